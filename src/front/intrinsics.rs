@@ -1,0 +1,208 @@
+//! Built-in functions of the shading language: their names, overload rules and result types.
+//! What they compute lives in [`crate::runtime`] (shared by the interpreter, the constant
+//! folder and JIT-compiled code).
+
+use super::ast::BaseType;
+use super::types::Type;
+
+/// How an intrinsic's argument and result types relate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Signature {
+    /// `T f(T)` for T = float or any triple (ints promote to float).
+    Generic1,
+    /// `T f(T, T)`; a float argument promotes to the other argument's triple type.
+    Generic2,
+    /// `T f(T, T, T)`.
+    Generic3,
+    /// `T mix(T a, T b, float|T t)`.
+    Mix,
+    /// Fixed parameter types and result.
+    Fixed(&'static [Type], Type),
+}
+
+macro_rules! intrinsics {
+    ($($variant:ident = $name:literal : $sig:expr),* $(,)?) => {
+        /// A built-in function.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+        pub enum Intrinsic {
+            $(
+                #[doc = concat!("`", $name, "`")]
+                $variant,
+            )*
+        }
+
+        impl Intrinsic {
+            /// Every intrinsic.
+            pub const ALL: &'static [Intrinsic] = &[$(Intrinsic::$variant),*];
+
+            /// The source name.
+            pub fn name(self) -> &'static str {
+                match self { $(Intrinsic::$variant => $name),* }
+            }
+
+            /// The overload rule.
+            pub fn signature(self) -> Signature {
+                match self { $(Intrinsic::$variant => $sig),* }
+            }
+        }
+    };
+}
+
+use Signature::*;
+const F: Type = Type::FLOAT;
+const C: Type = Type::COLOR;
+const P: Type = Type::POINT;
+const V: Type = Type::VECTOR;
+const S: Type = Type::STRING;
+const CL: Type = Type::CLOSURE;
+
+intrinsics! {
+    Sin = "sin": Generic1,
+    Cos = "cos": Generic1,
+    Tan = "tan": Generic1,
+    Asin = "asin": Generic1,
+    Acos = "acos": Generic1,
+    Atan = "atan": Generic1,
+    Sqrt = "sqrt": Generic1,
+    InverseSqrt = "inversesqrt": Generic1,
+    Exp = "exp": Generic1,
+    Exp2 = "exp2": Generic1,
+    Log = "log": Generic1,
+    Log2 = "log2": Generic1,
+    Abs = "abs": Generic1,
+    Floor = "floor": Generic1,
+    Ceil = "ceil": Generic1,
+    Round = "round": Generic1,
+    Fract = "fract": Generic1,
+    Sign = "sign": Generic1,
+    Radians = "radians": Generic1,
+    Degrees = "degrees": Generic1,
+    Pow = "pow": Generic2,
+    Atan2 = "atan2": Generic2,
+    Min = "min": Generic2,
+    Max = "max": Generic2,
+    Mod = "mod": Generic2,
+    Step = "step": Generic2,
+    Clamp = "clamp": Generic3,
+    Smoothstep = "smoothstep": Generic3,
+    Mix = "mix": Mix,
+    Dot = "dot": Fixed(&[V, V], F),
+    Cross = "cross": Fixed(&[V, V], V),
+    Length = "length": Fixed(&[V], F),
+    Normalize = "normalize": Fixed(&[V], V),
+    Distance = "distance": Fixed(&[P, P], F),
+    Luminance = "luminance": Fixed(&[C], F),
+    Noise = "noise": Fixed(&[P], F),
+    Snoise = "snoise": Fixed(&[P], F),
+    Cellnoise = "cellnoise": Fixed(&[P], F),
+    Cellular = "cellular": Fixed(&[P], F),
+    Texture = "texture": Fixed(&[S, F, F], C),
+    DiffuseBsdf = "diffuse_bsdf": Fixed(&[C], CL),
+    GlossyBsdf = "glossy_bsdf": Fixed(&[C, C, F, F], CL),
+    MetalBsdf = "metal_bsdf": Fixed(&[C, C, F], CL),
+    GlassBsdf = "glass_bsdf": Fixed(&[C, F, F], CL),
+}
+
+impl Intrinsic {
+    /// Looks an intrinsic up by name.
+    pub fn from_name(name: &str) -> Option<Intrinsic> {
+        Intrinsic::ALL.iter().copied().find(|i| i.name() == name)
+    }
+
+    /// Whether the result depends on something other than the arguments (files on disk), so
+    /// it must not be folded at compile time.
+    pub fn is_varying(self) -> bool {
+        matches!(self, Intrinsic::Texture)
+    }
+
+    /// Whether this builds a BSDF closure.
+    pub fn is_closure(self) -> bool {
+        matches!(self, Intrinsic::DiffuseBsdf | Intrinsic::GlossyBsdf | Intrinsic::MetalBsdf | Intrinsic::GlassBsdf)
+    }
+
+    /// Resolves the parameter types and result type for the given argument types, or explains
+    /// why the call does not type-check.
+    pub fn resolve(self, args: &[Type]) -> Result<(Vec<Type>, Type), String> {
+        let arity = match self.signature() {
+            Generic1 => 1,
+            Generic2 => 2,
+            Generic3 | Mix => 3,
+            Fixed(params, _) => params.len(),
+        };
+        if args.len() != arity {
+            return Err(format!("`{}` takes {arity} argument(s), found {}", self.name(), args.len()));
+        }
+        match self.signature() {
+            Fixed(params, ret) => {
+                for (i, (&arg, &param)) in args.iter().zip(params).enumerate() {
+                    if !arg.converts_to(param) {
+                        return Err(format!("argument {} of `{}` must be {param}, found {arg}", i + 1, self.name()));
+                    }
+                }
+                Ok((params.to_vec(), ret))
+            }
+            Generic1 | Generic2 | Generic3 => {
+                let common = common_generic(args).ok_or_else(|| self.generic_error(args))?;
+                Ok((vec![common; arity], common))
+            }
+            Mix => {
+                let common = common_generic(&args[..2]).ok_or_else(|| self.generic_error(args))?;
+                let t = if args[2].converts_to(Type::FLOAT) {
+                    Type::FLOAT
+                } else if args[2].converts_to(common) {
+                    common
+                } else {
+                    return Err(self.generic_error(args));
+                };
+                Ok((vec![common, common, t], common))
+            }
+        }
+    }
+
+    fn generic_error(self, args: &[Type]) -> String {
+        let found: Vec<String> = args.iter().map(|t| t.to_string()).collect();
+        format!("`{}` takes float or triple arguments of one type, found ({})", self.name(), found.join(", "))
+    }
+}
+
+/// The common type of generic arguments: float, or the one triple type they share.
+fn common_generic(args: &[Type]) -> Option<Type> {
+    let mut common = Type::FLOAT;
+    for &arg in args {
+        if arg.array.is_some() {
+            return None;
+        }
+        match arg.base {
+            BaseType::Int | BaseType::Float => {}
+            _ if arg.is_triple() => {
+                if common == Type::FLOAT {
+                    common = arg;
+                } else if common != arg {
+                    if common.is_spatial() && arg.is_spatial() {
+                        common = Type::VECTOR;
+                    } else {
+                        return None;
+                    }
+                }
+            }
+            _ => return None,
+        }
+    }
+    Some(common)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn generic_promotion() {
+        let (params, ret) = Intrinsic::Mix.resolve(&[Type::COLOR, Type::FLOAT, Type::FLOAT]).unwrap();
+        assert_eq!(params, vec![Type::COLOR, Type::COLOR, Type::FLOAT]);
+        assert_eq!(ret, Type::COLOR);
+        assert!(Intrinsic::Min.resolve(&[Type::COLOR, Type::POINT]).is_err());
+        assert_eq!(Intrinsic::Sin.resolve(&[Type::INT]).unwrap().1, Type::FLOAT);
+        assert!(Intrinsic::Dot.resolve(&[Type::COLOR, Type::VECTOR]).is_err());
+        assert!(Intrinsic::Noise.resolve(&[Type::FLOAT]).is_ok());
+    }
+}
