@@ -7,5 +7,8 @@
 //! - [`compose`]: slot bindings → one composed material per renderable prim.
 //! - [`ir`]: the wired IR of a composed material, its passes and text form.
 
+pub mod compose;
 pub mod diag;
 pub mod front;
+pub mod ir;
+pub mod runtime;

@@ -442,6 +442,15 @@ impl Checker<'_> {
                 match op {
                     ast::UnaryOp::Neg if v.ty.is_numeric() => {
                         let ty = v.ty;
+                        // Negative literals stay literals.
+                        match v.as_const() {
+                            Some(Value::Int(i)) => return Some(Expr::constant(Value::Int(i.wrapping_neg()), ty, span)),
+                            Some(Value::Float(x)) => return Some(Expr::constant(Value::Float(-x), ty, span)),
+                            Some(Value::Triple(t)) => {
+                                return Some(Expr::constant(Value::Triple(t.map(|c| -c)), ty, span));
+                            }
+                            _ => {}
+                        }
                         (ExprKind::Unary(hir::UnaryOp::Neg, Box::new(v)), ty)
                     }
                     ast::UnaryOp::Not if v.ty.is_scalar_number() => {
@@ -590,6 +599,11 @@ impl Checker<'_> {
                 3 if checked.iter().all(|a| a.ty.is_scalar_number()) => {
                     let mut it = checked.into_iter().map(|a| a.convert_to(Type::FLOAT));
                     let parts = [it.next()?, it.next()?, it.next()?];
+                    // Literal triples become constants so defaults such as `color(0.5, 0.5, 1)` fold.
+                    if let [Some(x), Some(y), Some(z)] = parts.each_ref().map(|p| p.as_const().and_then(Value::as_f32))
+                    {
+                        return Some(Expr::constant(Value::Triple([x, y, z]), ty, span));
+                    }
                     Some(Expr { kind: ExprKind::Construct(Box::new(parts)), ty, span })
                 }
                 _ => {

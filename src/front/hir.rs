@@ -111,8 +111,9 @@ pub struct Function {
     pub locals: Vec<Local>,
     /// The body.
     pub body: Vec<Stmt>,
-    /// Whether the body (or a default, or a callee) reads a shading global, calls a runtime
-    /// function with hidden state (texture), or otherwise cannot be folded at compile time.
+    /// Whether the body (or a callee; parameter defaults excluded) reads a shading global or
+    /// calls a runtime function with hidden state (texture), so it cannot be folded at compile
+    /// time even when every input is constant.
     pub varying: bool,
     /// Where it is declared.
     pub span: Span,

@@ -299,9 +299,12 @@ fn callees_of(func: &Function) -> Vec<FuncId> {
     out
 }
 
+/// Whether the body itself (defaults excluded: they apply only to unconnected ports) reads a
+/// shading global or a varying intrinsic.
 fn reads_varying(func: &Function) -> bool {
+    let body_only = Function { params: Vec::new(), ..func.clone() };
     let mut varying = false;
-    visit_exprs(func, &mut |e| match &e.kind {
+    visit_exprs(&body_only, &mut |e| match &e.kind {
         ExprKind::Global(_) => varying = true,
         ExprKind::Intrinsic(i, _) if i.is_varying() => varying = true,
         _ => {}
@@ -348,7 +351,8 @@ mod tests {
             assert!(lib.shaders.contains_key(name), "missing built-in {name}");
         }
         let noise = lib.function(lib.shaders["noise"]);
-        assert!(noise.varying, "noise reads P by default");
+        assert!(!noise.varying, "noise reads P only through its default");
+        assert!(lib.function(lib.shaders["normal_map"]).varying, "normal_map reads N");
     }
 
     #[test]

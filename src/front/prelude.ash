@@ -131,3 +131,10 @@ shader float_to_color(float value = 0.0, output color out) {
 shader color_to_float(color value = 0.0, output float out) {
     out = luminance(value);
 }
+
+// ---- The default substance: what a prim with no slot binding renders with (DESIGN.md rule 4) --
+
+substance default_substance {
+    node white = diffuse(albedo: color(1.0, 1.0, 1.0));
+    surface = white.bsdf;
+}

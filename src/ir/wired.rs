@@ -1,0 +1,695 @@
+//! The wired IR: one typed node graph per composed material.
+//!
+//! Building it instantiates every layer's substance and override graphs, sets the input values
+//! the scene gives, and wires override outputs to same-named substance inputs (DESIGN.md rule 3).
+//! Passes then fold constants, prune layers hidden under constant-opaque masks, and remove
+//! dead nodes (products and custom channels are the roots). The text form is stable and pinned
+//! by snapshot tests.
+
+use super::eval::eval_node;
+use crate::compose::{ComposedMaterial, MaterialRef};
+use crate::diag::{Diagnostic, Diagnostics, Span};
+use crate::front::ast::{GraphKind, Product};
+use crate::front::graph::{ChannelKind, DisplacementMode, Graph, Source};
+use crate::front::hir::{ExprKind, FuncId};
+use crate::front::library::Library;
+use crate::front::types::{Type, Value};
+use std::collections::{BTreeMap, HashMap};
+use std::fmt::Write as _;
+
+/// Index of a node in a [`WiredMaterial`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct NodeId(pub u32);
+
+/// What drives a node input, a product or a channel.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Operand {
+    /// A constant of the given type.
+    Const(Value, Type),
+    /// Output parameter `param` of a node.
+    Node {
+        /// The node.
+        node: NodeId,
+        /// Parameter index of the output in the node type.
+        param: usize,
+    },
+    /// The node type's default for this input (which may read shading globals).
+    Default,
+}
+
+/// One node instance.
+#[derive(Clone, Debug)]
+pub struct Node {
+    /// Node type.
+    pub func: FuncId,
+    /// `slot/instance`, e.g. `050::010/dirt_color`.
+    pub label: String,
+    /// Per parameter of the node type; outputs are always [`Operand::Default`].
+    pub args: Vec<Operand>,
+    /// The layer it belongs to.
+    pub layer: usize,
+}
+
+/// A custom channel (AOV) root.
+#[derive(Clone, Debug)]
+pub struct Channel {
+    /// Channel name (the EXR layer name).
+    pub name: String,
+    /// Colour, float or integer.
+    pub kind: ChannelKind,
+    /// Its value.
+    pub value: Operand,
+    /// The type of the channel node's `value` port.
+    pub ty: Type,
+}
+
+/// One layer of the wired material.
+#[derive(Clone, Debug)]
+pub struct Layer {
+    /// Slot name (`000`; `default` for the default substance).
+    pub slot: String,
+    /// The substance's graph name.
+    pub substance: String,
+    /// The material prim path.
+    pub material: String,
+    /// Override slots and material paths applied to it, ascending.
+    pub overrides: Vec<(String, String)>,
+    /// BSDF closure.
+    pub surface: Option<Operand>,
+    /// Height and combination mode.
+    pub displacement: Option<(Operand, DisplacementMode)>,
+    /// Shading normal.
+    pub normal: Option<Operand>,
+    /// Opacity (absent: 1).
+    pub mask: Option<Operand>,
+    /// Custom channels of the layer (its substance's and its overrides').
+    pub channels: Vec<Channel>,
+    /// Why the layer's shading was removed, if it was (`hidden under slot 050`).
+    pub pruned: Option<String>,
+}
+
+impl Layer {
+    /// The layer's mask as a compile-time constant, if it is one (absent mask = 1).
+    pub fn constant_mask(&self) -> Option<f32> {
+        match &self.mask {
+            None => Some(1.0),
+            Some(Operand::Const(v, _)) => v.as_f32().map(|m| m.clamp(0.0, 1.0)),
+            _ => None,
+        }
+    }
+}
+
+/// Node counts after each pass.
+#[derive(Clone, Debug, Default)]
+pub struct Stats {
+    /// (pass name, live nodes after it).
+    pub nodes: Vec<(&'static str, usize)>,
+    /// Layers whose shading was pruned.
+    pub layers_pruned: usize,
+}
+
+/// A composed material as a wired node graph.
+#[derive(Clone, Debug)]
+pub struct WiredMaterial {
+    /// Layers bottom to top.
+    pub layers: Vec<Layer>,
+    /// Live nodes in topological order (inputs before users).
+    pub nodes: Vec<Node>,
+    /// Every custom channel of the material, by name (the union over layers).
+    pub channels: Vec<(String, ChannelKind)>,
+    /// Pass statistics.
+    pub stats: Stats,
+}
+
+/// Options for the passes (the renderer's tests compare optimised and unoptimised output).
+#[derive(Clone, Copy, Debug)]
+pub struct PassOptions {
+    /// Constant folding and pruning of hidden layers.
+    pub optimize: bool,
+}
+
+impl Default for PassOptions {
+    fn default() -> Self {
+        PassOptions { optimize: true }
+    }
+}
+
+/// Builds and optimises the wired IR of one composed material.
+pub fn build(
+    lib: &Library,
+    material: &ComposedMaterial,
+    options: PassOptions,
+    diags: &mut Diagnostics,
+) -> WiredMaterial {
+    let mut b = Builder { lib, nodes: Vec::new(), diags };
+    let mut layers = Vec::new();
+    if material.layers.is_empty() {
+        let graph = lib.graph_by_name("default_substance").expect("the prelude defines default_substance");
+        let substance = MaterialRef { path: String::new(), graph, values: Vec::new(), span: Span::default() };
+        layers.push(b.layer(0, "default", &substance, &[]));
+    }
+    for (index, layer) in material.layers.iter().enumerate() {
+        let overrides: Vec<(String, &MaterialRef)> = layer.overrides.iter().map(|(s, m)| (s.name(), m)).collect();
+        layers.push(b.layer(index, &layer.slot.name(), &layer.substance, &overrides));
+    }
+    let nodes = b.nodes;
+    let mut wired = WiredMaterial { layers, nodes: Vec::new(), channels: Vec::new(), stats: Stats::default() };
+    let mut live: Vec<Option<Node>> = nodes.into_iter().map(Some).collect();
+    wired.stats.nodes.push(("wired", live.len()));
+    if options.optimize {
+        fold_constants(lib, &mut live, &mut wired.layers);
+        wired.stats.nodes.push(("fold", count_used(&live, &wired.layers)));
+        wired.stats.layers_pruned = prune_hidden_layers(&mut wired.layers);
+    }
+    wired.nodes = eliminate_dead_nodes(live, &mut wired.layers);
+    wired.stats.nodes.push(("dce", wired.nodes.len()));
+    wired.channels = collect_channels(&wired.layers, b.diags);
+    wired
+}
+
+struct Builder<'a> {
+    lib: &'a Library,
+    nodes: Vec<Node>,
+    diags: &'a mut Diagnostics,
+}
+
+/// The operands that a graph instance's exposed inputs resolve to.
+struct Instance {
+    /// Node index in the graph → wired node.
+    nodes: Vec<NodeId>,
+    /// Exposed input index → operand.
+    inputs: Vec<Operand>,
+}
+
+impl Builder<'_> {
+    /// Instantiates a graph's nodes. `inputs` gives the operand of each exposed input.
+    fn instantiate(&mut self, graph: &Graph, slot: &str, layer: usize, inputs: Vec<Operand>) -> Instance {
+        let base = self.nodes.len() as u32;
+        let ids: Vec<NodeId> = (0..graph.nodes.len() as u32).map(|i| NodeId(base + i)).collect();
+        let instance = Instance { nodes: ids, inputs };
+        for node in &graph.nodes {
+            let args =
+                node.args.iter().map(|a| a.as_ref().map_or(Operand::Default, |s| operand(&instance, s))).collect();
+            self.nodes.push(Node { func: node.func, label: format!("{slot}/{}", node.name), args, layer });
+        }
+        instance
+    }
+
+    /// The operands of a material's exposed inputs: scene values, else defaults.
+    fn input_values(graph: &Graph, material: &MaterialRef) -> Vec<Operand> {
+        graph
+            .inputs
+            .iter()
+            .enumerate()
+            .map(|(i, input)| {
+                let value = material.values.iter().find(|(j, _)| *j == i).map(|(_, v)| v.clone());
+                Operand::Const(value.unwrap_or_else(|| input.default.clone()), input.ty)
+            })
+            .collect()
+    }
+
+    fn layer(
+        &mut self,
+        index: usize,
+        slot: &str,
+        substance: &MaterialRef,
+        overrides: &[(String, &MaterialRef)],
+    ) -> Layer {
+        let lib = self.lib;
+        let graph = lib.get(substance.graph);
+        let mut inputs = Self::input_values(graph, substance);
+        let mut channels = Vec::new();
+        // Overrides in ascending slot order: a later (higher) one replaces an earlier connection.
+        for (over_slot, over) in overrides {
+            let og = lib.get(over.graph);
+            if og.kind != GraphKind::Override {
+                self.diags.push(
+                    Diagnostic::error(format!(
+                        "`{}` is bound to override slot `{over_slot}` but `{}` is a substance",
+                        over.path, og.name
+                    ))
+                    .at(over.span, "bound here")
+                    .also(og.span, "declared as a substance"),
+                );
+                continue;
+            }
+            let over_inputs = Self::input_values(og, over);
+            let instance = self.instantiate(og, over_slot, index, over_inputs);
+            for output in &og.outputs {
+                let Some((i, input)) = graph.input(&output.name) else { continue };
+                if !output.ty.converts_to(input.ty) {
+                    self.diags.push(
+                        Diagnostic::error(format!(
+                            "override `{}` output `{}` is {}, but input `{}` of substance `{}` is {}",
+                            og.name, output.name, output.ty, input.name, graph.name, input.ty
+                        ))
+                        .at(output.span, format!("this is {}", output.ty))
+                        .also(input.span, format!("the input is {}", input.ty))
+                        .also(over.span, format!("bound to slot `{over_slot}` here")),
+                    );
+                    continue;
+                }
+                inputs[i] = match operand(&instance, &output.source) {
+                    Operand::Const(v, t) => Operand::Const(v.convert(t, input.ty), input.ty),
+                    other => other,
+                };
+            }
+            // Override nodes that connect nowhere (custom channels) join the layer.
+            channels.extend(self.channels(og, &instance));
+        }
+        let instance = self.instantiate(graph, slot, index, inputs);
+        let mut sub_channels = self.channels(graph, &instance);
+        sub_channels.append(&mut channels);
+        let product = |p: Product| graph.products.iter().find(|b| b.product == p);
+        Layer {
+            slot: slot.to_string(),
+            substance: graph.name.clone(),
+            material: substance.path.clone(),
+            overrides: overrides.iter().map(|(s, m)| (s.clone(), m.path.clone())).collect(),
+            surface: product(Product::Surface).map(|b| operand(&instance, &b.source)),
+            displacement: product(Product::Displacement)
+                .map(|b| (operand(&instance, &b.source), b.mode.unwrap_or(DisplacementMode::Add))),
+            normal: product(Product::Normal).map(|b| operand(&instance, &b.source)),
+            mask: product(Product::Mask).map(|b| operand(&instance, &b.source)),
+            channels: sub_channels,
+            pruned: None,
+        }
+    }
+
+    fn channels(&self, graph: &Graph, instance: &Instance) -> Vec<Channel> {
+        graph
+            .channels
+            .iter()
+            .map(|(node, kind, name)| {
+                let id = instance.nodes[*node];
+                let wired = &self.nodes[id.0 as usize];
+                let func = self.lib.function(wired.func);
+                let (param, p) = func.param("value").expect("custom channel node types have a `value` input");
+                Channel { name: name.clone(), kind: *kind, value: wired.args[param].clone(), ty: p.ty }
+            })
+            .collect()
+    }
+}
+
+fn operand(instance: &Instance, source: &Source) -> Operand {
+    match source {
+        Source::Const(v, t) => Operand::Const(v.clone(), *t),
+        Source::Input(i) => instance.inputs[*i].clone(),
+        Source::Node { node, param } => Operand::Node { node: instance.nodes[*node], param: *param },
+    }
+}
+
+/// Calls `f` on every root operand of the layers.
+fn for_each_root(layers: &mut [Layer], mut f: impl FnMut(&mut Operand)) {
+    for layer in layers {
+        for op in [&mut layer.surface, &mut layer.normal, &mut layer.mask].into_iter().flatten() {
+            f(op);
+        }
+        if let Some((op, _)) = &mut layer.displacement {
+            f(op);
+        }
+        for channel in &mut layer.channels {
+            f(&mut channel.value);
+        }
+    }
+}
+
+/// Evaluates nodes whose inputs are all constant and whose body reads no globals, and replaces
+/// their outputs by constants, in dependency order until nothing changes.
+fn fold_constants(lib: &Library, nodes: &mut [Option<Node>], layers: &mut [Layer]) {
+    let mut folded: HashMap<(NodeId, usize), (Value, Type)> = HashMap::new();
+    loop {
+        let before = folded.len();
+        for index in 0..nodes.len() {
+            let Some(node) = &mut nodes[index] else { continue };
+            for arg in &mut node.args {
+                substitute(arg, &folded);
+            }
+            let func = lib.function(node.func);
+            if func.varying || func.outputs().next().is_none() {
+                continue;
+            }
+            let mut inputs = Vec::with_capacity(func.params.len());
+            let mut constant = true;
+            for ((_, param), arg) in func.params.iter().enumerate().zip(&node.args) {
+                match arg {
+                    _ if param.output => inputs.push(None),
+                    Operand::Const(v, t) => inputs.push(Some(v.convert(*t, param.ty))),
+                    Operand::Default if param.default.as_ref().is_none_or(|d| matches!(d.kind, ExprKind::Const(_))) => {
+                        inputs.push(None)
+                    }
+                    _ => {
+                        constant = false;
+                        break;
+                    }
+                }
+            }
+            if !constant {
+                continue;
+            }
+            let Some(values) = eval_node(lib, func, &inputs) else { continue };
+            let id = NodeId(index as u32);
+            for (param, p) in func.outputs() {
+                if folded.contains_key(&(id, param)) {
+                    continue;
+                }
+                // Closures have no constant form; non-finite results stay for run time so the
+                // renderer's NaN guard sees them.
+                if p.ty != Type::CLOSURE && values[param].is_finite() {
+                    folded.insert((id, param), (values[param].clone(), p.ty));
+                }
+            }
+        }
+        if folded.len() == before {
+            break;
+        }
+    }
+    for_each_root(layers, |op| substitute(op, &folded));
+}
+
+fn substitute(op: &mut Operand, folded: &HashMap<(NodeId, usize), (Value, Type)>) {
+    if let Operand::Node { node, param } = op
+        && let Some((v, t)) = folded.get(&(*node, *param))
+    {
+        *op = Operand::Const(v.clone(), *t);
+    }
+}
+
+fn count_used(nodes: &[Option<Node>], layers: &[Layer]) -> usize {
+    let mut layers = layers.to_vec();
+    let live: Vec<Option<Node>> = nodes.to_vec();
+    eliminate_dead_nodes(live, &mut layers).len()
+}
+
+/// Removes the shading of layers no path can pick: below a constant-opaque layer, or with a
+/// constant zero mask. Displacement survives where its mode ignores the layers above.
+fn prune_hidden_layers(layers: &mut [Layer]) -> usize {
+    let mut pruned = 0;
+    let mut covered_by: Option<String> = None; // a layer above with mask ≡ 1
+    let mut displacement_covered_by: Option<String> = None; // a mix layer above with mask ≡ 1
+    for layer in layers.iter_mut().rev() {
+        let mask = layer.constant_mask();
+        let reason = match (&covered_by, mask) {
+            (Some(slot), _) => Some(format!("hidden under slot {slot}")),
+            (None, Some(m)) if m <= 0.0 => Some("mask is 0".to_string()),
+            _ => None,
+        };
+        if let Some(reason) = reason {
+            pruned += 1;
+            layer.surface = None;
+            layer.normal = None;
+            layer.channels.clear();
+            let keep_displacement = match &layer.displacement {
+                Some((_, DisplacementMode::None)) => displacement_covered_by.is_none(),
+                Some((_, DisplacementMode::Add)) => displacement_covered_by.is_none() && mask != Some(0.0),
+                _ => false,
+            };
+            if !keep_displacement {
+                layer.displacement = None;
+            }
+            // The mask still feeds displacement weighting of kept add-mode displacement.
+            if layer.displacement.is_none() {
+                layer.mask = Some(Operand::Const(Value::Float(0.0), Type::FLOAT));
+            }
+            layer.pruned = Some(reason);
+        }
+        if layer.pruned.is_none() && mask == Some(1.0) && covered_by.is_none() {
+            covered_by = Some(layer.slot.clone());
+        }
+        if mask == Some(1.0) && matches!(layer.displacement, Some((_, DisplacementMode::Mix))) {
+            displacement_covered_by.get_or_insert_with(|| layer.slot.clone());
+        }
+    }
+    pruned
+}
+
+/// Keeps the nodes reachable from products and channels, in topological order, and renumbers.
+fn eliminate_dead_nodes(mut nodes: Vec<Option<Node>>, layers: &mut [Layer]) -> Vec<Node> {
+    let mut order: Vec<NodeId> = Vec::new();
+    let mut state = vec![0u8; nodes.len()]; // 0 unseen, 1 on stack, 2 emitted
+    let mut roots = Vec::new();
+    for_each_root(layers, |op| {
+        if let Operand::Node { node, .. } = op {
+            roots.push(*node);
+        }
+    });
+    for root in roots {
+        // Iterative post-order DFS (graphs were checked acyclic; `1` guards anyway).
+        let mut stack = vec![(root, 0usize)];
+        while let Some((node, next)) = stack.pop() {
+            let i = node.0 as usize;
+            if next == 0 {
+                if state[i] != 0 {
+                    continue;
+                }
+                state[i] = 1;
+            }
+            let args = nodes[i].as_ref().map(|n| n.args.as_slice()).unwrap_or(&[]);
+            let dep = args[next..]
+                .iter()
+                .position(|a| matches!(a, Operand::Node { node, .. } if state[node.0 as usize] == 0));
+            match dep {
+                Some(offset) => {
+                    let Operand::Node { node: d, .. } = args[next + offset] else { unreachable!() };
+                    stack.push((node, next + offset + 1));
+                    stack.push((d, 0));
+                }
+                None => {
+                    state[i] = 2;
+                    order.push(node);
+                }
+            }
+        }
+    }
+    let mut remap = vec![None; nodes.len()];
+    let mut out = Vec::with_capacity(order.len());
+    for old in order {
+        remap[old.0 as usize] = Some(NodeId(out.len() as u32));
+        out.push(nodes[old.0 as usize].take().expect("each node is emitted once"));
+    }
+    let fix = |op: &mut Operand| {
+        if let Operand::Node { node, .. } = op {
+            *node = remap[node.0 as usize].expect("live operands point at live nodes");
+        }
+    };
+    for node in &mut out {
+        node.args.iter_mut().for_each(fix);
+    }
+    for_each_root(layers, fix);
+    out
+}
+
+/// The union of channel names over layers; one name must mean one kind.
+fn collect_channels(layers: &[Layer], diags: &mut Diagnostics) -> Vec<(String, ChannelKind)> {
+    let mut channels: BTreeMap<String, ChannelKind> = BTreeMap::new();
+    for layer in layers {
+        for channel in &layer.channels {
+            match channels.get(&channel.name) {
+                Some(kind) if *kind != channel.kind => diags.push(Diagnostic::error(format!(
+                    "custom channel `{}` is {:?} in one layer and {:?} in layer `{}`",
+                    channel.name, kind, channel.kind, layer.slot
+                ))),
+                _ => {
+                    channels.insert(channel.name.clone(), channel.kind);
+                }
+            }
+        }
+    }
+    channels.into_iter().collect()
+}
+
+impl WiredMaterial {
+    /// The stable text form pinned by snapshot tests.
+    pub fn to_text(&self, lib: &Library) -> String {
+        let mut out = String::new();
+        let op = |o: &Operand| match o {
+            Operand::Const(v, _) => v.to_string(),
+            Operand::Node { node, param } => {
+                let func = lib.function(self.nodes[node.0 as usize].func);
+                format!("%{}.{}", node.0, func.params[*param].name)
+            }
+            Operand::Default => "default".to_string(),
+        };
+        let _ = writeln!(out, "material: {} layer(s), {} node(s)", self.layers.len(), self.nodes.len());
+        for (name, kind) in &self.channels {
+            let _ = writeln!(out, "channel {name}: {kind:?}");
+        }
+        for (index, layer) in self.layers.iter().enumerate() {
+            let _ = writeln!(
+                out,
+                "layer {index} slot {} substance {} from {}",
+                layer.slot,
+                layer.substance,
+                show_path(&layer.material)
+            );
+            for (slot, path) in &layer.overrides {
+                let _ = writeln!(out, "  override {slot} from {path}");
+            }
+            if let Some(reason) = &layer.pruned {
+                let _ = writeln!(out, "  pruned: {reason}");
+            }
+            for (id, node) in self.nodes.iter().enumerate().filter(|(_, n)| n.layer == index) {
+                let func = lib.function(node.func);
+                let args: Vec<String> = func
+                    .params
+                    .iter()
+                    .zip(&node.args)
+                    .filter(|(p, a)| !p.output && !matches!(a, Operand::Default))
+                    .map(|(p, a)| format!("{}: {}", p.name, op(a)))
+                    .collect();
+                let _ = writeln!(out, "  %{id} = {} \"{}\" ({})", func.name, node.label, args.join(", "));
+            }
+            if let Some(s) = &layer.surface {
+                let _ = writeln!(out, "  surface = {}", op(s));
+            }
+            if let Some((d, mode)) = &layer.displacement {
+                let _ = writeln!(out, "  displacement({}) = {}", mode.name(), op(d));
+            }
+            if let Some(n) = &layer.normal {
+                let _ = writeln!(out, "  normal = {}", op(n));
+            }
+            if let Some(m) = &layer.mask {
+                let _ = writeln!(out, "  mask = {}", op(m));
+            }
+            for c in &layer.channels {
+                let _ = writeln!(out, "  channel {} = {}", c.name, op(&c.value));
+            }
+        }
+        out
+    }
+
+    /// A one-line summary of the pass statistics.
+    pub fn stats_line(&self) -> String {
+        let passes: Vec<String> = self.stats.nodes.iter().map(|(p, n)| format!("{p} {n}")).collect();
+        format!("nodes: {}; layers pruned: {}", passes.join(" -> "), self.stats.layers_pruned)
+    }
+}
+
+fn show_path(path: &str) -> &str {
+    if path.is_empty() { "<builtin>" } else { path }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compose::{ComposedLayer, Slot};
+    use crate::diag::SourceMap;
+
+    const SOURCE: &str = r#"
+        substance plastic {
+            input color base_color = color(0.8, 0.8, 0.8);
+            input float roughness = 0.4;
+            node unused = noise(scale: 3.0);
+            node g = glossy(albedo: base_color, roughness: roughness);
+            surface = g.bsdf;
+        }
+        substance dirt {
+            input float amount = 0.5;
+            node n = fbm(scale: 4.0);
+            node m = mask(opacity: n.out);
+            node d = diffuse(albedo: color(0.3, 0.2, 0.1));
+            surface = d.bsdf;
+            mask = m.out;
+        }
+        substance opaque {
+            node d = diffuse();
+            surface = d.bsdf;
+        }
+        override red {
+            output color base_color = color(1.0, 0.0, 0.0);
+            node aov = customChannelColor(name: "red_marker", value: color(1.0, 1.0, 1.0));
+        }
+        override rough {
+            input float r = 0.9;
+            node half = math(a: r, b: 2.0, op: "div");
+            output float roughness = half.out;
+            output color base_color = color(0.0, 0.0, 1.0);
+        }
+        override wrong {
+            output int roughness = 2;
+            output string base_color = "red";
+        }
+    "#;
+
+    fn setup() -> (Library, SourceMap) {
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let (lib, _) = Library::from_text("test.ash", SOURCE, &mut sources, &mut diags);
+        assert!(!diags.has_errors(), "{}", diags.render(&sources));
+        (lib, sources)
+    }
+
+    fn mref(lib: &Library, name: &str) -> MaterialRef {
+        MaterialRef {
+            path: format!("/Looks/{name}"),
+            graph: lib.graph_by_name(name).unwrap(),
+            values: Vec::new(),
+            span: Span::default(),
+        }
+    }
+
+    fn layer(lib: &Library, slot: &str, name: &str, overrides: &[(&str, &str)]) -> ComposedLayer {
+        ComposedLayer {
+            slot: Slot::parse(slot).unwrap(),
+            substance: mref(lib, name),
+            overrides: overrides.iter().map(|(s, n)| (Slot::parse(s).unwrap(), mref(lib, n))).collect(),
+        }
+    }
+
+    #[test]
+    fn highest_override_wins_and_channels_join() {
+        let (lib, _) = setup();
+        let material = ComposedMaterial {
+            layers: vec![layer(&lib, "000", "plastic", &[("000::010", "red"), ("000::020", "rough")])],
+        };
+        let mut diags = Diagnostics::new();
+        let wired = build(&lib, &material, PassOptions::default(), &mut diags);
+        assert!(!diags.has_errors());
+        let text = wired.to_text(&lib);
+        // 000::020 (rough) beats 000::010 (red) for base_color; roughness folds 0.9 / 2.
+        assert!(text.contains("albedo: (0.0, 0.0, 1.0)"), "{text}");
+        assert!(text.contains("roughness: 0.45"), "{text}");
+        assert!(text.contains("channel red_marker = (1.0, 1.0, 1.0)"), "{text}");
+        assert!(!text.contains("unused"), "dead pattern node removed: {text}");
+        assert!(!text.contains("math"), "folded node removed: {text}");
+    }
+
+    #[test]
+    fn incompatible_override_is_an_error() {
+        let (lib, _) = setup();
+        let material = ComposedMaterial { layers: vec![layer(&lib, "000", "plastic", &[("000::010", "wrong")])] };
+        let mut diags = Diagnostics::new();
+        build(&lib, &material, PassOptions::default(), &mut diags);
+        assert_eq!(diags.error_count(), 1, "int → float converts; string → color does not");
+    }
+
+    #[test]
+    fn opaque_layer_hides_lower_layers() {
+        let (lib, _) = setup();
+        let material = ComposedMaterial {
+            layers: vec![
+                layer(&lib, "000", "plastic", &[]),
+                layer(&lib, "010", "opaque", &[]),
+                layer(&lib, "050", "dirt", &[]),
+            ],
+        };
+        let mut diags = Diagnostics::new();
+        let wired = build(&lib, &material, PassOptions::default(), &mut diags);
+        assert_eq!(wired.stats.layers_pruned, 1);
+        assert_eq!(wired.layers[0].pruned.as_deref(), Some("hidden under slot 010"));
+        assert!(wired.layers[2].surface.is_some());
+        let unoptimised = build(&lib, &material, PassOptions { optimize: false }, &mut diags);
+        assert_eq!(unoptimised.stats.layers_pruned, 0);
+        assert!(unoptimised.nodes.len() > wired.nodes.len());
+    }
+
+    #[test]
+    fn default_substance_when_no_layers() {
+        let (lib, _) = setup();
+        let mut diags = Diagnostics::new();
+        let wired = build(&lib, &ComposedMaterial::default(), PassOptions::default(), &mut diags);
+        let text = wired.to_text(&lib);
+        assert!(text.contains("substance default_substance"), "{text}");
+        assert!(text.contains("albedo: (1.0, 1.0, 1.0)"), "{text}");
+    }
+}
