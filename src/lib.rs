@@ -6,9 +6,15 @@
 //! - [`scene`]: USD ASCII scenes → a composed prim hierarchy.
 //! - [`compose`]: slot bindings → one composed material per renderable prim.
 //! - [`ir`]: the wired IR of a composed material, its passes and text form.
+//! - [`runtime`]: noise, patterns and math semantics shared by every backend.
+//! - [`scenes`]: the embedded default scene.
+//! - [`cli`]: the `strata` subcommands.
 
+pub mod cli;
 pub mod compose;
 pub mod diag;
 pub mod front;
 pub mod ir;
 pub mod runtime;
+pub mod scene;
+pub mod scenes;

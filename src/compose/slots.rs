@@ -192,7 +192,10 @@ fn stack_of(prim: &str, slots: &BTreeMap<Slot, Option<Applied>>, diags: &mut Dia
 mod tests {
     use super::*;
 
-    fn tree(prims: &[(&str, Option<usize>, &[(&str, Option<&str>)], bool)]) -> BindingTree {
+    /// (path, parent, bindings as (slot, material), renderable)
+    type PrimSpec<'a> = (&'a str, Option<usize>, &'a [(&'a str, Option<&'a str>)], bool);
+
+    fn tree(prims: &[PrimSpec]) -> BindingTree {
         BindingTree {
             prims: prims
                 .iter()

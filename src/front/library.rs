@@ -47,7 +47,11 @@ impl Library {
             if !seen.insert(canonical.clone()) {
                 continue;
             }
-            let text = match std::fs::read_to_string(&path) {
+            let read = match crate::scenes::embedded(&path) {
+                Some(text) => Ok(text.to_string()),
+                None => std::fs::read_to_string(&path),
+            };
+            let text = match read {
                 Ok(text) => text,
                 Err(err) => {
                     let message = format!("cannot read substance file `{}`: {err}", path.display());

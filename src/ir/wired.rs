@@ -320,8 +320,8 @@ fn fold_constants(lib: &Library, nodes: &mut [Option<Node>], layers: &mut [Layer
     let mut folded: HashMap<(NodeId, usize), (Value, Type)> = HashMap::new();
     loop {
         let before = folded.len();
-        for index in 0..nodes.len() {
-            let Some(node) = &mut nodes[index] else { continue };
+        for (index, slot) in nodes.iter_mut().enumerate() {
+            let Some(node) = slot else { continue };
             for arg in &mut node.args {
                 substitute(arg, &folded);
             }

@@ -1,0 +1,10 @@
+//! Scene description: reading USD ASCII layers ([`usda`]), typed values ([`value`]) and
+//! composing layers into a renderable prim tree ([`stage`]).
+
+pub mod stage;
+pub mod usda;
+pub mod value;
+
+pub use stage::{Attribute, Prim, PrimId, Relationship, Stage};
+pub use usda::{Layer, LayerMetadata, ListOp, ListOpKind, PrimSpec, Specifier};
+pub use value::{AssetPath, ScalarType, Value, ValueType};

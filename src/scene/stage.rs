@@ -1,0 +1,1368 @@
+//! Stage composition: layers, sublayers, references, payloads, inherits and variants
+//! composed into one prim tree.
+//!
+//! Each prim's opinions are gathered in a small tree of *nodes* in the spirit of USD's prim
+//! index: the root node holds the specs of the root layer stack, and every composition arc
+//! (inherit, variant, reference, payload) adds a child node for the arc's target site.
+//! Children of a node are ordered by arc type (LIVRPS), arcs authored directly on the prim
+//! before arcs inherited from its ancestors; the strength order of opinions is a pre-order
+//! walk of that tree. A child prim's tree is derived from its parent's by looking up the
+//! child's name in every node, which is how an ancestor's reference reaches its children.
+//!
+//! Referenced layers are loaded lazily: a composition pass records the layers it is missing,
+//! they are loaded, and the pass is redone, so layers in unselected variants are never read.
+
+use crate::diag::{Diagnostic, Diagnostics, Failed, FileId, SourceMap, Span};
+use crate::scene::usda::{
+    self, Layer, LayerMetadata, ListOp, MetadataEntry, PrimSpec, PropertySpec, Reference, Specifier, Target,
+};
+use crate::scene::value::{AssetPath, Value, ValueType, normalize};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+/// Index of a prim in a [`Stage`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct PrimId(pub u32);
+
+/// A composed attribute.
+#[derive(Clone, Debug)]
+pub struct Attribute {
+    /// Its (namespaced) name.
+    pub name: String,
+    /// The declared type from the strongest opinion, `[]` included (`point3f[]`).
+    pub type_name: String,
+    /// The classified type.
+    pub value_type: ValueType,
+    /// The strongest value with its span; `None` when declared only or blocked.
+    pub value: Option<(Value, Span)>,
+    /// Whether the strongest value opinion is a block (`= None`).
+    pub blocked: bool,
+    /// The span of the strongest opinion's statement.
+    pub span: Span,
+    /// Declared `custom`.
+    pub custom: bool,
+    /// Declared `uniform`.
+    pub uniform: bool,
+    /// Composed connection targets (`name.connect`), mapped to stage paths.
+    pub connections: Vec<Target>,
+    /// Time samples of the strongest opinion that has them (not used for rendering).
+    pub time_samples: Vec<(f64, Value)>,
+    /// Metadata, strongest opinion per key.
+    pub metadata: Vec<MetadataEntry>,
+}
+
+impl Attribute {
+    /// The value, if any.
+    pub fn get(&self) -> Option<&Value> {
+        self.value.as_ref().map(|(v, _)| v)
+    }
+
+    /// A metadata value such as `interpolation`.
+    pub fn meta(&self, key: &str) -> Option<&Value> {
+        self.metadata.iter().find(|m| m.key == key).map(|m| &m.value)
+    }
+}
+
+/// A composed relationship.
+#[derive(Clone, Debug)]
+pub struct Relationship {
+    /// Its (namespaced) name.
+    pub name: String,
+    /// Composed targets, mapped to stage paths, each with the span that authored it.
+    pub targets: Vec<Target>,
+    /// Whether an explicit list (`= [...]` or `= None`) took part in the composition.
+    pub explicit: bool,
+    /// The span of the strongest opinion's statement.
+    pub span: Span,
+    /// Declared `custom`.
+    pub custom: bool,
+    /// Metadata, strongest opinion per key.
+    pub metadata: Vec<MetadataEntry>,
+}
+
+impl Relationship {
+    /// Whether the relationship was explicitly set to nothing (`= None` or `= []`): for a
+    /// binding, this means "bound to nothing", unlike a relationship with no opinion.
+    pub fn is_explicit_empty(&self) -> bool {
+        self.explicit && self.targets.is_empty()
+    }
+}
+
+/// A composed prim.
+#[derive(Clone, Debug)]
+pub struct Prim {
+    /// Absolute path, `/a/b`.
+    pub path: String,
+    /// Last path element.
+    pub name: String,
+    /// Schema type name (`Mesh`), if any opinion has one.
+    pub type_name: Option<String>,
+    /// `kind` metadata.
+    pub kind: Option<String>,
+    /// `instanceable` metadata (instancing is composed as plain copies).
+    pub instanceable: bool,
+    /// Composed `apiSchemas`.
+    pub api_schemas: Vec<String>,
+    /// Variant selections in effect, `(set, variant)`.
+    pub variant_selections: Vec<(String, String)>,
+    /// `doc` metadata.
+    pub doc: Option<String>,
+    /// The parent prim; `None` for root prims.
+    pub parent: Option<PrimId>,
+    /// Child prims in order.
+    pub children: Vec<PrimId>,
+    /// The strongest defining spec's `def Type "name"` text.
+    pub span: Span,
+    /// Attributes in authored order.
+    pub attributes: Vec<Attribute>,
+    /// Relationships in authored order.
+    pub relationships: Vec<Relationship>,
+}
+
+impl Prim {
+    /// The attribute named `name`.
+    pub fn attribute(&self, name: &str) -> Option<&Attribute> {
+        self.attributes.iter().find(|a| a.name == name)
+    }
+
+    /// The value of the attribute named `name`.
+    pub fn value(&self, name: &str) -> Option<&Value> {
+        self.attribute(name)?.get()
+    }
+
+    /// The relationship named `name`.
+    pub fn relationship(&self, name: &str) -> Option<&Relationship> {
+        self.relationships.iter().find(|r| r.name == name)
+    }
+
+    /// Relationships whose names start with `prefix`, e.g. `material:slotBinding:`.
+    pub fn relationships_with_prefix<'p>(&'p self, prefix: &'p str) -> impl Iterator<Item = &'p Relationship> + 'p {
+        self.relationships.iter().filter(move |r| r.name.starts_with(prefix))
+    }
+}
+
+/// A composed stage: the renderable prim tree (defined, active, non-abstract prims).
+#[derive(Debug)]
+pub struct Stage {
+    prims: Vec<Prim>,
+    roots: Vec<PrimId>,
+    by_path: HashMap<String, PrimId>,
+    metadata: LayerMetadata,
+    root_file: FileId,
+}
+
+impl Stage {
+    /// Reads and composes the stage whose root layer is the file at `path`.
+    pub fn open(path: &Path, sources: &mut SourceMap, diags: &mut Diagnostics) -> Result<Stage, Failed> {
+        let errors = diags.error_count();
+        let text = match std::fs::read_to_string(path) {
+            Ok(text) => text,
+            Err(e) => {
+                diags.push(Diagnostic::error(format!("cannot read `{}`: {e}", path.display())));
+                return Err(Failed);
+            }
+        };
+        let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
+        let key = std::fs::canonicalize(path).unwrap_or_else(|_| normalize(path));
+        Stage::compose(&path.display().to_string(), text, dir, Some(key), sources, diags, errors)
+    }
+
+    /// Composes a stage from text (tests, embedded scenes). `name` is the display name for
+    /// diagnostics; relative asset paths resolve against `base_dir`.
+    pub fn from_text(
+        name: &str,
+        text: &str,
+        base_dir: &Path,
+        sources: &mut SourceMap,
+        diags: &mut Diagnostics,
+    ) -> Result<Stage, Failed> {
+        let errors = diags.error_count();
+        Stage::compose(name, text.to_string(), base_dir.to_path_buf(), None, sources, diags, errors)
+    }
+
+    fn compose(
+        name: &str,
+        text: String,
+        dir: PathBuf,
+        key: Option<PathBuf>,
+        sources: &mut SourceMap,
+        diags: &mut Diagnostics,
+        errors_before: usize,
+    ) -> Result<Stage, Failed> {
+        let mut layers = Layers::default();
+        let mut chain = Vec::new();
+        let root = layers.add(name, text, dir, key, &mut chain, sources, diags);
+        // Redo the pass until it needs no layer that is not loaded yet.
+        let stage = loop {
+            let mut pass = Pass::new(&layers, root);
+            pass.run();
+            if pass.needs.is_empty() {
+                diags.extend(pass.diags);
+                break Stage {
+                    prims: pass.prims,
+                    roots: pass.roots,
+                    by_path: pass.by_path,
+                    metadata: layers.get(root).map(|l| l.layer.metadata.clone()).unwrap_or_default(),
+                    root_file: layers.get(root).map(|l| l.layer.file).unwrap_or_default(),
+                };
+            }
+            let needs = std::mem::take(&mut pass.needs);
+            drop(pass);
+            for (path, span) in needs {
+                layers.load(&path, span, &mut chain, sources, diags);
+            }
+        };
+        if diags.error_count() > errors_before { Err(Failed) } else { Ok(stage) }
+    }
+
+    /// Root prims in order.
+    pub fn root_children(&self) -> &[PrimId] {
+        &self.roots
+    }
+
+    /// The prim with id `id` (ids come from this stage).
+    pub fn prim(&self, id: PrimId) -> &Prim {
+        &self.prims[id.0 as usize]
+    }
+
+    /// Number of prims.
+    pub fn len(&self) -> usize {
+        self.prims.len()
+    }
+
+    /// Whether the stage has no prims.
+    pub fn is_empty(&self) -> bool {
+        self.prims.is_empty()
+    }
+
+    /// The prim at an absolute path such as `/World/Mesh`.
+    pub fn find(&self, path: &str) -> Option<PrimId> {
+        self.by_path.get(path).copied()
+    }
+
+    /// Every prim in depth-first pre-order (parents before children, siblings in order).
+    pub fn depth_first(&self) -> DepthFirst<'_> {
+        DepthFirst { stage: self, stack: self.roots.iter().rev().copied().collect() }
+    }
+
+    /// `id` and its descendants in depth-first pre-order.
+    pub fn subtree(&self, id: PrimId) -> DepthFirst<'_> {
+        DepthFirst { stage: self, stack: vec![id] }
+    }
+
+    /// The root layer's metadata.
+    pub fn metadata(&self) -> &LayerMetadata {
+        &self.metadata
+    }
+
+    /// `upAxis` of the root layer (`"Y"` when not authored, as in USD).
+    pub fn up_axis(&self) -> &str {
+        self.metadata.up_axis.as_deref().unwrap_or("Y")
+    }
+
+    /// `metersPerUnit` of the root layer (0.01 when not authored, as in USD).
+    pub fn meters_per_unit(&self) -> f64 {
+        self.metadata.meters_per_unit.unwrap_or(0.01)
+    }
+
+    /// `defaultPrim` of the root layer.
+    pub fn default_prim(&self) -> Option<PrimId> {
+        let (name, _) = self.metadata.default_prim.as_ref()?;
+        self.find(&format!("/{name}"))
+    }
+
+    /// The root layer's file.
+    pub fn root_file(&self) -> FileId {
+        self.root_file
+    }
+}
+
+/// Depth-first iterator over prims; see [`Stage::depth_first`].
+pub struct DepthFirst<'s> {
+    stage: &'s Stage,
+    stack: Vec<PrimId>,
+}
+
+impl<'s> Iterator for DepthFirst<'s> {
+    type Item = (PrimId, &'s Prim);
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let id = self.stack.pop()?;
+        let prim = self.stage.prims.get(id.0 as usize)?;
+        self.stack.extend(prim.children.iter().rev());
+        Some((id, prim))
+    }
+}
+
+// ---- layers ----
+
+struct LoadedLayer {
+    layer: Layer,
+    /// This layer and its sublayers, recursively, strongest first.
+    stack: Vec<usize>,
+}
+
+#[derive(Default)]
+struct Layers {
+    list: Vec<LoadedLayer>,
+    /// Canonical path → index, or `None` when loading failed (reported once).
+    by_key: HashMap<PathBuf, Option<usize>>,
+}
+
+impl Layers {
+    fn get(&self, index: usize) -> Option<&LoadedLayer> {
+        self.list.get(index)
+    }
+
+    fn key(path: &Path) -> PathBuf {
+        std::fs::canonicalize(path).unwrap_or_else(|_| normalize(path))
+    }
+
+    /// Loads the layer at `path` (and its sublayers) unless known; errors point at `span`.
+    fn load(
+        &mut self,
+        path: &Path,
+        span: Span,
+        chain: &mut Vec<PathBuf>,
+        sources: &mut SourceMap,
+        diags: &mut Diagnostics,
+    ) -> Option<usize> {
+        let key = Layers::key(path);
+        if chain.contains(&key) {
+            diags.push(
+                Diagnostic::error(format!("sublayer cycle: `{}` includes itself", path.display()))
+                    .at(span, "this sublayer is already being read"),
+            );
+            return None;
+        }
+        if let Some(known) = self.by_key.get(&key) {
+            return *known;
+        }
+        let text = match std::fs::read_to_string(path) {
+            Ok(text) => text,
+            Err(e) => {
+                diags.push(
+                    Diagnostic::error(format!("cannot read layer `{}`: {e}", path.display()))
+                        .at(span, "referenced here"),
+                );
+                self.by_key.insert(key, None);
+                return None;
+            }
+        };
+        let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
+        Some(self.add(&path.display().to_string(), text, dir, Some(key), chain, sources, diags))
+    }
+
+    /// Parses a layer's text, registers it and loads its sublayers.
+    #[allow(clippy::too_many_arguments)]
+    fn add(
+        &mut self,
+        name: &str,
+        text: String,
+        dir: PathBuf,
+        key: Option<PathBuf>,
+        chain: &mut Vec<PathBuf>,
+        sources: &mut SourceMap,
+        diags: &mut Diagnostics,
+    ) -> usize {
+        let file = sources.add(name, text);
+        let layer = usda::parse(file, sources.text(file), &dir, diags);
+        let index = self.list.len();
+        let sub_layers = layer.metadata.sub_layers.clone();
+        self.list.push(LoadedLayer { layer, stack: vec![index] });
+        if let Some(key) = &key {
+            self.by_key.insert(key.clone(), Some(index));
+            chain.push(key.clone());
+        }
+        let mut stack = vec![index];
+        for (asset, span) in sub_layers {
+            if let Some(sub) = self.load(&asset.resolved, span, chain, sources, diags)
+                && let Some(sub_stack) = self.list.get(sub).map(|l| l.stack.clone())
+            {
+                for i in sub_stack {
+                    if !stack.contains(&i) {
+                        stack.push(i);
+                    }
+                }
+            }
+        }
+        if key.is_some() {
+            chain.pop();
+        }
+        if let Some(loaded) = self.list.get_mut(index) {
+            loaded.stack = stack;
+        }
+        index
+    }
+}
+
+// ---- composition ----
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum Arc {
+    Root,
+    Inherit,
+    Variant,
+    Reference,
+    Payload,
+}
+
+/// Prefix mappings from a node's namespace to the stage's, innermost first.
+type MapChain = Vec<(String, String)>;
+
+/// Past this many nodes in one prim's index, composition gives up on further arcs.
+const MAX_NODES: usize = 4096;
+
+struct Node<'l> {
+    arc: Arc,
+    /// The root layer of the layer stack this node's site lives in.
+    stack: usize,
+    /// The prim path in that layer stack's namespace.
+    site: String,
+    /// Specs at the site, strongest first.
+    specs: Vec<&'l PrimSpec>,
+    map: MapChain,
+    children: Vec<Node<'l>>,
+    /// Added for this prim (not inherited from an ancestor's index).
+    direct: bool,
+    expanded: bool,
+    /// Variant sets already applied at this node.
+    variants_done: Vec<String>,
+}
+
+impl<'l> Node<'l> {
+    /// The node for the same arc one level down, at child `name`; `None` if nothing is there.
+    fn child(&self, name: &str) -> Option<Node<'l>> {
+        let specs: Vec<&PrimSpec> = self.specs.iter().filter_map(|s| s.child(name)).collect();
+        let children: Vec<Node> = self.children.iter().filter_map(|c| c.child(name)).collect();
+        if specs.is_empty() && children.is_empty() {
+            return None;
+        }
+        Some(Node {
+            arc: self.arc,
+            stack: self.stack,
+            site: join_path(&self.site, name),
+            specs,
+            map: self.map.clone(),
+            children,
+            direct: false,
+            expanded: false,
+            variants_done: Vec::new(),
+        })
+    }
+
+    fn count(&self) -> usize {
+        1 + self.children.iter().map(Node::count).sum::<usize>()
+    }
+
+    /// Inserts a direct arc after the direct arcs of the same type, before ancestral ones.
+    fn insert_child(&mut self, node: Node<'l>) {
+        let at = self
+            .children
+            .iter()
+            .position(|c| c.arc > node.arc || (c.arc == node.arc && !c.direct))
+            .unwrap_or(self.children.len());
+        self.children.insert(at, node);
+    }
+
+    /// Every `(spec, node)` pair in strength order.
+    fn flatten<'n>(&'n self, out: &mut Vec<(&'l PrimSpec, &'n Node<'l>)>) {
+        for spec in &self.specs {
+            out.push((spec, self));
+        }
+        for child in &self.children {
+            child.flatten(out);
+        }
+    }
+}
+
+fn join_path(parent: &str, name: &str) -> String {
+    if parent == "/" || parent.is_empty() { format!("/{name}") } else { format!("{parent}/{name}") }
+}
+
+/// Maps a path authored at `site` in a node's namespace to the stage's namespace.
+fn map_path(chain: &MapChain, site: &str, path: &str) -> String {
+    let mut path = anchor(site, path);
+    for (from, to) in chain {
+        if let Some(rest) = path.strip_prefix(from.as_str())
+            && (rest.is_empty() || rest.starts_with('/') || rest.starts_with('.'))
+        {
+            path = format!("{to}{rest}");
+        }
+    }
+    path
+}
+
+/// Makes a relative path (`../Mat`, `Child`, `.prop`) absolute against the prim at `site`.
+fn anchor(site: &str, path: &str) -> String {
+    if path.starts_with('/') || path.is_empty() {
+        return path.to_string();
+    }
+    let mut base: Vec<&str> = site.split('/').filter(|s| !s.is_empty()).collect();
+    let mut rest = path;
+    loop {
+        if let Some(r) = rest.strip_prefix("../") {
+            base.pop();
+            rest = r;
+        } else if rest == ".." {
+            base.pop();
+            rest = "";
+        } else if let Some(r) = rest.strip_prefix("./") {
+            rest = r;
+        } else {
+            break;
+        }
+    }
+    let mut out = String::new();
+    for b in &base {
+        out.push('/');
+        out.push_str(b);
+    }
+    if rest.starts_with('.') || rest.is_empty() {
+        if out.is_empty() {
+            out.push('/');
+        }
+        out.push_str(rest);
+    } else {
+        out.push('/');
+        out.push_str(rest);
+    }
+    out
+}
+
+struct Pass<'l> {
+    layers: &'l Layers,
+    root: usize,
+    diags: Diagnostics,
+    /// Layers this pass wanted but that are not loaded yet.
+    needs: Vec<(PathBuf, Span)>,
+    prims: Vec<Prim>,
+    roots: Vec<PrimId>,
+    by_path: HashMap<String, PrimId>,
+}
+
+impl<'l> Pass<'l> {
+    fn new(layers: &'l Layers, root: usize) -> Pass<'l> {
+        Pass {
+            layers,
+            root,
+            diags: Diagnostics::new(),
+            needs: Vec::new(),
+            prims: Vec::new(),
+            roots: Vec::new(),
+            by_path: HashMap::new(),
+        }
+    }
+
+    fn stack(&self, layer: usize) -> &'l [usize] {
+        self.layers.get(layer).map(|l| l.stack.as_slice()).unwrap_or(&[])
+    }
+
+    /// Specs at `path` in every layer of `stack`, strongest first.
+    fn specs_at(&self, stack: usize, path: &str) -> Vec<&'l PrimSpec> {
+        let layers = self.layers;
+        self.stack(stack).iter().filter_map(|&i| layers.get(i).and_then(|l| l.layer.prim_at(path))).collect()
+    }
+
+    fn run(&mut self) {
+        let layers = self.layers;
+        // Root prim names, weakest layer first so stronger layers' new names come after.
+        let mut names: Vec<&str> = Vec::new();
+        for &i in self.stack(self.root).iter().rev() {
+            if let Some(l) = layers.get(i) {
+                for p in &l.layer.prims {
+                    if !names.contains(&p.name.as_str()) {
+                        names.push(&p.name);
+                    }
+                }
+            }
+        }
+        for name in names {
+            let site = format!("/{name}");
+            let node = Node {
+                arc: Arc::Root,
+                stack: self.root,
+                specs: self.specs_at(self.root, &site),
+                site,
+                map: Vec::new(),
+                children: Vec::new(),
+                direct: true,
+                expanded: false,
+                variants_done: Vec::new(),
+            };
+            if let Some(id) = self.compose_prim(node, None, name) {
+                self.roots.push(id);
+            }
+        }
+    }
+
+    /// Composes one prim from its index tree, then its children. Returns `None` for prims
+    /// that are not part of the renderable tree (abstract, undefined or inactive).
+    fn compose_prim(&mut self, mut tree: Node<'l>, parent: Option<PrimId>, name: &str) -> Option<PrimId> {
+        let path = match parent {
+            Some(p) => join_path(&self.prims[p.0 as usize].path, name),
+            None => format!("/{name}"),
+        };
+        self.expand(&mut tree, &mut Vec::new());
+        self.apply_variants(&mut tree, &path);
+
+        let mut opinions = Vec::new();
+        tree.flatten(&mut opinions);
+
+        let specifier =
+            opinions.iter().map(|(s, _)| s.specifier).find(|s| *s != Specifier::Over).unwrap_or(Specifier::Over);
+        let active = opinions.iter().find_map(|(s, _)| s.metadata.active).unwrap_or(true);
+        if specifier != Specifier::Def || !active {
+            return None;
+        }
+        let span =
+            opinions.iter().find(|(s, _)| s.specifier == Specifier::Def).map(|(s, _)| s.span).unwrap_or_default();
+        let mut api_schemas = Vec::new();
+        for (spec, _) in opinions.iter().rev() {
+            spec.metadata.api_schemas.apply(&mut api_schemas, |a, b| a == b);
+        }
+        let (attributes, relationships) = compose_properties(&opinions);
+        let prim = Prim {
+            path: path.clone(),
+            name: name.to_string(),
+            type_name: opinions.iter().find_map(|(s, _)| s.type_name.clone()),
+            kind: opinions.iter().find_map(|(s, _)| s.metadata.kind.clone()),
+            instanceable: opinions.iter().find_map(|(s, _)| s.metadata.instanceable).unwrap_or(false),
+            api_schemas,
+            variant_selections: selections(&opinions),
+            doc: opinions.iter().find_map(|(s, _)| s.metadata.doc.clone()),
+            parent,
+            children: Vec::new(),
+            span,
+            attributes,
+            relationships,
+        };
+        let id = PrimId(self.prims.len() as u32);
+        self.prims.push(prim);
+        self.by_path.insert(path, id);
+
+        // Child names, weakest opinion first, so an asset's order is kept and local
+        // additions follow it.
+        let mut names: Vec<&'l str> = Vec::new();
+        for (spec, _) in opinions.iter().rev() {
+            for child in &spec.children {
+                if !names.contains(&child.name.as_str()) {
+                    names.push(&child.name);
+                }
+            }
+        }
+        drop(opinions);
+        let mut children = Vec::new();
+        for child_name in names {
+            if let Some(child_tree) = tree.child(child_name)
+                && let Some(child) = self.compose_prim(child_tree, Some(id), child_name)
+            {
+                children.push(child);
+            }
+        }
+        if let Some(prim) = self.prims.get_mut(id.0 as usize) {
+            prim.children = children;
+        }
+        Some(id)
+    }
+
+    /// Adds the inherit, reference and payload arcs authored on every node's specs.
+    fn expand(&mut self, node: &mut Node<'l>, ancestors: &mut Vec<(usize, String)>) {
+        ancestors.push((node.stack, node.site.clone()));
+        if !node.expanded {
+            node.expanded = true;
+            for arc in self.direct_arcs(node, ancestors) {
+                node.insert_child(arc);
+            }
+        }
+        for child in &mut node.children {
+            self.expand(child, ancestors);
+        }
+        ancestors.pop();
+    }
+
+    fn direct_arcs(&mut self, node: &Node<'l>, ancestors: &[(usize, String)]) -> Vec<Node<'l>> {
+        let mut inherits: Vec<Target> = Vec::new();
+        let mut references: Vec<Reference> = Vec::new();
+        let mut payloads: Vec<Reference> = Vec::new();
+        for spec in node.specs.iter().rev() {
+            spec.metadata.inherits.apply(&mut inherits, |a, b| a.0 == b.0);
+            spec.metadata.references.apply(&mut references, same_reference);
+            spec.metadata.payloads.apply(&mut payloads, same_reference);
+            if !spec.metadata.specializes.is_empty() {
+                self.diags
+                    .push(Diagnostic::warning("`specializes` is not supported; ignored").at(spec.span, "on this prim"));
+            }
+        }
+        let mut arcs = Vec::new();
+        for (path, span) in inherits {
+            let target = anchor(&node.site, &path);
+            if let Some(n) = self.arc_node(node, Arc::Inherit, node.stack, target, span, ancestors) {
+                arcs.push(n);
+            }
+        }
+        for (arc, list) in [(Arc::Reference, references), (Arc::Payload, payloads)] {
+            for reference in list {
+                let Some((stack, target)) = self.reference_target(node, &reference) else {
+                    continue;
+                };
+                if let Some(n) = self.arc_node(node, arc, stack, target, reference.span, ancestors) {
+                    arcs.push(n);
+                }
+            }
+        }
+        arcs
+    }
+
+    /// The layer stack and prim path a reference or payload points at.
+    fn reference_target(&mut self, node: &Node<'l>, reference: &Reference) -> Option<(usize, String)> {
+        let stack = match &reference.asset {
+            None => node.stack,
+            Some(asset) => self.layer_for(asset, reference.span)?,
+        };
+        let path = match &reference.prim_path {
+            Some(p) => anchor(&node.site, p),
+            None => {
+                let layer = &self.layers.get(stack)?.layer;
+                match &layer.metadata.default_prim {
+                    Some((name, _)) => format!("/{name}"),
+                    None => {
+                        self.diags.push(
+                            Diagnostic::error("the referenced layer has no `defaultPrim`")
+                                .at(reference.span, "name the prim: `@file.usda@</Prim>`"),
+                        );
+                        return None;
+                    }
+                }
+            }
+        };
+        Some((stack, path))
+    }
+
+    /// The loaded layer for an asset, or records it as needed for the next pass.
+    fn layer_for(&mut self, asset: &AssetPath, span: Span) -> Option<usize> {
+        let key = Layers::key(&asset.resolved);
+        match self.layers.by_key.get(&key) {
+            Some(known) => *known,
+            None => {
+                if !self.needs.iter().any(|(p, _)| Layers::key(p) == key) {
+                    self.needs.push((asset.resolved.clone(), span));
+                }
+                None
+            }
+        }
+    }
+
+    fn arc_node(
+        &mut self,
+        from: &Node<'l>,
+        arc: Arc,
+        stack: usize,
+        site: String,
+        span: Span,
+        ancestors: &[(usize, String)],
+    ) -> Option<Node<'l>> {
+        if ancestors.iter().any(|(s, p)| *s == stack && *p == site) {
+            let what = if arc == Arc::Inherit { "inherit" } else { "reference" };
+            self.diags.push(
+                Diagnostic::error(format!("{what} cycle: `{site}` depends on itself"))
+                    .at(span, format!("this {what} leads back to a prim that is being composed")),
+            );
+            return None;
+        }
+        if ancestors.len() > 64 || from.count() > MAX_NODES {
+            self.diags
+                .push(Diagnostic::error("composition is too deep or too large").at(span, "while composing this arc"));
+            return None;
+        }
+        let specs = self.specs_at(stack, &site);
+        if specs.is_empty() && arc != Arc::Inherit {
+            self.diags.push(
+                Diagnostic::error(format!("the referenced prim `{site}` does not exist")).at(span, "referenced here"),
+            );
+            return None;
+        }
+        let mut map = Vec::with_capacity(from.map.len() + 1);
+        map.push((site.clone(), from.site.clone()));
+        map.extend(from.map.iter().cloned());
+        Some(Node {
+            arc,
+            stack,
+            site,
+            specs,
+            map,
+            children: Vec::new(),
+            direct: true,
+            expanded: false,
+            variants_done: Vec::new(),
+        })
+    }
+
+    /// Applies selected variants everywhere in the tree until no new variant appears.
+    fn apply_variants(&mut self, tree: &mut Node<'l>, path: &str) {
+        for _ in 0..16 {
+            let chosen = {
+                let mut opinions = Vec::new();
+                tree.flatten(&mut opinions);
+                selections(&opinions)
+            };
+            if !self.add_variants(tree, &chosen, path) {
+                return;
+            }
+            self.expand(tree, &mut Vec::new());
+        }
+    }
+
+    fn add_variants(&mut self, node: &mut Node<'l>, chosen: &[(String, String)], path: &str) -> bool {
+        let mut added = false;
+        let mut sets: Vec<&'l str> = Vec::new();
+        for spec in &node.specs {
+            for set in &spec.variant_sets {
+                if !sets.contains(&set.name.as_str()) && !node.variants_done.contains(&set.name) {
+                    sets.push(&set.name);
+                }
+            }
+        }
+        for set_name in sets {
+            node.variants_done.push(set_name.to_string());
+            let Some((_, selection)) = chosen.iter().find(|(s, _)| s == set_name) else {
+                let span = node.specs.iter().find_map(|s| s.variant_sets.iter().find(|v| v.name == set_name));
+                if let Some(set) = span {
+                    self.diags.push(
+                        Diagnostic::warning(format!("no variant selected for variant set `{set_name}` on `{path}`"))
+                            .at(set.span, "no variant of this set is applied"),
+                    );
+                }
+                continue;
+            };
+            let bodies: Vec<&'l PrimSpec> = node
+                .specs
+                .iter()
+                .filter_map(|s| s.variant_sets.iter().find(|v| v.name == set_name))
+                .filter_map(|set| set.variants.iter().find(|v| v.name == *selection))
+                .collect();
+            if bodies.is_empty() {
+                if let Some(set) = node.specs.iter().find_map(|s| s.variant_sets.iter().find(|v| v.name == set_name)) {
+                    self.diags.push(
+                        Diagnostic::warning(format!(
+                            "variant `{selection}` selected for `{set_name}` on `{path}` does not exist"
+                        ))
+                        .at(set.span, "this set has no such variant"),
+                    );
+                }
+                continue;
+            }
+            node.insert_child(Node {
+                arc: Arc::Variant,
+                stack: node.stack,
+                site: node.site.clone(),
+                specs: bodies,
+                map: node.map.clone(),
+                children: Vec::new(),
+                direct: true,
+                expanded: false,
+                variants_done: Vec::new(),
+            });
+            added = true;
+        }
+        for child in &mut node.children {
+            added |= self.add_variants(child, chosen, path);
+        }
+        added
+    }
+}
+
+fn same_reference(a: &Reference, b: &Reference) -> bool {
+    a.asset.as_ref().map(|x| &x.resolved) == b.asset.as_ref().map(|x| &x.resolved) && a.prim_path == b.prim_path
+}
+
+/// Variant selections, strongest opinion per set.
+fn selections(opinions: &[(&PrimSpec, &Node)]) -> Vec<(String, String)> {
+    let mut out: Vec<(String, String)> = Vec::new();
+    for (spec, _) in opinions {
+        for (set, selection, _) in &spec.metadata.variant_selections {
+            if !out.iter().any(|(s, _)| s == set) {
+                out.push((set.clone(), selection.clone()));
+            }
+        }
+    }
+    out
+}
+
+/// Composes properties from opinions in strength order.
+fn compose_properties(opinions: &[(&PrimSpec, &Node)]) -> (Vec<Attribute>, Vec<Relationship>) {
+    // Group each property's opinions, strongest first, in first-seen order.
+    let mut order: Vec<&str> = Vec::new();
+    let mut groups: HashMap<&str, Vec<(&PropertySpec, &Node)>> = HashMap::new();
+    for (spec, node) in opinions {
+        for property in &spec.properties {
+            let name = property.name();
+            let group = groups.entry(name).or_insert_with(|| {
+                order.push(name);
+                Vec::new()
+            });
+            group.push((property, *node));
+        }
+    }
+    let mut attributes = Vec::new();
+    let mut relationships = Vec::new();
+    for name in order {
+        let Some(group) = groups.get(name) else {
+            continue;
+        };
+        match group.first() {
+            Some((PropertySpec::Attribute(_), _)) => {
+                let specs: Vec<_> = group
+                    .iter()
+                    .filter_map(|(p, n)| match p {
+                        PropertySpec::Attribute(a) => Some((&**a, *n)),
+                        PropertySpec::Relationship(_) => None,
+                    })
+                    .collect();
+                attributes.push(compose_attribute(&specs));
+            }
+            Some((PropertySpec::Relationship(_), _)) => {
+                let specs: Vec<_> = group
+                    .iter()
+                    .filter_map(|(p, n)| match p {
+                        PropertySpec::Relationship(r) => Some((r, *n)),
+                        PropertySpec::Attribute(_) => None,
+                    })
+                    .collect();
+                relationships.push(compose_relationship(&specs));
+            }
+            None => {}
+        }
+    }
+    (attributes, relationships)
+}
+
+/// Targets of one opinion mapped into the stage's namespace.
+fn mapped(op: &ListOp<Target>, node: &Node) -> ListOp<Target> {
+    let map = |items: &Vec<Target>| -> Vec<Target> {
+        items.iter().map(|(p, s)| (map_path(&node.map, &node.site, p), *s)).collect()
+    };
+    ListOp {
+        explicit: op.explicit.as_ref().map(map),
+        prepended: map(&op.prepended),
+        appended: map(&op.appended),
+        deleted: map(&op.deleted),
+        added: map(&op.added),
+        ordered: map(&op.ordered),
+    }
+}
+
+fn merge_metadata(out: &mut Vec<MetadataEntry>, entries: &[MetadataEntry]) {
+    for entry in entries {
+        if !out.iter().any(|m| m.key == entry.key) {
+            out.push(entry.clone());
+        }
+    }
+}
+
+fn compose_attribute(specs: &[(&usda::AttributeSpec, &Node)]) -> Attribute {
+    let (strongest, _) = specs[0];
+    let mut value = None;
+    let mut blocked = false;
+    // The strongest default wins; a block (`= None`) hides every weaker value.
+    if let Some((v, span)) = specs.iter().find_map(|(a, _)| a.default.as_ref()) {
+        if v.is_none() {
+            blocked = true;
+        } else {
+            value = Some((v.clone(), *span));
+        }
+    }
+    let time_samples =
+        specs.iter().find(|(a, _)| !a.time_samples.is_empty()).map(|(a, _)| a.time_samples.clone()).unwrap_or_default();
+    if value.is_none()
+        && !blocked
+        && let Some((_, v)) = time_samples.first()
+    {
+        // No default anywhere: the first sample is the best single-frame value.
+        value = Some((v.clone(), strongest.span));
+    }
+    let mut connections = Vec::new();
+    let mut metadata = Vec::new();
+    for (a, node) in specs.iter().rev() {
+        mapped(&a.connections, node).apply(&mut connections, |x, y| x.0 == y.0);
+    }
+    for (a, _) in specs {
+        merge_metadata(&mut metadata, &a.metadata);
+    }
+    Attribute {
+        name: strongest.name.clone(),
+        type_name: strongest.type_name.clone(),
+        value_type: strongest.value_type,
+        value,
+        blocked,
+        span: strongest.span,
+        custom: specs.iter().any(|(a, _)| a.custom),
+        uniform: specs.iter().any(|(a, _)| a.uniform),
+        connections,
+        time_samples,
+        metadata,
+    }
+}
+
+fn compose_relationship(specs: &[(&usda::RelationshipSpec, &Node)]) -> Relationship {
+    let (strongest, _) = specs[0];
+    let mut targets = Vec::new();
+    let mut explicit = false;
+    for (r, node) in specs.iter().rev() {
+        explicit |= mapped(&r.targets, node).apply(&mut targets, |x, y| x.0 == y.0);
+    }
+    let mut metadata = Vec::new();
+    for (r, _) in specs {
+        merge_metadata(&mut metadata, &r.metadata);
+    }
+    Relationship {
+        name: strongest.name.clone(),
+        targets,
+        explicit,
+        span: strongest.span,
+        custom: specs.iter().any(|(r, _)| r.custom),
+        metadata,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::fs;
+
+    fn fixtures() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/usd")
+    }
+
+    fn open(path: &Path) -> (Result<Stage, Failed>, String) {
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let stage = Stage::open(path, &mut sources, &mut diags);
+        (stage, diags.render(&sources))
+    }
+
+    fn text(text: &str) -> (Result<Stage, Failed>, String) {
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let stage = Stage::from_text("scene.usda", text, Path::new("/nowhere"), &mut sources, &mut diags);
+        (stage, diags.render(&sources))
+    }
+
+    fn ok(stage: (Result<Stage, Failed>, String)) -> Stage {
+        match stage {
+            (Ok(stage), _) => stage,
+            (Err(_), rendered) => panic!("{rendered}"),
+        }
+    }
+
+    /// A fresh directory under the system temp dir.
+    fn temp_dir(name: &str) -> tempfile::TempDir {
+        tempfile::Builder::new().prefix(name).tempdir().expect("temp dir")
+    }
+
+    fn prim<'s>(stage: &'s Stage, path: &str) -> &'s Prim {
+        stage.prim(stage.find(path).unwrap_or_else(|| panic!("no prim {path}")))
+    }
+
+    #[test]
+    fn pixar_written_fixture() {
+        let stage = ok(open(&fixtures().join("pixar_written.usda")));
+        assert_eq!(stage.up_axis(), "Y");
+        assert_eq!(stage.meters_per_unit(), 0.01);
+        assert_eq!(stage.default_prim(), stage.find("/World"));
+        let world = prim(&stage, "/World");
+        assert_eq!(world.type_name.as_deref(), Some("Xform"));
+        assert_eq!(world.value("xformOp:translate").and_then(Value::as_vec3), Some([1.0, 2.0, 3.0]));
+        assert_eq!(world.value("xformOp:rotateXYZ").and_then(Value::as_vec3), Some([0.0, 90.0, 0.0]));
+        assert_eq!(world.value("xformOpOrder").and_then(Value::as_string_array).map(<[String]>::len), Some(3));
+        let quad = prim(&stage, "/World/Group/Quad");
+        assert_eq!(quad.type_name.as_deref(), Some("Mesh"));
+        assert_eq!(quad.value("faceVertexIndices").and_then(Value::as_int_array), Some(&[0, 1, 2, 3][..]));
+        let points = quad.value("points").and_then(Value::as_vec3_array).unwrap();
+        assert_eq!(points[0], [-1.0, 0.0, -1.0]);
+        let st = quad.attribute("primvars:st").unwrap();
+        assert_eq!(st.type_name, "texCoord2f[]");
+        assert_eq!(st.meta("interpolation").and_then(Value::as_str), Some("faceVarying"));
+        assert_eq!(st.get().and_then(Value::as_tuple_array).map(|(w, d)| (w, d.len())), Some((2, 8)));
+        assert_eq!(quad.value("doubleSided"), Some(&Value::Bool(true)));
+        let slot0 = quad.relationship("material:slotBinding:_000").unwrap();
+        assert_eq!(slot0.targets[0].0, "/World/Looks/Plastic");
+        let slot50 = quad.relationship("material:slotBinding:_050").unwrap();
+        assert!(slot50.is_explicit_empty());
+        let nested = quad.relationship("material:slotBinding:_050:_:_010").unwrap();
+        assert_eq!(nested.targets.len(), 2);
+        assert_eq!(quad.relationships_with_prefix("material:slotBinding:").count(), 3);
+        let ball = prim(&stage, "/World/Ball");
+        assert_eq!(ball.api_schemas, vec!["MaterialBindingAPI".to_string()]);
+        assert_eq!(ball.value("radius"), Some(&Value::Float(0.5)));
+        let cam = prim(&stage, "/World/Cam");
+        let m = cam.value("xformOp:transform").and_then(Value::as_matrix4).unwrap();
+        assert_eq!(&m[12..], &[0.0, 1.0, 5.0, 1.0]);
+        let sky = prim(&stage, "/World/Sky");
+        let tex = sky.value("inputs:texture:file").and_then(Value::as_asset).unwrap();
+        assert_eq!(tex.resolved, fixtures().join("sky.exr"));
+        assert_eq!(prim(&stage, "/World/Panel").type_name.as_deref(), Some("RectLight"));
+        let shader = prim(&stage, "/World/Looks/Plastic/Surface");
+        assert_eq!(shader.value("info:implementationSource").and_then(Value::as_str), Some("sourceAsset"));
+        let source = shader.value("info:strata:sourceAsset").and_then(Value::as_asset).unwrap();
+        assert_eq!(source.authored, "plastic.ash");
+        assert_eq!(shader.value("info:strata:sourceAsset:subIdentifier"), Some(&Value::Token("plastic".into())));
+        assert_eq!(shader.value("inputs:base_color").and_then(Value::as_vec3), Some([0.8, 0.1, 0.1]));
+        let output = prim(&stage, "/World/Looks/Plastic").attribute("outputs:strata:surface").unwrap();
+        assert_eq!(output.connections[0].0, "/World/Looks/Plastic/Surface.outputs:surface");
+        // Depth-first order visits parents first and keeps file order.
+        let order: Vec<&str> = stage.depth_first().map(|(_, p)| p.name.as_str()).take(4).collect();
+        assert_eq!(order, vec!["World", "Group", "Quad", "Ball"]);
+        assert_eq!(stage.subtree(stage.find("/World/Looks").unwrap()).count(), 3);
+    }
+
+    #[test]
+    fn pixar_sublayer_and_reference_fixture() {
+        let stage = ok(open(&fixtures().join("sub_root.usda")));
+        // The weak sublayer's root prim is there, after nothing stronger reorders it.
+        assert!(stage.find("/Weak").is_some());
+        let body = prim(&stage, "/Scene/Thing/Body");
+        assert_eq!(body.type_name.as_deref(), Some("Cube"));
+        // The sublayer is local, so it beats the reference.
+        assert_eq!(body.value("size"), Some(&Value::Float(5.0)));
+        // Targets inside the referenced asset are mapped to where it is referenced.
+        let slot = body.relationship("material:slotBinding:_000").unwrap();
+        assert_eq!(slot.targets[0].0, "/Scene/Thing/Mat");
+        assert!(stage.find("/Scene/Thing/Mat").is_some());
+    }
+
+    #[test]
+    fn pixar_kitchen_fixture() {
+        let (stage, rendered) = open(&fixtures().join("pixar_kitchen.usda"));
+        let stage = stage.unwrap_or_else(|_| panic!("{rendered}"));
+        assert!(rendered.contains("timeSamples ignored"), "{rendered}");
+        let root = prim(&stage, "/Root");
+        assert_eq!(root.kind.as_deref(), Some("component"));
+        assert_eq!(root.value("inherited"), Some(&Value::Float(7.0)));
+        assert_eq!(root.value("color").and_then(Value::as_vec3), Some([1.0, 0.0, 0.0]));
+        assert!(stage.find("/Root/RedOnly").is_some());
+        assert!(stage.find("/Root/Off").is_none());
+        assert!(stage.find("/_class_Base").is_none());
+        assert!(stage.find("/OverOnly").is_none());
+        assert_eq!(root.value("anim"), Some(&Value::Float(1.0)));
+        assert_eq!(root.value("only_ts").and_then(Value::as_vec3), Some([1.0, 1.0, 1.0]));
+        assert!(root.attribute("blocked").unwrap().blocked);
+        assert_eq!(root.value("f"), Some(&Value::Float(f64::INFINITY)));
+        assert_eq!(root.value("s").and_then(Value::as_str), Some("it's \"quoted\"\nnewline\ttab \\ back"));
+        assert_eq!(root.value("s3").and_then(Value::as_str), Some("multi\nline with \"\"\" inside"));
+        assert_eq!(root.value("ast_at").and_then(Value::as_str), Some("weird@name.png"));
+        assert_eq!(root.value("m3"), Some(&Value::Matrix3([1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0])));
+        assert_eq!(root.value("m4a").and_then(Value::as_tuple_array).map(|(w, d)| (w, d.len())), Some((16, 32)));
+        assert_eq!(root.value("ba"), Some(&Value::BoolArray(vec![true, false])));
+        assert_eq!(root.value("i64"), Some(&Value::Int(-9_000_000_000)));
+        let r = root.relationship("r").unwrap();
+        let targets: Vec<&str> = r.targets.iter().map(|t| t.0.as_str()).collect();
+        assert_eq!(targets, vec!["/Root/Child", "/Other"]);
+        assert!(!r.explicit);
+        assert!(root.relationship("explicit_empty_list").unwrap().is_explicit_empty());
+        assert!(!root.relationship("declared_rel").unwrap().is_explicit_empty());
+        let dst = root.attribute("dst").unwrap();
+        assert_eq!(dst.connections.len(), 2);
+        let inst = prim(&stage, "/Root/Inst");
+        assert!(inst.instanceable);
+        assert_eq!(inst.value("from_payload"), Some(&Value::Int(1)));
+        assert_eq!(inst.value("from_other"), Some(&Value::Int(2)));
+        assert_eq!(inst.value("inherited"), Some(&Value::Float(7.0)));
+        let meta = stage.metadata();
+        assert_eq!(meta.doc.as_deref(), Some("Kitchen \"sink\"\nsecond line"));
+    }
+
+    fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+        let path = dir.join(name);
+        fs::write(&path, text).expect("write fixture");
+        path
+    }
+
+    #[test]
+    fn sublayers_strongest_first_and_nested_references() {
+        let dir = temp_dir("strata-compose");
+        let d = dir.path();
+        fs::create_dir(d.join("sub")).unwrap();
+        write(d, "sub/leaf.usda", "#usda 1.0\n(defaultPrim = \"Leaf\")\ndef Sphere \"Leaf\" { double radius = 3 }\n");
+        write(
+            d,
+            "sub/mid.usda",
+            "#usda 1.0\n(defaultPrim = \"Mid\")\ndef Xform \"Mid\" { def \"L\" (references = @./leaf.usda@) { double radius = 2 } }\n",
+        );
+        write(d, "strong.usda", "#usda 1.0\nover \"A\" { float x = 1 }\n");
+        write(d, "weak.usda", "#usda 1.0\ndef \"A\" { float x = 2\n float y = 2 }\n");
+        let root = write(
+            d,
+            "root.usda",
+            "#usda 1.0\n(subLayers = [@strong.usda@, @weak.usda@])\ndef \"R\" (prepend references = @sub/mid.usda@) { }\n",
+        );
+        let stage = ok(open(&root));
+        let a = prim(&stage, "/A");
+        assert_eq!(a.value("x"), Some(&Value::Float(1.0)));
+        assert_eq!(a.value("y"), Some(&Value::Float(2.0)));
+        let leaf = prim(&stage, "/R/L");
+        assert_eq!(leaf.type_name.as_deref(), Some("Sphere"));
+        assert_eq!(leaf.value("radius"), Some(&Value::Float(2.0)));
+    }
+
+    #[test]
+    fn cycles_and_missing_files_are_errors() {
+        let dir = temp_dir("strata-cycle");
+        let d = dir.path();
+        write(d, "a.usda", "#usda 1.0\n(subLayers = [@b.usda@])\n");
+        write(d, "b.usda", "#usda 1.0\n(subLayers = [@a.usda@])\n");
+        let (stage, rendered) = open(&d.join("a.usda"));
+        assert!(stage.is_err());
+        assert!(rendered.contains("cycle") && rendered.contains("b.usda:2:15"), "{rendered}");
+
+        write(d, "r1.usda", "#usda 1.0\n(defaultPrim = \"P\")\ndef \"P\" (references = @r2.usda@) {}\n");
+        write(d, "r2.usda", "#usda 1.0\n(defaultPrim = \"P\")\ndef \"P\" (references = @r1.usda@) {}\n");
+        let (stage, rendered) = open(&d.join("r1.usda"));
+        assert!(stage.is_err());
+        assert!(rendered.contains("reference cycle"), "{rendered}");
+
+        let missing = write(d, "m.usda", "#usda 1.0\ndef \"P\" (\n    references = @gone.usda@\n) {}\n");
+        let (stage, rendered) = open(&missing);
+        assert!(stage.is_err());
+        assert!(rendered.contains("m.usda:3:18") && rendered.contains("@gone.usda@"), "{rendered}");
+
+        let (stage, rendered) = text("#usda 1.0\ndef \"A\" (references = </A>) {}\n");
+        assert!(stage.is_err() && rendered.contains("cycle"), "{rendered}");
+    }
+
+    #[test]
+    fn internal_references_inherits_classes_and_variants() {
+        let stage = ok(text(
+            r#"#usda 1.0
+class "_base" { float k = 1
+    def "Part" { float p = 1 } }
+def "Proto" { float r = 5
+    rel mat = </Proto/M>
+    def "M" {} }
+def "A" (
+    inherits = </_base>
+    references = </Proto>
+    variants = { string look = "b" }
+    variantSets = "look"
+) {
+    float r = 6
+    variantSet "look" = {
+        "a" { float v = 1 }
+        "b" { float v = 2
+              def "FromVariant" {} }
+    }
+}
+def "Inactive" (active = false) { def "Kid" {} }
+"#,
+        ));
+        let a = prim(&stage, "/A");
+        assert_eq!(a.value("k"), Some(&Value::Float(1.0)));
+        assert_eq!(a.value("r"), Some(&Value::Float(6.0)));
+        assert_eq!(a.value("v"), Some(&Value::Float(2.0)));
+        assert_eq!(a.relationship("mat").unwrap().targets[0].0, "/A/M");
+        assert_eq!(a.variant_selections, vec![("look".to_string(), "b".to_string())]);
+        // A `def` inside a class is inherited as a defined child, as in USD.
+        assert_eq!(prim(&stage, "/A/Part").value("p"), Some(&Value::Float(1.0)));
+        assert!(stage.find("/A/FromVariant").is_some());
+        assert!(stage.find("/A/M").is_some());
+        assert!(stage.find("/_base").is_none());
+        assert!(stage.find("/Inactive").is_none() && stage.find("/Inactive/Kid").is_none());
+        let roots: Vec<&str> = stage.root_children().iter().map(|&id| stage.prim(id).path.as_str()).collect();
+        assert_eq!(roots, vec!["/Proto", "/A"]);
+    }
+
+    #[test]
+    fn relationship_list_ops_compose_weakest_to_strongest() {
+        let dir = temp_dir("strata-rel");
+        let d = dir.path();
+        write(d, "weak.usda", "#usda 1.0\ndef \"P\" { rel r = [</a>, </b>]\n rel s = [</x>] }\n");
+        let root = write(
+            d,
+            "root.usda",
+            "#usda 1.0\n(subLayers = [@weak.usda@])\nover \"P\" { delete rel r = </a>\n append rel r = </c>\n rel s = None\n custom rel material:slotBinding:_050 = None }\n",
+        );
+        let stage = ok(open(&root));
+        let p = prim(&stage, "/P");
+        let r: Vec<&str> = p.relationship("r").unwrap().targets.iter().map(|t| t.0.as_str()).collect();
+        assert_eq!(r, vec!["/b", "/c"]);
+        assert!(p.relationship("s").unwrap().is_explicit_empty());
+        assert!(p.relationship("material:slotBinding:_050").unwrap().is_explicit_empty());
+        // The span is the strongest opinion's.
+        let span = p.relationship("s").unwrap().span;
+        assert_eq!(span.file, stage.root_file());
+    }
+
+    #[test]
+    fn warnings_for_missing_variant_selection() {
+        let (stage, rendered) = text("#usda 1.0\ndef \"A\" { variantSet \"v\" = { \"x\" { float a = 1 } } }\n");
+        assert!(stage.is_ok());
+        assert!(rendered.contains("no variant selected"), "{rendered}");
+    }
+
+    #[test]
+    fn diagnostics_render_file_line_col() {
+        let (stage, rendered) = text("#usda 1.0\ndef \"A\"\n{\n    float3 x = (1, 2, \"a\")\n}\n");
+        assert!(stage.is_err());
+        assert!(rendered.contains("scene.usda:4:16"), "{rendered}");
+        assert!(rendered.contains("float3 x = (1, 2, \"a\")"), "{rendered}");
+    }
+
+    #[test]
+    fn deep_nesting_is_an_error_not_a_stack_overflow() {
+        let deep = format!("#usda 1.0\ndef \"A\" {{ float[] x = {} }}\n", "[".repeat(100_000));
+        assert!(text(&deep).0.is_err());
+        let prims = format!("#usda 1.0\n{}{}", "def \"A\" {\n".repeat(5000), "}\n".repeat(5000));
+        assert!(text(&prims).0.is_err());
+    }
+
+    /// Tiny deterministic PRNG so the fuzz test needs no dependency.
+    struct XorShift(u64);
+    impl XorShift {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            self.0
+        }
+        fn below(&mut self, n: usize) -> usize {
+            (self.next() % n.max(1) as u64) as usize
+        }
+    }
+
+    #[test]
+    fn mutation_fuzz_never_panics() {
+        let seeds = [
+            include_str!("../../tests/fixtures/usd/pixar_written.usda"),
+            include_str!("../../tests/fixtures/usd/pixar_kitchen.usda"),
+            include_str!("../../tests/fixtures/usd/sub_root.usda"),
+        ];
+        let alphabet = b"()[]{}<>@\"'#=,.:;/\\ \n0123456789-eEinfNoneadefoverclassrelpathuniform_";
+        let mut rng = XorShift(0x9e37_79b9_7f4a_7c15);
+        let dir = fixtures();
+        for round in 0..1500 {
+            let seed = seeds[round % seeds.len()];
+            let mut bytes = seed.as_bytes().to_vec();
+            for _ in 0..1 + rng.below(8) {
+                let at = rng.below(bytes.len());
+                match rng.below(4) {
+                    0 => bytes[at] = alphabet[rng.below(alphabet.len())],
+                    1 => {
+                        bytes.remove(at);
+                    }
+                    2 => bytes.insert(at, alphabet[rng.below(alphabet.len())]),
+                    _ => {
+                        let len = rng.below(40).min(bytes.len() - at);
+                        let chunk: Vec<u8> = bytes[at..at + len].to_vec();
+                        let to = rng.below(bytes.len());
+                        bytes.splice(to..to, chunk);
+                    }
+                }
+            }
+            let text = String::from_utf8_lossy(&bytes);
+            let mut sources = SourceMap::new();
+            let mut diags = Diagnostics::new();
+            let _ = Stage::from_text("fuzz.usda", &text, &dir, &mut sources, &mut diags);
+            let _ = diags.render(&sources);
+        }
+    }
+}

@@ -1,0 +1,219 @@
+//! Tokens of the USD ASCII format (`.usda`), produced with logos.
+//!
+//! Keywords (`def`, `rel`, `uniform`, ...) are lexed as plain identifiers and recognised by
+//! the parser, because USD allows most of them as property or dictionary names too.
+//! Comments (`#`, `//`, `/* */`) and whitespace are skipped; the `#usda 1.0` header is a
+//! comment to the lexer and is checked by the parser on the raw text.
+
+use crate::diag::{FileId, Span};
+use logos::{Lexer, Logos};
+
+/// The kind of one token.
+#[derive(Logos, Clone, Copy, Debug, PartialEq, Eq)]
+#[logos(skip r"[ \t\r\n\f]+")]
+// A comment runs to the end of its line, so the greedy repetition is what we want.
+#[logos(skip(r"(#|//)[^\n]*", allow_greedy = true))]
+#[logos(skip r"/\*([^*]|\*+[^*/])*\*+/")]
+pub enum TokenKind {
+    /// `(`
+    #[token("(")]
+    LParen,
+    /// `)`
+    #[token(")")]
+    RParen,
+    /// `[`
+    #[token("[")]
+    LBracket,
+    /// `]`
+    #[token("]")]
+    RBracket,
+    /// `{`
+    #[token("{")]
+    LBrace,
+    /// `}`
+    #[token("}")]
+    RBrace,
+    /// `=`
+    #[token("=")]
+    Eq,
+    /// `,`
+    #[token(",")]
+    Comma,
+    /// `:` (time-sample keys; namespaced names are single identifiers)
+    #[token(":")]
+    Colon,
+    /// `;` (optional statement separator in metadata)
+    #[token(";")]
+    Semi,
+    /// `.` (as in `name.timeSamples`)
+    #[token(".")]
+    Dot,
+    /// An identifier, possibly namespaced: `xformOp:translate`, `def`, `inf`.
+    #[regex(r"[A-Za-z_][A-Za-z0-9_]*(:[A-Za-z_][A-Za-z0-9_]*)*")]
+    Ident,
+    /// A number: `1`, `-2.5e-3`, `-inf` (`inf` and `nan` alone are identifiers).
+    #[regex(r"[-+]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][-+]?[0-9]+)?")]
+    #[token("-inf")]
+    Number,
+    /// A single-line string in `"` or `'` quotes, escapes not yet processed.
+    #[regex(r#""([^"\\\n]|\\.)*""#)]
+    #[regex(r"'([^'\\\n]|\\.)*'")]
+    String,
+    /// A triple-quoted string (`"""` or `'''`), which may span lines.
+    #[token("\"\"\"", |lex| close_triple(lex, "\"\"\""))]
+    #[token("'''", |lex| close_triple(lex, "'''"))]
+    TripleString,
+    /// An asset path `@path@`.
+    #[regex(r"@[^@\n]*@")]
+    Asset,
+    /// An asset path `@@@path@@@`, which may contain `@`.
+    #[token("@@@", |lex| close_triple(lex, "@@@"))]
+    TripleAsset,
+    /// A scene path `</a/b.prop>`.
+    #[regex(r"<[^<>\n]*>")]
+    Path,
+}
+
+/// Extends the current token to the closing delimiter, honouring backslash escapes.
+/// Returns `false` (a lexing error) when the delimiter never comes.
+fn close_triple(lex: &mut Lexer<TokenKind>, close: &str) -> bool {
+    let rest = lex.remainder().as_bytes();
+    let mut i = 0;
+    while i < rest.len() {
+        if rest[i] == b'\\' {
+            i += 2;
+            continue;
+        }
+        if rest[i..].starts_with(close.as_bytes()) {
+            // `@@@a@@@@` closes at the last run of `@`: USD keeps extra `@` in the path.
+            let mut end = i + close.len();
+            if close == "@@@" {
+                while rest.get(end) == Some(&b'@') {
+                    end += 1;
+                }
+            }
+            lex.bump(end);
+            return true;
+        }
+        i += 1;
+    }
+    lex.bump(rest.len());
+    false
+}
+
+/// One token with its location.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Token {
+    /// What kind of token.
+    pub kind: TokenKind,
+    /// Where it is.
+    pub span: Span,
+    /// Whether a line break separates it from the previous token; used for error recovery.
+    pub line_start: bool,
+}
+
+/// The result of lexing a whole file: tokens plus the spans of unrecognised text.
+#[derive(Debug, Default)]
+pub struct Lexed {
+    /// Recognised tokens in order.
+    pub tokens: Vec<Token>,
+    /// Spans of text no token matches (including unterminated strings).
+    pub errors: Vec<Span>,
+}
+
+/// Splits `text` into tokens.
+pub fn lex(file: FileId, text: &str) -> Lexed {
+    let mut out = Lexed::default();
+    let mut lexer = TokenKind::lexer(text);
+    let mut prev_end = 0usize;
+    while let Some(result) = lexer.next() {
+        let range = lexer.span();
+        let gap = text.get(prev_end..range.start).unwrap_or("");
+        let line_start = prev_end == 0 || gap.contains('\n');
+        let span = Span::new(file, range.start, range.end);
+        match result {
+            Ok(kind) => out.tokens.push(Token { kind, span, line_start }),
+            Err(()) => {
+                // Merge adjacent bad bytes into one error span.
+                match out.errors.last_mut() {
+                    Some(last) if last.end as usize == range.start => last.end = range.end as u32,
+                    _ => out.errors.push(span),
+                }
+            }
+        }
+        prev_end = range.end;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kinds(text: &str) -> Vec<(TokenKind, &str)> {
+        let lexed = lex(FileId(0), text);
+        assert!(lexed.errors.is_empty(), "errors: {:?}", lexed.errors);
+        lexed.tokens.iter().map(|t| (t.kind, &text[t.span.start as usize..t.span.end as usize])).collect()
+    }
+
+    #[test]
+    fn punctuation_idents_numbers() {
+        use TokenKind::*;
+        assert_eq!(
+            kinds("def Xform \"a\" ( ) { } [ ] = , : ; . xformOp:translate -1.5e-3 2 .5 -inf inf nan"),
+            vec![
+                (Ident, "def"),
+                (Ident, "Xform"),
+                (String, "\"a\""),
+                (LParen, "("),
+                (RParen, ")"),
+                (LBrace, "{"),
+                (RBrace, "}"),
+                (LBracket, "["),
+                (RBracket, "]"),
+                (Eq, "="),
+                (Comma, ","),
+                (Colon, ":"),
+                (Semi, ";"),
+                (Dot, "."),
+                (Ident, "xformOp:translate"),
+                (Number, "-1.5e-3"),
+                (Number, "2"),
+                (Number, ".5"),
+                (Number, "-inf"),
+                (Ident, "inf"),
+                (Ident, "nan"),
+            ]
+        );
+    }
+
+    #[test]
+    fn strings_assets_paths_comments() {
+        use TokenKind::*;
+        let text = "#usda 1.0\n'a\\'b' \"\" \"\"\"x\n\\\"y\"\"\" '''z''' @a b.png@ @@ @@@w@x@@@ </A/B.outputs:c> # c\n// d\n/* e\n*/ name.timeSamples";
+        assert_eq!(
+            kinds(text),
+            vec![
+                (String, "'a\\'b'"),
+                (String, "\"\""),
+                (TripleString, "\"\"\"x\n\\\"y\"\"\""),
+                (TripleString, "'''z'''"),
+                (Asset, "@a b.png@"),
+                (Asset, "@@"),
+                (TripleAsset, "@@@w@x@@@"),
+                (Path, "</A/B.outputs:c>"),
+                (Ident, "name"),
+                (Dot, "."),
+                (Ident, "timeSamples"),
+            ]
+        );
+    }
+
+    #[test]
+    fn line_starts_and_errors() {
+        let lexed = lex(FileId(0), "a b\nc $$ \"open\n\"\"\"never closed");
+        let starts: Vec<bool> = lexed.tokens.iter().map(|t| t.line_start).collect();
+        assert_eq!(starts, vec![true, false, true]);
+        assert_eq!(lexed.errors.len(), 3, "{:?}", lexed.errors);
+    }
+}
