@@ -6,10 +6,12 @@
 //! - [`scene`]: USD ASCII scenes → a composed prim hierarchy.
 //! - [`compose`]: slot bindings → one composed material per renderable prim.
 //! - [`ir`]: the wired IR of a composed material, its passes and text form.
+//! - [`abi`]: the `#[repr(C)]` contract between compiled materials and the renderer.
 //! - [`runtime`]: noise, patterns and math semantics shared by every backend.
 //! - [`scenes`]: the embedded default scene.
 //! - [`cli`]: the `strata` subcommands.
 
+pub mod abi;
 pub mod cli;
 pub mod compose;
 pub mod diag;

@@ -1,0 +1,169 @@
+//! The contract between compiled materials and the renderer: `#[repr(C)]` shading globals and
+//! closure values, the entry points every backend provides ([`MaterialCode`]), and what the
+//! renderer needs to know about a material's layers ([`MaterialInfo`]).
+//!
+//! Architecture invariant: the renderer sees only this module — entry points, closure values
+//! and layer metadata — never the IR or a backend.
+
+use crate::front::graph::{ChannelKind, DisplacementMode};
+use std::fmt;
+
+/// Inputs of one shading point, in world space. Field order is the C ABI.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Globals {
+    /// Shading position `P`.
+    pub p: [f32; 3],
+    /// Shading normal `N` (unit, facing the incoming ray's side as the renderer decides).
+    pub n: [f32; 3],
+    /// Geometric normal `Ng`.
+    pub ng: [f32; 3],
+    /// Incident direction `I` (from the eye towards `P`, unit).
+    pub i: [f32; 3],
+    /// Tangent `dPdu`.
+    pub dpdu: [f32; 3],
+    /// Tangent `dPdv`.
+    pub dpdv: [f32; 3],
+    /// Texture coordinate `u` (s).
+    pub u: f32,
+    /// Texture coordinate `v` (t).
+    pub v: f32,
+}
+
+/// Which BSDF a [`Closure`] describes.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ClosureKind {
+    /// No BSDF: the layer absorbs (black).
+    None = 0,
+    /// Lambert: `params = [albedo.r, albedo.g, albedo.b]`.
+    Diffuse = 1,
+    /// GGX dielectric coat over diffuse: `[albedo rgb, specular rgb, roughness, ior]`.
+    Glossy = 2,
+    /// GGX conductor: `[reflectivity rgb, edge_tint rgb, roughness]`.
+    Metal = 3,
+    /// Rough dielectric: `[tint rgb, roughness, ior]`.
+    Glass = 4,
+}
+
+impl ClosureKind {
+    /// Decodes the `kind` field; unknown values are `None`.
+    pub fn from_u32(kind: u32) -> ClosureKind {
+        match kind {
+            1 => ClosureKind::Diffuse,
+            2 => ClosureKind::Glossy,
+            3 => ClosureKind::Metal,
+            4 => ClosureKind::Glass,
+            _ => ClosureKind::None,
+        }
+    }
+}
+
+/// A BSDF closure value as compiled code returns it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Closure {
+    /// A [`ClosureKind`] as `u32`.
+    pub kind: u32,
+    /// Parameters; meaning per kind (see [`ClosureKind`]). Unused entries are 0.
+    pub params: [f32; 8],
+}
+
+/// Status returned by every entry point.
+pub type Status = u32;
+/// Success.
+pub const STATUS_OK: Status = 0;
+/// A loop exceeded its iteration budget.
+pub const STATUS_LOOP_BUDGET: Status = 1;
+/// An array index was out of bounds.
+pub const STATUS_OUT_OF_BOUNDS: Status = 2;
+
+/// A shader failed at run time (the renderer reports it once and treats the sample as invalid).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShaderError {
+    /// A loop ran past its iteration budget.
+    LoopBudget,
+    /// An array index was out of bounds.
+    OutOfBounds,
+}
+
+impl ShaderError {
+    /// Converts a status code.
+    pub fn check(status: Status) -> Result<(), ShaderError> {
+        match status {
+            STATUS_OK => Ok(()),
+            STATUS_LOOP_BUDGET => Err(ShaderError::LoopBudget),
+            _ => Err(ShaderError::OutOfBounds),
+        }
+    }
+}
+
+impl fmt::Display for ShaderError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ShaderError::LoopBudget => f.write_str("a shader loop exceeded its iteration budget"),
+            ShaderError::OutOfBounds => f.write_str("a shader indexed an array out of bounds"),
+        }
+    }
+}
+
+/// What the renderer knows about one layer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LayerInfo {
+    /// Slot name.
+    pub slot: String,
+    /// Whether the layer has a surface product (a layer without one is never picked).
+    pub has_surface: bool,
+    /// Displacement combination mode, if the layer displaces.
+    pub displacement: Option<DisplacementMode>,
+    /// Whether the layer has a normal product.
+    pub has_normal: bool,
+}
+
+/// A custom channel of a material: its name, kind and offset in the channel output array.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChannelInfo {
+    /// Channel (EXR layer) name.
+    pub name: String,
+    /// Colour (3 floats), float or integer (1 float each).
+    pub kind: ChannelKind,
+    /// Index of its first float in the `channels` output.
+    pub offset: usize,
+}
+
+impl ChannelInfo {
+    /// Floats this channel occupies.
+    pub fn width(&self) -> usize {
+        if self.kind == ChannelKind::Color { 3 } else { 1 }
+    }
+}
+
+/// Layer and channel metadata of a compiled material.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MaterialInfo {
+    /// Layers bottom to top.
+    pub layers: Vec<LayerInfo>,
+    /// Channels of the material, sorted by name.
+    pub channels: Vec<ChannelInfo>,
+    /// Total floats of the `channels` output.
+    pub channel_floats: usize,
+}
+
+/// The entry points of one compiled material. The JIT and the interpreter both implement it;
+/// the renderer calls only these. Every method is allocation-free.
+pub trait MaterialCode: Send + Sync {
+    /// Layer and channel metadata.
+    fn info(&self) -> &MaterialInfo;
+    /// Writes each layer's mask, clamped to [0, 1] (absent mask: 1; a layer without a surface
+    /// or pruned at compile time: 0). `out.len()` is the layer count.
+    fn masks(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError>;
+    /// Evaluates one layer's surface closure.
+    fn surface(&self, g: &Globals, layer: usize, out: &mut Closure) -> Result<(), ShaderError>;
+    /// Writes each layer's displacement height (0 without a displacement product).
+    fn displacement(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError>;
+    /// Writes one layer's shading normal (`g.n` without a normal product).
+    fn normal(&self, g: &Globals, layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError>;
+    /// Writes one layer's custom channels at their offsets (0 for channels the layer lacks).
+    /// `out.len()` is `info().channel_floats`.
+    fn channels(&self, g: &Globals, layer: usize, out: &mut [f32]) -> Result<(), ShaderError>;
+}
