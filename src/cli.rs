@@ -170,13 +170,14 @@ pub fn ir(scene: &Path, prim: &str, optimize: bool, stats: bool) -> Result<(), F
     let composition = compose_file(Some(scene), &mut sources, &mut diags);
     report(&diags, &sources)?;
     let Some(composition) = composition else { return Err(Failure) };
-    let Some(index) = composition.stacks.iter().position(|s| s.prim == prim) else {
+    let Some(material) = composition.material_of(prim) else {
         eprintln!("error: `{prim}` is not a renderable prim of {}", scene.display());
         let prims: Vec<&str> = composition.stacks.iter().map(|s| s.prim.as_str()).take(20).collect();
         eprintln!("  renderable prims: {}", prims.join(", "));
         return Err(Failure);
     };
-    let wired = wired::build(&composition.library, &composition.materials[index], PassOptions { optimize }, &mut diags);
+    let mut diags = Diagnostics::new();
+    let wired = wired::build(&composition.library, material, PassOptions { optimize }, &mut diags);
     report(&diags, &sources)?;
     if stats {
         eprintln!("{}", wired.stats_line());
@@ -184,8 +185,8 @@ pub fn ir(scene: &Path, prim: &str, optimize: bool, stats: bool) -> Result<(), F
     print_out(&wired.to_text(&composition.library))
 }
 
-/// `strata check FILE`
-pub fn check(file: &Path) -> Result<(), Failure> {
+/// Checks a substance file or scene: every diagnostic, and a one-line summary when it is clean.
+pub fn check_file(file: &Path) -> (Diagnostics, SourceMap, String) {
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
     let is_substance = file.extension().is_some_and(|e| e == "ash");
@@ -211,6 +212,12 @@ pub fn check(file: &Path) -> Result<(), Failure> {
             None => String::new(),
         }
     };
+    (diags, sources, summary)
+}
+
+/// `strata check FILE`
+pub fn check(file: &Path) -> Result<(), Failure> {
+    let (diags, sources, summary) = check_file(file);
     report(&diags, &sources)?;
     print_out(&(summary + "\n"))
 }

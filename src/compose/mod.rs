@@ -44,3 +44,19 @@ pub struct ComposedMaterial {
     /// Layers, bottom first.
     pub layers: Vec<ComposedLayer>,
 }
+
+impl ComposedMaterial {
+    /// A key equal for compositions with the same substances, overrides and input values in
+    /// the same order (DESIGN.md rule 8): where and under which slot names they were bound
+    /// does not change the material.
+    pub fn identity_key(&self) -> String {
+        let mut key = String::new();
+        for layer in &self.layers {
+            for m in std::iter::once(&layer.substance).chain(layer.overrides.iter().map(|(_, o)| o)) {
+                key += &format!("{}{:?};", m.graph.0, m.values);
+            }
+            key.push('|');
+        }
+        key
+    }
+}

@@ -77,8 +77,18 @@ pub struct SceneComposition {
     pub stacks: Vec<PrimStack>,
     /// Every substance file the scene uses, loaded and checked.
     pub library: Library,
-    /// The composed material of each entry of `stacks`.
+    /// The distinct composed materials (DESIGN.md rule 8: identical compositions are shared).
     pub materials: Vec<ComposedMaterial>,
+    /// For each entry of `stacks`, its index in `materials`.
+    pub prim_material: Vec<usize>,
+}
+
+impl SceneComposition {
+    /// The composed material of a renderable prim, by path.
+    pub fn material_of(&self, prim: &str) -> Option<&ComposedMaterial> {
+        let index = self.stacks.iter().position(|s| s.prim == prim)?;
+        self.materials.get(self.prim_material[index])
+    }
 }
 
 /// Resolves slot stacks, loads the bound substances and composes each renderable prim's
@@ -105,7 +115,9 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
     let library = Library::load(&files, sources, diags);
 
     let mut refs: HashMap<String, Option<MaterialRef>> = HashMap::new();
-    let mut materials = Vec::with_capacity(stacks.len());
+    let mut materials = Vec::new();
+    let mut prim_material = Vec::with_capacity(stacks.len());
+    let mut by_key: HashMap<String, usize> = HashMap::new();
     for stack in &stacks {
         let mut composed = ComposedMaterial::default();
         for layer in &stack.layers {
@@ -149,9 +161,13 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
                 overrides,
             });
         }
-        materials.push(composed);
+        let index = *by_key.entry(composed.identity_key()).or_insert_with(|| {
+            materials.push(composed);
+            materials.len() - 1
+        });
+        prim_material.push(index);
     }
-    SceneComposition { stacks, library, materials }
+    SceneComposition { stacks, library, materials, prim_material }
 }
 
 /// Finds the strata shader of a Material prim: a Shader (the prim itself or a descendant)
@@ -220,6 +236,9 @@ fn material_ref(
     binding: Span,
     diags: &mut Diagnostics,
 ) -> Option<MaterialRef> {
+    if lib.failed_to_load(&source.file) {
+        return None; // already reported where the file is named
+    }
     let graph = match &source.graph_name {
         Some(name) => lib.graph(&source.file, name).or_else(|| {
             diags.push(

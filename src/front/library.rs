@@ -30,6 +30,8 @@ pub struct Library {
     graph_index: HashMap<(PathBuf, String), GraphId>,
     /// The file each graph was declared in.
     pub graph_files: Vec<PathBuf>,
+    /// Files that could not be read (already reported).
+    unreadable: HashSet<PathBuf>,
 }
 
 impl Library {
@@ -40,6 +42,7 @@ impl Library {
         let prelude = sources.add("<builtins>", PRELUDE);
         modules.push((None, parse(prelude, PRELUDE, diags)));
         let mut seen = HashSet::new();
+        let mut unreadable = HashSet::new();
         let mut queue: Vec<(PathBuf, Option<Span>)> = files.iter().map(|(p, s)| (p.clone(), Some(*s))).collect();
         queue.reverse();
         while let Some((path, from)) = queue.pop() {
@@ -60,6 +63,7 @@ impl Library {
                         Some(span) if span != Span::default() => d.at(span, "referenced here"),
                         _ => d,
                     });
+                    unreadable.insert(path);
                     continue;
                 }
             };
@@ -73,7 +77,14 @@ impl Library {
             }
             modules.push((Some(canonical), module));
         }
-        Library::check(modules, diags)
+        let mut lib = Library::check(modules, diags);
+        lib.unreadable = unreadable;
+        lib
+    }
+
+    /// Whether `file` was named but could not be read.
+    pub fn failed_to_load(&self, file: &Path) -> bool {
+        self.unreadable.contains(file)
     }
 
     /// Loads only the prelude and one in-memory file (tests, embedded scenes).
