@@ -337,7 +337,7 @@ impl<'a> Parser<'a> {
             let mut ty = self.type_expr()?;
             let name = self.ident()?;
             self.array_suffix(&mut ty)?;
-            let init = if self.eat(Tok::Assign) { Some(self.expr()?) } else { None };
+            let init = if self.eat(Tok::Assign) { Some(self.init()?) } else { None };
             StmtKind::Local { ty, name, init }
         } else if matches!(self.peek(), Tok::PlusPlus | Tok::MinusMinus) {
             let op = if self.bump().kind == Tok::PlusPlus { AssignOp::Add } else { AssignOp::Sub };
@@ -372,6 +372,23 @@ impl<'a> Parser<'a> {
             }
         };
         Ok(Stmt { kind, span: start.to(self.prev_span()) })
+    }
+
+    /// A variable initialiser: an expression or a `{…}` array list.
+    fn init(&mut self) -> PResult<Expr> {
+        if self.peek() != Tok::LBrace {
+            return self.expr();
+        }
+        let start = self.bump().span;
+        let mut items = Vec::new();
+        while self.peek() != Tok::RBrace {
+            items.push(self.expr()?);
+            if !self.eat(Tok::Comma) {
+                break;
+            }
+        }
+        self.expect(Tok::RBrace)?;
+        Ok(Expr { kind: ExprKind::List(items), span: start.to(self.prev_span()) })
     }
 
     /// Parses an expression.
@@ -499,18 +516,6 @@ impl<'a> Parser<'a> {
                 let inner = self.expr()?;
                 self.expect(Tok::RParen)?;
                 return Ok(Expr { kind: inner.kind, span: tok.span.to(self.prev_span()) });
-            }
-            Tok::LBrace => {
-                self.bump();
-                let mut items = Vec::new();
-                while self.peek() != Tok::RBrace {
-                    items.push(self.expr()?);
-                    if !self.eat(Tok::Comma) {
-                        break;
-                    }
-                }
-                self.expect(Tok::RBrace)?;
-                ExprKind::List(items)
             }
             _ => return Err(self.error_here("an expression")),
         };
