@@ -94,3 +94,43 @@ fn pixar_written_fixture_composes() {
     let stacks = strata::compose::slots::resolve_stacks(&tree, &mut diags);
     insta::assert_snapshot!("pixar_written_layers_json", cli::layers_json(&stacks));
 }
+
+#[test]
+fn identical_compositions_share_one_material() {
+    // Two prims get SubstanceA + SubstanceB from bindings authored at different places and in
+    // differently named slots; a third differs by an input value.
+    let text = r#"#usda 1.0
+def Xform "Root" {
+    rel material:slotBinding:_000 = </M/A>
+    def Sphere "One" { rel material:slotBinding:_010 = </M/B> }
+    def Xform "G" {
+        rel material:slotBinding:_020 = </M/B>
+        def Sphere "Two" { }
+    }
+    def Sphere "Three" { rel material:slotBinding:_010 = </M/B2> }
+}
+def Scope "M" {
+    def Material "A" { def Shader "S" {
+        uniform asset info:strata:sourceAsset = @listing1.ash@
+        uniform token info:strata:sourceAsset:subIdentifier = "SubstanceA" } }
+    def Material "B" { def Shader "S" {
+        uniform asset info:strata:sourceAsset = @listing1.ash@
+        uniform token info:strata:sourceAsset:subIdentifier = "SubstanceB" } }
+    def Material "B2" { def Shader "S" {
+        uniform asset info:strata:sourceAsset = @listing1.ash@
+        uniform token info:strata:sourceAsset:subIdentifier = "SubstanceB"
+        float inputs:coverage = 0.25 } }
+}
+"#;
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let stage =
+        strata::scene::Stage::from_text("dedup.usda", text, Path::new("scenes/paper"), &mut sources, &mut diags)
+            .expect("stage");
+    let composition = compose_stage(&stage, &mut sources, &mut diags);
+    assert!(!diags.has_errors(), "{}", diags.render(&sources));
+    assert_eq!(composition.stacks.len(), 3);
+    assert_eq!(composition.materials.len(), 2, "One and Two share a material; Three differs");
+    assert_eq!(composition.prim_material[0], composition.prim_material[1]);
+    assert_ne!(composition.prim_material[0], composition.prim_material[2]);
+}

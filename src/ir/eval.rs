@@ -32,13 +32,19 @@ struct Frame {
 struct Evaluator<'a> {
     lib: &'a Library,
     budget: u32,
+    /// Call depth; recursion is a reported error, but folding must not overflow the stack
+    /// while the rest of a broken file is still being checked.
+    depth: u32,
 }
+
+/// Deepest user-function nesting folding follows.
+const MAX_CALL_DEPTH: u32 = 64;
 
 /// Evaluates a node type with the given input values (`None`: use the parameter's default).
 /// Returns the value of every parameter after the body ran (outputs included), or `None` if
 /// the result is not a compile-time constant.
 pub fn eval_node(lib: &Library, func: &Function, inputs: &[Option<Value>]) -> Option<Vec<Value>> {
-    let mut ev = Evaluator { lib, budget: FOLD_BUDGET };
+    let mut ev = Evaluator { lib, budget: FOLD_BUDGET, depth: 0 };
     let mut frame = Frame { locals: vec![None; func.locals.len()] };
     for (i, param) in func.params.iter().enumerate() {
         let value = match inputs.get(i).cloned().flatten() {
@@ -209,11 +215,17 @@ impl Evaluator<'_> {
             }
             ExprKind::Call(id, args) => {
                 let func = self.lib.function(*id);
+                if self.depth >= MAX_CALL_DEPTH {
+                    return Err(Stop::NotConstant);
+                }
                 let mut callee = Frame { locals: vec![None; func.locals.len()] };
                 for (i, a) in args.iter().enumerate() {
                     callee.locals[i] = Some(self.expr(a, frame)?);
                 }
-                match self.block(&func.body, &mut callee)? {
+                self.depth += 1;
+                let flow = self.block(&func.body, &mut callee);
+                self.depth -= 1;
+                match flow? {
                     Flow::Return(Some(v)) => v,
                     _ => Value::zero(func.ret).ok_or(Stop::NotConstant)?,
                 }
