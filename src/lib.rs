@@ -6,12 +6,14 @@
 //! - [`scene`]: USD ASCII scenes → a composed prim hierarchy.
 //! - [`compose`]: slot bindings → one composed material per renderable prim.
 //! - [`ir`]: the wired IR of a composed material, its passes and text form.
+//! - [`backend`]: lowered IR → Cranelift JIT, native objects, or the reference interpreter.
 //! - [`abi`]: the `#[repr(C)]` contract between compiled materials and the renderer.
 //! - [`runtime`]: noise, patterns and math semantics shared by every backend.
 //! - [`scenes`]: the embedded default scene.
 //! - [`cli`]: the `strata` subcommands.
 
 pub mod abi;
+pub mod backend;
 pub mod cli;
 pub mod compose;
 pub mod diag;

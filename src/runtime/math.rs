@@ -39,7 +39,7 @@ pub fn smoothstep(e0: f32, e1: f32, x: f32) -> f32 {
     if e1 == e0 {
         return if x < e0 { 0.0 } else { 1.0 };
     }
-    let t = ((x - e0) / (e1 - e0)).clamp(0.0, 1.0);
+    let t = clamp((x - e0) / (e1 - e0), 0.0, 1.0);
     t * t * (3.0 - 2.0 * t)
 }
 
@@ -48,19 +48,22 @@ pub fn step(edge: f32, x: f32) -> f32 {
     if x < edge { 0.0 } else { 1.0 }
 }
 
-/// `clamp(x, lo, hi)` that never panics (`f32::clamp` asserts `lo <= hi`); NaN passes through.
+/// `clamp(x, lo, hi)` = `min(max(x, lo), hi)`: never panics (`f32::clamp` asserts `lo <= hi`)
+/// and maps NaN to `lo`.
 pub fn clamp(x: f32, lo: f32, hi: f32) -> f32 {
-    x.max(lo).min(hi)
+    min(max(x, lo), hi)
 }
 
-/// `min` with IEEE minNum semantics (a NaN operand yields the other operand).
+/// `min` with IEEE minNum semantics (a NaN operand yields the other operand). Spelled out as a
+/// compare and select, not `f32::min`, because code generation emits exactly this sequence and
+/// the backends must agree bit for bit, signed zeros included.
 pub fn min(a: f32, b: f32) -> f32 {
-    a.min(b)
+    if a <= b || b.is_nan() { a } else { b }
 }
 
-/// `max` with IEEE maxNum semantics.
+/// `max` with IEEE maxNum semantics; the same compare-and-select shape as [`min`].
 pub fn max(a: f32, b: f32) -> f32 {
-    a.max(b)
+    if a >= b || b.is_nan() { a } else { b }
 }
 
 /// `fract(x)`: `x - floor(x)`.

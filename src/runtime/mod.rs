@@ -4,3 +4,5 @@
 
 pub mod math;
 pub mod noise;
+pub mod rt;
+pub mod texture;

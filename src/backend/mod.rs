@@ -1,0 +1,308 @@
+//! Backends: turn a lowered material ([`crate::ir::ssa::Module`]) into something the renderer
+//! can call through [`abi::MaterialCode`].
+//!
+//! - [`clif`]: Cranelift code generation, shared by the JIT ([`jit`]) and native shader
+//!   objects ([`object`]).
+//! - [`interp`]: the reference interpreter over the same lowered IR.
+//!
+//! [`Compiler`] runs the whole pipeline for composed materials (wire → optimise → lower →
+//! compile) with a cache keyed by the lowered code, so each distinct composition is compiled
+//! once, and keeps the statistics `--stats` prints.
+
+pub mod clif;
+pub mod interp;
+pub mod jit;
+pub mod object;
+
+use crate::abi::{Closure, Globals, MaterialCode, MaterialInfo, ShaderError, Status};
+use crate::compose::ComposedMaterial;
+use crate::diag::Diagnostics;
+use crate::front::library::Library;
+use crate::ir::lower;
+use crate::ir::ssa::{self, EntryKind};
+use crate::ir::wired::{self, PassOptions};
+use std::collections::HashMap;
+use std::fmt;
+use std::hash::{DefaultHasher, Hash, Hasher};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Which backend runs shader code.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum BackendKind {
+    /// Cranelift-compiled native code.
+    #[default]
+    Jit,
+    /// The reference interpreter.
+    Interp,
+}
+
+impl fmt::Display for BackendKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            BackendKind::Jit => "jit",
+            BackendKind::Interp => "interp",
+        })
+    }
+}
+
+/// Executes the entry functions of one material.
+pub trait Runner: Send + Sync {
+    /// How an entry is addressed.
+    type Entry: Copy + Send + Sync;
+    /// Calls `entry`; `out` holds at least the words the entry writes.
+    fn run(&self, entry: Self::Entry, g: &Globals, out: &mut [u32]) -> Status;
+}
+
+/// The entry points of a material, by what they compute.
+#[derive(Clone, Debug)]
+pub struct Entries<E> {
+    masks: Option<E>,
+    displacement: Option<E>,
+    surface: Vec<Option<E>>,
+    normal: Vec<Option<E>>,
+    channels: Vec<Option<E>>,
+}
+
+impl<E: Copy> Entries<E> {
+    /// Maps each function of `module` (by index) to an entry handle.
+    pub fn new(module: &ssa::Module, mut handle: impl FnMut(usize) -> E) -> Entries<E> {
+        let n = module.info.layers.len();
+        let mut e = Entries {
+            masks: None,
+            displacement: None,
+            surface: vec![None; n],
+            normal: vec![None; n],
+            channels: vec![None; n],
+        };
+        for (i, f) in module.functions.iter().enumerate() {
+            let h = Some(handle(i));
+            match f.kind {
+                EntryKind::Masks => e.masks = h,
+                EntryKind::Displacement => e.displacement = h,
+                EntryKind::Surface(l) => e.surface[l] = h,
+                EntryKind::Normal(l) => e.normal[l] = h,
+                EntryKind::Channels(l) => e.channels[l] = h,
+            }
+        }
+        e
+    }
+}
+
+/// A compiled material: metadata, entries and the runner that executes them.
+pub struct Material<R: Runner> {
+    info: MaterialInfo,
+    entries: Entries<R::Entry>,
+    runner: R,
+}
+
+impl<R: Runner> Material<R> {
+    /// Assembles a material.
+    pub fn new(info: MaterialInfo, entries: Entries<R::Entry>, runner: R) -> Self {
+        Material { info, entries, runner }
+    }
+}
+
+/// Views f32 output as the 4-byte words entry functions write.
+fn words(out: &mut [f32]) -> &mut [u32] {
+    // SAFETY: f32 and u32 have the same size and alignment, and every bit pattern is valid.
+    unsafe { std::slice::from_raw_parts_mut(out.as_mut_ptr().cast::<u32>(), out.len()) }
+}
+
+impl<R: Runner> MaterialCode for Material<R> {
+    fn info(&self) -> &MaterialInfo {
+        &self.info
+    }
+
+    fn masks(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError> {
+        match self.entries.masks {
+            Some(e) => ShaderError::check(self.runner.run(e, g, words(out))),
+            None => {
+                out.fill(1.0);
+                Ok(())
+            }
+        }
+    }
+
+    fn surface(&self, g: &Globals, layer: usize, out: &mut Closure) -> Result<(), ShaderError> {
+        match self.entries.surface.get(layer).copied().flatten() {
+            Some(e) => {
+                // SAFETY: `Closure` is repr(C): a u32 and eight f32, nine 4-byte words.
+                let w = unsafe { std::slice::from_raw_parts_mut((out as *mut Closure).cast::<u32>(), 9) };
+                ShaderError::check(self.runner.run(e, g, w))
+            }
+            None => {
+                *out = Closure::default();
+                Ok(())
+            }
+        }
+    }
+
+    fn displacement(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError> {
+        match self.entries.displacement {
+            Some(e) => ShaderError::check(self.runner.run(e, g, words(out))),
+            None => {
+                out.fill(0.0);
+                Ok(())
+            }
+        }
+    }
+
+    fn normal(&self, g: &Globals, layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError> {
+        match self.entries.normal.get(layer).copied().flatten() {
+            Some(e) => ShaderError::check(self.runner.run(e, g, words(out))),
+            None => {
+                *out = g.n;
+                Ok(())
+            }
+        }
+    }
+
+    fn channels(&self, g: &Globals, layer: usize, out: &mut [f32]) -> Result<(), ShaderError> {
+        match self.entries.channels.get(layer).copied().flatten() {
+            Some(e) => ShaderError::check(self.runner.run(e, g, words(out))),
+            None => {
+                out.fill(0.0);
+                Ok(())
+            }
+        }
+    }
+}
+
+/// Runs lowered functions in the interpreter.
+pub struct InterpRunner {
+    module: ssa::Module,
+}
+
+impl Runner for InterpRunner {
+    type Entry = usize;
+    fn run(&self, entry: usize, g: &Globals, out: &mut [u32]) -> Status {
+        interp::run(&self.module.functions[entry], g, out)
+    }
+}
+
+/// Builds an interpreted material.
+pub fn interpret(module: ssa::Module) -> Material<InterpRunner> {
+    let entries = Entries::new(&module, |i| i);
+    Material::new(module.info.clone(), entries, InterpRunner { module })
+}
+
+/// Compiles a lowered material with the chosen backend.
+pub fn compile_module(module: ssa::Module, backend: BackendKind) -> Result<Arc<dyn MaterialCode>, String> {
+    Ok(match backend {
+        BackendKind::Interp => Arc::new(interpret(module)),
+        BackendKind::Jit => Arc::new(jit::compile(&module)?),
+    })
+}
+
+/// What compiling a scene's materials cost.
+#[derive(Clone, Debug, Default)]
+pub struct CompileStats {
+    /// Materials asked for.
+    pub requested: usize,
+    /// Materials actually compiled (the rest came from the cache).
+    pub compiled: usize,
+    /// Entry functions compiled.
+    pub functions: usize,
+    /// Lowered instructions compiled.
+    pub instructions: usize,
+    /// Wired nodes summed over materials, per pass (`wired`, `fold`, `dce`).
+    pub nodes: Vec<(&'static str, usize)>,
+    /// Layers pruned (hidden under opaque layers or masked to 0).
+    pub layers_pruned: usize,
+    /// Wall time in wiring, passes and lowering.
+    pub lower_ms: f64,
+    /// Wall time in the backend.
+    pub codegen_ms: f64,
+}
+
+impl fmt::Display for CompileStats {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let nodes: Vec<String> = self.nodes.iter().map(|(p, n)| format!("{p} {n}")).collect();
+        write!(
+            f,
+            "materials: {} requested, {} compiled ({} cached); nodes: {}; layers pruned: {}; \
+             functions: {}; instructions: {}; lower {:.2} ms; codegen {:.2} ms",
+            self.requested,
+            self.compiled,
+            self.requested - self.compiled,
+            nodes.join(" -> "),
+            self.layers_pruned,
+            self.functions,
+            self.instructions,
+            self.lower_ms,
+            self.codegen_ms
+        )
+    }
+}
+
+/// Compiles composed materials, each distinct one once.
+pub struct Compiler {
+    backend: BackendKind,
+    passes: PassOptions,
+    cache: HashMap<u64, Arc<dyn MaterialCode>>,
+    /// Accumulated statistics.
+    pub stats: CompileStats,
+}
+
+impl Compiler {
+    /// A compiler for one backend and pass configuration.
+    pub fn new(backend: BackendKind, passes: PassOptions) -> Compiler {
+        Compiler { backend, passes, cache: HashMap::new(), stats: CompileStats::default() }
+    }
+
+    /// Lowers one composed material (wire, optimise, lower); problems go to `diags`.
+    pub fn lower(&mut self, lib: &Library, material: &ComposedMaterial, diags: &mut Diagnostics) -> ssa::Module {
+        let start = Instant::now();
+        let wired = wired::build(lib, material, self.passes, diags);
+        for (i, (pass, n)) in wired.stats.nodes.iter().enumerate() {
+            match self.stats.nodes.get_mut(i) {
+                Some((_, total)) => *total += n,
+                None => self.stats.nodes.push((pass, *n)),
+            }
+        }
+        self.stats.layers_pruned += wired.stats.layers_pruned;
+        let module = lower::lower(lib, &wired, diags);
+        self.stats.lower_ms += start.elapsed().as_secs_f64() * 1e3;
+        module
+    }
+
+    /// Compiles one composed material, or returns the cached code of an identical one.
+    /// `None` when diagnostics were reported as errors.
+    pub fn compile(
+        &mut self,
+        lib: &Library,
+        material: &ComposedMaterial,
+        diags: &mut Diagnostics,
+    ) -> Option<Arc<dyn MaterialCode>> {
+        self.stats.requested += 1;
+        let errors = diags.error_count();
+        let module = self.lower(lib, material, diags);
+        if diags.error_count() > errors {
+            return None;
+        }
+        // The key is the lowered code itself: compositions that differ only in ways the
+        // passes erase (a hidden layer, an override of a pruned input) share one compilation.
+        let mut hasher = DefaultHasher::new();
+        module.to_text().hash(&mut hasher);
+        format!("{:?}", module.info).hash(&mut hasher);
+        let key = hasher.finish();
+        if let Some(code) = self.cache.get(&key) {
+            return Some(code.clone());
+        }
+        let start = Instant::now();
+        self.stats.functions += module.functions.len();
+        self.stats.instructions += module.inst_count();
+        let code = match compile_module(module, self.backend) {
+            Ok(code) => code,
+            Err(msg) => {
+                diags.push(crate::diag::Diagnostic::error(format!("code generation failed: {msg}")));
+                return None;
+            }
+        };
+        self.stats.codegen_ms += start.elapsed().as_secs_f64() * 1e3;
+        self.stats.compiled += 1;
+        self.cache.insert(key, code.clone());
+        Some(code)
+    }
+}
