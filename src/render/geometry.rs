@@ -113,7 +113,7 @@ impl Emitter<'_> {
         let wp = p.map(|p| self.m.transform_point3(p).as_vec3());
         let cross = (wp[1] - wp[0]).cross(wp[2] - wp[0]);
         let len2 = cross.length_squared();
-        if !(len2 > 0.0) || !len2.is_finite() {
+        if len2.is_nan() || len2 <= 0.0 || !len2.is_finite() {
             self.geometry.degenerate += 1;
             return;
         }

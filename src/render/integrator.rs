@@ -561,14 +561,14 @@ impl Context<'_> {
             let Some(bs) = lobe.bsdf.sample(wo_local, uc_lobe, u2) else { break };
             let wi = lobe.frame.to_world(bs.wi).normalize();
             if bs.delta || s.lobes.len() == 1 {
-                if !(bs.pdf > 0.0) {
+                if bs.pdf.is_nan() || bs.pdf <= 0.0 {
                     break;
                 }
                 throughput *= bs.f * (bs.wi.z.abs() / bs.pdf);
                 bsdf_pdf = if bs.delta { None } else { Some(bs.pdf) };
             } else {
                 let (f, pdf) = Self::eval_lobes(&s.lobes, wo, wi);
-                if !(pdf > 0.0) {
+                if pdf.is_nan() || pdf <= 0.0 {
                     break;
                 }
                 throughput *= f / pdf;
