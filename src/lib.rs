@@ -8,6 +8,7 @@
 //! - [`ir`]: the wired IR of a composed material, its passes and text form.
 //! - [`backend`]: lowered IR → Cranelift JIT, native objects, or the reference interpreter.
 //! - [`abi`]: the `#[repr(C)]` contract between compiled materials and the renderer.
+//! - [`render`]: the path tracer (geometry, BVH, lights, integrator, EXR output).
 //! - [`runtime`]: noise, patterns and math semantics shared by every backend.
 //! - [`scenes`]: the embedded default scene.
 //! - [`cli`]: the `strata` subcommands.
@@ -19,6 +20,7 @@ pub mod compose;
 pub mod diag;
 pub mod front;
 pub mod ir;
+pub mod render;
 pub mod runtime;
 pub mod scene;
 pub mod scenes;

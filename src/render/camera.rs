@@ -1,0 +1,236 @@
+//! UsdGeom cameras: a pinhole or thin-lens perspective camera looking down its local −Z
+//! with +Y up, or a default camera framing the scene when the stage has none.
+//!
+//! `focalLength` and the apertures share a unit (USD: tenths of a scene unit), so the field
+//! of view depends only on their ratio. The aperture is fit horizontally, as USD's
+//! `CameraUtilFit` horizontal policy: the horizontal aperture is kept and the vertical extent
+//! follows the image aspect. Depth of field (when `fStop > 0` and `focusDistance > 0`) uses a
+//! thin lens of diameter `focalLength / fStop`, converted from tenths of a unit to scene units.
+
+use super::sampling::concentric_disk;
+use super::xform::value_span;
+use crate::diag::{Diagnostic, Diagnostics};
+use crate::scene::{Prim, Value};
+use glam::{DMat4, Vec2, Vec3};
+
+/// A perspective camera in world space.
+#[derive(Clone, Copy, Debug)]
+pub struct Camera {
+    origin: Vec3,
+    right: Vec3,
+    up: Vec3,
+    forward: Vec3,
+    /// `tan` of half the horizontal and vertical field of view.
+    tan_half: Vec2,
+    /// Aperture offset, as a fraction of the focal length.
+    shift: Vec2,
+    lens_radius: f32,
+    focus_distance: f32,
+    near: f32,
+    far: f32,
+    /// For a framing camera: the bounding sphere `(centre, radius)` to keep in view.
+    framed: Option<(Vec3, f32)>,
+}
+
+/// A camera ray: origin, unit direction and the clipping interval along it.
+#[derive(Clone, Copy, Debug)]
+pub struct CameraRay {
+    /// Origin (on the lens).
+    pub o: Vec3,
+    /// Unit direction.
+    pub d: Vec3,
+    /// Near clip distance along `d`.
+    pub tmin: f32,
+    /// Far clip distance along `d`.
+    pub tmax: f32,
+}
+
+impl Camera {
+    /// Reads a `Camera` prim with its world transform, for an image of aspect `width / height`.
+    pub fn from_prim(prim: &Prim, world: DMat4, aspect: f32, diags: &mut Diagnostics) -> Camera {
+        let num = |name: &str, default: f64| prim.value(name).and_then(Value::as_f64).unwrap_or(default);
+        let focal = num("focalLength", 50.0);
+        let h_aperture = num("horizontalAperture", 20.955);
+        if !(focal > 0.0 && h_aperture > 0.0 && focal.is_finite() && h_aperture.is_finite()) {
+            let attr = prim.attribute("focalLength").or_else(|| prim.attribute("horizontalAperture"));
+            let mut d = Diagnostic::error(format!(
+                "camera `{}` needs a positive focalLength and horizontalAperture (got {focal}, {h_aperture})",
+                prim.path
+            ));
+            d = d.at(attr.map_or(prim.span, value_span), "here");
+            diags.push(d);
+        }
+        if prim.value("projection").and_then(Value::as_str) == Some("orthographic") {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "camera `{}`: orthographic projection is rendered as perspective",
+                    prim.path
+                ))
+                .at(prim.attribute("projection").map_or(prim.span, value_span), "here"),
+            );
+        }
+        let focal = if focal > 0.0 && focal.is_finite() { focal } else { 50.0 };
+        let h_aperture = if h_aperture > 0.0 && h_aperture.is_finite() { h_aperture } else { 20.955 };
+        let tan_w = (h_aperture / 2.0 / focal) as f32;
+        let shift = Vec2::new(
+            (num("horizontalApertureOffset", 0.0) / focal) as f32,
+            (num("verticalApertureOffset", 0.0) / focal) as f32,
+        );
+        let clip = prim.value("clippingRange").and_then(Value::as_vec2).unwrap_or([1.0, 1_000_000.0]);
+        let f_stop = num("fStop", 0.0);
+        let focus = num("focusDistance", 0.0);
+        let lens_radius = if f_stop > 0.0 && focus > 0.0 { (focal * 0.1 / f_stop / 2.0) as f32 } else { 0.0 };
+        let origin = world.transform_point3(glam::DVec3::ZERO).as_vec3();
+        let right = world.transform_vector3(glam::DVec3::X).as_vec3().normalize_or(Vec3::X);
+        let up = world.transform_vector3(glam::DVec3::Y).as_vec3().normalize_or(Vec3::Y);
+        let forward = world.transform_vector3(-glam::DVec3::Z).as_vec3().normalize_or(-Vec3::Z);
+        Camera {
+            origin,
+            right,
+            up,
+            forward,
+            tan_half: Vec2::new(tan_w, tan_w / aspect.max(1e-6)),
+            shift,
+            lens_radius,
+            focus_distance: focus as f32,
+            near: clip[0].max(0.0) as f32,
+            far: clip[1] as f32,
+            framed: None,
+        }
+    }
+
+    /// A camera that frames the box `(lo, hi)` from the front and slightly above, with
+    /// `up_axis` (`"Y"` or `"Z"`) up and a 50 mm lens on a 36 mm back.
+    pub fn framing(lo: Vec3, hi: Vec3, aspect: f32, up_axis: &str) -> Camera {
+        let centre = (lo + hi) * 0.5;
+        let radius = ((hi - lo).length() * 0.5).max(1e-3);
+        let tan_w = 18.0 / 50.0;
+        let tan_h = tan_w / aspect.max(1e-6);
+        let half = tan_w.min(tan_h).atan();
+        let distance = radius / half.sin();
+        let (up_world, back) = if up_axis == "Z" { (Vec3::Z, -Vec3::Y) } else { (Vec3::Y, Vec3::Z) };
+        let elevation = 20f32.to_radians();
+        let back = (back * elevation.cos() + up_world * elevation.sin()).normalize();
+        let forward = -back;
+        let right = forward.cross(up_world).normalize();
+        let up = right.cross(forward);
+        Camera {
+            origin: centre + back * distance,
+            right,
+            up,
+            forward,
+            tan_half: Vec2::new(tan_w, tan_h),
+            shift: Vec2::ZERO,
+            lens_radius: 0.0,
+            focus_distance: 0.0,
+            near: 0.0,
+            far: f32::INFINITY,
+            framed: Some((centre, radius)),
+        }
+    }
+
+    /// The same camera for an image of aspect `width / height` (horizontal aperture fit; a
+    /// framing camera also moves so the scene stays in view).
+    pub fn with_aspect(&self, aspect: f32) -> Camera {
+        let mut c = *self;
+        c.tan_half.y = c.tan_half.x / aspect.max(1e-6);
+        if let Some((centre, radius)) = c.framed {
+            let half = c.tan_half.x.min(c.tan_half.y).atan();
+            c.origin = centre - c.forward * (radius / half.sin());
+        }
+        c
+    }
+
+    /// The camera position.
+    pub fn origin(&self) -> Vec3 {
+        self.origin
+    }
+
+    /// The viewing direction.
+    pub fn forward(&self) -> Vec3 {
+        self.forward
+    }
+
+    /// The ray through film position `film` (`[0,1]²`, x to the right, y downwards) using
+    /// lens sample `lens` (`[0,1)²`, unused for a pinhole).
+    pub fn ray(&self, film: Vec2, lens: Vec2) -> CameraRay {
+        let x = (2.0 * film.x - 1.0 + self.shift.x) * self.tan_half.x;
+        let y = (1.0 - 2.0 * film.y + self.shift.y) * self.tan_half.y;
+        // Direction in camera space with unit depth along forward.
+        let local = Vec3::new(x, y, 1.0);
+        let (o_local, d_local) = if self.lens_radius > 0.0 {
+            let l = concentric_disk(lens) * self.lens_radius;
+            let focus = local * self.focus_distance;
+            (Vec3::new(l.x, l.y, 0.0), focus - Vec3::new(l.x, l.y, 0.0))
+        } else {
+            (Vec3::ZERO, local)
+        };
+        let to_world = |v: Vec3| self.right * v.x + self.up * v.y + self.forward * v.z;
+        let len = d_local.length();
+        let d = to_world(d_local / len);
+        // Clipping planes are depths along the view axis.
+        let cos = d_local.z / len;
+        CameraRay { o: self.origin + to_world(o_local), d, tmin: self.near / cos, tmax: self.far / cos }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::xform::{tests::stage, world_transforms};
+
+    #[test]
+    fn fov_follows_focal_length_over_aperture_and_horizontal_fit() {
+        let (stage, mut diags) = stage(
+            r#"#usda 1.0
+def Camera "C" {
+    float focalLength = 18
+    float horizontalAperture = 36
+    float verticalAperture = 10
+    double3 xformOp:translate = (0, 0, 5)
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+}"#,
+        );
+        let xf = world_transforms(&stage, &mut diags);
+        let id = stage.find("/C").unwrap();
+        let cam = Camera::from_prim(stage.prim(id), xf[id.0 as usize].world, 2.0, &mut diags);
+        assert!(!diags.has_errors());
+        // Right edge of the film: tan = 18/18 = 1 → 45°.
+        let r = cam.ray(Vec2::new(1.0, 0.5), Vec2::ZERO);
+        assert!((r.d - Vec3::new(1.0, 0.0, -1.0).normalize()).length() < 1e-6);
+        // Top edge: aspect 2 → tan 0.5 (the authored verticalAperture does not matter).
+        let t = cam.ray(Vec2::new(0.5, 0.0), Vec2::ZERO);
+        assert!((t.d - Vec3::new(0.0, 0.5, -1.0).normalize()).length() < 1e-6);
+        assert_eq!(r.o, Vec3::new(0.0, 0.0, 5.0));
+        // Near clip 1 along the axis is 1/cos along an oblique ray.
+        assert!((r.tmin - 2f32.sqrt()).abs() < 1e-5);
+    }
+
+    #[test]
+    fn depth_of_field_focuses_at_focus_distance() {
+        let (stage, mut diags) = stage(
+            r#"#usda 1.0
+def Camera "C" {
+    float focalLength = 50
+    float horizontalAperture = 36
+    float fStop = 1
+    float focusDistance = 4
+}"#,
+        );
+        let id = stage.find("/C").unwrap();
+        let cam = Camera::from_prim(stage.prim(id), DMat4::IDENTITY, 1.0, &mut diags);
+        let film = Vec2::new(0.3, 0.6);
+        let pin = cam.ray(film, Vec2::splat(0.5));
+        let mut spread = 0.0f32;
+        for lens in [Vec2::new(0.1, 0.2), Vec2::new(0.9, 0.5), Vec2::new(0.4, 0.95)] {
+            let r = cam.ray(film, lens);
+            spread = spread.max((r.o - pin.o).length());
+            // Every lens position reaches the same point on the plane of focus (z = -4).
+            let t = -4.0 / r.d.z;
+            let q = r.o + r.d * t;
+            let tp = -4.0 / pin.d.z;
+            assert!((q - (pin.o + pin.d * tp)).length() < 1e-4, "{q}");
+        }
+        assert!(spread > 0.5, "lens radius 2.5 units expected, spread {spread}");
+    }
+}

@@ -1,0 +1,417 @@
+//! The rendering driver: camera samples per pixel, accumulated into AOV buffers.
+//!
+//! Pixel filter: box (each sample lands in its own pixel at a uniformly jittered position),
+//! so every pixel depends only on its own samples. Samples use a counter-based RNG keyed by
+//! (seed, pixel, sample) and are accumulated in sample order, which makes the image
+//! bit-identical whatever the thread count. Rows are rendered in parallel with rayon.
+
+use super::integrator::{ChannelMap, Context, Invalid, LayerMode, PathParams, Scratch};
+use super::sampling::Rng;
+use super::scene::Scene;
+use crate::abi::{MaterialCode, ShaderError};
+use crate::front::graph::ChannelKind;
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use std::fmt;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// What to render.
+#[derive(Clone, Debug)]
+pub struct RenderSettings {
+    /// Image width in pixels.
+    pub width: usize,
+    /// Image height in pixels.
+    pub height: usize,
+    /// Camera samples per pixel.
+    pub spp: u32,
+    /// Seed of every random number.
+    pub seed: u64,
+    /// Worker threads (`None`: rayon's default, all cores).
+    pub threads: Option<usize>,
+    /// Maximum number of bounces.
+    pub max_depth: u32,
+    /// Layer evaluation mode.
+    pub mode: LayerMode,
+}
+
+impl Default for RenderSettings {
+    fn default() -> RenderSettings {
+        RenderSettings {
+            width: 640,
+            height: 480,
+            spp: 16,
+            seed: 0,
+            threads: None,
+            max_depth: 8,
+            mode: LayerMode::Stochastic,
+        }
+    }
+}
+
+/// Pixel data of one image channel.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ChannelData {
+    /// Floats.
+    F32(Vec<f32>),
+    /// Unsigned integers (integer custom channels).
+    U32(Vec<u32>),
+}
+
+/// One named channel, row-major, top row first.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Channel {
+    /// Full EXR channel name, e.g. `R`, `albedo.G`, `N.X`, `Z`, `mask.R`.
+    pub name: String,
+    /// Pixels.
+    pub data: ChannelData,
+}
+
+/// A rendered multi-channel image.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// Channels: `R G B A`, `albedo.R/G/B`, `N.X/Y/Z`, `Z`, then custom channels by name.
+    pub channels: Vec<Channel>,
+}
+
+impl Image {
+    /// The float channel named `name`.
+    pub fn f32_channel(&self, name: &str) -> Option<&[f32]> {
+        self.channels.iter().find(|c| c.name == name).and_then(|c| match &c.data {
+            ChannelData::F32(v) => Some(v.as_slice()),
+            ChannelData::U32(_) => None,
+        })
+    }
+
+    /// The integer channel named `name`.
+    pub fn u32_channel(&self, name: &str) -> Option<&[u32]> {
+        self.channels.iter().find(|c| c.name == name).and_then(|c| match &c.data {
+            ChannelData::U32(v) => Some(v.as_slice()),
+            ChannelData::F32(_) => None,
+        })
+    }
+}
+
+/// Counters reported after a render.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RenderStats {
+    /// Camera samples traced.
+    pub samples: u64,
+    /// Samples discarded (black) because a shader failed: loop budget exceeded.
+    pub loop_budget_errors: u64,
+    /// Samples discarded because a shader indexed out of bounds.
+    pub out_of_bounds_errors: u64,
+    /// Samples discarded because a shader returned non-finite closure values.
+    pub nonfinite_closures: u64,
+    /// Samples whose radiance was NaN or infinite (discarded, black).
+    pub nonfinite_samples: u64,
+    /// Rays absorbed after passing through too many transparent surfaces.
+    pub pass_through_limit: u64,
+    /// Warnings about channel layout (same name, different kinds across materials).
+    pub warnings: Vec<String>,
+}
+
+impl RenderStats {
+    /// Samples thrown away for any reason.
+    pub fn invalid_samples(&self) -> u64 {
+        self.loop_budget_errors + self.out_of_bounds_errors + self.nonfinite_closures + self.nonfinite_samples
+    }
+}
+
+impl fmt::Display for RenderStats {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} samples", self.samples)?;
+        let parts = [
+            (self.loop_budget_errors, "discarded: a shader loop exceeded its iteration budget"),
+            (self.out_of_bounds_errors, "discarded: a shader indexed an array out of bounds"),
+            (self.nonfinite_closures, "discarded: a shader returned NaN/infinite closure values"),
+            (self.nonfinite_samples, "discarded: NaN/infinite radiance"),
+            (self.pass_through_limit, "absorbed after too many transparent surfaces"),
+        ];
+        for (n, what) in parts {
+            if n > 0 {
+                write!(f, "; {n} {what}")?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Why a render could not start.
+#[derive(Debug, PartialEq)]
+pub enum RenderError {
+    /// Width, height or spp is 0, or the image is too large.
+    BadSettings(String),
+    /// A prim refers to a material index outside the slice.
+    MissingMaterial {
+        /// The prim.
+        prim: String,
+        /// Its material index.
+        index: usize,
+    },
+    /// The thread pool could not be created.
+    Threads(String),
+}
+
+impl fmt::Display for RenderError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RenderError::BadSettings(s) => write!(f, "invalid render settings: {s}"),
+            RenderError::MissingMaterial { prim, index } => {
+                write!(f, "prim `{prim}` uses material {index}, which was not given")
+            }
+            RenderError::Threads(s) => write!(f, "cannot start render threads: {s}"),
+        }
+    }
+}
+
+impl std::error::Error for RenderError {}
+
+/// A custom channel of the image.
+#[derive(Clone, Debug)]
+struct ImageChannel {
+    name: String,
+    kind: ChannelKind,
+    offset: usize,
+}
+
+fn width(kind: ChannelKind) -> usize {
+    if kind == ChannelKind::Color { 3 } else { 1 }
+}
+
+/// The union of all materials' channels, sorted by name, and where each material's go.
+fn channel_layout(
+    materials: &[&dyn MaterialCode],
+    warnings: &mut Vec<String>,
+) -> (Vec<ImageChannel>, usize, ChannelMap) {
+    let mut names: Vec<(String, ChannelKind)> = Vec::new();
+    for m in materials {
+        for c in &m.info().channels {
+            match names.iter().find(|(n, _)| *n == c.name) {
+                Some((_, k)) if *k != c.kind => warnings.push(format!(
+                    "custom channel `{}` is {:?} in one material and {:?} in another; the first kind is kept",
+                    c.name, k, c.kind
+                )),
+                Some(_) => {}
+                None => names.push((c.name.clone(), c.kind)),
+            }
+        }
+    }
+    names.sort_by(|a, b| a.0.cmp(&b.0));
+    let mut offset = 0;
+    let channels: Vec<ImageChannel> = names
+        .into_iter()
+        .map(|(name, kind)| {
+            let c = ImageChannel { name, kind, offset };
+            offset += width(kind);
+            c
+        })
+        .collect();
+    let map = materials
+        .iter()
+        .map(|m| {
+            m.info()
+                .channels
+                .iter()
+                .filter_map(|c| {
+                    let g = channels.iter().find(|g| g.name == c.name)?;
+                    Some((c.offset, g.offset, c.width().min(width(g.kind))))
+                })
+                .collect()
+        })
+        .collect();
+    (channels, offset, map)
+}
+
+/// Per-row accumulation buffers.
+struct Row {
+    rgba: Vec<[f32; 4]>,
+    albedo: Vec<Vec3>,
+    normal: Vec<Vec3>,
+    depth: Vec<f32>,
+    channels: Vec<f32>,
+    stats: RenderStats,
+}
+
+/// Progress callback: `(rows done, rows total)`.
+pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
+
+/// Renders `scene` through `materials` (indexed by `scene.prim_material`).
+pub fn render(
+    scene: &Scene,
+    materials: &[&dyn MaterialCode],
+    settings: &RenderSettings,
+    progress: Option<Progress>,
+) -> Result<(Image, RenderStats), RenderError> {
+    let (w, h) = (settings.width, settings.height);
+    if w == 0 || h == 0 || settings.spp == 0 {
+        return Err(RenderError::BadSettings(format!("{w}x{h} at {} spp", settings.spp)));
+    }
+    if w.checked_mul(h).is_none_or(|n| n > 1 << 28) {
+        return Err(RenderError::BadSettings(format!("{w}x{h} is too large")));
+    }
+    for (prim, &index) in scene.prims.iter().zip(&scene.prim_material) {
+        if index >= materials.len() {
+            return Err(RenderError::MissingMaterial { prim: prim.path.clone(), index });
+        }
+    }
+    let mut warnings = Vec::new();
+    let (channels, channel_floats, channel_map) = channel_layout(materials, &mut warnings);
+    let camera = scene.camera.with_aspect(w as f32 / h as f32);
+    let ctx = Context {
+        scene,
+        materials,
+        channel_map: &channel_map,
+        params: PathParams { max_depth: settings.max_depth, rr_depth: 3, mode: settings.mode },
+    };
+    let done = AtomicUsize::new(0);
+    let progress_lock = Mutex::new(());
+    let render_row = |y: usize, scratch: &mut Scratch| -> Row {
+        let mut row = Row {
+            rgba: vec![[0.0; 4]; w],
+            albedo: vec![Vec3::ZERO; w],
+            normal: vec![Vec3::ZERO; w],
+            depth: vec![f32::INFINITY; w],
+            channels: vec![0.0; w * channel_floats],
+            stats: RenderStats::default(),
+        };
+        for x in 0..w {
+            let pixel = (y * w + x) as u64;
+            let mut sum = Vec3::ZERO;
+            let mut alpha = 0.0f32;
+            let mut albedo = Vec3::ZERO;
+            let mut normal = Vec3::ZERO;
+            let mut hits = 0u32;
+            let mut depth = f32::INFINITY;
+            let px_channels = &mut row.channels[x * channel_floats..(x + 1) * channel_floats];
+            for sample in 0..settings.spp {
+                let mut rng = Rng::new(settings.seed, pixel, sample as u64);
+                let jitter = rng.uniform2();
+                let film = Vec2::new((x as f32 + jitter.x) / w as f32, (y as f32 + jitter.y) / h as f32);
+                let ray = camera.ray(film, rng.uniform2());
+                row.stats.samples += 1;
+                match ctx.trace(ray.o, ray.d, ray.tmin, ray.tmax, &mut rng, scratch) {
+                    Ok(r) if r.radiance.is_finite() && r.albedo.is_finite() && r.normal.is_finite() => {
+                        row.stats.pass_through_limit += u64::from(r.pass_limit);
+                        sum += r.radiance;
+                        alpha += r.alpha;
+                        albedo += r.albedo;
+                        if r.alpha > 0.0 {
+                            normal += r.normal;
+                            hits += 1;
+                        }
+                        depth = depth.min(r.depth);
+                        for c in &channels {
+                            for k in 0..width(c.kind) {
+                                let v = scratch.channels[c.offset + k];
+                                let v = if v.is_finite() { v } else { 0.0 };
+                                if c.kind == ChannelKind::Integer {
+                                    // Integers are not averaged: the pixel's first sample wins.
+                                    if sample == 0 {
+                                        px_channels[c.offset + k] = v;
+                                    }
+                                } else {
+                                    px_channels[c.offset + k] += v;
+                                }
+                            }
+                        }
+                    }
+                    Ok(_) => row.stats.nonfinite_samples += 1,
+                    Err(Invalid::Shader(ShaderError::LoopBudget)) => row.stats.loop_budget_errors += 1,
+                    Err(Invalid::Shader(ShaderError::OutOfBounds)) => row.stats.out_of_bounds_errors += 1,
+                    Err(Invalid::NonFiniteClosure) => row.stats.nonfinite_closures += 1,
+                }
+            }
+            // Invalid samples count in the average as black (they are reported, not hidden).
+            let inv = 1.0 / settings.spp as f32;
+            let c = sum * inv;
+            row.rgba[x] = [c.x, c.y, c.z, alpha * inv];
+            row.albedo[x] = albedo * inv;
+            row.normal[x] = if hits > 0 { (normal / hits as f32).normalize_or_zero() } else { Vec3::ZERO };
+            row.depth[x] = depth;
+            for c in &channels {
+                if c.kind != ChannelKind::Integer {
+                    for k in 0..width(c.kind) {
+                        px_channels[c.offset + k] *= inv;
+                    }
+                }
+            }
+        }
+        let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+        if let Some(progress) = progress {
+            let _guard = progress_lock.lock();
+            progress(n, h);
+        }
+        row
+    };
+    let run = || -> Vec<Row> {
+        (0..h)
+            .into_par_iter()
+            .map_init(|| Scratch::new(materials, channel_floats), |scratch, y| render_row(y, scratch))
+            .collect()
+    };
+    let rows = match settings.threads {
+        Some(n) => rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build()
+            .map_err(|e| RenderError::Threads(e.to_string()))?
+            .install(run),
+        None => run(),
+    };
+    // Assemble channels and stats in row order.
+    let mut stats = RenderStats { warnings, ..RenderStats::default() };
+    let n = w * h;
+    let mut planes: Vec<Vec<f32>> = vec![Vec::with_capacity(n); 11 + channel_floats];
+    for row in &rows {
+        let s = &row.stats;
+        stats.samples += s.samples;
+        stats.loop_budget_errors += s.loop_budget_errors;
+        stats.out_of_bounds_errors += s.out_of_bounds_errors;
+        stats.nonfinite_closures += s.nonfinite_closures;
+        stats.nonfinite_samples += s.nonfinite_samples;
+        stats.pass_through_limit += s.pass_through_limit;
+        for x in 0..w {
+            let values = [
+                row.rgba[x][0],
+                row.rgba[x][1],
+                row.rgba[x][2],
+                row.rgba[x][3],
+                row.albedo[x].x,
+                row.albedo[x].y,
+                row.albedo[x].z,
+                row.normal[x].x,
+                row.normal[x].y,
+                row.normal[x].z,
+                row.depth[x],
+            ];
+            for (plane, v) in planes.iter_mut().zip(values) {
+                plane.push(v);
+            }
+            for k in 0..channel_floats {
+                planes[11 + k].push(row.channels[x * channel_floats + k]);
+            }
+        }
+    }
+    let mut planes = planes.into_iter();
+    let mut out = Vec::new();
+    for name in ["R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z"] {
+        out.push(Channel { name: name.into(), data: ChannelData::F32(planes.next().unwrap_or_default()) });
+    }
+    for c in &channels {
+        let suffixes: &[&str] = if c.kind == ChannelKind::Color { &[".R", ".G", ".B"] } else { &[""] };
+        for suffix in suffixes {
+            let plane = planes.next().unwrap_or_default();
+            let data = if c.kind == ChannelKind::Integer {
+                ChannelData::U32(plane.iter().map(|&v| v.round().clamp(0.0, u32::MAX as f32) as u32).collect())
+            } else {
+                ChannelData::F32(plane)
+            };
+            out.push(Channel { name: format!("{}{suffix}", c.name), data });
+        }
+    }
+    Ok((Image { width: w, height: h, channels: out }, stats))
+}

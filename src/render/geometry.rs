@@ -1,0 +1,510 @@
+//! World-space triangles from a composed stage.
+//!
+//! Every renderable prim becomes triangles in world space: meshes are fan-triangulated,
+//! and the implicit surfaces (Sphere, Cube, Cylinder) are tessellated finely with analytic
+//! normals and texture coordinates, so one triangle BVH serves every prim type.
+//! Malformed meshes are diagnosed (never a panic); zero-area triangles are skipped and counted.
+
+use super::xform::{PrimXform, value_span, world_transforms};
+use crate::compose::scene::is_renderable;
+use crate::diag::{Diagnostic, Diagnostics, Span};
+use crate::scene::{Attribute, Prim, Stage, Value};
+use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
+use std::f64::consts::{PI, TAU};
+
+/// Segments around a tessellated sphere or cylinder (rings of a sphere: half of it).
+const SEGMENTS: usize = 128;
+
+/// One world-space triangle.
+#[derive(Clone, Copy, Debug)]
+pub struct Triangle {
+    /// Vertex positions.
+    pub p: [Vec3; 3],
+    /// Vertex shading normals (unit); the geometric normal when the prim has none.
+    pub n: [Vec3; 3],
+    /// Vertex texture coordinates (`st`, or parametric `(0,0), (1,0), (0,1)` when absent).
+    pub uv: [Vec2; 3],
+    /// Index of the renderable prim in [`Geometry::prims`].
+    pub prim: u32,
+    /// Whether `uv` came from the prim (`primvars:st` or an implicit surface's parameterisation).
+    pub has_uv: bool,
+}
+
+impl Triangle {
+    /// The unnormalised geometric normal (right-handed winding).
+    pub fn cross(&self) -> Vec3 {
+        (self.p[1] - self.p[0]).cross(self.p[2] - self.p[0])
+    }
+}
+
+/// A renderable prim that produced triangles.
+#[derive(Clone, Debug)]
+pub struct GeomPrim {
+    /// Its path.
+    pub path: String,
+    /// Where it is defined (for diagnostics about it).
+    pub span: Span,
+}
+
+/// The triangles of a whole stage.
+#[derive(Clone, Debug, Default)]
+pub struct Geometry {
+    /// World-space triangles.
+    pub triangles: Vec<Triangle>,
+    /// Renderable, visible prims, indexed by [`Triangle::prim`].
+    pub prims: Vec<GeomPrim>,
+    /// Zero-area or non-finite triangles that were skipped.
+    pub degenerate: usize,
+}
+
+impl Geometry {
+    /// World-space bounds `(min, max)` of every triangle; `None` when empty.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let mut it = self.triangles.iter().flat_map(|t| t.p);
+        let first = it.next()?;
+        Some(it.fold((first, first), |(lo, hi), p| (lo.min(p), hi.max(p))))
+    }
+}
+
+/// Builds the triangles of every visible renderable prim of `stage`.
+pub fn build(stage: &Stage, diags: &mut Diagnostics) -> Geometry {
+    let xforms = world_transforms(stage, diags);
+    build_with(stage, &xforms, diags)
+}
+
+/// As [`build`], with transforms already computed.
+pub fn build_with(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagnostics) -> Geometry {
+    let mut geometry = Geometry::default();
+    for (id, prim) in stage.depth_first() {
+        let xf = xforms[id.0 as usize];
+        if xf.hidden || !is_renderable(prim) {
+            continue;
+        }
+        let index = geometry.prims.len() as u32;
+        let mut out = Emitter { geometry: &mut geometry, m: xf.world, prim: index };
+        match prim.type_name.as_deref() {
+            Some("Mesh") => mesh(prim, &mut out, diags),
+            Some("Sphere") => sphere(prim, &mut out, diags),
+            Some("Cube") => cube(prim, &mut out, diags),
+            Some("Cylinder") => cylinder(prim, &mut out, diags),
+            _ => {}
+        }
+        geometry.prims.push(GeomPrim { path: prim.path.clone(), span: prim.span });
+    }
+    if geometry.degenerate > 0 {
+        diags.push(Diagnostic::warning(format!(
+            "{} degenerate (zero-area or non-finite) triangle(s) skipped",
+            geometry.degenerate
+        )));
+    }
+    geometry
+}
+
+/// Transforms local-space triangles to world space and appends them.
+struct Emitter<'g> {
+    geometry: &'g mut Geometry,
+    m: DMat4,
+    prim: u32,
+}
+
+impl Emitter<'_> {
+    /// Emits one triangle given in local space (`n` in local space, not necessarily unit).
+    fn emit(&mut self, p: [DVec3; 3], n: Option<[DVec3; 3]>, uv: Option<[Vec2; 3]>) {
+        let wp = p.map(|p| self.m.transform_point3(p).as_vec3());
+        let cross = (wp[1] - wp[0]).cross(wp[2] - wp[0]);
+        let len2 = cross.length_squared();
+        if len2.is_nan() || len2 <= 0.0 || !len2.is_finite() {
+            self.geometry.degenerate += 1;
+            return;
+        }
+        let ng = cross / len2.sqrt();
+        // Normals transform by the inverse transpose.
+        let nm = DMat3::from_mat4(self.m).inverse().transpose();
+        let n = match n {
+            Some(n) => n.map(|n| {
+                let w = (nm * n).as_vec3().normalize_or_zero();
+                if w == Vec3::ZERO || !w.is_finite() { ng } else { w }
+            }),
+            None => [ng; 3],
+        };
+        let has_uv = uv.is_some();
+        let uv = uv.unwrap_or([Vec2::ZERO, Vec2::X, Vec2::Y]);
+        self.geometry.triangles.push(Triangle { p: wp, n, uv, prim: self.prim, has_uv });
+    }
+}
+
+fn span_of(prim: &Prim, name: &str) -> Span {
+    prim.attribute(name).map_or(prim.span, value_span)
+}
+
+/// A primvar resolved per face-vertex: its data, width, interpolation and optional indices.
+struct Primvar<'a> {
+    data: &'a [f64],
+    width: usize,
+    interpolation: &'a str,
+    indices: Option<&'a [i64]>,
+    attr: &'a Attribute,
+}
+
+impl<'a> Primvar<'a> {
+    fn get(prim: &'a Prim, name: &str, width: usize, default_interp: &'a str) -> Option<Primvar<'a>> {
+        let attr = prim.attribute(name)?;
+        let (w, data) = attr.get()?.as_tuple_array()?;
+        if w != width {
+            return None;
+        }
+        let interpolation = attr.meta("interpolation").and_then(Value::as_str).unwrap_or(default_interp);
+        let indices = prim.value(&format!("{name}:indices")).and_then(Value::as_int_array);
+        Some(Primvar { data, width, interpolation, indices, attr })
+    }
+
+    /// Number of elements the interpolation needs, given the mesh's counts.
+    fn expected(&self, points: usize, faces: usize, face_vertices: usize) -> Option<usize> {
+        match self.interpolation {
+            "vertex" | "varying" => Some(points),
+            "faceVarying" => Some(face_vertices),
+            "uniform" => Some(faces),
+            "constant" => Some(1),
+            _ => None,
+        }
+    }
+
+    /// The element for (face, face-vertex ordinal, point index).
+    fn at(&self, face: usize, corner: usize, point: usize) -> Option<&'a [f64]> {
+        let slot = match self.interpolation {
+            "vertex" | "varying" => point,
+            "faceVarying" => corner,
+            "uniform" => face,
+            _ => 0,
+        };
+        let element = match self.indices {
+            Some(ix) => usize::try_from(*ix.get(slot)?).ok()?,
+            None => slot,
+        };
+        self.data.get(element * self.width..(element + 1) * self.width)
+    }
+}
+
+fn mesh(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
+    let error = |diags: &mut Diagnostics, name: &str, message: String| {
+        diags.push(Diagnostic::error(message).at(span_of(prim, name), "here"));
+    };
+    let Some((3, points)) = prim.value("points").and_then(Value::as_tuple_array) else {
+        if prim.attribute("points").is_some() {
+            error(diags, "points", format!("mesh `{}`: `points` must be an array of 3-vectors", prim.path));
+        }
+        return;
+    };
+    let counts = prim.value("faceVertexCounts").and_then(Value::as_int_array).unwrap_or(&[]);
+    let indices = prim.value("faceVertexIndices").and_then(Value::as_int_array).unwrap_or(&[]);
+    let npoints = points.len() / 3;
+    if points.iter().any(|c| !c.is_finite()) {
+        error(diags, "points", format!("mesh `{}` has non-finite (NaN or infinite) points", prim.path));
+        return;
+    }
+    if counts.iter().any(|&c| c < 0) || counts.iter().map(|&c| c.max(0) as usize).sum::<usize>() != indices.len() {
+        error(
+            diags,
+            "faceVertexCounts",
+            format!(
+                "mesh `{}`: faceVertexCounts sum to {} but faceVertexIndices has {} entries",
+                prim.path,
+                counts.iter().map(|&c| c.max(0)).sum::<i64>(),
+                indices.len()
+            ),
+        );
+        return;
+    }
+    if let Some(bad) = indices.iter().find(|&&i| i < 0 || i as usize >= npoints) {
+        error(
+            diags,
+            "faceVertexIndices",
+            format!("mesh `{}`: vertex index {bad} is out of range (the mesh has {npoints} points)", prim.path),
+        );
+        return;
+    }
+    let faces = counts.len();
+    let left = prim.value("orientation").and_then(Value::as_str) == Some("leftHanded");
+    // A mirroring transform flips the winding too.
+    let flip = left != (out.m.determinant() < 0.0);
+
+    let normals =
+        Primvar::get(prim, "primvars:normals", 3, "vertex").or_else(|| Primvar::get(prim, "normals", 3, "vertex"));
+    let normals = normals.filter(|pv| check_primvar(prim, pv, npoints, faces, indices.len(), diags));
+    let st = Primvar::get(prim, "primvars:st", 2, "faceVarying");
+    let st = st.filter(|pv| check_primvar(prim, pv, npoints, faces, indices.len(), diags));
+
+    let point = |i: usize| DVec3::new(points[3 * i], points[3 * i + 1], points[3 * i + 2]);
+    let mut start = 0usize;
+    let mut short_faces = 0usize;
+    for (face, &count) in counts.iter().enumerate() {
+        let count = count as usize;
+        if count < 3 {
+            short_faces += 1;
+            start += count;
+            continue;
+        }
+        let corner = |k: usize| -> (DVec3, Option<DVec3>, Option<Vec2>) {
+            let c = start + k;
+            let pi = indices[c] as usize;
+            let n = normals.as_ref().and_then(|pv| pv.at(face, c, pi)).map(|n| DVec3::new(n[0], n[1], n[2]));
+            let uv = st.as_ref().and_then(|pv| pv.at(face, c, pi)).map(|t| Vec2::new(t[0] as f32, t[1] as f32));
+            (point(pi), n, uv)
+        };
+        for k in 1..count - 1 {
+            let mut c = [corner(0), corner(k), corner(k + 1)];
+            if flip {
+                c.swap(1, 2);
+            }
+            let p = [c[0].0, c[1].0, c[2].0];
+            let n = match (c[0].1, c[1].1, c[2].1) {
+                (Some(a), Some(b), Some(d)) => Some([a, b, d]),
+                _ => None,
+            };
+            let uv = match (c[0].2, c[1].2, c[2].2) {
+                (Some(a), Some(b), Some(d)) => Some([a, b, d]),
+                _ => None,
+            };
+            out.emit(p, n, uv);
+        }
+        start += count;
+    }
+    if short_faces > 0 {
+        diags.push(
+            Diagnostic::warning(format!(
+                "mesh `{}`: {short_faces} face(s) with fewer than 3 vertices skipped",
+                prim.path
+            ))
+            .at(span_of(prim, "faceVertexCounts"), "here"),
+        );
+    }
+}
+
+/// Whether a primvar's length fits its interpolation; warns and drops it when not.
+fn check_primvar(prim: &Prim, pv: &Primvar, points: usize, faces: usize, fv: usize, diags: &mut Diagnostics) -> bool {
+    let elements = pv.indices.map_or(pv.data.len() / pv.width, <[i64]>::len);
+    let ok = pv.expected(points, faces, fv).is_some_and(|e| e == elements)
+        && pv.indices.is_none_or(|ix| ix.iter().all(|&i| i >= 0 && (i as usize) < pv.data.len() / pv.width))
+        && pv.data.iter().all(|c| c.is_finite());
+    if !ok {
+        diags.push(
+            Diagnostic::warning(format!(
+                "mesh `{}`: `{}` ({} interpolation, {elements} elements) does not fit the mesh; ignored",
+                prim.path, pv.attr.name, pv.interpolation
+            ))
+            .at(value_span(pv.attr), "here"),
+        );
+    }
+    ok
+}
+
+fn positive(prim: &Prim, name: &str, default: f64, diags: &mut Diagnostics) -> Option<f64> {
+    let v = prim.value(name).and_then(Value::as_f64).unwrap_or(default);
+    if v.is_finite() && v > 0.0 {
+        Some(v)
+    } else {
+        diags.push(
+            Diagnostic::error(format!("`{}`: `{name}` must be a positive number, not {v}", prim.path))
+                .at(span_of(prim, name), "here"),
+        );
+        None
+    }
+}
+
+/// A UV sphere around the Z axis (UsdGeom's implicit surfaces use Z as their default axis).
+fn sphere(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
+    let Some(r) = positive(prim, "radius", 1.0, diags) else { return };
+    let rings = SEGMENTS / 2;
+    let vertex = |i: usize, j: usize| {
+        let phi = TAU * i as f64 / SEGMENTS as f64;
+        let theta = PI * j as f64 / rings as f64;
+        let n = DVec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
+        (n * r, n, Vec2::new(i as f32 / SEGMENTS as f32, 1.0 - j as f32 / rings as f32))
+    };
+    grid(out, SEGMENTS, rings, vertex);
+}
+
+/// Emits a `cols × rows` quad grid of a parametric surface, two triangles per quad
+/// (degenerate pole triangles are dropped by [`Emitter::emit`]'s area test, not counted).
+fn grid(out: &mut Emitter, cols: usize, rows: usize, vertex: impl Fn(usize, usize) -> (DVec3, DVec3, Vec2)) {
+    for j in 0..rows {
+        for i in 0..cols {
+            let a = vertex(i, j);
+            let b = vertex(i + 1, j);
+            let c = vertex(i + 1, j + 1);
+            let d = vertex(i, j + 1);
+            for tri in [[a, c, b], [a, d, c]] {
+                let before = out.geometry.degenerate;
+                out.emit(tri.map(|v| v.0), Some(tri.map(|v| v.1)), Some(tri.map(|v| v.2)));
+                // Pole triangles of a parametric grid are expected, not a modelling error.
+                out.geometry.degenerate = before;
+            }
+        }
+    }
+}
+
+fn cube(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
+    let Some(size) = positive(prim, "size", 2.0, diags) else { return };
+    let h = size / 2.0;
+    for axis in 0..3 {
+        for sign in [-1.0, 1.0] {
+            let n = DVec3::from_array(std::array::from_fn(|k| if k == axis { sign } else { 0.0 }));
+            let u = DVec3::from_array(std::array::from_fn(|k| if k == (axis + 1) % 3 { 1.0 } else { 0.0 }));
+            let v = n.cross(u);
+            let corner = |a: f64, b: f64| {
+                (n * h + u * (a * h) + v * (b * h), Vec2::new((a as f32 + 1.0) / 2.0, (b as f32 + 1.0) / 2.0))
+            };
+            let q = [corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)];
+            for [i, j, k] in [[0, 1, 2], [0, 2, 3]] {
+                out.emit([q[i].0, q[j].0, q[k].0], Some([n; 3]), Some([q[i].1, q[j].1, q[k].1]));
+            }
+        }
+    }
+}
+
+fn cylinder(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
+    let Some(r) = positive(prim, "radius", 1.0, diags) else { return };
+    let Some(height) = positive(prim, "height", 2.0, diags) else { return };
+    let axis = prim.value("axis").and_then(Value::as_str).unwrap_or("Z");
+    // Build around Z, then permute so the cylinder's axis is the authored one.
+    let to_axis = |p: DVec3| match axis {
+        "X" => DVec3::new(p.z, p.x, p.y),
+        "Y" => DVec3::new(p.y, p.z, p.x),
+        _ => p,
+    };
+    let h = height / 2.0;
+    let side = |i: usize, j: usize| {
+        let phi = TAU * i as f64 / SEGMENTS as f64;
+        let n = DVec3::new(phi.cos(), phi.sin(), 0.0);
+        let z = if j == 0 { -h } else { h };
+        (to_axis(n * r + DVec3::Z * z), to_axis(n), Vec2::new(i as f32 / SEGMENTS as f32, j as f32))
+    };
+    grid(out, SEGMENTS, 1, side);
+    for sign in [-1.0, 1.0] {
+        let n = to_axis(DVec3::Z * sign);
+        let centre = to_axis(DVec3::Z * (h * sign));
+        for i in 0..SEGMENTS {
+            let rim = |i: usize| {
+                let phi = TAU * i as f64 / SEGMENTS as f64;
+                let (s, c) = phi.sin_cos();
+                (to_axis(DVec3::new(c * r, s * r, h * sign)), Vec2::new(0.5 + 0.5 * c as f32, 0.5 + 0.5 * s as f32))
+            };
+            let (a, b) = if sign > 0.0 { (rim(i), rim(i + 1)) } else { (rim(i + 1), rim(i)) };
+            out.emit([centre, a.0, b.0], Some([n; 3]), Some([Vec2::splat(0.5), a.1, b.1]));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::xform::tests::stage;
+
+    #[test]
+    fn quad_is_two_triangles_with_normals_and_st() {
+        let (stage, mut diags) = stage(
+            r#"#usda 1.0
+def Mesh "M" {
+    int[] faceVertexCounts = [4]
+    int[] faceVertexIndices = [0, 1, 2, 3]
+    point3f[] points = [(-1, 0, -1), (-1, 0, 1), (1, 0, 1), (1, 0, -1)]
+    normal3f[] normals = [(0, 1, 0), (0, 1, 0), (0, 1, 0), (0, 1, 0)] (interpolation = "vertex")
+    texCoord2f[] primvars:st = [(0, 0), (0, 1), (1, 1), (1, 0)] (interpolation = "faceVarying")
+    double3 xformOp:translate = (0, 2, 0)
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+}"#,
+        );
+        let g = build(&stage, &mut diags);
+        assert!(diags.items().is_empty(), "{diags:?}");
+        assert_eq!(g.triangles.len(), 2);
+        for t in &g.triangles {
+            assert!(t.has_uv);
+            assert!(t.p.iter().all(|p| p.y == 2.0));
+            // Winding (-1,0,-1), (-1,0,1), (1,0,1) is right-handed about +Y.
+            assert!(t.cross().normalize().dot(Vec3::Y) > 0.99);
+            assert_eq!(t.n[0], Vec3::Y);
+        }
+        assert_eq!(g.triangles[0].uv[1], Vec2::new(0.0, 1.0));
+    }
+
+    #[test]
+    fn bad_index_is_an_error_not_a_panic() {
+        let (stage, mut diags) = stage(
+            r#"#usda 1.0
+def Mesh "M" {
+    int[] faceVertexCounts = [3]
+    int[] faceVertexIndices = [0, 1, 7]
+    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]
+}"#,
+        );
+        let g = build(&stage, &mut diags);
+        assert!(diags.has_errors());
+        assert!(diags.items()[0].message.contains("out of range"), "{:?}", diags.items());
+        assert!(g.triangles.is_empty());
+    }
+
+    #[test]
+    fn counts_not_summing_and_nan_points_are_errors() {
+        for body in [
+            "int[] faceVertexCounts = [3, 3]\n int[] faceVertexIndices = [0, 1, 2]\n point3f[] points = [(0,0,0), (1,0,0), (0,1,0)]",
+            "int[] faceVertexCounts = [3]\n int[] faceVertexIndices = [0, 1, 2]\n point3f[] points = [(0,0,0), (nan,0,0), (0,1,0)]",
+        ] {
+            let (stage, mut diags) = stage(&format!("#usda 1.0\ndef Mesh \"M\" {{\n{body}\n}}"));
+            let g = build(&stage, &mut diags);
+            assert!(diags.has_errors(), "{body}");
+            assert!(g.triangles.is_empty());
+        }
+    }
+
+    #[test]
+    fn degenerate_triangles_are_skipped_and_counted() {
+        let (stage, mut diags) = stage(
+            r#"#usda 1.0
+def Mesh "M" {
+    int[] faceVertexCounts = [3, 3]
+    int[] faceVertexIndices = [0, 1, 2, 0, 1, 3]
+    point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (2, 0, 0)]
+}"#,
+        );
+        let g = build(&stage, &mut diags);
+        assert_eq!(g.triangles.len(), 1);
+        assert_eq!(g.degenerate, 1);
+        assert!(!diags.has_errors());
+        assert_eq!(diags.items().len(), 1);
+    }
+
+    #[test]
+    fn implicit_prims_invisible_and_guides() {
+        let (stage, mut diags) = stage(
+            r#"#usda 1.0
+def Sphere "S" { double radius = 2 }
+def Cube "C" { double size = 1 }
+def Cylinder "Y" { token axis = "Y" }
+def Sphere "Hidden" { token visibility = "invisible" }
+def Xform "G" {
+    uniform token purpose = "guide"
+    def Sphere "Child" {}
+}"#,
+        );
+        let g = build(&stage, &mut diags);
+        assert!(!diags.has_errors());
+        let paths: Vec<_> = g.prims.iter().map(|p| p.path.as_str()).collect();
+        assert_eq!(paths, ["/S", "/C", "/Y"]);
+        for t in g.triangles.iter().filter(|t| t.prim == 0) {
+            for p in t.p {
+                assert!((p.length() - 2.0).abs() < 1e-4);
+            }
+            // Outward winding.
+            assert!(t.cross().dot(t.p[0]) > 0.0);
+        }
+        let (lo, hi) = g.bounds().unwrap();
+        assert!(
+            (lo - Vec3::splat(-2.0)).abs().max_element() < 1e-4 && (hi - Vec3::splat(2.0)).abs().max_element() < 1e-4
+        );
+        let cyl = g.triangles.iter().filter(|t| t.prim == 2).flat_map(|t| t.p);
+        let ymax = cyl.map(|p| p.y).fold(f32::MIN, f32::max);
+        assert!((ymax - 1.0).abs() < 1e-5);
+        let cube = g.triangles.iter().filter(|t| t.prim == 1).count();
+        assert_eq!(cube, 12);
+    }
+}

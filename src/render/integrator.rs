@@ -1,0 +1,609 @@
+//! Unidirectional path tracing with next-event estimation and multiple importance sampling
+//! (power heuristic), through layered materials (DESIGN.md rules 5–7).
+//!
+//! At every path vertex the layer weights `w_top = m_top`, `w_i = m_i Π_{j above}(1 − m_j)`
+//! and the transparency `w_T = 1 − Σ w` are computed from the masks. One uniform number
+//! decides transparency (the ray continues straight on, not counted as a bounce) and, in
+//! [`LayerMode::Stochastic`], which single layer is evaluated; picking with probability
+//! `w_i` and weighting by `w_i` cancel, so no division is needed. [`LayerMode::Weighted`]
+//! evaluates every layer instead (`f = Σ ŵ_i f_i`, `ŵ_i = w_i / (1 − w_T)`), sampling one
+//! lobe by weight and using the mixture pdf; it is the reference the stochastic mode is tested
+//! against. Shadow rays account for transparency by its expected value (the product of
+//! `w_T` at the surfaces they cross), which matches the stochastic pass-through on average.
+
+use super::accel::{Accel, Hit, offset_ray_origin};
+use super::bsdf::{Bsdf, Frame};
+use super::light::Light;
+use super::sampling::{Rng, power_heuristic};
+use super::scene::Scene;
+use crate::abi::{Closure, ClosureKind, Globals, MaterialCode, ShaderError};
+use crate::front::graph::DisplacementMode;
+use glam::{Vec2, Vec3};
+
+/// How layers are evaluated at a path vertex.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum LayerMode {
+    /// Pick one layer per vertex with probability equal to its weight (DESIGN.md rule 5).
+    #[default]
+    Stochastic,
+    /// Evaluate every layer, weighted (reference and benchmark mode).
+    Weighted,
+}
+
+/// Most transparent surfaces one ray passes straight through before it is absorbed.
+pub const MAX_PASS_THROUGH: u32 = 64;
+
+/// Path-tracing parameters.
+#[derive(Clone, Copy, Debug)]
+pub struct PathParams {
+    /// Maximum number of bounces (scattering events).
+    pub max_depth: u32,
+    /// Bounces before Russian roulette starts.
+    pub rr_depth: u32,
+    /// Layer evaluation mode.
+    pub mode: LayerMode,
+}
+
+/// Everything one camera sample produced (AOVs are those of the first visible hit).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SampleResult {
+    /// Radiance.
+    pub radiance: Vec3,
+    /// 1 when the camera ray reached a non-transparent surface.
+    pub alpha: f32,
+    /// Albedo of the evaluated layer(s).
+    pub albedo: Vec3,
+    /// World shading normal.
+    pub normal: Vec3,
+    /// Distance from the camera (`f32::INFINITY` on a miss).
+    pub depth: f32,
+    /// Transparent surfaces passed through that hit [`MAX_PASS_THROUGH`].
+    pub pass_limit: bool,
+}
+
+/// Why a sample was thrown away.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Invalid {
+    /// A shader entry point failed.
+    Shader(ShaderError),
+    /// A shader returned a non-finite closure parameter or normal.
+    NonFiniteClosure,
+}
+
+/// One evaluated layer at a shading point.
+#[derive(Clone, Copy, Debug)]
+struct Lobe {
+    weight: f32,
+    bsdf: Bsdf,
+    frame: Frame,
+    layer: usize,
+}
+
+/// Per-thread buffers, allocated once outside the sample loop so shading allocates nothing.
+pub struct Scratch {
+    masks: Vec<f32>,
+    masks_du: Vec<f32>,
+    masks_dv: Vec<f32>,
+    disp: Vec<f32>,
+    weights: Vec<f32>,
+    lobes: Vec<Lobe>,
+    material_channels: Vec<f32>,
+    /// The sample's custom channels in the image's global layout.
+    pub channels: Vec<f32>,
+}
+
+impl Scratch {
+    /// Buffers large enough for every material in `materials` and `global_channels` floats.
+    pub fn new(materials: &[&dyn MaterialCode], global_channels: usize) -> Scratch {
+        let layers = materials.iter().map(|m| m.info().layers.len()).max().unwrap_or(0).max(1);
+        let floats = materials.iter().map(|m| m.info().channel_floats).max().unwrap_or(0);
+        Scratch {
+            masks: vec![0.0; layers],
+            masks_du: vec![0.0; layers],
+            masks_dv: vec![0.0; layers],
+            disp: vec![0.0; layers],
+            weights: vec![0.0; layers],
+            lobes: Vec::with_capacity(layers),
+            material_channels: vec![0.0; floats],
+            channels: vec![0.0; global_channels],
+        }
+    }
+}
+
+/// Where each material's channels go in the image: `(material offset, image offset, width)`.
+pub type ChannelMap = Vec<Vec<(usize, usize, usize)>>;
+
+/// The scene and materials a path is traced through.
+pub struct Context<'a> {
+    /// Geometry, lights, camera.
+    pub scene: &'a Scene,
+    /// Materials, indexed by `Scene::prim_material`.
+    pub materials: &'a [&'a dyn MaterialCode],
+    /// Channel layout per material.
+    pub channel_map: &'a ChannelMap,
+    /// Parameters.
+    pub params: PathParams,
+}
+
+/// Surface geometry at a hit.
+struct SurfacePoint {
+    p: Vec3,
+    /// Geometric normal, outward by winding.
+    ng: Vec3,
+    /// Interpolated shading normal, outward.
+    ns: Vec3,
+    dpdu: Vec3,
+    dpdv: Vec3,
+    uv: Vec2,
+    material: usize,
+}
+
+fn surface_point(accel: &Accel, scene: &Scene, hit: &Hit) -> SurfacePoint {
+    let tri = &accel.triangles()[hit.tri as usize];
+    let b0 = 1.0 - hit.b1 - hit.b2;
+    let p = tri.p[0] * b0 + tri.p[1] * hit.b1 + tri.p[2] * hit.b2;
+    let ng = tri.cross().normalize();
+    let mut ns = (tri.n[0] * b0 + tri.n[1] * hit.b1 + tri.n[2] * hit.b2).normalize_or_zero();
+    if ns == Vec3::ZERO || !ns.is_finite() {
+        ns = ng;
+    }
+    // Shading normals are authored on either side; keep them on the winding's side.
+    if ns.dot(ng) < 0.0 {
+        ns = -ns;
+    }
+    let uv = tri.uv[0] * b0 + tri.uv[1] * hit.b1 + tri.uv[2] * hit.b2;
+    let (dpdu, dpdv) = tangents(tri.p, tri.uv, ns);
+    SurfacePoint { p, ng, ns, dpdu, dpdv, uv, material: scene.prim_material[tri.prim as usize] }
+}
+
+/// dP/du and dP/dv from the triangle's texture coordinates, or a frame around `n` when
+/// they are degenerate.
+fn tangents(p: [Vec3; 3], uv: [Vec2; 3], n: Vec3) -> (Vec3, Vec3) {
+    let d1 = uv[1] - uv[0];
+    let d2 = uv[2] - uv[0];
+    let det = d1.x * d2.y - d1.y * d2.x;
+    let e1 = p[1] - p[0];
+    let e2 = p[2] - p[0];
+    if det.abs() > 1e-12 {
+        let inv = 1.0 / det;
+        let dpdu = (e1 * d2.y - e2 * d1.y) * inv;
+        let dpdv = (e2 * d1.x - e1 * d2.x) * inv;
+        if dpdu.is_finite() && dpdv.is_finite() && dpdu.cross(dpdv).length_squared() > 0.0 {
+            return (dpdu, dpdv);
+        }
+    }
+    let f = Frame::from_normal(n);
+    (f.t, f.b)
+}
+
+fn to_arr(v: Vec3) -> [f32; 3] {
+    v.to_array()
+}
+
+impl Context<'_> {
+    fn globals(&self, sp: &SurfacePoint, n: Vec3, d: Vec3) -> Globals {
+        Globals {
+            p: to_arr(sp.p),
+            n: to_arr(n),
+            ng: to_arr(if sp.ng.dot(d) > 0.0 { -sp.ng } else { sp.ng }),
+            i: to_arr(d),
+            dpdu: to_arr(sp.dpdu),
+            dpdv: to_arr(sp.dpdv),
+            u: sp.uv.x,
+            v: sp.uv.y,
+        }
+    }
+
+    /// Layer weights of rule 5 into `weights`; returns the transparency.
+    fn weights(masks: &[f32], weights: &mut [f32]) -> f32 {
+        let mut remaining = 1.0f32;
+        for i in (0..masks.len()).rev() {
+            let m = masks[i];
+            let m = if m.is_nan() { 0.0 } else { m.clamp(0.0, 1.0) };
+            weights[i] = m * remaining;
+            remaining *= 1.0 - m;
+        }
+        remaining.max(0.0)
+    }
+
+    /// Total displacement of rule 6 from heights `disp` and masks.
+    fn combine_displacement(material: &dyn MaterialCode, disp: &[f32], masks: &[f32]) -> f32 {
+        let mut d = 0.0f32;
+        for (i, layer) in material.info().layers.iter().enumerate() {
+            let h = disp[i];
+            let m = masks[i].clamp(0.0, 1.0);
+            match layer.displacement {
+                Some(DisplacementMode::None) => d += h,
+                Some(DisplacementMode::Add) => d += m * h,
+                Some(DisplacementMode::Mix) => d += (h - d) * m,
+                None => {}
+            }
+        }
+        d
+    }
+
+    /// The bumped shading normal from displacement heights (finite differences along dPdu, dPdv).
+    fn bump(
+        &self,
+        material: &dyn MaterialCode,
+        g: &Globals,
+        sp: &SurfacePoint,
+        n: Vec3,
+        s: &mut Scratch,
+    ) -> Result<Vec3, Invalid> {
+        let nl = material.info().layers.len();
+        if !material.info().layers.iter().any(|l| l.displacement.is_some()) {
+            return Ok(n);
+        }
+        let scale = sp.p.abs().max_element().max(1.0);
+        let h = 1e-3 * scale;
+        let eval = |offset_u: f32, offset_v: f32, masks: &mut [f32], disp: &mut [f32]| -> Result<f32, Invalid> {
+            let du = if offset_u > 0.0 { offset_u / sp.dpdu.length().max(1e-12) } else { 0.0 };
+            let dv = if offset_v > 0.0 { offset_v / sp.dpdv.length().max(1e-12) } else { 0.0 };
+            let mut gg = *g;
+            gg.p = to_arr(sp.p + sp.dpdu * du + sp.dpdv * dv);
+            gg.u += du;
+            gg.v += dv;
+            material.masks(&gg, masks).map_err(Invalid::Shader)?;
+            material.displacement(&gg, disp).map_err(Invalid::Shader)?;
+            Ok(Self::combine_displacement(material, disp, masks))
+        };
+        let d0 = eval(0.0, 0.0, &mut s.masks_du[..nl], &mut s.disp[..nl])?;
+        let du = eval(h, 0.0, &mut s.masks_du[..nl], &mut s.disp[..nl])?;
+        let dv = eval(0.0, h, &mut s.masks_dv[..nl], &mut s.disp[..nl])?;
+        let lu = sp.dpdu.length().max(1e-12);
+        let lv = sp.dpdv.length().max(1e-12);
+        // Displaced tangents: dP'/du = dPdu + (dD/du) N (the dN/du term is neglected).
+        let tu = sp.dpdu + n * ((du - d0) / h * lu);
+        let tv = sp.dpdv + n * ((dv - d0) / h * lv);
+        let nb = tu.cross(tv).normalize_or_zero();
+        if !nb.is_finite() || nb == Vec3::ZERO {
+            return Ok(n);
+        }
+        Ok(if nb.dot(n) < 0.0 { -nb } else { nb })
+    }
+
+    /// Evaluates the picked layer(s) at a hit into `s.lobes`; returns `false` on a
+    /// transparent pick. `d` is the incoming ray direction.
+    fn shade(
+        &self,
+        sp: &SurfacePoint,
+        d: Vec3,
+        u: f32,
+        s: &mut Scratch,
+        first: bool,
+    ) -> Result<Option<(Vec3, Vec3)>, Invalid> {
+        let material = self.materials[sp.material];
+        let info = material.info();
+        let nl = info.layers.len();
+        let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
+        let mut g = self.globals(sp, facing, d);
+        if nl == 0 {
+            s.lobes.clear();
+            return Ok(None);
+        }
+        material.masks(&g, &mut s.masks[..nl]).map_err(Invalid::Shader)?;
+        let transparency = Self::weights(&s.masks[..nl], &mut s.weights[..nl]);
+        let opaque = 1.0 - transparency;
+        if u >= opaque || opaque <= 0.0 {
+            s.lobes.clear();
+            return Ok(None);
+        }
+        let bumped = self.bump(material, &g, sp, facing, s)?;
+        g.n = to_arr(bumped);
+        s.lobes.clear();
+        match self.params.mode {
+            LayerMode::Stochastic => {
+                let mut acc = 0.0;
+                let mut picked = None;
+                for i in (0..nl).rev() {
+                    acc += s.weights[i];
+                    if u < acc && s.weights[i] > 0.0 {
+                        picked = Some(i);
+                        break;
+                    }
+                }
+                // Rounding can leave u just above the running sum: take the lowest weighted layer.
+                let picked = picked.or_else(|| (0..nl).find(|&i| s.weights[i] > 0.0));
+                if let Some(i) = picked {
+                    let lobe = self.lobe(material, &g, sp, d, i, 1.0)?;
+                    s.lobes.push(lobe);
+                }
+            }
+            LayerMode::Weighted => {
+                for i in (0..nl).rev() {
+                    if s.weights[i] > 0.0 {
+                        let lobe = self.lobe(material, &g, sp, d, i, s.weights[i] / opaque)?;
+                        s.lobes.push(lobe);
+                    }
+                }
+            }
+        }
+        let mut albedo = Vec3::ZERO;
+        let mut normal = Vec3::ZERO;
+        let mut best = -1.0;
+        for lobe in &s.lobes {
+            albedo += lobe.bsdf.albedo() * lobe.weight;
+            if lobe.weight > best {
+                best = lobe.weight;
+                normal = lobe.frame.n;
+            }
+        }
+        if first {
+            s.channels.iter_mut().for_each(|c| *c = 0.0);
+            let map = &self.channel_map[sp.material];
+            if !map.is_empty() {
+                for k in 0..s.lobes.len() {
+                    let (layer, weight) = (s.lobes[k].layer, s.lobes[k].weight);
+                    material
+                        .channels(&g, layer, &mut s.material_channels[..info.channel_floats])
+                        .map_err(Invalid::Shader)?;
+                    for &(from, to, width) in map {
+                        for c in 0..width {
+                            s.channels[to + c] += weight * s.material_channels[from + c];
+                        }
+                    }
+                }
+            }
+        }
+        Ok(Some((albedo, normal)))
+    }
+
+    fn lobe(
+        &self,
+        material: &dyn MaterialCode,
+        g: &Globals,
+        sp: &SurfacePoint,
+        d: Vec3,
+        layer: usize,
+        weight: f32,
+    ) -> Result<Lobe, Invalid> {
+        let mut n = Vec3::from_array(g.n);
+        if material.info().layers[layer].has_normal {
+            let mut out = [0.0f32; 3];
+            material.normal(g, layer, &mut out).map_err(Invalid::Shader)?;
+            let v = Vec3::from_array(out);
+            if !v.is_finite() {
+                return Err(Invalid::NonFiniteClosure);
+            }
+            let v = v.normalize_or_zero();
+            if v != Vec3::ZERO {
+                n = v;
+            }
+        }
+        let mut closure = Closure::default();
+        material.surface(g, layer, &mut closure).map_err(Invalid::Shader)?;
+        if closure.params.iter().any(|p| !p.is_finite()) {
+            return Err(Invalid::NonFiniteClosure);
+        }
+        // Glass needs to know inside from outside, so its frame keeps the outward side
+        // (wo.z < 0 means the ray travels inside); every other closure faces the ray.
+        let n = if ClosureKind::from_u32(closure.kind) == ClosureKind::Glass {
+            if n.dot(sp.ng) < 0.0 { -n } else { n }
+        } else if n.dot(d) > 0.0 {
+            -n
+        } else {
+            n
+        };
+        Ok(Lobe { weight, bsdf: Bsdf::from_closure(&closure), frame: Frame::from_normal(n), layer })
+    }
+
+    /// `(f · |cos|, pdf)` of the evaluated lobes for directions `wo`, `wi` (world).
+    fn eval_lobes(lobes: &[Lobe], wo: Vec3, wi: Vec3) -> (Vec3, f32) {
+        let mut f = Vec3::ZERO;
+        let mut pdf = 0.0;
+        for l in lobes {
+            let lo = l.frame.to_local(wo);
+            let li = l.frame.to_local(wi);
+            f += l.bsdf.eval(lo, li) * (li.z.abs() * l.weight);
+            pdf += l.bsdf.pdf(lo, li) * l.weight;
+        }
+        (f, pdf)
+    }
+
+    /// Transmittance along a shadow segment: 0 behind an opaque surface, the product of
+    /// transparencies across masked ones.
+    fn transmittance(&self, mut o: Vec3, d: Vec3, dist: f32, s: &mut Scratch) -> Result<f32, Invalid> {
+        let accel = &self.scene.accel;
+        let mut remaining = dist;
+        let mut t_total = 1.0f32;
+        for _ in 0..MAX_PASS_THROUGH {
+            let Some(hit) = accel.intersect(o, d, 0.0, remaining) else { return Ok(t_total) };
+            let sp = surface_point(accel, self.scene, &hit);
+            let material = self.materials[sp.material];
+            let nl = material.info().layers.len();
+            if nl > 0 {
+                let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
+                let g = self.globals(&sp, facing, d);
+                material.masks(&g, &mut s.masks[..nl]).map_err(Invalid::Shader)?;
+                t_total *= Self::weights(&s.masks[..nl], &mut s.weights[..nl]);
+            }
+            if t_total <= 0.0 {
+                return Ok(0.0);
+            }
+            let side = if sp.ng.dot(d) > 0.0 { sp.ng } else { -sp.ng };
+            let next = offset_ray_origin(sp.p, side);
+            remaining -= (next - o).dot(d);
+            o = next;
+            if remaining <= 0.0 {
+                return Ok(t_total);
+            }
+        }
+        Ok(0.0)
+    }
+
+    /// Direct light at a shading point by sampling one light (uniform selection), MIS-weighted.
+    fn direct(&self, p: Vec3, ng: Vec3, wo: Vec3, rng: &mut Rng, s: &mut Scratch) -> Result<Vec3, Invalid> {
+        let lights = &self.scene.lights;
+        if lights.is_empty() {
+            return Ok(Vec3::ZERO);
+        }
+        let pick = ((rng.uniform() * lights.len() as f32) as usize).min(lights.len() - 1);
+        let u = rng.uniform2();
+        let select_pdf = 1.0 / lights.len() as f32;
+        let light = &lights[pick];
+        let Some(ls) = light.sample_li(p, u) else { return Ok(Vec3::ZERO) };
+        let (f, bsdf_pdf) = Self::eval_lobes(&s.lobes, wo, ls.wi);
+        if f == Vec3::ZERO || ls.li == Vec3::ZERO {
+            return Ok(Vec3::ZERO);
+        }
+        let side = if ng.dot(ls.wi) > 0.0 { ng } else { -ng };
+        let o = offset_ray_origin(p, side);
+        let dist = if ls.dist.is_finite() { ls.dist * (1.0 - 1e-4) } else { f32::INFINITY };
+        let tr = self.transmittance(o, ls.wi, dist, s)?;
+        if tr <= 0.0 {
+            return Ok(Vec3::ZERO);
+        }
+        let light_pdf = ls.pdf * select_pdf;
+        let weight = if ls.delta { 1.0 } else { power_heuristic(light_pdf, bsdf_pdf) };
+        Ok(f * ls.li * (tr * weight / light_pdf))
+    }
+
+    /// Emission of area lights crossed by the segment `o + t d`, `t < tmax`, MIS-weighted
+    /// against the BSDF pdf that chose `d` (`None` when the direction was not BSDF-sampled
+    /// with a density: camera rays and delta lobes).
+    fn area_emission(&self, o: Vec3, d: Vec3, tmax: f32, bsdf_pdf: Option<f32>) -> Vec3 {
+        let mut sum = Vec3::ZERO;
+        let select = 1.0 / self.scene.lights.len().max(1) as f32;
+        for light in &self.scene.lights {
+            if let Some((le, _)) = light.hit(o, d, tmax) {
+                sum += le * mis(light, o, d, bsdf_pdf, select);
+            }
+        }
+        sum
+    }
+
+    fn escape_emission(&self, o: Vec3, d: Vec3, bsdf_pdf: Option<f32>) -> Vec3 {
+        let mut sum = Vec3::ZERO;
+        let select = 1.0 / self.scene.lights.len().max(1) as f32;
+        for light in self.scene.lights.iter().filter(|l| l.is_infinite()) {
+            let le = light.escape(d);
+            if le != Vec3::ZERO {
+                sum += le * mis(light, o, d, bsdf_pdf, select);
+            }
+        }
+        sum
+    }
+
+    /// Traces one camera ray. Channels of the first visible hit are left in `s.channels`.
+    pub fn trace(
+        &self,
+        mut o: Vec3,
+        mut d: Vec3,
+        mut tmin: f32,
+        mut tmax: f32,
+        rng: &mut Rng,
+        s: &mut Scratch,
+    ) -> Result<SampleResult, Invalid> {
+        let mut out = SampleResult { depth: f32::INFINITY, ..SampleResult::default() };
+        s.channels.iter_mut().for_each(|c| *c = 0.0);
+        let mut throughput = Vec3::ONE;
+        let mut bsdf_pdf: Option<f32> = None;
+        let mut bounces = 0u32;
+        let mut passes = 0u32;
+        let mut first = true;
+        let mut travelled = 0.0f32;
+        let accel = &self.scene.accel;
+        loop {
+            let hit = accel.intersect(o, d, tmin, tmax);
+            let t_hit = hit.map_or(f32::INFINITY, |h| h.t);
+            out.radiance += throughput * self.area_emission(o, d, t_hit, bsdf_pdf);
+            let Some(hit) = hit else {
+                out.radiance += throughput * self.escape_emission(o, d, bsdf_pdf);
+                break;
+            };
+            let sp = surface_point(accel, self.scene, &hit);
+            let u_layer = rng.uniform();
+            let shaded = self.shade(&sp, d, u_layer, s, first)?;
+            let Some((albedo, normal)) = shaded else {
+                // Transparent: continue straight on, not a bounce.
+                passes += 1;
+                if passes > MAX_PASS_THROUGH {
+                    out.pass_limit = true;
+                    break;
+                }
+                let side = if sp.ng.dot(d) > 0.0 { sp.ng } else { -sp.ng };
+                let next = offset_ray_origin(sp.p, side);
+                let advanced = (next - o).dot(d);
+                travelled += advanced;
+                tmax = (tmax - advanced).max(0.0);
+                tmin = 0.0;
+                o = next;
+                continue;
+            };
+            if first {
+                first = false;
+                out.alpha = 1.0;
+                out.albedo = albedo;
+                out.normal = normal;
+                out.depth = travelled + hit.t;
+            }
+            if s.lobes.is_empty() || bounces >= self.params.max_depth {
+                break;
+            }
+            let wo = -d;
+            out.radiance += throughput * self.direct(sp.p, sp.ng, wo, rng, s)?;
+            // Sample the next direction: pick a lobe by weight, then sample it.
+            let uc = rng.uniform();
+            let u2 = rng.uniform2();
+            let uc_lobe = rng.uniform();
+            let mut acc = 0.0;
+            let mut k = s.lobes.len() - 1;
+            for (i, l) in s.lobes.iter().enumerate() {
+                acc += l.weight;
+                if uc < acc {
+                    k = i;
+                    break;
+                }
+            }
+            let lobe = s.lobes[k];
+            let wo_local = lobe.frame.to_local(wo);
+            let Some(bs) = lobe.bsdf.sample(wo_local, uc_lobe, u2) else { break };
+            let wi = lobe.frame.to_world(bs.wi).normalize();
+            if bs.delta || s.lobes.len() == 1 {
+                if bs.pdf.is_nan() || bs.pdf <= 0.0 {
+                    break;
+                }
+                throughput *= bs.f * (bs.wi.z.abs() / bs.pdf);
+                bsdf_pdf = if bs.delta { None } else { Some(bs.pdf) };
+            } else {
+                let (f, pdf) = Self::eval_lobes(&s.lobes, wo, wi);
+                if pdf.is_nan() || pdf <= 0.0 {
+                    break;
+                }
+                throughput *= f / pdf;
+                bsdf_pdf = Some(pdf);
+            }
+            if !throughput.is_finite() {
+                // Reported by the caller as a non-finite sample.
+                out.radiance = Vec3::NAN;
+                break;
+            }
+            if throughput == Vec3::ZERO {
+                break;
+            }
+            bounces += 1;
+            if bounces >= self.params.rr_depth {
+                let p = throughput.max_element().min(0.95);
+                if rng.uniform() >= p {
+                    break;
+                }
+                throughput /= p;
+            }
+            let side = if sp.ng.dot(wi) > 0.0 { sp.ng } else { -sp.ng };
+            o = offset_ray_origin(sp.p, side);
+            d = wi;
+            tmin = 0.0;
+            tmax = f32::INFINITY;
+        }
+        Ok(out)
+    }
+}
+
+/// MIS weight of emission reached by BSDF sampling with density `bsdf_pdf`.
+fn mis(light: &Light, o: Vec3, d: Vec3, bsdf_pdf: Option<f32>, select: f32) -> f32 {
+    match bsdf_pdf {
+        None => 1.0,
+        Some(pdf) => power_heuristic(pdf, light.pdf_li(o, d) * select),
+    }
+}

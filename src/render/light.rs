@@ -1,0 +1,621 @@
+//! UsdLux lights.
+//!
+//! Emission is `inputs:intensity · 2^inputs:exposure · inputs:color`, a radiance; with
+//! `inputs:normalize` area lights divide it by their world-space area. DistantLight follows
+//! the UsdLux light spec: unnormalised, the intensity is the radiance of the sun disk;
+//! normalised, it is the irradiance on a surface facing the light (whatever the angle).
+//!
+//! Area lights (rect, disk, sphere) are not in the BVH: rays test them analytically
+//! ([`Light::hit`]), and lights at infinity (dome, distant) are seen by escaping rays
+//! ([`Light::escape`]). Every sampleable light gives the same density from
+//! [`Light::sample_li`] and [`Light::pdf_li`], which multiple importance sampling needs.
+
+use super::sampling::{Distribution2D, concentric_disk, uniform_cone, uniform_sphere};
+use super::xform::{PrimXform, value_span};
+use crate::diag::{Diagnostic, Diagnostics};
+use crate::scene::{Prim, Stage, Value};
+use glam::{DMat3, DVec3, Mat3, Vec2, Vec3};
+use std::f32::consts::PI;
+use std::sync::Arc;
+
+/// Light prim types this renderer understands.
+pub const LIGHT_TYPES: &[&str] = &["DomeLight", "RectLight", "SphereLight", "DiskLight", "DistantLight"];
+
+/// A latitude-longitude environment image, importance sampled.
+#[derive(Debug)]
+pub struct EnvMap {
+    width: usize,
+    height: usize,
+    texels: Vec<Vec3>,
+    distribution: Distribution2D,
+}
+
+impl EnvMap {
+    /// Builds from RGB texels, row 0 at the top (latitude +π/2), OpenEXR's lat-long layout.
+    pub fn new(width: usize, height: usize, texels: Vec<Vec3>) -> EnvMap {
+        // Weight by luminance × sin θ: the lat-long map's area distortion.
+        let weights: Vec<f32> = (0..height)
+            .flat_map(|y| {
+                let sin_theta = (PI * (y as f32 + 0.5) / height as f32).sin();
+                let texels = &texels;
+                (0..width).map(move |x| luminance(texels[y * width + x]) * sin_theta)
+            })
+            .collect();
+        let distribution = Distribution2D::new(&weights, width, height);
+        EnvMap { width, height, texels, distribution }
+    }
+
+    /// Reads the first RGB(A) layer of an EXR file.
+    pub fn load(path: &std::path::Path) -> Result<EnvMap, String> {
+        let image = exr::prelude::read_first_rgba_layer_from_file(
+            path,
+            |size, _| (size.width(), size.height(), vec![Vec3::ZERO; size.width() * size.height()]),
+            |(w, _, px): &mut (usize, usize, Vec<Vec3>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                px[pos.y() * *w + pos.x()] = Vec3::new(r, g, b);
+            },
+        )
+        .map_err(|e| e.to_string())?;
+        let (w, h, texels) = image.layer_data.channel_data.pixels;
+        if w == 0 || h == 0 {
+            return Err("the image is empty".into());
+        }
+        let texels = texels.into_iter().map(|t| if t.is_finite() { t.max(Vec3::ZERO) } else { Vec3::ZERO }).collect();
+        Ok(EnvMap::new(w, h, texels))
+    }
+
+    fn uv(d: Vec3) -> Vec2 {
+        let lon = d.x.atan2(d.z);
+        // atan2 rather than asin: asin loses all precision near the poles.
+        let lat = d.y.atan2(Vec2::new(d.x, d.z).length());
+        Vec2::new(
+            ((PI - lon) / (2.0 * PI)).clamp(0.0, 1.0 - f32::EPSILON),
+            ((PI / 2.0 - lat) / PI).clamp(0.0, 1.0 - f32::EPSILON),
+        )
+    }
+
+    fn direction(uv: Vec2) -> (Vec3, f32) {
+        let lon = PI - 2.0 * PI * uv.x;
+        let theta = PI * uv.y;
+        let (st, ct) = theta.sin_cos();
+        (Vec3::new(st * lon.sin(), ct, st * lon.cos()), st)
+    }
+
+    fn lookup(&self, d: Vec3) -> Vec3 {
+        let uv = EnvMap::uv(d);
+        let x = ((uv.x * self.width as f32) as usize).min(self.width - 1);
+        let y = ((uv.y * self.height as f32) as usize).min(self.height - 1);
+        self.texels[y * self.width + x]
+    }
+}
+
+fn luminance(c: Vec3) -> f32 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
+}
+
+/// The shape and emission of one light, in world space.
+#[derive(Clone, Debug)]
+pub enum LightKind {
+    /// Environment at infinity; `to_local` maps world directions into the dome's frame.
+    Dome {
+        /// Constant radiance (multiplies the map).
+        radiance: Vec3,
+        /// Optional lat-long map.
+        map: Option<Arc<EnvMap>>,
+        /// World → dome frame.
+        to_local: Mat3,
+        /// Dome frame → world.
+        to_world: Mat3,
+    },
+    /// A parallelogram `centre ± ex ± ey` emitting along `n`.
+    Rect {
+        /// Centre.
+        centre: Vec3,
+        /// Half-width axis.
+        ex: Vec3,
+        /// Half-height axis.
+        ey: Vec3,
+        /// Unit emission direction (local −Z).
+        n: Vec3,
+        /// Radiance.
+        radiance: Vec3,
+    },
+    /// An ellipse `centre + a ex + b ey`, `a² + b² ≤ 1`, emitting along `n`.
+    Disk {
+        /// Centre.
+        centre: Vec3,
+        /// Radius axis 1.
+        ex: Vec3,
+        /// Radius axis 2.
+        ey: Vec3,
+        /// Unit emission direction (local −Z).
+        n: Vec3,
+        /// Radiance.
+        radiance: Vec3,
+    },
+    /// A sphere emitting outwards.
+    Sphere {
+        /// Centre.
+        centre: Vec3,
+        /// Radius.
+        radius: f32,
+        /// Radiance.
+        radiance: Vec3,
+    },
+    /// A point (`treatAsPoint`) of radiant intensity `intensity`.
+    Point {
+        /// Position.
+        position: Vec3,
+        /// Radiant intensity.
+        intensity: Vec3,
+    },
+    /// A distant light: a cone of directions around `dir` (towards the light).
+    Distant {
+        /// Unit direction towards the light (its local +Z).
+        dir: Vec3,
+        /// Cosine of the half angle; 1 for a delta light.
+        cos_max: f32,
+        /// Radiance of the disk, or the irradiance of a delta light.
+        radiance: Vec3,
+    },
+}
+
+/// A light and the prim it came from.
+#[derive(Clone, Debug)]
+pub struct Light {
+    /// Prim path.
+    pub path: String,
+    /// Geometry and emission.
+    pub kind: LightKind,
+}
+
+/// A light sample as seen from a shading point.
+#[derive(Clone, Copy, Debug)]
+pub struct LightSample {
+    /// Unit direction from the point towards the light.
+    pub wi: Vec3,
+    /// Incident radiance (for delta lights: irradiance-like value, with `pdf = 1`).
+    pub li: Vec3,
+    /// Solid-angle density (1 for delta lights).
+    pub pdf: f32,
+    /// Distance to the sampled point (`f32::INFINITY` for lights at infinity).
+    pub dist: f32,
+    /// A delta light (no MIS with BSDF sampling).
+    pub delta: bool,
+}
+
+impl Light {
+    /// Whether the light is at infinity (dome, distant).
+    pub fn is_infinite(&self) -> bool {
+        matches!(self.kind, LightKind::Dome { .. } | LightKind::Distant { .. })
+    }
+
+    /// Samples incident light at `p` with uniform numbers `u`.
+    pub fn sample_li(&self, p: Vec3, u: Vec2) -> Option<LightSample> {
+        let s = match &self.kind {
+            LightKind::Dome { radiance, map, to_world, .. } => match map {
+                None => {
+                    let wi = uniform_sphere(u);
+                    LightSample { wi, li: *radiance, pdf: 1.0 / (4.0 * PI), dist: f32::INFINITY, delta: false }
+                }
+                Some(map) => {
+                    let (uv, pdf_uv) = map.distribution.sample(u);
+                    let (local, sin_theta) = EnvMap::direction(uv);
+                    if pdf_uv <= 0.0 || sin_theta <= 0.0 {
+                        return None;
+                    }
+                    let pdf = pdf_uv / (2.0 * PI * PI * sin_theta);
+                    let wi = (*to_world * local).normalize();
+                    LightSample { wi, li: *radiance * map.lookup(local), pdf, dist: f32::INFINITY, delta: false }
+                }
+            },
+            LightKind::Rect { centre, ex, ey, n, radiance } => {
+                let q = *centre + *ex * (2.0 * u.x - 1.0) + *ey * (2.0 * u.y - 1.0);
+                let area = 4.0 * ex.cross(*ey).length();
+                area_sample(p, q, *n, area, *radiance)?
+            }
+            LightKind::Disk { centre, ex, ey, n, radiance } => {
+                let d = concentric_disk(u);
+                let q = *centre + *ex * d.x + *ey * d.y;
+                let area = PI * ex.cross(*ey).length();
+                area_sample(p, q, *n, area, *radiance)?
+            }
+            LightKind::Sphere { centre, radius, radiance } => {
+                let to = *centre - p;
+                let d2 = to.length_squared();
+                if d2 <= radius * radius {
+                    return None;
+                }
+                let dist_c = d2.sqrt();
+                let axis = to / dist_c;
+                let sin2 = radius * radius / d2;
+                let cos_max = (1.0 - sin2).max(0.0).sqrt();
+                let local = uniform_cone(u, cos_max);
+                let frame = super::bsdf::Frame::from_normal(axis);
+                let wi = frame.to_world(local).normalize();
+                let dist = sphere_hit(p, wi, *centre, *radius).unwrap_or(dist_c - radius);
+                LightSample { wi, li: *radiance, pdf: 1.0 / (2.0 * PI * (1.0 - cos_max)), dist, delta: false }
+            }
+            LightKind::Point { position, intensity } => {
+                let to = *position - p;
+                let d2 = to.length_squared();
+                if d2 == 0.0 {
+                    return None;
+                }
+                let dist = d2.sqrt();
+                LightSample { wi: to / dist, li: *intensity / d2, pdf: 1.0, dist, delta: true }
+            }
+            LightKind::Distant { dir, cos_max, radiance } => {
+                if *cos_max >= 1.0 {
+                    LightSample { wi: *dir, li: *radiance, pdf: 1.0, dist: f32::INFINITY, delta: true }
+                } else {
+                    let frame = super::bsdf::Frame::from_normal(*dir);
+                    let wi = frame.to_world(uniform_cone(u, *cos_max)).normalize();
+                    let pdf = 1.0 / (2.0 * PI * (1.0 - cos_max));
+                    LightSample { wi, li: *radiance, pdf, dist: f32::INFINITY, delta: false }
+                }
+            }
+        };
+        (s.pdf > 0.0 && s.pdf.is_finite() && s.wi.is_finite()).then_some(s)
+    }
+
+    /// Solid-angle density with which [`Light::sample_li`] at `p` picks direction `wi`
+    /// (0 for delta lights and directions that miss the light).
+    pub fn pdf_li(&self, p: Vec3, wi: Vec3) -> f32 {
+        match &self.kind {
+            LightKind::Dome { map: None, .. } => 1.0 / (4.0 * PI),
+            LightKind::Dome { map: Some(map), to_local, .. } => {
+                let local = (*to_local * wi).normalize();
+                let uv = EnvMap::uv(local);
+                let sin_theta = Vec2::new(local.x, local.z).length();
+                if sin_theta <= 0.0 { 0.0 } else { map.distribution.pdf(uv) / (2.0 * PI * PI * sin_theta) }
+            }
+            LightKind::Rect { centre, ex, ey, n, .. } => match rect_hit(p, wi, *centre, *ex, *ey, *n) {
+                Some(t) => area_pdf(p, wi, t, *n, 4.0 * ex.cross(*ey).length()),
+                None => 0.0,
+            },
+            LightKind::Disk { centre, ex, ey, n, .. } => match disk_hit(p, wi, *centre, *ex, *ey, *n) {
+                Some(t) => area_pdf(p, wi, t, *n, PI * ex.cross(*ey).length()),
+                None => 0.0,
+            },
+            LightKind::Sphere { centre, radius, .. } => {
+                let to = *centre - p;
+                let d2 = to.length_squared();
+                if d2 <= radius * radius {
+                    return 0.0;
+                }
+                let cos_max = (1.0 - radius * radius / d2).max(0.0).sqrt();
+                if wi.dot(to) / d2.sqrt() >= cos_max { 1.0 / (2.0 * PI * (1.0 - cos_max)) } else { 0.0 }
+            }
+            LightKind::Point { .. } => 0.0,
+            LightKind::Distant { dir, cos_max, .. } => {
+                if *cos_max < 1.0 && wi.dot(*dir) >= *cos_max {
+                    1.0 / (2.0 * PI * (1.0 - cos_max))
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+
+    /// Radiance and distance where the ray `p + t wi`, `t < tmax`, meets this area light from
+    /// its emitting side.
+    pub fn hit(&self, p: Vec3, wi: Vec3, tmax: f32) -> Option<(Vec3, f32)> {
+        let (radiance, t) = match &self.kind {
+            LightKind::Rect { centre, ex, ey, n, radiance } => (*radiance, rect_hit(p, wi, *centre, *ex, *ey, *n)?),
+            LightKind::Disk { centre, ex, ey, n, radiance } => (*radiance, disk_hit(p, wi, *centre, *ex, *ey, *n)?),
+            LightKind::Sphere { centre, radius, radiance } => (*radiance, sphere_hit(p, wi, *centre, *radius)?),
+            _ => return None,
+        };
+        (t < tmax).then_some((radiance, t))
+    }
+
+    /// Radiance reaching a ray that escapes to infinity in direction `wi`.
+    pub fn escape(&self, wi: Vec3) -> Vec3 {
+        match &self.kind {
+            LightKind::Dome { radiance, map, to_local, .. } => match map {
+                None => *radiance,
+                Some(map) => *radiance * map.lookup((*to_local * wi).normalize()),
+            },
+            LightKind::Distant { dir, cos_max, radiance } if *cos_max < 1.0 && wi.dot(*dir) >= *cos_max => *radiance,
+            _ => Vec3::ZERO,
+        }
+    }
+}
+
+fn area_sample(p: Vec3, q: Vec3, n: Vec3, area: f32, radiance: Vec3) -> Option<LightSample> {
+    let to = q - p;
+    let d2 = to.length_squared();
+    let dist = d2.sqrt();
+    let wi = to / dist;
+    // One-sided: the light faces the point when its emission direction points back at it.
+    let cos_l = -wi.dot(n);
+    if cos_l <= 0.0 || area <= 0.0 || dist == 0.0 {
+        return None;
+    }
+    Some(LightSample { wi, li: radiance, pdf: d2 / (cos_l * area), dist, delta: false })
+}
+
+fn area_pdf(_p: Vec3, wi: Vec3, t: f32, n: Vec3, area: f32) -> f32 {
+    let cos_l = -wi.dot(n);
+    if cos_l <= 0.0 || area <= 0.0 { 0.0 } else { t * t / (cos_l * area) }
+}
+
+/// Ray/parallelogram distance, front (emitting) side only.
+fn rect_hit(p: Vec3, wi: Vec3, c: Vec3, ex: Vec3, ey: Vec3, n: Vec3) -> Option<f32> {
+    let (t, q) = plane_hit(p, wi, c, n)?;
+    let d = q - c;
+    let a = d.dot(ex) / ex.length_squared();
+    let b = d.dot(ey) / ey.length_squared();
+    (a.abs() <= 1.0 && b.abs() <= 1.0).then_some(t)
+}
+
+/// Ray/ellipse distance, front side only.
+fn disk_hit(p: Vec3, wi: Vec3, c: Vec3, ex: Vec3, ey: Vec3, n: Vec3) -> Option<f32> {
+    let (t, q) = plane_hit(p, wi, c, n)?;
+    let d = q - c;
+    let a = d.dot(ex) / ex.length_squared();
+    let b = d.dot(ey) / ey.length_squared();
+    (a * a + b * b <= 1.0).then_some(t)
+}
+
+fn plane_hit(p: Vec3, wi: Vec3, c: Vec3, n: Vec3) -> Option<(f32, Vec3)> {
+    let denom = wi.dot(n);
+    if denom >= 0.0 {
+        return None;
+    }
+    let t = (c - p).dot(n) / denom;
+    (t > 0.0 && t.is_finite()).then(|| (t, p + wi * t))
+}
+
+/// Ray/sphere distance to the outside surface, from outside.
+fn sphere_hit(p: Vec3, wi: Vec3, c: Vec3, r: f32) -> Option<f32> {
+    let oc = p - c;
+    let b = oc.dot(wi);
+    let cc = oc.length_squared() - r * r;
+    if cc <= 0.0 {
+        return None;
+    }
+    // Numerically stable discriminant (Ray Tracing Gems ch. 7).
+    let f = oc - b * wi;
+    let disc = r * r - f.length_squared();
+    if disc < 0.0 {
+        return None;
+    }
+    let q = -b - b.signum() * disc.sqrt();
+    let t0 = cc / q;
+    let t1 = q;
+    let t = t0.min(t1);
+    (t > 0.0 && b < 0.0).then_some(t)
+}
+
+/// Reads every visible light of `stage`.
+pub fn lights_from_stage(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagnostics) -> Vec<Light> {
+    let mut lights = Vec::new();
+    for (id, prim) in stage.depth_first() {
+        let Some(ty) = prim.type_name.as_deref() else { continue };
+        if !LIGHT_TYPES.contains(&ty) || xforms[id.0 as usize].hidden {
+            continue;
+        }
+        if let Some(kind) = light_kind(prim, ty, xforms[id.0 as usize], diags) {
+            lights.push(Light { path: prim.path.clone(), kind });
+        }
+    }
+    lights
+}
+
+fn light_kind(prim: &Prim, ty: &str, xf: PrimXform, diags: &mut Diagnostics) -> Option<LightKind> {
+    let num = |name: &str, default: f64| prim.value(name).and_then(Value::as_f64).unwrap_or(default);
+    let default_intensity = if ty == "DistantLight" { 50000.0 } else { 1.0 };
+    let intensity = num("inputs:intensity", default_intensity) * num("inputs:exposure", 0.0).exp2();
+    let color = prim.value("inputs:color").and_then(Value::as_vec3).map_or(DVec3::ONE, DVec3::from);
+    let normalize = prim.value("inputs:normalize").and_then(Value::as_bool).unwrap_or(false);
+    let mut emission = (color * intensity).as_vec3();
+    if !emission.is_finite() || emission.min_element() < 0.0 {
+        let attr = prim.attribute("inputs:intensity").or_else(|| prim.attribute("inputs:color"));
+        diags.push(
+            Diagnostic::error(format!("light `{}` has a negative or non-finite emission", prim.path))
+                .at(attr.map_or(prim.span, value_span), "here"),
+        );
+        return None;
+    }
+    let m = xf.world;
+    let point = |v: DVec3| m.transform_point3(v).as_vec3();
+    let vector = |v: DVec3| m.transform_vector3(v).as_vec3();
+    let normal_z = || (DMat3::from_mat4(m).inverse().transpose() * -DVec3::Z).as_vec3().normalize_or_zero();
+    let positive = |name: &str, default: f64, diags: &mut Diagnostics| {
+        let v = num(name, default);
+        if v.is_finite() && v >= 0.0 {
+            Some(v)
+        } else {
+            diags.push(
+                Diagnostic::error(format!("light `{}`: `{name}` must be a non-negative number", prim.path))
+                    .at(prim.attribute(name).map_or(prim.span, value_span), "here"),
+            );
+            None
+        }
+    };
+    Some(match ty {
+        "DomeLight" => {
+            let rot = DMat3::from_mat4(m);
+            let to_world = Mat3::from_cols(
+                rot.x_axis.as_vec3().normalize_or(Vec3::X),
+                rot.y_axis.as_vec3().normalize_or(Vec3::Y),
+                rot.z_axis.as_vec3().normalize_or(Vec3::Z),
+            );
+            let to_local = to_world.inverse();
+            let map = match prim.attribute("inputs:texture:file").and_then(|a| Some((a, a.get()?.as_asset()?))) {
+                Some((attr, asset)) if !asset.authored.is_empty() => match EnvMap::load(&asset.resolved) {
+                    Ok(map) => Some(Arc::new(map)),
+                    Err(e) => {
+                        diags.push(
+                            Diagnostic::error(format!("cannot read dome texture `{}`: {e}", asset.resolved.display()))
+                                .at(value_span(attr), "here"),
+                        );
+                        return None;
+                    }
+                },
+                _ => None,
+            };
+            LightKind::Dome { radiance: emission, map, to_local, to_world }
+        }
+        "RectLight" => {
+            let w = positive("inputs:width", 1.0, diags)?;
+            let h = positive("inputs:height", 1.0, diags)?;
+            let ex = vector(DVec3::X * (w / 2.0));
+            let ey = vector(DVec3::Y * (h / 2.0));
+            if normalize {
+                emission /= (4.0 * ex.cross(ey).length()).max(1e-12);
+            }
+            LightKind::Rect { centre: point(DVec3::ZERO), ex, ey, n: normal_z(), radiance: emission }
+        }
+        "DiskLight" => {
+            let r = positive("inputs:radius", 0.5, diags)?;
+            let ex = vector(DVec3::X * r);
+            let ey = vector(DVec3::Y * r);
+            if normalize {
+                emission /= (PI * ex.cross(ey).length()).max(1e-12);
+            }
+            LightKind::Disk { centre: point(DVec3::ZERO), ex, ey, n: normal_z(), radiance: emission }
+        }
+        "SphereLight" => {
+            let r = positive("inputs:radius", 0.5, diags)?;
+            // Uniform scale assumed for the radius (the mean axis scale).
+            let s = DMat3::from_mat4(m);
+            let scale = ((s.x_axis.length() + s.y_axis.length() + s.z_axis.length()) / 3.0) as f32;
+            let radius = r as f32 * scale;
+            let area = 4.0 * PI * radius * radius;
+            if normalize && area > 0.0 {
+                emission /= area;
+            }
+            let point_light = prim.value("treatAsPoint").and_then(Value::as_bool).unwrap_or(false);
+            if point_light || radius == 0.0 {
+                // A sphere of radiance L seen from afar has intensity L·πr² in every direction.
+                let intensity = if normalize { emission * area / (4.0 * PI) } else { emission * PI * radius * radius };
+                LightKind::Point { position: point(DVec3::ZERO), intensity }
+            } else {
+                LightKind::Sphere { centre: point(DVec3::ZERO), radius, radiance: emission }
+            }
+        }
+        "DistantLight" => {
+            let angle = positive("inputs:angle", 0.53, diags)?.min(180.0);
+            let half = (angle.to_radians() / 2.0) as f32;
+            let dir = vector(DVec3::Z).normalize_or(Vec3::Z);
+            let cos_max = half.cos();
+            let radiance = if half <= 1e-6 || cos_max >= 1.0 {
+                // A delta light: the irradiance is the intensity either way.
+                return Some(LightKind::Distant { dir, cos_max: 1.0, radiance: emission });
+            } else if normalize {
+                // Irradiance E at normal incidence: E = L ∫cone cosθ dω = L π sin²(half).
+                emission / (PI * half.sin().powi(2))
+            } else {
+                emission
+            };
+            LightKind::Distant { dir, cos_max, radiance }
+        }
+        _ => return None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::sampling::Rng;
+    use crate::render::xform::{tests::stage, world_transforms};
+
+    pub(crate) fn lights(text: &str) -> Vec<Light> {
+        let (stage, mut diags) = stage(text);
+        let xf = world_transforms(&stage, &mut diags);
+        let l = lights_from_stage(&stage, &xf, &mut diags);
+        assert!(!diags.has_errors(), "{diags:?}");
+        l
+    }
+
+    #[test]
+    fn sample_pdf_matches_pdf_li_and_integrates() {
+        let map = EnvMap::new(8, 4, (0..32).map(|i| Vec3::splat(1.0 + (i % 5) as f32)).collect());
+        let mut all = lights(
+            r#"#usda 1.0
+def RectLight "R" { float inputs:width = 2  float inputs:height = 0.5
+    double3 xformOp:translate = (0, 3, 0)  float xformOp:rotateX = -90
+    uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateX"] }
+def DiskLight "D" { float inputs:radius = 0.7  double3 xformOp:translate = (1, 0, 4)
+    uniform token[] xformOpOrder = ["xformOp:translate"] }
+def SphereLight "S" { float inputs:radius = 0.5  double3 xformOp:translate = (-2, 1, 1)
+    uniform token[] xformOpOrder = ["xformOp:translate"] }
+def DistantLight "Sun" { float inputs:angle = 10  float3 xformOp:rotateXYZ = (-60, 20, 0)
+    uniform token[] xformOpOrder = ["xformOp:rotateXYZ"] }
+def DomeLight "Dome" {}
+def Xform "X" { float xformOp:rotateY = 30  uniform token[] xformOpOrder = ["xformOp:rotateY"]
+    def DomeLight "Textured" {} }"#,
+        );
+        if let LightKind::Dome { map: m, .. } = &mut all[5].kind {
+            *m = Some(Arc::new(map));
+        }
+        let p = Vec3::new(0.1, 0.2, 0.3);
+        for light in &all {
+            let mut rng = Rng::new(7, 0, 0);
+            let n = 20000;
+            let mut inv_pdf_sum = 0.0f64;
+            let mut samples = 0;
+            for _ in 0..n {
+                let Some(s) = light.sample_li(p, rng.uniform2()) else { continue };
+                samples += 1;
+                let pdf = light.pdf_li(p, s.wi);
+                assert!((pdf - s.pdf).abs() <= 2e-3 * s.pdf, "{}: {pdf} vs {}", light.path, s.pdf);
+                if !light.is_infinite() {
+                    let (_, t) = light.hit(p, s.wi, f32::INFINITY).expect("sampled direction hits the light");
+                    assert!((t - s.dist).abs() < 1e-3 * s.dist, "{}", light.path);
+                }
+                inv_pdf_sum += 1.0 / s.pdf as f64;
+            }
+            assert!(samples > n / 2, "{}", light.path);
+            // E[1/pdf] is the solid angle the light subtends from p.
+            let solid_angle = inv_pdf_sum / n as f64;
+            let expected = match &light.kind {
+                LightKind::Dome { .. } => 4.0 * std::f64::consts::PI,
+                LightKind::Distant { cos_max, .. } => 2.0 * std::f64::consts::PI * (1.0 - *cos_max as f64),
+                LightKind::Sphere { centre, radius, .. } => {
+                    let d = (*centre - p).length() as f64;
+                    2.0 * std::f64::consts::PI * (1.0 - (1.0 - (*radius as f64 / d).powi(2)).sqrt())
+                }
+                LightKind::Rect { centre, ex, ey, n, .. } | LightKind::Disk { centre, ex, ey, n, .. } => {
+                    // Reference: midpoint quadrature of ∫ cos_l / d² dA over the shape.
+                    let disk = matches!(light.kind, LightKind::Disk { .. });
+                    let m = 400;
+                    let da = 4.0 * ex.cross(*ey).length() as f64 / (m * m) as f64;
+                    let mut sum = 0.0f64;
+                    for i in 0..m {
+                        for j in 0..m {
+                            let a = -1.0 + 2.0 * (i as f32 + 0.5) / m as f32;
+                            let b = -1.0 + 2.0 * (j as f32 + 0.5) / m as f32;
+                            if disk && a * a + b * b > 1.0 {
+                                continue;
+                            }
+                            let to = (*centre + *ex * a + *ey * b - p).as_dvec3();
+                            let cos_l = (-to.normalize().dot(n.as_dvec3())).max(0.0);
+                            sum += cos_l / to.length_squared() * da;
+                        }
+                    }
+                    sum
+                }
+                LightKind::Point { .. } => unreachable!(),
+            };
+            assert!((solid_angle - expected).abs() < 0.02 * expected, "{}: {solid_angle} vs {expected}", light.path);
+        }
+    }
+
+    #[test]
+    fn intensity_exposure_color_and_normalize() {
+        let l = lights(
+            r#"#usda 1.0
+def RectLight "R" { float inputs:intensity = 3  float inputs:exposure = 2  color3f inputs:color = (1, 0.5, 0)
+    float inputs:width = 2  float inputs:height = 4  bool inputs:normalize = 1 }
+def DistantLight "Sun" { float inputs:intensity = 2  float inputs:angle = 0 }"#,
+        );
+        let LightKind::Rect { radiance, n, .. } = &l[0].kind else { panic!() };
+        assert!((*radiance - Vec3::new(12.0, 6.0, 0.0) / 8.0).length() < 1e-5);
+        assert!((*n - -Vec3::Z).length() < 1e-6, "rect lights emit along -Z");
+        let LightKind::Distant { dir, cos_max, radiance } = &l[1].kind else { panic!() };
+        assert_eq!((*dir, *cos_max, *radiance), (Vec3::Z, 1.0, Vec3::splat(2.0)));
+    }
+}

@@ -1,0 +1,31 @@
+//! The CPU path tracer: scene geometry and lights from a composed USD stage, rendered
+//! through compiled materials that the renderer sees only through [`crate::abi`].
+//!
+//! - [`xform`]: xformOps and imageability; [`geometry`]: world-space triangles;
+//!   [`accel`]: BVH and ray queries; [`camera`]; [`light`]: UsdLux lights;
+//!   [`scene`]: the render scene.
+//! - [`bsdf`]: BSDF evaluation and sampling; [`sampling`]: RNG and warps.
+//! - [`integrator`]: path tracing with NEE + MIS and layer picking (DESIGN.md rules 5–7);
+//!   [`film`]: the driver, AOVs and statistics; [`output`]: EXR and PNG files.
+//! - [`testing`]: a constant `MaterialCode` for tests and benchmarks.
+
+pub mod accel;
+pub mod bsdf;
+pub mod camera;
+pub mod film;
+pub mod geometry;
+pub mod integrator;
+pub mod light;
+pub mod output;
+pub mod sampling;
+pub mod scene;
+pub mod testing;
+pub mod xform;
+
+#[cfg(test)]
+mod tests;
+
+pub use film::{Channel, ChannelData, Image, Progress, RenderError, RenderSettings, RenderStats, render};
+pub use integrator::LayerMode;
+pub use output::{OutputError, write_exr, write_outputs, write_png};
+pub use scene::Scene;

@@ -1,0 +1,121 @@
+//! The render scene: triangles in a BVH, the material of each renderable prim, lights and
+//! the camera, built once from a composed stage.
+
+use super::accel::Accel;
+use super::camera::Camera;
+use super::geometry::{self, GeomPrim};
+use super::light::{Light, lights_from_stage};
+use super::xform::world_transforms;
+use crate::diag::{Diagnostic, Diagnostics};
+use crate::scene::Stage;
+use glam::Vec3;
+
+/// Everything the integrator needs about the scene, materials excepted (they are passed to
+/// [`crate::render::render`] as `abi::MaterialCode`s, indexed by [`Scene::prim_material`]).
+pub struct Scene {
+    /// Triangles and their BVH.
+    pub accel: Accel,
+    /// Renderable prims, indexed by `Triangle::prim`.
+    pub prims: Vec<GeomPrim>,
+    /// For each entry of `prims`, its index in the caller's materials slice.
+    pub prim_material: Vec<usize>,
+    /// Visible lights.
+    pub lights: Vec<Light>,
+    /// The camera (its aspect is set per render from the resolution).
+    pub camera: Camera,
+    /// World bounds of the geometry (a unit box when there is none).
+    pub bounds: (Vec3, Vec3),
+    /// Zero-area triangles that were skipped.
+    pub degenerate_triangles: usize,
+}
+
+impl Scene {
+    /// Builds the render scene. `material_of_prim` maps a renderable prim's path to an index
+    /// into the materials slice later given to `render`. Problems go to `diags`; `None` when
+    /// any error was found (so a broken scene is never rendered as if it were fine).
+    pub fn from_stage(
+        stage: &Stage,
+        material_of_prim: &dyn Fn(&str) -> Option<usize>,
+        diags: &mut Diagnostics,
+    ) -> Option<Scene> {
+        let errors = diags.error_count();
+        let xforms = world_transforms(stage, diags);
+        let geometry = geometry::build_with(stage, &xforms, diags);
+        let mut prim_material = Vec::with_capacity(geometry.prims.len());
+        for prim in &geometry.prims {
+            match material_of_prim(&prim.path) {
+                Some(m) => prim_material.push(m),
+                None => {
+                    diags.push(
+                        Diagnostic::error(format!("renderable prim `{}` has no compiled material", prim.path))
+                            .at(prim.span, "this prim"),
+                    );
+                    prim_material.push(0);
+                }
+            }
+        }
+        let lights = lights_from_stage(stage, &xforms, diags);
+        if lights.is_empty() {
+            diags.push(Diagnostic::warning("the scene has no lights: the image will be black"));
+        }
+        let bounds = geometry.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
+        let camera = stage
+            .depth_first()
+            .find(|(_, p)| p.type_name.as_deref() == Some("Camera"))
+            .map(|(id, prim)| Camera::from_prim(prim, xforms[id.0 as usize].world, 1.0, diags))
+            .unwrap_or_else(|| Camera::framing(bounds.0, bounds.1, 1.0, stage.up_axis()));
+        if diags.error_count() > errors {
+            return None;
+        }
+        Some(Scene {
+            degenerate_triangles: geometry.degenerate,
+            accel: Accel::new(geometry.triangles),
+            prims: geometry.prims,
+            prim_material,
+            lights,
+            camera,
+            bounds,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::xform::tests::stage;
+    use glam::Vec2;
+
+    #[test]
+    fn camera_ray_through_centre_hits_prim_ahead() {
+        let (stage, mut diags) = stage(
+            r#"#usda 1.0
+def Camera "Cam" {
+    double3 xformOp:translate = (0, 1, 10)
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+}
+def Sphere "Left" { double3 xformOp:translate = (-4, 1, 0)  uniform token[] xformOpOrder = ["xformOp:translate"] }
+def Sphere "Ahead" { double3 xformOp:translate = (0, 1, 0)  uniform token[] xformOpOrder = ["xformOp:translate"] }
+def DomeLight "Sky" {}"#,
+        );
+        let scene = Scene::from_stage(&stage, &|_| Some(0), &mut diags).expect("scene");
+        let r = scene.camera.ray(Vec2::splat(0.5), Vec2::ZERO);
+        let hit = scene.accel.intersect(r.o, r.d, r.tmin, r.tmax).expect("hit");
+        let tri = scene.accel.triangles()[hit.tri as usize];
+        assert_eq!(scene.prims[tri.prim as usize].path, "/Ahead");
+        assert!((hit.t - 9.0).abs() < 1e-2, "{}", hit.t);
+    }
+
+    #[test]
+    fn default_camera_frames_the_scene_and_missing_material_is_an_error() {
+        let (stage, mut diags) = stage("#usda 1.0\ndef Cube \"C\" { double size = 3 }\ndef DomeLight \"D\" {}");
+        let scene = Scene::from_stage(&stage, &|_| Some(0), &mut diags).expect("scene");
+        let r = scene.camera.ray(Vec2::splat(0.5), Vec2::ZERO);
+        assert!(scene.accel.intersect(r.o, r.d, r.tmin, r.tmax).is_some());
+        // The corners of the bounds are inside the view.
+        let corner = scene.camera.ray(Vec2::new(0.02, 0.02), Vec2::ZERO);
+        assert!(scene.accel.intersect(corner.o, corner.d, 0.0, f32::INFINITY).is_none());
+        let mut diags = Diagnostics::new();
+        assert!(Scene::from_stage(&stage, &|_| None, &mut diags).is_none());
+        assert!(diags.has_errors());
+    }
+}
