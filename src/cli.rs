@@ -1,15 +1,20 @@
 //! The subcommands behind `strata`: each loads its input, reports diagnostics to stderr and
 //! prints its result to stdout. Kept in the library so tests can run them.
 
+use crate::abi::MaterialCode;
+use crate::backend::{BackendKind, Compiler};
 use crate::compose::scene::{SceneComposition, compose_stage};
 use crate::compose::slots::PrimStack;
 use crate::diag::{Diagnostics, SourceMap};
 use crate::front::library::Library;
+use crate::ir::ssa::EntryKind;
 use crate::ir::wired::{self, PassOptions};
 use crate::scene::Stage;
 use crate::scenes;
 use serde::Serialize;
+use std::collections::HashMap;
 use std::io::Write;
+use std::sync::Arc;
 use std::path::Path;
 
 /// A command failed; its diagnostics were already printed.
@@ -220,4 +225,253 @@ pub fn check(file: &Path) -> Result<(), Failure> {
     let (diags, sources, summary) = check_file(file);
     report(&diags, &sources)?;
     print_out(&(summary + "\n"))
+}
+
+/// What `strata render` was asked to do.
+#[derive(Clone, Debug)]
+pub struct RenderArgs {
+    /// The scene (`None`: the embedded default scene).
+    pub scene: Option<std::path::PathBuf>,
+    /// The EXR to write; the PNG preview goes beside it.
+    pub output: std::path::PathBuf,
+    /// Image size, samples, seed, threads, depth and layer mode.
+    pub settings: crate::render::RenderSettings,
+    /// Which backend runs the shaders.
+    pub backend: BackendKind,
+    /// Constant folding and layer pruning (off only to compare).
+    pub optimize: bool,
+    /// Print compile and render statistics.
+    pub stats: bool,
+}
+
+/// Composes a scene and compiles every distinct material once. Returns the stage, the
+/// compiled materials and, per renderable prim path, its material index.
+pub fn compile_scene(
+    scene: Option<&Path>,
+    backend: BackendKind,
+    passes: PassOptions,
+    sources: &mut SourceMap,
+    diags: &mut Diagnostics,
+) -> Option<(Stage, Vec<Arc<dyn MaterialCode>>, HashMap<String, usize>, Compiler)> {
+    let stage = open_scene(scene, sources, diags)?;
+    let composition = compose_stage(&stage, sources, diags);
+    if diags.has_errors() {
+        return None;
+    }
+    let mut compiler = Compiler::new(backend, passes);
+    let mut materials = Vec::with_capacity(composition.materials.len());
+    for material in &composition.materials {
+        materials.push(compiler.compile(&composition.library, material, diags)?);
+    }
+    let prims = composition.stacks.iter().zip(&composition.prim_material).map(|(s, m)| (s.prim.clone(), *m)).collect();
+    Some((stage, materials, prims, compiler))
+}
+
+/// `strata render [SCENE] -o OUT.exr …`
+pub fn render(args: &RenderArgs) -> Result<(), Failure> {
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let compiled =
+        compile_scene(args.scene.as_deref(), args.backend, PassOptions { optimize: args.optimize }, &mut sources, &mut diags);
+    let scene = compiled
+        .as_ref()
+        .and_then(|(stage, _, prims, _)| crate::render::Scene::from_stage(stage, &|p| prims.get(p).copied(), &mut diags));
+    report(&diags, &sources)?;
+    let (Some((_, materials, _, compiler)), Some(scene)) = (compiled, scene) else { return Err(Failure) };
+    if args.stats {
+        eprintln!("compile ({}): {}", args.backend, compiler.stats);
+    }
+    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    let bar = progress_bar(args.settings.height as u64);
+    let progress = |done: usize, _total: usize| {
+        if let Some(bar) = &bar {
+            bar.set_position(done as u64);
+        }
+    };
+    let start = std::time::Instant::now();
+    let (image, stats) = match crate::render::render(&scene, &refs, &args.settings, Some(&progress)) {
+        Ok(result) => result,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return Err(Failure);
+        }
+    };
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    let png = match crate::render::write_outputs(&image, &args.output) {
+        Ok(png) => png,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return Err(Failure);
+        }
+    };
+    let s = &args.settings;
+    eprintln!(
+        "rendered {}x{} at {} spp in {seconds:.2} s ({} backend): {} and {}",
+        s.width,
+        s.height,
+        s.spp,
+        args.backend,
+        args.output.display(),
+        png.display()
+    );
+    if args.stats || stats.invalid_samples() > 0 {
+        eprintln!("{stats}");
+    }
+    Ok(())
+}
+
+/// A progress bar on stderr when it is a terminal (and not in CI logs).
+fn progress_bar(rows: u64) -> Option<indicatif::ProgressBar> {
+    use std::io::IsTerminal;
+    if !std::io::stderr().is_terminal() {
+        return None;
+    }
+    let bar = indicatif::ProgressBar::new(rows);
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} rendering [{bar:40}] {percent}% {eta} left") {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    Some(bar)
+}
+
+/// `strata ir SCENE --prim PATH --lowered`: the lowered IR of one prim's material.
+pub fn lowered_ir(scene: &Path, prim: &str, optimize: bool, stats: bool) -> Result<(), Failure> {
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let composition = compose_file(Some(scene), &mut sources, &mut diags);
+    report(&diags, &sources)?;
+    let Some(composition) = composition else { return Err(Failure) };
+    let Some(material) = composition.material_of(prim) else {
+        eprintln!("error: `{prim}` is not a renderable prim of {}", scene.display());
+        return Err(Failure);
+    };
+    let mut compiler = Compiler::new(BackendKind::Jit, PassOptions { optimize });
+    let mut diags = Diagnostics::new();
+    let module = compiler.lower(&composition.library, material, &mut diags);
+    report(&diags, &sources)?;
+    if stats {
+        eprintln!("{}", compiler.stats);
+    }
+    print_out(&module.to_text())
+}
+
+/// The C declarations describing a shader object's ABI.
+const C_HEADER_PRELUDE: &str = "\
+/* Generated by `strata compile`. Link with the strata runtime library (strata_rt_* symbols). */
+#include <stdint.h>
+
+/* Shading globals, world space (abi::Globals). */
+typedef struct StrataGlobals {
+    float p[3], n[3], ng[3], i[3], dpdu[3], dpdv[3];
+    float u, v;
+} StrataGlobals;
+
+/* A BSDF closure (abi::Closure): kind 0 none, 1 diffuse, 2 glossy, 3 metal, 4 glass. */
+typedef struct StrataClosure {
+    uint32_t kind;
+    float params[8];
+} StrataClosure;
+
+/* Every function returns a status: 0 ok, 1 loop budget exceeded, 2 index out of bounds. */
+enum { STRATA_OK = 0, STRATA_LOOP_BUDGET = 1, STRATA_OUT_OF_BOUNDS = 2 };
+";
+
+/// `strata compile FILE.ash -o OUT.o`: a native object with one C function per product of each
+/// substance (inputs at their defaults), plus `OUT.h` declaring them.
+pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let lib = Library::load(&[(file.to_path_buf(), Default::default())], &mut sources, &mut diags);
+    report(&diags, &sources)?;
+    let canonical = file.canonicalize().ok();
+    let substances: Vec<_> = lib
+        .graphs
+        .iter()
+        .enumerate()
+        .filter(|(i, g)| {
+            g.kind == crate::front::ast::GraphKind::Substance
+                && canonical.is_some()
+                && lib.graph_files.get(*i).and_then(|p| p.canonicalize().ok()) == canonical
+        })
+        .map(|(i, g)| (crate::front::library::GraphId(i as u32), g.name.clone()))
+        .collect();
+    if substances.is_empty() {
+        eprintln!("error: {} declares no substance", file.display());
+        return Err(Failure);
+    }
+    let mut compiler = Compiler::new(BackendKind::Jit, PassOptions::default());
+    let mut modules = Vec::new();
+    for (graph, name) in &substances {
+        let material = crate::compose::ComposedMaterial {
+            layers: vec![crate::compose::ComposedLayer {
+                slot: crate::compose::Slot::parse("000").expect("a valid slot name"),
+                substance: crate::compose::MaterialRef {
+                    path: String::new(),
+                    graph: *graph,
+                    values: Vec::new(),
+                    span: Default::default(),
+                },
+                overrides: Vec::new(),
+            }],
+        };
+        modules.push((name.clone(), compiler.lower(&lib, &material, &mut diags)));
+    }
+    report(&diags, &sources)?;
+    let mut header = C_HEADER_PRELUDE.to_string();
+    let mut functions = Vec::new();
+    for (name, module) in &modules {
+        header += &format!("\n/* substance {name} */\n");
+        for f in &module.functions {
+            let (product, out_ty) = match f.kind {
+                EntryKind::Masks => ("mask", "float *out /* 1 */"),
+                EntryKind::Surface(_) => ("surface", "StrataClosure *out"),
+                EntryKind::Displacement => ("displacement", "float *out /* 1 */"),
+                EntryKind::Normal(_) => ("normal", "float out[3]"),
+                EntryKind::Channels(_) => ("channels", "float *out"),
+            };
+            if let EntryKind::Channels(_) = f.kind {
+                let names: Vec<String> = module.info.channels.iter().map(|c| format!("{} at {}", c.name, c.offset)).collect();
+                header += &format!("/* channels: {} ({} floats) */\n", names.join(", "), f.out_words);
+            }
+            let symbol = format!("{name}_{product}");
+            header += &format!("uint32_t {symbol}(const StrataGlobals *g, {out_ty});\n");
+            functions.push((symbol, f));
+        }
+    }
+    let object = match crate::backend::object::compile(&file.display().to_string(), &functions) {
+        Ok(bytes) => bytes,
+        Err(e) => {
+            eprintln!("error: code generation failed: {e}");
+            return Err(Failure);
+        }
+    };
+    let header_path = output.with_extension("h");
+    for (path, bytes) in [(output, object.as_slice()), (header_path.as_path(), header.as_bytes())] {
+        if let Err(e) = write_atomically(path, bytes) {
+            eprintln!("error: cannot write {}: {e}", path.display());
+            return Err(Failure);
+        }
+    }
+    eprintln!(
+        "wrote {} ({} function(s) for {} substance(s)) and {}",
+        output.display(),
+        functions.len(),
+        modules.len(),
+        header_path.display()
+    );
+    Ok(())
+}
+
+/// Writes a file whole or not at all: a temporary file beside it, then a rename.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let name = path.file_name().ok_or_else(|| std::io::Error::other("not a file path"))?;
+    let tmp = dir.join(format!(".{}.tmp{}", name.to_string_lossy(), std::process::id()));
+    let result = std::fs::write(&tmp, bytes).and_then(|_| std::fs::rename(&tmp, path));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
 }

@@ -3,7 +3,9 @@
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
+use strata::backend::BackendKind;
 use strata::cli;
+use strata::render::{LayerMode, RenderSettings};
 
 #[derive(Parser)]
 #[command(
@@ -39,6 +41,52 @@ enum Command {
         /// Print node counts per pass to stderr.
         #[arg(long)]
         stats: bool,
+        /// Print the lowered IR (typed SSA, one function per entry point) instead.
+        #[arg(long)]
+        lowered: bool,
+    },
+    /// Render a scene through its compiled materials to a multi-layer EXR and a PNG preview.
+    Render {
+        /// A `.usda` scene (default: the embedded default scene).
+        scene: Option<PathBuf>,
+        /// The EXR to write (the PNG preview goes beside it).
+        #[arg(short, long, default_value = "strata.exr")]
+        output: PathBuf,
+        /// Camera samples per pixel.
+        #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+        spp: u32,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "640x480", value_parser = parse_resolution)]
+        res: (usize, usize),
+        /// Seed of all sampling: the same seed gives the same image whatever the thread count.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Worker threads (default: all cores).
+        #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+        threads: Option<u32>,
+        /// Maximum path depth (bounces).
+        #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=1024))]
+        max_depth: u32,
+        /// Shader backend.
+        #[arg(long, value_enum, default_value_t = BackendKind::Jit)]
+        backend: BackendKind,
+        /// Evaluate every layer weighted at each vertex instead of picking one (for comparison).
+        #[arg(long)]
+        weighted: bool,
+        /// Skip constant folding and layer pruning (for comparison).
+        #[arg(long)]
+        no_optimize: bool,
+        /// Print compile and render statistics.
+        #[arg(long)]
+        stats: bool,
+    },
+    /// Compile every substance of a `.ash` file into a native object (plus a C header beside it).
+    Compile {
+        /// A `.ash` substance file.
+        file: PathBuf,
+        /// The object file to write; `OUT.h` is written beside it.
+        #[arg(short, long)]
+        output: PathBuf,
     },
     /// Check a substance file or a scene and report every problem.
     Check {
@@ -51,11 +99,53 @@ fn main() -> ExitCode {
     let args = Args::parse();
     let result = match args.command {
         Command::Layers { scene, json } => cli::layers(scene.as_deref(), json),
-        Command::Ir { scene, prim, no_optimize, stats } => cli::ir(&scene, &prim, !no_optimize, stats),
+        Command::Ir { scene, prim, no_optimize, stats, lowered: false } => cli::ir(&scene, &prim, !no_optimize, stats),
+        Command::Ir { scene, prim, no_optimize, stats, lowered: true } => {
+            cli::lowered_ir(&scene, &prim, !no_optimize, stats)
+        }
+        Command::Render {
+            scene,
+            output,
+            spp,
+            res,
+            seed,
+            threads,
+            max_depth,
+            backend,
+            weighted,
+            no_optimize,
+            stats,
+        } => cli::render(&cli::RenderArgs {
+            scene,
+            output,
+            settings: RenderSettings {
+                width: res.0,
+                height: res.1,
+                spp,
+                seed,
+                threads: threads.map(|t| t as usize),
+                max_depth,
+                mode: if weighted { LayerMode::Weighted } else { LayerMode::Stochastic },
+            },
+            backend,
+            optimize: !no_optimize,
+            stats,
+        }),
+        Command::Compile { file, output } => cli::compile(&file, &output),
         Command::Check { file } => cli::check(&file),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(cli::Failure) => ExitCode::FAILURE,
     }
+}
+
+/// Parses `WIDTHxHEIGHT` (each 1 to 16384).
+fn parse_resolution(text: &str) -> Result<(usize, usize), String> {
+    let (w, h) = text.split_once(['x', 'X']).ok_or("expected WIDTHxHEIGHT, e.g. 640x480")?;
+    let parse = |s: &str| -> Result<usize, String> {
+        let n: usize = s.trim().parse().map_err(|_| format!("`{s}` is not a whole number"))?;
+        if (1..=16384).contains(&n) { Ok(n) } else { Err(format!("{n} is outside 1..=16384")) }
+    };
+    Ok((parse(w)?, parse(h)?))
 }
