@@ -7,6 +7,7 @@
 //! - [`compose`]: slot bindings → one composed material per renderable prim.
 //! - [`ir`]: the wired IR of a composed material, its passes and text form.
 //! - [`abi`]: the `#[repr(C)]` contract between compiled materials and the renderer.
+//! - [`render`]: the path tracer's BSDFs (materials' closures → sampling and evaluation).
 //! - [`runtime`]: noise, patterns and math semantics shared by every backend.
 //! - [`scenes`]: the embedded default scene.
 //! - [`cli`]: the `strata` subcommands.
@@ -17,6 +18,7 @@ pub mod compose;
 pub mod diag;
 pub mod front;
 pub mod ir;
+pub mod render;
 pub mod runtime;
 pub mod scene;
 pub mod scenes;

@@ -1,0 +1,3 @@
+pub mod bsdf;
+pub mod frame;
+pub mod microfacet;
