@@ -4,7 +4,7 @@
 //! - [`xform`]: xformOps and imageability; [`geometry`]: world-space triangles;
 //!   [`accel`]: BVH and ray queries; [`camera`]; [`light`]: UsdLux lights;
 //!   [`scene`]: the render scene.
-//! - [`bsdf`]: BSDF evaluation and sampling; [`sampling`]: RNG and warps.
+//! - [`bsdf`]: BSDF evaluation and sampling ([`microfacet`]: GGX and Fresnel; [`frame`]: shading frames); [`sampling`]: RNG and warps.
 //! - [`integrator`]: path tracing with NEE + MIS and layer picking (DESIGN.md rules 5–7);
 //!   [`film`]: the driver, AOVs and statistics; [`output`]: EXR and PNG files.
 //! - [`testing`]: a constant `MaterialCode` for tests and benchmarks.
@@ -13,9 +13,11 @@ pub mod accel;
 pub mod bsdf;
 pub mod camera;
 pub mod film;
+pub mod frame;
 pub mod geometry;
 pub mod integrator;
 pub mod light;
+pub mod microfacet;
 pub mod output;
 pub mod sampling;
 pub mod scene;
