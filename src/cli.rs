@@ -14,8 +14,8 @@ use crate::scenes;
 use serde::Serialize;
 use std::collections::HashMap;
 use std::io::Write;
-use std::sync::Arc;
 use std::path::Path;
+use std::sync::Arc;
 
 /// A command failed; its diagnostics were already printed.
 #[derive(Debug)]
@@ -271,11 +271,16 @@ pub fn compile_scene(
 pub fn render(args: &RenderArgs) -> Result<(), Failure> {
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
-    let compiled =
-        compile_scene(args.scene.as_deref(), args.backend, PassOptions { optimize: args.optimize }, &mut sources, &mut diags);
-    let scene = compiled
-        .as_ref()
-        .and_then(|(stage, _, prims, _)| crate::render::Scene::from_stage(stage, &|p| prims.get(p).copied(), &mut diags));
+    let compiled = compile_scene(
+        args.scene.as_deref(),
+        args.backend,
+        PassOptions { optimize: args.optimize },
+        &mut sources,
+        &mut diags,
+    );
+    let scene = compiled.as_ref().and_then(|(stage, _, prims, _)| {
+        crate::render::Scene::from_stage(stage, &|p| prims.get(p).copied(), &mut diags)
+    });
     report(&diags, &sources)?;
     let (Some((_, materials, _, compiler)), Some(scene)) = (compiled, scene) else { return Err(Failure) };
     if args.stats {
@@ -432,7 +437,8 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
                 EntryKind::Channels(_) => ("channels", "float *out"),
             };
             if let EntryKind::Channels(_) = f.kind {
-                let names: Vec<String> = module.info.channels.iter().map(|c| format!("{} at {}", c.name, c.offset)).collect();
+                let names: Vec<String> =
+                    module.info.channels.iter().map(|c| format!("{} at {}", c.name, c.offset)).collect();
                 header += &format!("/* channels: {} ({} floats) */\n", names.join(", "), f.out_words);
             }
             let symbol = format!("{name}_{product}");

@@ -3,8 +3,7 @@
 //! a backend the renderer can use (`--backend interp`).
 
 use crate::abi::{self, Status};
-use crate::ir::ssa::{BinOp, CmpOp, Function, Inst, Terminator, UnOp};
-use crate::runtime::math;
+use crate::ir::ssa::{Function, Inst, Terminator, eval_pure};
 use std::cell::RefCell;
 
 /// Per-thread scratch memory (values, variables, slots), reused across calls so shading
@@ -65,7 +64,6 @@ fn execute(func: &Function, globals: &abi::Globals, out: &mut [u32], s: &mut Scr
     }
     s.slots.clear();
     s.slots.resize(total, 0);
-    let f = |w: u32| f32::from_bits(w);
     let mut block = 0usize;
     loop {
         let data = &func.blocks[block];
@@ -75,78 +73,8 @@ fn execute(func: &Function, globals: &abi::Globals, out: &mut [u32], s: &mut Scr
                 Inst::FConst(x) => x.to_bits(),
                 Inst::IConst(i) => *i as u32,
                 Inst::Global(o) => g[*o as usize],
-                Inst::Unary(op, a) => {
-                    let a = v(a);
-                    match op {
-                        UnOp::FNeg => (-f(a)).to_bits(),
-                        UnOp::FAbs => f(a).abs().to_bits(),
-                        UnOp::Sqrt => f(a).sqrt().to_bits(),
-                        UnOp::Floor => f(a).floor().to_bits(),
-                        UnOp::Ceil => f(a).ceil().to_bits(),
-                        UnOp::INeg => (a as i32).wrapping_neg() as u32,
-                        UnOp::FToI => math::float_to_int(f(a)) as u32,
-                        UnOp::IToF => (a as i32 as f32).to_bits(),
-                    }
-                }
-                Inst::Binary(op, a, b) => {
-                    let (a, b) = (v(a), v(b));
-                    let (x, y) = (f(a), f(b));
-                    let (i, j) = (a as i32, b as i32);
-                    match op {
-                        BinOp::FAdd => (x + y).to_bits(),
-                        BinOp::FSub => (x - y).to_bits(),
-                        BinOp::FMul => (x * y).to_bits(),
-                        BinOp::FDiv => (x / y).to_bits(),
-                        BinOp::FMin => math::min(x, y).to_bits(),
-                        BinOp::FMax => math::max(x, y).to_bits(),
-                        BinOp::IAdd => i.wrapping_add(j) as u32,
-                        BinOp::ISub => i.wrapping_sub(j) as u32,
-                        BinOp::IMul => i.wrapping_mul(j) as u32,
-                        BinOp::IDiv => math::int_div(i, j) as u32,
-                        BinOp::IRem => math::int_rem(i, j) as u32,
-                        BinOp::And => a & b,
-                        BinOp::Or => a | b,
-                    }
-                }
-                Inst::Cmp(op, a, b) => {
-                    let int = func.values[a.0 as usize] == crate::ir::ssa::Ty::I32;
-                    let (a, b) = (v(a), v(b));
-                    let r = if int {
-                        let (i, j) = (a as i32, b as i32);
-                        match op {
-                            CmpOp::Eq => i == j,
-                            CmpOp::Ne => i != j,
-                            CmpOp::Lt => i < j,
-                            CmpOp::Le => i <= j,
-                            CmpOp::Gt => i > j,
-                            CmpOp::Ge => i >= j,
-                        }
-                    } else {
-                        let (x, y) = (f(a), f(b));
-                        match op {
-                            CmpOp::Eq => x == y,
-                            CmpOp::Ne => x != y,
-                            CmpOp::Lt => x < y,
-                            CmpOp::Le => x <= y,
-                            CmpOp::Gt => x > y,
-                            CmpOp::Ge => x >= y,
-                        }
-                    };
-                    r as u32
-                }
-                Inst::Select(c, a, b) => {
-                    if v(c) != 0 {
-                        v(a)
-                    } else {
-                        v(b)
-                    }
-                }
-                Inst::Call(func, args) => {
-                    let mut words = [0u32; 4];
-                    for (w, a) in words.iter_mut().zip(args) {
-                        *w = v(a);
-                    }
-                    func.call(&words[..args.len()]).to_bits()
+                Inst::Unary(..) | Inst::Binary(..) | Inst::Cmp(..) | Inst::Select(..) | Inst::Call(..) => {
+                    eval_pure(func, &inst.inst, |x| s.values[x.0 as usize]).unwrap_or(0)
                 }
                 Inst::Get(var) => s.vars[var.0 as usize],
                 Inst::Set(var, x) => {

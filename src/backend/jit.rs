@@ -65,9 +65,8 @@ pub fn compile(module: &ssa::Module) -> Result<Material<JitRunner>, String> {
     let entries = Entries::new(module, |i| {
         let code = jit.get_finalized_function(ids[i]);
         // SAFETY: `define` gave every entry exactly this signature.
-        let func = unsafe {
-            std::mem::transmute::<*const u8, unsafe extern "C" fn(*const Globals, *mut u32) -> u32>(code)
-        };
+        let func =
+            unsafe { std::mem::transmute::<*const u8, unsafe extern "C" fn(*const Globals, *mut u32) -> u32>(code) };
         JitEntry { func, out_words: module.functions[i].out_words }
     });
     Ok(Material::new(module.info.clone(), entries, JitRunner { module: Some(jit) }))

@@ -262,7 +262,7 @@ impl Compiler {
             }
         }
         self.stats.layers_pruned += wired.stats.layers_pruned;
-        let module = lower::lower(lib, &wired, diags);
+        let module = lower::lower(lib, &wired, self.passes.optimize, diags);
         self.stats.lower_ms += start.elapsed().as_secs_f64() * 1e3;
         module
     }

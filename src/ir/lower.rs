@@ -35,14 +35,14 @@ const MAX_INLINE_DEPTH: u32 = 64;
 /// Words of a closure in an output buffer: kind + 8 parameters.
 const CLOSURE_WORDS: u32 = 9;
 
-/// Lowers every entry point of a wired material. Problems (a texture file that cannot be read,
+/// Lowers every entry point of a wired material (and, with `optimize`, simplifies each). Problems (a texture file that cannot be read,
 /// a non-constant texture name) are reported to `diags`.
-pub fn lower(lib: &Library, wired: &WiredMaterial, diags: &mut Diagnostics) -> Module {
+pub fn lower(lib: &Library, wired: &WiredMaterial, optimize: bool, diags: &mut Diagnostics) -> Module {
     let info = material_info(wired);
     let mut strings = Vec::new();
     let mut functions = Vec::new();
     let nlayers = wired.layers.len() as u32;
-    let mut cx = Context { lib, wired, strings: &mut strings, diags };
+    let mut cx = Context { lib, wired, strings: &mut strings, diags, optimize };
 
     functions.push(cx.entry(EntryKind::Masks, nlayers, |f| {
         for (l, layer) in wired.layers.iter().enumerate() {
@@ -137,6 +137,8 @@ struct Context<'a> {
     wired: &'a WiredMaterial,
     strings: &'a mut Vec<String>,
     diags: &'a mut Diagnostics,
+    /// Run [`ssa::simplify`] on each function.
+    optimize: bool,
 }
 
 impl Context<'_> {
@@ -159,8 +161,12 @@ impl Context<'_> {
             depth: 0,
         };
         body(&mut f);
-        let func = f.b.finish();
-        debug_assert_eq!(ssa::validate(&func), Ok(()), "{}", func.to_text());
+        let mut func = f.b.finish();
+        debug_assert_eq!(ssa::validate(&func), Ok(()), "after lowering:\n{}", func.to_text());
+        if self.optimize {
+            ssa::simplify(&mut func);
+            debug_assert_eq!(ssa::validate(&func), Ok(()), "after simplify:\n{}", func.to_text());
+        }
         func
     }
 }
@@ -326,19 +332,25 @@ impl FnLower<'_> {
             let value = if param.output {
                 self.zero(param.ty)
             } else {
+                let constant = match &node.args[i] {
+                    Operand::Const(Value::Str(s), _) => Some(s),
+                    Operand::Default => param.default.as_ref().and_then(|d| match &d.kind {
+                        ExprKind::Const(Value::Str(s)) => Some(s),
+                        _ => None,
+                    }),
+                    _ => None,
+                };
+                if let Some(s) = constant
+                    && !assigns(&func.body, i as u32)
+                {
+                    frame.const_strings.insert(i as u32, s.clone());
+                }
                 match &node.args[i] {
                     Operand::Default => match &param.default {
                         Some(e) => self.expr(e, &mut frame),
                         None => self.zero(param.ty),
                     },
-                    other => {
-                        if let Operand::Const(Value::Str(s), _) = other
-                            && !assigns(&func.body, i as u32)
-                        {
-                            frame.const_strings.insert(i as u32, s.clone());
-                        }
-                        self.operand(other, param.ty)
-                    }
+                    other => self.operand(other, param.ty),
                 }
             };
             self.store_local(&frame, LocalId(i as u32), value);
@@ -394,9 +406,9 @@ impl FnLower<'_> {
 
     fn load(&mut self, storage: &Storage) -> Lv {
         match storage {
-            Storage::Vars(vars) => Lv::Scalars(
-                vars.iter().map(|v| self.b.value(Inst::Get(*v), self.b.func.vars[v.0 as usize])).collect(),
-            ),
+            Storage::Vars(vars) => {
+                Lv::Scalars(vars.iter().map(|v| self.b.value(Inst::Get(*v), self.b.func.vars[v.0 as usize])).collect())
+            }
             Storage::Array { slot, elem, len } => Lv::Array { slot: *slot, elem: *elem, len: *len },
         }
     }
@@ -854,11 +866,7 @@ impl FnLower<'_> {
 
     /// Applies `f` per lane over arguments that are floats or triples of one width (a float
     /// argument broadcasts, as the folder's `map_n` does).
-    fn lanes(
-        &mut self,
-        args: &[Vec<ssa::Value>],
-        mut f: impl FnMut(&mut Self, &[ssa::Value]) -> ssa::Value,
-    ) -> Lv {
+    fn lanes(&mut self, args: &[Vec<ssa::Value>], mut f: impl FnMut(&mut Self, &[ssa::Value]) -> ssa::Value) -> Lv {
         let width = args.iter().map(Vec::len).max().unwrap_or(1);
         let mut out = Vec::with_capacity(width);
         for k in 0..width {

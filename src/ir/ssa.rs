@@ -541,6 +541,11 @@ impl Builder {
         if self.func.blocks[self.current.0 as usize].term.is_none() {
             self.func.blocks[self.current.0 as usize].term = Some(Terminator::Return(crate::abi::STATUS_OK));
         }
+        self.finish_reachable()
+    }
+
+    /// Drops the blocks no path from the entry reaches and renumbers the rest.
+    fn finish_reachable(mut self) -> Function {
         let n = self.func.blocks.len();
         let mut reached = vec![false; n];
         let mut stack = vec![0usize];
@@ -686,5 +691,220 @@ impl Builder {
     pub fn jump_to(&mut self, to: Block) {
         self.terminate(Terminator::Jump(to));
         self.switch_to(to);
+    }
+}
+
+/// The scalar semantics of one pure instruction on constant operand words, shared by the
+/// interpreter and [`simplify`]'s constant folding. `None` for instructions that are not pure
+/// arithmetic (memory, variables, globals, output).
+pub fn eval_pure(f: &Function, inst: &Inst, operand: impl Fn(Value) -> u32) -> Option<u32> {
+    use crate::runtime::math;
+    let fl = f32::from_bits;
+    Some(match inst {
+        Inst::FConst(x) => x.to_bits(),
+        Inst::IConst(i) => *i as u32,
+        Inst::Unary(op, a) => {
+            let a = operand(*a);
+            match op {
+                UnOp::FNeg => (-fl(a)).to_bits(),
+                UnOp::FAbs => fl(a).abs().to_bits(),
+                UnOp::Sqrt => fl(a).sqrt().to_bits(),
+                UnOp::Floor => fl(a).floor().to_bits(),
+                UnOp::Ceil => fl(a).ceil().to_bits(),
+                UnOp::INeg => (a as i32).wrapping_neg() as u32,
+                UnOp::FToI => math::float_to_int(fl(a)) as u32,
+                UnOp::IToF => (a as i32 as f32).to_bits(),
+            }
+        }
+        Inst::Binary(op, a, b) => {
+            let (a, b) = (operand(*a), operand(*b));
+            let (x, y, i, j) = (fl(a), fl(b), a as i32, b as i32);
+            match op {
+                BinOp::FAdd => (x + y).to_bits(),
+                BinOp::FSub => (x - y).to_bits(),
+                BinOp::FMul => (x * y).to_bits(),
+                BinOp::FDiv => (x / y).to_bits(),
+                BinOp::FMin => math::min(x, y).to_bits(),
+                BinOp::FMax => math::max(x, y).to_bits(),
+                BinOp::IAdd => i.wrapping_add(j) as u32,
+                BinOp::ISub => i.wrapping_sub(j) as u32,
+                BinOp::IMul => i.wrapping_mul(j) as u32,
+                BinOp::IDiv => math::int_div(i, j) as u32,
+                BinOp::IRem => math::int_rem(i, j) as u32,
+                BinOp::And => a & b,
+                BinOp::Or => a | b,
+            }
+        }
+        Inst::Cmp(op, a, b) => {
+            let int = f.ty(*a) == Ty::I32;
+            let (a, b) = (operand(*a), operand(*b));
+            let ord = if int { (a as i32).partial_cmp(&(b as i32)) } else { fl(a).partial_cmp(&fl(b)) };
+            use std::cmp::Ordering::*;
+            (match op {
+                CmpOp::Eq => ord == Some(Equal),
+                CmpOp::Ne => ord != Some(Equal),
+                CmpOp::Lt => ord == Some(Less),
+                CmpOp::Le => matches!(ord, Some(Less | Equal)),
+                CmpOp::Gt => ord == Some(Greater),
+                CmpOp::Ge => matches!(ord, Some(Greater | Equal)),
+            }) as u32
+        }
+        Inst::Select(c, a, b) => {
+            if operand(*c) != 0 {
+                operand(*a)
+            } else {
+                operand(*b)
+            }
+        }
+        Inst::Call(func, args) => {
+            let mut words = [0u32; 4];
+            for (w, a) in words.iter_mut().zip(args) {
+                *w = operand(*a);
+            }
+            func.call(&words[..args.len()]).to_bits()
+        }
+        _ => return None,
+    })
+}
+
+/// The one cleanup pass over lowered IR: within each block, a `get` of a variable set earlier
+/// in the block becomes that value; instructions whose operands are all constants become
+/// constants (with [`eval_pure`], the interpreter's own semantics, so nothing changes); branches
+/// on constants become jumps; then unused pure instructions, variables never read and
+/// unreachable blocks are removed. Texture calls are not folded: they read the registry.
+pub fn simplify(f: &mut Function) {
+    use crate::runtime::rt::RtFn;
+    let mut replace: Vec<Value> = (0..f.values.len() as u32).map(Value).collect();
+    let mut constant: Vec<Option<u32>> = vec![None; f.values.len()];
+    let resolve = |replace: &Vec<Value>, v: Value| replace[v.0 as usize];
+    for b in 0..f.blocks.len() {
+        let mut known: std::collections::HashMap<Var, Value> = std::collections::HashMap::new();
+        let insts = std::mem::take(&mut f.blocks[b].insts);
+        let mut kept = Vec::with_capacity(insts.len());
+        for mut data in insts {
+            rename(&mut data.inst, |v| resolve(&replace, v));
+            match &data.inst {
+                Inst::Set(var, x) => {
+                    known.insert(*var, *x);
+                }
+                Inst::Get(var) => {
+                    if let (Some(x), Some(r)) = (known.get(var), data.result) {
+                        replace[r.0 as usize] = *x;
+                        continue;
+                    }
+                }
+                _ => {}
+            }
+            let foldable = match &data.inst {
+                Inst::Call(RtFn::Texture, _) => false,
+                Inst::Unary(_, a) => constant[a.0 as usize].is_some(),
+                Inst::Binary(_, a, b) | Inst::Cmp(_, a, b) => {
+                    constant[a.0 as usize].is_some() && constant[b.0 as usize].is_some()
+                }
+                Inst::Select(c, a, b) => match constant[c.0 as usize] {
+                    Some(cv) => {
+                        // A known condition picks its side even when the sides are not constant.
+                        if let Some(r) = data.result {
+                            replace[r.0 as usize] = if cv != 0 { *a } else { *b };
+                            continue;
+                        }
+                        false
+                    }
+                    None => constant[a.0 as usize].is_some() && constant[b.0 as usize].is_some() && a == b,
+                },
+                Inst::Call(_, args) => args.iter().all(|a| constant[a.0 as usize].is_some()),
+                _ => false,
+            };
+            if let Some(r) = data.result {
+                if let Inst::FConst(x) = data.inst {
+                    constant[r.0 as usize] = Some(x.to_bits());
+                } else if let Inst::IConst(i) = data.inst {
+                    constant[r.0 as usize] = Some(i as u32);
+                } else if foldable && let Some(word) = eval_pure(f, &data.inst, |v| constant[v.0 as usize].unwrap_or(0))
+                {
+                    constant[r.0 as usize] = Some(word);
+                    data.inst = match f.ty(r) {
+                        Ty::F32 => Inst::FConst(f32::from_bits(word)),
+                        Ty::I32 => Inst::IConst(word as i32),
+                    };
+                }
+            }
+            kept.push(data);
+        }
+        let block = &mut f.blocks[b];
+        block.insts = kept;
+        if let Some(Terminator::Branch(c, t, e)) = block.term.clone() {
+            let c = resolve(&replace, c);
+            block.term = Some(match constant[c.0 as usize] {
+                Some(cv) => Terminator::Jump(if cv != 0 { t } else { e }),
+                None => Terminator::Branch(c, t, e),
+            });
+        }
+    }
+    remove_dead(f);
+}
+
+/// Applies `map` to every operand of an instruction.
+fn rename(inst: &mut Inst, mut map: impl FnMut(Value) -> Value) {
+    match inst {
+        Inst::Unary(_, a) | Inst::Set(_, a) | Inst::Out(_, a) | Inst::Load(_, a) => *a = map(*a),
+        Inst::Binary(_, a, b) | Inst::Cmp(_, a, b) | Inst::Store(_, a, b) => {
+            *a = map(*a);
+            *b = map(*b);
+        }
+        Inst::Select(c, a, b) => {
+            *c = map(*c);
+            *a = map(*a);
+            *b = map(*b);
+        }
+        Inst::Call(_, args) => args.iter_mut().for_each(|a| *a = map(*a)),
+        Inst::FConst(_) | Inst::IConst(_) | Inst::Global(_) | Inst::Get(_) => {}
+    }
+}
+
+fn operands(inst: &Inst) -> Vec<Value> {
+    let mut out = Vec::new();
+    let mut probe = inst.clone();
+    rename(&mut probe, |v| {
+        out.push(v);
+        v
+    });
+    out
+}
+
+/// Removes unreachable blocks, sets of variables nobody reads, and unused pure instructions,
+/// until nothing changes.
+fn remove_dead(f: &mut Function) {
+    loop {
+        let before: usize = f.blocks.iter().map(|b| b.insts.len()).sum();
+        let mut builder = Builder { func: std::mem::replace(f, Function::new(EntryKind::Masks, 0)), current: Block(0) };
+        builder.current = Block(0);
+        *f = builder.finish_reachable();
+        let mut used = vec![false; f.values.len()];
+        let mut read = vec![false; f.vars.len()];
+        for block in &f.blocks {
+            for data in &block.insts {
+                for v in operands(&data.inst) {
+                    used[v.0 as usize] = true;
+                }
+                if let Inst::Get(var) = data.inst {
+                    read[var.0 as usize] = true;
+                }
+            }
+            if let Some(Terminator::Branch(c, ..)) = &block.term {
+                used[c.0 as usize] = true;
+            }
+        }
+        for block in &mut f.blocks {
+            block.insts.retain(|data| match &data.inst {
+                Inst::Set(var, _) => read[var.0 as usize],
+                Inst::Store(..) | Inst::Out(..) => true,
+                _ => data.result.is_some_and(|r| used[r.0 as usize]),
+            });
+        }
+        let after: usize = f.blocks.iter().map(|b| b.insts.len()).sum();
+        if after == before {
+            break;
+        }
     }
 }

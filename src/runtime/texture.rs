@@ -66,7 +66,8 @@ pub fn register_file(path: &Path) -> Result<i32, String> {
     if let Some(id) = REGISTRY.read().ok().and_then(|r| r.textures.iter().position(|(p, _)| *p == canonical)) {
         return Ok(id as i32);
     }
-    let texture = Texture::load_exr(&canonical).map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
+    let texture =
+        Texture::load_exr(&canonical).map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
     register(canonical, texture)
 }
 
