@@ -244,15 +244,26 @@ pub struct RenderArgs {
     pub stats: bool,
 }
 
-/// Composes a scene and compiles every distinct material once. Returns the stage, the
-/// compiled materials and, per renderable prim path, its material index.
+/// A scene with every distinct material compiled.
+pub struct CompiledScene {
+    /// The composed stage.
+    pub stage: Stage,
+    /// Compiled materials.
+    pub materials: Vec<Arc<dyn MaterialCode>>,
+    /// Per renderable prim path, its index in `materials`.
+    pub prim_material: HashMap<String, usize>,
+    /// The compiler, with its statistics.
+    pub compiler: Compiler,
+}
+
+/// Composes a scene and compiles every distinct material once.
 pub fn compile_scene(
     scene: Option<&Path>,
     backend: BackendKind,
     passes: PassOptions,
     sources: &mut SourceMap,
     diags: &mut Diagnostics,
-) -> Option<(Stage, Vec<Arc<dyn MaterialCode>>, HashMap<String, usize>, Compiler)> {
+) -> Option<CompiledScene> {
     let stage = open_scene(scene, sources, diags)?;
     let composition = compose_stage(&stage, sources, diags);
     if diags.has_errors() {
@@ -263,8 +274,9 @@ pub fn compile_scene(
     for material in &composition.materials {
         materials.push(compiler.compile(&composition.library, material, diags)?);
     }
-    let prims = composition.stacks.iter().zip(&composition.prim_material).map(|(s, m)| (s.prim.clone(), *m)).collect();
-    Some((stage, materials, prims, compiler))
+    let prim_material =
+        composition.stacks.iter().zip(&composition.prim_material).map(|(s, m)| (s.prim.clone(), *m)).collect();
+    Some(CompiledScene { stage, materials, prim_material, compiler })
 }
 
 /// `strata render [SCENE] -o OUT.exr …`
@@ -278,11 +290,11 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         &mut sources,
         &mut diags,
     );
-    let scene = compiled.as_ref().and_then(|(stage, _, prims, _)| {
-        crate::render::Scene::from_stage(stage, &|p| prims.get(p).copied(), &mut diags)
-    });
+    let scene = compiled
+        .as_ref()
+        .and_then(|c| crate::render::Scene::from_stage(&c.stage, &|p| c.prim_material.get(p).copied(), &mut diags));
     report(&diags, &sources)?;
-    let (Some((_, materials, _, compiler)), Some(scene)) = (compiled, scene) else { return Err(Failure) };
+    let (Some(CompiledScene { materials, compiler, .. }), Some(scene)) = (compiled, scene) else { return Err(Failure) };
     if args.stats {
         eprintln!("compile ({}): {}", args.backend, compiler.stats);
     }
