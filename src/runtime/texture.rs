@@ -1,108 +1,34 @@
-//! Texture lookups for compiled shaders: a process-wide registry of decoded images, addressed
-//! by small integer ids that code generation bakes into the call. Images are loaded once, at
-//! compile time; a lookup only reads (no allocation, no I/O on the shading path).
+//! Texture files: decoding images for the runtime's texture registry
+//! ([`strata_rt::texture`]), once per file, at compile time.
 
-use std::path::{Path, PathBuf};
-use std::sync::{Arc, RwLock};
+use std::path::Path;
+pub use strata_rt::texture::{Texture, lookup, register};
 
-/// A decoded RGB image, linear floats, rows top to bottom.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Texture {
-    /// Width in pixels (≥ 1).
-    pub width: usize,
-    /// Height in pixels (≥ 1).
-    pub height: usize,
-    /// `width * height` RGB texels, row-major, top row first.
-    pub texels: Vec<[f32; 3]>,
-}
-
-impl Texture {
-    /// Loads an OpenEXR file (its first RGBA layer). Non-finite texels become 0, so a broken
-    /// pixel cannot put NaN into every render that samples it.
-    pub fn load_exr(path: &Path) -> Result<Texture, String> {
-        let image = exr::prelude::read_first_rgba_layer_from_file(
-            path,
-            |size, _| Texture { width: size.width(), height: size.height(), texels: vec![[0.0; 3]; size.area()] },
-            |tex: &mut Texture, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-                let clean = |x: f32| if x.is_finite() { x } else { 0.0 };
-                tex.texels[pos.y() * tex.width + pos.x()] = [clean(r), clean(g), clean(b)];
-            },
-        )
-        .map_err(|e| e.to_string())?;
-        let tex = image.layer_data.channel_data.pixels;
-        if tex.width == 0 || tex.height == 0 {
-            return Err("the image is empty".into());
-        }
-        Ok(tex)
+/// Loads an OpenEXR file (its first RGBA layer). Non-finite texels become 0, so a broken
+/// pixel cannot put NaN into every render that samples it.
+pub fn load_exr(path: &Path) -> Result<Texture, String> {
+    let image = exr::prelude::read_first_rgba_layer_from_file(
+        path,
+        |size, _| Texture { width: size.width(), height: size.height(), texels: vec![[0.0; 3]; size.area()] },
+        |tex: &mut Texture, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+            let clean = |x: f32| if x.is_finite() { x } else { 0.0 };
+            tex.texels[pos.y() * tex.width + pos.x()] = [clean(r), clean(g), clean(b)];
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    let tex = image.layer_data.channel_data.pixels;
+    if tex.width == 0 || tex.height == 0 {
+        return Err("the image is empty".into());
     }
-
-    /// Bilinear lookup with repeat wrapping; `t = 0` is the bottom row (USD's st convention).
-    pub fn sample(&self, s: f32, t: f32, channel: usize) -> f32 {
-        if !s.is_finite() || !t.is_finite() {
-            return 0.0;
-        }
-        let x = s * self.width as f32 - 0.5;
-        let y = (1.0 - t) * self.height as f32 - 0.5;
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let wrap = |i: f32, n: usize| (i as i64).rem_euclid(n as i64) as usize;
-        let at = |xi: f32, yi: f32| self.texels[wrap(yi, self.height) * self.width + wrap(xi, self.width)][channel];
-        let top = at(x0, y0) + (at(x0 + 1.0, y0) - at(x0, y0)) * fx;
-        let bottom = at(x0, y0 + 1.0) + (at(x0 + 1.0, y0 + 1.0) - at(x0, y0 + 1.0)) * fx;
-        top + (bottom - top) * fy
-    }
+    Ok(tex)
 }
 
-struct Registry {
-    /// Loaded textures by id, with the file each came from.
-    textures: Vec<(PathBuf, Arc<Texture>)>,
-}
-
-static REGISTRY: RwLock<Registry> = RwLock::new(Registry { textures: Vec::new() });
-
-/// Loads `path` (once per process) and returns its id.
+/// Loads `path` (once per process) into the registry and returns its id.
 pub fn register_file(path: &Path) -> Result<i32, String> {
     let canonical = path.canonicalize().map_err(|e| format!("cannot open texture `{}`: {e}", path.display()))?;
-    if let Some(id) = REGISTRY.read().ok().and_then(|r| r.textures.iter().position(|(p, _)| *p == canonical)) {
-        return Ok(id as i32);
+    if let Some(id) = strata_rt::texture::find(&canonical) {
+        return Ok(id);
     }
-    let texture =
-        Texture::load_exr(&canonical).map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
+    let texture = load_exr(&canonical).map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
     register(canonical, texture)
-}
-
-/// Registers an in-memory texture under a name (tests, generated images).
-pub fn register(name: PathBuf, texture: Texture) -> Result<i32, String> {
-    let mut registry = REGISTRY.write().map_err(|_| "texture registry poisoned".to_string())?;
-    registry.textures.push((name, Arc::new(texture)));
-    Ok(registry.textures.len() as i32 - 1)
-}
-
-/// Channel `channel` (0..3) of texture `id` at (s, t); 0 for an unknown id or channel.
-pub fn lookup(id: i32, s: f32, t: f32, channel: i32) -> f32 {
-    let Ok(registry) = REGISTRY.read() else { return 0.0 };
-    match (usize::try_from(id).ok().and_then(|i| registry.textures.get(i)), channel) {
-        (Some((_, tex)), 0..=2) => tex.sample(s, t, channel as usize),
-        _ => 0.0,
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn bilinear_wraps_and_flips_t() {
-        // 2×1: left texel red 1, right texel red 0.
-        let tex = Texture { width: 2, height: 1, texels: vec![[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]] };
-        assert_eq!(tex.sample(0.25, 0.5, 0), 1.0);
-        assert_eq!(tex.sample(0.75, 0.5, 0), 0.0);
-        assert_eq!(tex.sample(0.5, 0.5, 0), 0.5);
-        assert_eq!(tex.sample(1.25, 0.5, 0), 1.0, "repeat wrap");
-        assert_eq!(tex.sample(f32::NAN, 0.5, 0), 0.0);
-        let id = register("test:bilinear".into(), tex).unwrap();
-        assert_eq!(lookup(id, 0.25, 0.5, 0), 1.0);
-        assert_eq!(lookup(id, 0.25, 0.5, 7), 0.0);
-        assert_eq!(lookup(-3, 0.25, 0.5, 0), 0.0);
-    }
 }

@@ -5,7 +5,7 @@
 //! The symbols are stable (`strata_rt_*`): JIT code links them by address, and native shader
 //! objects written by `strata compile` import them by name from the runtime library.
 
-use super::{math, noise, texture};
+use crate::{math, noise, texture};
 
 macro_rules! runtime {
     ($($variant:ident = $sym:ident ($($arg:ident : $ty:ident),*) $body:block),* $(,)?) => {
