@@ -168,8 +168,9 @@ pub fn compose_file(
     Some(compose_stage(&stage, sources, diags))
 }
 
-/// `strata ir SCENE --prim PATH`
-pub fn ir(scene: &Path, prim: &str, optimize: bool, stats: bool) -> Result<(), Failure> {
+/// `strata ir SCENE --prim PATH [--lowered]`: the wired IR of one prim's material, or its
+/// lowered IR.
+pub fn ir(scene: &Path, prim: &str, optimize: bool, stats: bool, lowered: bool) -> Result<(), Failure> {
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
     let composition = compose_file(Some(scene), &mut sources, &mut diags);
@@ -182,12 +183,21 @@ pub fn ir(scene: &Path, prim: &str, optimize: bool, stats: bool) -> Result<(), F
         return Err(Failure);
     };
     let mut diags = Diagnostics::new();
-    let wired = wired::build(&composition.library, material, PassOptions { optimize }, &mut diags);
+    let passes = PassOptions { optimize };
+    let (text, stats_line) = if lowered {
+        let mut compiler = Compiler::new(BackendKind::Jit, passes);
+        let module = compiler.lower(&composition.library, material, &mut diags);
+        let line = format!("lowered: {} function(s), {} instruction(s)", module.functions.len(), module.inst_count());
+        (module.to_text(), line)
+    } else {
+        let wired = wired::build(&composition.library, material, passes, &mut diags);
+        (wired.to_text(&composition.library), wired.stats_line())
+    };
     report(&diags, &sources)?;
     if stats {
-        eprintln!("{}", wired.stats_line());
+        eprintln!("{stats_line}");
     }
-    print_out(&wired.to_text(&composition.library))
+    print_out(&text)
 }
 
 /// Checks a substance file or scene: every diagnostic, and a one-line summary when it is clean.
@@ -351,27 +361,6 @@ fn progress_bar(rows: u64) -> Option<indicatif::ProgressBar> {
         bar.set_style(style.progress_chars("=> "));
     }
     Some(bar)
-}
-
-/// `strata ir SCENE --prim PATH --lowered`: the lowered IR of one prim's material.
-pub fn lowered_ir(scene: &Path, prim: &str, optimize: bool, stats: bool) -> Result<(), Failure> {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let composition = compose_file(Some(scene), &mut sources, &mut diags);
-    report(&diags, &sources)?;
-    let Some(composition) = composition else { return Err(Failure) };
-    let Some(material) = composition.material_of(prim) else {
-        eprintln!("error: `{prim}` is not a renderable prim of {}", scene.display());
-        return Err(Failure);
-    };
-    let mut compiler = Compiler::new(BackendKind::Jit, PassOptions { optimize });
-    let mut diags = Diagnostics::new();
-    let module = compiler.lower(&composition.library, material, &mut diags);
-    report(&diags, &sources)?;
-    if stats {
-        eprintln!("{}", compiler.stats);
-    }
-    print_out(&module.to_text())
 }
 
 /// The C declarations describing a shader object's ABI.

@@ -99,9 +99,8 @@ fn main() -> ExitCode {
     let args = Args::parse();
     let result = match args.command {
         Command::Layers { scene, json } => cli::layers(scene.as_deref(), json),
-        Command::Ir { scene, prim, no_optimize, stats, lowered: false } => cli::ir(&scene, &prim, !no_optimize, stats),
-        Command::Ir { scene, prim, no_optimize, stats, lowered: true } => {
-            cli::lowered_ir(&scene, &prim, !no_optimize, stats)
+        Command::Ir { scene, prim, no_optimize, stats, lowered } => {
+            cli::ir(&scene, &prim, !no_optimize, stats, lowered)
         }
         Command::Render {
             scene,
