@@ -38,6 +38,9 @@ const CLOSURE_WORDS: u32 = 9;
 /// Lowers every entry point of a wired material (and, with `optimize`, simplifies each). Problems (a texture file that cannot be read,
 /// a non-constant texture name) are reported to `diags`.
 pub fn lower(lib: &Library, wired: &WiredMaterial, optimize: bool, diags: &mut Diagnostics) -> Module {
+    if let Err(e) = wired.validate(lib) {
+        diags.push(Diagnostic::error(format!("internal compiler error: invalid wired IR: {e}")));
+    }
     let info = material_info(wired);
     let mut strings = Vec::new();
     let mut functions = Vec::new();

@@ -499,6 +499,69 @@ fn collect_channels(layers: &[Layer], diags: &mut Diagnostics) -> Vec<(String, C
 }
 
 impl WiredMaterial {
+    /// Checks the invariants lowering relies on: nodes in topological order (operands point at
+    /// earlier nodes, at output parameters), one operand per parameter, operand types that
+    /// convert to the port types, and products and channels of the right types. Lowering runs
+    /// it first; a failure is a compiler bug, reported instead of miscompiled.
+    pub fn validate(&self, lib: &Library) -> Result<(), String> {
+        let check = |op: &Operand, to: Type, before: usize, what: &dyn Fn() -> String| -> Result<(), String> {
+            let from = match op {
+                Operand::Const(_, t) => *t,
+                Operand::Default => return Ok(()),
+                Operand::Node { node, param } => {
+                    let n = node.0 as usize;
+                    if n >= before {
+                        return Err(format!("{}: reads %{n}, which is not evaluated before it", what()));
+                    }
+                    let func = lib.function(self.nodes[n].func);
+                    match func.params.get(*param) {
+                        Some(p) if p.output => p.ty,
+                        _ => return Err(format!("{}: reads %{n}.{param}, which is not an output", what())),
+                    }
+                }
+            };
+            if from.converts_to(to) { Ok(()) } else { Err(format!("{}: {from} does not convert to {to}", what())) }
+        };
+        for (i, node) in self.nodes.iter().enumerate() {
+            let func = lib.function(node.func);
+            if node.args.len() != func.params.len() {
+                return Err(format!(
+                    "%{i} `{}` has {} operands for {} parameters",
+                    node.label,
+                    node.args.len(),
+                    func.params.len()
+                ));
+            }
+            for (p, arg) in func.params.iter().zip(&node.args) {
+                if p.output && *arg != Operand::Default {
+                    return Err(format!("%{i} `{}` drives its output `{}`", node.label, p.name));
+                }
+                check(arg, p.ty, i, &|| format!("%{i} `{}` input `{}`", node.label, p.name))?;
+            }
+        }
+        let n = self.nodes.len();
+        for layer in &self.layers {
+            let slot = &layer.slot;
+            let roots = [
+                (&layer.surface, Type::CLOSURE, "surface"),
+                (&layer.normal, Type::NORMAL, "normal"),
+                (&layer.mask, Type::FLOAT, "mask"),
+            ];
+            for (op, ty, what) in roots {
+                if let Some(op) = op {
+                    check(op, ty, n, &|| format!("layer {slot} {what}"))?;
+                }
+            }
+            if let Some((op, _)) = &layer.displacement {
+                check(op, Type::FLOAT, n, &|| format!("layer {slot} displacement"))?;
+            }
+            for c in &layer.channels {
+                check(&c.value, c.ty, n, &|| format!("layer {slot} channel {}", c.name))?;
+            }
+        }
+        Ok(())
+    }
+
     /// The stable text form pinned by snapshot tests.
     pub fn to_text(&self, lib: &Library) -> String {
         let mut out = String::new();
@@ -681,6 +744,26 @@ mod tests {
         let unoptimised = build(&lib, &material, PassOptions { optimize: false }, &mut diags);
         assert_eq!(unoptimised.stats.layers_pruned, 0);
         assert!(unoptimised.nodes.len() > wired.nodes.len());
+    }
+
+    #[test]
+    fn validator_rejects_broken_wiring() {
+        let (lib, _) = setup();
+        let material = ComposedMaterial { layers: vec![layer(&lib, "050", "dirt", &[])] };
+        let mut diags = Diagnostics::new();
+        let wired = build(&lib, &material, PassOptions::default(), &mut diags);
+        assert_eq!(wired.validate(&lib), Ok(()));
+        // A node reading a later node breaks the topological order lowering relies on.
+        let mut backwards = wired.clone();
+        let last = NodeId(backwards.nodes.len() as u32 - 1);
+        let first = &mut backwards.nodes[0];
+        let input = lib.function(first.func).inputs().next().unwrap().0;
+        first.args[input] = Operand::Node { node: last, param: 0 };
+        assert!(backwards.validate(&lib).unwrap_err().contains("not evaluated before it"));
+        // A closure where a mask belongs is a type error.
+        let mut mistyped = wired.clone();
+        mistyped.layers[0].mask = mistyped.layers[0].surface.clone();
+        assert!(mistyped.validate(&lib).unwrap_err().contains("closure does not convert to float"));
     }
 
     #[test]
