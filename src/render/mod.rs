@@ -12,6 +12,8 @@
 pub mod accel;
 pub mod bsdf;
 pub mod camera;
+#[cfg(test)]
+pub(crate) mod chi2;
 pub mod film;
 pub mod frame;
 pub mod geometry;
