@@ -76,3 +76,100 @@ fn cli_renders_the_default_scene_and_refuses_bad_input() {
     let unwritable = run(&["render", "--res", "8x8", "--spp", "1", "-o", "/nonexistent/dir/out.exr"]);
     assert_eq!(unwritable.status.code(), Some(1));
 }
+
+/// A 2×2 quad at y = 0 (st along +x and +z), a camera looking straight down at its centre and a
+/// white dome; `substance` is bound to the quad.
+fn quad_scene(dir: &Path, ash: &str) -> std::path::PathBuf {
+    std::fs::write(dir.join("quad.ash"), ash).unwrap();
+    let usda = r#"#usda 1.0
+(
+    upAxis = "Y"
+)
+def Xform "World"
+{
+    def Camera "Camera"
+    {
+        float focalLength = 200
+        float horizontalAperture = 20
+        float verticalAperture = 20
+        float3 xformOp:translate = (0, 5, 0)
+        float3 xformOp:rotateXYZ = (-90, 0, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateXYZ"]
+    }
+    def DomeLight "Sky"
+    {
+        float inputs:intensity = 1
+    }
+    def Mesh "Quad"
+    {
+        rel material:slotBinding:_000 = </Looks/Q>
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points = [(-1, 0, -1), (1, 0, -1), (1, 0, 1), (-1, 0, 1)]
+        texCoord2f[] primvars:st = [(0, 0), (1, 0), (1, 1), (0, 1)] (
+            interpolation = "vertex"
+        )
+    }
+}
+def Material "Looks"
+{
+    def Material "Q"
+    {
+        def Shader "Surface"
+        {
+            uniform token info:implementationSource = "sourceAsset"
+            uniform asset info:strata:sourceAsset = @quad.ash@
+            uniform token info:strata:sourceAsset:subIdentifier = "q"
+        }
+    }
+}
+"#;
+    let path = dir.join("quad.usda");
+    std::fs::write(&path, usda).unwrap();
+    path
+}
+
+/// The mean of the `N` AOV over the image.
+fn mean_normal(scene: &Path) -> [f32; 3] {
+    let image = render_scene(Some(scene.to_str().unwrap()), BackendKind::Jit, true, LayerMode::Stochastic);
+    let mean = |c: &str| {
+        let v = image.f32_channel(c).unwrap();
+        v.iter().sum::<f32>() / v.len() as f32
+    };
+    [mean("N.X"), mean("N.Y"), mean("N.Z")]
+}
+
+fn assert_close(got: [f32; 3], want: [f32; 3]) {
+    let d = (0..3).map(|k| (got[k] - want[k]).abs()).fold(0.0, f32::max);
+    assert!(d < 2e-3, "got {got:?}, want {want:?}");
+}
+
+#[test]
+fn bump_from_displacement_tilts_the_shading_normal() {
+    // Height 0.5·x: the surface rises along +x, so the normal leans to −x by atan(0.5).
+    let dir = tempfile::tempdir().unwrap();
+    let scene = quad_scene(
+        dir.path(),
+        "shader slope(output float out = 0.0) { out = P[0] * 0.5; }
+         substance q { node h = slope(); node b = bump(height: h.out, scale: 1.0); node d = diffuse();
+                       surface = d.bsdf; displacement = b.out; }",
+    );
+    let k = 1.0 / 1.25f32.sqrt();
+    assert_close(mean_normal(&scene), [-0.5 * k, k, 0.0]);
+    // Without the displacement product the normal is the geometric one.
+    let flat = quad_scene(dir.path(), "substance q { node d = diffuse(); surface = d.bsdf; }");
+    assert_close(mean_normal(&flat), [0.0, 1.0, 0.0]);
+}
+
+#[test]
+fn normal_map_applies_in_the_tangent_frame() {
+    // Tangent-space (0.5, 0, 1) with the tangent along +x (dPdu): world (0.5, 1, 0), normalised.
+    let dir = tempfile::tempdir().unwrap();
+    let scene = quad_scene(
+        dir.path(),
+        "substance q { node m = normal_map(map: color(0.75, 0.5, 1.0)); node d = diffuse();
+                       surface = d.bsdf; normal = m.out; }",
+    );
+    let k = 1.0 / 1.25f32.sqrt();
+    assert_close(mean_normal(&scene), [0.5 * k, k, 0.0]);
+}
