@@ -1,19 +1,22 @@
 //! Prints the `strata bench shade` and `strata bench render` reports:
-//! `cargo run --release --example bench`.
+//! `cargo run --release --example bench [shade|render]` (both when no argument is given).
 
 fn main() {
-    match strata::bench::bench_shade(None, None) {
-        Ok(report) => println!("{report}"),
-        Err(e) => {
-            eprintln!("error: {e}");
-            std::process::exit(1);
-        }
+    let which = std::env::args().nth(1).unwrap_or_default();
+    let mut reports = Vec::new();
+    if which != "render" {
+        reports.push(strata::bench::bench_shade(None, None));
     }
-    match strata::bench::bench_render(None, 16, (64, 64)) {
-        Ok(report) => println!("{report}"),
-        Err(e) => {
-            eprintln!("error: {e}");
-            std::process::exit(1);
+    if which != "shade" {
+        reports.push(strata::bench::bench_render(None, 16, (64, 64)));
+    }
+    for report in reports {
+        match report {
+            Ok(text) => println!("{text}"),
+            Err(e) => {
+                eprintln!("error: {e}");
+                std::process::exit(1);
+            }
         }
     }
 }

@@ -747,9 +747,15 @@ struct RenderRow {
     rmse: [f64; 2],
 }
 
-/// Times both layer modes (interleaved, median of `reps` after a warm-up) on one thread and
-/// measures their error against a weighted reference at `16 × spp`.
-fn measure_scene(label: String, l: &Loaded, spp: u32, res: (usize, usize), reps: usize) -> Result<RenderRow, String> {
+/// Times both layer modes of every scene on one thread, interleaved repetition by repetition
+/// (median of `reps` after a warm-up) so that outside load affects all rows alike, and
+/// measures their error against a weighted reference at `16 × spp` with another seed.
+fn measure_scenes(
+    scenes: &[(String, Loaded)],
+    spp: u32,
+    res: (usize, usize),
+    reps: usize,
+) -> Result<Vec<RenderRow>, String> {
     let base = RenderSettings {
         width: res.0,
         height: res.1,
@@ -760,28 +766,45 @@ fn measure_scene(label: String, l: &Loaded, spp: u32, res: (usize, usize), reps:
         mode: LayerMode::Stochastic,
     };
     let reference = RenderSettings {
-        spp: spp.saturating_mul(16).max(64),
+        spp: reference_spp(spp),
         seed: 0x5eed_0001,
         threads: None,
         mode: LayerMode::Weighted,
         ..base.clone()
     };
-    let (_, reference) = render_rgb(l, &reference)?;
+    let references =
+        scenes.iter().map(|(_, l)| render_rgb(l, &reference).map(|r| r.1)).collect::<Result<Vec<_>, String>>()?;
     let modes = [LayerMode::Stochastic, LayerMode::Weighted];
-    let mut times = [Vec::new(), Vec::new()];
-    let mut errors = [0.0; 2];
+    let mut times = vec![[Vec::new(), Vec::new()]; scenes.len()];
+    let mut errors = vec![[0.0; 2]; scenes.len()];
     for rep in 0..=reps {
-        for (k, &mode) in modes.iter().enumerate() {
-            let settings = RenderSettings { mode, spp: if rep == 0 { 1 } else { spp }, ..base.clone() };
-            let (secs, rgb) = render_rgb(l, &settings)?;
-            if rep > 0 {
-                times[k].push(secs * 1e9 / (res.0 * res.1) as f64 / spp as f64);
-                errors[k] = rmse(&rgb, &reference);
+        for (i, (_, l)) in scenes.iter().enumerate() {
+            for (k, &mode) in modes.iter().enumerate() {
+                let settings = RenderSettings { mode, spp: if rep == 0 { 1 } else { spp }, ..base.clone() };
+                let (secs, rgb) = render_rgb(l, &settings)?;
+                if rep > 0 {
+                    times[i][k].push(secs * 1e9 / (res.0 * res.1) as f64 / spp as f64);
+                    errors[i][k] = rmse(&rgb, &references[i]);
+                }
             }
         }
     }
-    let [s, w] = times;
-    Ok(RenderRow { label, layers: l.max_layers, ns: [median(s), median(w)], rmse: errors })
+    Ok(scenes
+        .iter()
+        .zip(times)
+        .zip(errors)
+        .map(|(((label, l), [s, w]), rmse)| RenderRow {
+            label: label.clone(),
+            layers: l.max_layers,
+            ns: [median(s), median(w)],
+            rmse,
+        })
+        .collect())
+}
+
+/// Samples per pixel of the reference image.
+fn reference_spp(spp: u32) -> u32 {
+    spp.saturating_mul(16).max(64)
 }
 
 /// A directory under the system temp dir, removed on drop.
@@ -806,7 +829,7 @@ impl Drop for TempDir {
 /// reference, stochastic vs weighted layer evaluation. Without a scene, a generated sphere
 /// with 1, 2, 4, 8 and 16 noise-masked layers. Returns the printed report.
 pub fn bench_render(scene: Option<&Path>, spp: u32, res: (usize, usize)) -> Result<String, String> {
-    render_report(scene, spp, res, &RENDER_LAYERS, 3)
+    render_report(scene, spp, res, &RENDER_LAYERS, 5)
 }
 
 fn render_report(
@@ -822,12 +845,9 @@ fn render_report(
             res.0, res.1
         ));
     }
-    let mut rows = Vec::new();
+    let mut scenes = Vec::new();
     match scene {
-        Some(path) => {
-            let l = load_scene(path)?;
-            rows.push(measure_scene(path.display().to_string(), &l, spp, res, reps)?);
-        }
+        Some(path) => scenes.push((path.display().to_string(), load_scene(path)?)),
         None => {
             let dir = TempDir::new()?;
             for &n in layer_counts {
@@ -837,18 +857,18 @@ fn render_report(
                 std::fs::write(&ash, layered_source(n)).map_err(|e| format!("cannot write {}: {e}", ash.display()))?;
                 std::fs::write(&usda, layered_scene(n, &file))
                     .map_err(|e| format!("cannot write {}: {e}", usda.display()))?;
-                let l = load_scene(&usda)?;
-                rows.push(measure_scene(format!("{n} layer{}", if n == 1 { "" } else { "s" }), &l, spp, res, reps)?);
+                scenes.push((format!("{n} layer{}", if n == 1 { "" } else { "s" }), load_scene(&usda)?));
             }
         }
     }
+    let rows = measure_scenes(&scenes, spp, res, reps)?;
     let mut out = String::new();
     writeln!(
         out,
         "bench render: {}x{} at {spp} spp, JIT, 1 thread timed (median of {reps}); reference: weighted at {} spp, other seed",
         res.0,
         res.1,
-        spp.saturating_mul(16).max(64)
+        reference_spp(spp)
     )
     .unwrap();
     writeln!(
