@@ -11,10 +11,12 @@
 //! - [`render`]: the path tracer (geometry, BVH, lights, integrator, EXR output).
 //! - [`runtime`]: noise, patterns and math semantics shared by every backend.
 //! - [`scenes`]: the embedded default scene.
+//! - [`bench`]: the measurements behind `strata bench shade` and `strata bench render`.
 //! - [`cli`]: the `strata` subcommands.
 
 pub mod abi;
 pub mod backend;
+pub mod bench;
 pub mod cli;
 pub mod compose;
 pub mod diag;

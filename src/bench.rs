@@ -1,0 +1,973 @@
+//! The measurements behind `strata bench shade` and `strata bench render`.
+//!
+//! Timings use [`Instant`] with a warm-up, several repetitions and the median; everything a
+//! table compares is measured in the same run, with the contenders interleaved per repetition
+//! so that load from other processes affects them alike.
+//!
+//! - [`bench_shade`]: per-shading-point cost of a composed material, hand-written Rust vs JIT vs
+//!   interpreter, and compile time against graph size.
+//! - [`bench_render`]: time per sample and error against a high-spp reference for 1–16 layers,
+//!   stochastic vs weighted layer evaluation.
+
+use crate::abi::{Closure, ClosureKind, Globals, LayerInfo, MaterialCode, MaterialInfo, ShaderError};
+use crate::backend::{self, BackendKind, Compiler};
+use crate::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
+use crate::diag::{Diagnostics, SourceMap, Span};
+use crate::front::library::Library;
+use crate::ir::lower;
+use crate::ir::wired::{self, PassOptions};
+use crate::render::{LayerMode, RenderSettings, Scene};
+use crate::runtime::{math, noise};
+use std::fmt::Write as _;
+use std::hint::black_box;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// The built-in benchmark material: three substances, composed bottom to top in this order.
+pub const BENCH_SOURCE: &str = r#"// strata's built-in shading benchmark: three layers.
+
+// A soft threshold: 0 below `edge`, 1 above `edge + softness`.
+shader threshold(float value = 0.0, float edge = 0.5, float softness = 0.1, output float out) {
+    out = smoothstep(edge, edge + max(softness, 1e-4), value);
+}
+
+// Bottom: a glossy base, always opaque.
+substance bench_glossy {
+    node coat = glossy(albedo: color(0.55, 0.5, 0.45), roughness: 0.35);
+    surface = coat.bsdf;
+}
+
+// Middle: dirt masked by thresholded fbm, its colour a noise-driven mix.
+substance bench_dirt {
+    node grime = fbm(scale: 4.0, octaves: 4);
+    node amount = threshold(value: grime.out, edge: 0.5, softness: 0.15);
+    node opacity = mask(opacity: amount.out);
+    node tint = noise(scale: 8.0);
+    node colour = mix(a: color(0.25, 0.18, 0.1), b: color(0.5, 0.42, 0.3), t: tint.out);
+    node base = diffuse(albedo: colour.out);
+    surface = base.bsdf;
+    mask = opacity.out;
+}
+
+// Top: metal flakes around the feature points of cellular noise.
+substance bench_metal {
+    node cells = cellular(scale: 6.0);
+    node edge = threshold(value: cells.out, edge: 0.25, softness: 0.1);
+    node flakes = math(a: edge.out, op: "invert");
+    node opacity = mask(opacity: flakes.out);
+    node conductor = metal(reflectivity: color(0.95, 0.64, 0.54), edge_tint: color(1.0, 0.9, 0.8), roughness: 0.25);
+    surface = conductor.bsdf;
+    mask = opacity.out;
+}
+"#;
+
+/// The substances of [`BENCH_SOURCE`], bottom to top.
+const BENCH_LAYERS: [&str; 3] = ["bench_glossy", "bench_dirt", "bench_metal"];
+
+/// Shading points of `strata bench shade`.
+const SHADE_POINTS: usize = 1 << 16;
+
+/// Graph sizes of the compile-time sweep.
+const GRAPH_SIZES: [usize; 5] = [10, 50, 100, 1000, 10000];
+
+// ---- The hand-written benchmark material ------------------------------------------------------
+
+/// [`BENCH_SOURCE`] written by hand in Rust, instance constants folded: what the JIT should match.
+pub struct HandMaterial {
+    info: MaterialInfo,
+}
+
+impl Default for HandMaterial {
+    fn default() -> Self {
+        let layer =
+            |slot: &str| LayerInfo { slot: slot.into(), has_surface: true, displacement: None, has_normal: false };
+        HandMaterial {
+            info: MaterialInfo {
+                layers: vec![layer("000"), layer("010"), layer("020")],
+                channels: Vec::new(),
+                channel_floats: 0,
+            },
+        }
+    }
+}
+
+/// `threshold(value, edge, softness)` with `edge + max(softness, 1e-4)` folded to `edge1`.
+#[inline(always)]
+fn threshold(value: f32, edge: f32, edge1: f32) -> f32 {
+    math::smoothstep(edge, edge1, value)
+}
+
+/// The `mask` node followed by the clamp of the `masks` entry.
+#[inline(always)]
+fn mask_out(opacity: f32) -> f32 {
+    let m = math::clamp(opacity, 0.0, 1.0);
+    math::min(math::max(m, 0.0), 1.0)
+}
+
+/// `fbm(scale: 4, octaves: 4)` with lacunarity 2 and gain 0.5: amplitudes and their total
+/// (0.9375) folded.
+#[inline(always)]
+fn fbm4(p: [f32; 3]) -> f32 {
+    let mut q = [p[0] * 4.0, p[1] * 4.0, p[2] * 4.0];
+    let mut sum = 0.0f32;
+    for amplitude in [0.5f32, 0.25, 0.125, 0.0625] {
+        sum += amplitude * noise::noise3(q[0], q[1], q[2]);
+        q = [q[0] * 2.0, q[1] * 2.0, q[2] * 2.0];
+    }
+    sum / 0.9375
+}
+
+fn closure(kind: ClosureKind, params: &[f32]) -> Closure {
+    let mut c = Closure { kind: kind as u32, params: [0.0; 8] };
+    c.params[..params.len()].copy_from_slice(params);
+    c
+}
+
+impl MaterialCode for HandMaterial {
+    fn info(&self) -> &MaterialInfo {
+        &self.info
+    }
+
+    fn masks(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError> {
+        out[0] = 1.0;
+        const DIRT_EDGE1: f32 = 0.5 + 0.15;
+        out[1] = mask_out(threshold(fbm4(g.p), 0.5, DIRT_EDGE1));
+        const FLAKE_EDGE1: f32 = 0.25 + 0.1;
+        let [x, y, z] = g.p;
+        let cells = noise::cellular3(x * 6.0, y * 6.0, z * 6.0);
+        out[2] = mask_out(1.0 - threshold(cells, 0.25, FLAKE_EDGE1));
+        Ok(())
+    }
+
+    fn surface(&self, g: &Globals, layer: usize, out: &mut Closure) -> Result<(), ShaderError> {
+        *out = match layer {
+            0 => closure(ClosureKind::Glossy, &[0.55, 0.5, 0.45, 1.0, 1.0, 1.0, 0.35, 1.5]),
+            1 => {
+                let [x, y, z] = g.p;
+                let t = math::clamp(noise::noise3(x * 8.0, y * 8.0, z * 8.0), 0.0, 1.0);
+                let (a, b) = ([0.25f32, 0.18, 0.1], [0.5f32, 0.42, 0.3]);
+                let lane = |k: usize| math::clamp(a[k] + (b[k] - a[k]) * t, 0.0, 1.0);
+                closure(ClosureKind::Diffuse, &[lane(0), lane(1), lane(2)])
+            }
+            2 => closure(ClosureKind::Metal, &[0.95, 0.64, 0.54, 1.0, 0.9, 0.8, 0.25]),
+            _ => Closure::default(),
+        };
+        Ok(())
+    }
+
+    fn displacement(&self, _g: &Globals, out: &mut [f32]) -> Result<(), ShaderError> {
+        out.fill(0.0);
+        Ok(())
+    }
+
+    fn normal(&self, g: &Globals, _layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError> {
+        *out = g.n;
+        Ok(())
+    }
+
+    fn channels(&self, _g: &Globals, _layer: usize, out: &mut [f32]) -> Result<(), ShaderError> {
+        out.fill(0.0);
+        Ok(())
+    }
+}
+
+// ---- Helpers ----------------------------------------------------------------------------------
+
+/// SplitMix64: a small deterministic generator for benchmark inputs.
+struct SplitMix(u64);
+
+impl SplitMix {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    fn unit(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 * (1.0 / 16_777_216.0)
+    }
+}
+
+/// `n` pseudo-random shading points: `P` in [-2, 2]³, unit `N`, `u, v` in [0, 1].
+pub fn sample_points(n: usize, seed: u64) -> Vec<Globals> {
+    let mut rng = SplitMix(seed);
+    (0..n)
+        .map(|_| {
+            let p = [(); 3].map(|_| rng.unit() * 4.0 - 2.0);
+            let n = loop {
+                let v = [(); 3].map(|_| rng.unit() * 2.0 - 1.0);
+                let l2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+                if l2 > 1e-4 && l2 <= 1.0 {
+                    let l = l2.sqrt();
+                    break v.map(|c| c / l);
+                }
+            };
+            let t = if n[0].abs() < 0.9 { [0.0, -n[2], n[1]] } else { [-n[2], 0.0, n[0]] };
+            Globals {
+                p,
+                n,
+                ng: n,
+                i: n.map(|c| -c),
+                dpdu: t,
+                dpdv: [n[1] * t[2] - n[2] * t[1], n[2] * t[0] - n[0] * t[2], n[0] * t[1] - n[1] * t[0]],
+                u: rng.unit(),
+                v: rng.unit(),
+            }
+        })
+        .collect()
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        0.0
+    } else if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+fn ms_since(start: Instant) -> f64 {
+    start.elapsed().as_secs_f64() * 1e3
+}
+
+fn diag_error(what: &str, diags: &Diagnostics, sources: &SourceMap) -> String {
+    format!("{what}:\n{}", diags.render(sources))
+}
+
+/// Masks plus every surface: what the renderer computes per path vertex in weighted mode.
+/// Returns a checksum so nothing is optimised away.
+fn shade_weighted(m: &dyn MaterialCode, g: &Globals, surfaces: &[usize], masks: &mut [f32]) -> f32 {
+    let mut c = Closure::default();
+    let _ = m.masks(g, masks);
+    let mut acc: f32 = masks.iter().sum();
+    for &l in surfaces {
+        let _ = m.surface(g, l, &mut c);
+        acc += c.params[0];
+    }
+    acc
+}
+
+/// Masks plus the surface of one layer picked with the layer weights (DESIGN.md rule 5).
+fn shade_stochastic(m: &dyn MaterialCode, g: &Globals, xi: f32, masks: &mut [f32]) -> f32 {
+    let _ = m.masks(g, masks);
+    let mut xi = xi;
+    let mut remaining = 1.0f32;
+    for l in (0..masks.len()).rev() {
+        let w = masks[l] * remaining;
+        if xi < w {
+            let mut c = Closure::default();
+            let _ = m.surface(g, l, &mut c);
+            return c.params[0];
+        }
+        xi -= w;
+        remaining *= 1.0 - masks[l];
+    }
+    0.0
+}
+
+/// Checks that two materials agree on masks and closures at `points` within `tol`.
+pub fn compare_materials(
+    a: &dyn MaterialCode,
+    b: &dyn MaterialCode,
+    points: &[Globals],
+    tol: f32,
+) -> Result<(), String> {
+    let n = a.info().layers.len();
+    if b.info().layers.len() != n {
+        return Err(format!("layer counts differ: {n} vs {}", b.info().layers.len()));
+    }
+    let (mut ma, mut mb) = (vec![0.0; n], vec![0.0; n]);
+    for (k, g) in points.iter().enumerate() {
+        a.masks(g, &mut ma).map_err(|e| e.to_string())?;
+        b.masks(g, &mut mb).map_err(|e| e.to_string())?;
+        for l in 0..n {
+            if (ma[l] - mb[l]).abs() > tol || ma[l].is_nan() != mb[l].is_nan() {
+                return Err(format!("point {k} (P = {:?}): mask {l}: {} vs {}", g.p, ma[l], mb[l]));
+            }
+            let (mut ca, mut cb) = (Closure::default(), Closure::default());
+            a.surface(g, l, &mut ca).map_err(|e| e.to_string())?;
+            b.surface(g, l, &mut cb).map_err(|e| e.to_string())?;
+            let close = ca.params.iter().zip(&cb.params).all(|(x, y)| (x - y).abs() <= tol);
+            if ca.kind != cb.kind || !close {
+                return Err(format!("point {k} (P = {:?}): surface {l}: {ca:?} vs {cb:?}", g.p));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Loads [`BENCH_SOURCE`] and composes its three substances bottom to top.
+pub fn bench_material() -> Result<(Library, ComposedMaterial), String> {
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let (lib, _) = Library::from_text("bench.ash", BENCH_SOURCE, &mut sources, &mut diags);
+    if diags.has_errors() {
+        return Err(diag_error("the benchmark material does not compile", &diags, &sources));
+    }
+    let names: Vec<&str> = BENCH_LAYERS.to_vec();
+    let material = single_layer_stack(&lib, &names)?;
+    Ok((lib, material))
+}
+
+/// Composes the named substances as layers `000`, `010`, … bottom to top, without overrides.
+fn single_layer_stack(lib: &Library, names: &[&str]) -> Result<ComposedMaterial, String> {
+    let layers = names
+        .iter()
+        .enumerate()
+        .map(|(i, name)| {
+            let graph = lib.graph_by_name(name).ok_or_else(|| format!("no substance `{name}`"))?;
+            Ok(ComposedLayer {
+                slot: Slot::parse(&format!("{:03}", i * 10))?,
+                substance: MaterialRef {
+                    path: format!("/Looks/{name}"),
+                    graph,
+                    values: Vec::new(),
+                    span: Span::default(),
+                },
+                overrides: Vec::new(),
+            })
+        })
+        .collect::<Result<Vec<_>, String>>()?;
+    Ok(ComposedMaterial { layers })
+}
+
+/// Wires, optimises and lowers a composed material.
+fn lower_material(lib: &Library, material: &ComposedMaterial) -> Result<(crate::ir::ssa::Module, usize), String> {
+    let mut diags = Diagnostics::new();
+    let wired = wired::build(lib, material, PassOptions::default(), &mut diags);
+    let module = lower::lower(lib, &wired, &mut diags);
+    if diags.has_errors() {
+        return Err(diag_error("the material does not lower", &diags, &SourceMap::new()));
+    }
+    let nodes = wired.nodes.len();
+    Ok((module, nodes))
+}
+
+// ---- bench shade ------------------------------------------------------------------------------
+
+/// What one `bench shade` run measures (the tests use tiny values).
+#[derive(Clone, Debug)]
+struct ShadeOptions {
+    points: usize,
+    reps: usize,
+    sizes: Vec<usize>,
+    compile_reps: usize,
+}
+
+/// `strata bench shade [SCENE --prim PATH]`: per-shading-point cost of a composed material,
+/// hand-written Rust (built-in material only) vs JIT vs interpreter, weighted and stochastic,
+/// then compile time against graph size. Returns the printed report.
+pub fn bench_shade(scene: Option<&Path>, prim: Option<&str>) -> Result<String, String> {
+    let options = ShadeOptions { points: SHADE_POINTS, reps: 7, sizes: GRAPH_SIZES.to_vec(), compile_reps: 9 };
+    shade_report(scene, prim, &options)
+}
+
+fn shade_report(scene: Option<&Path>, prim: Option<&str>, o: &ShadeOptions) -> Result<String, String> {
+    let mut out = String::new();
+    let (lib, material, label) = match scene {
+        None => {
+            let (lib, material) = bench_material()?;
+            (lib, material, "built-in benchmark material (3 layers: glossy, fbm-masked dirt, cellular metal)".into())
+        }
+        Some(path) => {
+            let mut sources = SourceMap::new();
+            let mut diags = Diagnostics::new();
+            let composition = crate::cli::compose_file(Some(path), &mut sources, &mut diags);
+            let composition = match composition {
+                Some(c) if !diags.has_errors() => c,
+                _ => return Err(diag_error(&format!("cannot compose {}", path.display()), &diags, &sources)),
+            };
+            let (prim, material) = match prim {
+                Some(p) => {
+                    let m = composition
+                        .material_of(p)
+                        .ok_or_else(|| format!("`{p}` is not a renderable prim of {}", path.display()))?;
+                    (p.to_string(), m.clone())
+                }
+                None => {
+                    // The prim with the most layers.
+                    let (i, _) = composition
+                        .stacks
+                        .iter()
+                        .enumerate()
+                        .max_by_key(|(i, _)| composition.materials[composition.prim_material[*i]].layers.len())
+                        .ok_or_else(|| format!("{} has no renderable prim", path.display()))?;
+                    let m = composition.materials[composition.prim_material[i]].clone();
+                    (composition.stacks[i].prim.clone(), m)
+                }
+            };
+            let label = format!("{} {prim} ({} layers)", path.display(), material.layers.len());
+            (composition.library, material, label)
+        }
+    };
+
+    let (module, nodes) = lower_material(&lib, &material)?;
+    let insts = module.inst_count();
+    let jit = backend::compile_module(module.clone(), BackendKind::Jit)?;
+    let interp = backend::compile_module(module, BackendKind::Interp)?;
+    let hand: Option<Arc<dyn MaterialCode>> = scene.is_none().then(|| Arc::new(HandMaterial::default()) as _);
+
+    let points = sample_points(o.points, 0x5eed);
+    compare_materials(jit.as_ref(), interp.as_ref(), &points, 1e-5)
+        .map_err(|e| format!("JIT and interpreter disagree: {e}"))?;
+    if let Some(hand) = &hand {
+        compare_materials(hand.as_ref(), jit.as_ref(), &points, 1e-5)
+            .map_err(|e| format!("hand-written Rust and JIT disagree: {e}"))?;
+    }
+
+    let nlayers = jit.info().layers.len();
+    let surfaces: Vec<usize> = (0..nlayers).filter(|&l| jit.info().layers[l].has_surface).collect();
+    let mut rng = SplitMix(0xfeed);
+    let xis: Vec<f32> = (0..points.len()).map(|_| rng.unit()).collect();
+
+    // Contenders in table order; measured interleaved, repetition by repetition.
+    let mut contenders: Vec<(&str, &dyn MaterialCode)> = Vec::new();
+    if let Some(hand) = &hand {
+        contenders.push(("hand Rust", hand.as_ref()));
+    }
+    contenders.push(("JIT", jit.as_ref()));
+    contenders.push(("interpreter", interp.as_ref()));
+    let mut weighted = vec![Vec::new(); contenders.len()];
+    let mut stochastic = vec![Vec::new(); contenders.len()];
+    let mut masks = vec![0.0f32; nlayers];
+    let mut checksum = 0.0f32;
+    for rep in 0..=o.reps {
+        for (k, (_, m)) in contenders.iter().enumerate() {
+            let start = Instant::now();
+            for g in &points {
+                checksum += shade_weighted(*m, black_box(g), &surfaces, &mut masks);
+            }
+            let w = start.elapsed().as_secs_f64() * 1e9 / points.len() as f64;
+            let start = Instant::now();
+            for (g, &xi) in points.iter().zip(&xis) {
+                checksum += shade_stochastic(*m, black_box(g), xi, &mut masks);
+            }
+            let s = start.elapsed().as_secs_f64() * 1e9 / points.len() as f64;
+            // Repetition 0 is the warm-up.
+            if rep > 0 {
+                weighted[k].push(w);
+                stochastic[k].push(s);
+            }
+        }
+    }
+    black_box(checksum);
+    let weighted: Vec<f64> = weighted.into_iter().map(median).collect();
+    let stochastic: Vec<f64> = stochastic.into_iter().map(median).collect();
+
+    writeln!(out, "bench shade: {label}").unwrap();
+    writeln!(
+        out,
+        "  {} wired nodes, {insts} lowered instructions, {} layers with a surface; {} points, median of {} reps",
+        nodes,
+        surfaces.len(),
+        points.len(),
+        o.reps
+    )
+    .unwrap();
+    if hand.is_some() {
+        writeln!(out, "  hand-written Rust = JIT = interpreter on every point (masks and closures within 1e-5)")
+            .unwrap();
+    } else {
+        writeln!(out, "  JIT = interpreter on every point (masks and closures within 1e-5)").unwrap();
+    }
+    writeln!(out).unwrap();
+    writeln!(out, "  {:<14} {:>22} {:>24}", "backend", "weighted ns/point", "stochastic ns/point").unwrap();
+    writeln!(out, "  {:<14} {:>22} {:>24}", "", "(masks + all surfaces)", "(masks + one surface)").unwrap();
+    for (k, (name, _)) in contenders.iter().enumerate() {
+        writeln!(out, "  {:<14} {:>22.1} {:>24.1}", name, weighted[k], stochastic[k]).unwrap();
+    }
+    let j = contenders.iter().position(|(n, _)| *n == "JIT").unwrap_or(0);
+    let i = contenders.len() - 1;
+    writeln!(out).unwrap();
+    if hand.is_some() {
+        writeln!(
+            out,
+            "  JIT / hand Rust:    weighted {:.2}x, stochastic {:.2}x   (target 1.0-1.1x)",
+            weighted[j] / weighted[0],
+            stochastic[j] / stochastic[0]
+        )
+        .unwrap();
+    }
+    writeln!(
+        out,
+        "  interpreter / JIT:  weighted {:.1}x, stochastic {:.1}x   (target >= 20x)",
+        weighted[i] / weighted[j],
+        stochastic[i] / stochastic[j]
+    )
+    .unwrap();
+
+    writeln!(out).unwrap();
+    out += &compile_sweep(&o.sizes, o.compile_reps)?;
+    Ok(out)
+}
+
+/// A substance whose pattern nodes form a binary tree `n` nodes large, read by its mask: noise
+/// leaves (reading `P`, so nothing folds) combined by `math` and `mix_float` nodes.
+pub fn generated_substance(n: usize) -> String {
+    let mut s = String::from("substance generated {\n");
+    for i in 0..n.max(1) {
+        let (a, b) = (2 * i + 1, 2 * i + 2);
+        let node = if a >= n {
+            format!("noise(scale: {:.3})", 1.0 + i as f64 * 0.013)
+        } else if b >= n {
+            format!("math(a: n{a}.out, op: \"sin\")")
+        } else {
+            match i % 3 {
+                0 => format!("math(a: n{a}.out, b: n{b}.out, op: \"add\")"),
+                1 => format!("math(a: n{a}.out, b: n{b}.out, op: \"mul\")"),
+                _ => format!("mix_float(a: n{a}.out, b: n{b}.out, t: 0.3)"),
+            }
+        };
+        writeln!(s, "    node n{i} = {node};").unwrap();
+    }
+    s += "    node opacity = mask(opacity: n0.out);\n";
+    s += "    node base = diffuse(albedo: color(0.5, 0.5, 0.5));\n";
+    s += "    surface = base.bsdf;\n    mask = opacity.out;\n}\n";
+    s
+}
+
+/// Compile time against graph size: parse + check, compose (wire + fold + lower), JIT codegen.
+fn compile_sweep(sizes: &[usize], reps: usize) -> Result<String, String> {
+    let mut out = String::new();
+    writeln!(out, "compile time vs graph size (tree of noise/math/mix_float nodes reading P; median of runs)").unwrap();
+    writeln!(
+        out,
+        "  {:>6} {:>6} {:>7} {:>10} {:>11} {:>11} {:>11} {:>10} {:>10}",
+        "nodes", "runs", "insts", "parse ms", "compose ms", "codegen ms", "total ms", "compose", "codegen"
+    )
+    .unwrap();
+    writeln!(
+        out,
+        "  {:>6} {:>6} {:>7} {:>10} {:>11} {:>11} {:>11} {:>10} {:>10}",
+        "", "", "", "", "", "", "(c+j)", "us/node", "us/node"
+    )
+    .unwrap();
+    let mut fifty = None;
+    for &n in sizes {
+        let source = generated_substance(n);
+        let runs = if n >= 10_000 {
+            1
+        } else if n >= 1000 {
+            reps.clamp(1, 3)
+        } else {
+            reps.max(1)
+        };
+        let (mut parse, mut compose, mut codegen, mut total) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let mut insts = 0;
+        for _ in 0..runs {
+            let start = Instant::now();
+            let mut sources = SourceMap::new();
+            let mut diags = Diagnostics::new();
+            let (lib, _) = Library::from_text("generated.ash", &source, &mut sources, &mut diags);
+            if diags.has_errors() {
+                return Err(diag_error("the generated substance does not compile", &diags, &sources));
+            }
+            parse.push(ms_since(start));
+            let material = single_layer_stack(&lib, &["generated"])?;
+            let start = Instant::now();
+            let (module, _) = lower_material(&lib, &material)?;
+            let c = ms_since(start);
+            insts = module.inst_count();
+            let start = Instant::now();
+            let code = backend::jit::compile(&module)?;
+            let j = ms_since(start);
+            drop(black_box(code));
+            compose.push(c);
+            codegen.push(j);
+            total.push(c + j);
+        }
+        let (p, c, j, t) = (median(parse), median(compose), median(codegen), median(total));
+        if n == 50 {
+            fifty = Some(t);
+        }
+        writeln!(
+            out,
+            "  {n:>6} {runs:>6} {insts:>7} {p:>10.3} {c:>11.3} {j:>11.3} {t:>11.3} {:>10.2} {:>10.2}",
+            c * 1e3 / n as f64,
+            j * 1e3 / n as f64
+        )
+        .unwrap();
+    }
+    if let Some(t) = fifty {
+        writeln!(out, "  compose + JIT of the 50-node material: {t:.3} ms median (target <= 1 ms)").unwrap();
+    }
+    Ok(out)
+}
+
+// ---- bench render -----------------------------------------------------------------------------
+
+/// Layer counts of the `bench render` sweep.
+const RENDER_LAYERS: [usize; 5] = [1, 2, 4, 8, 16];
+
+/// A `.ash` file with `n` substances `layer_0` … : each a noise-thresholded mask (none on the
+/// bottom layer, which is opaque) over a diffuse or glossy surface of its own colour.
+pub fn layered_source(n: usize) -> String {
+    let mut s = String::from(
+        "shader threshold(float value = 0.0, float edge = 0.5, float softness = 0.1, output float out) {\n    \
+         out = smoothstep(edge, edge + max(softness, 1e-4), value);\n}\n\n",
+    );
+    for k in 0..n {
+        // Colours around the hue circle.
+        let h = k as f32 / n.max(1) as f32 * 6.0;
+        let c = |o: f32| 0.15 + 0.7 * (((h + o) % 6.0 - 3.0).abs() - 1.0).clamp(0.0, 1.0);
+        let (r, g, b) = (c(0.0), c(4.0), c(2.0));
+        writeln!(s, "substance layer_{k} {{").unwrap();
+        if k % 2 == 0 {
+            writeln!(s, "    node s = diffuse(albedo: color({r:.3}, {g:.3}, {b:.3}));").unwrap();
+        } else {
+            writeln!(s, "    node s = glossy(albedo: color({r:.3}, {g:.3}, {b:.3}), roughness: 0.3);").unwrap();
+        }
+        s += "    surface = s.bsdf;\n";
+        if k > 0 {
+            writeln!(s, "    node n = noise(scale: {:.3});", 2.0 + 1.37 * k as f32).unwrap();
+            s += "    node t = threshold(value: n.out, edge: 0.5, softness: 0.1);\n";
+            s += "    node m = mask(opacity: t.out);\n    mask = m.out;\n";
+        }
+        s += "}\n\n";
+    }
+    s
+}
+
+/// A scene: a camera, a dome and a distant light, and a unit sphere with `n` slots bound to
+/// the substances of [`layered_source`] in `file`.
+pub fn layered_scene(n: usize, file: &str) -> String {
+    let mut s = String::from(
+        r#"#usda 1.0
+def Xform "World"
+{
+    def Camera "Camera"
+    {
+        float focalLength = 50
+        float horizontalAperture = 36
+        float verticalAperture = 36
+        float3 xformOp:translate = (0, 0, 4)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+    def DomeLight "Sky"
+    {
+        float inputs:intensity = 0.8
+    }
+    def DistantLight "Sun"
+    {
+        float inputs:intensity = 2
+        float inputs:angle = 3
+        float3 xformOp:rotateXYZ = (-40, 30, 0)
+        uniform token[] xformOpOrder = ["xformOp:rotateXYZ"]
+    }
+    def Sphere "Ball"
+    {
+        double radius = 1
+"#,
+    );
+    for k in 0..n {
+        writeln!(s, "        rel material:slotBinding:_{:03} = </Looks/L{k}>", k * 10).unwrap();
+    }
+    s += "    }\n}\n\ndef Scope \"Looks\"\n{\n";
+    for k in 0..n {
+        writeln!(
+            s,
+            "    def Material \"L{k}\"\n    {{\n        def Shader \"Surface\"\n        {{\n            \
+             uniform token info:implementationSource = \"sourceAsset\"\n            \
+             uniform asset info:strata:sourceAsset = @{file}@\n            \
+             uniform token info:strata:sourceAsset:subIdentifier = \"layer_{k}\"\n        }}\n    }}"
+        )
+        .unwrap();
+    }
+    s += "}\n";
+    s
+}
+
+/// A scene loaded, composed, compiled with the JIT and ready to render.
+struct Loaded {
+    scene: Scene,
+    materials: Vec<Arc<dyn MaterialCode>>,
+    max_layers: usize,
+}
+
+fn load_scene(path: &Path) -> Result<Loaded, String> {
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let fail = |diags: &Diagnostics, sources: &SourceMap| {
+        diag_error(&format!("cannot load {}", path.display()), diags, sources)
+    };
+    let Some(stage) = crate::cli::open_scene(Some(path), &mut sources, &mut diags) else {
+        return Err(fail(&diags, &sources));
+    };
+    let composition = crate::compose::scene::compose_stage(&stage, &mut sources, &mut diags);
+    if diags.has_errors() {
+        return Err(fail(&diags, &sources));
+    }
+    let mut compiler = Compiler::new(BackendKind::Jit, PassOptions::default());
+    let mut materials = Vec::new();
+    for m in &composition.materials {
+        match compiler.compile(&composition.library, m, &mut diags) {
+            Some(code) => materials.push(code),
+            None => return Err(fail(&diags, &sources)),
+        }
+    }
+    let max_layers = composition.materials.iter().map(|m| m.layers.len()).max().unwrap_or(0);
+    let lookup = |prim: &str| {
+        let i = composition.stacks.iter().position(|s| s.prim == prim)?;
+        composition.prim_material.get(i).copied()
+    };
+    let scene = Scene::from_stage(&stage, &lookup, &mut diags).ok_or_else(|| fail(&diags, &sources))?;
+    Ok(Loaded { scene, materials, max_layers })
+}
+
+/// Renders and returns (seconds, RGB pixels).
+fn render_rgb(l: &Loaded, settings: &RenderSettings) -> Result<(f64, Vec<[f32; 3]>), String> {
+    let materials: Vec<&dyn MaterialCode> = l.materials.iter().map(|m| m.as_ref()).collect();
+    let start = Instant::now();
+    let (image, _) = crate::render::render(&l.scene, &materials, settings, None).map_err(|e| e.to_string())?;
+    let secs = start.elapsed().as_secs_f64();
+    let channel = |name: &str| image.f32_channel(name).map(<[f32]>::to_vec).ok_or_else(|| format!("no {name} channel"));
+    let (r, g, b) = (channel("R")?, channel("G")?, channel("B")?);
+    Ok((secs, (0..r.len()).map(|i| [r[i], g[i], b[i]]).collect()))
+}
+
+fn rmse(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
+    let sum: f64 = a.iter().zip(b).map(|(x, y)| (0..3).map(|k| f64::from(x[k] - y[k]).powi(2)).sum::<f64>()).sum();
+    (sum / (3 * a.len().max(1)) as f64).sqrt()
+}
+
+/// One measured row of `bench render`.
+struct RenderRow {
+    label: String,
+    layers: usize,
+    /// ns per camera sample (single thread), stochastic and weighted.
+    ns: [f64; 2],
+    /// RMSE against the reference at equal spp, stochastic and weighted.
+    rmse: [f64; 2],
+}
+
+/// Times both layer modes of every scene on one thread, interleaved repetition by repetition
+/// (median of `reps` after a warm-up) so that outside load affects all rows alike, and
+/// measures their error against a weighted reference at `16 × spp` with another seed.
+fn measure_scenes(
+    scenes: &[(String, Loaded)],
+    spp: u32,
+    res: (usize, usize),
+    reps: usize,
+) -> Result<Vec<RenderRow>, String> {
+    let base = RenderSettings {
+        width: res.0,
+        height: res.1,
+        spp,
+        seed: 1,
+        threads: Some(1),
+        max_depth: 6,
+        mode: LayerMode::Stochastic,
+    };
+    let reference = RenderSettings {
+        spp: reference_spp(spp),
+        seed: 0x5eed_0001,
+        threads: None,
+        mode: LayerMode::Weighted,
+        ..base.clone()
+    };
+    let references =
+        scenes.iter().map(|(_, l)| render_rgb(l, &reference).map(|r| r.1)).collect::<Result<Vec<_>, String>>()?;
+    let modes = [LayerMode::Stochastic, LayerMode::Weighted];
+    let mut times = vec![[Vec::new(), Vec::new()]; scenes.len()];
+    let mut errors = vec![[0.0; 2]; scenes.len()];
+    for rep in 0..=reps {
+        for (i, (_, l)) in scenes.iter().enumerate() {
+            for (k, &mode) in modes.iter().enumerate() {
+                let settings = RenderSettings { mode, spp: if rep == 0 { 1 } else { spp }, ..base.clone() };
+                let (secs, rgb) = render_rgb(l, &settings)?;
+                if rep > 0 {
+                    times[i][k].push(secs * 1e9 / (res.0 * res.1) as f64 / spp as f64);
+                    errors[i][k] = rmse(&rgb, &references[i]);
+                }
+            }
+        }
+    }
+    Ok(scenes
+        .iter()
+        .zip(times)
+        .zip(errors)
+        .map(|(((label, l), [s, w]), rmse)| RenderRow {
+            label: label.clone(),
+            layers: l.max_layers,
+            ns: [median(s), median(w)],
+            rmse,
+        })
+        .collect())
+}
+
+/// Samples per pixel of the reference image.
+fn reference_spp(spp: u32) -> u32 {
+    spp.saturating_mul(16).max(64)
+}
+
+/// A directory under the system temp dir, removed on drop.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new() -> Result<TempDir, String> {
+        let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+        let dir = std::env::temp_dir().join(format!("strata-bench-{}-{nanos}", std::process::id()));
+        std::fs::create_dir_all(&dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+        Ok(TempDir(dir))
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// `strata bench render [SCENE]`: time per camera sample and RMSE against a high-spp weighted
+/// reference, stochastic vs weighted layer evaluation. Without a scene, a generated sphere
+/// with 1, 2, 4, 8 and 16 noise-masked layers. Returns the printed report.
+pub fn bench_render(scene: Option<&Path>, spp: u32, res: (usize, usize)) -> Result<String, String> {
+    render_report(scene, spp, res, &RENDER_LAYERS, 5)
+}
+
+fn render_report(
+    scene: Option<&Path>,
+    spp: u32,
+    res: (usize, usize),
+    layer_counts: &[usize],
+    reps: usize,
+) -> Result<String, String> {
+    if spp == 0 || res.0 == 0 || res.1 == 0 {
+        return Err(format!(
+            "bench render needs spp > 0 and a non-empty resolution, got {spp} spp at {}x{}",
+            res.0, res.1
+        ));
+    }
+    let mut scenes = Vec::new();
+    match scene {
+        Some(path) => scenes.push((path.display().to_string(), load_scene(path)?)),
+        None => {
+            let dir = TempDir::new()?;
+            for &n in layer_counts {
+                let ash = dir.0.join(format!("layers{n}.ash"));
+                let usda = dir.0.join(format!("layers{n}.usda"));
+                let file = ash.file_name().and_then(|f| f.to_str()).unwrap_or_default().to_string();
+                std::fs::write(&ash, layered_source(n)).map_err(|e| format!("cannot write {}: {e}", ash.display()))?;
+                std::fs::write(&usda, layered_scene(n, &file))
+                    .map_err(|e| format!("cannot write {}: {e}", usda.display()))?;
+                scenes.push((format!("{n} layer{}", if n == 1 { "" } else { "s" }), load_scene(&usda)?));
+            }
+        }
+    }
+    let rows = measure_scenes(&scenes, spp, res, reps)?;
+    let mut out = String::new();
+    writeln!(
+        out,
+        "bench render: {}x{} at {spp} spp, JIT, 1 thread timed (median of {reps}); reference: weighted at {} spp, other seed",
+        res.0,
+        res.1,
+        reference_spp(spp)
+    )
+    .unwrap();
+    writeln!(
+        out,
+        "  {:<28} {:>6} {:>13} {:>13} {:>11} {:>11} {:>10} {:>10} {:>9}",
+        "scene",
+        "layers",
+        "stoch ns/smp",
+        "wtd ns/smp",
+        "stoch/1lay",
+        "wtd/1lay",
+        "stoch RMSE",
+        "wtd RMSE",
+        "wtd/stoch"
+    )
+    .unwrap();
+    let first = rows.first().map_or([1.0; 2], |r| r.ns);
+    for r in &rows {
+        writeln!(
+            out,
+            "  {:<28} {:>6} {:>13.0} {:>13.0} {:>10.2}x {:>10.2}x {:>10.5} {:>10.5} {:>8.2}x",
+            r.label,
+            r.layers,
+            r.ns[0],
+            r.ns[1],
+            r.ns[0] / first[0],
+            r.ns[1] / first[1],
+            r.rmse[0],
+            r.rmse[1],
+            r.ns[1] / r.ns[0]
+        )
+        .unwrap();
+    }
+    if scene.is_none()
+        && let (Some(one), Some(eight)) = (rows.iter().find(|r| r.layers == 1), rows.iter().find(|r| r.layers == 8))
+    {
+        writeln!(
+            out,
+            "  8 layers / 1 layer, stochastic: {:.2}x (target <= 1.25x); ms per spp at 8 layers: {:.2} stochastic, {:.2} weighted",
+            eight.ns[0] / one.ns[0],
+            eight.ns[0] * (res.0 * res.1) as f64 * 1e-6,
+            eight.ns[1] * (res.0 * res.1) as f64 * 1e-6
+        )
+        .unwrap();
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hand_material_matches_jit_and_interpreter() {
+        let (lib, material) = bench_material().unwrap();
+        let (module, _) = lower_material(&lib, &material).unwrap();
+        let jit = backend::compile_module(module.clone(), BackendKind::Jit).unwrap();
+        let interp = backend::compile_module(module, BackendKind::Interp).unwrap();
+        let hand = HandMaterial::default();
+        let points = sample_points(400, 7);
+        compare_materials(&hand, jit.as_ref(), &points, 1e-5).unwrap();
+        compare_materials(&hand, interp.as_ref(), &points, 1e-5).unwrap();
+        // The masks are not trivially constant: both mask layers take 0, 1 and in-between values.
+        let mut m = [0.0; 3];
+        let (mut lo, mut hi, mut mid) = ([false; 3], [false; 3], [false; 3]);
+        for g in &points {
+            hand.masks(g, &mut m).unwrap();
+            for l in 1..3 {
+                lo[l] |= m[l] == 0.0;
+                hi[l] |= m[l] == 1.0;
+                mid[l] |= m[l] > 0.0 && m[l] < 1.0;
+            }
+        }
+        assert!(lo[1..].iter().chain(&hi[1..]).chain(&mid[1..]).all(|&b| b), "{lo:?} {hi:?} {mid:?}");
+    }
+
+    #[test]
+    fn bench_shade_runs_small() {
+        let options = ShadeOptions { points: 64, reps: 1, sizes: vec![3, 10], compile_reps: 1 };
+        let report = shade_report(None, None, &options).unwrap();
+        assert!(report.contains("hand Rust") && report.contains("interpreter / JIT"), "{report}");
+        assert!(report.contains("compile time vs graph size"), "{report}");
+    }
+
+    #[test]
+    fn bench_render_runs_small() {
+        let report = render_report(None, 1, (4, 4), &[1, 2], 1).unwrap();
+        assert!(report.contains("2 layers"), "{report}");
+    }
+
+    #[test]
+    fn generated_sources_compile() {
+        for n in [1, 2, 7] {
+            let mut sources = SourceMap::new();
+            let mut diags = Diagnostics::new();
+            Library::from_text("g.ash", &generated_substance(n), &mut sources, &mut diags);
+            assert!(!diags.has_errors(), "{}", diags.render(&sources));
+            Library::from_text("l.ash", &layered_source(n), &mut sources, &mut diags);
+            assert!(!diags.has_errors(), "{}", diags.render(&sources));
+        }
+    }
+}
