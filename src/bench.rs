@@ -342,7 +342,7 @@ fn single_layer_stack(lib: &Library, names: &[&str]) -> Result<ComposedMaterial,
 fn lower_material(lib: &Library, material: &ComposedMaterial) -> Result<(crate::ir::ssa::Module, usize), String> {
     let mut diags = Diagnostics::new();
     let wired = wired::build(lib, material, PassOptions::default(), &mut diags);
-    let module = lower::lower(lib, &wired, &mut diags);
+    let module = lower::lower(lib, &wired, true, &mut diags);
     if diags.has_errors() {
         return Err(diag_error("the material does not lower", &diags, &SourceMap::new()));
     }

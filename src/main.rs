@@ -80,6 +80,12 @@ enum Command {
         #[arg(long)]
         stats: bool,
     },
+    /// Measure shading and rendering cost: JIT vs interpreter vs hand-written Rust, compile
+    /// time vs graph size, render time and error vs layer count.
+    Bench {
+        #[command(subcommand)]
+        what: BenchCommand,
+    },
     /// Compile every substance of a `.ash` file into a native object (plus a C header beside it).
     Compile {
         /// A `.ash` substance file.
@@ -92,6 +98,31 @@ enum Command {
     Check {
         /// A `.ash` substance file or a `.usda` scene.
         file: PathBuf,
+    },
+}
+
+#[derive(Subcommand)]
+enum BenchCommand {
+    /// Per-shading-point cost of a composed material (default: the built-in 3-layer benchmark
+    /// material, also hand-written in Rust), and compile time vs graph size.
+    Shade {
+        /// A `.usda` scene (default: the built-in benchmark material).
+        scene: Option<PathBuf>,
+        /// The prim whose material to measure (default: the one with the most layers).
+        #[arg(long)]
+        prim: Option<String>,
+    },
+    /// Time per sample and error against a high-spp reference for 1 to 16 layers, stochastic
+    /// vs weighted evaluation.
+    Render {
+        /// A `.usda` scene to measure instead of the generated layer scenes.
+        scene: Option<PathBuf>,
+        /// Samples per pixel of the timed renders.
+        #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=4096))]
+        spp: u32,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "64x64", value_parser = parse_resolution)]
+        res: (usize, usize),
     },
 }
 
@@ -131,6 +162,22 @@ fn main() -> ExitCode {
             stats,
         }),
         Command::Compile { file, output } => cli::compile(&file, &output),
+        Command::Bench { what } => {
+            let report = match what {
+                BenchCommand::Shade { scene, prim } => strata::bench::bench_shade(scene.as_deref(), prim.as_deref()),
+                BenchCommand::Render { scene, spp, res } => strata::bench::bench_render(scene.as_deref(), spp, res),
+            };
+            match report {
+                Ok(text) => {
+                    print!("{text}");
+                    Ok(())
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    Err(cli::Failure)
+                }
+            }
+        }
         Command::Check { file } => cli::check(&file),
     };
     match result {
