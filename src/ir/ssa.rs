@@ -773,6 +773,44 @@ pub fn eval_pure(f: &Function, inst: &Inst, operand: impl Fn(Value) -> u32) -> O
 /// on constants become jumps; then unused pure instructions, variables never read and
 /// unreachable blocks are removed. Texture calls are not folded: they read the registry.
 pub fn simplify(f: &mut Function) {
+    // A variable set exactly once, to a constant, holds that constant wherever it is read
+    // (lowering initialises every local where it is declared, so no read precedes the set):
+    // node inputs and `op` strings become constants across blocks, which folds their
+    // branches away. Each round can expose more, so repeat while it does.
+    let mut constant_vars: std::collections::HashMap<Var, u32> = std::collections::HashMap::new();
+    for _ in 0..8 {
+        simplify_round(f, &constant_vars);
+        let mut sets: Vec<(u32, Option<Value>)> = vec![(0, None); f.vars.len()];
+        let mut word: Vec<Option<u32>> = vec![None; f.values.len()];
+        for block in &f.blocks {
+            for data in &block.insts {
+                match (&data.inst, data.result) {
+                    (Inst::Set(var, x), _) => {
+                        let s = &mut sets[var.0 as usize];
+                        s.0 += 1;
+                        s.1 = Some(*x);
+                    }
+                    (Inst::FConst(x), Some(r)) => word[r.0 as usize] = Some(x.to_bits()),
+                    (Inst::IConst(i), Some(r)) => word[r.0 as usize] = Some(*i as u32),
+                    _ => {}
+                }
+            }
+        }
+        let before = constant_vars.len();
+        for (v, (count, value)) in sets.iter().enumerate() {
+            if let (1, Some(x)) = (count, value)
+                && let Some(w) = word[x.0 as usize]
+            {
+                constant_vars.insert(Var(v as u32), w);
+            }
+        }
+        if constant_vars.len() == before {
+            break;
+        }
+    }
+}
+
+fn simplify_round(f: &mut Function, constant_vars: &std::collections::HashMap<Var, u32>) {
     use crate::runtime::rt::RtFn;
     let mut replace: Vec<Value> = (0..f.values.len() as u32).map(Value).collect();
     let mut constant: Vec<Option<u32>> = vec![None; f.values.len()];
@@ -791,6 +829,12 @@ pub fn simplify(f: &mut Function) {
                     if let (Some(x), Some(r)) = (known.get(var), data.result) {
                         replace[r.0 as usize] = *x;
                         continue;
+                    }
+                    if let Some(&w) = constant_vars.get(var) {
+                        data.inst = match f.vars[var.0 as usize] {
+                            Ty::F32 => Inst::FConst(f32::from_bits(w)),
+                            Ty::I32 => Inst::IConst(w as i32),
+                        };
                     }
                 }
                 _ => {}
@@ -862,14 +906,22 @@ fn rename(inst: &mut Inst, mut map: impl FnMut(Value) -> Value) {
     }
 }
 
-fn operands(inst: &Inst) -> Vec<Value> {
-    let mut out = Vec::new();
-    let mut probe = inst.clone();
-    rename(&mut probe, |v| {
-        out.push(v);
-        v
-    });
-    out
+/// Calls `f` on every operand of an instruction.
+fn for_each_operand(inst: &Inst, mut f: impl FnMut(Value)) {
+    match inst {
+        Inst::Unary(_, a) | Inst::Set(_, a) | Inst::Out(_, a) | Inst::Load(_, a) => f(*a),
+        Inst::Binary(_, a, b) | Inst::Cmp(_, a, b) | Inst::Store(_, a, b) => {
+            f(*a);
+            f(*b);
+        }
+        Inst::Select(c, a, b) => {
+            f(*c);
+            f(*a);
+            f(*b);
+        }
+        Inst::Call(_, args) => args.iter().copied().for_each(f),
+        Inst::FConst(_) | Inst::IConst(_) | Inst::Global(_) | Inst::Get(_) => {}
+    }
 }
 
 /// Removes unreachable blocks, sets of variables nobody reads, and unused pure instructions,
@@ -884,9 +936,7 @@ fn remove_dead(f: &mut Function) {
         let mut read = vec![false; f.vars.len()];
         for block in &f.blocks {
             for data in &block.insts {
-                for v in operands(&data.inst) {
-                    used[v.0 as usize] = true;
-                }
+                for_each_operand(&data.inst, |v| used[v.0 as usize] = true);
                 if let Inst::Get(var) = data.inst {
                     read[var.0 as usize] = true;
                 }
