@@ -780,6 +780,7 @@ pub fn simplify(f: &mut Function) {
     let mut constant_vars: std::collections::HashMap<Var, u32> = std::collections::HashMap::new();
     for _ in 0..8 {
         simplify_round(f, &constant_vars);
+        merge_straight_lines(f);
         let mut sets: Vec<(u32, Option<Value>)> = vec![(0, None); f.vars.len()];
         let mut word: Vec<Option<u32>> = vec![None; f.values.len()];
         for block in &f.blocks {
@@ -808,6 +809,45 @@ pub fn simplify(f: &mut Function) {
             break;
         }
     }
+}
+
+/// Appends each block reached only by a jump from one predecessor to that predecessor, so
+/// folded branches leave straight-line code that forwarding and Cranelift see whole. Blocks
+/// left empty and unreachable are dropped by the next round.
+fn merge_straight_lines(f: &mut Function) {
+    let mut preds = vec![0u32; f.blocks.len()];
+    preds[0] = 1; // the entry has an implicit predecessor
+    for block in &f.blocks {
+        match &block.term {
+            Some(Terminator::Jump(t)) => preds[t.0 as usize] += 1,
+            Some(Terminator::Branch(_, t, e)) => {
+                preds[t.0 as usize] += 1;
+                preds[e.0 as usize] += 1;
+            }
+            _ => {}
+        }
+    }
+    for b in 0..f.blocks.len() {
+        while let Some(Terminator::Jump(t)) = f.blocks[b].term.clone() {
+            let t = t.0 as usize;
+            if t == b || preds[t] != 1 {
+                break;
+            }
+            let moved = std::mem::replace(&mut f.blocks[t], BlockData { insts: Vec::new(), term: None });
+            preds[t] = 0;
+            let block = &mut f.blocks[b];
+            block.insts.extend(moved.insts);
+            block.term = moved.term;
+        }
+    }
+    // Emptied blocks are unreachable now; give them a terminator so the structure stays valid
+    // until `remove_dead` drops them.
+    for block in &mut f.blocks {
+        if block.term.is_none() {
+            block.term = Some(Terminator::Return(crate::abi::STATUS_OK));
+        }
+    }
+    remove_dead(f);
 }
 
 fn simplify_round(f: &mut Function, constant_vars: &std::collections::HashMap<Var, u32>) {
