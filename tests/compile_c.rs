@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use strata::abi::{Closure, Globals, MaterialCode};
+use strata::abi::{Closure, Globals};
 use strata::backend::{BackendKind, Compiler};
 use strata::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
 use strata::diag::{Diagnostics, SourceMap};
