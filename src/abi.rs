@@ -118,6 +118,8 @@ pub struct LayerInfo {
     pub displacement: Option<DisplacementMode>,
     /// Whether the layer has a normal product.
     pub has_normal: bool,
+    /// The layer's mask when it is known at compile time (clamped; 0 without a surface).
+    pub constant_mask: Option<f32>,
 }
 
 /// A custom channel of a material: its name, kind and offset in the channel output array.
@@ -157,6 +159,10 @@ pub trait MaterialCode: Send + Sync {
     /// Writes each layer's mask, clamped to [0, 1] (absent mask: 1; a layer without a surface
     /// or pruned at compile time: 0). `out.len()` is the layer count.
     fn masks(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError>;
+    /// One layer's mask, as [`MaterialCode::masks`] writes it. Stochastic layer picking walks
+    /// the stack from the top and stops at the picked layer (paper 5.3), so its cost does not
+    /// grow with the layers below.
+    fn mask(&self, g: &Globals, layer: usize) -> Result<f32, ShaderError>;
     /// Evaluates one layer's surface closure.
     fn surface(&self, g: &Globals, layer: usize, out: &mut Closure) -> Result<(), ShaderError>;
     /// Writes each layer's displacement height (0 without a displacement product).

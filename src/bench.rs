@@ -80,11 +80,16 @@ pub struct HandMaterial {
 
 impl Default for HandMaterial {
     fn default() -> Self {
-        let layer =
-            |slot: &str| LayerInfo { slot: slot.into(), has_surface: true, displacement: None, has_normal: false };
+        let layer = |slot: &str, constant_mask| LayerInfo {
+            slot: slot.into(),
+            has_surface: true,
+            displacement: None,
+            has_normal: false,
+            constant_mask,
+        };
         HandMaterial {
             info: MaterialInfo {
-                layers: vec![layer("000"), layer("010"), layer("020")],
+                layers: vec![layer("000", Some(1.0)), layer("010", None), layer("020", None)],
                 channels: Vec::new(),
                 channel_floats: 0,
             },
@@ -130,14 +135,25 @@ impl MaterialCode for HandMaterial {
     }
 
     fn masks(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError> {
-        out[0] = 1.0;
-        const DIRT_EDGE1: f32 = 0.5 + 0.15;
-        out[1] = mask_out(threshold(fbm4(g.p), 0.5, DIRT_EDGE1));
-        const FLAKE_EDGE1: f32 = 0.25 + 0.1;
-        let [x, y, z] = g.p;
-        let cells = noise::cellular3(x * 6.0, y * 6.0, z * 6.0);
-        out[2] = mask_out(1.0 - threshold(cells, 0.25, FLAKE_EDGE1));
+        for (layer, o) in out.iter_mut().enumerate().take(3) {
+            *o = self.mask(g, layer)?;
+        }
         Ok(())
+    }
+
+    fn mask(&self, g: &Globals, layer: usize) -> Result<f32, ShaderError> {
+        const DIRT_EDGE1: f32 = 0.5 + 0.15;
+        const FLAKE_EDGE1: f32 = 0.25 + 0.1;
+        Ok(match layer {
+            0 => 1.0,
+            1 => mask_out(threshold(fbm4(g.p), 0.5, DIRT_EDGE1)),
+            2 => {
+                let [x, y, z] = g.p;
+                let cells = noise::cellular3(x * 6.0, y * 6.0, z * 6.0);
+                mask_out(1.0 - threshold(cells, 0.25, FLAKE_EDGE1))
+            }
+            _ => 0.0,
+        })
     }
 
     fn surface(&self, g: &Globals, layer: usize, out: &mut Closure) -> Result<(), ShaderError> {

@@ -431,6 +431,8 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
         header += &format!("\n/* substance {name} */\n");
         for f in &module.functions {
             let (product, out_ty) = match f.kind {
+                // One layer: `masks` already is its mask.
+                EntryKind::Mask(_) => continue,
                 EntryKind::Masks => ("mask", "float *out /* 1 */"),
                 EntryKind::Surface(_) => ("surface", "StrataClosure *out"),
                 EntryKind::Displacement => ("displacement", "float *out /* 1 */"),

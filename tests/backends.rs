@@ -58,6 +58,10 @@ fn outputs(code: &dyn MaterialCode, g: &Globals) -> Vec<u32> {
     out.push(status(code.displacement(g, &mut disp)));
     out.extend(disp.iter().map(|m| m.to_bits()));
     for layer in 0..n {
+        match code.mask(g, layer) {
+            Ok(m) => out.extend([0, m.to_bits()]),
+            Err(e) => out.push(status(Err(e))),
+        }
         let mut c = Closure::default();
         out.push(status(code.surface(g, layer, &mut c)));
         out.push(c.kind);

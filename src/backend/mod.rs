@@ -58,6 +58,7 @@ pub trait Runner: Send + Sync {
 #[derive(Clone, Debug)]
 pub struct Entries<E> {
     masks: Option<E>,
+    mask: Vec<Option<E>>,
     displacement: Option<E>,
     surface: Vec<Option<E>>,
     normal: Vec<Option<E>>,
@@ -70,6 +71,7 @@ impl<E: Copy> Entries<E> {
         let n = module.info.layers.len();
         let mut e = Entries {
             masks: None,
+            mask: vec![None; n],
             displacement: None,
             surface: vec![None; n],
             normal: vec![None; n],
@@ -79,6 +81,7 @@ impl<E: Copy> Entries<E> {
             let h = Some(handle(i));
             match f.kind {
                 EntryKind::Masks => e.masks = h,
+                EntryKind::Mask(l) => e.mask[l] = h,
                 EntryKind::Displacement => e.displacement = h,
                 EntryKind::Surface(l) => e.surface[l] = h,
                 EntryKind::Normal(l) => e.normal[l] = h,
@@ -121,6 +124,20 @@ impl<R: Runner> MaterialCode for Material<R> {
                 out.fill(1.0);
                 Ok(())
             }
+        }
+    }
+
+    fn mask(&self, g: &Globals, layer: usize) -> Result<f32, ShaderError> {
+        if let Some(m) = self.info.layers.get(layer).and_then(|l| l.constant_mask) {
+            return Ok(m);
+        }
+        match self.entries.mask.get(layer).copied().flatten() {
+            Some(e) => {
+                let mut out = [0u32];
+                ShaderError::check(self.runner.run(e, g, &mut out))?;
+                Ok(f32::from_bits(out[0]))
+            }
+            None => Ok(1.0),
         }
     }
 

@@ -48,20 +48,19 @@ pub fn lower(lib: &Library, wired: &WiredMaterial, optimize: bool, diags: &mut D
     let mut cx = Context { lib, wired, strings: &mut strings, diags, optimize };
 
     functions.push(cx.entry(EntryKind::Masks, nlayers, |f| {
-        for (l, layer) in wired.layers.iter().enumerate() {
-            let m = match (&layer.surface, &layer.mask) {
-                (None, _) => f.b.fconst(0.0),
-                (Some(_), None) => f.b.fconst(1.0),
-                (Some(_), Some(mask)) => {
-                    let m = f.operand_scalar(mask, Type::FLOAT);
-                    let (zero, one) = (f.b.fconst(0.0), f.b.fconst(1.0));
-                    let m = f.b.binary(BinOp::FMax, m, zero);
-                    f.b.binary(BinOp::FMin, m, one)
-                }
-            };
+        for l in 0..wired.layers.len() {
+            let m = f.layer_mask(l);
             f.b.effect(Inst::Out(l as u32, m));
         }
     }));
+    for (l, layer) in info.layers.iter().enumerate() {
+        if layer.constant_mask.is_none() {
+            functions.push(cx.entry(EntryKind::Mask(l), 1, |f| {
+                let m = f.layer_mask(l);
+                f.b.effect(Inst::Out(0, m));
+            }));
+        }
+    }
     for (l, layer) in wired.layers.iter().enumerate() {
         if let Some(surface) = &layer.surface {
             functions.push(cx.entry(EntryKind::Surface(l), CLOSURE_WORDS, |f| {
@@ -120,6 +119,7 @@ pub fn material_info(wired: &WiredMaterial) -> MaterialInfo {
             has_surface: l.surface.is_some(),
             displacement: l.displacement.as_ref().map(|(_, mode)| *mode),
             has_normal: l.normal.is_some(),
+            constant_mask: if l.surface.is_none() { Some(0.0) } else { l.constant_mask() },
         })
         .collect();
     let mut offset = 0;
@@ -249,6 +249,21 @@ impl FnLower<'_> {
     fn out_words(&mut self, at: u32, values: &[ssa::Value]) {
         for (k, v) in values.iter().enumerate() {
             self.b.effect(Inst::Out(at + k as u32, *v));
+        }
+    }
+
+    /// Layer `l`'s mask clamped to [0, 1]: 0 without a surface, 1 without a mask.
+    fn layer_mask(&mut self, l: usize) -> ssa::Value {
+        let layer = &self.wired.layers[l];
+        match (&layer.surface, &layer.mask) {
+            (None, _) => self.b.fconst(0.0),
+            (Some(_), None) => self.b.fconst(1.0),
+            (Some(_), Some(mask)) => {
+                let m = self.operand_scalar(mask, Type::FLOAT);
+                let (zero, one) = (self.b.fconst(0.0), self.b.fconst(1.0));
+                let m = self.b.binary(BinOp::FMax, m, zero);
+                self.b.binary(BinOp::FMin, m, one)
+            }
         }
     }
 

@@ -201,6 +201,8 @@ pub struct BlockData {
 pub enum EntryKind {
     /// One f32 per layer: the clamped mask.
     Masks,
+    /// One f32: the clamped mask of one layer.
+    Mask(usize),
     /// A [`crate::abi::Closure`] of one layer.
     Surface(usize),
     /// One f32 per layer: displacement height.
@@ -216,6 +218,7 @@ impl EntryKind {
     pub fn name(self) -> String {
         match self {
             EntryKind::Masks => "masks".into(),
+            EntryKind::Mask(l) => format!("mask_{l}"),
             EntryKind::Surface(l) => format!("surface_{l}"),
             EntryKind::Displacement => "displacement".into(),
             EntryKind::Normal(l) => format!("normal_{l}"),

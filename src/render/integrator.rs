@@ -79,6 +79,9 @@ pub(crate) struct Lobe {
     pub(crate) layer: usize,
 }
 
+/// The largest f32 below 1: keeps a rescaled uniform number in [0, 1).
+const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+
 /// A direction sampled from the lobes of a shading point.
 pub(crate) struct LobeSample {
     /// The new direction (world).
@@ -325,35 +328,51 @@ impl Context<'_> {
             s.lobes.clear();
             return Ok(None);
         }
-        material.masks(&g, &mut s.masks[..nl]).map_err(Invalid::Shader)?;
-        let transparency = Self::weights(&s.masks[..nl], &mut s.weights[..nl]);
-        let opaque = 1.0 - transparency;
-        if u >= opaque || opaque <= 0.0 {
-            s.lobes.clear();
-            return Ok(None);
-        }
-        let bumped = self.bump(material, &g, sp, facing, s)?;
-        g.n = to_arr(bumped);
-        s.lobes.clear();
-        match self.params.mode {
+        // Rule 5. Stochastic: walk down from the top layer, evaluating each mask only until a
+        // layer is picked: layer i is picked with probability m_i · Π_{j above}(1 − m_j), the
+        // rule's weight, and one uniform number serves every step (rescaled after each miss).
+        // Weighted: every mask, every layer.
+        let picked = match self.params.mode {
             LayerMode::Stochastic => {
-                let mut acc = 0.0;
+                let mut u = u;
                 let mut picked = None;
                 for i in (0..nl).rev() {
-                    acc += s.weights[i];
-                    if u < acc && s.weights[i] > 0.0 {
+                    let m = material.mask(&g, i).map_err(Invalid::Shader)?;
+                    let m = if m.is_nan() { 0.0 } else { m.clamp(0.0, 1.0) };
+                    if u < m {
                         picked = Some(i);
                         break;
                     }
+                    u = ((u - m) / (1.0 - m)).min(ONE_MINUS_EPSILON);
                 }
-                // Rounding can leave u just above the running sum: take the lowest weighted layer.
-                let picked = picked.or_else(|| (0..nl).find(|&i| s.weights[i] > 0.0));
-                if let Some(i) = picked {
-                    let lobe = self.lobe(material, &g, sp, d, i, 1.0)?;
-                    s.lobes.push(lobe);
+                match picked {
+                    Some(i) => Some(i),
+                    None => {
+                        s.lobes.clear();
+                        return Ok(None);
+                    }
                 }
             }
             LayerMode::Weighted => {
+                material.masks(&g, &mut s.masks[..nl]).map_err(Invalid::Shader)?;
+                let transparency = Self::weights(&s.masks[..nl], &mut s.weights[..nl]);
+                if u >= 1.0 - transparency || transparency >= 1.0 {
+                    s.lobes.clear();
+                    return Ok(None);
+                }
+                None
+            }
+        };
+        let bumped = self.bump(material, &g, sp, facing, s)?;
+        g.n = to_arr(bumped);
+        s.lobes.clear();
+        match picked {
+            Some(i) => {
+                let lobe = self.lobe(material, &g, sp, d, i, 1.0)?;
+                s.lobes.push(lobe);
+            }
+            None => {
+                let opaque: f32 = s.weights[..nl].iter().sum();
                 for i in (0..nl).rev() {
                     if s.weights[i] > 0.0 {
                         let lobe = self.lobe(material, &g, sp, d, i, s.weights[i] / opaque)?;
@@ -446,7 +465,7 @@ impl Context<'_> {
 
     /// Transmittance along a shadow segment: 0 behind an opaque surface, the product of
     /// transparencies across masked ones.
-    fn transmittance(&self, mut o: Vec3, d: Vec3, dist: f32, s: &mut Scratch) -> Result<f32, Invalid> {
+    fn transmittance(&self, mut o: Vec3, d: Vec3, dist: f32) -> Result<f32, Invalid> {
         let accel = &self.scene.accel;
         let mut remaining = dist;
         let mut t_total = 1.0f32;
@@ -458,8 +477,14 @@ impl Context<'_> {
             if nl > 0 {
                 let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
                 let g = self.globals(&sp, facing, d);
-                material.masks(&g, &mut s.masks[..nl]).map_err(Invalid::Shader)?;
-                t_total *= Self::weights(&s.masks[..nl], &mut s.weights[..nl]);
+                // Π(1 − m_i) from the top; an opaque layer ends the product (and the walk).
+                for i in (0..nl).rev() {
+                    let m = material.mask(&g, i).map_err(Invalid::Shader)?;
+                    t_total *= 1.0 - if m.is_nan() { 0.0 } else { m.clamp(0.0, 1.0) };
+                    if t_total <= 0.0 {
+                        return Ok(0.0);
+                    }
+                }
             }
             if t_total <= 0.0 {
                 return Ok(0.0);
@@ -493,7 +518,7 @@ impl Context<'_> {
         let side = if ng.dot(ls.wi) > 0.0 { ng } else { -ng };
         let o = offset_ray_origin(p, side);
         let dist = if ls.dist.is_finite() { ls.dist * (1.0 - 1e-4) } else { f32::INFINITY };
-        let tr = self.transmittance(o, ls.wi, dist, s)?;
+        let tr = self.transmittance(o, ls.wi, dist)?;
         if tr <= 0.0 {
             return Ok(Vec3::ZERO);
         }

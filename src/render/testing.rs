@@ -67,6 +67,7 @@ impl ConstMaterial {
                     has_surface: true,
                     displacement: None,
                     has_normal: l.normal.is_some(),
+                    constant_mask: None,
                 })
                 .collect(),
             channels,
@@ -96,6 +97,11 @@ impl MaterialCode for ConstMaterial {
             *o = l.mask;
         }
         Ok(())
+    }
+
+    fn mask(&self, _g: &Globals, layer: usize) -> Result<f32, ShaderError> {
+        self.check()?;
+        Ok(self.layers[layer].mask)
     }
 
     fn surface(&self, _g: &Globals, layer: usize, out: &mut Closure) -> Result<(), ShaderError> {
