@@ -429,11 +429,16 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
     let mut functions = Vec::new();
     for (name, module) in &modules {
         header += &format!("\n/* substance {name} */\n");
+        if let Some(m) = module.info.layers.first().and_then(|l| l.constant_mask) {
+            // A mask known at compile time needs no code: define it in the header.
+            header += &format!(
+                "static inline uint32_t {name}_mask(const StrataGlobals *g, float *out) {{ (void)g; *out = {}f; return 0; }}\n",
+                crate::front::types::format_f32(m)
+            );
+        }
         for f in &module.functions {
             let (product, out_ty) = match f.kind {
-                // One layer: `masks` already is its mask.
-                EntryKind::Mask(_) => continue,
-                EntryKind::Masks => ("mask", "float *out /* 1 */"),
+                EntryKind::Mask(_) => ("mask", "float *out /* 1 */"),
                 EntryKind::Surface(_) => ("surface", "StrataClosure *out"),
                 EntryKind::Displacement => ("displacement", "float *out /* 1 */"),
                 EntryKind::Normal(_) => ("normal", "float out[3]"),

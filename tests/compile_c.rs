@@ -63,6 +63,7 @@ int main(void) {
         s = brushed_metal_surface(&g, &c); dump_closure("brushed_metal", s, &c);
         s = dirt_surface(&g, &c); dump_closure("dirt", s, &c);
         s = dirt_mask(&g, &m); memcpy(&w, &m, 4); printf("dirt_mask %u %08x\n", s, w);
+        s = clay_mask(&g, &m); memcpy(&w, &m, 4); printf("clay_mask %u %08x\n", s, w);
     }
     return 0;
 }
@@ -107,6 +108,8 @@ fn jit_lines(points: &[Globals]) -> String {
         let mut m = [0.0f32];
         let s = code[3].masks(g, &mut m).map_or(1, |_| 0);
         out += &format!("dirt_mask {s} {:08x}\n", m[0].to_bits());
+        let s = code[0].masks(g, &mut m).map_or(1, |_| 0);
+        out += &format!("clay_mask {s} {:08x}\n", m[0].to_bits());
     }
     out
 }
@@ -154,7 +157,7 @@ fn compiled_object_links_from_c_and_matches_the_jit() {
     assert!(result.status.success());
     let from_c = String::from_utf8(result.stdout).unwrap();
     let from_jit = jit_lines(&points);
-    assert_eq!(from_c.lines().count(), 200 * 5);
+    assert_eq!(from_c.lines().count(), 200 * 6);
     for (k, (c, j)) in from_c.lines().zip(from_jit.lines()).enumerate() {
         assert_eq!(c, j, "line {k}: C object vs JIT");
     }

@@ -57,7 +57,6 @@ pub trait Runner: Send + Sync {
 /// The entry points of a material, by what they compute.
 #[derive(Clone, Debug)]
 pub struct Entries<E> {
-    masks: Option<E>,
     mask: Vec<Option<E>>,
     displacement: Option<E>,
     surface: Vec<Option<E>>,
@@ -70,7 +69,6 @@ impl<E: Copy> Entries<E> {
     pub fn new(module: &ssa::Module, mut handle: impl FnMut(usize) -> E) -> Entries<E> {
         let n = module.info.layers.len();
         let mut e = Entries {
-            masks: None,
             mask: vec![None; n],
             displacement: None,
             surface: vec![None; n],
@@ -80,7 +78,6 @@ impl<E: Copy> Entries<E> {
         for (i, f) in module.functions.iter().enumerate() {
             let h = Some(handle(i));
             match f.kind {
-                EntryKind::Masks => e.masks = h,
                 EntryKind::Mask(l) => e.mask[l] = h,
                 EntryKind::Displacement => e.displacement = h,
                 EntryKind::Surface(l) => e.surface[l] = h,
@@ -118,13 +115,10 @@ impl<R: Runner> MaterialCode for Material<R> {
     }
 
     fn masks(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError> {
-        match self.entries.masks {
-            Some(e) => ShaderError::check(self.runner.run(e, g, words(out))),
-            None => {
-                out.fill(1.0);
-                Ok(())
-            }
+        for (layer, m) in out.iter_mut().enumerate() {
+            *m = self.mask(g, layer)?;
         }
+        Ok(())
     }
 
     fn mask(&self, g: &Globals, layer: usize) -> Result<f32, ShaderError> {

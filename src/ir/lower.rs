@@ -47,12 +47,8 @@ pub fn lower(lib: &Library, wired: &WiredMaterial, optimize: bool, diags: &mut D
     let nlayers = wired.layers.len() as u32;
     let mut cx = Context { lib, wired, strings: &mut strings, diags, optimize };
 
-    functions.push(cx.entry(EntryKind::Masks, nlayers, |f| {
-        for l in 0..wired.layers.len() {
-            let m = f.layer_mask(l);
-            f.b.effect(Inst::Out(l as u32, m));
-        }
-    }));
+    // Masks known at compile time live in `info`; the others get one entry each, which
+    // `masks` (all layers) and stochastic picking (top-down, stopping early) both call.
     for (l, layer) in info.layers.iter().enumerate() {
         if layer.constant_mask.is_none() {
             functions.push(cx.entry(EntryKind::Mask(l), 1, |f| {

@@ -199,9 +199,7 @@ pub struct BlockData {
 /// What an entry function computes (and so what its output buffer holds).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum EntryKind {
-    /// One f32 per layer: the clamped mask.
-    Masks,
-    /// One f32: the clamped mask of one layer.
+    /// One f32: the clamped mask of one layer whose mask is not a compile-time constant.
     Mask(usize),
     /// A [`crate::abi::Closure`] of one layer.
     Surface(usize),
@@ -217,7 +215,6 @@ impl EntryKind {
     /// The function's symbol suffix.
     pub fn name(self) -> String {
         match self {
-            EntryKind::Masks => "masks".into(),
             EntryKind::Mask(l) => format!("mask_{l}"),
             EntryKind::Surface(l) => format!("surface_{l}"),
             EntryKind::Displacement => "displacement".into(),
@@ -972,7 +969,7 @@ fn for_each_operand(inst: &Inst, mut f: impl FnMut(Value)) {
 fn remove_dead(f: &mut Function) {
     loop {
         let before: usize = f.blocks.iter().map(|b| b.insts.len()).sum();
-        let mut builder = Builder { func: std::mem::replace(f, Function::new(EntryKind::Masks, 0)), current: Block(0) };
+        let mut builder = Builder { func: std::mem::replace(f, Function::new(EntryKind::Displacement, 0)), current: Block(0) };
         builder.current = Block(0);
         *f = builder.finish_reachable();
         let mut used = vec![false; f.values.len()];
