@@ -197,6 +197,9 @@ impl Lv {
 /// Where a local lives.
 #[derive(Clone, Debug)]
 enum Storage {
+    /// A parameter the body never assigns, bound to compile-time constants: reads are those
+    /// constants, so conditions on it (`op == "add"`) fold and only the taken branch is lowered.
+    Known(Vec<ssa::Value>),
     Vars(Vec<Var>),
     Array { slot: Slot, elem: Type, len: u32 },
 }
@@ -223,8 +226,6 @@ struct Frame {
     ret_value: Option<Storage>,
     /// (break target, continue target) of the enclosing loops, innermost last.
     loops: Vec<(Block, Block)>,
-    /// Locals known to hold one constant string for the whole body (texture file names).
-    const_strings: HashMap<u32, String>,
 }
 
 struct FnLower<'a> {
@@ -346,19 +347,6 @@ impl FnLower<'_> {
             let value = if param.output {
                 self.zero(param.ty)
             } else {
-                let constant = match &node.args[i] {
-                    Operand::Const(Value::Str(s), _) => Some(s),
-                    Operand::Default => param.default.as_ref().and_then(|d| match &d.kind {
-                        ExprKind::Const(Value::Str(s)) => Some(s),
-                        _ => None,
-                    }),
-                    _ => None,
-                };
-                if let Some(s) = constant
-                    && !assigns(&func.body, i as u32)
-                {
-                    frame.const_strings.insert(i as u32, s.clone());
-                }
                 match &node.args[i] {
                     Operand::Default => match &param.default {
                         Some(e) => self.expr(e, &mut frame),
@@ -367,7 +355,7 @@ impl FnLower<'_> {
                     other => self.operand(other, param.ty),
                 }
             };
-            self.store_local(&frame, LocalId(i as u32), value);
+            self.bind_param(&mut frame, func, i, value);
         }
         self.block(&func.body, &mut frame);
         self.b.jump_to(frame.ret);
@@ -382,7 +370,7 @@ impl FnLower<'_> {
         let locals = func.locals.iter().map(|l| self.storage(l.ty)).collect();
         let ret = self.b.block();
         let ret_value = (func.ret != Type::VOID).then(|| self.storage(func.ret));
-        Frame { locals, ret, ret_value, loops: Vec::new(), const_strings: HashMap::new() }
+        Frame { locals, ret, ret_value, loops: Vec::new() }
     }
 
     fn storage(&mut self, ty: Type) -> Storage {
@@ -424,7 +412,22 @@ impl FnLower<'_> {
                 Lv::Scalars(vars.iter().map(|v| self.b.value(Inst::Get(*v), self.b.func.vars[v.0 as usize])).collect())
             }
             Storage::Array { slot, elem, len } => Lv::Array { slot: *slot, elem: *elem, len: *len },
+            Storage::Known(values) => Lv::Scalars(values.clone()),
         }
+    }
+
+    /// Binds parameter `i` to its value: as known constants when the value is constant and
+    /// the body never assigns the parameter, else through its variables.
+    fn bind_param(&mut self, frame: &mut Frame, func: &Function, i: usize, value: Lv) {
+        if let Lv::Scalars(values) = &value
+            && !values.is_empty()
+            && values.iter().all(|v| self.b.known(*v).is_some())
+            && !assigns(&func.body, i as u32)
+        {
+            frame.locals[i] = Storage::Known(values.clone());
+            return;
+        }
+        self.store_local(frame, LocalId(i as u32), value);
     }
 
     fn store_local(&mut self, frame: &Frame, local: LocalId, value: Lv) {
@@ -526,6 +529,9 @@ impl FnLower<'_> {
             }
             Stmt::If(cond, then, otherwise) => {
                 let c = self.truthy(cond, frame);
+                if let Some(k) = self.b.known(c) {
+                    return self.block(if k != 0 { then } else { otherwise }, frame);
+                }
                 let (then_b, else_b, join) = (self.b.block(), self.b.block(), self.b.block());
                 self.b.terminate(Terminator::Branch(c, then_b, else_b));
                 self.b.switch_to(then_b);
@@ -541,7 +547,11 @@ impl FnLower<'_> {
                 match cond {
                     Some(cond) => {
                         let c = self.truthy(cond, frame);
-                        self.b.terminate(Terminator::Branch(c, body_b, exit));
+                        match self.b.known(c) {
+                            Some(0) => self.b.terminate(Terminator::Jump(exit)),
+                            Some(_) => self.b.terminate(Terminator::Jump(body_b)),
+                            None => self.b.terminate(Terminator::Branch(c, body_b, exit)),
+                        }
                         self.b.switch_to(body_b);
                     }
                     None => self.b.jump_to(body_b),
@@ -690,6 +700,9 @@ impl FnLower<'_> {
             ExprKind::Binary(op, a, b) => self.binary(*op, a, b, frame),
             ExprKind::Select(c, a, b) => {
                 let cond = self.truthy(c, frame);
+                if let Some(k) = self.b.known(cond) {
+                    return self.expr(if k != 0 { a } else { b }, frame);
+                }
                 if is_simple(a) && is_simple(b) {
                     let x = self.expr(a, frame).scalars();
                     let y = self.expr(b, frame).scalars();
@@ -783,7 +796,7 @@ impl FnLower<'_> {
                     self.store(&storage, zero);
                 }
                 for (i, v) in values.into_iter().enumerate() {
-                    self.store_local(&callee, LocalId(i as u32), v);
+                    self.bind_param(&mut callee, func, i, v);
                 }
                 // Locals start at zero, as the folder's frames do once assigned; the checker
                 // requires initialisers, so this only matters for robustness.
@@ -803,6 +816,14 @@ impl FnLower<'_> {
         use BinaryOp::*;
         if matches!(op, And | Or) {
             let l = self.truthy(a, frame);
+            if let Some(k) = self.b.known(l) {
+                // The left side decides, or the right side is the answer.
+                if (k != 0) == (op == Or) {
+                    return Lv::Scalars(vec![self.b.iconst((k != 0) as i32)]);
+                }
+                let r = self.truthy(b, frame);
+                return Lv::Scalars(vec![r]);
+            }
             if is_simple(b) {
                 let r = self.truthy(b, frame);
                 let bop = if op == And { BinOp::And } else { BinOp::Or };
@@ -1062,11 +1083,8 @@ impl FnLower<'_> {
     /// `texture(file, s, t)`: the file must be known when compiling (a literal or an input
     /// the scene sets); it is loaded now and the call reads the decoded image by id.
     fn texture(&mut self, args: &[Expr], frame: &mut Frame) -> Lv {
-        let file = match &args[0].kind {
-            ExprKind::Const(Value::Str(s)) => Some(s.clone()),
-            ExprKind::Local(id) => frame.const_strings.get(&id.0).cloned(),
-            _ => None,
-        };
+        let name = self.expr(&args[0], frame).one();
+        let file = self.b.known(name).and_then(|id| self.strings.get(id as usize).cloned());
         let s = self.expr(&args[1], frame).one();
         let t = self.expr(&args[2], frame).one();
         let id = match file {

@@ -522,17 +522,26 @@ pub fn validate(f: &Function) -> Result<(), Invalid> {
     Ok(())
 }
 
-/// Builds a [`Function`] block by block.
+/// Builds a [`Function`] block by block. Pure instructions whose operands are constants are
+/// folded as they are added (with [`eval_pure`], so nothing changes), which lets lowering see
+/// constant conditions and emit only the branch taken.
 pub struct Builder {
     /// The function being built.
     pub func: Function,
     current: Block,
+    /// The constant word of each value, where known.
+    known: Vec<Option<u32>>,
 }
 
 impl Builder {
     /// Starts a function in its entry block.
     pub fn new(kind: EntryKind, out_words: u32) -> Builder {
-        Builder { func: Function::new(kind, out_words), current: Block(0) }
+        Builder { func: Function::new(kind, out_words), current: Block(0), known: Vec::new() }
+    }
+
+    /// The constant word of `v`, if it is a compile-time constant.
+    pub fn known(&self, v: Value) -> Option<u32> {
+        self.known.get(v.0 as usize).copied().flatten()
     }
 
     /// Finishes the function: the open block returns success, and blocks no path reaches
@@ -584,9 +593,27 @@ impl Builder {
         self.func
     }
 
-    fn push(&mut self, inst: Inst, ty: Option<Ty>) -> Option<Value> {
+    fn push(&mut self, mut inst: Inst, ty: Option<Ty>) -> Option<Value> {
+        let word = match &inst {
+            Inst::FConst(x) => Some(x.to_bits()),
+            Inst::IConst(i) => Some(*i as u32),
+            Inst::Call(crate::runtime::rt::RtFn::Texture, _) => None,
+            Inst::Unary(..) | Inst::Binary(..) | Inst::Cmp(..) | Inst::Select(..) | Inst::Call(..) => {
+                let mut all = true;
+                for_each_operand(&inst, |v| all &= self.known(v).is_some());
+                if all { eval_pure(&self.func, &inst, |v| self.known(v).unwrap_or(0)) } else { None }
+            }
+            _ => None,
+        };
+        if let (Some(w), Some(t)) = (word, ty) {
+            inst = match t {
+                Ty::F32 => Inst::FConst(f32::from_bits(w)),
+                Ty::I32 => Inst::IConst(w as i32),
+            };
+        }
         let result = ty.map(|t| {
             self.func.values.push(t);
+            self.known.push(word);
             Value(self.func.values.len() as u32 - 1)
         });
         self.func.blocks[self.current.0 as usize].insts.push(InstData { result, inst });
@@ -780,7 +807,7 @@ pub fn simplify(f: &mut Function) {
     let mut constant_vars: std::collections::HashMap<Var, u32> = std::collections::HashMap::new();
     for _ in 0..8 {
         simplify_round(f, &constant_vars);
-        merge_straight_lines(f);
+        let merged = merge_straight_lines(f);
         let mut sets: Vec<(u32, Option<Value>)> = vec![(0, None); f.vars.len()];
         let mut word: Vec<Option<u32>> = vec![None; f.values.len()];
         for block in &f.blocks {
@@ -805,16 +832,18 @@ pub fn simplify(f: &mut Function) {
                 constant_vars.insert(Var(v as u32), w);
             }
         }
-        if constant_vars.len() == before {
+        if constant_vars.len() == before && !merged {
             break;
         }
     }
 }
 
-/// Appends each block reached only by a jump from one predecessor to that predecessor, so
+/// Appends each block reached only by a jump from one predecessor to that predecessor (and
+/// says whether it merged any), so
 /// folded branches leave straight-line code that forwarding and Cranelift see whole. Blocks
 /// left empty and unreachable are dropped by the next round.
-fn merge_straight_lines(f: &mut Function) {
+fn merge_straight_lines(f: &mut Function) -> bool {
+    let mut merged = false;
     let mut preds = vec![0u32; f.blocks.len()];
     preds[0] = 1; // the entry has an implicit predecessor
     for block in &f.blocks {
@@ -835,6 +864,7 @@ fn merge_straight_lines(f: &mut Function) {
             }
             let moved = std::mem::replace(&mut f.blocks[t], BlockData { insts: Vec::new(), term: None });
             preds[t] = 0;
+            merged = true;
             let block = &mut f.blocks[b];
             block.insts.extend(moved.insts);
             block.term = moved.term;
@@ -848,6 +878,7 @@ fn merge_straight_lines(f: &mut Function) {
         }
     }
     remove_dead(f);
+    merged
 }
 
 fn simplify_round(f: &mut Function, constant_vars: &std::collections::HashMap<Var, u32>) {
@@ -969,7 +1000,11 @@ fn for_each_operand(inst: &Inst, mut f: impl FnMut(Value)) {
 fn remove_dead(f: &mut Function) {
     loop {
         let before: usize = f.blocks.iter().map(|b| b.insts.len()).sum();
-        let mut builder = Builder { func: std::mem::replace(f, Function::new(EntryKind::Displacement, 0)), current: Block(0) };
+        let mut builder = Builder {
+            func: std::mem::replace(f, Function::new(EntryKind::Displacement, 0)),
+            current: Block(0),
+            known: Vec::new(),
+        };
         builder.current = Block(0);
         *f = builder.finish_reachable();
         let mut used = vec![false; f.values.len()];
