@@ -21,6 +21,7 @@ pub fn flags(pic: bool) -> settings::Flags {
         b.set(k, v).unwrap_or_else(|e| panic!("cranelift flag {k}={v}: {e}"));
     };
     set(&mut b, "opt_level", "speed");
+    set(&mut b, "regalloc_algorithm", "single_pass");
     set(&mut b, "enable_verifier", if cfg!(debug_assertions) { "true" } else { "false" });
     set(&mut b, "is_pic", if pic { "true" } else { "false" });
     set(&mut b, "use_colocated_libcalls", "false");
