@@ -519,9 +519,80 @@ fn shade_report(scene: Option<&Path>, prim: Option<&str>, o: &ShadeOptions) -> R
     )
     .unwrap();
 
+    if scene.is_none() {
+        out += &arithmetic_report(&points, o.reps)?;
+    }
     writeln!(out).unwrap();
     out += &compile_sweep(&o.sizes, o.compile_reps)?;
     Ok(out)
+}
+
+/// Nodes of the arithmetic-only material.
+const ARITHMETIC_NODES: usize = 64;
+
+/// A mask computed by `n` arithmetic nodes (`math` and `mix_float` over expressions of `P`,
+/// no runtime-library calls): where the interpreter's own dispatch cost shows, which the
+/// noise calls of the benchmark material (identical in every backend) hide.
+pub fn arithmetic_substance(n: usize) -> String {
+    let mut s = String::from(
+        "shader leaf(float k = 1.0, output float out = 0.0) {\n    out = P[0] * k + P[1] * (1.0 - k) - P[2] * 0.5;\n}\n\
+         substance arithmetic {\n",
+    );
+    let ops = ["add", "mul", "sub", "max", "min", "abs"];
+    for i in 0..n.max(1) {
+        let (a, b) = (2 * i + 1, 2 * i + 2);
+        let node = if a >= n {
+            format!("leaf(k: {:.3})", 0.3 + i as f64 * 0.011)
+        } else if b >= n {
+            format!("math(a: n{a}.out, b: 0.7, op: \"mul\")")
+        } else if i % 4 == 3 {
+            format!("mix_float(a: n{a}.out, b: n{b}.out, t: 0.3)")
+        } else {
+            format!("math(a: n{a}.out, b: n{b}.out, op: \"{}\")", ops[i % ops.len()])
+        };
+        writeln!(s, "    node n{i} = {node};").unwrap();
+    }
+    s += "    node opacity = mask(opacity: n0.out);\n    node base = diffuse();\n";
+    s += "    surface = base.bsdf;\n    mask = opacity.out;\n}\n";
+    s
+}
+
+/// JIT vs interpreter on [`arithmetic_substance`]: ns per mask evaluation.
+fn arithmetic_report(points: &[Globals], reps: usize) -> Result<String, String> {
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let source = arithmetic_substance(ARITHMETIC_NODES);
+    let (lib, _) = Library::from_text("arithmetic.ash", &source, &mut sources, &mut diags);
+    if diags.has_errors() {
+        return Err(diag_error("the arithmetic material does not compile", &diags, &sources));
+    }
+    let material = single_layer_stack(&lib, &["arithmetic"])?;
+    let (module, _) = lower_material(&lib, &material)?;
+    let insts = module.inst_count();
+    let jit = backend::compile_module(module.clone(), BackendKind::Jit)?;
+    let interp = backend::compile_module(module, BackendKind::Interp)?;
+    compare_materials(jit.as_ref(), interp.as_ref(), points, 0.0)
+        .map_err(|e| format!("JIT and interpreter disagree on the arithmetic material: {e}"))?;
+    let mut times = [Vec::new(), Vec::new()];
+    let mut checksum = 0.0f32;
+    for rep in 0..=reps {
+        for (k, m) in [jit.as_ref(), interp.as_ref()].into_iter().enumerate() {
+            let start = Instant::now();
+            for g in points {
+                checksum += m.mask(black_box(g), 0).unwrap_or(0.0);
+            }
+            if rep > 0 {
+                times[k].push(start.elapsed().as_secs_f64() * 1e9 / points.len() as f64);
+            }
+        }
+    }
+    black_box(checksum);
+    let [jit_ns, interp_ns] = times.map(median);
+    Ok(format!(
+        "\n  arithmetic only ({ARITHMETIC_NODES} math/mix nodes over P, {insts} instructions, no runtime calls):\n  \
+         JIT {jit_ns:.1} ns/point, interpreter {interp_ns:.1} ns/point: interpreter / JIT {:.1}x   (target >= 20x)\n",
+        interp_ns / jit_ns
+    ))
 }
 
 /// A substance whose pattern nodes form a binary tree `n` nodes large, read by its mask: noise

@@ -201,7 +201,11 @@ enum Storage {
     /// constants, so conditions on it (`op == "add"`) fold and only the taken branch is lowered.
     Known(Vec<ssa::Value>),
     Vars(Vec<Var>),
-    Array { slot: Slot, elem: Type, len: u32 },
+    Array {
+        slot: Slot,
+        elem: Type,
+        len: u32,
+    },
 }
 
 /// The scalar layout of a non-array type.
