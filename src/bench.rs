@@ -356,9 +356,18 @@ fn single_layer_stack(lib: &Library, names: &[&str]) -> Result<ComposedMaterial,
 
 /// Wires, optimises and lowers a composed material.
 fn lower_material(lib: &Library, material: &ComposedMaterial) -> Result<(crate::ir::ssa::Module, usize), String> {
+    lower_material_with(lib, material, lower::LowerOptions::default())
+}
+
+/// [`lower_material`] with explicit lowering options.
+fn lower_material_with(
+    lib: &Library,
+    material: &ComposedMaterial,
+    options: lower::LowerOptions,
+) -> Result<(crate::ir::ssa::Module, usize), String> {
     let mut diags = Diagnostics::new();
     let wired = wired::build(lib, material, PassOptions::default(), &mut diags);
-    let module = lower::lower(lib, &wired, true, &mut diags);
+    let module = lower::lower(lib, &wired, options, &mut diags);
     if diags.has_errors() {
         return Err(diag_error("the material does not lower", &diags, &SourceMap::new()));
     }
@@ -521,6 +530,7 @@ fn shade_report(scene: Option<&Path>, prim: Option<&str>, o: &ShadeOptions) -> R
 
     if scene.is_none() {
         out += &arithmetic_report(&points, o.reps)?;
+        out += &loop_budget_report(&points, o.reps)?;
     }
     writeln!(out).unwrap();
     out += &compile_sweep(&o.sizes, o.compile_reps)?;
@@ -555,6 +565,67 @@ pub fn arithmetic_substance(n: usize) -> String {
     s += "    node opacity = mask(opacity: n0.out);\n    node base = diffuse();\n";
     s += "    surface = base.bsdf;\n    mask = opacity.out;\n}\n";
     s
+}
+
+/// A mask computed by a 64-iteration loop with a tiny body: the worst case for the loop
+/// budget's per-iteration check.
+const LOOP_SOURCE: &str = "
+shader orbit(float k = 0.97, output float out = 0.0) {
+    float x = P[0];
+    float acc = 0.0;
+    for (int i = 0; i < 64; i++) {
+        x = x * k + 0.1;
+        acc += x * x;
+    }
+    out = acc / 64.0;
+}
+substance looping {
+    node o = orbit();
+    node opacity = mask(opacity: o.out);
+    node base = diffuse();
+    surface = base.bsdf;
+    mask = opacity.out;
+}
+";
+
+/// What the loop budget (DESIGN: shaders cannot hang the renderer) costs: JIT with and without
+/// it on [`LOOP_SOURCE`].
+fn loop_budget_report(points: &[Globals], reps: usize) -> Result<String, String> {
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let (lib, _) = Library::from_text("looping.ash", LOOP_SOURCE, &mut sources, &mut diags);
+    if diags.has_errors() {
+        return Err(diag_error("the loop material does not compile", &diags, &sources));
+    }
+    let material = single_layer_stack(&lib, &["looping"])?;
+    let mut codes = Vec::new();
+    for loop_budget in [true, false] {
+        let options = lower::LowerOptions { loop_budget, ..Default::default() };
+        let (module, _) = lower_material_with(&lib, &material, options)?;
+        codes.push(backend::compile_module(module, BackendKind::Jit)?);
+    }
+    compare_materials(codes[0].as_ref(), codes[1].as_ref(), points, 0.0)
+        .map_err(|e| format!("the loop budget changed a result: {e}"))?;
+    let mut times = [Vec::new(), Vec::new()];
+    let mut checksum = 0.0f32;
+    for rep in 0..=reps {
+        for (k, m) in codes.iter().enumerate() {
+            let start = Instant::now();
+            for g in points {
+                checksum += m.mask(black_box(g), 0).unwrap_or(0.0);
+            }
+            if rep > 0 {
+                times[k].push(start.elapsed().as_secs_f64() * 1e9 / points.len() as f64);
+            }
+        }
+    }
+    black_box(checksum);
+    let [with, without] = times.map(median);
+    Ok(format!(
+        "\n  loop budget (64-iteration loop, 3-instruction body): JIT {with:.1} ns/point with the budget, \
+         {without:.1} without: {:.2}x\n",
+        with / without
+    ))
 }
 
 /// JIT vs interpreter on [`arithmetic_substance`]: ns per mask evaluation.

@@ -273,7 +273,8 @@ impl Compiler {
             }
         }
         self.stats.layers_pruned += wired.stats.layers_pruned;
-        let module = lower::lower(lib, &wired, self.passes.optimize, diags);
+        let options = lower::LowerOptions { simplify: self.passes.optimize, ..Default::default() };
+        let module = lower::lower(lib, &wired, options, diags);
         self.stats.lower_ms += start.elapsed().as_secs_f64() * 1e3;
         module
     }

@@ -35,9 +35,25 @@ const MAX_INLINE_DEPTH: u32 = 64;
 /// Words of a closure in an output buffer: kind + 8 parameters.
 const CLOSURE_WORDS: u32 = 9;
 
-/// Lowers every entry point of a wired material (and, with `optimize`, simplifies each). Problems (a texture file that cannot be read,
-/// a non-constant texture name) are reported to `diags`.
-pub fn lower(lib: &Library, wired: &WiredMaterial, optimize: bool, diags: &mut Diagnostics) -> Module {
+/// How to lower.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LowerOptions {
+    /// Run [`ssa::simplify`] on each function.
+    pub simplify: bool,
+    /// Charge loops against [`LOOP_BUDGET`]. Off only to measure what the guard costs
+    /// (`strata bench shade`); without it a runaway shader hangs its render thread.
+    pub loop_budget: bool,
+}
+
+impl Default for LowerOptions {
+    fn default() -> Self {
+        LowerOptions { simplify: true, loop_budget: true }
+    }
+}
+
+/// Lowers every entry point of a wired material. Problems (a texture file that cannot be
+/// read, a non-constant texture name) are reported to `diags`.
+pub fn lower(lib: &Library, wired: &WiredMaterial, options: LowerOptions, diags: &mut Diagnostics) -> Module {
     if let Err(e) = wired.validate(lib) {
         diags.push(Diagnostic::error(format!("internal compiler error: invalid wired IR: {e}")));
     }
@@ -45,7 +61,7 @@ pub fn lower(lib: &Library, wired: &WiredMaterial, optimize: bool, diags: &mut D
     let mut strings = Vec::new();
     let mut functions = Vec::new();
     let nlayers = wired.layers.len() as u32;
-    let mut cx = Context { lib, wired, strings: &mut strings, diags, optimize };
+    let mut cx = Context { lib, wired, strings: &mut strings, diags, options };
 
     // Masks known at compile time live in `info`; the others get one entry each, which
     // `masks` (all layers) and stochastic picking (top-down, stopping early) both call.
@@ -136,8 +152,7 @@ struct Context<'a> {
     wired: &'a WiredMaterial,
     strings: &'a mut Vec<String>,
     diags: &'a mut Diagnostics,
-    /// Run [`ssa::simplify`] on each function.
-    optimize: bool,
+    options: LowerOptions,
 }
 
 impl Context<'_> {
@@ -155,14 +170,14 @@ impl Context<'_> {
             diags: self.diags,
             b,
             node_out: HashMap::new(),
-            budget,
+            budget: self.options.loop_budget.then_some(budget),
             fail_blocks: HashMap::new(),
             depth: 0,
         };
         body(&mut f);
         let mut func = f.b.finish();
         debug_assert_eq!(ssa::validate(&func), Ok(()), "after lowering:\n{}", func.to_text());
-        if self.optimize {
+        if self.options.simplify {
             ssa::simplify(&mut func);
             debug_assert_eq!(ssa::validate(&func), Ok(()), "after simplify:\n{}", func.to_text());
         }
@@ -240,7 +255,8 @@ struct FnLower<'a> {
     b: Builder,
     /// Lowered outputs of the nodes evaluated so far: (node, param) → value.
     node_out: HashMap<(usize, usize), Lv>,
-    budget: Var,
+    /// The iteration budget's variable (`None` when loops are not charged).
+    budget: Option<Var>,
     /// Shared blocks that return a failure status, by status.
     fail_blocks: HashMap<u32, Block>,
     depth: u32,
@@ -561,13 +577,15 @@ impl FnLower<'_> {
                     None => self.b.jump_to(body_b),
                 }
                 // The iteration budget: a runaway loop returns a status instead of hanging.
-                let left = self.b.value(Inst::Get(self.budget), Ty::I32);
-                let zero = self.b.iconst(0);
-                let ok = self.b.cmp(CmpOp::Gt, left, zero);
-                self.guard(ok, abi::STATUS_LOOP_BUDGET);
-                let one = self.b.iconst(1);
-                let next = self.b.binary(BinOp::ISub, left, one);
-                self.b.effect(Inst::Set(self.budget, next));
+                if let Some(budget) = self.budget {
+                    let left = self.b.value(Inst::Get(budget), Ty::I32);
+                    let zero = self.b.iconst(0);
+                    let ok = self.b.cmp(CmpOp::Gt, left, zero);
+                    self.guard(ok, abi::STATUS_LOOP_BUDGET);
+                    let one = self.b.iconst(1);
+                    let next = self.b.binary(BinOp::ISub, left, one);
+                    self.b.effect(Inst::Set(budget, next));
+                }
                 frame.loops.push((exit, step_b));
                 self.block(body, frame);
                 frame.loops.pop();

@@ -836,6 +836,45 @@ pub fn simplify(f: &mut Function) {
             break;
         }
     }
+    compact(f);
+}
+
+/// Renumbers values and variables densely in definition order, dropping the ones no longer
+/// defined or used, so the text form reads `v0, v1, …` and the interpreter's scratch is small.
+fn compact(f: &mut Function) {
+    let mut value_map: Vec<Option<Value>> = vec![None; f.values.len()];
+    let mut values = Vec::new();
+    let mut var_map: Vec<Option<Var>> = vec![None; f.vars.len()];
+    let mut vars = Vec::new();
+    for block in &f.blocks {
+        for data in &block.insts {
+            if let Some(r) = data.result {
+                value_map[r.0 as usize] = Some(Value(values.len() as u32));
+                values.push(f.values[r.0 as usize]);
+            }
+            if let Inst::Get(v) | Inst::Set(v, _) = &data.inst
+                && var_map[v.0 as usize].is_none()
+            {
+                var_map[v.0 as usize] = Some(Var(vars.len() as u32));
+                vars.push(f.vars[v.0 as usize]);
+            }
+        }
+    }
+    let value = |v: Value| value_map[v.0 as usize].expect("validated: every operand is defined");
+    for block in &mut f.blocks {
+        for data in &mut block.insts {
+            rename(&mut data.inst, value);
+            data.result = data.result.map(value);
+            if let Inst::Get(v) | Inst::Set(v, _) = &mut data.inst {
+                *v = var_map[v.0 as usize].expect("mapped above");
+            }
+        }
+        if let Some(Terminator::Branch(c, ..)) = &mut block.term {
+            *c = value(*c);
+        }
+    }
+    f.values = values;
+    f.vars = vars;
 }
 
 /// Appends each block reached only by a jump from one predecessor to that predecessor (and
