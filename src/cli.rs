@@ -291,6 +291,12 @@ pub fn compile_scene(
 
 /// `strata render [SCENE] -o OUT.exr …`
 pub fn render(args: &RenderArgs) -> Result<(), Failure> {
+    // Only ever write `.exr` (and its `.png` beside it), so a slip of `-o` cannot replace the
+    // scene or a substance file.
+    if !args.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
+        eprintln!("error: the output must be an .exr file, not `{}`", args.output.display());
+        return Err(Failure);
+    }
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
     let compiled = compile_scene(

@@ -73,6 +73,12 @@ fn cli_renders_the_default_scene_and_refuses_bad_input() {
     assert!(!bad_res.status.success());
     assert!(String::from_utf8_lossy(&bad_res.stderr).contains("outside 1..=16384"));
 
+    let scene_copy = dir.path().join("scene.usda");
+    std::fs::write(&scene_copy, "#usda 1.0\n").unwrap();
+    let clobber = run(&["render", "--res", "8x8", "-o", scene_copy.to_str().unwrap()]);
+    assert_eq!(clobber.status.code(), Some(1));
+    assert_eq!(std::fs::read_to_string(&scene_copy).unwrap(), "#usda 1.0\n", "the input is untouched");
+
     let unwritable = run(&["render", "--res", "8x8", "--spp", "1", "-o", "/nonexistent/dir/out.exr"]);
     assert_eq!(unwritable.status.code(), Some(1));
 }
