@@ -591,13 +591,7 @@ substance looping {
 /// What the loop budget (DESIGN: shaders cannot hang the renderer) costs: JIT with and without
 /// it on [`LOOP_SOURCE`].
 fn loop_budget_report(points: &[Globals], reps: usize) -> Result<String, String> {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let (lib, _) = Library::from_text("looping.ash", LOOP_SOURCE, &mut sources, &mut diags);
-    if diags.has_errors() {
-        return Err(diag_error("the loop material does not compile", &diags, &sources));
-    }
-    let material = single_layer_stack(&lib, &["looping"])?;
+    let (lib, material) = single_substance(LOOP_SOURCE, "looping")?;
     let mut codes = Vec::new();
     for loop_budget in [true, false] {
         let options = lower::LowerOptions { loop_budget, ..Default::default() };
@@ -606,21 +600,7 @@ fn loop_budget_report(points: &[Globals], reps: usize) -> Result<String, String>
     }
     compare_materials(codes[0].as_ref(), codes[1].as_ref(), points, 0.0)
         .map_err(|e| format!("the loop budget changed a result: {e}"))?;
-    let mut times = [Vec::new(), Vec::new()];
-    let mut checksum = 0.0f32;
-    for rep in 0..=reps {
-        for (k, m) in codes.iter().enumerate() {
-            let start = Instant::now();
-            for g in points {
-                checksum += m.mask(black_box(g), 0).unwrap_or(0.0);
-            }
-            if rep > 0 {
-                times[k].push(start.elapsed().as_secs_f64() * 1e9 / points.len() as f64);
-            }
-        }
-    }
-    black_box(checksum);
-    let [with, without] = times.map(median);
+    let [with, without] = time_first_mask([codes[0].as_ref(), codes[1].as_ref()], points, reps);
     Ok(format!(
         "\n  loop budget (64-iteration loop, 3-instruction body): JIT {with:.1} ns/point with the budget, \
          {without:.1} without: {:.2}x\n",
@@ -630,40 +610,51 @@ fn loop_budget_report(points: &[Globals], reps: usize) -> Result<String, String>
 
 /// JIT vs interpreter on [`arithmetic_substance`]: ns per mask evaluation.
 fn arithmetic_report(points: &[Globals], reps: usize) -> Result<String, String> {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let source = arithmetic_substance(ARITHMETIC_NODES);
-    let (lib, _) = Library::from_text("arithmetic.ash", &source, &mut sources, &mut diags);
-    if diags.has_errors() {
-        return Err(diag_error("the arithmetic material does not compile", &diags, &sources));
-    }
-    let material = single_layer_stack(&lib, &["arithmetic"])?;
+    let (lib, material) = single_substance(&arithmetic_substance(ARITHMETIC_NODES), "arithmetic")?;
     let (module, _) = lower_material(&lib, &material)?;
     let insts = module.inst_count();
     let jit = backend::compile_module(module.clone(), BackendKind::Jit)?;
     let interp = backend::compile_module(module, BackendKind::Interp)?;
     compare_materials(jit.as_ref(), interp.as_ref(), points, 0.0)
         .map_err(|e| format!("JIT and interpreter disagree on the arithmetic material: {e}"))?;
-    let mut times = [Vec::new(), Vec::new()];
+    let [jit_ns, interp_ns] = time_first_mask([jit.as_ref(), interp.as_ref()], points, reps);
+    Ok(format!(
+        "\n  arithmetic only ({ARITHMETIC_NODES} math/mix nodes over P, {insts} instructions, no runtime calls):\n  \
+         JIT {jit_ns:.1} ns/point, interpreter {interp_ns:.1} ns/point: interpreter / JIT {:.1}x   (target >= 20x)\n",
+        interp_ns / jit_ns
+    ))
+}
+
+/// Loads `source` and composes its substance `name` as a one-layer material.
+fn single_substance(source: &str, name: &str) -> Result<(Library, ComposedMaterial), String> {
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let (lib, _) = Library::from_text(&format!("{name}.ash"), source, &mut sources, &mut diags);
+    if diags.has_errors() {
+        return Err(diag_error(&format!("`{name}` does not compile"), &diags, &sources));
+    }
+    let material = single_layer_stack(&lib, &[name])?;
+    Ok((lib, material))
+}
+
+/// Median ns per evaluation of layer 0's mask for each material, measured interleaved.
+fn time_first_mask<const N: usize>(codes: [&dyn MaterialCode; N], points: &[Globals], reps: usize) -> [f64; N] {
+    let mut times: [Vec<f64>; N] = std::array::from_fn(|_| Vec::new());
     let mut checksum = 0.0f32;
     for rep in 0..=reps {
-        for (k, m) in [jit.as_ref(), interp.as_ref()].into_iter().enumerate() {
+        for (k, m) in codes.iter().enumerate() {
             let start = Instant::now();
             for g in points {
                 checksum += m.mask(black_box(g), 0).unwrap_or(0.0);
             }
+            // Repetition 0 is the warm-up.
             if rep > 0 {
                 times[k].push(start.elapsed().as_secs_f64() * 1e9 / points.len() as f64);
             }
         }
     }
     black_box(checksum);
-    let [jit_ns, interp_ns] = times.map(median);
-    Ok(format!(
-        "\n  arithmetic only ({ARITHMETIC_NODES} math/mix nodes over P, {insts} instructions, no runtime calls):\n  \
-         JIT {jit_ns:.1} ns/point, interpreter {interp_ns:.1} ns/point: interpreter / JIT {:.1}x   (target >= 20x)\n",
-        interp_ns / jit_ns
-    ))
+    times.map(median)
 }
 
 /// A substance whose pattern nodes form a binary tree `n` nodes large, read by its mask: noise
