@@ -210,13 +210,17 @@ pub fn check_file(file: &Path) -> (Diagnostics, SourceMap, String) {
         let user = lib.graphs.len().saturating_sub(1);
         format!("{}: ok ({user} graph(s))", file.display())
     } else {
-        match compose_file(Some(file), &mut sources, &mut diags) {
-            Some(c) => {
+        // Everything `render` would reject: composition, lowering (textures), geometry,
+        // lights and camera — all without generating code or tracing a ray.
+        match open_scene(Some(file), &mut sources, &mut diags) {
+            Some(stage) => {
+                let c = compose_stage(&stage, &mut sources, &mut diags);
+                let mut compiler = Compiler::new(BackendKind::Jit, PassOptions::default());
                 let mut distinct = std::collections::HashSet::new();
                 for material in &c.materials {
-                    let wired = wired::build(&c.library, material, PassOptions::default(), &mut diags);
-                    distinct.insert(wired.to_text(&c.library));
+                    distinct.insert(compiler.lower(&c.library, material, &mut diags).to_text());
                 }
+                crate::render::Scene::from_stage(&stage, &|_| Some(0), &mut diags);
                 format!(
                     "{}: ok ({} renderable prim(s), {} distinct material(s))",
                     file.display(),

@@ -1,4 +1,4 @@
-//! Rendered diagnostics, compared whole (like naga's `tests/wgsl_errors.rs`): every bad input in
+//! Rendered diagnostics (syntax, types, graphs, bindings, geometry and lights), compared whole (like naga's `tests/wgsl_errors.rs`): every bad input in
 //! `tests/in/errors/` gets messages with file:line:col and the source line, and `strata check`
 //! exits non-zero without panicking.
 
@@ -31,6 +31,7 @@ error_snapshots! {
     ash_graphs => "tests/in/errors/graphs.ash",
     usda_syntax => "tests/in/errors/syntax.usda",
     usda_bindings => "tests/in/errors/bindings.usda",
+    usda_geometry => "tests/in/errors/geometry.usda",
 }
 
 fn strata(args: &[&str]) -> std::process::Output {
