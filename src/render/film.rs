@@ -267,6 +267,7 @@ pub fn render(
         materials,
         channel_map: &channel_map,
         params: PathParams { max_depth: settings.max_depth, rr_depth: 3, mode: settings.mode },
+        all_opaque: materials.iter().all(|m| super::integrator::is_opaque(*m)),
     };
     let done = AtomicUsize::new(0);
     let progress_lock = Mutex::new(());

@@ -169,6 +169,14 @@ pub struct Context<'a> {
     pub channel_map: &'a ChannelMap,
     /// Parameters.
     pub params: PathParams,
+    /// Whether every material has a layer whose mask is 1 at compile time: then no surface
+    /// lets light through and shadow rays can stop at their first hit, in any order.
+    pub all_opaque: bool,
+}
+
+/// Whether a material never lets light through: one of its layers has a constant mask of 1.
+pub fn is_opaque(material: &dyn MaterialCode) -> bool {
+    material.info().layers.iter().any(|l| l.constant_mask == Some(1.0))
 }
 
 /// Surface geometry at a hit.
@@ -467,6 +475,9 @@ impl Context<'_> {
     /// transparencies across masked ones.
     fn transmittance(&self, mut o: Vec3, d: Vec3, dist: f32) -> Result<f32, Invalid> {
         let accel = &self.scene.accel;
+        if self.all_opaque {
+            return Ok(if accel.occluded(o, d, 0.0, dist) { 0.0 } else { 1.0 });
+        }
         let mut remaining = dist;
         let mut t_total = 1.0f32;
         for _ in 0..MAX_PASS_THROUGH {
