@@ -544,25 +544,30 @@ const ARITHMETIC_NODES: usize = 64;
 /// no runtime-library calls): where the interpreter's own dispatch cost shows, which the
 /// noise calls of the benchmark material (identical in every backend) hide.
 pub fn arithmetic_substance(n: usize) -> String {
-    let mut s = String::from(
-        "shader leaf(float k = 1.0, output float out = 0.0) {\n    out = P[0] * k + P[1] * (1.0 - k) - P[2] * 0.5;\n}\n\
-         substance arithmetic {\n",
-    );
     let ops = ["add", "mul", "sub", "max", "min", "abs"];
+    let header = "shader leaf(float k = 1.0, output float out = 0.0) {\n    \
+                  out = P[0] * k + P[1] * (1.0 - k) - P[2] * 0.5;\n}\n";
+    header.to_string()
+        + &tree_substance("arithmetic", n, |i, children| match children {
+            None => format!("leaf(k: {:.3})", 0.3 + i as f64 * 0.011),
+            Some((a, None)) => format!("math(a: n{a}.out, b: 0.7, op: \"mul\")"),
+            Some((a, Some(b))) if i % 4 == 3 => format!("mix_float(a: n{a}.out, b: n{b}.out, t: 0.3)"),
+            Some((a, Some(b))) => format!("math(a: n{a}.out, b: n{b}.out, op: \"{}\")", ops[i % ops.len()]),
+        })
+}
+
+/// A substance whose `n` pattern nodes form a binary tree (node `i` reads nodes `2i+1` and
+/// `2i+2` where they exist) and whose mask reads the root. `node(i, children)` writes node
+/// `i`'s expression: `None` for a leaf, `Some((a, b))` with its one or two children.
+fn tree_substance(name: &str, n: usize, node: impl Fn(usize, Option<(usize, Option<usize>)>) -> String) -> String {
+    let mut s = format!("substance {name} {{\n");
     for i in 0..n.max(1) {
         let (a, b) = (2 * i + 1, 2 * i + 2);
-        let node = if a >= n {
-            format!("leaf(k: {:.3})", 0.3 + i as f64 * 0.011)
-        } else if b >= n {
-            format!("math(a: n{a}.out, b: 0.7, op: \"mul\")")
-        } else if i % 4 == 3 {
-            format!("mix_float(a: n{a}.out, b: n{b}.out, t: 0.3)")
-        } else {
-            format!("math(a: n{a}.out, b: n{b}.out, op: \"{}\")", ops[i % ops.len()])
-        };
-        writeln!(s, "    node n{i} = {node};").unwrap();
+        let children = (a < n).then_some((a, (b < n).then_some(b)));
+        writeln!(s, "    node n{i} = {};", node(i, children)).unwrap();
     }
-    s += "    node opacity = mask(opacity: n0.out);\n    node base = diffuse();\n";
+    s += "    node opacity = mask(opacity: n0.out);\n";
+    s += "    node base = diffuse(albedo: color(0.5, 0.5, 0.5));\n";
     s += "    surface = base.bsdf;\n    mask = opacity.out;\n}\n";
     s
 }
@@ -660,26 +665,15 @@ fn time_first_mask<const N: usize>(codes: [&dyn MaterialCode; N], points: &[Glob
 /// A substance whose pattern nodes form a binary tree `n` nodes large, read by its mask: noise
 /// leaves (reading `P`, so nothing folds) combined by `math` and `mix_float` nodes.
 pub fn generated_substance(n: usize) -> String {
-    let mut s = String::from("substance generated {\n");
-    for i in 0..n.max(1) {
-        let (a, b) = (2 * i + 1, 2 * i + 2);
-        let node = if a >= n {
-            format!("noise(scale: {:.3})", 1.0 + i as f64 * 0.013)
-        } else if b >= n {
-            format!("math(a: n{a}.out, op: \"sin\")")
-        } else {
-            match i % 3 {
-                0 => format!("math(a: n{a}.out, b: n{b}.out, op: \"add\")"),
-                1 => format!("math(a: n{a}.out, b: n{b}.out, op: \"mul\")"),
-                _ => format!("mix_float(a: n{a}.out, b: n{b}.out, t: 0.3)"),
-            }
-        };
-        writeln!(s, "    node n{i} = {node};").unwrap();
-    }
-    s += "    node opacity = mask(opacity: n0.out);\n";
-    s += "    node base = diffuse(albedo: color(0.5, 0.5, 0.5));\n";
-    s += "    surface = base.bsdf;\n    mask = opacity.out;\n}\n";
-    s
+    tree_substance("generated", n, |i, children| match children {
+        None => format!("noise(scale: {:.3})", 1.0 + i as f64 * 0.013),
+        Some((a, None)) => format!("math(a: n{a}.out, op: \"sin\")"),
+        Some((a, Some(b))) => match i % 3 {
+            0 => format!("math(a: n{a}.out, b: n{b}.out, op: \"add\")"),
+            1 => format!("math(a: n{a}.out, b: n{b}.out, op: \"mul\")"),
+            _ => format!("mix_float(a: n{a}.out, b: n{b}.out, t: 0.3)"),
+        },
+    })
 }
 
 /// Compile time against graph size: parse + check, compose (wire + fold + lower), JIT codegen.
