@@ -305,3 +305,40 @@ proptest! {
         assert_same(jit.as_ref(), unoptimised.as_ref(), &body, 64);
     }
 }
+
+#[test]
+fn texture_lookups_read_the_file_in_both_backends() {
+    use strata::render::{Channel, ChannelData, Image, write_exr};
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("two_texels.exr");
+    // 2×1: left texel (1, 0, 0.25), right texel (0, 1, 0.75).
+    let channel = |name: &str, v: [f32; 2]| Channel { name: name.into(), data: ChannelData::F32(v.to_vec()) };
+    let image = Image {
+        width: 2,
+        height: 1,
+        channels: vec![channel("R", [1.0, 0.0]), channel("G", [0.0, 1.0]), channel("B", [0.25, 0.75])],
+    };
+    write_exr(&image, &file).unwrap();
+    let source = format!(
+        "substance t {{ node tx = texture(file: {:?}); node c = customChannelColor(name: \"tex\", value: tx.out); }}",
+        file.to_str().unwrap()
+    );
+    let jit = compile(&source, "t", BackendKind::Jit, true);
+    let interp = compile(&source, "t", BackendKind::Interp, true);
+    assert_same(jit.as_ref(), interp.as_ref(), "texture", 400);
+    let mut out = vec![0.0; 3];
+    for (u, want) in [(0.25, [1.0, 0.0, 0.25]), (0.75, [0.0, 1.0, 0.75]), (0.5, [0.5, 0.5, 0.5])] {
+        let g = Globals { u, v: 0.5, ..Globals::default() };
+        jit.channels(&g, 0, &mut out).unwrap();
+        assert_eq!(out, want, "bilinear lookup at u = {u}");
+    }
+
+    // A file that is not there is a compile-time error, not a black texture.
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let missing = source.replace("two_texels.exr", "missing.exr");
+    let (lib, _) = Library::from_text("test.ash", &missing, &mut sources, &mut diags);
+    let mut compiler = Compiler::new(BackendKind::Jit, PassOptions::default());
+    assert!(compiler.compile(&lib, &single_layer(&lib, "t"), &mut diags).is_none());
+    assert!(diags.render(&sources).contains("cannot open texture"), "{}", diags.render(&sources));
+}
