@@ -14,6 +14,8 @@
 //! - [`bench`]: the measurements behind `strata bench shade` and `strata bench render`.
 //! - [`cli`]: the `strata` subcommands.
 
+#![warn(missing_docs)]
+
 pub mod abi;
 pub mod backend;
 pub mod bench;

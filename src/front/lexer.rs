@@ -9,6 +9,8 @@ use logos::Logos;
 #[logos(skip r"[ \t\r\n\f]+")]
 #[logos(skip(r"//[^\n]*", allow_greedy = true))]
 #[logos(skip r"/\*([^*]|\*+[^*/])*\*+/")]
+// Each variant is named after the token its `#[token]`/`#[regex]` attribute spells.
+#[allow(missing_docs)]
 pub enum Tok {
     #[token("shader")]
     Shader,

@@ -14,6 +14,8 @@ use logos::{Lexer, Logos};
 // A comment runs to the end of its line, so the greedy repetition is what we want.
 #[logos(skip(r"(#|//)[^\n]*", allow_greedy = true))]
 #[logos(skip r"/\*([^*]|\*+[^*/])*\*+/")]
+// Each variant is named after the token its `#[token]`/`#[regex]` attribute spells.
+#[allow(missing_docs)]
 pub enum TokenKind {
     /// `(`
     #[token("(")]
