@@ -118,7 +118,7 @@ pub struct LayerInfo {
     pub displacement: Option<DisplacementMode>,
     /// Whether the layer has a normal product.
     pub has_normal: bool,
-    /// The layer's mask when it is known at compile time (clamped; 0 without a surface).
+    /// The layer's mask when it is known at compile time (clamped; absent mask: 1).
     pub constant_mask: Option<f32>,
 }
 
@@ -156,8 +156,8 @@ pub struct MaterialInfo {
 pub trait MaterialCode: Send + Sync {
     /// Layer and channel metadata.
     fn info(&self) -> &MaterialInfo;
-    /// Writes each layer's mask, clamped to [0, 1] (absent mask: 1; a layer without a surface
-    /// or pruned at compile time: 0). `out.len()` is the layer count.
+    /// Writes each layer's mask, clamped to [0, 1] (absent mask: 1), whether or not the layer
+    /// has a surface: which masks weigh what is `crate::layering`'s to say. `out.len()` is the layer count.
     fn masks(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError>;
     /// One layer's mask, as [`MaterialCode::masks`] writes it. Stochastic layer picking walks
     /// the stack from the top and stops at the picked layer (paper 5.3), so its cost does not

@@ -7,6 +7,7 @@
 //! - [`compose`]: slot bindings → one composed material per renderable prim.
 //! - [`ir`]: the wired IR of a composed material, its passes and text form.
 //! - [`backend`]: lowered IR → Cranelift JIT, native objects, or the reference interpreter.
+//! - [`layering`]: which layers take part in the pick, hide, or weight displacement (rules 5, 6).
 //! - [`abi`]: the `#[repr(C)]` contract between compiled materials and the renderer.
 //! - [`render`]: the path tracer (geometry, BVH, lights, integrator, EXR output).
 //! - [`runtime`]: noise, patterns and math semantics shared by every backend.
@@ -24,6 +25,7 @@ pub mod compose;
 pub mod diag;
 pub mod front;
 pub mod ir;
+pub mod layering;
 pub mod render;
 pub mod runtime;
 pub mod scene;

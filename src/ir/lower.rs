@@ -11,7 +11,7 @@
 
 use super::ssa::{self, BinOp, Block, Builder, CmpOp, EntryKind, Inst, Module, Slot, Terminator, Ty, UnOp, Var};
 use super::wired::{Operand, WiredMaterial};
-use crate::abi::{self, ChannelInfo, LayerInfo, MaterialInfo};
+use crate::abi::{self, ChannelInfo, MaterialInfo};
 use crate::diag::{Diagnostic, Diagnostics};
 use crate::front::ast::{BaseType, BinaryOp};
 use crate::front::hir::{Expr, ExprKind, Function, Global, LocalId, Place, Stmt, UnaryOp};
@@ -123,17 +123,7 @@ pub fn lower(lib: &Library, wired: &WiredMaterial, options: LowerOptions, diags:
 
 /// Layer and channel metadata of a wired material, as the renderer sees it.
 pub fn material_info(wired: &WiredMaterial) -> MaterialInfo {
-    let layers = wired
-        .layers
-        .iter()
-        .map(|l| LayerInfo {
-            slot: l.slot.clone(),
-            has_surface: l.surface.is_some(),
-            displacement: l.displacement.as_ref().map(|(_, mode)| *mode),
-            has_normal: l.normal.is_some(),
-            constant_mask: if l.surface.is_none() { Some(0.0) } else { l.constant_mask() },
-        })
-        .collect();
+    let layers = wired.layers.iter().map(|l| l.info()).collect();
     let mut offset = 0;
     let channels = wired
         .channels
@@ -269,13 +259,12 @@ impl FnLower<'_> {
         }
     }
 
-    /// Layer `l`'s mask clamped to [0, 1]: 0 without a surface, 1 without a mask.
+    /// Layer `l`'s mask clamped to [0, 1]; 1 without a mask.
     fn layer_mask(&mut self, l: usize) -> ssa::Value {
         let layer = &self.wired.layers[l];
-        match (&layer.surface, &layer.mask) {
-            (None, _) => self.b.fconst(0.0),
-            (Some(_), None) => self.b.fconst(1.0),
-            (Some(_), Some(mask)) => {
+        match &layer.mask {
+            None => self.b.fconst(1.0),
+            Some(mask) => {
                 let m = self.operand_scalar(mask, Type::FLOAT);
                 let (zero, one) = (self.b.fconst(0.0), self.b.fconst(1.0));
                 let m = self.b.binary(BinOp::FMax, m, zero);

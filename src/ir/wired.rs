@@ -7,6 +7,7 @@
 //! by snapshot tests.
 
 use super::eval::eval_node;
+use crate::abi::LayerInfo;
 use crate::compose::{ComposedMaterial, MaterialRef};
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::front::ast::{GraphKind, Product};
@@ -14,6 +15,7 @@ use crate::front::graph::{ChannelKind, DisplacementMode, Graph, Source};
 use crate::front::hir::{ExprKind, FuncId};
 use crate::front::library::Library;
 use crate::front::types::{Type, Value};
+use crate::layering::{self, Unpickable};
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 
@@ -89,11 +91,22 @@ pub struct Layer {
 }
 
 impl Layer {
+    /// What the renderer (and [`layering`]) knows about the layer.
+    pub fn info(&self) -> LayerInfo {
+        LayerInfo {
+            slot: self.slot.clone(),
+            has_surface: self.surface.is_some(),
+            displacement: self.displacement.as_ref().map(|(_, mode)| *mode),
+            has_normal: self.normal.is_some(),
+            constant_mask: self.constant_mask(),
+        }
+    }
+
     /// The layer's mask as a compile-time constant, if it is one (absent mask = 1).
     pub fn constant_mask(&self) -> Option<f32> {
         match &self.mask {
             None => Some(1.0),
-            Some(Operand::Const(v, _)) => v.as_f32().map(|m| m.clamp(0.0, 1.0)),
+            Some(Operand::Const(v, _)) => v.as_f32().map(layering::clamp_mask),
             _ => None,
         }
     }
@@ -381,43 +394,34 @@ fn count_used(nodes: &[Option<Node>], layers: &[Layer]) -> usize {
     eliminate_dead_nodes(live, &mut layers).len()
 }
 
-/// Removes the shading of layers no path can pick: below a constant-opaque layer, or with a
-/// constant zero mask. Displacement survives where its mode ignores the layers above.
+/// Removes what no rule can observe ([`layering::liveness`]): the surface, normal and channels
+/// of layers that can never be picked (no surface, a constant zero mask, hidden under a
+/// constant-opaque surface), displacement replaced by a constant-opaque `mix` layer above or
+/// weighted by a constant zero mask. Masks stay: they are products of the ABI (a C caller of
+/// a shader object may read any), and the renderer evaluates only those `layering` reads.
+/// Returns the number of layers whose shading was removed.
 fn prune_hidden_layers(layers: &mut [Layer]) -> usize {
+    let infos: Vec<LayerInfo> = layers.iter().map(Layer::info).collect();
+    let live = layering::liveness(&infos);
     let mut pruned = 0;
-    let mut covered_by: Option<String> = None; // a layer above with mask ≡ 1
-    let mut displacement_covered_by: Option<String> = None; // a mix layer above with mask ≡ 1
-    for layer in layers.iter_mut().rev() {
-        let mask = layer.constant_mask();
-        let reason = match (&covered_by, mask) {
-            (Some(slot), _) => Some(format!("hidden under slot {slot}")),
-            (None, Some(m)) if m <= 0.0 => Some("mask is 0".to_string()),
-            _ => None,
+    for (layer, live) in layers.iter_mut().zip(live) {
+        // A layer that has a surface but can never be picked loses what is read only where it
+        // is picked. A layer without a surface keeps its normal and channels: the renderer
+        // never reads them, but they are products of a substance compiled on its own.
+        let why = match &live.unpickable {
+            Some(Unpickable::HiddenUnder(above)) => Some(format!("hidden under slot {}", infos[*above].slot)),
+            Some(Unpickable::MaskZero) => Some("mask is 0".to_string()),
+            Some(Unpickable::NoSurface) | None => None,
         };
-        if let Some(reason) = reason {
+        if let Some(why) = why {
             pruned += 1;
             layer.surface = None;
             layer.normal = None;
             layer.channels.clear();
-            let keep_displacement = match &layer.displacement {
-                Some((_, DisplacementMode::None)) => displacement_covered_by.is_none(),
-                Some((_, DisplacementMode::Add)) => displacement_covered_by.is_none() && mask != Some(0.0),
-                _ => false,
-            };
-            if !keep_displacement {
-                layer.displacement = None;
-            }
-            // The mask still feeds displacement weighting of kept add-mode displacement.
-            if layer.displacement.is_none() {
-                layer.mask = Some(Operand::Const(Value::Float(0.0), Type::FLOAT));
-            }
-            layer.pruned = Some(reason);
+            layer.pruned = Some(why);
         }
-        if layer.pruned.is_none() && mask == Some(1.0) && covered_by.is_none() {
-            covered_by = Some(layer.slot.clone());
-        }
-        if mask == Some(1.0) && matches!(layer.displacement, Some((_, DisplacementMode::Mix))) {
-            displacement_covered_by.get_or_insert_with(|| layer.slot.clone());
+        if !live.displacement {
+            layer.displacement = None;
         }
     }
     pruned

@@ -17,7 +17,7 @@ use super::light::Light;
 use super::sampling::{Rng, power_heuristic};
 use super::scene::Scene;
 use crate::abi::{Closure, ClosureKind, Globals, MaterialCode, ShaderError};
-use crate::front::graph::DisplacementMode;
+use crate::layering;
 use glam::{Vec2, Vec3};
 
 /// How layers are evaluated at a path vertex.
@@ -78,9 +78,6 @@ pub(crate) struct Lobe {
     pub(crate) frame: Frame,
     pub(crate) layer: usize,
 }
-
-/// The largest f32 below 1: keeps a rescaled uniform number in [0, 1).
-const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
 
 /// A direction sampled from the lobes of a shading point.
 pub(crate) struct LobeSample {
@@ -174,9 +171,10 @@ pub struct Context<'a> {
     pub all_opaque: bool,
 }
 
-/// Whether a material never lets light through: one of its layers has a constant mask of 1.
+/// Whether a material never lets light through: a layer with a surface and a mask of 1 at
+/// compile time hides everything below it.
 pub fn is_opaque(material: &dyn MaterialCode) -> bool {
-    material.info().layers.iter().any(|l| l.constant_mask == Some(1.0))
+    layering::is_opaque(&material.info().layers)
 }
 
 /// Surface geometry at a hit.
@@ -248,75 +246,6 @@ impl Context<'_> {
         }
     }
 
-    /// Layer weights of rule 5 into `weights`; returns the transparency.
-    fn weights(masks: &[f32], weights: &mut [f32]) -> f32 {
-        let mut remaining = 1.0f32;
-        for i in (0..masks.len()).rev() {
-            let m = masks[i];
-            let m = if m.is_nan() { 0.0 } else { m.clamp(0.0, 1.0) };
-            weights[i] = m * remaining;
-            remaining *= 1.0 - m;
-        }
-        remaining.max(0.0)
-    }
-
-    /// Total displacement of rule 6 from heights `disp` and masks.
-    fn combine_displacement(material: &dyn MaterialCode, disp: &[f32], masks: &[f32]) -> f32 {
-        let mut d = 0.0f32;
-        for (i, layer) in material.info().layers.iter().enumerate() {
-            let h = disp[i];
-            let m = masks[i].clamp(0.0, 1.0);
-            match layer.displacement {
-                Some(DisplacementMode::None) => d += h,
-                Some(DisplacementMode::Add) => d += m * h,
-                Some(DisplacementMode::Mix) => d += (h - d) * m,
-                None => {}
-            }
-        }
-        d
-    }
-
-    /// The bumped shading normal from displacement heights (finite differences along dPdu, dPdv).
-    fn bump(
-        &self,
-        material: &dyn MaterialCode,
-        g: &Globals,
-        sp: &SurfacePoint,
-        n: Vec3,
-        s: &mut Scratch,
-    ) -> Result<Vec3, Invalid> {
-        let nl = material.info().layers.len();
-        if !material.info().layers.iter().any(|l| l.displacement.is_some()) {
-            return Ok(n);
-        }
-        let scale = sp.p.abs().max_element().max(1.0);
-        let h = 1e-3 * scale;
-        let eval = |offset_u: f32, offset_v: f32, masks: &mut [f32], disp: &mut [f32]| -> Result<f32, Invalid> {
-            let du = if offset_u > 0.0 { offset_u / sp.dpdu.length().max(1e-12) } else { 0.0 };
-            let dv = if offset_v > 0.0 { offset_v / sp.dpdv.length().max(1e-12) } else { 0.0 };
-            let mut gg = *g;
-            gg.p = to_arr(sp.p + sp.dpdu * du + sp.dpdv * dv);
-            gg.u += du;
-            gg.v += dv;
-            material.masks(&gg, masks).map_err(Invalid::Shader)?;
-            material.displacement(&gg, disp).map_err(Invalid::Shader)?;
-            Ok(Self::combine_displacement(material, disp, masks))
-        };
-        let d0 = eval(0.0, 0.0, &mut s.masks_du[..nl], &mut s.disp[..nl])?;
-        let du = eval(h, 0.0, &mut s.masks_du[..nl], &mut s.disp[..nl])?;
-        let dv = eval(0.0, h, &mut s.masks_dv[..nl], &mut s.disp[..nl])?;
-        let lu = sp.dpdu.length().max(1e-12);
-        let lv = sp.dpdv.length().max(1e-12);
-        // Displaced tangents: dP'/du = dPdu + (dD/du) N (the dN/du term is neglected).
-        let tu = sp.dpdu + n * ((du - d0) / h * lu);
-        let tv = sp.dpdv + n * ((dv - d0) / h * lv);
-        let nb = tu.cross(tv).normalize_or_zero();
-        if !nb.is_finite() || nb == Vec3::ZERO {
-            return Ok(n);
-        }
-        Ok(if nb.dot(n) < 0.0 { -nb } else { nb })
-    }
-
     /// Evaluates the picked layer(s) at a hit into `s.lobes`; returns `false` on a
     /// transparent pick. `d` is the incoming ray direction.
     fn shade(
@@ -336,24 +265,11 @@ impl Context<'_> {
             s.lobes.clear();
             return Ok(None);
         }
-        // Rule 5. Stochastic: walk down from the top layer, evaluating each mask only until a
-        // layer is picked: layer i is picked with probability m_i · Π_{j above}(1 − m_j), the
-        // rule's weight, and one uniform number serves every step (rescaled after each miss).
-        // Weighted: every mask, every layer.
+        // Rule 5 (`layering`). Stochastic: walk down from the top, evaluating masks only until
+        // a layer is picked. Weighted: every mask, every layer.
         let picked = match self.params.mode {
             LayerMode::Stochastic => {
-                let mut u = u;
-                let mut picked = None;
-                for i in (0..nl).rev() {
-                    let m = material.mask(&g, i).map_err(Invalid::Shader)?;
-                    let m = if m.is_nan() { 0.0 } else { m.clamp(0.0, 1.0) };
-                    if u < m {
-                        picked = Some(i);
-                        break;
-                    }
-                    u = ((u - m) / (1.0 - m)).min(ONE_MINUS_EPSILON);
-                }
-                match picked {
+                match layering::pick(&info.layers, u, |i| material.mask(&g, i)).map_err(Invalid::Shader)? {
                     Some(i) => Some(i),
                     None => {
                         s.lobes.clear();
@@ -363,7 +279,7 @@ impl Context<'_> {
             }
             LayerMode::Weighted => {
                 material.masks(&g, &mut s.masks[..nl]).map_err(Invalid::Shader)?;
-                let transparency = Self::weights(&s.masks[..nl], &mut s.weights[..nl]);
+                let transparency = layering::pick_weights(&info.layers, &s.masks[..nl], &mut s.weights[..nl]);
                 if u >= 1.0 - transparency || transparency >= 1.0 {
                     s.lobes.clear();
                     return Ok(None);
@@ -371,7 +287,7 @@ impl Context<'_> {
                 None
             }
         };
-        let bumped = self.bump(material, &g, sp, facing, s)?;
+        let bumped = bump(material, &g, &mut s.masks_du, &mut s.masks_dv, &mut s.disp)?;
         g.n = to_arr(bumped);
         s.lobes.clear();
         match picked {
@@ -428,19 +344,7 @@ impl Context<'_> {
         layer: usize,
         weight: f32,
     ) -> Result<Lobe, Invalid> {
-        let mut n = Vec3::from_array(g.n);
-        if material.info().layers[layer].has_normal {
-            let mut out = [0.0f32; 3];
-            material.normal(g, layer, &mut out).map_err(Invalid::Shader)?;
-            let v = Vec3::from_array(out);
-            if !v.is_finite() {
-                return Err(Invalid::NonFiniteClosure);
-            }
-            let v = v.normalize_or_zero();
-            if v != Vec3::ZERO {
-                n = v;
-            }
-        }
+        let n = layer_normal(material, g, layer)?;
         let mut closure = Closure::default();
         material.surface(g, layer, &mut closure).map_err(Invalid::Shader)?;
         if closure.params.iter().any(|p| !p.is_finite()) {
@@ -488,14 +392,9 @@ impl Context<'_> {
             if nl > 0 {
                 let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
                 let g = self.globals(&sp, facing, d);
-                // Π(1 − m_i) from the top; an opaque layer ends the product (and the walk).
-                for i in (0..nl).rev() {
-                    let m = material.mask(&g, i).map_err(Invalid::Shader)?;
-                    t_total *= 1.0 - if m.is_nan() { 0.0 } else { m.clamp(0.0, 1.0) };
-                    if t_total <= 0.0 {
-                        return Ok(0.0);
-                    }
-                }
+                // Π(1 − m_i) over the layers that pick, from the top (`layering`).
+                t_total *= layering::transmittance(&material.info().layers, |i| material.mask(&g, i))
+                    .map_err(Invalid::Shader)?;
             }
             if t_total <= 0.0 {
                 return Ok(0.0);
@@ -539,26 +438,26 @@ impl Context<'_> {
     }
 
     /// Emission of area lights crossed by the segment `o + t d`, `t < tmax`, MIS-weighted
-    /// against the BSDF pdf that chose `d` (`None` when the direction was not BSDF-sampled
-    /// with a density: camera rays and delta lobes).
-    fn area_emission(&self, o: Vec3, d: Vec3, tmax: f32, bsdf_pdf: Option<f32>) -> Vec3 {
+    /// against the vertex that chose `d` (which transparent picks may have left behind `o`).
+    fn area_emission(&self, o: Vec3, d: Vec3, tmax: f32, from: &Scatter) -> Vec3 {
         let mut sum = Vec3::ZERO;
         let select = 1.0 / self.scene.lights.len().max(1) as f32;
         for light in &self.scene.lights {
             if let Some((le, _)) = light.hit(o, d, tmax) {
-                sum += le * mis(light, o, d, bsdf_pdf, select);
+                sum += le * from.mis(light, d, select);
             }
         }
         sum
     }
 
-    fn escape_emission(&self, o: Vec3, d: Vec3, bsdf_pdf: Option<f32>) -> Vec3 {
+    /// Emission of infinite lights reached in direction `d`, MIS-weighted against `from`.
+    fn escape_emission(&self, d: Vec3, from: &Scatter) -> Vec3 {
         let mut sum = Vec3::ZERO;
         let select = 1.0 / self.scene.lights.len().max(1) as f32;
         for light in self.scene.lights.iter().filter(|l| l.is_infinite()) {
             let le = light.escape(d);
             if le != Vec3::ZERO {
-                sum += le * mis(light, o, d, bsdf_pdf, select);
+                sum += le * from.mis(light, d, select);
             }
         }
         sum
@@ -577,7 +476,8 @@ impl Context<'_> {
         let mut out = SampleResult { depth: f32::INFINITY, ..SampleResult::default() };
         s.channels.iter_mut().for_each(|c| *c = 0.0);
         let mut throughput = Vec3::ONE;
-        let mut bsdf_pdf: Option<f32> = None;
+        // The camera "scattered" the first ray; emission it sees directly takes no MIS weight.
+        let mut from = Scatter { p: o, pdf: None };
         let mut bounces = 0u32;
         let mut passes = 0u32;
         let mut first = true;
@@ -586,16 +486,17 @@ impl Context<'_> {
         loop {
             let hit = accel.intersect(o, d, tmin, tmax);
             let t_hit = hit.map_or(f32::INFINITY, |h| h.t);
-            out.radiance += throughput * self.area_emission(o, d, t_hit, bsdf_pdf);
+            out.radiance += throughput * self.area_emission(o, d, t_hit, &from);
             let Some(hit) = hit else {
-                out.radiance += throughput * self.escape_emission(o, d, bsdf_pdf);
+                out.radiance += throughput * self.escape_emission(d, &from);
                 break;
             };
             let sp = surface_point(accel, self.scene, &hit);
             let u_layer = rng.uniform();
             let shaded = self.shade(&sp, d, u_layer, s, first)?;
             let Some((albedo, normal)) = shaded else {
-                // Transparent: continue straight on, not a bounce.
+                // Transparent: continue straight on, not a bounce. Only the ray moves: MIS and
+                // light pdfs stay with `from`, the vertex that chose `d` (DESIGN.md rule 5).
                 passes += 1;
                 if passes > MAX_PASS_THROUGH {
                     out.pass_limit = true;
@@ -628,7 +529,7 @@ impl Context<'_> {
             let Some(next) = sample_lobes(&s.lobes, wo, uc, u2) else { break };
             let wi = next.wi;
             throughput *= next.weight;
-            bsdf_pdf = next.pdf;
+            from = Scatter { p: sp.p, pdf: next.pdf };
             if !throughput.is_finite() {
                 // Reported by the caller as a non-finite sample.
                 out.radiance = Vec3::NAN;
@@ -655,11 +556,133 @@ impl Context<'_> {
     }
 }
 
-/// MIS weight of emission reached by BSDF sampling with density `bsdf_pdf`.
-fn mis(light: &Light, o: Vec3, d: Vec3, bsdf_pdf: Option<f32>, select: f32) -> f32 {
-    match bsdf_pdf {
-        None => 1.0,
-        Some(pdf) => power_heuristic(pdf, light.pdf_li(o, d) * select),
+/// The bumped shading normal of rule 6: `g.n` tilted by the slope of the combined
+/// displacement, by finite differences along `g.dpdu` and `g.dpdv` (masks and heights are
+/// evaluated at the undisplaced points). `masks_a`, `masks_b` and `heights` are scratch, one
+/// float per layer.
+pub(crate) fn bump(
+    material: &dyn MaterialCode,
+    g: &Globals,
+    masks_a: &mut [f32],
+    masks_b: &mut [f32],
+    heights: &mut [f32],
+) -> Result<Vec3, Invalid> {
+    let layers = &material.info().layers;
+    let n = Vec3::from_array(g.n);
+    if !layers.iter().any(|l| l.displacement.is_some()) {
+        return Ok(n);
+    }
+    let nl = layers.len();
+    let (p, dpdu, dpdv) = (Vec3::from_array(g.p), Vec3::from_array(g.dpdu), Vec3::from_array(g.dpdv));
+    let lu = dpdu.length().max(1e-12);
+    let lv = dpdv.length().max(1e-12);
+    // A step of 1e-3 scene units (relative beyond 1): small against pattern features, large
+    // against f32 rounding of the position.
+    let h = 1e-3 * p.abs().max_element().max(1.0);
+    let eval = |du: f32, dv: f32, masks: &mut [f32], heights: &mut [f32]| -> Result<f32, Invalid> {
+        let mut gg = *g;
+        gg.p = to_arr(p + dpdu * du + dpdv * dv);
+        gg.u += du;
+        gg.v += dv;
+        // Only the masks that weight a displacement (`add`, `mix`) are read.
+        for (i, layer) in layers.iter().enumerate() {
+            masks[i] =
+                if layer.mask_weights_displacement() { material.mask(&gg, i).map_err(Invalid::Shader)? } else { 0.0 };
+        }
+        material.displacement(&gg, heights).map_err(Invalid::Shader)?;
+        Ok(layering::combine_displacement(layers, heights, masks))
+    };
+    let d0 = eval(0.0, 0.0, &mut masks_a[..nl], &mut heights[..nl])?;
+    let du = eval(h / lu, 0.0, &mut masks_a[..nl], &mut heights[..nl])?;
+    let dv = eval(0.0, h / lv, &mut masks_b[..nl], &mut heights[..nl])?;
+    // Displaced tangents: dP'/du = dPdu + (dD/du) N (the dN/du term is neglected).
+    let tu = dpdu + n * ((du - d0) / h * lu);
+    let tv = dpdv + n * ((dv - d0) / h * lv);
+    let nb = tu.cross(tv).normalize_or_zero();
+    if !nb.is_finite() || nb == Vec3::ZERO {
+        return Ok(n);
+    }
+    Ok(if nb.dot(n) < 0.0 { -nb } else { nb })
+}
+
+/// Layer `layer`'s shading normal: its normal product (rule 6: after bump, which `g.n`
+/// carries), or `g.n` without one or where it is zero.
+pub(crate) fn layer_normal(material: &dyn MaterialCode, g: &Globals, layer: usize) -> Result<Vec3, Invalid> {
+    let n = Vec3::from_array(g.n);
+    if !material.info().layers[layer].has_normal {
+        return Ok(n);
+    }
+    let mut out = [0.0f32; 3];
+    material.normal(g, layer, &mut out).map_err(Invalid::Shader)?;
+    let v = Vec3::from_array(out);
+    if !v.is_finite() {
+        return Err(Invalid::NonFiniteClosure);
+    }
+    let v = v.normalize_or_zero();
+    Ok(if v == Vec3::ZERO { n } else { v })
+}
+
+/// Everything the integrator derives from a material at one shading point, through the same
+/// functions the path loop calls. Tests compare it across backends and optimisation levels;
+/// it allocates, so it is not for the hot path.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShadingState {
+    /// Rule-5 pick weights, bottom to top.
+    pub weights: Vec<f32>,
+    /// The transparency `w_T`.
+    pub transparency: f32,
+    /// The combined displacement of rule 6.
+    pub displacement: f32,
+    /// The bumped shading normal.
+    pub normal: Vec3,
+    /// Per layer with a positive weight: `(layer, closure, shading normal, channels)`.
+    pub picked: Vec<(usize, Closure, Vec3, Vec<f32>)>,
+}
+
+/// Computes the [`ShadingState`] of `material` at `g` (`g.n` is the unbumped shading normal).
+pub fn shading_state(material: &dyn MaterialCode, g: &Globals) -> Result<ShadingState, Invalid> {
+    let info = material.info();
+    let nl = info.layers.len();
+    let mut masks = vec![0.0; nl];
+    let mut weights = vec![0.0; nl];
+    let mut heights = vec![0.0; nl];
+    material.masks(g, &mut masks).map_err(Invalid::Shader)?;
+    let transparency = layering::pick_weights(&info.layers, &masks, &mut weights);
+    material.displacement(g, &mut heights).map_err(Invalid::Shader)?;
+    let displacement = layering::combine_displacement(&info.layers, &heights, &masks);
+    let (mut a, mut b) = (vec![0.0; nl], vec![0.0; nl]);
+    let normal = bump(material, g, &mut a, &mut b, &mut heights)?;
+    let mut bumped = *g;
+    bumped.n = to_arr(normal);
+    let mut picked = Vec::new();
+    for layer in (0..nl).filter(|&l| weights[l] > 0.0) {
+        let mut closure = Closure::default();
+        material.surface(&bumped, layer, &mut closure).map_err(Invalid::Shader)?;
+        let n = layer_normal(material, &bumped, layer)?;
+        let mut channels = vec![0.0; info.channel_floats];
+        material.channels(&bumped, layer, &mut channels).map_err(Invalid::Shader)?;
+        picked.push((layer, closure, n, channels));
+    }
+    Ok(ShadingState { weights, transparency, displacement, normal, picked })
+}
+
+/// The path vertex that chose the current ray direction (pbrt-v4's previous interaction).
+struct Scatter {
+    /// Where it scattered (the camera for primary rays).
+    p: Vec3,
+    /// The BSDF's solid-angle pdf of the direction; `None` for camera rays and delta lobes,
+    /// which light sampling cannot reach.
+    pdf: Option<f32>,
+}
+
+impl Scatter {
+    /// MIS weight (power heuristic) of emission from `light` in direction `d`: the light pdf
+    /// is that of sampling the light from this vertex, as [`Context::direct`] would have.
+    fn mis(&self, light: &Light, d: Vec3, select: f32) -> f32 {
+        match self.pdf {
+            None => 1.0,
+            Some(pdf) => power_heuristic(pdf, light.pdf_li(self.p, d) * select),
+        }
     }
 }
 
