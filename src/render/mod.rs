@@ -27,6 +27,8 @@ pub mod testing;
 pub mod xform;
 
 #[cfg(test)]
+mod reference;
+#[cfg(test)]
 mod tests;
 
 pub use film::{Channel, ChannelData, Image, Progress, RenderError, RenderSettings, RenderStats, render};
