@@ -31,6 +31,7 @@ error_snapshots! {
     ash_graphs => "tests/in/errors/graphs.ash",
     usda_syntax => "tests/in/errors/syntax.usda",
     usda_bindings => "tests/in/errors/bindings.usda",
+    usda_connections => "tests/in/errors/connections.usda",
     usda_geometry => "tests/in/errors/geometry.usda",
 }
 

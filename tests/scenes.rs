@@ -92,7 +92,40 @@ fn pixar_written_fixture_composes() {
         .expect("Pixar's file opens");
     let tree = strata::compose::scene::binding_tree(&stage, &mut diags);
     let stacks = strata::compose::slots::resolve_stacks(&tree, &mut diags);
+    // The fixture's `_050:_:_010` has two targets: an error (one material per slot), and not
+    // applied. Everything else composes.
+    let rendered = diags.render(&sources);
+    assert_eq!(diags.error_count(), 1, "{rendered}");
+    assert!(rendered.contains("`material:slotBinding:_050:_:_010` has 2 targets"), "{rendered}");
     insta::assert_snapshot!("pixar_written_layers_json", cli::layers_json(&stacks));
+}
+
+#[test]
+fn layers_json_for_declared_empty_and_utf8_slots() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_strata"))
+        .args(["layers", "tests/fixtures/usd/slot_semantics.usda", "--json"])
+        .output()
+        .expect("strata runs");
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("valid JSON");
+    let layer = |slot: &str, material: &str, bound_at: &str, overrides: serde_json::Value| serde_json::json!({"slot": slot, "material": material, "bound_at": bound_at, "overrides": overrides});
+    let wet = serde_json::json!([{"slot": "050::010", "material": "/Looks/Wet", "bound_at": "/Root"}]);
+    assert_eq!(
+        json,
+        serde_json::json!([
+            {"prim": "/Root/Declared", "layers": [
+                layer("000", "/Looks/Base", "/Root", serde_json::json!([])),
+                layer("050", "/Looks/Dirt", "/Root", wet),
+                layer("060", "/Looks/Decal", "/Root/Declared", serde_json::json!([])),
+                layer("z", "/Looks/Zinc", "/Root/Declared", serde_json::json!([])),
+                layer("é", "/Looks/Accent", "/Root/Declared", serde_json::json!([])),
+            ]},
+            {"prim": "/Root/Deleted", "layers": [layer("000", "/Looks/Base", "/Root", serde_json::json!([]))]},
+            {"prim": "/Root/Blocked", "layers": [layer("000", "/Looks/Base", "/Root", serde_json::json!([]))]},
+        ])
+    );
+    // UTF-8 slot names are written as they are, not escaped.
+    assert!(String::from_utf8_lossy(&out.stdout).contains("\"slot\": \"é\""));
 }
 
 #[test]

@@ -1,6 +1,7 @@
 //! The bridge from a composed USD stage to composition: reads slot-binding relationships into
 //! a [`BindingTree`], finds each bound Material's strata shader (UsdShade source-asset
-//! convention) and the input values it sets, and assembles one [`ComposedMaterial`] per
+//! convention) and the input values it sets (its own, or through `.connect` the Material's
+//! interface inputs, as UsdShade resolves them), and assembles one [`ComposedMaterial`] per
 //! renderable prim.
 
 use super::slots::{Binding, BindingPrim, BindingTree, PrimStack, SLOT_BINDING_PREFIX, decode_slot, resolve_stacks};
@@ -9,7 +10,7 @@ use crate::diag::{Diagnostic, Diagnostics, SourceMap, Span};
 use crate::front::ast::{BaseType, GraphKind};
 use crate::front::library::Library;
 use crate::front::types::{Type, Value};
-use crate::scene::{Prim, PrimId, Stage, Value as UsdValue};
+use crate::scene::{Attribute, Prim, PrimId, Stage, Value as UsdValue};
 use std::collections::HashMap;
 use std::path::PathBuf;
 
@@ -28,6 +29,9 @@ pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
     for (id, prim) in stage.depth_first() {
         let mut bindings = Vec::new();
         for rel in prim.relationships_with_prefix(SLOT_BINDING_PREFIX) {
+            // Declared only (`rel material:slotBinding:_050`, no target opinion in any layer):
+            // no binding at all, as in USD. An authored empty list is an empty binding.
+            let Some(authored) = rel.authored else { continue };
             let encoded = &rel.name[SLOT_BINDING_PREFIX.len()..];
             let slot = match decode_slot(encoded) {
                 Ok(slot) => slot,
@@ -39,19 +43,22 @@ pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
                     continue;
                 }
             };
-            if rel.targets.len() > 1 {
-                diags.push(
-                    Diagnostic::warning(format!(
-                        "slot binding `{}` has {} targets; the first is used",
+            let (material, span) = match rel.targets.as_slice() {
+                [] => (None, authored),
+                [(path, span)] => (Some(path.clone()), *span),
+                targets => {
+                    let mut d = Diagnostic::error(format!(
+                        "slot binding `{}` has {} targets; a slot binds one material",
                         rel.name,
-                        rel.targets.len()
+                        targets.len()
                     ))
-                    .at(rel.span, "one material per slot"),
-                );
-            }
-            let (material, span) = match rel.targets.first() {
-                Some((path, span)) => (Some(path.clone()), *span),
-                None => (None, rel.span),
+                    .at(authored, "one material per slot");
+                    for (_, span) in targets {
+                        d = d.also(*span, "target");
+                    }
+                    diags.push(d);
+                    continue;
+                }
             };
             bindings.push(Binding { slot, material, span });
         }
@@ -68,7 +75,24 @@ struct MaterialSource {
     file: PathBuf,
     file_span: Span,
     graph_name: Option<String>,
-    inputs: Vec<(String, UsdValue, String, Span)>,
+    inputs: Vec<InputValue>,
+    /// Interface inputs of the Material with a value that no connection reaches: (name, USD
+    /// type, span).
+    unconnected: Vec<(String, String, Span)>,
+}
+
+/// The value a Material sets on one shader input.
+#[derive(Clone, Debug)]
+struct InputValue {
+    /// The input's name, without `inputs:`.
+    name: String,
+    value: UsdValue,
+    /// The USD type of the attribute that holds the value.
+    type_name: String,
+    /// The value's text.
+    span: Span,
+    /// The shader input's connection, when the value comes through one.
+    connected: Option<Span>,
 }
 
 /// Everything composition produced for a scene.
@@ -211,22 +235,144 @@ fn material_source(stage: &Stage, path: &str, binding: Span, diags: &mut Diagnos
     }
     let graph_name =
         shader.value("info:strata:sourceAsset:subIdentifier").and_then(UsdValue::as_str).map(str::to_string);
-    // Material-level interface inputs first, then the shader's own (which win when authored
-    // with a value; a shader input connected to the material interface takes the interface value).
-    let mut inputs: Vec<(String, UsdValue, String, Span)> = Vec::new();
-    let mut push = |name: &str, value: UsdValue, ty: &str, span: Span| {
-        inputs.retain(|(n, ..)| n != name);
-        inputs.push((name.to_string(), value, ty.to_string(), span));
-    };
-    for prim in [material, shader] {
-        for attr in &prim.attributes {
-            let Some(name) = attr.name.strip_prefix("inputs:") else { continue };
-            if let Some((value, span)) = &attr.value {
-                push(name, value.clone(), &attr.type_name, *span);
-            }
-        }
+    // Each shader input takes the value UsdShade resolves for it: through `.connect` to the
+    // Material's interface inputs, else its own. Interface inputs reach the shader only through
+    // connections; the ones nothing reaches are kept to warn about if the substance has them.
+    let mut inputs = Vec::new();
+    let mut reached: Vec<String> = Vec::new();
+    for attr in &shader.attributes {
+        let Some(name) = attr.name.strip_prefix("inputs:") else { continue };
+        let mut seen = Vec::new();
+        let producer = value_producer(stage, shader, attr, &mut seen, diags);
+        reached.append(&mut seen);
+        let Some((prim, producer)) = producer else { continue };
+        let Some((value, span)) = &producer.value else { continue };
+        reached.push(attribute_path(prim, producer));
+        let connected = if std::ptr::eq(producer, attr) { None } else { attr.connections.first().map(|(_, s)| *s) };
+        inputs.push(InputValue {
+            name: name.to_string(),
+            value: value.clone(),
+            type_name: producer.type_name.clone(),
+            span: *span,
+            connected,
+        });
     }
-    Some(MaterialSource { file: asset.resolved.clone(), file_span: asset_span, graph_name, inputs })
+    let unconnected = if std::ptr::eq(material, shader) {
+        Vec::new()
+    } else {
+        material
+            .attributes
+            .iter()
+            .filter(|a| a.name.starts_with("inputs:") && a.value.is_some())
+            .filter(|a| !reached.contains(&attribute_path(material, a)))
+            .map(|a| (a.name.clone(), a.type_name.clone(), a.span))
+            .collect()
+    };
+    Some(MaterialSource { file: asset.resolved.clone(), file_span: asset_span, graph_name, inputs, unconnected })
+}
+
+/// `/Prim.name`, the form connection targets take.
+fn attribute_path(prim: &Prim, attr: &Attribute) -> String {
+    format!("{}.{}", prim.path, attr.name)
+}
+
+/// Whether a prim type encapsulates a shading network (UsdShade's containers), so that its
+/// inputs and outputs pass connections on instead of computing values.
+fn is_container(prim: &Prim) -> bool {
+    matches!(prim.type_name.as_deref(), Some("Material" | "NodeGraph"))
+}
+
+/// The attribute whose value an input takes, as UsdShade's `GetValueProducingAttributes`
+/// resolves it: connections are followed through the inputs and outputs of Materials and
+/// NodeGraphs; where they lead to no value, the input's own authored value applies. `seen`
+/// holds the connected attributes on the way (`/Prim.inputs:x`) to detect cycles.
+fn value_producer<'s>(
+    stage: &'s Stage,
+    prim: &'s Prim,
+    attr: &'s Attribute,
+    seen: &mut Vec<String>,
+    diags: &mut Diagnostics,
+) -> Option<(&'s Prim, &'s Attribute)> {
+    let own = attr.value.is_some().then_some((prim, attr));
+    let (target, span) = match attr.connections.as_slice() {
+        [] => return own,
+        [one] => one,
+        targets => {
+            let mut d = Diagnostic::error(format!(
+                "`{}` connects to {} sources; a substance input takes one value",
+                attribute_path(prim, attr),
+                targets.len()
+            ))
+            .at(attr.span, "this input");
+            for (_, span) in targets {
+                d = d.also(*span, "source");
+            }
+            diags.push(d);
+            return own;
+        }
+    };
+    seen.push(attribute_path(prim, attr));
+    // A prim path has no `.`; the property name follows the first one.
+    let Some((source_path, name)) = target.split_once('.') else {
+        diags.push(
+            Diagnostic::error(format!("connection source `{target}` is not an attribute"))
+                .at(*span, "expected `</Prim.inputs:name>` or `</Prim.outputs:name>`"),
+        );
+        return own;
+    };
+    let Some(source) = stage.find(source_path).map(|id| stage.prim(id)) else {
+        diags.push(
+            Diagnostic::error(format!("connection source `{target}` does not exist"))
+                .at(*span, format!("no prim `{source_path}`")),
+        );
+        return own;
+    };
+    let Some(source_attr) = source.attribute(name) else {
+        diags.push(
+            Diagnostic::error(format!("connection source `{target}` does not exist"))
+                .at(*span, format!("`{source_path}` has no attribute `{name}`"))
+                .also(source.span, "this prim"),
+        );
+        return own;
+    };
+    if seen.contains(&attribute_path(source, source_attr)) {
+        diags.push(
+            Diagnostic::error(format!("connection cycle: `{target}` leads back to itself"))
+                .at(*span, "this connection closes the cycle"),
+        );
+        return own;
+    }
+    let found = match (name.split_once(':').map(|(ns, _)| ns), is_container(source)) {
+        (Some("inputs" | "outputs"), true) => value_producer(stage, source, source_attr, seen, diags),
+        (Some("outputs"), false) => {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "strata cannot evaluate `{target}`, an output of the shader `{source_path}`; the connection is ignored"
+                ))
+                .at(*span, "connected here")
+                .note("the input takes a value authored along the connection, else the substance's default"),
+            );
+            None
+        }
+        (Some("inputs"), false) => {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "`{target}` is an input of the shader `{source_path}`; UsdShade ignores such a connection"
+                ))
+                .at(*span, "connected here")
+                .note("a shader input connects to a Material or NodeGraph input, or to a shader output"),
+            );
+            None
+        }
+        _ => {
+            diags.push(
+                Diagnostic::error(format!("connection source `{target}` is neither an input nor an output"))
+                    .at(*span, "expected `inputs:` or `outputs:`"),
+            );
+            None
+        }
+    };
+    found.or(own)
 }
 
 fn material_ref(
@@ -271,21 +417,38 @@ fn material_ref(
     };
     let g = lib.get(graph);
     let mut values = Vec::new();
-    for (name, value, usd_type, span) in &source.inputs {
+    for InputValue { name, value, type_name, span, connected } in &source.inputs {
         let Some((index, input)) = g.input(name) else {
             diags.push(
                 Diagnostic::warning(format!("`{}` has no input `{name}`; the value set on `{path}` is unused", g.name))
-                    .at(*span, "unused"),
+                    .at(connected.unwrap_or(*span), "unused"),
             );
             continue;
         };
-        match convert_input(value, usd_type, input.ty) {
+        match convert_input(value, type_name, input.ty) {
             Ok(v) => values.push((index, v)),
-            Err(message) => diags.push(
-                Diagnostic::error(format!("input `{name}` of `{path}`: {message}"))
-                    .at(*span, "this value")
-                    .also(input.span, format!("declared as {}", input.ty)),
-            ),
+            Err(message) => {
+                let mut d = Diagnostic::error(format!("input `{name}` of `{path}`: {message}")).at(*span, "this value");
+                if let Some(c) = connected {
+                    d = d.also(*c, "connected here");
+                }
+                diags.push(d.also(input.span, format!("declared as {}", input.ty)));
+            }
+        }
+    }
+    for (attr, type_name, span) in &source.unconnected {
+        let name = &attr["inputs:".len()..];
+        if g.input(name).is_some() && !source.inputs.iter().any(|i| i.name == name) {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "`{path}` sets `{attr}`, but no shader input connects to it; the value is unused"
+                ))
+                .at(*span, "not connected")
+                .note(format!(
+                    "UsdShade passes a Material's inputs to its shader only through connections: \
+                     `{type_name} {attr}.connect = <{path}.{attr}>` on the Shader"
+                )),
+            );
         }
     }
     Some(MaterialRef { path: path.to_string(), graph, values, span: binding })
@@ -348,4 +511,332 @@ fn convert_input(value: &UsdValue, type_name: &str, to: Type) -> Result<Value, S
         return Err(format!("a {from} value cannot set a {to} input"));
     }
     Ok(v.convert(from, to))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compose::slots::resolve_stacks;
+    use std::path::Path;
+
+    /// The paper's listing-1 substances (`SubstanceB`: `color albedo`, `float coverage`).
+    fn paper_dir() -> PathBuf {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/paper")
+    }
+
+    fn stage(text: &str, dir: &Path) -> (Stage, SourceMap, Diagnostics) {
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let stage = Stage::from_text("scene.usda", text, dir, &mut sources, &mut diags)
+            .unwrap_or_else(|_| panic!("{}", diags.render(&sources)));
+        (stage, sources, diags)
+    }
+
+    /// Each renderable prim's stack as `prim: slot=material@bound_at ...`, and the diagnostics.
+    fn stacks(text: &str, dir: &Path) -> (Vec<String>, String, bool) {
+        let (stage, sources, mut diags) = stage(text, dir);
+        let tree = binding_tree(&stage, &mut diags);
+        let stacks = resolve_stacks(&tree, &mut diags);
+        let lines = stacks
+            .iter()
+            .map(|s| {
+                let layers: Vec<String> = s
+                    .layers
+                    .iter()
+                    .map(|l| {
+                        let mut t = format!("{}={}@{}", l.slot.name(), l.applied.material, l.applied.bound_at);
+                        for o in &l.overrides {
+                            t += &format!("[{}={}]", o.slot.name(), o.applied.material);
+                        }
+                        t
+                    })
+                    .collect();
+                format!("{}: {}", s.prim, layers.join(" "))
+            })
+            .collect();
+        (lines, diags.render(&sources), diags.has_errors())
+    }
+
+    #[test]
+    fn declared_only_is_no_binding_and_authored_empty_removes() {
+        let (lines, rendered, errors) = stacks(
+            r#"#usda 1.0
+def Xform "Root" {
+    rel material:slotBinding:_000 = </M/A>
+    rel material:slotBinding:_050 = </M/B>
+    def Sphere "Declared" {
+        rel material:slotBinding:_050
+        custom rel material:slotBinding:_070
+        rel material:slotBinding:not_encoded
+    }
+    def Sphere "None" { rel material:slotBinding:_050 = None }
+    def Sphere "EmptyList" { rel material:slotBinding:_050 = [] }
+    def Sphere "DeleteOnly" { delete rel material:slotBinding:_050 = </M/B> }
+    def Sphere "DeletedAway" {
+        # As in Sdf, the edit replaces the explicit list; `delete` over nothing is empty.
+        rel material:slotBinding:_050 = </M/C>
+        delete rel material:slotBinding:_050 = </M/C>
+    }
+    def Sphere "PrependNothing" { prepend rel material:slotBinding:_050 = [] }
+    def Xform "Removed" {
+        rel material:slotBinding:_050 = None
+        def Sphere "DeclaredBelow" { rel material:slotBinding:_050 }
+    }
+}
+"#,
+            &paper_dir(),
+        );
+        // Not even the malformed name is reported: a declaration binds nothing.
+        assert!(!errors && rendered.is_empty(), "{rendered}");
+        assert_eq!(
+            lines,
+            vec![
+                "/Root/Declared: 000=/M/A@/Root 050=/M/B@/Root",
+                "/Root/None: 000=/M/A@/Root",
+                "/Root/EmptyList: 000=/M/A@/Root",
+                "/Root/DeleteOnly: 000=/M/A@/Root",
+                "/Root/DeletedAway: 000=/M/A@/Root",
+                "/Root/PrependNothing: 000=/M/A@/Root",
+                // A declaration does not undo an inherited removal either.
+                "/Root/Removed/DeclaredBelow: 000=/M/A@/Root",
+            ]
+        );
+    }
+
+    fn write(dir: &Path, name: &str, text: &str) {
+        std::fs::write(dir.join(name), text).expect("write fixture");
+    }
+
+    #[test]
+    fn declared_only_in_a_stronger_layer_keeps_the_weaker_opinion() {
+        let dir = tempfile::Builder::new().prefix("strata-declared").tempdir().expect("temp dir");
+        let d = dir.path();
+        write(
+            d,
+            "weak.usda",
+            "#usda 1.0\ndef Xform \"Root\" {\n    rel material:slotBinding:_000 = </M/A>\n    \
+             def Sphere \"Ball\" {\n        rel material:slotBinding:_050 = </M/B>\n        \
+             rel material:slotBinding:_060 = </M/C>\n    }\n    \
+             def Sphere \"Deleted\" {\n        rel material:slotBinding:_000 = </M/X>\n    }\n}\n",
+        );
+        write(
+            d,
+            "asset.usda",
+            "#usda 1.0\n(defaultPrim = \"Thing\")\ndef Sphere \"Thing\" {\n    \
+             rel material:slotBinding:_010 = </Thing/Mat>\n    def Material \"Mat\" {}\n}\n",
+        );
+        let (lines, rendered, errors) = stacks(
+            r#"#usda 1.0
+(subLayers = [@weak.usda@])
+over "Root" {
+    over "Ball" {
+        rel material:slotBinding:_050
+        rel material:slotBinding:_060 = None
+    }
+    over "Deleted" {
+        delete rel material:slotBinding:_000 = </M/X>
+    }
+    def "Ref" (references = @asset.usda@) {
+        custom rel material:slotBinding:_010
+    }
+}
+"#,
+            d,
+        );
+        assert!(!errors, "{rendered}");
+        assert_eq!(
+            lines,
+            vec![
+                // The stronger layer's declaration is no opinion; its `= None` is one.
+                "/Root/Ball: 000=/M/A@/Root 050=/M/B@/Root/Ball",
+                // Deleting the weaker layer's only target leaves an empty binding: it removes
+                // the inherited slot.
+                "/Root/Deleted: ",
+                // The reference's binding applies, mapped to where it is referenced.
+                "/Root/Ref: 000=/M/A@/Root 010=/Root/Ref/Mat@/Root/Ref",
+            ]
+        );
+    }
+
+    #[test]
+    fn utf8_slots_parse_and_sort_byte_by_byte() {
+        let (lines, rendered, errors) = stacks(
+            "#usda 1.0\ndef Sphere \"Ball\" {\n    rel material:slotBinding:_é = </M/E>\n    \
+             rel material:slotBinding:_é:_:_ü = </M/O>\n    rel material:slotBinding:_z = </M/Z>\n    \
+             rel material:slotBinding:_Ａ = </M/W>\n    rel material:slotBinding:_𐐀 = </M/D>\n    \
+             rel material:slotBinding:_Z = </M/U>\n    rel material:slotBinding:_e\u{301} = </M/C>\n}\n",
+            &paper_dir(),
+        );
+        assert!(!errors, "{rendered}");
+        // Byte order (= code point order), not case- or locale-aware, not UTF-16 order (which
+        // would put U+10400 before U+FF21), no normalisation (`e` + U+0301 is not `é`).
+        assert_eq!(
+            lines,
+            vec![
+                "/Ball: Z=/M/U@/Ball e\u{301}=/M/C@/Ball z=/M/Z@/Ball é=/M/E@/Ball[é::ü=/M/O] Ａ=/M/W@/Ball 𐐀=/M/D@/Ball"
+            ]
+        );
+    }
+
+    #[test]
+    fn more_than_one_target_is_an_error() {
+        let (lines, rendered, errors) = stacks(
+            "#usda 1.0\ndef Xform \"Root\" {\n    rel material:slotBinding:_000 = </M/A>\n    \
+             def Sphere \"Ball\" {\n        rel material:slotBinding:_000 = [</M/B>, </M/C>]\n    }\n}\n",
+            &paper_dir(),
+        );
+        assert!(errors);
+        assert!(rendered.contains("slot binding `material:slotBinding:_000` has 2 targets"), "{rendered}");
+        assert!(rendered.contains("scene.usda:5:9"), "{rendered}");
+        // The bad binding is not applied, not even its first target.
+        assert_eq!(lines, vec!["/Root/Ball: 000=/M/A@/Root"]);
+    }
+
+    /// Composes a scene whose `/Ball` binds `/M/B` (listing 1's `SubstanceB`) and returns the
+    /// values it sets by input name, with the rendered diagnostics.
+    fn ball_inputs(material: &str) -> (Vec<(String, Value)>, String, bool) {
+        let (values, _, rendered, errors) = ball(material);
+        (values, rendered, errors)
+    }
+
+    /// [`ball_inputs`] plus the wired IR of `/Ball`'s material.
+    fn ball(material: &str) -> (Vec<(String, Value)>, String, String, bool) {
+        let text = format!(
+            "#usda 1.0\ndef Sphere \"Ball\" {{ rel material:slotBinding:_000 = </M/B> }}\ndef Scope \"M\" {{\n{material}\n}}\n"
+        );
+        let (stage, mut sources, mut diags) = stage(&text, &paper_dir());
+        let c = compose_stage(&stage, &mut sources, &mut diags);
+        let values = c
+            .material_of("/Ball")
+            .and_then(|m| m.layers.first())
+            .map(|l| {
+                let g = c.library.get(l.substance.graph);
+                l.substance.values.iter().map(|(i, v)| (g.inputs[*i].name.clone(), v.clone())).collect()
+            })
+            .unwrap_or_default();
+        let ir = c
+            .material_of("/Ball")
+            .map(|m| {
+                let options = crate::ir::wired::PassOptions::default();
+                crate::ir::wired::build(&c.library, m, options, &mut diags).to_text(&c.library)
+            })
+            .unwrap_or_default();
+        (values, ir, diags.render(&sources), diags.has_errors())
+    }
+
+    const SHADER: &str = r#"uniform token info:implementationSource = "sourceAsset"
+            uniform asset info:strata:sourceAsset = @listing1.ash@
+            uniform token info:strata:sourceAsset:subIdentifier = "SubstanceB""#;
+
+    #[test]
+    fn connect_delivers_material_interface_inputs() {
+        let (values, ir, rendered, errors) = ball(&format!(
+            r#"    def Material "B" {{
+        color3f inputs:tint = (0.1, 0.2, 0.3)
+        float inputs:cov = 0.25
+        float inputs:cov.connect = </M/B.inputs:base_cov>
+        float inputs:base_cov = 0.75
+        def Shader "S" {{
+            {SHADER}
+            color3f inputs:albedo = (1, 1, 1)
+            color3f inputs:albedo.connect = </M/B.inputs:tint>
+            float inputs:coverage.connect = </M/B.inputs:cov>
+        }}
+    }}"#
+        ));
+        assert!(!errors, "{rendered}");
+        assert!(rendered.is_empty(), "{rendered}");
+        // The connection beats the shader's own value; `cov` passes `base_cov` on.
+        assert_eq!(
+            values,
+            vec![("albedo".to_string(), Value::Triple([0.1, 0.2, 0.3])), ("coverage".to_string(), Value::Float(0.75))]
+        );
+        // And they reach the compiled material.
+        assert!(ir.contains("(albedo: (0.1, 0.2, 0.3))") && ir.contains("mask = 0.75"), "{ir}");
+    }
+
+    #[test]
+    fn connect_falls_back_to_authored_values_as_usdshade_does() {
+        let (values, rendered, errors) = ball_inputs(&format!(
+            r#"    def Material "B" {{
+        color3f inputs:tint
+        float inputs:cov
+        def Shader "S" {{
+            {SHADER}
+            color3f inputs:albedo = (0.5, 0.5, 0.5)
+            color3f inputs:albedo.connect = </M/B.inputs:tint>
+            float inputs:coverage.connect = </M/B.inputs:cov>
+        }}
+    }}"#
+        ));
+        assert!(!errors && rendered.is_empty(), "{rendered}");
+        // The interface inputs have no value: the shader's own applies, else the default.
+        assert_eq!(values, vec![("albedo".to_string(), Value::Triple([0.5, 0.5, 0.5]))]);
+    }
+
+    #[test]
+    fn material_inputs_reach_the_shader_only_through_connections() {
+        let (values, rendered, errors) = ball_inputs(&format!(
+            r#"    def Material "B" {{
+        float inputs:coverage = 0.1
+        float inputs:unrelated = 2
+        def Shader "S" {{
+            {SHADER}
+        }}
+    }}"#
+        ));
+        assert!(!errors, "{rendered}");
+        assert!(values.is_empty(), "{values:?}");
+        assert!(
+            rendered.contains("`/M/B` sets `inputs:coverage`, but no shader input connects to it")
+                && rendered.contains("float inputs:coverage.connect = </M/B.inputs:coverage>")
+                && !rendered.contains("unrelated"),
+            "{rendered}"
+        );
+    }
+
+    #[test]
+    fn bad_connections_are_located_diagnostics() {
+        let (values, rendered, errors) = ball_inputs(&format!(
+            r#"    def Material "B" {{
+        float inputs:a.connect = </M/B.inputs:b>
+        float inputs:b = 0.5
+        float inputs:b.connect = </M/B.inputs:a>
+        def Shader "S" {{
+            {SHADER}
+            float inputs:coverage.connect = </M/B.inputs:a>
+            color3f inputs:albedo.connect = </M/B.inputs:nope>
+        }}
+    }}"#
+        ));
+        assert!(errors);
+        for expected in [
+            "error: connection cycle: `/M/B.inputs:a` leads back to itself",
+            "scene.usda:7:34",
+            "error: connection source `/M/B.inputs:nope` does not exist",
+            "scene.usda:13:45",
+        ] {
+            assert!(rendered.contains(expected), "{expected}\n{rendered}");
+        }
+        // `b`'s own value ends the search the cycle broke off, as in UsdShade.
+        assert_eq!(values, vec![("coverage".to_string(), Value::Float(0.5))]);
+
+        let (values, rendered, errors) = ball_inputs(&format!(
+            r#"    def Material "B" {{
+        float inputs:x = 1
+        float inputs:y = 0
+        def Shader "S" {{
+            {SHADER}
+            color3f inputs:albedo = (1, 0, 0)
+            color3f inputs:albedo.connect = </M/B/Noise.outputs:out>
+            float inputs:coverage.connect = [</M/B.inputs:x>, </M/B.inputs:y>]
+        }}
+        def Shader "Noise" {{ color3f outputs:out }}
+    }}"#
+        ));
+        assert!(errors);
+        assert!(rendered.contains("warning: strata cannot evaluate `/M/B/Noise.outputs:out`"), "{rendered}");
+        assert!(rendered.contains("error: `/M/B/S.inputs:coverage` connects to 2 sources"), "{rendered}");
+        assert_eq!(values, vec![("albedo".to_string(), Value::Triple([1.0, 0.0, 0.0]))]);
+    }
 }

@@ -69,7 +69,8 @@ pub fn decode_slot(encoded: &str) -> Result<Slot, String> {
 pub struct Binding {
     /// The slot.
     pub slot: Slot,
-    /// The bound material prim path; `None` is an empty binding (removes the slot).
+    /// The bound material prim path; `None` is an empty binding (removes the slot). A
+    /// relationship that is only declared is no binding and never becomes one.
     pub material: Option<String>,
     /// Where it is authored.
     pub span: Span,
@@ -289,6 +290,21 @@ mod tests {
             true,
         )]);
         assert_eq!(resolve(&t).0, vec!["/a: 010=/Z@/a 10=/T@/a B=/U@/a b=/B@/a"]);
+    }
+
+    #[test]
+    fn utf8_slots_decode_and_sort_byte_by_byte() {
+        assert_eq!(decode_slot("_é:_:_ü").unwrap(), Slot { base: "é".into(), over: Some("ü".into()) });
+        assert_eq!(encode_slot("é::ü"), "_é:_:_ü");
+        // U+FF21 (EF BC A1) before U+10400 (F0 90 90 80): UTF-8 byte order is code point
+        // order, where UTF-16 order would swap them.
+        let t = tree(&[(
+            "/a",
+            None,
+            &[("\u{10400}", Some("/D")), ("\u{FF21}", Some("/W")), ("é", Some("/E")), ("z", Some("/Z"))],
+            true,
+        )]);
+        assert_eq!(resolve(&t).0, vec!["/a: z=/Z@/a é=/E@/a \u{FF21}=/W@/a \u{10400}=/D@/a"]);
     }
 
     #[test]

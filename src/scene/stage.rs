@@ -72,6 +72,9 @@ pub struct Relationship {
     pub targets: Vec<Target>,
     /// Whether an explicit list (`= [...]` or `= None`) took part in the composition.
     pub explicit: bool,
+    /// The strongest statement that authored targets; `None` when every opinion only declares
+    /// the relationship (`rel r`, what `CreateRelationship` writes): USD's `HasAuthoredTargets`.
+    pub authored: Option<Span>,
     /// The span of the strongest opinion's statement.
     pub span: Span,
     /// Declared `custom`.
@@ -81,6 +84,11 @@ pub struct Relationship {
 }
 
 impl Relationship {
+    /// Whether any opinion says something about the targets, even that there are none.
+    pub fn has_authored_targets(&self) -> bool {
+        self.authored.is_some()
+    }
+
     /// Whether the relationship was explicitly set to nothing (`= None` or `= []`): for a
     /// binding, this means "bound to nothing", unlike a relationship with no opinion.
     pub fn is_explicit_empty(&self) -> bool {
@@ -925,7 +933,7 @@ fn compose_properties(opinions: &[(&PrimSpec, &Node)]) -> (Vec<Attribute>, Vec<R
                 let specs: Vec<_> = group
                     .iter()
                     .filter_map(|(p, n)| match p {
-                        PropertySpec::Relationship(r) => Some((r, *n)),
+                        PropertySpec::Relationship(r) => Some((&**r, *n)),
                         PropertySpec::Attribute(_) => None,
                     })
                     .collect();
@@ -1019,6 +1027,7 @@ fn compose_relationship(specs: &[(&usda::RelationshipSpec, &Node)]) -> Relations
         name: strongest.name.clone(),
         targets,
         explicit,
+        authored: specs.iter().find_map(|(r, _)| r.authored),
         span: strongest.span,
         custom: specs.iter().any(|(r, _)| r.custom),
         metadata,
@@ -1161,6 +1170,10 @@ mod tests {
         assert!(!r.explicit);
         assert!(root.relationship("explicit_empty_list").unwrap().is_explicit_empty());
         assert!(!root.relationship("declared_rel").unwrap().is_explicit_empty());
+        // Declared only is no target opinion at all; an authored empty list is one.
+        assert!(!root.relationship("declared_rel").unwrap().has_authored_targets());
+        assert!(root.relationship("explicit_empty_list").unwrap().has_authored_targets());
+        assert!(r.has_authored_targets());
         let dst = root.attribute("dst").unwrap();
         assert_eq!(dst.connections.len(), 2);
         let inst = prim(&stage, "/Root/Inst");

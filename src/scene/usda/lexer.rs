@@ -50,8 +50,9 @@ pub enum TokenKind {
     /// `.` (as in `name.timeSamples`)
     #[token(".")]
     Dot,
-    /// An identifier, possibly namespaced: `xformOp:translate`, `def`, `inf`.
-    #[regex(r"[A-Za-z_][A-Za-z0-9_]*(:[A-Za-z_][A-Za-z0-9_]*)*")]
+    /// An identifier, possibly namespaced: `xformOp:translate`, `def`, `inf`. Identifiers are
+    /// UTF-8 as in USD (`XID_Start` or `_`, then `XID_Continue`): `material:slotBinding:_é`.
+    #[regex(r"[\p{XID_Start}_]\p{XID_Continue}*(:[\p{XID_Start}_]\p{XID_Continue}*)*")]
     Ident,
     /// A number: `1`, `-2.5e-3`, `-inf` (`inf` and `nan` alone are identifiers).
     #[regex(r"[-+]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][-+]?[0-9]+)?")]
@@ -209,6 +210,18 @@ mod tests {
                 (Ident, "timeSamples"),
             ]
         );
+    }
+
+    #[test]
+    fn utf8_identifiers() {
+        use TokenKind::*;
+        assert_eq!(
+            kinds("rel material:slotBinding:_é:_:_Ａ1 Grüße:名前 _"),
+            vec![(Ident, "rel"), (Ident, "material:slotBinding:_é:_:_Ａ1"), (Ident, "Grüße:名前"), (Ident, "_")]
+        );
+        // Not identifier characters: a digit cannot start an element, `·` cannot start one.
+        assert_eq!(kinds("a:b1")[0], (Ident, "a:b1"));
+        assert!(!lex(FileId(0), "a:·b").errors.is_empty());
     }
 
     #[test]

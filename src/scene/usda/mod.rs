@@ -134,8 +134,13 @@ impl<T> Default for ListOp<T> {
 }
 
 impl<T: Clone> ListOp<T> {
-    /// Records one statement. An explicit statement replaces everything recorded before.
+    /// Records one statement. As in Sdf, a list op is either explicit or a set of edits:
+    /// switching between the two (`r = [...]` then `delete r = ...`, or the reverse) drops
+    /// everything recorded before.
     pub fn set(&mut self, kind: ListOpKind, items: Vec<T>) {
+        if self.explicit.is_some() && kind != ListOpKind::Explicit {
+            *self = ListOp::default();
+        }
         match kind {
             ListOpKind::Explicit => *self = ListOp { explicit: Some(items), ..ListOp::default() },
             ListOpKind::Prepend => self.prepended = items,
@@ -313,10 +318,10 @@ pub struct VariantSetSpec {
 /// An attribute or relationship spec.
 #[derive(Clone, Debug)]
 pub enum PropertySpec {
-    /// An attribute (boxed: it is much larger than a relationship).
+    /// An attribute (boxed, as both kinds are: a prim holds many properties).
     Attribute(Box<AttributeSpec>),
     /// A relationship.
-    Relationship(RelationshipSpec),
+    Relationship(Box<RelationshipSpec>),
 }
 
 impl PropertySpec {
@@ -382,6 +387,9 @@ pub struct RelationshipSpec {
     pub targets: ListOp<Target>,
     /// `= None` was written.
     pub explicit_none: bool,
+    /// The first statement that authored targets (`= ...`, with or without a list-op prefix);
+    /// `None` when the relationship is only declared (`rel r`), which is no target opinion.
+    pub authored: Option<Span>,
     /// The metadata block entries.
     pub metadata: Vec<MetadataEntry>,
 }

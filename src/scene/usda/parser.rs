@@ -765,14 +765,15 @@ impl<'a> Parser<'a, '_> {
         let index = match existing {
             Some(i) => i,
             None => {
-                prim.properties.push(PropertySpec::Relationship(RelationshipSpec {
+                prim.properties.push(PropertySpec::Relationship(Box::new(RelationshipSpec {
                     name: name.to_string(),
                     span,
                     custom,
                     targets: ListOp::default(),
                     explicit_none: false,
+                    authored: None,
                     metadata: Vec::new(),
-                }));
+                })));
                 prim.properties.len() - 1
             }
         };
@@ -795,6 +796,9 @@ impl<'a> Parser<'a, '_> {
                 return Err(Reported);
             }
             rel.targets.set(op, targets);
+            // Kept apart from the list op: `prepend rel r = []` authors an (empty) opinion
+            // that an empty list op cannot tell from a bare declaration.
+            rel.authored.get_or_insert(span);
         }
         rel.metadata.extend(metadata);
         Ok(())
@@ -1427,6 +1431,20 @@ def "A"
         assert_eq!(r.targets.added[0].0, "/Added");
         assert_eq!(r.targets.ordered.len(), 2);
         assert_eq!(r.metadata[0].key, "doc");
+        // `rel r` alone authors no targets; the later list-op statements do.
+        assert!(r.authored.is_some_and(|s| s != r.span));
+        assert!(none.authored.is_some() && empty.authored.is_some());
+    }
+
+    #[test]
+    fn declared_relationships_author_no_targets() {
+        let text =
+            "#usda 1.0\ndef \"A\" {\n    rel d\n    custom rel material:slotBinding:_é\n    prepend rel p = []\n}\n";
+        let layer = parse_ok(text);
+        assert!(rel(&layer.prims[0], "d").authored.is_none());
+        assert!(rel(&layer.prims[0], "material:slotBinding:_é").authored.is_none());
+        // An empty prepend is still an opinion about the targets.
+        assert!(rel(&layer.prims[0], "p").authored.is_some());
     }
 
     #[test]
