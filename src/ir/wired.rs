@@ -169,6 +169,9 @@ pub fn build(
     let mut wired = WiredMaterial { layers, nodes: Vec::new(), channels: Vec::new(), stats: Stats::default() };
     let mut live: Vec<Option<Node>> = nodes.into_iter().map(Some).collect();
     wired.stats.nodes.push(("wired", live.len()));
+    // Every declared channel is an image channel, even where pruning removes the only layer
+    // that writes it (it then reads 0 everywhere, as it would unoptimised).
+    wired.channels = collect_channels(&wired.layers, b.diags);
     if options.optimize {
         fold_constants(lib, &mut live, &mut wired.layers);
         wired.stats.nodes.push(("fold", count_used(&live, &wired.layers)));
@@ -176,7 +179,6 @@ pub fn build(
     }
     wired.nodes = eliminate_dead_nodes(live, &mut wired.layers);
     wired.stats.nodes.push(("dce", wired.nodes.len()));
-    wired.channels = collect_channels(&wired.layers, b.diags);
     wired
 }
 

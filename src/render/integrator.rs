@@ -595,9 +595,15 @@ pub(crate) fn bump(
     let d0 = eval(0.0, 0.0, &mut masks_a[..nl], &mut heights[..nl])?;
     let du = eval(h / lu, 0.0, &mut masks_a[..nl], &mut heights[..nl])?;
     let dv = eval(0.0, h / lv, &mut masks_b[..nl], &mut heights[..nl])?;
-    // Displaced tangents: dP'/du = dPdu + (dD/du) N (the dN/du term is neglected).
-    let tu = dpdu + n * ((du - d0) / h * lu);
-    let tv = dpdv + n * ((dv - d0) / h * lv);
+    if du == d0 && dv == d0 {
+        // No slope: the shading normal stays as it is, bit for bit (as without displacement).
+        return Ok(n);
+    }
+    // Displaced tangents: dP'/du = dPdu + (dD/du) N (the dN/du term is neglected). The
+    // tangents are first projected onto the shading normal's plane, so that a small slope
+    // tilts the interpolated normal rather than replacing it with the facet's.
+    let tu = (dpdu - n * n.dot(dpdu)) + n * ((du - d0) / h * lu);
+    let tv = (dpdv - n * n.dot(dpdv)) + n * ((dv - d0) / h * lv);
     let nb = tu.cross(tv).normalize_or_zero();
     if !nb.is_finite() || nb == Vec3::ZERO {
         return Ok(n);
