@@ -12,14 +12,14 @@
 //! JIT and interpreter at the same optimisation level must agree on every entry point of
 //! every layer.
 
+mod common;
+
 use proptest::prelude::*;
 use std::sync::Arc;
 use strata::abi::{Closure, Globals, MaterialCode, ShaderError};
-use strata::backend::{BackendKind, Compiler};
-use strata::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
+use strata::backend::BackendKind;
 use strata::diag::{Diagnostics, SourceMap};
 use strata::front::library::Library;
-use strata::ir::wired::PassOptions;
 use strata::render::integrator::{Invalid, shading_state};
 
 #[derive(Clone, Debug)]
@@ -105,23 +105,8 @@ fn source(stack: &[LayerSpec]) -> String {
 }
 
 fn compile(lib: &Library, n: usize, backend: BackendKind, optimize: bool) -> Arc<dyn MaterialCode> {
-    let layers = (0..n)
-        .map(|i| ComposedLayer {
-            slot: Slot::parse(&format!("{:03}", i * 10)).unwrap(),
-            substance: MaterialRef {
-                path: format!("/Looks/L{i}"),
-                graph: lib.graph_by_name(&format!("l{i}")).expect("graph"),
-                values: Vec::new(),
-                span: Default::default(),
-            },
-            overrides: Vec::new(),
-        })
-        .collect();
-    let mut diags = Diagnostics::new();
-    let mut compiler = Compiler::new(backend, PassOptions { optimize });
-    let code = compiler.compile(lib, &ComposedMaterial { layers }, &mut diags);
-    assert!(!diags.has_errors());
-    code.expect("compiled")
+    let names: Vec<String> = (0..n).map(|i| format!("l{i}")).collect();
+    common::compile_stack(lib, &names, backend, optimize)
 }
 
 /// Deterministic shading points with unit normals and tangents that span the surface.

@@ -1,0 +1,43 @@
+//! Helpers shared by the integration tests: compiling a stack of substances from source.
+// Each test crate uses only some of these helpers.
+#![allow(dead_code)]
+
+use std::sync::Arc;
+use strata::abi::MaterialCode;
+use strata::backend::{BackendKind, Compiler};
+use strata::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
+use strata::diag::{Diagnostics, SourceMap};
+use strata::front::library::Library;
+use strata::ir::wired::PassOptions;
+
+/// Loads `text` (plus the prelude) as a library, or panics with the rendered diagnostics.
+pub fn library(text: &str) -> Library {
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let (lib, _) = Library::from_text("test.ash", text, &mut sources, &mut diags);
+    assert!(!diags.has_errors(), "{}\n{text}", diags.render(&sources));
+    lib
+}
+
+/// Compiles the substances `names` as one material, bottom to top in slots 000, 010, …
+pub fn compile_stack(lib: &Library, names: &[String], backend: BackendKind, optimize: bool) -> Arc<dyn MaterialCode> {
+    let layers = names
+        .iter()
+        .enumerate()
+        .map(|(i, name)| ComposedLayer {
+            slot: Slot::parse(&format!("{:03}", i * 10)).unwrap(),
+            substance: MaterialRef {
+                path: format!("/Looks/{name}"),
+                graph: lib.graph_by_name(name).expect("graph"),
+                values: Vec::new(),
+                span: Default::default(),
+            },
+            overrides: Vec::new(),
+        })
+        .collect();
+    let mut diags = Diagnostics::new();
+    let mut compiler = Compiler::new(backend, PassOptions { optimize });
+    let code = compiler.compile(lib, &ComposedMaterial { layers }, &mut diags);
+    assert!(!diags.has_errors());
+    code.expect("compiled")
+}
