@@ -307,15 +307,17 @@ impl Context<'_> {
         }
         let mut albedo = Vec3::ZERO;
         let mut normal = Vec3::ZERO;
-        let mut best = -1.0;
-        for lobe in &s.lobes {
-            albedo += lobe.bsdf.albedo() * lobe.weight;
-            if lobe.weight > best {
-                best = lobe.weight;
-                normal = lobe.frame.n;
-            }
-        }
         if first {
+            // The AOVs are the first visible hit's; `albedo()` integrates a Fresnel term, so
+            // later bounces skip it.
+            let mut best = -1.0;
+            for lobe in &s.lobes {
+                albedo += lobe.bsdf.albedo() * lobe.weight;
+                if lobe.weight > best {
+                    best = lobe.weight;
+                    normal = lobe.frame.n;
+                }
+            }
             s.channels.iter_mut().for_each(|c| *c = 0.0);
             let map = &self.channel_map[sp.material];
             if !map.is_empty() {
