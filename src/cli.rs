@@ -499,3 +499,29 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     }
     result
 }
+
+/// `strata fuzz`: runs the fuzzer and prints its report; fails if any input failed.
+pub fn fuzz(options: &crate::fuzz::FuzzOptions) -> Result<(), Failure> {
+    let start = std::time::Instant::now();
+    let report = match crate::fuzz::run(options, &mut |line| eprintln!("{line}")) {
+        Ok(report) => report,
+        Err(e) => {
+            eprintln!("error: fuzzing failed: {e}");
+            return Err(Failure);
+        }
+    };
+    let secs = start.elapsed().as_secs_f64();
+    println!(
+        "fuzz: {} executions in {secs:.1} s ({:.0}/s, {} jobs, seed {}), {} finding(s), peak worker RSS {} MiB",
+        report.executions,
+        report.executions as f64 / secs.max(1e-9),
+        options.jobs,
+        options.seed,
+        report.findings.len(),
+        report.peak_rss >> 20
+    );
+    for f in &report.findings {
+        println!("  input {} from {}: {:?} -> {}", f.k, f.base.display(), f.failure, f.saved.display());
+    }
+    if report.findings.is_empty() { Ok(()) } else { Err(Failure) }
+}

@@ -13,6 +13,7 @@
 //! - [`runtime`]: noise, patterns and math semantics shared by every backend.
 //! - [`scenes`]: the embedded default scene.
 //! - [`bench`]: the measurements behind `strata bench shade` and `strata bench render`.
+//! - [`fuzz`]: `strata fuzz`, mutation fuzzing of both front ends in worker processes.
 //! - [`cli`]: the `strata` subcommands.
 
 #![warn(missing_docs)]
@@ -24,6 +25,7 @@ pub mod cli;
 pub mod compose;
 pub mod diag;
 pub mod front;
+pub mod fuzz;
 pub mod ir;
 pub mod layering;
 pub mod render;

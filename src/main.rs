@@ -99,6 +99,43 @@ enum Command {
         /// A `.ash` substance file or a `.usda` scene.
         file: PathBuf,
     },
+    /// Mutation-fuzz both front ends and the check pipeline; exit 1 if any input crashes,
+    /// hangs or passes the memory budget (it is saved under `--crashes`).
+    Fuzz {
+        /// How long to run, in seconds.
+        #[arg(long, default_value_t = 60.0)]
+        secs: f64,
+        /// Seed of the input sequence (the same seed makes the same inputs).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Worker processes (default: the number of cores).
+        #[arg(long)]
+        jobs: Option<u64>,
+        /// The repository whose scenes/, tests/in/, tests/fixtures/ and fuzz/corpus/ are the corpus.
+        #[arg(long, default_value = env!("CARGO_MANIFEST_DIR"))]
+        root: PathBuf,
+        /// Where failing inputs are written.
+        #[arg(long, default_value = "fuzz/crashes")]
+        crashes: PathBuf,
+        /// Longest one input may run, in seconds.
+        #[arg(long, default_value_t = 10.0)]
+        timeout: f64,
+        /// Most resident memory a worker may use, in MiB.
+        #[arg(long, default_value_t = 1024)]
+        max_rss_mib: u64,
+        /// Run as a worker of a fuzzing run (internal).
+        #[arg(long, hide = true)]
+        worker: bool,
+        /// The worker's staged corpus (internal).
+        #[arg(long, hide = true)]
+        stage: Option<PathBuf>,
+        /// The worker's first input (internal).
+        #[arg(long, hide = true, default_value_t = 0)]
+        first: u64,
+        /// The worker's input stride (internal).
+        #[arg(long, hide = true, default_value_t = 1)]
+        stride: u64,
+    },
 }
 
 #[derive(Subcommand)]
@@ -179,6 +216,29 @@ fn main() -> ExitCode {
             }
         }
         Command::Check { file } => cli::check(&file),
+        Command::Fuzz { secs, seed, jobs, root, crashes, timeout, max_rss_mib, worker, stage, first, stride } => {
+            if worker {
+                let stage = stage.unwrap_or_else(std::env::temp_dir);
+                return match strata::fuzz::worker(&root, &stage, seed, first, stride) {
+                    Ok(()) => ExitCode::SUCCESS,
+                    Err(e) => {
+                        eprintln!("fuzz worker: {e}");
+                        ExitCode::FAILURE
+                    }
+                };
+            }
+            let jobs = jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get() as u64));
+            let options = strata::fuzz::FuzzOptions {
+                root,
+                duration: std::time::Duration::from_secs_f64(secs.max(0.0)),
+                seed,
+                jobs,
+                input_timeout: std::time::Duration::from_secs_f64(timeout.max(0.1)),
+                max_rss: max_rss_mib.saturating_mul(1 << 20),
+                crashes,
+            };
+            cli::fuzz(&options)
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

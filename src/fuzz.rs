@@ -1,0 +1,536 @@
+//! `strata fuzz`: mutation fuzzing of both front ends and the whole `check` pipeline, on the
+//! stable toolchain (no sanitizer coverage needed).
+//!
+//! The corpus is every `.ash` and `.usda` file under the repository's `scenes/`, `tests/in/`,
+//! `tests/fixtures/` and `fuzz/corpus/` (where inputs that once crashed are kept), plus the
+//! prelude. Input `k` of a run is a deterministic function of the seed and `k`: a corpus file
+//! with 1 to 8 mutations, byte-level (replace, delete, insert, duplicate, splice from another
+//! file) or structured (repeat a span hundreds of times, swap in an extreme number, insert a
+//! token of either language). Each input goes through `check` in-process and, for substance
+//! files, through lowering and the interpreter (every input) and the JIT (one in eight); for
+//! scenes, one in sixteen is also rendered at 4x4.
+//!
+//! Inputs run in worker processes (this same binary, `fuzz --worker`) so that a crash, an
+//! abort, a hang or a memory blow-up costs one worker, not the run: the parent watches each
+//! worker's progress and resident memory, kills it past the per-input time or memory budget,
+//! saves the input that did it under the crash directory, and starts a new worker after it.
+
+use crate::backend::{BackendKind, Compiler};
+use crate::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
+use crate::diag::{Diagnostics, SourceMap, Span};
+use crate::front::ast::GraphKind;
+use crate::front::library::Library;
+use crate::ir::wired::PassOptions;
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+/// Folders of the repository whose files make the corpus (and are staged for each worker, so
+/// that relative references between them resolve).
+pub const CORPUS_DIRS: [&str; 4] = ["scenes", "tests/in", "tests/fixtures", "fuzz/corpus"];
+
+/// Files larger than this are neither mutated nor staged (the corpus is source text).
+const MAX_CORPUS_FILE: u64 = 1 << 20;
+
+/// One corpus file: its path relative to the repository root and its bytes.
+#[derive(Clone, Debug)]
+pub struct Entry {
+    /// Path relative to the corpus root (`scenes/default/default.usda`).
+    pub rel: PathBuf,
+    /// The file's bytes.
+    pub bytes: Vec<u8>,
+}
+
+impl Entry {
+    fn is_substance(&self) -> bool {
+        self.rel.extension().is_some_and(|e| e == "ash")
+    }
+}
+
+/// The files inputs are made from, and the other files they may refer to.
+#[derive(Clone, Debug, Default)]
+pub struct Corpus {
+    /// `.ash` and `.usda` files, sorted by path (so input `k` is the same on every machine).
+    pub entries: Vec<Entry>,
+    /// Every other staged file (textures and the like), relative path and bytes.
+    pub assets: Vec<Entry>,
+}
+
+impl Corpus {
+    /// Loads the corpus under `root` (the repository), plus the prelude as `prelude.ash`.
+    pub fn load(root: &Path) -> std::io::Result<Corpus> {
+        let mut corpus = Corpus::default();
+        corpus.entries.push(Entry { rel: "prelude.ash".into(), bytes: crate::front::library::PRELUDE.into() });
+        let mut stack: Vec<PathBuf> = CORPUS_DIRS.iter().map(|d| root.join(d)).filter(|d| d.is_dir()).collect();
+        while let Some(dir) = stack.pop() {
+            for entry in std::fs::read_dir(&dir)? {
+                let entry = entry?;
+                let path = entry.path();
+                let kind = entry.file_type()?;
+                if kind.is_dir() {
+                    stack.push(path);
+                } else if kind.is_file() && entry.metadata()?.len() <= MAX_CORPUS_FILE {
+                    let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
+                    let item = Entry { rel, bytes: std::fs::read(&path)? };
+                    if item.rel.extension().is_some_and(|e| e == "ash" || e == "usda") {
+                        corpus.entries.push(item);
+                    } else {
+                        corpus.assets.push(item);
+                    }
+                }
+            }
+        }
+        corpus.entries.sort_by(|a, b| a.rel.cmp(&b.rel));
+        corpus.assets.sort_by(|a, b| a.rel.cmp(&b.rel));
+        Ok(corpus)
+    }
+
+    /// Writes every file under `dir`, as the workers see them.
+    pub fn stage(&self, dir: &Path) -> std::io::Result<()> {
+        for e in self.entries.iter().chain(&self.assets) {
+            let path = dir.join(&e.rel);
+            if let Some(parent) = path.parent() {
+                std::fs::create_dir_all(parent)?;
+            }
+            std::fs::write(path, &e.bytes)?;
+        }
+        Ok(())
+    }
+
+    /// Input `k` of the run seeded `seed`: `(corpus entry, mutated bytes)`.
+    pub fn input(&self, seed: u64, k: u64) -> (usize, Vec<u8>) {
+        let mut rng = Rng::new(seed ^ k.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        let which = rng.below(self.entries.len());
+        let mut bytes = self.entries[which].bytes.clone();
+        for _ in 0..1 + rng.below(8) {
+            mutate(&mut rng, &mut bytes, self);
+        }
+        (which, bytes)
+    }
+}
+
+/// xorshift64*: small, fast and the same everywhere.
+struct Rng(u64);
+
+impl Rng {
+    fn new(seed: u64) -> Rng {
+        Rng(seed | 1)
+    }
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+/// Bytes that matter to one of the two grammars.
+const ALPHABET: &[u8] = b"{}()[];,.=+-*/<>!&|?:@\"'#_ \n\t0123456789abcxyzeE";
+
+/// Numbers that break careless code.
+const EXTREMES: [&str; 12] =
+    ["1e38", "-1e39", "3.4e38", "nan", "inf", "-0", "0", "2147483648", "-2147483649", "1e-45", "65536", "1e300"];
+
+/// Tokens of either language worth inserting.
+const TOKENS: [&str; 28] = [
+    "substance s { node d = diffuse(); surface = d.bsdf; }",
+    "override o { output float x = 1.0; }",
+    "shader f(output float o = 0.0) { o = 1.0; }",
+    "node n = noise();",
+    "for (;;) { break; }",
+    "while (1) {}",
+    "float a[65536];",
+    "return",
+    "(((",
+    ")))",
+    "{{{",
+    "}}}",
+    "x + x + x + x",
+    "def Xform \"X\" {}",
+    "over \"X\" {}",
+    "rel material:slotBinding:_000 = </Looks/X>",
+    "rel material:slotBinding:_000:_:_010 = [</a>, </b>]",
+    "rel material:slotBinding:_é",
+    "prepend references = @./x.usda@",
+    "subLayers = [@./default.usda@]",
+    "@/dev/zero@",
+    "double3 xformOp:translate = (1e38, 0, 0)",
+    "uniform token[] xformOpOrder = [\"xformOp:translate\"]",
+    "point3f[] points = [(0, 0, 0), (nan, 1, 0), (1, 1e38, 0)]",
+    "int[] faceVertexIndices = [0, 1, 99999]",
+    "def Sphere \"S\" { double radius = -1 }",
+    "variantSet \"v\" = { \"a\" {} }",
+    "asset info:strata:sourceAsset = @missing.ash@",
+];
+
+fn mutate(rng: &mut Rng, bytes: &mut Vec<u8>, corpus: &Corpus) {
+    let len = bytes.len();
+    let at = rng.below(len + 1);
+    let span = |rng: &mut Rng| {
+        let start = rng.below(len + 1);
+        let end = (start + 1 + rng.below(64)).min(len);
+        (start, end.max(start))
+    };
+    match rng.below(9) {
+        0 if len > 0 => bytes[at.min(len - 1)] = ALPHABET[rng.below(ALPHABET.len())],
+        1 => {
+            let (s, e) = span(rng);
+            bytes.drain(s..e);
+        }
+        2 => {
+            let n = 1 + rng.below(4);
+            let ins: Vec<u8> = (0..n).map(|_| ALPHABET[rng.below(ALPHABET.len())]).collect();
+            bytes.splice(at..at, ins);
+        }
+        3 => {
+            let (s, e) = span(rng);
+            let chunk = bytes[s..e].to_vec();
+            let to = rng.below(bytes.len() + 1);
+            bytes.splice(to..to, chunk);
+        }
+        4 => {
+            let other = &corpus.entries[rng.below(corpus.entries.len())].bytes;
+            let s = rng.below(other.len() + 1);
+            let e = (s + 1 + rng.below(256)).min(other.len()).max(s);
+            bytes.splice(at..at, other[s..e].iter().copied());
+        }
+        5 => {
+            // Repeat a short span many times: deep nesting, long chains, many prims.
+            let (s, e) = span(rng);
+            let e = e.min(s + 16);
+            let times = [10, 100, 1000, 5000][rng.below(4)];
+            let chunk = bytes[s..e].repeat(times);
+            bytes.splice(e..e, chunk);
+        }
+        6 => {
+            // Replace a run of digits with an extreme number.
+            if let Some(start) = (0..len).map(|i| (at + i) % len.max(1)).find(|&i| bytes[i].is_ascii_digit()) {
+                let mut end = start;
+                while end < bytes.len() && (bytes[end].is_ascii_digit() || bytes[end] == b'.') {
+                    end += 1;
+                }
+                bytes.splice(start..end, EXTREMES[rng.below(EXTREMES.len())].bytes());
+            }
+        }
+        7 => {
+            let t = TOKENS[rng.below(TOKENS.len())];
+            bytes.splice(at..at, t.bytes());
+        }
+        _ => {
+            // Swap two lines' worth of text.
+            let (s1, e1) = span(rng);
+            let chunk: Vec<u8> = bytes.drain(s1..e1).collect();
+            let to = rng.below(bytes.len() + 1);
+            bytes.splice(to..to, chunk);
+        }
+    }
+}
+
+/// Runs one input in this process: writes it over its corpus file inside the staged `dir`,
+/// checks it as `strata check` would, compiles and runs what compiles, and restores the file.
+pub fn execute(dir: &Path, corpus: &Corpus, which: usize, bytes: &[u8], k: u64) -> std::io::Result<()> {
+    let entry = &corpus.entries[which];
+    let path = dir.join(&entry.rel);
+    std::fs::write(&path, bytes)?;
+    let (diags, sources, _) = crate::cli::check_file(&path);
+    let _ = diags.render(&sources);
+    if entry.is_substance() {
+        run_substances(bytes, k % 8 == 0);
+    } else if k % 16 == 0 && !diags.has_errors() {
+        render_tiny(&path);
+    }
+    std::fs::write(&path, &entry.bytes)
+}
+
+/// Compiles every substance of `text` with its file's overrides and evaluates its entry points.
+fn run_substances(text: &[u8], jit: bool) {
+    let text = String::from_utf8_lossy(text);
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let (lib, _) = Library::from_text("fuzz.ash", &text, &mut sources, &mut diags);
+    if diags.has_errors() {
+        return;
+    }
+    let overrides: Vec<MaterialRef> = lib
+        .graphs_in(GraphKind::Override)
+        .map(|(id, _)| MaterialRef { path: "/o".into(), graph: id, values: vec![], span: Span::default() })
+        .collect();
+    let backends: &[BackendKind] = if jit { &[BackendKind::Interp, BackendKind::Jit] } else { &[BackendKind::Interp] };
+    for (id, _) in lib.graphs_in(GraphKind::Substance).take(8) {
+        let layer = ComposedLayer {
+            slot: Slot::parse("000").expect("a valid slot"),
+            substance: MaterialRef { path: "/s".into(), graph: id, values: vec![], span: Span::default() },
+            overrides: overrides.iter().take(4).cloned().map(|o| (Slot::parse("000::001").expect("valid"), o)).collect(),
+        };
+        let material = ComposedMaterial { layers: vec![layer] };
+        for &backend in backends {
+            let mut diags = Diagnostics::new();
+            let Some(code) = Compiler::new(backend, PassOptions::default()).compile(&lib, &material, &mut diags) else {
+                continue;
+            };
+            let g = crate::abi::Globals { p: [0.3, -1.2, 2.5], n: [0.0, 1.0, 0.0], u: 0.25, v: 0.75, ..Default::default() };
+            let _ = crate::render::integrator::shading_state(code.as_ref(), &g);
+        }
+    }
+}
+
+fn render_tiny(scene: &Path) {
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let Some(compiled) =
+        crate::cli::compile_scene(Some(scene), BackendKind::Jit, PassOptions::default(), &mut sources, &mut diags)
+    else {
+        return;
+    };
+    let Some(scene) = crate::render::Scene::from_stage(
+        &compiled.stage,
+        &|p| compiled.prim_material.get(p).copied(),
+        &mut diags,
+    ) else {
+        return;
+    };
+    let materials: Vec<&dyn crate::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
+    let settings = crate::render::RenderSettings {
+        width: 4,
+        height: 4,
+        spp: 1,
+        seed: 1,
+        threads: Some(1),
+        max_depth: 4,
+        mode: crate::render::LayerMode::Stochastic,
+    };
+    let _ = crate::render::render(&scene, &materials, &settings, None);
+}
+
+/// The worker loop: inputs `first`, `first + stride`, … until killed. Before each input it
+/// prints `run K` and after it `done K`, so the parent knows which input was in flight.
+pub fn worker(root: &Path, dir: &Path, seed: u64, first: u64, stride: u64) -> std::io::Result<()> {
+    let corpus = Corpus::load(root)?;
+    let stdout = std::io::stdout();
+    let mut k = first;
+    loop {
+        let (which, bytes) = corpus.input(seed, k);
+        writeln!(stdout.lock(), "run {k}")?;
+        execute(dir, &corpus, which, &bytes, k)?;
+        writeln!(stdout.lock(), "done {k}")?;
+        k += stride.max(1);
+    }
+}
+
+/// What made an input a finding.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Failure {
+    /// The worker died (panic, abort, signal) while running it.
+    Crash(String),
+    /// It ran longer than the per-input budget.
+    Hang,
+    /// The worker's resident memory passed the budget while running it.
+    Memory(u64),
+}
+
+/// One input that failed, saved to the crash directory.
+#[derive(Clone, Debug)]
+pub struct Finding {
+    /// Input number.
+    pub k: u64,
+    /// The corpus file it was made from.
+    pub base: PathBuf,
+    /// What happened.
+    pub failure: Failure,
+    /// Where the input was saved.
+    pub saved: PathBuf,
+}
+
+/// Settings of a fuzzing run.
+#[derive(Clone, Debug)]
+pub struct FuzzOptions {
+    /// The repository root (the corpus folders are under it).
+    pub root: PathBuf,
+    /// Wall-clock length of the run.
+    pub duration: Duration,
+    /// Seed of the input sequence.
+    pub seed: u64,
+    /// Worker processes.
+    pub jobs: u64,
+    /// Longest one input may run.
+    pub input_timeout: Duration,
+    /// Most resident memory a worker may use.
+    pub max_rss: u64,
+    /// Where failing inputs are written.
+    pub crashes: PathBuf,
+}
+
+/// What a run did.
+#[derive(Clone, Debug, Default)]
+pub struct FuzzReport {
+    /// Inputs that ran to the end.
+    pub executions: u64,
+    /// Inputs that failed.
+    pub findings: Vec<Finding>,
+    /// Largest resident memory seen in a worker (bytes).
+    pub peak_rss: u64,
+}
+
+enum Event {
+    Started(u64),
+    Finished(u64),
+    Exited,
+}
+
+struct Worker {
+    child: Child,
+    events: mpsc::Receiver<Event>,
+    stderr: std::sync::Arc<std::sync::Mutex<Vec<u8>>>,
+    in_flight: Option<(u64, Instant)>,
+    next: u64,
+}
+
+fn spawn_worker(options: &FuzzOptions, dir: &Path, first: u64) -> std::io::Result<Worker> {
+    let mut child = Command::new(std::env::current_exe()?)
+        .args(["fuzz", "--worker"])
+        .arg("--root")
+        .arg(&options.root)
+        .arg("--stage")
+        .arg(dir)
+        .args(["--seed", &options.seed.to_string(), "--first", &first.to_string()])
+        .args(["--stride", &options.jobs.to_string()])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()?;
+    let (tx, events) = mpsc::channel();
+    let stdout = child.stdout.take().expect("piped");
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            let parse = |p: &str| line.strip_prefix(p).and_then(|k| k.parse().ok());
+            let event = match (parse("run "), parse("done ")) {
+                (Some(k), _) => Event::Started(k),
+                (_, Some(k)) => Event::Finished(k),
+                _ => continue,
+            };
+            if tx.send(event).is_err() {
+                return;
+            }
+        }
+        let _ = tx.send(Event::Exited);
+    });
+    // Keep the last few KiB of the worker's stderr for the report (a panic message).
+    let stderr = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let mut pipe = child.stderr.take().expect("piped");
+    let sink = stderr.clone();
+    std::thread::spawn(move || {
+        let mut buf = [0u8; 4096];
+        while let Ok(n) = std::io::Read::read(&mut pipe, &mut buf) {
+            if n == 0 {
+                break;
+            }
+            let mut s = sink.lock().unwrap_or_else(|e| e.into_inner());
+            s.extend_from_slice(&buf[..n]);
+            let excess = s.len().saturating_sub(8192);
+            s.drain(..excess);
+        }
+    });
+    Ok(Worker { child, events, stderr, in_flight: None, next: first })
+}
+
+/// Resident memory of a process now, from `/proc` (0 where that is not available).
+fn resident_bytes(pid: u32) -> u64 {
+    let Ok(status) = std::fs::read_to_string(format!("/proc/{pid}/status")) else { return 0 };
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+        .map_or(0, |kb| kb * 1024)
+}
+
+/// Runs the fuzzer for `options.duration`; `log` receives a line per finding and progress.
+pub fn run(options: &FuzzOptions, log: &mut dyn FnMut(&str)) -> std::io::Result<FuzzReport> {
+    let corpus = Corpus::load(&options.root)?;
+    std::fs::create_dir_all(&options.crashes)?;
+    let base = std::env::temp_dir().join(format!("strata-fuzz-{}", std::process::id()));
+    let mut report = FuzzReport::default();
+    let mut workers = Vec::new();
+    for j in 0..options.jobs.max(1) {
+        let dir = base.join(format!("worker{j}"));
+        corpus.stage(&dir)?;
+        workers.push((dir.clone(), spawn_worker(options, &dir, j)?));
+    }
+    let start = Instant::now();
+    let mut last_log = Instant::now();
+    while start.elapsed() < options.duration {
+        for (dir, w) in &mut workers {
+            let mut failure = None;
+            while let Ok(event) = w.events.try_recv() {
+                match event {
+                    Event::Started(k) => w.in_flight = Some((k, Instant::now())),
+                    Event::Finished(k) => {
+                        report.executions += 1;
+                        w.in_flight = None;
+                        w.next = k + options.jobs;
+                    }
+                    Event::Exited => {
+                        let status = w.child.wait().map(|s| s.to_string()).unwrap_or_default();
+                        let tail = String::from_utf8_lossy(&w.stderr.lock().unwrap_or_else(|e| e.into_inner())).into_owned();
+                        let last: Vec<&str> = tail.lines().rev().take(6).collect();
+                        failure = Some(Failure::Crash(format!(
+                            "{status}: {}",
+                            last.into_iter().rev().collect::<Vec<_>>().join(" | ")
+                        )));
+                        break;
+                    }
+                }
+            }
+            let rss = resident_bytes(w.child.id());
+            report.peak_rss = report.peak_rss.max(rss);
+            if failure.is_none() {
+                if rss > options.max_rss {
+                    failure = Some(Failure::Memory(rss));
+                } else if w.in_flight.is_some_and(|(_, t)| t.elapsed() > options.input_timeout) {
+                    failure = Some(Failure::Hang);
+                }
+            }
+            if let Some(failure) = failure {
+                let _ = w.child.kill();
+                let _ = w.child.wait();
+                let k = w.in_flight.map_or(w.next, |(k, _)| k);
+                let (which, bytes) = corpus.input(options.seed, k);
+                let entry = &corpus.entries[which];
+                let ext = entry.rel.extension().and_then(|e| e.to_str()).unwrap_or("txt");
+                let saved = options.crashes.join(format!("input-{}-{k}.{ext}", options.seed));
+                std::fs::write(&saved, &bytes)?;
+                let finding = Finding { k, base: entry.rel.clone(), failure, saved };
+                log(&format!(
+                    "finding: input {k} (from {}): {:?}, saved to {}",
+                    finding.base.display(),
+                    finding.failure,
+                    finding.saved.display()
+                ));
+                report.findings.push(finding);
+                // The staged file may hold the failing input: restore it, then go on after it.
+                std::fs::write(dir.join(&entry.rel), &entry.bytes)?;
+                *w = spawn_worker(options, dir, k + options.jobs)?;
+            }
+        }
+        if last_log.elapsed() > Duration::from_secs(10) {
+            last_log = Instant::now();
+            log(&format!(
+                "{:.0} s: {} executions, {} findings",
+                start.elapsed().as_secs_f64(),
+                report.executions,
+                report.findings.len()
+            ));
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    for (_, w) in &mut workers {
+        let _ = w.child.kill();
+        let _ = w.child.wait();
+    }
+    let _ = std::fs::remove_dir_all(&base);
+    Ok(report)
+}
