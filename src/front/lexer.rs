@@ -224,13 +224,18 @@ pub fn lex(file: FileId, text: &str, diags: &mut Diagnostics) -> Vec<Token> {
         let range = lexer.span();
         let span = Span::new(file, range.start, range.end);
         match result {
+            // The comment rule skips only a closed `/* … */`; an unclosed one comes out as `/`
+            // then `*`, and the rest of the file is that comment.
+            Ok(Tok::Slash) if text[range.end..].starts_with('*') => {
+                let span = Span::new(file, range.start, range.end + 1);
+                diags.push(Diagnostic::error("unterminated block comment").at(span, "no `*/` closes this comment"));
+                break;
+            }
             Ok(kind) => tokens.push(Token { kind, span }),
             Err(()) => {
                 let what = &text[range.clone()];
                 let message = if what.starts_with('"') {
                     "unterminated string literal".to_string()
-                } else if what.starts_with("/*") {
-                    "unterminated block comment".to_string()
                 } else {
                     format!("unexpected character `{}`", what.escape_debug())
                 };
@@ -271,5 +276,23 @@ mod tests {
         let toks = lex(FileId(0), "a $ b", &mut diags);
         assert_eq!(diags.error_count(), 1);
         assert_eq!(toks.len(), 3);
+    }
+
+    #[test]
+    fn unterminated_comments_and_strings_are_named() {
+        for (text, message, start) in [
+            ("a /* b", "unterminated block comment", 2),
+            ("a /* b * / c", "unterminated block comment", 2),
+            ("a \"b", "unterminated string literal", 2),
+        ] {
+            let mut diags = Diagnostics::new();
+            let toks = lex(FileId(0), text, &mut diags);
+            assert_eq!(diags.error_count(), 1, "{text}: {diags:?}");
+            let d = &diags.items()[0];
+            assert_eq!((d.message.as_str(), d.labels[0].span.start), (message, start), "{text}");
+            assert_eq!(toks.first().map(|t| t.kind), Some(Tok::Ident), "{text}");
+        }
+        // Only an adjacent `/*` opens a comment.
+        assert_eq!(kinds("a / * b"), vec![Tok::Ident, Tok::Slash, Tok::Star, Tok::Ident, Tok::Eof]);
     }
 }

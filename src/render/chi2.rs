@@ -224,16 +224,9 @@ pub fn integrate(pdf: &impl Fn(Vec3) -> f32, rect: [f64; 4], depth: u32) -> f64 
     quads.iter().map(|&q| integrate(pdf, q, depth - 1)).sum()
 }
 
-/// χ² goodness of fit of `sample` against `pdf` over the sphere, binned in (cos θ, φ) (an
-/// equal-area parametrisation: dω = d cos θ dφ), as pbrt-v4's bsdfs_test and Mitsuba's
-/// chi2.py do. Cells expecting fewer than `MIN_EXPECTED` samples are pooled; samples that are
-/// `None` or delta form one extra cell expecting `N (1 − ∫ pdf)`.
-pub fn chi2_test(
-    sample: impl Fn(f32, Vec2) -> Option<BsdfSample>,
-    pdf: impl Fn(Vec3) -> f32,
-    centres: &[(Vec3, f32)],
-    seed: u64,
-) -> Chi2 {
+/// The (cos θ, φ) bin edges over the sphere: a coarse grid graded around each lobe centre
+/// `(direction, angular scale)`.
+fn grid(centres: &[(Vec3, f32)]) -> (Vec<f64>, Vec<f64>) {
     let mut cc = vec![];
     let mut pc = vec![];
     for &(d, s) in centres {
@@ -244,8 +237,33 @@ pub fn chi2_test(
             pc.push(((d.y as f64).atan2(d.x as f64).rem_euclid(TAU), s / sin));
         }
     }
-    let ce = edges(-1.0, 1.0, 20, &cc, false);
-    let pe = edges(0.0, TAU, 40, &pc, true);
+    (edges(-1.0, 1.0, 20, &cc, false), edges(0.0, TAU, 40, &pc, true))
+}
+
+/// ∫ f dω over the sphere by the χ² test's quadrature: adaptive Gauss–Legendre on each bin of
+/// the grid graded around `centres`. A deterministic reference, independent of any sampler.
+pub fn sphere_integral(f: impl Fn(Vec3) -> f32, centres: &[(Vec3, f32)]) -> f64 {
+    let (ce, pe) = grid(centres);
+    let mut sum = 0.0;
+    for c in ce.windows(2) {
+        for p in pe.windows(2) {
+            sum += integrate(&f, [c[0], c[1], p[0], p[1]], 6);
+        }
+    }
+    sum
+}
+
+/// χ² goodness of fit of `sample` against `pdf` over the sphere, binned in (cos θ, φ) (an
+/// equal-area parametrisation: dω = d cos θ dφ), as pbrt-v4's bsdfs_test and Mitsuba's
+/// chi2.py do. Cells expecting fewer than `MIN_EXPECTED` samples are pooled; samples that are
+/// `None` or delta form one extra cell expecting `N (1 − ∫ pdf)`.
+pub fn chi2_test(
+    sample: impl Fn(f32, Vec2) -> Option<BsdfSample>,
+    pdf: impl Fn(Vec3) -> f32,
+    centres: &[(Vec3, f32)],
+    seed: u64,
+) -> Chi2 {
+    let (ce, pe) = grid(centres);
     let (nc, np) = (ce.len() - 1, pe.len() - 1);
 
     let mut observed = vec![0usize; nc * np];
