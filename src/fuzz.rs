@@ -240,8 +240,8 @@ pub fn execute(dir: &Path, corpus: &Corpus, which: usize, bytes: &[u8], k: u64) 
     let (diags, sources, _) = crate::cli::check_file(&path);
     let _ = diags.render(&sources);
     if entry.is_substance() {
-        run_substances(bytes, k % 8 == 0);
-    } else if k % 16 == 0 && !diags.has_errors() {
+        run_substances(bytes, k.is_multiple_of(8));
+    } else if k.is_multiple_of(16) && !diags.has_errors() {
         render_tiny(&path);
     }
     std::fs::write(&path, &entry.bytes)
@@ -265,7 +265,12 @@ fn run_substances(text: &[u8], jit: bool) {
         let layer = ComposedLayer {
             slot: Slot::parse("000").expect("a valid slot"),
             substance: MaterialRef { path: "/s".into(), graph: id, values: vec![], span: Span::default() },
-            overrides: overrides.iter().take(4).cloned().map(|o| (Slot::parse("000::001").expect("valid"), o)).collect(),
+            overrides: overrides
+                .iter()
+                .take(4)
+                .cloned()
+                .map(|o| (Slot::parse("000::001").expect("valid"), o))
+                .collect(),
         };
         let material = ComposedMaterial { layers: vec![layer] };
         for &backend in backends {
@@ -273,7 +278,8 @@ fn run_substances(text: &[u8], jit: bool) {
             let Some(code) = Compiler::new(backend, PassOptions::default()).compile(&lib, &material, &mut diags) else {
                 continue;
             };
-            let g = crate::abi::Globals { p: [0.3, -1.2, 2.5], n: [0.0, 1.0, 0.0], u: 0.25, v: 0.75, ..Default::default() };
+            let g =
+                crate::abi::Globals { p: [0.3, -1.2, 2.5], n: [0.0, 1.0, 0.0], u: 0.25, v: 0.75, ..Default::default() };
             let _ = crate::render::integrator::shading_state(code.as_ref(), &g);
         }
     }
@@ -287,11 +293,9 @@ fn render_tiny(scene: &Path) {
     else {
         return;
     };
-    let Some(scene) = crate::render::Scene::from_stage(
-        &compiled.stage,
-        &|p| compiled.prim_material.get(p).copied(),
-        &mut diags,
-    ) else {
+    let Some(scene) =
+        crate::render::Scene::from_stage(&compiled.stage, &|p| compiled.prim_material.get(p).copied(), &mut diags)
+    else {
         return;
     };
     let materials: Vec<&dyn crate::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
@@ -475,7 +479,8 @@ pub fn run(options: &FuzzOptions, log: &mut dyn FnMut(&str)) -> std::io::Result<
                     }
                     Event::Exited => {
                         let status = w.child.wait().map(|s| s.to_string()).unwrap_or_default();
-                        let tail = String::from_utf8_lossy(&w.stderr.lock().unwrap_or_else(|e| e.into_inner())).into_owned();
+                        let tail =
+                            String::from_utf8_lossy(&w.stderr.lock().unwrap_or_else(|e| e.into_inner())).into_owned();
                         let last: Vec<&str> = tail.lines().rev().take(6).collect();
                         failure = Some(Failure::Crash(format!(
                             "{status}: {}",

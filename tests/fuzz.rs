@@ -1,0 +1,92 @@
+//! The fuzzing harness in the test suite: every input kept in `fuzz/corpus/` (each once
+//! crashed, hung or flooded the terminal) is checked by `strata check` within a time and
+//! output budget, and a short fuzzing session with a fixed seed finds nothing.
+
+use std::io::Read;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Runs `strata ARGS`, killing it after `limit`; returns (exit code, stdout, stderr), `None` for
+/// the code when it was killed or died of a signal.
+fn strata(args: &[&str], limit: Duration) -> (Option<i32>, Vec<u8>, Vec<u8>) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_strata"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("strata starts");
+    let mut out_pipe = child.stdout.take().unwrap();
+    let mut err_pipe = child.stderr.take().unwrap();
+    let out = std::thread::spawn(move || {
+        let mut v = Vec::new();
+        let _ = out_pipe.read_to_end(&mut v);
+        v
+    });
+    let err = std::thread::spawn(move || {
+        let mut v = Vec::new();
+        let _ = err_pipe.read_to_end(&mut v);
+        v
+    });
+    let start = Instant::now();
+    let code = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status.code();
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    (code, out.join().unwrap(), err.join().unwrap())
+}
+
+#[test]
+fn every_kept_failure_is_now_a_diagnostic() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus");
+    let mut failures = Vec::new();
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if !path.extension().is_some_and(|e| e == "ash" || e == "usda") {
+            continue;
+        }
+        checked += 1;
+        let (code, _, stderr) = strata(&["check", path.to_str().unwrap()], Duration::from_secs(20));
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        match code {
+            Some(0 | 1) => {}
+            other => failures.push(format!(
+                "{name}: exit {other:?} (killed or crashed): {}",
+                String::from_utf8_lossy(&stderr[stderr.len().saturating_sub(400)..])
+            )),
+        }
+        // Diagnostics are capped: a flood of errors on one long line stays readable.
+        if stderr.len() > 256 << 10 {
+            failures.push(format!("{name}: {} bytes of diagnostics", stderr.len()));
+        }
+    }
+    assert!(checked > 0, "no corpus in {}", dir.display());
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
+fn a_short_fuzzing_session_finds_nothing() {
+    let crashes = tempfile::tempdir().unwrap();
+    let (code, stdout, stderr) = strata(
+        &["fuzz", "--secs", "20", "--jobs", "2", "--seed", "1", "--crashes", crashes.path().to_str().unwrap()],
+        Duration::from_secs(120),
+    );
+    let stdout = String::from_utf8_lossy(&stdout);
+    eprintln!("{stdout}");
+    assert_eq!(code, Some(0), "{stdout}\n{}", String::from_utf8_lossy(&stderr));
+    let executions: u64 = stdout
+        .split_whitespace()
+        .nth(1)
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no execution count in {stdout:?}"));
+    assert!(executions > 50, "only {executions} inputs ran");
+}
