@@ -1,7 +1,8 @@
 //! strata: a shading-language compiler for binding-level layered shading.
 //!
 //! The pipeline, one module per stage (dependencies point down this list only):
-//! - [`diag`]: source files, spans and diagnostics shared by every stage.
+//! - [`diag`]: source files, spans and diagnostics shared by every stage; [`text`]: scanning
+//!   loops both lexers share.
 //! - [`front`]: substance files (`.ash`) → checked node types and graphs.
 //! - [`scene`]: USD ASCII scenes → a composed prim hierarchy.
 //! - [`compose`]: slot bindings → one composed material per renderable prim.
@@ -32,3 +33,4 @@ pub mod render;
 pub mod runtime;
 pub mod scene;
 pub mod scenes;
+pub mod text;

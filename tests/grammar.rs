@@ -138,12 +138,13 @@ fn visit(g: &G, f: &mut dyn FnMut(&G)) {
     }
 }
 
-/// Terminals the lexer knows, read from its `#[token("…")]` attributes.
+/// Terminals the lexer knows, read from its plain `#[token("…")]` attributes (a token with a
+/// callback opens a lexical class, a string or a comment, not a terminal of the grammar).
 fn lexer_tokens() -> BTreeSet<String> {
     let source = include_str!("../src/front/lexer.rs");
     source
         .lines()
-        .filter_map(|l| l.trim().strip_prefix("#[token(\"").and_then(|r| r.split("\")").next()))
+        .filter_map(|l| l.trim().strip_prefix("#[token(\"").and_then(|r| r.strip_suffix("\")]")))
         .map(str::to_string)
         .collect()
 }

@@ -8,7 +8,6 @@ use logos::Logos;
 #[derive(Logos, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[logos(skip r"[ \t\r\n\f]+")]
 #[logos(skip(r"//[^\n]*", allow_greedy = true))]
-#[logos(skip r"/\*([^*]|\*+[^*/])*\*+/")]
 // Each variant is named after the token its `#[token]`/`#[regex]` attribute spells.
 #[allow(missing_docs)]
 pub enum Tok {
@@ -65,8 +64,11 @@ pub enum Tok {
     IntLit,
     #[regex(r"([0-9]+\.[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?|[0-9]+[eE][+-]?[0-9]+")]
     FloatLit,
-    #[regex(r#""([^"\\\n]|\\.)*""#)]
+    #[token("\"", |lex| close(lex, crate::text::quoted_len(lex.remainder(), b'"')))]
     StrLit,
+    /// A block comment: skipped when closed, an error to the end of the file when not.
+    #[token("/*", |lex| skip_comment(lex))]
+    BlockComment,
 
     #[token("(")]
     LParen,
@@ -169,6 +171,7 @@ impl Tok {
             IntLit => "an integer",
             FloatLit => "a number",
             StrLit => "a string",
+            BlockComment => "a comment",
             LParen => "`(`",
             RParen => "`)`",
             LBrace => "`{`",
@@ -206,6 +209,28 @@ impl Tok {
     }
 }
 
+/// Extends a string token to its closing quote, or (unterminated) to the end of its line.
+fn close(lex: &mut logos::Lexer<Tok>, len: Option<usize>) -> bool {
+    let rest = lex.remainder();
+    lex.bump(len.unwrap_or_else(|| crate::text::line_len(rest)));
+    len.is_some()
+}
+
+/// Skips a closed block comment; an unclosed one is an error spanning the rest of the file.
+fn skip_comment(lex: &mut logos::Lexer<Tok>) -> logos::FilterResult<(), ()> {
+    let rest = lex.remainder();
+    match crate::text::block_comment_len(rest) {
+        Some(n) => {
+            lex.bump(n);
+            logos::FilterResult::Skip
+        }
+        None => {
+            lex.bump(rest.len());
+            logos::FilterResult::Error(())
+        }
+    }
+}
+
 /// One token with its location.
 #[derive(Clone, Copy, Debug)]
 pub struct Token {
@@ -224,10 +249,9 @@ pub fn lex(file: FileId, text: &str, diags: &mut Diagnostics) -> Vec<Token> {
         let range = lexer.span();
         let span = Span::new(file, range.start, range.end);
         match result {
-            // The comment rule skips only a closed `/* … */`; an unclosed one comes out as `/`
-            // then `*`, and the rest of the file is that comment.
-            Ok(Tok::Slash) if text[range.end..].starts_with('*') => {
-                let span = Span::new(file, range.start, range.end + 1);
+            // An unclosed `/*` runs to the end of the file.
+            Err(()) if text[range.clone()].starts_with("/*") => {
+                let span = Span::new(file, range.start, range.start + 2);
                 diags.push(Diagnostic::error("unterminated block comment").at(span, "no `*/` closes this comment"));
                 break;
             }
@@ -294,5 +318,17 @@ mod tests {
         }
         // Only an adjacent `/*` opens a comment.
         assert_eq!(kinds("a / * b"), vec![Tok::Ident, Tok::Slash, Tok::Star, Tok::Ident, Tok::Eof]);
+    }
+
+    #[test]
+    fn huge_comments_and_strings_lex_without_recursion() {
+        // Each once overflowed a debug build's stack (one frame per repetition).
+        let comment = format!("/*{}*/ x", "*a".repeat(300_000));
+        assert_eq!(kinds(&comment), vec![Tok::Ident, Tok::Eof]);
+        let string = format!("\"{}\"", "\\a".repeat(300_000));
+        assert_eq!(kinds(&string), vec![Tok::StrLit, Tok::Eof]);
+        let mut diags = Diagnostics::new();
+        lex(FileId(0), &format!("x /*{}", "*a".repeat(300_000)), &mut diags);
+        assert!(diags.has_errors());
     }
 }

@@ -13,7 +13,6 @@ use logos::{Lexer, Logos};
 #[logos(skip r"[ \t\r\n\f]+")]
 // A comment runs to the end of its line, so the greedy repetition is what we want.
 #[logos(skip(r"(#|//)[^\n]*", allow_greedy = true))]
-#[logos(skip r"/\*([^*]|\*+[^*/])*\*+/")]
 // Each variant is named after the token its `#[token]`/`#[regex]` attribute spells.
 #[allow(missing_docs)]
 pub enum TokenKind {
@@ -52,16 +51,19 @@ pub enum TokenKind {
     Dot,
     /// An identifier, possibly namespaced: `xformOp:translate`, `def`, `inf`. Identifiers are
     /// UTF-8 as in USD (`XID_Start` or `_`, then `XID_Continue`): `material:slotBinding:_é`.
-    #[regex(r"[\p{XID_Start}_]\p{XID_Continue}*(:[\p{XID_Start}_]\p{XID_Continue}*)*")]
+    #[regex(r"[\p{XID_Start}_]\p{XID_Continue}*", namespaces)]
     Ident,
     /// A number: `1`, `-2.5e-3`, `-inf` (`inf` and `nan` alone are identifiers).
     #[regex(r"[-+]?([0-9]+(\.[0-9]*)?|\.[0-9]+)([eE][-+]?[0-9]+)?")]
     #[token("-inf")]
     Number,
     /// A single-line string in `"` or `'` quotes, escapes not yet processed.
-    #[regex(r#""([^"\\\n]|\\.)*""#)]
-    #[regex(r"'([^'\\\n]|\\.)*'")]
+    #[token("\"", |lex| close_quote(lex, b'"'))]
+    #[token("'", |lex| close_quote(lex, b'\''))]
     String,
+    /// A block comment: skipped when closed, an error to the end of the file when not.
+    #[token("/*", skip_comment)]
+    BlockComment,
     /// A triple-quoted string (`"""` or `'''`), which may span lines.
     #[token("\"\"\"", |lex| close_triple(lex, "\"\"\""))]
     #[token("'''", |lex| close_triple(lex, "'''"))]
@@ -75,6 +77,56 @@ pub enum TokenKind {
     /// A scene path `</a/b.prop>`.
     #[regex(r"<[^<>\n]*>")]
     Path,
+}
+
+/// Extends an identifier over its `:name` namespace parts. A loop here, rather than a
+/// repetition in the regex: logos turns a repeated group into one stack frame per
+/// repetition in unoptimised builds, and a property name of 100 000 parts overflowed it.
+fn namespaces(lex: &mut Lexer<TokenKind>) {
+    let rest = lex.remainder();
+    let mut end = 0;
+    loop {
+        let mut chars = rest[end..].chars();
+        if chars.next() != Some(':') {
+            break;
+        }
+        match chars.next() {
+            Some(c) if c == '_' || unicode_ident::is_xid_start(c) => {}
+            _ => break,
+        }
+        let part = &rest[end + 1..];
+        let len = part
+            .char_indices()
+            .skip(1)
+            .find(|&(_, c)| !unicode_ident::is_xid_continue(c))
+            .map_or(part.len(), |(i, _)| i);
+        end += 1 + len;
+    }
+    lex.bump(end);
+}
+
+/// Extends a string token to its closing quote, or (unterminated: an error) to the end of
+/// its line.
+fn close_quote(lex: &mut Lexer<TokenKind>, quote: u8) -> bool {
+    let rest = lex.remainder();
+    let len = crate::text::quoted_len(rest, quote);
+    lex.bump(len.unwrap_or_else(|| crate::text::line_len(rest)));
+    len.is_some()
+}
+
+/// Skips a closed block comment; an unclosed one is an error spanning the rest of the file.
+fn skip_comment(lex: &mut Lexer<TokenKind>) -> logos::FilterResult<(), ()> {
+    let rest = lex.remainder();
+    match crate::text::block_comment_len(rest) {
+        Some(n) => {
+            lex.bump(n);
+            logos::FilterResult::Skip
+        }
+        None => {
+            lex.bump(rest.len());
+            logos::FilterResult::Error(())
+        }
+    }
 }
 
 /// Extends the current token to the closing delimiter, honouring backslash escapes.
@@ -230,5 +282,18 @@ mod tests {
         let starts: Vec<bool> = lexed.tokens.iter().map(|t| t.line_start).collect();
         assert_eq!(starts, vec![true, false, true]);
         assert_eq!(lexed.errors.len(), 3, "{:?}", lexed.errors);
+    }
+
+    #[test]
+    fn huge_tokens_lex_without_recursion() {
+        // Each once overflowed a debug build's stack (one frame per repetition).
+        let name = format!("a{}", ":b".repeat(200_000));
+        assert_eq!(kinds(&name), vec![(TokenKind::Ident, name.as_str())]);
+        let comment = format!("/*{}*/", "*a".repeat(300_000));
+        assert_eq!(kinds(&comment), vec![]);
+        let string = format!("'{}'", "\\a".repeat(300_000));
+        assert_eq!(kinds(&string).len(), 1);
+        assert!(!lex(FileId(0), &format!("/*{}", "*a".repeat(1000))).errors.is_empty());
+        assert!(!lex(FileId(0), "\"unterminated\n").errors.is_empty());
     }
 }
