@@ -1,9 +1,10 @@
-//! Ray queries over the scene's triangles: an obvhs compressed-wide BVH (CWBVH) with a
-//! watertight ray/triangle test (Woop, Benthin & Wald 2013, in f64), so rays through shared edges
+//! Ray queries over the scene's triangles and analytic shapes: an obvhs compressed-wide BVH
+//! (CWBVH) over both, with a watertight ray/triangle test (Woop, Benthin & Wald 2013, in f64), so rays through shared edges
 //! and vertices never slip between triangles, and robust ray origins (Wächter & Binder,
 //! Ray Tracing Gems ch. 6) so secondary rays do not re-hit their own surface.
 
 use super::geometry::Triangle;
+use super::shapes::Shape;
 use glam::{DVec3, Vec3, Vec3A};
 use obvhs::aabb::Aabb;
 use obvhs::cwbvh::CwBvh;
@@ -17,45 +18,89 @@ use std::time::Duration;
 pub struct Hit {
     /// Distance along the (unit) ray direction.
     pub t: f32,
-    /// Index of the triangle in [`Accel::triangles`].
-    pub tri: u32,
-    /// Barycentric weight of vertex 1.
+    /// The primitive: triangles first, then shapes ([`Accel::primitive`]).
+    pub index: u32,
+    /// Barycentric weight of vertex 1 (triangles only).
     pub b1: f32,
-    /// Barycentric weight of vertex 2.
+    /// Barycentric weight of vertex 2 (triangles only).
     pub b2: f32,
 }
 
-/// The acceleration structure and the triangles it indexes.
+/// One primitive of the acceleration structure.
+#[derive(Clone, Copy, Debug)]
+pub enum Primitive<'a> {
+    /// A world-space triangle.
+    Triangle(&'a Triangle),
+    /// An analytic shape.
+    Shape(&'a Shape),
+}
+
+/// The acceleration structure and the primitives it indexes.
 pub struct Accel {
     bvh: Option<CwBvh>,
     triangles: Vec<Triangle>,
+    shapes: Vec<Shape>,
 }
 
 impl Accel {
-    /// Builds a BVH over `triangles` (none needed when there are none).
-    pub fn new(triangles: Vec<Triangle>) -> Accel {
-        let bvh = if triangles.is_empty() {
+    /// Builds a BVH over `triangles` and `shapes` (none needed when there are none).
+    pub fn new(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Accel {
+        let mut boxes: Vec<(Vec3, Vec3)> =
+            triangles.iter().map(|t| (t.p[0].min(t.p[1]).min(t.p[2]), t.p[0].max(t.p[1]).max(t.p[2]))).collect();
+        boxes.extend(shapes.iter().map(Shape::world_bounds));
+        let bvh = if boxes.is_empty() {
             None
         } else {
             // Boxes are padded slightly: obvhs' quantised CWBVH nodes can lose a flat
             // (zero-thickness) box entirely, e.g. a scene that is one axis-aligned plane.
-            let scale = triangles.iter().flat_map(|t| t.p).fold(1.0f32, |m, p| m.max(p.abs().max_element()));
+            let scale =
+                boxes.iter().fold(1.0f32, |m, (lo, hi)| m.max(lo.abs().max_element()).max(hi.abs().max_element()));
             let pad = Vec3A::splat(scale * 1e-6);
-            let boxes: Vec<Padded> = triangles
-                .iter()
-                .map(|t| {
-                    let (lo, hi) = (t.p[0].min(t.p[1]).min(t.p[2]), t.p[0].max(t.p[1]).max(t.p[2]));
-                    Padded(Aabb::new(Vec3A::from(lo) - pad, Vec3A::from(hi) + pad))
-                })
-                .collect();
+            let boxes: Vec<Padded> =
+                boxes.iter().map(|&(lo, hi)| Padded(Aabb::new(Vec3A::from(lo) - pad, Vec3A::from(hi) + pad))).collect();
             Some(build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut Duration::default()))
         };
-        Accel { bvh, triangles }
+        Accel { bvh, triangles, shapes }
     }
 
     /// The triangles, in the order given to [`Accel::new`].
     pub fn triangles(&self) -> &[Triangle] {
         &self.triangles
+    }
+
+    /// The primitive of a [`Hit::index`].
+    pub fn primitive(&self, index: u32) -> Primitive<'_> {
+        let i = index as usize;
+        match self.triangles.get(i) {
+            Some(t) => Primitive::Triangle(t),
+            None => Primitive::Shape(&self.shapes[i - self.triangles.len()]),
+        }
+    }
+
+    /// The renderable prim a primitive belongs to.
+    pub fn prim_of(&self, index: u32) -> u32 {
+        match self.primitive(index) {
+            Primitive::Triangle(t) => t.prim,
+            Primitive::Shape(s) => s.prim,
+        }
+    }
+
+    /// `(t, b1, b2)` of the ray against primitive `index`.
+    #[inline]
+    fn hit_primitive(
+        &self,
+        pre: &RayPre,
+        o: Vec3,
+        d: Vec3,
+        index: u32,
+        tmin: f32,
+        tmax: f32,
+    ) -> Option<(f32, f32, f32)> {
+        let i = index as usize;
+        match self.triangles.get(i) {
+            Some(tri) => pre.intersect(tri, tmin, tmax),
+            None => self.shapes[i - self.triangles.len()].intersect(o, d, tmin, tmax).map(|t| (t, 0.0, 0.0)),
+        }
     }
 
     /// The closest hit of the ray `o + t d`, `t` in `(tmin, tmax)`. `d` must be unit length.
@@ -72,9 +117,9 @@ impl Accel {
         let mut hit = RayHit::none();
         bvh.ray_traverse(ray, &mut hit, |r, id| {
             let index = bvh.primitive_indices[id];
-            match pre.intersect(&self.triangles[index as usize], tmin, r.tmax) {
+            match self.hit_primitive(&pre, o, d, index, tmin, r.tmax) {
                 Some((t, b1, b2)) => {
-                    best = Some(Hit { t, tri: index, b1, b2 });
+                    best = Some(Hit { t, index, b1, b2 });
                     t
                 }
                 None => f32::INFINITY,
@@ -94,8 +139,8 @@ impl Accel {
         // wrong one and miss everything, so negative zeros become +0.0 (-0 + 0 = +0).
         let ray = Ray::new(o.into(), (d + Vec3::ZERO).into(), tmin, tmax);
         !bvh.ray_traverse_miss(ray, |r, id| {
-            let index = bvh.primitive_indices[id] as usize;
-            pre.intersect(&self.triangles[index], tmin, r.tmax).map_or(f32::INFINITY, |h| h.0)
+            let index = bvh.primitive_indices[id];
+            self.hit_primitive(&pre, o, d, index, tmin, r.tmax).map_or(f32::INFINITY, |h| h.0)
         })
     }
 }
@@ -201,9 +246,9 @@ mod tests {
     fn closest_hit_and_barycentrics() {
         let near = tri([Vec3::new(-1.0, -1.0, 1.0), Vec3::new(1.0, -1.0, 1.0), Vec3::new(-1.0, 1.0, 1.0)]);
         let far = tri([Vec3::new(-5.0, -5.0, 3.0), Vec3::new(5.0, -5.0, 3.0), Vec3::new(-5.0, 5.0, 3.0)]);
-        let accel = Accel::new(vec![far, near]);
+        let accel = Accel::new(vec![far, near], vec![]);
         let hit = accel.intersect(Vec3::new(-0.5, -0.5, 0.0), Vec3::Z, 0.0, f32::INFINITY).unwrap();
-        assert_eq!(hit.tri, 1);
+        assert_eq!(hit.index, 1);
         assert!((hit.t - 1.0).abs() < 1e-6);
         assert!((hit.b1 - 0.25).abs() < 1e-6 && (hit.b2 - 0.25).abs() < 1e-6);
         assert!(accel.occluded(Vec3::new(-0.5, -0.5, 0.0), Vec3::Z, 0.0, 2.0));
@@ -216,7 +261,7 @@ mod tests {
         // Two triangles sharing the diagonal of a square; rays exactly on the diagonal must hit.
         let a = tri([Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0)]);
         let b = tri([Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0), Vec3::new(0.0, 1.0, 0.0)]);
-        let accel = Accel::new(vec![a, b]);
+        let accel = Accel::new(vec![a, b], vec![]);
         for i in 1..100 {
             let x = i as f32 / 100.0;
             let o = Vec3::new(x, x, 1.0);
@@ -227,7 +272,7 @@ mod tests {
     #[test]
     fn offset_origin_escapes_surface() {
         let t = tri([Vec3::new(-100.0, -100.0, 7.3), Vec3::new(100.0, -100.0, 7.3), Vec3::new(0.0, 100.0, 7.3)]);
-        let accel = Accel::new(vec![t]);
+        let accel = Accel::new(vec![t], vec![]);
         let p = Vec3::new(0.123, 0.456, 7.3);
         let o = offset_ray_origin(p, Vec3::Z);
         assert!(o.z > p.z);

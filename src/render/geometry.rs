@@ -1,19 +1,16 @@
-//! World-space triangles from a composed stage.
+//! World-space geometry from a composed stage.
 //!
-//! Every renderable prim becomes triangles in world space: meshes are fan-triangulated,
-//! and the implicit surfaces (Sphere, Cube, Cylinder) are tessellated finely with analytic
-//! normals and texture coordinates, so one triangle BVH serves every prim type.
+//! Meshes are fan-triangulated into world-space triangles; Cube and Plane are triangles too
+//! (they are flat, so exactly). The curved implicit prims (Sphere, Cylinder, Cone, Capsule)
+//! become analytic [`Shape`]s, intersected exactly in object space: nothing is tessellated.
 //! Malformed meshes are diagnosed (never a panic); zero-area triangles are skipped and counted.
 
+use super::shapes::{Part, Shape};
 use super::xform::{PrimXform, value_span, world_transforms};
 use crate::compose::scene::is_renderable;
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::scene::{Attribute, Prim, Stage, Value};
 use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
-use std::f64::consts::{PI, TAU};
-
-/// Segments around a tessellated sphere or cylinder (rings of a sphere: half of it).
-const SEGMENTS: usize = 128;
 
 /// One world-space triangle.
 #[derive(Clone, Copy, Debug)]
@@ -51,6 +48,8 @@ pub struct GeomPrim {
 pub struct Geometry {
     /// World-space triangles.
     pub triangles: Vec<Triangle>,
+    /// Analytic surfaces.
+    pub shapes: Vec<Shape>,
     /// Renderable, visible prims, indexed by [`Triangle::prim`].
     pub prims: Vec<GeomPrim>,
     /// Zero-area or non-finite triangles that were skipped.
@@ -58,9 +57,13 @@ pub struct Geometry {
 }
 
 impl Geometry {
-    /// World-space bounds `(min, max)` of every triangle; `None` when empty.
+    /// World-space bounds `(min, max)` of every triangle and shape; `None` when empty.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
-        let mut it = self.triangles.iter().flat_map(|t| t.p);
+        let shape_corners = self.shapes.iter().flat_map(|s| {
+            let (lo, hi) = s.world_bounds();
+            [lo, hi]
+        });
+        let mut it = self.triangles.iter().flat_map(|t| t.p).chain(shape_corners);
         let first = it.next()?;
         Some(it.fold((first, first), |(lo, hi), p| (lo.min(p), hi.max(p))))
     }
@@ -87,6 +90,9 @@ pub fn build_with(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagnostics) 
             Some("Sphere") => sphere(prim, &mut out, diags),
             Some("Cube") => cube(prim, &mut out, diags),
             Some("Cylinder") => cylinder(prim, &mut out, diags),
+            Some("Cone") => cone(prim, &mut out, diags),
+            Some("Capsule") => capsule(prim, &mut out, diags),
+            Some("Plane") => plane(prim, &mut out, diags),
             _ => {}
         }
         geometry.prims.push(GeomPrim { path: prim.path.clone(), span: prim.span });
@@ -100,7 +106,7 @@ pub fn build_with(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagnostics) 
     geometry
 }
 
-/// Transforms local-space triangles to world space and appends them.
+/// Transforms local-space triangles and shapes to world space and appends them.
 struct Emitter<'g> {
     geometry: &'g mut Geometry,
     m: DMat4,
@@ -130,6 +136,24 @@ impl Emitter<'_> {
         let has_uv = uv.is_some();
         let uv = uv.unwrap_or([Vec2::ZERO, Vec2::X, Vec2::Y]);
         self.geometry.triangles.push(Triangle { p: wp, n, uv, prim: self.prim, has_uv });
+    }
+
+    /// Adds an analytic part built around z, turned so that z is the prim's `axis`.
+    fn shape(&mut self, part: Part, axis: DMat4) {
+        match Shape::new(part, self.m * axis, self.prim) {
+            Some(shape) => self.geometry.shapes.push(shape),
+            None => self.geometry.degenerate += 1,
+        }
+    }
+}
+
+/// The rotation taking z to the prim's `axis` attribute (`X`, `Y` or `Z`, default `Z`), as
+/// a cyclic permutation: for `X`, (x, y, z) → (z, x, y).
+fn axis_matrix(prim: &Prim) -> DMat4 {
+    match prim.value("axis").and_then(Value::as_str).unwrap_or("Z") {
+        "X" => DMat4::from_cols(DVec3::Y.extend(0.0), DVec3::Z.extend(0.0), DVec3::X.extend(0.0), glam::DVec4::W),
+        "Y" => DMat4::from_cols(DVec3::Z.extend(0.0), DVec3::X.extend(0.0), DVec3::Y.extend(0.0), glam::DVec4::W),
+        _ => DMat4::IDENTITY,
     }
 }
 
@@ -311,36 +335,10 @@ fn positive(prim: &Prim, name: &str, default: f64, diags: &mut Diagnostics) -> O
     }
 }
 
-/// A UV sphere around the Z axis (UsdGeom's implicit surfaces use Z as their default axis).
+/// A sphere of `radius` around the origin, its poles on z (UsdGeomSphere).
 fn sphere(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
     let Some(r) = positive(prim, "radius", 1.0, diags) else { return };
-    let rings = SEGMENTS / 2;
-    let vertex = |i: usize, j: usize| {
-        let phi = TAU * i as f64 / SEGMENTS as f64;
-        let theta = PI * j as f64 / rings as f64;
-        let n = DVec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
-        (n * r, n, Vec2::new(i as f32 / SEGMENTS as f32, 1.0 - j as f32 / rings as f32))
-    };
-    grid(out, SEGMENTS, rings, vertex);
-}
-
-/// Emits a `cols × rows` quad grid of a parametric surface, two triangles per quad
-/// (degenerate pole triangles are dropped by [`Emitter::emit`]'s area test, not counted).
-fn grid(out: &mut Emitter, cols: usize, rows: usize, vertex: impl Fn(usize, usize) -> (DVec3, DVec3, Vec2)) {
-    for j in 0..rows {
-        for i in 0..cols {
-            let a = vertex(i, j);
-            let b = vertex(i + 1, j);
-            let c = vertex(i + 1, j + 1);
-            let d = vertex(i, j + 1);
-            for tri in [[a, c, b], [a, d, c]] {
-                let before = out.geometry.degenerate;
-                out.emit(tri.map(|v| v.0), Some(tri.map(|v| v.1)), Some(tri.map(|v| v.2)));
-                // Pole triangles of a parametric grid are expected, not a modelling error.
-                out.geometry.degenerate = before;
-            }
-        }
-    }
+    out.shape(Part::Sphere { r, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY }, DMat4::IDENTITY);
 }
 
 fn cube(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
@@ -362,36 +360,51 @@ fn cube(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
     }
 }
 
+/// A capped cylinder of `radius` and `height` along `axis`, centred (UsdGeomCylinder).
 fn cylinder(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
     let Some(r) = positive(prim, "radius", 1.0, diags) else { return };
     let Some(height) = positive(prim, "height", 2.0, diags) else { return };
-    let axis = prim.value("axis").and_then(Value::as_str).unwrap_or("Z");
-    // Build around Z, then permute so the cylinder's axis is the authored one.
-    let to_axis = |p: DVec3| match axis {
-        "X" => DVec3::new(p.z, p.x, p.y),
-        "Y" => DVec3::new(p.y, p.z, p.x),
-        _ => p,
+    let (h, axis) = (height / 2.0, axis_matrix(prim));
+    out.shape(Part::Cylinder { r, z0: -h, z1: h }, axis);
+    out.shape(Part::Disk { r, z: h, down: false }, axis);
+    out.shape(Part::Disk { r, z: -h, down: true }, axis);
+}
+
+/// A cone of base `radius` at `−height/2`, apex at `+height/2` along `axis`, with its base
+/// capped (UsdGeomCone).
+fn cone(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
+    let Some(r) = positive(prim, "radius", 1.0, diags) else { return };
+    let Some(height) = positive(prim, "height", 2.0, diags) else { return };
+    let (h, axis) = (height / 2.0, axis_matrix(prim));
+    out.shape(Part::Cone { r, z0: -h, z1: h }, axis);
+    out.shape(Part::Disk { r, z: -h, down: true }, axis);
+}
+
+/// A cylinder of `radius` and `height` along `axis` closed by two hemispheres beyond it
+/// (UsdGeomCapsule: `height` excludes the caps).
+fn capsule(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
+    let Some(r) = positive(prim, "radius", 0.5, diags) else { return };
+    let Some(height) = positive(prim, "height", 1.0, diags) else { return };
+    let (h, axis) = (height / 2.0, axis_matrix(prim));
+    out.shape(Part::Cylinder { r, z0: -h, z1: h }, axis);
+    out.shape(Part::Sphere { r, cz: h, zmin: h, zmax: f64::INFINITY }, axis);
+    out.shape(Part::Sphere { r, cz: -h, zmin: f64::NEG_INFINITY, zmax: -h }, axis);
+}
+
+/// A `width` × `length` rectangle through the origin whose normal is `axis` (UsdGeomPlane):
+/// two triangles, `st` over the rectangle.
+fn plane(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
+    let Some(w) = positive(prim, "width", 2.0, diags) else { return };
+    let Some(l) = positive(prim, "length", 2.0, diags) else { return };
+    let axis = axis_matrix(prim);
+    let corner = |a: f64, b: f64| {
+        let p = axis.transform_point3(DVec3::new(a * w / 2.0, b * l / 2.0, 0.0));
+        (p, Vec2::new((a as f32 + 1.0) / 2.0, (b as f32 + 1.0) / 2.0))
     };
-    let h = height / 2.0;
-    let side = |i: usize, j: usize| {
-        let phi = TAU * i as f64 / SEGMENTS as f64;
-        let n = DVec3::new(phi.cos(), phi.sin(), 0.0);
-        let z = if j == 0 { -h } else { h };
-        (to_axis(n * r + DVec3::Z * z), to_axis(n), Vec2::new(i as f32 / SEGMENTS as f32, j as f32))
-    };
-    grid(out, SEGMENTS, 1, side);
-    for sign in [-1.0, 1.0] {
-        let n = to_axis(DVec3::Z * sign);
-        let centre = to_axis(DVec3::Z * (h * sign));
-        for i in 0..SEGMENTS {
-            let rim = |i: usize| {
-                let phi = TAU * i as f64 / SEGMENTS as f64;
-                let (s, c) = phi.sin_cos();
-                (to_axis(DVec3::new(c * r, s * r, h * sign)), Vec2::new(0.5 + 0.5 * c as f32, 0.5 + 0.5 * s as f32))
-            };
-            let (a, b) = if sign > 0.0 { (rim(i), rim(i + 1)) } else { (rim(i + 1), rim(i)) };
-            out.emit([centre, a.0, b.0], Some([n; 3]), Some([Vec2::splat(0.5), a.1, b.1]));
-        }
+    let n = axis.transform_vector3(DVec3::Z);
+    let q = [corner(-1.0, -1.0), corner(1.0, -1.0), corner(1.0, 1.0), corner(-1.0, 1.0)];
+    for [i, j, k] in [[0, 1, 2], [0, 2, 3]] {
+        out.emit([q[i].0, q[j].0, q[k].0], Some([n; 3]), Some([q[i].1, q[j].1, q[k].1]));
     }
 }
 
@@ -490,20 +503,20 @@ def Xform "G" {
         assert!(!diags.has_errors());
         let paths: Vec<_> = g.prims.iter().map(|p| p.path.as_str()).collect();
         assert_eq!(paths, ["/S", "/C", "/Y"]);
-        for t in g.triangles.iter().filter(|t| t.prim == 0) {
-            for p in t.p {
-                assert!((p.length() - 2.0).abs() < 1e-4);
-            }
-            // Outward winding.
-            assert!(t.cross().dot(t.p[0]) > 0.0);
-        }
+        // The sphere and the cylinder are analytic: no triangles; the cylinder has its side
+        // and two caps, turned to y.
+        assert!(g.triangles.iter().all(|t| t.prim == 1));
+        assert_eq!(g.shapes.iter().filter(|s| s.prim == 0).count(), 1);
+        assert_eq!(g.shapes.iter().filter(|s| s.prim == 2).count(), 3);
         let (lo, hi) = g.bounds().unwrap();
         assert!(
             (lo - Vec3::splat(-2.0)).abs().max_element() < 1e-4 && (hi - Vec3::splat(2.0)).abs().max_element() < 1e-4
         );
-        let cyl = g.triangles.iter().filter(|t| t.prim == 2).flat_map(|t| t.p);
-        let ymax = cyl.map(|p| p.y).fold(f32::MIN, f32::max);
-        assert!((ymax - 1.0).abs() < 1e-5);
+        let top = g.shapes.iter().filter(|s| s.prim == 2).map(|s| s.world_bounds().1.y).fold(f32::MIN, f32::max);
+        assert!((top - 1.0).abs() < 1e-5);
+        // A ray down the y axis meets the top cap.
+        let down = |s: &&Shape| s.intersect(Vec3::new(0.0, 5.0, 0.2), -Vec3::Y, 0.0, f32::INFINITY).is_some();
+        assert!(g.shapes.iter().filter(|s| s.prim == 2).any(|s| down(&s)));
         let cube = g.triangles.iter().filter(|t| t.prim == 1).count();
         assert_eq!(cube, 12);
     }

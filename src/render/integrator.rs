@@ -11,7 +11,7 @@
 //! against. Shadow rays account for transparency by its expected value (the product of
 //! `w_T` at the surfaces they cross), which matches the stochastic pass-through on average.
 
-use super::accel::{Accel, Hit, offset_ray_origin};
+use super::accel::{Accel, Hit, Primitive, offset_ray_origin};
 use super::bsdf::{Bsdf, Frame};
 use super::light::Light;
 use super::sampling::{Rng, power_heuristic};
@@ -190,22 +190,47 @@ struct SurfacePoint {
     material: usize,
 }
 
-fn surface_point(accel: &Accel, scene: &Scene, hit: &Hit) -> SurfacePoint {
-    let tri = &accel.triangles()[hit.tri as usize];
-    let b0 = 1.0 - hit.b1 - hit.b2;
-    let p = tri.p[0] * b0 + tri.p[1] * hit.b1 + tri.p[2] * hit.b2;
-    let ng = tri.cross().normalize();
-    let mut ns = (tri.n[0] * b0 + tri.n[1] * hit.b1 + tri.n[2] * hit.b2).normalize_or_zero();
-    if ns == Vec3::ZERO || !ns.is_finite() {
-        ns = ng;
+/// Surface geometry where the ray `o + t d` hit.
+fn surface_point(accel: &Accel, scene: &Scene, o: Vec3, d: Vec3, hit: &Hit) -> SurfacePoint {
+    match accel.primitive(hit.index) {
+        Primitive::Triangle(tri) => {
+            let b0 = 1.0 - hit.b1 - hit.b2;
+            let p = tri.p[0] * b0 + tri.p[1] * hit.b1 + tri.p[2] * hit.b2;
+            let ng = tri.cross().normalize();
+            let mut ns = (tri.n[0] * b0 + tri.n[1] * hit.b1 + tri.n[2] * hit.b2).normalize_or_zero();
+            if ns == Vec3::ZERO || !ns.is_finite() {
+                ns = ng;
+            }
+            // Shading normals are authored on either side; keep them on the winding's side.
+            if ns.dot(ng) < 0.0 {
+                ns = -ns;
+            }
+            let uv = tri.uv[0] * b0 + tri.uv[1] * hit.b1 + tri.uv[2] * hit.b2;
+            let (dpdu, dpdv) = tangents(tri.p, tri.uv, ns);
+            SurfacePoint { p, ng, ns, dpdu, dpdv, uv, material: scene.prim_material[tri.prim as usize] }
+        }
+        Primitive::Shape(shape) => {
+            let h = shape.surface(o, d, hit.t);
+            let n = if h.n == Vec3::ZERO || !h.n.is_finite() { -d } else { h.n };
+            let (dpdu, dpdv) =
+                if h.dpdu.cross(h.dpdv).length_squared() > 0.0 && h.dpdu.is_finite() && h.dpdv.is_finite() {
+                    (h.dpdu, h.dpdv)
+                } else {
+                    // At a pole dP/du vanishes: any frame around the normal serves.
+                    let f = Frame::from_normal(n);
+                    (f.t, f.b)
+                };
+            SurfacePoint {
+                p: h.p,
+                ng: n,
+                ns: n,
+                dpdu,
+                dpdv,
+                uv: h.uv,
+                material: scene.prim_material[shape.prim as usize],
+            }
+        }
     }
-    // Shading normals are authored on either side; keep them on the winding's side.
-    if ns.dot(ng) < 0.0 {
-        ns = -ns;
-    }
-    let uv = tri.uv[0] * b0 + tri.uv[1] * hit.b1 + tri.uv[2] * hit.b2;
-    let (dpdu, dpdv) = tangents(tri.p, tri.uv, ns);
-    SurfacePoint { p, ng, ns, dpdu, dpdv, uv, material: scene.prim_material[tri.prim as usize] }
 }
 
 /// dP/du and dP/dv from the triangle's texture coordinates, or a frame around `n` when
@@ -388,7 +413,7 @@ impl Context<'_> {
         let mut t_total = 1.0f32;
         for _ in 0..MAX_PASS_THROUGH {
             let Some(hit) = accel.intersect(o, d, 0.0, remaining) else { return Ok(t_total) };
-            let sp = surface_point(accel, self.scene, &hit);
+            let sp = surface_point(accel, self.scene, o, d, &hit);
             let material = self.materials[sp.material];
             let nl = material.info().layers.len();
             if nl > 0 {
@@ -493,7 +518,7 @@ impl Context<'_> {
                 out.radiance += throughput * self.escape_emission(d, &from);
                 break;
             };
-            let sp = surface_point(accel, self.scene, &hit);
+            let sp = surface_point(accel, self.scene, o, d, &hit);
             let u_layer = rng.uniform();
             let shaded = self.shade(&sp, d, u_layer, s, first)?;
             let Some((albedo, normal)) = shaded else {

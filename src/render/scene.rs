@@ -69,7 +69,7 @@ impl Scene {
         }
         Some(Scene {
             degenerate_triangles: geometry.degenerate,
-            accel: Accel::new(geometry.triangles),
+            accel: Accel::new(geometry.triangles, geometry.shapes),
             prims: geometry.prims,
             prim_material,
             lights,
@@ -100,8 +100,7 @@ def DomeLight "Sky" {}"#,
         let scene = Scene::from_stage(&stage, &|_| Some(0), &mut diags).expect("scene");
         let r = scene.camera.ray(Vec2::splat(0.5), Vec2::ZERO);
         let hit = scene.accel.intersect(r.o, r.d, r.tmin, r.tmax).expect("hit");
-        let tri = scene.accel.triangles()[hit.tri as usize];
-        assert_eq!(scene.prims[tri.prim as usize].path, "/Ahead");
+        assert_eq!(scene.prims[scene.accel.prim_of(hit.index) as usize].path, "/Ahead");
         assert!((hit.t - 9.0).abs() < 1e-2, "{}", hit.t);
     }
 
