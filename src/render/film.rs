@@ -294,8 +294,10 @@ pub fn render(
                 let jitter = rng.uniform2();
                 let film = Vec2::new((x as f32 + jitter.x) / w as f32, (y as f32 + jitter.y) / h as f32);
                 let ray = camera.ray(film, rng.uniform2());
+                // Stratified over the pixel's samples: sample k picks in [k, k + 1) / spp.
+                let u_pick = ((sample as f32 + rng.uniform()) / settings.spp as f32).min(1.0 - f32::EPSILON / 2.0);
                 row.stats.samples += 1;
-                match ctx.trace(ray.o, ray.d, ray.tmin, ray.tmax, &mut rng, scratch) {
+                match ctx.trace(ray.o, ray.d, ray.tmin, ray.tmax, u_pick, &mut rng, scratch) {
                     Ok(r) if r.radiance.is_finite() && r.albedo.is_finite() && r.normal.is_finite() => {
                         row.stats.pass_through_limit += u64::from(r.pass_limit);
                         sum += r.radiance;

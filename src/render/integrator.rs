@@ -491,12 +491,17 @@ impl Context<'_> {
     }
 
     /// Traces one camera ray. Channels of the first visible hit are left in `s.channels`.
+    /// `u_first_pick` is the uniform number that picks the layer (or transparency) at the
+    /// first surface the ray meets: the film stratifies it over a pixel's samples, which
+    /// removes most of the variance of the pick where the camera sees blended layers.
+    #[allow(clippy::too_many_arguments)]
     pub fn trace(
         &self,
         mut o: Vec3,
         mut d: Vec3,
         mut tmin: f32,
         mut tmax: f32,
+        u_first_pick: f32,
         rng: &mut Rng,
         s: &mut Scratch,
     ) -> Result<SampleResult, Invalid> {
@@ -519,7 +524,7 @@ impl Context<'_> {
                 break;
             };
             let sp = surface_point(accel, self.scene, o, d, &hit);
-            let u_layer = rng.uniform();
+            let u_layer = if bounces == 0 && passes == 0 { u_first_pick } else { rng.uniform() };
             let shaded = self.shade(&sp, d, u_layer, s, first)?;
             let Some((albedo, normal)) = shaded else {
                 // Transparent: continue straight on, not a bounce. Only the ray moves: MIS and
