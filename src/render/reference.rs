@@ -153,11 +153,15 @@ fn transparent_sheet_under_every_light_type() {
             let m = mask.unwrap_or(0.0) as f64;
             let expected = (1.0 - m).powi(2) * open;
             let tolerance = 3.0 * se + 1e-4 * open;
+            let relative = if expected > 0.0 {
+                format!("{:+.2} % ± {:.2} %", 100.0 * (mean / expected - 1.0), 100.0 * tolerance / expected)
+            } else {
+                "must be 0".to_string()
+            };
             let line = format!(
-                "{:<8} sheet {:<5} measured {mean:.5} expected {expected:.5} (±{tolerance:.5}, {:+.2} %)",
+                "{:<8} sheet {:<5} measured {mean:.5} expected {expected:.5} ({relative})",
                 light.name,
                 mask.map_or("none".to_string(), |m| m.to_string()),
-                100.0 * (mean / expected.max(1e-12) - 1.0)
             );
             eprintln!("{line}");
             if (mean - expected).abs() > tolerance {
