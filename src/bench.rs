@@ -856,10 +856,9 @@ fn load_scene(path: &Path) -> Result<Loaded, String> {
         }
     }
     let max_layers = composition.materials.iter().map(|m| m.layers.len()).max().unwrap_or(0);
-    let lookup = |prim: &str| {
-        let i = composition.stacks.iter().position(|s| s.prim == prim)?;
-        composition.prim_material.get(i).copied()
-    };
+    let by_prim: std::collections::HashMap<&str, usize> =
+        composition.stacks.iter().zip(&composition.prim_material).map(|(s, &m)| (s.prim.as_str(), m)).collect();
+    let lookup = |prim: &str| by_prim.get(prim).copied();
     let scene = Scene::from_stage(&stage, &lookup, &mut diags).ok_or_else(|| fail(&diags, &sources))?;
     Ok(Loaded { scene, materials, max_layers })
 }
@@ -1113,4 +1112,144 @@ mod tests {
             assert!(!diags.has_errors(), "{}", diags.render(&sources));
         }
     }
+}
+
+/// `count` unit spheres on a grid, bound round-robin to `compositions` diffuse substances of
+/// `file` (see [`scale_source`]), under a dome.
+pub fn scale_scene(count: usize, compositions: usize, file: &str) -> String {
+    let mut s = String::from("#usda 1.0\n(\n    upAxis = \"Y\"\n)\ndef Xform \"World\" {\n");
+    s += "    def Camera \"Cam\" { double3 xformOp:translate = (0, 30, 160)  uniform token[] xformOpOrder = [\"xformOp:translate\"] }\n";
+    s += "    def DomeLight \"Sky\" { float inputs:intensity = 1 }\n";
+    let side = (count as f64).sqrt().ceil() as usize;
+    for i in 0..count {
+        let (x, z) = ((i % side) as f64 * 2.5, (i / side) as f64 * 2.5);
+        s += &format!(
+            "    def Sphere \"S{i}\" {{ double3 xformOp:translate = ({x}, 1, {z})  uniform token[] xformOpOrder = [\"xformOp:translate\"]  rel material:slotBinding:_000 = </Looks/M{}> }}\n",
+            i % compositions
+        );
+    }
+    s += "}\ndef Scope \"Looks\" {\n";
+    for k in 0..compositions {
+        s += &format!(
+            "    def Material \"M{k}\" {{ def Shader \"S\" {{ uniform token info:implementationSource = \"sourceAsset\"  uniform asset info:strata:sourceAsset = @{file}@  uniform token info:strata:sourceAsset:subIdentifier = \"m{k}\" }} }}\n"
+        );
+    }
+    s + "}\n"
+}
+
+/// `compositions` diffuse substances `m0 …` of distinct albedos.
+pub fn scale_source(compositions: usize) -> String {
+    (0..compositions)
+        .map(|k| {
+            let a = (k % 10) as f32 / 10.0;
+            format!(
+                "substance m{k} {{ node d = diffuse(albedo: color({a:?}, 0.5, {:?})); surface = d.bsdf; }}\n",
+                1.0 - a
+            )
+        })
+        .collect()
+}
+
+/// A `n × n` grid mesh in the plane y = 0 (`2 n²` triangles) with `st`.
+pub fn grid_mesh_scene(n: usize) -> String {
+    let mut points = String::new();
+    let mut st = String::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (u, v) = (i as f64 / n as f64, j as f64 / n as f64);
+            points += &format!("({}, 0, {}), ", u * 100.0 - 50.0, v * 100.0 - 50.0);
+            st += &format!("({u}, {v}), ");
+        }
+    }
+    let mut indices = String::new();
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * (n + 1) + i;
+            indices += &format!("{}, {}, {}, {}, ", a, a + 1, a + n + 2, a + n + 1);
+        }
+    }
+    let counts = "4, ".repeat(n * n);
+    format!(
+        "#usda 1.0\ndef Mesh \"Grid\" {{\n    int[] faceVertexCounts = [{}]\n    int[] faceVertexIndices = [{}]\n    point3f[] points = [{}]\n    texCoord2f[] primvars:st = [{}] (\n        interpolation = \"vertex\"\n    )\n}}\ndef DomeLight \"Sky\" {{}}\n",
+        counts.trim_end_matches(", "),
+        indices.trim_end_matches(", "),
+        points.trim_end_matches(", "),
+        st.trim_end_matches(", ")
+    )
+}
+
+/// Peak resident memory of this process so far (`VmHWM`), in MiB; 0 where unknown.
+fn peak_rss_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| s.lines().find_map(|l| l.strip_prefix("VmHWM:")).map(str::to_string))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
+        .map_or(0.0, |kb| kb / 1024.0)
+}
+
+/// `strata bench scale`: time from scene file to first pixel and peak memory for sphere
+/// scenes of growing size (every Sphere is analytic: nothing is tessellated), and BVH build
+/// time and memory for a large triangle mesh. Sizes run in ascending order so that the peak
+/// resident memory after each row is that row's.
+pub fn bench_scale() -> Result<String, String> {
+    let dir = TempDir::new()?;
+    let write = |name: &str, text: &str| {
+        let path = dir.0.join(name);
+        std::fs::write(&path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        Ok::<PathBuf, String>(path)
+    };
+    let mut out = String::from(
+        "bench scale: scene file to first pixel (to scene: parse, compose, JIT, geometry and BVH; then a 16x16 1-spp render)\n",
+    );
+    out += &format!(
+        "  {:<34} {:>9} {:>12} {:>10} {:>10} {:>9}\n",
+        "scene", "prims", "to scene ms", "render ms", "total ms", "peak MiB"
+    );
+    let compositions = 50;
+    write("m.ash", &scale_source(compositions))?;
+    let settings = RenderSettings {
+        width: 16,
+        height: 16,
+        spp: 1,
+        seed: 1,
+        threads: None,
+        max_depth: 4,
+        mode: LayerMode::Stochastic,
+    };
+    for count in [200usize, 2000, 20000] {
+        let path = write(&format!("spheres{count}.usda"), &scale_scene(count, compositions, "m.ash"))?;
+        let start = Instant::now();
+        let loaded = load_scene(&path)?;
+        let load_ms = ms_since(start);
+        let (render_s, _) = render_rgb(&loaded, &settings)?;
+        out += &format!(
+            "  {:<34} {:>9} {:>12.1} {:>10.1} {:>10.1} {:>9.0}\n",
+            format!("{count} spheres, {compositions} compositions"),
+            count,
+            load_ms,
+            render_s * 1e3,
+            ms_since(start),
+            peak_rss_mib()
+        );
+    }
+    let n = 700;
+    let path = write("grid.usda", &grid_mesh_scene(n))?;
+    let before = peak_rss_mib();
+    let start = Instant::now();
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let stage = crate::cli::open_scene(Some(&path), &mut sources, &mut diags)
+        .ok_or_else(|| diag_error("cannot load the grid", &diags, &sources))?;
+    let parse_ms = ms_since(start);
+    let build_start = Instant::now();
+    let scene = Scene::from_stage(&stage, &|_| Some(0), &mut diags)
+        .ok_or_else(|| diag_error("cannot build the grid", &diags, &sources))?;
+    let build_ms = ms_since(build_start);
+    let triangles = scene.accel.triangles().len();
+    let grown = (peak_rss_mib() - before).max(0.0);
+    out += &format!(
+        "\n  {triangles} triangles ({n}x{n} grid mesh): parse {parse_ms:.0} ms, triangles + BVH {build_ms:.0} ms, peak memory +{grown:.0} MiB ({:.0} B per triangle, parsed text included)\n",
+        grown * 1048576.0 / triangles.max(1) as f64
+    );
+    Ok(out)
 }
