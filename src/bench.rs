@@ -1059,61 +1059,6 @@ fn render_report(
     Ok(out)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn hand_material_matches_jit_and_interpreter() {
-        let (lib, material) = bench_material().unwrap();
-        let (module, _) = lower_material(&lib, &material).unwrap();
-        let jit = backend::compile_module(module.clone(), BackendKind::Jit).unwrap();
-        let interp = backend::compile_module(module, BackendKind::Interp).unwrap();
-        let hand = HandMaterial::default();
-        let points = sample_points(400, 7);
-        compare_materials(&hand, jit.as_ref(), &points, 1e-5).unwrap();
-        compare_materials(&hand, interp.as_ref(), &points, 1e-5).unwrap();
-        // The masks are not trivially constant: both mask layers take 0, 1 and in-between values.
-        let mut m = [0.0; 3];
-        let (mut lo, mut hi, mut mid) = ([false; 3], [false; 3], [false; 3]);
-        for g in &points {
-            hand.masks(g, &mut m).unwrap();
-            for l in 1..3 {
-                lo[l] |= m[l] == 0.0;
-                hi[l] |= m[l] == 1.0;
-                mid[l] |= m[l] > 0.0 && m[l] < 1.0;
-            }
-        }
-        assert!(lo[1..].iter().chain(&hi[1..]).chain(&mid[1..]).all(|&b| b), "{lo:?} {hi:?} {mid:?}");
-    }
-
-    #[test]
-    fn bench_shade_runs_small() {
-        let options = ShadeOptions { points: 64, reps: 1, sizes: vec![3, 10], compile_reps: 1 };
-        let report = shade_report(None, None, &options).unwrap();
-        assert!(report.contains("hand Rust") && report.contains("interpreter / JIT"), "{report}");
-        assert!(report.contains("compile time vs graph size"), "{report}");
-    }
-
-    #[test]
-    fn bench_render_runs_small() {
-        let report = render_report(None, 1, (4, 4), &[1, 2], 1).unwrap();
-        assert!(report.contains("2 layers"), "{report}");
-    }
-
-    #[test]
-    fn generated_sources_compile() {
-        for n in [1, 2, 7] {
-            let mut sources = SourceMap::new();
-            let mut diags = Diagnostics::new();
-            Library::from_text("g.ash", &generated_substance(n), &mut sources, &mut diags);
-            assert!(!diags.has_errors(), "{}", diags.render(&sources));
-            Library::from_text("l.ash", &layered_source(n), &mut sources, &mut diags);
-            assert!(!diags.has_errors(), "{}", diags.render(&sources));
-        }
-    }
-}
-
 /// `count` unit spheres on a grid, bound round-robin to `compositions` diffuse substances of
 /// `file` (see [`scale_source`]), under a dome.
 pub fn scale_scene(count: usize, compositions: usize, file: &str) -> String {
@@ -1252,4 +1197,59 @@ pub fn bench_scale() -> Result<String, String> {
         grown * 1048576.0 / triangles.max(1) as f64
     );
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hand_material_matches_jit_and_interpreter() {
+        let (lib, material) = bench_material().unwrap();
+        let (module, _) = lower_material(&lib, &material).unwrap();
+        let jit = backend::compile_module(module.clone(), BackendKind::Jit).unwrap();
+        let interp = backend::compile_module(module, BackendKind::Interp).unwrap();
+        let hand = HandMaterial::default();
+        let points = sample_points(400, 7);
+        compare_materials(&hand, jit.as_ref(), &points, 1e-5).unwrap();
+        compare_materials(&hand, interp.as_ref(), &points, 1e-5).unwrap();
+        // The masks are not trivially constant: both mask layers take 0, 1 and in-between values.
+        let mut m = [0.0; 3];
+        let (mut lo, mut hi, mut mid) = ([false; 3], [false; 3], [false; 3]);
+        for g in &points {
+            hand.masks(g, &mut m).unwrap();
+            for l in 1..3 {
+                lo[l] |= m[l] == 0.0;
+                hi[l] |= m[l] == 1.0;
+                mid[l] |= m[l] > 0.0 && m[l] < 1.0;
+            }
+        }
+        assert!(lo[1..].iter().chain(&hi[1..]).chain(&mid[1..]).all(|&b| b), "{lo:?} {hi:?} {mid:?}");
+    }
+
+    #[test]
+    fn bench_shade_runs_small() {
+        let options = ShadeOptions { points: 64, reps: 1, sizes: vec![3, 10], compile_reps: 1 };
+        let report = shade_report(None, None, &options).unwrap();
+        assert!(report.contains("hand Rust") && report.contains("interpreter / JIT"), "{report}");
+        assert!(report.contains("compile time vs graph size"), "{report}");
+    }
+
+    #[test]
+    fn bench_render_runs_small() {
+        let report = render_report(None, 1, (4, 4), &[1, 2], 1).unwrap();
+        assert!(report.contains("2 layers"), "{report}");
+    }
+
+    #[test]
+    fn generated_sources_compile() {
+        for n in [1, 2, 7] {
+            let mut sources = SourceMap::new();
+            let mut diags = Diagnostics::new();
+            Library::from_text("g.ash", &generated_substance(n), &mut sources, &mut diags);
+            assert!(!diags.has_errors(), "{}", diags.render(&sources));
+            Library::from_text("l.ash", &layered_source(n), &mut sources, &mut diags);
+            assert!(!diags.has_errors(), "{}", diags.render(&sources));
+        }
+    }
 }
