@@ -255,7 +255,12 @@ impl Checker<'_> {
                 if let Some(init) = init {
                     self.stmt(init, out);
                 }
-                let cond = cond.as_ref().map(|c| self.condition(c));
+                // No condition: an endless loop that only `break`, `return` or the loop budget
+                // ends. A condition that failed to check is already reported: no loop.
+                let cond = match cond {
+                    None => Some(None),
+                    Some(c) => self.condition(c).map(Some),
+                };
                 let mut step_out = Vec::new();
                 if let Some(step) = step {
                     self.stmt(step, &mut step_out);
