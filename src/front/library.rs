@@ -5,6 +5,7 @@ use super::ast::{self, FunctionKind, GraphKind, Item};
 use super::check::{Callee, check_function, resolve_type};
 use super::graph::{Graph, resolve_graph};
 use super::hir::{ExprKind, FuncId, Function, Stmt};
+use super::intrinsics::Intrinsic;
 use super::parser::parse;
 use crate::diag::{Diagnostic, Diagnostics, FileId, SourceMap, Span};
 use std::collections::{HashMap, HashSet};
@@ -102,21 +103,37 @@ impl Library {
         // Declare every function and shader first so bodies may call forward.
         let mut decls: Vec<(&ast::FunctionDecl, bool)> = Vec::new();
         let mut callees: HashMap<String, Callee> = HashMap::new();
-        let mut first_span: HashMap<(FunctionKind, String), Span> = HashMap::new();
+        // (kind, name) → where first defined and whether that is the prelude.
+        let mut first_span: HashMap<(FunctionKind, String), (Span, bool)> = HashMap::new();
         for (path, module) in &modules {
+            let builtin = path.is_none();
             for item in &module.items {
                 let Item::Function(f) = item else { continue };
                 let key = (f.kind, f.name.name.clone());
-                if let Some(first) = first_span.get(&key) {
-                    let what = if f.kind == FunctionKind::Shader { "shader" } else { "function" };
+                let what = if f.kind == FunctionKind::Shader { "shader" } else { "function" };
+                if let Some(&(first, first_builtin)) = first_span.get(&key) {
+                    let message = if first_builtin {
+                        format!("`{}` is a built-in {what}; choose another name", f.name.name)
+                    } else {
+                        format!("{what} `{}` is defined twice", f.name.name)
+                    };
                     diags.push(
-                        Diagnostic::error(format!("{what} `{}` is defined twice", f.name.name))
-                            .at(f.name.span, "defined again")
-                            .also(*first, "first defined here"),
+                        Diagnostic::error(message).at(f.name.span, "defined again").also(first, "first defined here"),
                     );
                     continue;
                 }
-                first_span.insert(key, f.name.span);
+                // Calls resolve user functions before built-in functions, everywhere (the
+                // prelude's node bodies included), so a user `noise` would silently replace
+                // the intrinsic inside the built-in `noise` node.
+                if !builtin && f.kind == FunctionKind::Function && Intrinsic::from_name(&f.name.name).is_some() {
+                    diags.push(
+                        Diagnostic::error(format!("`{}` is a built-in function; choose another name", f.name.name))
+                            .at(f.name.span, "reserved by the language")
+                            .note("user functions may not take the name of a built-in function"),
+                    );
+                    continue;
+                }
+                first_span.insert(key, (f.name.span, builtin));
                 let id = FuncId(decls.len() as u32);
                 decls.push((f, path.is_none()));
                 if f.kind == FunctionKind::Shader {
@@ -145,6 +162,19 @@ impl Library {
         for (path, module) in &modules {
             for item in &module.items {
                 let Item::Graph(g) = item else { continue };
+                // Graph names are per file, but the renderer looks the prelude's graphs up by
+                // name (`default_substance` shades unbound prims): a user graph may not take one.
+                if path.is_some()
+                    && let Some(&builtin) = lib.graph_index.get(&(PathBuf::new(), g.name.name.clone()))
+                {
+                    let kind = if g.kind == GraphKind::Substance { "substance" } else { "override" };
+                    diags.push(
+                        Diagnostic::error(format!("`{}` is a built-in graph; choose another name", g.name.name))
+                            .at(g.name.span, format!("this {kind} would shadow it"))
+                            .also(lib.graphs[builtin.0 as usize].span, "defined by the built-in library"),
+                    );
+                    continue;
+                }
                 let graph = resolve_graph(g, &lib.shaders, &lib.functions, diags);
                 let file = path.clone().unwrap_or_default();
                 let key = (file.clone(), graph.name.clone());
@@ -169,6 +199,11 @@ impl Library {
     pub fn graph(&self, file: &Path, name: &str) -> Option<GraphId> {
         let canonical = file.canonicalize().unwrap_or_else(|_| file.to_path_buf());
         self.graph_index.get(&(canonical, name.to_string())).copied()
+    }
+
+    /// Finds a graph of the built-in library (the prelude) by name.
+    pub fn builtin_graph(&self, name: &str) -> Option<GraphId> {
+        self.graph_index.get(&(PathBuf::new(), name.to_string())).copied()
     }
 
     /// Finds a graph by name alone (only when it is unique).

@@ -157,9 +157,17 @@ pub fn build(
     let mut b = Builder { lib, nodes: Vec::new(), diags };
     let mut layers = Vec::new();
     if material.layers.is_empty() {
-        let graph = lib.graph_by_name("default_substance").expect("the prelude defines default_substance");
-        let substance = MaterialRef { path: String::new(), graph, values: Vec::new(), span: Span::default() };
-        layers.push(b.layer(0, "default", &substance, &[]));
+        // The prelude's own graph, by its file: a user graph of the same name is rejected when
+        // the library loads, and could not be picked here anyway.
+        match lib.builtin_graph("default_substance") {
+            Some(graph) => {
+                let substance = MaterialRef { path: String::new(), graph, values: Vec::new(), span: Span::default() };
+                layers.push(b.layer(0, "default", &substance, &[]));
+            }
+            None => b.diags.push(Diagnostic::error(
+                "internal compiler error: the built-in library has no `default_substance` to shade unbound prims",
+            )),
+        }
     }
     for (index, layer) in material.layers.iter().enumerate() {
         let overrides: Vec<(String, &MaterialRef)> = layer.overrides.iter().map(|(s, m)| (s.name(), m)).collect();
