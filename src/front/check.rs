@@ -54,6 +54,7 @@ pub fn check_function(
         if ty.base == BaseType::Void {
             cx.diags.push(Diagnostic::error("a parameter cannot be void").at(param.ty.span, "void"));
         }
+        cx.check_array_element(ty, param.ty.span);
         // Shader defaults may read globals but no other parameter.
         let default = param.default.as_ref().and_then(|d| {
             let value = cx.expr(d)?;
@@ -148,6 +149,14 @@ impl Checker<'_> {
         id
     }
 
+    /// Arrays hold numbers, triples and strings: a closure (a kind word and eight floats)
+    /// has no array layout, and would be stored with the wrong types.
+    fn check_array_element(&mut self, ty: Type, span: Span) {
+        if ty.array.is_some() && ty.base == BaseType::Closure {
+            self.error(span, "arrays of closures are not supported", "closure array");
+        }
+    }
+
     fn lookup(&self, name: &str) -> Option<LocalId> {
         self.scopes.iter().rev().find_map(|s| s.get(name).copied())
     }
@@ -188,11 +197,12 @@ impl Checker<'_> {
 
     fn stmt(&mut self, stmt: &ast::Stmt, out: &mut Vec<Stmt>) {
         match &stmt.kind {
-            StmtKind::Local { ty, name, init } => {
-                let ty = resolve_type(ty);
+            StmtKind::Local { ty: written, name, init } => {
+                let ty = resolve_type(written);
                 if matches!(ty.base, BaseType::Void) {
                     self.error(name.span, "a variable cannot be void", "void");
                 }
+                self.check_array_element(ty, written.span);
                 let init = match init {
                     Some(init) => {
                         self.expr_expecting(init, ty).and_then(|v| self.coerce(v, ty, init.span, "initial value"))
