@@ -26,7 +26,17 @@ pub fn resolve_type(ty: &ast::TypeExpr) -> Type {
 }
 
 /// Checks one function or shader. `callees` maps names to user functions visible from it.
+/// Runs on the compiler stack ([`crate::stack`]): checking recurses as deep as the body nests.
 pub fn check_function(
+    decl: &ast::FunctionDecl,
+    callees: &HashMap<String, Callee>,
+    builtin: bool,
+    diags: &mut Diagnostics,
+) -> hir::Function {
+    crate::stack::on_compiler_stack(|| check_function_here(decl, callees, builtin, diags))
+}
+
+fn check_function_here(
     decl: &ast::FunctionDecl,
     callees: &HashMap<String, Callee>,
     builtin: bool,
@@ -82,7 +92,7 @@ pub fn check_function(
         );
     }
     let body = cx.block(&decl.body);
-    if cx.ret != Type::VOID && !always_returns(&decl.body.stmts) {
+    if cx.ret != Type::VOID && !decl.body.skipped && !always_returns(&decl.body.stmts) {
         cx.diags.push(
             Diagnostic::error(format!("function `{}` may end without returning a value", decl.name.name))
                 .at(decl.name.span, format!("must return {}", cx.ret)),
@@ -131,7 +141,7 @@ impl Checker<'_> {
 
     fn declare(&mut self, name: &ast::Ident, ty: Type, readonly: bool) -> LocalId {
         let id = LocalId(self.locals.len() as u32);
-        self.locals.push(hir::Local { name: name.name.clone(), ty });
+        self.locals.push(hir::Local { name: name.name.clone(), ty, span: name.span });
         self.readonly.push(readonly);
         let scope = self.scopes.last_mut().expect("a scope is always open");
         if scope.insert(name.name.clone(), id).is_some() {
@@ -477,11 +487,7 @@ impl Checker<'_> {
                     }
                 }
             }
-            A::Binary(op, lhs, rhs) => {
-                let l = self.expr(lhs);
-                let r = self.expr(rhs);
-                return self.binary(*op, l?, r?, span);
-            }
+            A::Binary(..) => return self.binary_chain(expr),
             A::Ternary(cond, then, otherwise) => {
                 let c = self.condition(cond);
                 let a = self.expr(then);
@@ -537,6 +543,29 @@ impl Checker<'_> {
             A::Call(name, args) => return self.call(name, args, span),
         };
         Some(Expr { kind, ty, span })
+    }
+
+    /// Checks a binary operator and the operators along its left operand's spine in a loop:
+    /// `x + x + … + x` is a left-deep tree as deep as the chain is long, so recursing into the
+    /// left operand would need stack in proportion to the chain. Operands are still checked
+    /// left to right, and each operator sees the checked (converted) result of the ones
+    /// before it, exactly as the recursive form would.
+    fn binary_chain(&mut self, expr: &ast::Expr) -> Option<Expr> {
+        let mut spine = Vec::new();
+        let mut leftmost = expr;
+        while let A::Binary(op, lhs, rhs) = &leftmost.kind {
+            spine.push((*op, &**rhs, leftmost.span));
+            leftmost = lhs;
+        }
+        let mut acc = self.expr(leftmost);
+        for (op, rhs, span) in spine.into_iter().rev() {
+            let r = self.expr(rhs);
+            acc = match (acc, r) {
+                (Some(l), Some(r)) => self.binary(op, l, r, span),
+                _ => None,
+            };
+        }
+        acc
     }
 
     fn binary(&mut self, op: BinaryOp, l: Expr, r: Expr, span: Span) -> Option<Expr> {
@@ -607,7 +636,9 @@ impl Checker<'_> {
                         // Explicit casts between any triples are allowed.
                         ExprKind::Convert(Box::new(arg))
                     } else {
-                        return Some(Expr { span, ..arg.convert_to(ty) });
+                        let mut converted = arg.convert_to(ty);
+                        converted.span = span;
+                        return Some(converted);
                     };
                     Some(Expr { kind, ty, span })
                 }

@@ -147,8 +147,18 @@ impl Default for PassOptions {
     }
 }
 
-/// Builds and optimises the wired IR of one composed material.
+/// Builds and optimises the wired IR of one composed material. Runs on the compiler stack
+/// ([`crate::stack`]): constant folding evaluates node bodies recursively.
 pub fn build(
+    lib: &Library,
+    material: &ComposedMaterial,
+    options: PassOptions,
+    diags: &mut Diagnostics,
+) -> WiredMaterial {
+    crate::stack::on_compiler_stack(|| build_here(lib, material, options, diags))
+}
+
+fn build_here(
     lib: &Library,
     material: &ComposedMaterial,
     options: PassOptions,
