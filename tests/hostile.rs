@@ -184,6 +184,8 @@ fn nesting_just_inside_the_limit_compiles() {
         ("calls", format!("o = {}u{};", "abs(".repeat(n), ")".repeat(n)), 0.3),
         ("blocks", format!("{} o = u; {}", "{".repeat(n), "}".repeat(n)), 0.3),
         ("ifs", format!("o = 1.0; {} o = u; {}", "if (u > 0.0) {".repeat(n), "}".repeat(n)), 0.3),
+        // Loops nested this deep also reach Cranelift's loop analysis as deep as they nest.
+        ("loops", format!("o = 0.0; {} o += u; {}", "for (int i = 0; i < 1; i++) {".repeat(n), "}".repeat(n)), 0.3),
     ];
     for (what, body, expected) in cases {
         let outcome = compile(&format!("{what}.ash"), &shader("", &body), "a");
@@ -276,7 +278,10 @@ fn chains_of_100_000_terms_compile() {
         (
             "compound assignment to a computed element",
             String::new(),
-            format!("float a[3] = {{0, 0, 0}}; int i = int(u); a[i - i{} + 1] += x; o = a[1] * u;", " + i - i".repeat(n / 2)),
+            format!(
+                "float a[3] = {{0, 0, 0}}; int i = int(u); a[i - i{} + 1] += x; o = a[1] * u;",
+                " + i - i".repeat(n / 2)
+            ),
             Box::new(|u| 0.25 * u),
         ),
         (
