@@ -5,9 +5,18 @@
 //! instead of failing at the first one, so one run shows as many problems as it can.
 
 use codespan_reporting::diagnostic as cs;
-use codespan_reporting::files::SimpleFiles;
+use codespan_reporting::files::{self as csfiles, Files as _, SimpleFiles};
 use codespan_reporting::term;
 use std::fmt;
+use std::ops::Range;
+
+/// Diagnostics [`Diagnostics::render`] shows per file; the rest are counted in one closing
+/// line, so a file that yields one error per byte cannot flood the terminal.
+pub const MAX_SHOWN_PER_FILE: usize = 50;
+
+/// Widest source line a diagnostic quotes whole; a longer one is cut to about this many
+/// bytes around each label, with `…` where text was left out.
+pub const MAX_EXCERPT_WIDTH: usize = 160;
 
 /// Index of a file in a [`SourceMap`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Default)]
@@ -59,6 +68,25 @@ impl SourceMap {
     /// The display name of a file.
     pub fn name(&self, file: FileId) -> &str {
         self.files.get(file.0 as usize).map(|f| f.name().as_str()).unwrap_or("<unknown>")
+    }
+
+    /// The byte range of the line holding byte `at` of a file (newline excluded).
+    pub fn line_bounds(&self, file: FileId, at: usize) -> Range<usize> {
+        let id = file.0 as usize;
+        let text = self.text(file);
+        match self.files.line_index(id, at).and_then(|i| self.files.line_range(id, i)) {
+            Ok(range) => {
+                let end = range.end.min(text.len());
+                let start = range.start.min(end);
+                start..start + text[start..end].trim_end_matches(['\n', '\r']).len()
+            }
+            Err(_) => at..at,
+        }
+    }
+
+    /// One-based number of the line holding byte `at` of a file.
+    pub fn line_number(&self, file: FileId, at: usize) -> usize {
+        self.files.line_index(file.0 as usize, at).map_or(1, |i| i + 1)
     }
 
     /// The full text of a file.
@@ -157,13 +185,17 @@ impl Diagnostic {
     }
 
     /// Renders this diagnostic as plain text: `error: msg`, then `--> file:line:col` and the
-    /// quoted source line with carets.
+    /// quoted source line with carets. Lines wider than [`MAX_EXCERPT_WIDTH`] are cut around
+    /// the labels.
     pub fn render(&self, sources: &SourceMap) -> String {
-        let severity = match self.severity {
-            Severity::Error => cs::Severity::Error,
-            Severity::Warning => cs::Severity::Warning,
-            Severity::Note => cs::Severity::Note,
-        };
+        let wide = self.labels.iter().any(|l| {
+            let line = sources.line_bounds(l.span.file, l.span.start as usize);
+            line.end - line.start > MAX_EXCERPT_WIDTH
+        });
+        if wide {
+            return self.render_excerpts(sources);
+        }
+        let severity = self.severity.codespan();
         let labels = self
             .labels
             .iter()
@@ -180,6 +212,163 @@ impl Diagnostic {
         let config = term::Config::default();
         term::emit_into_string(&config, &sources.files, &diagnostic)
             .unwrap_or_else(|_| format!("{:?}: {}\n", self.severity, self.message))
+    }
+
+    /// [`Diagnostic::render`] for labels on very long lines: each label's first line, cut to
+    /// a window around the label, stands in for the file, with the original line numbers and
+    /// columns.
+    fn render_excerpts(&self, sources: &SourceMap) -> String {
+        let mut excerpts = Excerpts::default();
+        // Excerpt lines in file order, whatever the order of the labels.
+        let mut order: Vec<usize> = (0..self.labels.len()).collect();
+        order.sort_by_key(|&i| (self.labels[i].span.file, self.labels[i].span.start));
+        let mut labels = vec![None; self.labels.len()];
+        for i in order {
+            let label = &self.labels[i];
+            let file = label.span.file;
+            let index = match excerpts.files.iter().position(|e| e.file == file) {
+                Some(i) => i,
+                None => {
+                    excerpts.files.push(Excerpt {
+                        file,
+                        name: sources.name(file).to_string(),
+                        text: String::new(),
+                        lines: Vec::new(),
+                    });
+                    excerpts.files.len() - 1
+                }
+            };
+            let range = excerpts.files[index].add_label(sources, label.span);
+            let style = if label.primary { cs::LabelStyle::Primary } else { cs::LabelStyle::Secondary };
+            labels[i] = Some(cs::Label::new(style, index, range).with_message(label.message.clone()));
+        }
+        let labels: Vec<_> = labels.into_iter().flatten().collect();
+        let diagnostic = cs::Diagnostic::new(self.severity.codespan())
+            .with_message(self.message.clone())
+            .with_labels(labels)
+            .with_notes(self.notes.clone());
+        term::emit_into_string(&term::Config::default(), &excerpts, &diagnostic)
+            .unwrap_or_else(|_| format!("{:?}: {}\n", self.severity, self.message))
+    }
+}
+
+impl Severity {
+    fn codespan(self) -> cs::Severity {
+        match self {
+            Severity::Error => cs::Severity::Error,
+            Severity::Warning => cs::Severity::Warning,
+            Severity::Note => cs::Severity::Note,
+        }
+    }
+}
+
+/// Stand-in source files for [`Diagnostic::render_excerpts`], one per file a diagnostic
+/// labels, each holding one excerpt line per label.
+#[derive(Default)]
+struct Excerpts {
+    files: Vec<Excerpt>,
+}
+
+struct Excerpt {
+    file: FileId,
+    name: String,
+    /// The excerpt lines, each ending in `\n`.
+    text: String,
+    lines: Vec<ExcerptLine>,
+}
+
+struct ExcerptLine {
+    /// Bytes of the line in `Excerpt::text` (newline excluded).
+    range: Range<usize>,
+    /// One-based line number in the original file.
+    number: usize,
+    /// Where the original text starts in this line (after a leading `…`).
+    content: usize,
+    /// One-based column, in the original line, of the first original character shown.
+    first_column: usize,
+}
+
+impl Excerpt {
+    /// Adds the (cut) first line of `span` and returns where `span` lies in the excerpt.
+    fn add_label(&mut self, sources: &SourceMap, span: Span) -> Range<usize> {
+        let text = sources.text(span.file);
+        let start = (span.start as usize).min(text.len());
+        let line = sources.line_bounds(span.file, start);
+        let end = (span.end as usize).clamp(start, line.end);
+        // A window of about MAX_EXCERPT_WIDTH bytes around the label, the label's start first.
+        let context = MAX_EXCERPT_WIDTH / 4;
+        let from = floor_char(text, start.saturating_sub(context).max(line.start));
+        let to = ceil_char(text, (end.min(start + MAX_EXCERPT_WIDTH / 2) + context).min(line.end));
+        let at = self.text.len();
+        let lead = if from > line.start { "…" } else { "" };
+        self.text.push_str(lead);
+        self.text.push_str(&text[from..to]);
+        if to < line.end {
+            self.text.push('…');
+        }
+        let content = at + lead.len();
+        self.lines.push(ExcerptLine {
+            range: at..self.text.len(),
+            number: sources.line_number(span.file, start),
+            content,
+            first_column: text[line.start..from].chars().count() + 1,
+        });
+        self.text.push('\n');
+        let shown_end = ceil_char(text, end.min(to));
+        content + (start - from)..content + (shown_end - from)
+    }
+}
+
+fn floor_char(text: &str, mut at: usize) -> usize {
+    while !text.is_char_boundary(at) {
+        at -= 1;
+    }
+    at
+}
+
+fn ceil_char(text: &str, mut at: usize) -> usize {
+    while !text.is_char_boundary(at) {
+        at += 1;
+    }
+    at
+}
+
+impl<'a> csfiles::Files<'a> for Excerpts {
+    type FileId = usize;
+    type Name = &'a str;
+    type Source = &'a str;
+
+    fn name(&'a self, id: usize) -> Result<&'a str, csfiles::Error> {
+        self.files.get(id).map(|e| e.name.as_str()).ok_or(csfiles::Error::FileMissing)
+    }
+
+    fn source(&'a self, id: usize) -> Result<&'a str, csfiles::Error> {
+        self.files.get(id).map(|e| e.text.as_str()).ok_or(csfiles::Error::FileMissing)
+    }
+
+    fn line_index(&'a self, id: usize, byte_index: usize) -> Result<usize, csfiles::Error> {
+        let excerpt = self.files.get(id).ok_or(csfiles::Error::FileMissing)?;
+        Ok(excerpt.lines.iter().position(|l| byte_index <= l.range.end).unwrap_or(excerpt.lines.len().max(1) - 1))
+    }
+
+    fn line_range(&'a self, id: usize, line_index: usize) -> Result<Range<usize>, csfiles::Error> {
+        let excerpt = self.files.get(id).ok_or(csfiles::Error::FileMissing)?;
+        let max = excerpt.lines.len();
+        let line = excerpt.lines.get(line_index).ok_or(csfiles::Error::LineTooLarge { given: line_index, max })?;
+        Ok(line.range.start..line.range.end + 1)
+    }
+
+    fn line_number(&'a self, id: usize, line_index: usize) -> Result<usize, csfiles::Error> {
+        let excerpt = self.files.get(id).ok_or(csfiles::Error::FileMissing)?;
+        Ok(excerpt.lines.get(line_index).map_or(line_index + 1, |l| l.number))
+    }
+
+    fn column_number(&'a self, id: usize, line_index: usize, byte_index: usize) -> Result<usize, csfiles::Error> {
+        let excerpt = self.files.get(id).ok_or(csfiles::Error::FileMissing)?;
+        let max = excerpt.lines.len();
+        let line = excerpt.lines.get(line_index).ok_or(csfiles::Error::LineTooLarge { given: line_index, max })?;
+        let at = byte_index.clamp(line.content, line.range.end);
+        Ok(line.first_column + excerpt.text.get(line.content..at).map_or(0, |t| t.chars().count()))
     }
 }
 
@@ -220,9 +409,47 @@ impl Diagnostics {
         self.items.extend(other.items);
     }
 
-    /// Renders every diagnostic, in order.
+    /// Renders the diagnostics in order, at most [`MAX_SHOWN_PER_FILE`] per file (the file of
+    /// the primary label; unlocated diagnostics count as one more file), then one line per
+    /// file saying how many were left out. Rendering costs time in proportion to what is
+    /// shown, not to what was found.
     pub fn render(&self, sources: &SourceMap) -> String {
-        self.items.iter().map(|d| d.render(sources)).collect()
+        // (file, errors left out, others left out), in order of first appearance.
+        let mut shown: std::collections::HashMap<Option<FileId>, usize> = std::collections::HashMap::new();
+        let mut hidden: Vec<(Option<FileId>, usize, usize)> = Vec::new();
+        let mut out = String::new();
+        for d in &self.items {
+            let file = d.labels.iter().find(|l| l.primary).or(d.labels.first()).map(|l| l.span.file);
+            let count = shown.entry(file).or_default();
+            if *count < MAX_SHOWN_PER_FILE {
+                *count += 1;
+                out += &d.render(sources);
+                continue;
+            }
+            let i = match hidden.iter().position(|h| h.0 == file) {
+                Some(i) => i,
+                None => {
+                    hidden.push((file, 0, 0));
+                    hidden.len() - 1
+                }
+            };
+            if d.severity == Severity::Error {
+                hidden[i].1 += 1;
+            } else {
+                hidden[i].2 += 1;
+            }
+        }
+        for (file, errors, others) in hidden {
+            let more = |n: usize, what: &str| format!("{n} more {what}{}", if n == 1 { "" } else { "s" });
+            let what = match (errors, others) {
+                (e, 0) => more(e, "error"),
+                (0, w) => more(w, "warning"),
+                (e, w) => format!("{} and {}", more(e, "error"), more(w, "warning")),
+            };
+            let place = file.map_or("without a location".to_string(), |f| format!("in {}", sources.name(f)));
+            out += &format!("note: {what} {place} not shown (only the first {MAX_SHOWN_PER_FILE} per file are)\n\n");
+        }
+        out
     }
 }
 

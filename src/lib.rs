@@ -13,6 +13,7 @@
 //! - [`render`]: the path tracer (geometry, BVH, lights, integrator, EXR output).
 //! - [`runtime`]: noise, patterns and math semantics shared by every backend.
 //! - [`scenes`]: the embedded default scene.
+//! - [`stack`]: the compiler thread with a known stack size that the recursive passes run on.
 //! - [`bench`]: the measurements behind `strata bench shade` and `strata bench render`.
 //! - [`fuzz`]: `strata fuzz`, mutation fuzzing of both front ends in worker processes.
 //! - [`cli`]: the `strata` subcommands.
@@ -33,4 +34,5 @@ pub mod render;
 pub mod runtime;
 pub mod scene;
 pub mod scenes;
+pub mod stack;
 pub mod text;

@@ -29,6 +29,7 @@ error_snapshots! {
     ash_syntax => "tests/in/errors/syntax.ash",
     ash_types => "tests/in/errors/types.ash",
     ash_graphs => "tests/in/errors/graphs.ash",
+    ash_long_lines => "tests/in/errors/long_lines.ash",
     usda_syntax => "tests/in/errors/syntax.usda",
     usda_bindings => "tests/in/errors/bindings.usda",
     usda_connections => "tests/in/errors/connections.usda",

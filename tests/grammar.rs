@@ -331,3 +331,83 @@ fn repository_ash_files_parse() {
         assert!(!diags.has_errors(), "{}: {diags:?}", file.display());
     }
 }
+
+/// The three optional parts of `for` (init, condition, step), in every combination: the
+/// grammar makes each optional, and the parser, the checker and both backends agree that each
+/// combination is the loop it reads as. Without a condition the loop is endless until `break`
+/// (it once compiled to no loop at all).
+#[test]
+fn every_optional_part_of_for() {
+    use strata::abi::Globals;
+    use strata::backend::{BackendKind, Compiler};
+    use strata::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
+    use strata::diag::SourceMap;
+    use strata::front::library::Library;
+    use strata::ir::wired::PassOptions;
+
+    let rules = grammar();
+    let G::Alt(statements) = &rules["stmt"] else { panic!("stmt is a choice") };
+    let for_rule = statements
+        .iter()
+        .find_map(|s| match s {
+            G::Seq(items) if matches!(items.first(), Some(G::Terminal(t)) if t == "for") => Some(items),
+            _ => None,
+        })
+        .expect("a `for` statement");
+    let optional: Vec<String> = for_rule
+        .iter()
+        .filter_map(|g| match g {
+            G::Opt(inner) => match &**inner {
+                G::Rule(r) => Some(r.clone()),
+                _ => None,
+            },
+            _ => None,
+        })
+        .collect();
+    assert_eq!(optional, ["simple", "expr", "simple"], "init, condition and step are optional");
+
+    for parts in 0..8 {
+        let (init, cond, step) = (parts & 1 != 0, parts & 2 != 0, parts & 4 != 0);
+        // Counts to 5 whichever parts the header has; the body does the rest.
+        let header = format!(
+            "for ({}; {}; {})",
+            if init { "i = 0" } else { "" },
+            if cond { "i < 5" } else { "" },
+            if step { "i += 1" } else { "" }
+        );
+        let body = format!(
+            "{} {} count += 1.0; {}",
+            if cond { "" } else { "if (i >= 5) break;" },
+            "if (u < -1000.0) continue;",
+            if step { "" } else { "i += 1;" }
+        );
+        let source = format!(
+            "shader s(output float o) {{\n    int i = {};\n    float count = 0.0;\n    {header} {{ {body} }}\n    o = count + u * 0.0;\n}}\n\
+             substance a {{ node n = s(); node d = displacement(height: n.o); displacement = d.out; }}\n",
+            if init { 9 } else { 0 }
+        );
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let (lib, _) = Library::from_text("for.ash", &source, &mut sources, &mut diags);
+        assert!(!diags.has_errors(), "{header}: {}", diags.render(&sources));
+        let material = ComposedMaterial {
+            layers: vec![ComposedLayer {
+                slot: Slot::parse("000").unwrap(),
+                substance: MaterialRef {
+                    path: "/A".into(),
+                    graph: lib.graph_by_name("a").unwrap(),
+                    values: Vec::new(),
+                    span: Default::default(),
+                },
+                overrides: Vec::new(),
+            }],
+        };
+        for backend in [BackendKind::Jit, BackendKind::Interp] {
+            let code = Compiler::new(backend, PassOptions::default()).compile(&lib, &material, &mut diags);
+            let code = code.unwrap_or_else(|| panic!("{header}: {}", diags.render(&sources)));
+            let mut height = [0.0f32];
+            code.displacement(&Globals { u: 0.5, ..Default::default() }, &mut height).expect("runs");
+            assert_eq!(height[0], 5.0, "{header} on {backend}:\n{source}");
+        }
+    }
+}

@@ -49,7 +49,7 @@ fn run_everything(text: &str) {
 #[test]
 fn mutated_sources_never_panic() {
     let mut corpus = vec![strata::front::library::PRELUDE.to_string()];
-    for dir in ["scenes/default", "scenes/paper", "tests/in/errors"] {
+    for dir in ["scenes/default", "scenes/paper", "tests/in/errors", "tests/in/hostile"] {
         for entry in std::fs::read_dir(dir).unwrap() {
             let path = entry.unwrap().path();
             if path.extension().is_some_and(|e| e == "ash") {

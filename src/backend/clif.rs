@@ -14,7 +14,7 @@ use cranelift_module::{FuncId, Linkage, Module};
 use std::collections::HashMap;
 
 /// Cranelift settings shared by the JIT and object output. The IR verifier runs in debug and
-/// test builds (it costs compile time, not run time).
+/// test builds (it costs compile time, not run time). Stack probes guard large frames.
 pub fn flags(pic: bool) -> settings::Flags {
     let mut b = settings::builder();
     let set = |b: &mut settings::Builder, k: &str, v: &str| {
@@ -25,6 +25,11 @@ pub fn flags(pic: bool) -> settings::Flags {
     set(&mut b, "enable_verifier", if cfg!(debug_assertions) { "true" } else { "false" });
     set(&mut b, "is_pic", if pic { "true" } else { "false" });
     set(&mut b, "use_colocated_libcalls", "false");
+    // Frames over a page (local arrays, up to `lower::MAX_LOCAL_ARRAY_BYTES`) touch each page in
+    // order, so a thread whose stack is too small faults on its guard page instead of writing
+    // past it.
+    set(&mut b, "enable_probestack", "true");
+    set(&mut b, "probestack_strategy", "inline");
     settings::Flags::new(b)
 }
 

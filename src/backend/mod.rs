@@ -265,7 +265,14 @@ impl Compiler {
     /// Lowers one composed material (wire, optimise, lower); problems go to `diags`.
     pub fn lower(&mut self, lib: &Library, material: &ComposedMaterial, diags: &mut Diagnostics) -> ssa::Module {
         let start = Instant::now();
-        let wired = wired::build(lib, material, self.passes, diags);
+        let passes = self.passes;
+        let options = lower::LowerOptions { simplify: passes.optimize, ..Default::default() };
+        // Both passes on one compiler thread (each would start its own; see `crate::stack`).
+        let (wired, module) = crate::stack::on_compiler_stack(|| {
+            let wired = wired::build(lib, material, passes, diags);
+            let module = lower::lower(lib, &wired, options, diags);
+            (wired, module)
+        });
         for (i, (pass, n)) in wired.stats.nodes.iter().enumerate() {
             match self.stats.nodes.get_mut(i) {
                 Some((_, total)) => *total += n,
@@ -273,8 +280,6 @@ impl Compiler {
             }
         }
         self.stats.layers_pruned += wired.stats.layers_pruned;
-        let options = lower::LowerOptions { simplify: self.passes.optimize, ..Default::default() };
-        let module = lower::lower(lib, &wired, options, diags);
         self.stats.lower_ms += start.elapsed().as_secs_f64() * 1e3;
         module
     }

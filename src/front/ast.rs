@@ -114,6 +114,10 @@ pub struct FunctionDecl {
 pub struct Block {
     /// Statements in order.
     pub stmts: Vec<Stmt>,
+    /// The parser gave up inside this block (it nests past
+    /// [`MAX_NESTING`](crate::front::parser::MAX_NESTING), already reported) and skipped the
+    /// rest: checks that need the whole body, such as "every path returns", do not apply.
+    pub skipped: bool,
 }
 
 /// Assignment operators.
@@ -269,6 +273,48 @@ pub struct Expr {
     pub kind: ExprKind,
     /// Where.
     pub span: Span,
+}
+
+impl Drop for Expr {
+    /// Drops the tree without recursing per level: a flat chain of 100 000 `+` is a left-deep
+    /// tree 100 000 levels deep, and the derived drop would recurse once per level.
+    fn drop(&mut self) {
+        let mut pending = Vec::new();
+        self.kind.take_subtrees(&mut pending);
+        while let Some(mut expr) = pending.pop() {
+            expr.kind.take_subtrees(&mut pending);
+        }
+    }
+}
+
+impl ExprKind {
+    /// Moves every operand that has operands of its own into `out`, leaving a leaf behind, so
+    /// that dropping `self` afterwards does not recurse.
+    fn take_subtrees(&mut self, out: &mut Vec<Expr>) {
+        let mut take = |slot: &mut Expr| {
+            if slot.kind.has_operands() {
+                out.push(std::mem::replace(slot, Expr { kind: ExprKind::Error, span: slot.span }));
+            }
+        };
+        match self {
+            ExprKind::Unary(_, a) | ExprKind::Member(a, _) => take(a),
+            ExprKind::Binary(_, a, b) | ExprKind::Index(a, b) => {
+                take(a);
+                take(b);
+            }
+            ExprKind::Ternary(a, b, c) => {
+                take(a);
+                take(b);
+                take(c);
+            }
+            ExprKind::Call(_, items) | ExprKind::List(items) => items.iter_mut().for_each(take),
+            ExprKind::Float(_) | ExprKind::Int(_) | ExprKind::Str(_) | ExprKind::Name(_) | ExprKind::Error => {}
+        }
+    }
+
+    fn has_operands(&self) -> bool {
+        !matches!(self, ExprKind::Float(_) | ExprKind::Int(_) | ExprKind::Str(_) | ExprKind::Name(_) | ExprKind::Error)
+    }
 }
 
 /// The expression forms.

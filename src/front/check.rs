@@ -26,7 +26,17 @@ pub fn resolve_type(ty: &ast::TypeExpr) -> Type {
 }
 
 /// Checks one function or shader. `callees` maps names to user functions visible from it.
+/// Runs on the compiler stack ([`crate::stack`]): checking recurses as deep as the body nests.
 pub fn check_function(
+    decl: &ast::FunctionDecl,
+    callees: &HashMap<String, Callee>,
+    builtin: bool,
+    diags: &mut Diagnostics,
+) -> hir::Function {
+    crate::stack::on_compiler_stack(|| check_function_here(decl, callees, builtin, diags))
+}
+
+fn check_function_here(
     decl: &ast::FunctionDecl,
     callees: &HashMap<String, Callee>,
     builtin: bool,
@@ -54,6 +64,7 @@ pub fn check_function(
         if ty.base == BaseType::Void {
             cx.diags.push(Diagnostic::error("a parameter cannot be void").at(param.ty.span, "void"));
         }
+        cx.check_array_element(ty, param.ty.span);
         // Shader defaults may read globals but no other parameter.
         let default = param.default.as_ref().and_then(|d| {
             let value = cx.expr(d)?;
@@ -81,7 +92,7 @@ pub fn check_function(
         );
     }
     let body = cx.block(&decl.body);
-    if cx.ret != Type::VOID && !always_returns(&decl.body.stmts) {
+    if cx.ret != Type::VOID && !decl.body.skipped && !always_returns(&decl.body.stmts) {
         cx.diags.push(
             Diagnostic::error(format!("function `{}` may end without returning a value", decl.name.name))
                 .at(decl.name.span, format!("must return {}", cx.ret)),
@@ -130,7 +141,7 @@ impl Checker<'_> {
 
     fn declare(&mut self, name: &ast::Ident, ty: Type, readonly: bool) -> LocalId {
         let id = LocalId(self.locals.len() as u32);
-        self.locals.push(hir::Local { name: name.name.clone(), ty });
+        self.locals.push(hir::Local { name: name.name.clone(), ty, span: name.span });
         self.readonly.push(readonly);
         let scope = self.scopes.last_mut().expect("a scope is always open");
         if scope.insert(name.name.clone(), id).is_some() {
@@ -146,6 +157,14 @@ impl Checker<'_> {
             );
         }
         id
+    }
+
+    /// Arrays hold numbers, triples and strings: a closure (a kind word and eight floats)
+    /// has no array layout, and would be stored with the wrong types.
+    fn check_array_element(&mut self, ty: Type, span: Span) {
+        if ty.array.is_some() && ty.base == BaseType::Closure {
+            self.error(span, "arrays of closures are not supported", "closure array");
+        }
     }
 
     fn lookup(&self, name: &str) -> Option<LocalId> {
@@ -188,11 +207,12 @@ impl Checker<'_> {
 
     fn stmt(&mut self, stmt: &ast::Stmt, out: &mut Vec<Stmt>) {
         match &stmt.kind {
-            StmtKind::Local { ty, name, init } => {
-                let ty = resolve_type(ty);
+            StmtKind::Local { ty: written, name, init } => {
+                let ty = resolve_type(written);
                 if matches!(ty.base, BaseType::Void) {
                     self.error(name.span, "a variable cannot be void", "void");
                 }
+                self.check_array_element(ty, written.span);
                 let init = match init {
                     Some(init) => {
                         self.expr_expecting(init, ty).and_then(|v| self.coerce(v, ty, init.span, "initial value"))
@@ -255,7 +275,12 @@ impl Checker<'_> {
                 if let Some(init) = init {
                     self.stmt(init, out);
                 }
-                let cond = cond.as_ref().map(|c| self.condition(c));
+                // No condition: an endless loop that only `break`, `return` or the loop budget
+                // ends. A condition that failed to check is already reported: no loop.
+                let cond = match cond {
+                    None => Some(None),
+                    Some(c) => self.condition(c).map(Some),
+                };
                 let mut step_out = Vec::new();
                 if let Some(step) = step {
                     self.stmt(step, &mut step_out);
@@ -462,11 +487,7 @@ impl Checker<'_> {
                     }
                 }
             }
-            A::Binary(op, lhs, rhs) => {
-                let l = self.expr(lhs);
-                let r = self.expr(rhs);
-                return self.binary(*op, l?, r?, span);
-            }
+            A::Binary(..) => return self.binary_chain(expr),
             A::Ternary(cond, then, otherwise) => {
                 let c = self.condition(cond);
                 let a = self.expr(then);
@@ -522,6 +543,29 @@ impl Checker<'_> {
             A::Call(name, args) => return self.call(name, args, span),
         };
         Some(Expr { kind, ty, span })
+    }
+
+    /// Checks a binary operator and the operators along its left operand's spine in a loop:
+    /// `x + x + … + x` is a left-deep tree as deep as the chain is long, so recursing into the
+    /// left operand would need stack in proportion to the chain. Operands are still checked
+    /// left to right, and each operator sees the checked (converted) result of the ones
+    /// before it, exactly as the recursive form would.
+    fn binary_chain(&mut self, expr: &ast::Expr) -> Option<Expr> {
+        let mut spine = Vec::new();
+        let mut leftmost = expr;
+        while let A::Binary(op, lhs, rhs) = &leftmost.kind {
+            spine.push((*op, &**rhs, leftmost.span));
+            leftmost = lhs;
+        }
+        let mut acc = self.expr(leftmost);
+        for (op, rhs, span) in spine.into_iter().rev() {
+            let r = self.expr(rhs);
+            acc = match (acc, r) {
+                (Some(l), Some(r)) => self.binary(op, l, r, span),
+                _ => None,
+            };
+        }
+        acc
     }
 
     fn binary(&mut self, op: BinaryOp, l: Expr, r: Expr, span: Span) -> Option<Expr> {
@@ -592,7 +636,9 @@ impl Checker<'_> {
                         // Explicit casts between any triples are allowed.
                         ExprKind::Convert(Box::new(arg))
                     } else {
-                        return Some(Expr { span, ..arg.convert_to(ty) });
+                        let mut converted = arg.convert_to(ty);
+                        converted.span = span;
+                        return Some(converted);
                     };
                     Some(Expr { kind, ty, span })
                 }

@@ -79,6 +79,8 @@ pub struct Local {
     pub name: String,
     /// Its type.
     pub ty: Type,
+    /// Where it is declared.
+    pub span: Span,
 }
 
 /// A parameter of a node type or function.
@@ -178,7 +180,7 @@ pub enum Stmt {
 }
 
 /// A checked expression with its type.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct Expr {
     /// The computation.
     pub kind: ExprKind,
@@ -186,6 +188,70 @@ pub struct Expr {
     pub ty: Type,
     /// Where it is written.
     pub span: Span,
+}
+
+impl Clone for Expr {
+    /// Clones along the left spine in a loop (see [`Expr::left_spine`]); other operands
+    /// recurse, as deep as the source may nest.
+    fn clone(&self) -> Expr {
+        let (spine, leaf) = self.left_spine();
+        let mut acc = Expr { kind: leaf.kind.clone(), ty: leaf.ty, span: leaf.span };
+        for node in spine.into_iter().rev() {
+            let kind = match &node.kind {
+                ExprKind::Binary(op, _, b) => ExprKind::Binary(*op, Box::new(acc), b.clone()),
+                _ => ExprKind::Convert(Box::new(acc)),
+            };
+            acc = Expr { kind, ty: node.ty, span: node.span };
+        }
+        acc
+    }
+}
+
+impl Drop for Expr {
+    /// Drops the tree without recursing per level (a flat chain of 100 000 `+` is a left-deep
+    /// tree that deep; the derived drop would recurse once per level).
+    fn drop(&mut self) {
+        let mut pending = Vec::new();
+        self.kind.take_subtrees(&mut pending);
+        while let Some(mut expr) = pending.pop() {
+            expr.kind.take_subtrees(&mut pending);
+        }
+    }
+}
+
+impl ExprKind {
+    /// Moves every operand that has operands of its own into `out`, leaving a leaf behind, so
+    /// that dropping `self` afterwards does not recurse.
+    fn take_subtrees(&mut self, out: &mut Vec<Expr>) {
+        let mut take = |slot: &mut Expr| {
+            if slot.kind.has_operands() {
+                let leaf = Expr { kind: ExprKind::Const(Value::Int(0)), ty: slot.ty, span: slot.span };
+                out.push(std::mem::replace(slot, leaf));
+            }
+        };
+        match self {
+            ExprKind::Unary(_, a) | ExprKind::Convert(a) | ExprKind::Component(a, _) => take(a),
+            ExprKind::Binary(_, a, b) | ExprKind::Index(a, b) => {
+                take(a);
+                take(b);
+            }
+            ExprKind::Select(a, b, c) => {
+                take(a);
+                take(b);
+                take(c);
+            }
+            ExprKind::Construct(parts) => parts.iter_mut().for_each(take),
+            ExprKind::Array(items) | ExprKind::Intrinsic(_, items) | ExprKind::Call(_, items) => {
+                items.iter_mut().for_each(take)
+            }
+            ExprKind::Const(_) | ExprKind::Local(_) | ExprKind::Global(_) => {}
+        }
+    }
+
+    /// Whether this form has operand expressions.
+    pub fn has_operands(&self) -> bool {
+        !matches!(self, ExprKind::Const(_) | ExprKind::Local(_) | ExprKind::Global(_))
+    }
 }
 
 /// Unary operations after checking.
@@ -245,6 +311,20 @@ impl Expr {
         }
         let span = self.span;
         Expr { kind: ExprKind::Convert(Box::new(self)), ty: to, span }
+    }
+
+    /// The binary operators and conversions along this expression's left operands, outermost
+    /// first, and the expression they start from. `x + x + … + x` parses to a left-deep tree
+    /// as deep as the chain is long; passes evaluate it from the leaf up, in a loop, instead of
+    /// recursing into the left operand once per operator.
+    pub fn left_spine(&self) -> (Vec<&Expr>, &Expr) {
+        let mut spine = Vec::new();
+        let mut leaf = self;
+        while let ExprKind::Binary(_, a, _) | ExprKind::Convert(a) = &leaf.kind {
+            spine.push(leaf);
+            leaf = a;
+        }
+        (spine, leaf)
     }
 
     /// The constant value, if this is a constant.

@@ -5,6 +5,7 @@ use super::ast::{self, FunctionKind, GraphKind, Item};
 use super::check::{Callee, check_function, resolve_type};
 use super::graph::{Graph, resolve_graph};
 use super::hir::{ExprKind, FuncId, Function, Stmt};
+use super::intrinsics::Intrinsic;
 use super::parser::parse;
 use crate::diag::{Diagnostic, Diagnostics, FileId, SourceMap, Span};
 use std::collections::{HashMap, HashSet};
@@ -38,6 +39,10 @@ impl Library {
     /// Loads the prelude, `files` and everything they import. Problems are reported to `diags`;
     /// the library holds whatever checked cleanly.
     pub fn load(files: &[(PathBuf, Span)], sources: &mut SourceMap, diags: &mut Diagnostics) -> Library {
+        crate::stack::on_compiler_stack(|| Library::load_here(files, sources, diags))
+    }
+
+    fn load_here(files: &[(PathBuf, Span)], sources: &mut SourceMap, diags: &mut Diagnostics) -> Library {
         let mut modules: Vec<(Option<PathBuf>, ast::Module)> = Vec::new();
         let prelude = sources.add("<builtins>", PRELUDE);
         modules.push((None, parse(prelude, PRELUDE, diags)));
@@ -89,6 +94,10 @@ impl Library {
 
     /// Loads only the prelude and one in-memory file (tests, embedded scenes).
     pub fn from_text(name: &str, text: &str, sources: &mut SourceMap, diags: &mut Diagnostics) -> (Library, FileId) {
+        crate::stack::on_compiler_stack(|| Library::from_text_here(name, text, sources, diags))
+    }
+
+    fn from_text_here(name: &str, text: &str, sources: &mut SourceMap, diags: &mut Diagnostics) -> (Library, FileId) {
         let prelude = sources.add("<builtins>", PRELUDE);
         let prelude_module = parse(prelude, PRELUDE, diags);
         let file = sources.add(name, text);
@@ -102,21 +111,37 @@ impl Library {
         // Declare every function and shader first so bodies may call forward.
         let mut decls: Vec<(&ast::FunctionDecl, bool)> = Vec::new();
         let mut callees: HashMap<String, Callee> = HashMap::new();
-        let mut first_span: HashMap<(FunctionKind, String), Span> = HashMap::new();
+        // (kind, name) → where first defined and whether that is the prelude.
+        let mut first_span: HashMap<(FunctionKind, String), (Span, bool)> = HashMap::new();
         for (path, module) in &modules {
+            let builtin = path.is_none();
             for item in &module.items {
                 let Item::Function(f) = item else { continue };
                 let key = (f.kind, f.name.name.clone());
-                if let Some(first) = first_span.get(&key) {
-                    let what = if f.kind == FunctionKind::Shader { "shader" } else { "function" };
+                let what = if f.kind == FunctionKind::Shader { "shader" } else { "function" };
+                if let Some(&(first, first_builtin)) = first_span.get(&key) {
+                    let message = if first_builtin {
+                        format!("`{}` is a built-in {what}; choose another name", f.name.name)
+                    } else {
+                        format!("{what} `{}` is defined twice", f.name.name)
+                    };
                     diags.push(
-                        Diagnostic::error(format!("{what} `{}` is defined twice", f.name.name))
-                            .at(f.name.span, "defined again")
-                            .also(*first, "first defined here"),
+                        Diagnostic::error(message).at(f.name.span, "defined again").also(first, "first defined here"),
                     );
                     continue;
                 }
-                first_span.insert(key, f.name.span);
+                // Calls resolve user functions before built-in functions, everywhere (the
+                // prelude's node bodies included), so a user `noise` would silently replace
+                // the intrinsic inside the built-in `noise` node.
+                if !builtin && f.kind == FunctionKind::Function && Intrinsic::from_name(&f.name.name).is_some() {
+                    diags.push(
+                        Diagnostic::error(format!("`{}` is a built-in function; choose another name", f.name.name))
+                            .at(f.name.span, "reserved by the language")
+                            .note("user functions may not take the name of a built-in function"),
+                    );
+                    continue;
+                }
+                first_span.insert(key, (f.name.span, builtin));
                 let id = FuncId(decls.len() as u32);
                 decls.push((f, path.is_none()));
                 if f.kind == FunctionKind::Shader {
@@ -145,6 +170,19 @@ impl Library {
         for (path, module) in &modules {
             for item in &module.items {
                 let Item::Graph(g) = item else { continue };
+                // Graph names are per file, but the renderer looks the prelude's graphs up by
+                // name (`default_substance` shades unbound prims): a user graph may not take one.
+                if path.is_some()
+                    && let Some(&builtin) = lib.graph_index.get(&(PathBuf::new(), g.name.name.clone()))
+                {
+                    let kind = if g.kind == GraphKind::Substance { "substance" } else { "override" };
+                    diags.push(
+                        Diagnostic::error(format!("`{}` is a built-in graph; choose another name", g.name.name))
+                            .at(g.name.span, format!("this {kind} would shadow it"))
+                            .also(lib.graphs[builtin.0 as usize].span, "defined by the built-in library"),
+                    );
+                    continue;
+                }
                 let graph = resolve_graph(g, &lib.shaders, &lib.functions, diags);
                 let file = path.clone().unwrap_or_default();
                 let key = (file.clone(), graph.name.clone());
@@ -171,6 +209,11 @@ impl Library {
         self.graph_index.get(&(canonical, name.to_string())).copied()
     }
 
+    /// Finds a graph of the built-in library (the prelude) by name.
+    pub fn builtin_graph(&self, name: &str) -> Option<GraphId> {
+        self.graph_index.get(&(PathBuf::new(), name.to_string())).copied()
+    }
+
     /// Finds a graph by name alone (only when it is unique).
     pub fn graph_by_name(&self, name: &str) -> Option<GraphId> {
         let mut found = self.graphs.iter().enumerate().filter(|(_, g)| g.name == name);
@@ -194,49 +237,59 @@ impl Library {
     }
 
     /// Reports recursion: node bodies are inlined, so the call graph must be acyclic.
+    /// Depth-first with an explicit stack: a chain of thousands of functions, each calling
+    /// the next, is legal and must not exhaust the stack.
     fn check_recursion(&self, diags: &mut Diagnostics) {
         let calls: Vec<Vec<FuncId>> = self.functions.iter().map(callees_of).collect();
         let mut state = vec![0u8; self.functions.len()]; // 0 new, 1 active, 2 done
-        fn visit(f: usize, calls: &[Vec<FuncId>], state: &mut [u8], lib: &Library, diags: &mut Diagnostics) {
-            state[f] = 1;
-            for callee in &calls[f] {
+        for root in 0..self.functions.len() {
+            if state[root] != 0 {
+                continue;
+            }
+            state[root] = 1;
+            // (function, index of the next callee to look at)
+            let mut stack = vec![(root, 0usize)];
+            while let Some((f, next)) = stack.last_mut() {
+                let f = *f;
+                let Some(callee) = calls[f].get(*next) else {
+                    state[f] = 2;
+                    stack.pop();
+                    continue;
+                };
+                *next += 1;
                 let c = callee.0 as usize;
                 if state[c] == 1 {
-                    let func = &lib.functions[c];
+                    let func = &self.functions[c];
                     diags.push(
                         Diagnostic::error(format!("`{}` is recursive", func.name))
                             .at(func.span, "calls itself, directly or indirectly")
                             .note("functions are inlined into shaders; use a loop instead"),
                     );
                 } else if state[c] == 0 {
-                    visit(c, calls, state, lib, diags);
+                    state[c] = 1;
+                    stack.push((c, 0));
                 }
-            }
-            state[f] = 2;
-        }
-        for f in 0..self.functions.len() {
-            if state[f] == 0 {
-                visit(f, &calls, &mut state, self, diags);
             }
         }
     }
 
-    /// Marks functions that read globals or varying intrinsics, directly or through callees.
+    /// Marks functions that read globals or varying intrinsics, directly or through callees:
+    /// varying-ness flows from each such function to its callers, each edge once.
     fn compute_varying(&mut self) {
-        let direct: Vec<bool> = self.functions.iter().map(reads_varying).collect();
-        let calls: Vec<Vec<FuncId>> = self.functions.iter().map(callees_of).collect();
-        let mut varying = direct;
-        // Fixed point over the (acyclic or already-reported) call graph.
-        loop {
-            let mut changed = false;
-            for f in 0..varying.len() {
-                if !varying[f] && calls[f].iter().any(|c| varying[c.0 as usize]) {
-                    varying[f] = true;
-                    changed = true;
-                }
+        let mut varying: Vec<bool> = self.functions.iter().map(reads_varying).collect();
+        let mut callers: Vec<Vec<usize>> = vec![Vec::new(); self.functions.len()];
+        for (f, func) in self.functions.iter().enumerate() {
+            for callee in callees_of(func) {
+                callers[callee.0 as usize].push(f);
             }
-            if !changed {
-                break;
+        }
+        let mut pending: Vec<usize> = (0..varying.len()).filter(|&f| varying[f]).collect();
+        while let Some(f) = pending.pop() {
+            for &caller in &callers[f] {
+                if !varying[caller] {
+                    varying[caller] = true;
+                    pending.push(caller);
+                }
             }
         }
         for (f, v) in self.functions.iter_mut().zip(varying) {
@@ -245,63 +298,67 @@ impl Library {
     }
 }
 
-/// Visits every expression of a function: parameter defaults and the body.
+/// Visits every expression of a function: parameter defaults and the body. Expressions are
+/// walked with an explicit stack (a flat chain of 100 000 `+` is a tree that deep); statements
+/// recurse, as deep as the parser lets blocks nest.
 pub fn visit_exprs(func: &Function, visit: &mut dyn FnMut(&super::hir::Expr)) {
-    fn expr(e: &super::hir::Expr, visit: &mut dyn FnMut(&super::hir::Expr)) {
-        visit(e);
-        match &e.kind {
-            ExprKind::Const(_) | ExprKind::Local(_) | ExprKind::Global(_) => {}
-            ExprKind::Unary(_, a) | ExprKind::Convert(a) | ExprKind::Component(a, _) => expr(a, visit),
-            ExprKind::Binary(_, a, b) | ExprKind::Index(a, b) => {
-                expr(a, visit);
-                expr(b, visit);
-            }
-            ExprKind::Select(a, b, c) => {
-                expr(a, visit);
-                expr(b, visit);
-                expr(c, visit);
-            }
-            ExprKind::Construct(parts) => parts.iter().for_each(|p| expr(p, visit)),
-            ExprKind::Array(items) | ExprKind::Intrinsic(_, items) | ExprKind::Call(_, items) => {
-                items.iter().for_each(|p| expr(p, visit))
-            }
-        }
-    }
-    fn stmts(list: &[Stmt], visit: &mut dyn FnMut(&super::hir::Expr)) {
-        for s in list {
-            match s {
-                Stmt::Assign(place, value) => {
-                    if let Some(e) = &place.element {
-                        expr(e, visit);
-                    }
-                    if let Some(c) = &place.component {
-                        expr(c, visit);
-                    }
-                    expr(value, visit);
-                }
-                Stmt::Eval(e) | Stmt::Return(Some(e)) => expr(e, visit),
-                Stmt::If(c, a, b) => {
-                    expr(c, visit);
-                    stmts(a, visit);
-                    stmts(b, visit);
-                }
-                Stmt::Loop { cond, body, step, .. } => {
-                    if let Some(c) = cond {
-                        expr(c, visit);
-                    }
-                    stmts(body, visit);
-                    stmts(step, visit);
-                }
-                Stmt::Break | Stmt::Continue | Stmt::Return(None) => {}
-            }
-        }
-    }
     for p in &func.params {
         if let Some(d) = &p.default {
-            expr(d, visit);
+            visit_tree(d, visit);
         }
     }
-    stmts(&func.body, visit);
+    visit_stmts(&func.body, &mut |e| visit_tree(e, visit));
+}
+
+/// Calls `visit` on `root` and every expression inside it, operands left to right.
+fn visit_tree(root: &super::hir::Expr, visit: &mut dyn FnMut(&super::hir::Expr)) {
+    let mut pending = vec![root];
+    while let Some(e) = pending.pop() {
+        visit(e);
+        // Pushed in reverse so operands are visited left to right.
+        match &e.kind {
+            ExprKind::Const(_) | ExprKind::Local(_) | ExprKind::Global(_) => {}
+            ExprKind::Unary(_, a) | ExprKind::Convert(a) | ExprKind::Component(a, _) => pending.push(a),
+            ExprKind::Binary(_, a, b) | ExprKind::Index(a, b) => pending.extend([&**b, &**a]),
+            ExprKind::Select(a, b, c) => pending.extend([&**c, &**b, &**a]),
+            ExprKind::Construct(parts) => pending.extend(parts.iter().rev()),
+            ExprKind::Array(items) | ExprKind::Intrinsic(_, items) | ExprKind::Call(_, items) => {
+                pending.extend(items.iter().rev())
+            }
+        }
+    }
+}
+
+/// Calls `visit` on every top-level expression of a statement list (conditions, values,
+/// indices), recursing into nested statements.
+fn visit_stmts(list: &[Stmt], visit: &mut dyn FnMut(&super::hir::Expr)) {
+    for s in list {
+        match s {
+            Stmt::Assign(place, value) => {
+                if let Some(e) = &place.element {
+                    visit(e);
+                }
+                if let Some(c) = &place.component {
+                    visit(c);
+                }
+                visit(value);
+            }
+            Stmt::Eval(e) | Stmt::Return(Some(e)) => visit(e),
+            Stmt::If(c, a, b) => {
+                visit(c);
+                visit_stmts(a, visit);
+                visit_stmts(b, visit);
+            }
+            Stmt::Loop { cond, body, step, .. } => {
+                if let Some(c) = cond {
+                    visit(c);
+                }
+                visit_stmts(body, visit);
+                visit_stmts(step, visit);
+            }
+            Stmt::Break | Stmt::Continue | Stmt::Return(None) => {}
+        }
+    }
 }
 
 fn callees_of(func: &Function) -> Vec<FuncId> {
@@ -317,13 +374,13 @@ fn callees_of(func: &Function) -> Vec<FuncId> {
 /// Whether the body itself (defaults excluded: they apply only to unconnected ports) reads a
 /// shading global or a varying intrinsic.
 fn reads_varying(func: &Function) -> bool {
-    let body_only = Function { params: Vec::new(), ..func.clone() };
     let mut varying = false;
-    visit_exprs(&body_only, &mut |e| match &e.kind {
+    let mut check = |e: &super::hir::Expr| match &e.kind {
         ExprKind::Global(_) => varying = true,
         ExprKind::Intrinsic(i, _) if i.is_varying() => varying = true,
         _ => {}
-    });
+    };
+    visit_stmts(&func.body, &mut |e| visit_tree(e, &mut check));
     varying
 }
 

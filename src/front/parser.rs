@@ -6,11 +6,21 @@ use super::ast::*;
 use super::lexer::{Tok, Token, lex};
 use crate::diag::{Diagnostic, Diagnostics, FileId, Span};
 
+/// Deepest nesting the parser accepts: parentheses, calls, indexing, member access, unary
+/// operators, `?:`, blocks and statement bodies, counted together. Past it the parser reports
+/// "… nests deeper than 256 levels" where the limit is crossed and skips the construct, so no
+/// input can exhaust the stack of this or any later pass (which recurse at most this deep per
+/// function; see [`crate::stack`]). Chains of binary operators (`x + x + …`) do not nest: they
+/// are parsed in a loop and walked iteratively, however long they are.
+pub const MAX_NESTING: u32 = 256;
+
 /// Parses a whole file. Errors go to `diags`; the returned module holds everything that parsed.
 pub fn parse(file: FileId, text: &str, diags: &mut Diagnostics) -> Module {
-    let tokens = lex(file, text, diags);
-    let mut parser = Parser { tokens, pos: 0, text, diags };
-    parser.module()
+    crate::stack::on_compiler_stack(|| {
+        let tokens = lex(file, text, diags);
+        let mut parser = Parser { tokens, pos: 0, text, diags, depth: 0, too_deep: false };
+        parser.module()
+    })
 }
 
 /// Raised when a construct cannot be parsed; the diagnostic is already recorded.
@@ -23,6 +33,12 @@ struct Parser<'a> {
     pos: usize,
     text: &'a str,
     diags: &'a mut Diagnostics,
+    /// Current nesting, checked against [`MAX_NESTING`].
+    depth: u32,
+    /// The nesting limit was crossed: unwind to the function body (or the item) and skip the
+    /// rest of it, rather than recover statement by statement in code that goes on nesting
+    /// (one error, not one per `else` or `}` left over).
+    too_deep: bool,
 }
 
 /// Binding power of binary operators (higher binds tighter).
@@ -110,6 +126,33 @@ impl<'a> Parser<'a> {
         Bail
     }
 
+    /// Reports that the input nests deeper than [`MAX_NESTING`] at the current token.
+    fn too_deep(&mut self, what: &str) -> Bail {
+        self.too_deep = true;
+        let span = self.span();
+        self.diags.push(
+            Diagnostic::error(format!("{what} nests deeper than {MAX_NESTING} levels"))
+                .at(span, "nesting limit reached here")
+                .note(format!(
+                    "parentheses, calls, indexing, operators, blocks and statements may nest at most \
+                     {MAX_NESTING} levels; split the code into functions or local variables"
+                )),
+        );
+        Bail
+    }
+
+    /// Parses one more level of nesting with `inner`, or reports that the input nests deeper
+    /// than [`MAX_NESTING`] (`what`: "expression" or "statement").
+    fn nested<T>(&mut self, what: &str, inner: impl FnOnce(&mut Self) -> PResult<T>) -> PResult<T> {
+        if self.depth >= MAX_NESTING {
+            return Err(self.too_deep(what));
+        }
+        self.depth += 1;
+        let result = inner(self);
+        self.depth -= 1;
+        result
+    }
+
     fn expect(&mut self, kind: Tok) -> PResult<Token> {
         if self.peek() == kind { Ok(self.bump()) } else { Err(self.error_here(kind.describe())) }
     }
@@ -135,6 +178,29 @@ impl<'a> Parser<'a> {
                 _ => {}
             }
             self.bump();
+        }
+    }
+
+    /// Moves past the item (or function body) that starts at token `start`: its first `{`
+    /// and the `}` matching it (or the end of the file).
+    fn skip_item(&mut self, start: usize) {
+        self.pos = start;
+        while !matches!(self.peek(), Tok::LBrace | Tok::Eof) {
+            self.bump();
+        }
+        let mut depth = 0usize;
+        loop {
+            match self.bump().kind {
+                Tok::Eof => return,
+                Tok::LBrace => depth += 1,
+                Tok::RBrace => {
+                    depth -= 1;
+                    if depth == 0 {
+                        return;
+                    }
+                }
+                _ => {}
+            }
         }
     }
 
@@ -165,6 +231,10 @@ impl<'a> Parser<'a> {
             let start = self.pos;
             match self.item() {
                 Ok(item) => module.items.push(item),
+                Err(Bail) if self.too_deep => {
+                    self.too_deep = false;
+                    self.skip_item(start);
+                }
                 Err(Bail) => {
                     self.recover_item();
                     if self.pos == start {
@@ -243,8 +313,23 @@ impl<'a> Parser<'a> {
             }
         }
         self.expect(Tok::RParen)?;
-        let body = self.block()?;
+        let body = self.function_body()?;
         Ok(FunctionDecl { kind, ret, name, params, body, span: start.to(self.prev_span()) })
+    }
+
+    /// A function's body. Code nested past [`MAX_NESTING`] unwinds to here and the rest of
+    /// the body is skipped: the function stays declared (so graphs using it raise no
+    /// follow-on errors) with an empty body marked [`Block::skipped`].
+    fn function_body(&mut self) -> PResult<Block> {
+        let open = self.pos;
+        match self.block() {
+            Err(Bail) if self.too_deep => {
+                self.too_deep = false;
+                self.skip_item(open);
+                Ok(Block { stmts: Vec::new(), skipped: true })
+            }
+            other => other,
+        }
     }
 
     fn block(&mut self) -> PResult<Block> {
@@ -254,6 +339,7 @@ impl<'a> Parser<'a> {
             let start = self.pos;
             match self.stmt() {
                 Ok(stmt) => block.stmts.push(stmt),
+                Err(Bail) if self.too_deep => return Err(Bail),
                 Err(Bail) => {
                     self.recover_statement();
                     if self.pos == start {
@@ -268,10 +354,14 @@ impl<'a> Parser<'a> {
 
     /// A statement body: a block, or a single statement wrapped in one.
     fn body(&mut self) -> PResult<Block> {
-        if self.peek() == Tok::LBrace { self.block() } else { Ok(Block { stmts: vec![self.stmt()?] }) }
+        if self.peek() == Tok::LBrace { self.block() } else { Ok(Block { stmts: vec![self.stmt()?], skipped: false }) }
     }
 
     fn stmt(&mut self) -> PResult<Stmt> {
+        self.nested("statement", Self::stmt_inner)
+    }
+
+    fn stmt_inner(&mut self) -> PResult<Stmt> {
         let start = self.span();
         let kind = match self.peek() {
             Tok::LBrace => StmtKind::Block(self.block()?),
@@ -391,8 +481,12 @@ impl<'a> Parser<'a> {
         Ok(Expr { kind: ExprKind::List(items), span: start.to(self.prev_span()) })
     }
 
-    /// Parses an expression.
+    /// Parses an expression (one level of nesting).
     fn expr(&mut self) -> PResult<Expr> {
+        self.nested("expression", Self::expr_inner)
+    }
+
+    fn expr_inner(&mut self) -> PResult<Expr> {
         let cond = self.binary(1)?;
         if self.eat(Tok::Question) {
             let then = self.expr()?;
@@ -404,6 +498,9 @@ impl<'a> Parser<'a> {
         Ok(cond)
     }
 
+    /// Operators of one binding power in a loop (a flat chain builds a left-deep tree without
+    /// recursing per operand); only a tighter-binding right operand recurses, at most once per
+    /// precedence level.
     fn binary(&mut self, min_power: u8) -> PResult<Expr> {
         let mut lhs = self.unary()?;
         while let Some((op, power)) = binary_op(self.peek()) {
@@ -425,19 +522,35 @@ impl<'a> Parser<'a> {
             Tok::Bang => UnaryOp::Not,
             Tok::Plus => {
                 self.bump();
-                return self.unary();
+                return self.nested("expression", Self::unary);
             }
             _ => return self.postfix(),
         };
         self.bump();
-        let operand = self.unary()?;
+        let operand = self.nested("expression", Self::unary)?;
         let span = start.to(operand.span);
         Ok(Expr { kind: ExprKind::Unary(op, Box::new(operand)), span })
     }
 
+    /// A primary expression and its `.name` / `[index]` suffixes. Each suffix nests the
+    /// expression one level deeper (`a[0][1].x` is three levels), so suffixes count against
+    /// [`MAX_NESTING`]: later passes recurse into the base of each.
     fn postfix(&mut self) -> PResult<Expr> {
+        let entered = self.depth;
+        let result = self.postfix_suffixes();
+        self.depth = entered;
+        result
+    }
+
+    fn postfix_suffixes(&mut self) -> PResult<Expr> {
         let mut expr = self.primary()?;
         loop {
+            if matches!(self.peek(), Tok::Dot | Tok::LBracket) {
+                if self.depth >= MAX_NESTING {
+                    return Err(self.too_deep("expression"));
+                }
+                self.depth += 1;
+            }
             match self.peek() {
                 Tok::Dot => {
                     self.bump();
@@ -513,9 +626,10 @@ impl<'a> Parser<'a> {
             }
             Tok::LParen => {
                 self.bump();
-                let inner = self.expr()?;
+                let mut inner = self.expr()?;
                 self.expect(Tok::RParen)?;
-                return Ok(Expr { kind: inner.kind, span: tok.span.to(self.prev_span()) });
+                inner.span = tok.span.to(self.prev_span());
+                return Ok(inner);
             }
             _ => return Err(self.error_here("an expression")),
         };
@@ -533,6 +647,8 @@ impl<'a> Parser<'a> {
             match self.graph_item() {
                 Ok(item) => items.push(item),
                 Err(Bail) => {
+                    // Graph items do not nest: past the limit, skip just this one.
+                    self.too_deep = false;
                     self.recover_statement();
                     if self.pos == at {
                         self.bump();

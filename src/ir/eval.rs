@@ -7,10 +7,16 @@ use crate::front::hir::{Expr, ExprKind, Function, Place, Stmt, UnaryOp};
 use crate::front::intrinsics::Intrinsic;
 use crate::front::library::Library;
 use crate::front::types::{Type, Value};
+use crate::ir::lower::MAX_INLINED_NESTING;
 use crate::runtime::{math, noise};
 
 /// Loop iterations one folding attempt may spend before it gives up.
 const FOLD_BUDGET: u32 = 100_000;
+
+/// Expressions and statements one folding attempt may evaluate before it gives up: folding
+/// `f24(1.0)`, where each of 24 functions calls the one before twice, would otherwise take
+/// 2²⁴ calls. Far above any built-in node's needs (fbm: a few thousand).
+const FOLD_STEPS: u32 = 1 << 20;
 
 /// Why evaluation stopped.
 enum Stop {
@@ -32,9 +38,14 @@ struct Frame {
 struct Evaluator<'a> {
     lib: &'a Library,
     budget: u32,
+    /// What is left of [`FOLD_STEPS`].
+    steps: u32,
     /// Call depth; recursion is a reported error, but folding must not overflow the stack
     /// while the rest of a broken file is still being checked.
     depth: u32,
+    /// Statement and expression nesting across inlined calls; past
+    /// [`MAX_INLINED_NESTING`] folding gives up (lowering reports it).
+    nesting: u32,
 }
 
 /// Deepest user-function nesting folding follows.
@@ -44,7 +55,11 @@ const MAX_CALL_DEPTH: u32 = 64;
 /// Returns the value of every parameter after the body ran (outputs included), or `None` if
 /// the result is not a compile-time constant.
 pub fn eval_node(lib: &Library, func: &Function, inputs: &[Option<Value>]) -> Option<Vec<Value>> {
-    let mut ev = Evaluator { lib, budget: FOLD_BUDGET, depth: 0 };
+    crate::stack::on_compiler_stack(|| eval_node_here(lib, func, inputs))
+}
+
+fn eval_node_here(lib: &Library, func: &Function, inputs: &[Option<Value>]) -> Option<Vec<Value>> {
+    let mut ev = Evaluator { lib, budget: FOLD_BUDGET, steps: FOLD_STEPS, depth: 0, nesting: 0 };
     let mut frame = Frame { locals: vec![None; func.locals.len()] };
     for (i, param) in func.params.iter().enumerate() {
         let value = match inputs.get(i).cloned().flatten() {
@@ -74,7 +89,24 @@ impl Evaluator<'_> {
         Ok(Flow::Normal)
     }
 
+    /// Counts one step and one level of nesting, or gives up past the budgets.
+    fn enter(&mut self) -> Result<(), Stop> {
+        self.steps = self.steps.checked_sub(1).ok_or(Stop::NotConstant)?;
+        if self.nesting >= MAX_INLINED_NESTING {
+            return Err(Stop::NotConstant);
+        }
+        self.nesting += 1;
+        Ok(())
+    }
+
     fn stmt(&mut self, stmt: &Stmt, frame: &mut Frame) -> Result<Flow, Stop> {
+        self.enter()?;
+        let flow = self.stmt_here(stmt, frame);
+        self.nesting -= 1;
+        flow
+    }
+
+    fn stmt_here(&mut self, stmt: &Stmt, frame: &mut Frame) -> Result<Flow, Stop> {
         match stmt {
             Stmt::Assign(place, value) => {
                 let v = self.expr(value, frame)?;
@@ -142,6 +174,38 @@ impl Evaluator<'_> {
     }
 
     fn expr(&mut self, expr: &Expr, frame: &mut Frame) -> Result<Value, Stop> {
+        self.enter()?;
+        let value = self.expr_here(expr, frame);
+        self.nesting -= 1;
+        value
+    }
+
+    /// Evaluates a chain of binary operators and conversions along its left spine in a loop
+    /// (see `check::binary_chain`): innermost first, each step applied to the value so far.
+    fn spine(&mut self, expr: &Expr, frame: &mut Frame) -> Result<Value, Stop> {
+        let (spine, leaf) = expr.left_spine();
+        let mut acc = self.expr(leaf, frame)?;
+        for node in spine.into_iter().rev() {
+            self.steps = self.steps.checked_sub(1).ok_or(Stop::NotConstant)?;
+            acc = match &node.kind {
+                ExprKind::Convert(a) => convert(acc, a.ty, node.ty),
+                // Logic short-circuits.
+                ExprKind::Binary(op @ (BinaryOp::And | BinaryOp::Or), _, b) => {
+                    let l = truthy(&acc);
+                    let r = if (*op == BinaryOp::And) == l { truthy(&self.expr(b, frame)?) } else { l };
+                    Value::Int(r as i32)
+                }
+                ExprKind::Binary(op, _, b) => {
+                    let r = self.expr(b, frame)?;
+                    binary(*op, acc, r)?
+                }
+                _ => return Err(Stop::NotConstant),
+            };
+        }
+        Ok(acc)
+    }
+
+    fn expr_here(&mut self, expr: &Expr, frame: &mut Frame) -> Result<Value, Stop> {
         Ok(match &expr.kind {
             ExprKind::Const(v) => v.clone(),
             ExprKind::Local(id) => frame.locals[id.0 as usize].clone().ok_or(Stop::NotConstant)?,
@@ -156,28 +220,13 @@ impl Evaluator<'_> {
                     _ => return Err(Stop::NotConstant),
                 }
             }
-            ExprKind::Binary(op, a, b) => {
-                // Logic short-circuits.
-                if matches!(op, BinaryOp::And | BinaryOp::Or) {
-                    let l = truthy(&self.expr(a, frame)?);
-                    let r = if (*op == BinaryOp::And) == l { truthy(&self.expr(b, frame)?) } else { l };
-                    return Ok(Value::Int(r as i32));
-                }
-                let l = self.expr(a, frame)?;
-                let r = self.expr(b, frame)?;
-                binary(*op, l, r)?
-            }
+            ExprKind::Binary(..) | ExprKind::Convert(_) => self.spine(expr, frame)?,
             ExprKind::Select(c, a, b) => {
                 if truthy(&self.expr(c, frame)?) {
                     self.expr(a, frame)?
                 } else {
                     self.expr(b, frame)?
                 }
-            }
-            ExprKind::Convert(a) => {
-                let from = a.ty;
-                let v = self.expr(a, frame)?;
-                convert(v, from, expr.ty)
             }
             ExprKind::Construct(parts) => {
                 let mut t = [0.0; 3];

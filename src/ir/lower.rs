@@ -12,7 +12,7 @@
 use super::ssa::{self, BinOp, Block, Builder, CmpOp, EntryKind, Inst, Module, Slot, Terminator, Ty, UnOp, Var};
 use super::wired::{Operand, WiredMaterial};
 use crate::abi::{self, ChannelInfo, MaterialInfo};
-use crate::diag::{Diagnostic, Diagnostics};
+use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::front::ast::{BaseType, BinaryOp};
 use crate::front::hir::{Expr, ExprKind, Function, Global, LocalId, Place, Stmt, UnaryOp};
 use crate::front::intrinsics::Intrinsic;
@@ -31,6 +31,26 @@ pub const LOOP_BUDGET: i32 = 1 << 20;
 /// Deepest nesting of inlined user functions (recursion is rejected by the checker; this
 /// guards a broken library).
 const MAX_INLINE_DEPTH: u32 = 64;
+
+/// Deepest nesting of statements and expressions in one entry function once node bodies and
+/// user functions are inlined into one another: four functions each nested to the parser's
+/// [`MAX_NESTING`](crate::front::parser::MAX_NESTING). Lowering and constant folding recurse
+/// this deep at most, which the compiler stack ([`crate::stack`]) holds with room to spare;
+/// past it lowering reports the inlining chain.
+pub const MAX_INLINED_NESTING: u32 = 4 * crate::front::parser::MAX_NESTING;
+
+/// Lowered instructions one entry function may reach while inlining (dead code included).
+/// Real materials lower to a few thousand; the limit leaves room for generated code (a flat
+/// chain of 100 000 `+` takes 200 000) and stops exponential inlining (24 functions each
+/// calling the previous twice would take 2²⁴ bodies and gigabytes) within a fraction of a
+/// second, with a diagnostic that names the chain of calls.
+pub const MAX_ENTRY_INSTRUCTIONS: usize = 1 << 19;
+
+/// Bytes of local arrays one entry function may hold. Arrays live in the entry's stack frame
+/// (Cranelift stack slots), and entries run on render threads with 2 MiB stacks: 256 KiB keeps
+/// the largest frame far from that, and fits one array of the language's largest length
+/// (65 536 floats). Past it, a diagnostic at the declaration that crosses the limit.
+pub const MAX_LOCAL_ARRAY_BYTES: usize = 256 << 10;
 
 /// Words of a closure in an output buffer: kind + 8 parameters.
 const CLOSURE_WORDS: u32 = 9;
@@ -52,8 +72,14 @@ impl Default for LowerOptions {
 }
 
 /// Lowers every entry point of a wired material. Problems (a texture file that cannot be
-/// read, a non-constant texture name) are reported to `diags`.
+/// read, a non-constant texture name, code past [`MAX_ENTRY_INSTRUCTIONS`],
+/// [`MAX_INLINED_NESTING`] or [`MAX_LOCAL_ARRAY_BYTES`]) are reported to `diags`. Runs on the
+/// compiler stack ([`crate::stack`]): inlining recurses as deep as the code nests.
 pub fn lower(lib: &Library, wired: &WiredMaterial, options: LowerOptions, diags: &mut Diagnostics) -> Module {
+    crate::stack::on_compiler_stack(|| lower_here(lib, wired, options, diags))
+}
+
+fn lower_here(lib: &Library, wired: &WiredMaterial, options: LowerOptions, diags: &mut Diagnostics) -> Module {
     if let Err(e) = wired.validate(lib) {
         diags.push(Diagnostic::error(format!("internal compiler error: invalid wired IR: {e}")));
     }
@@ -163,8 +189,18 @@ impl Context<'_> {
             budget: self.options.loop_budget.then_some(budget),
             fail_blocks: HashMap::new(),
             depth: 0,
+            nesting: 0,
+            inlining: Vec::new(),
+            array_bytes: 0,
+            failed: false,
+            here: Span::default(),
         };
         body(&mut f);
+        if f.failed {
+            // Reported; what was built is incomplete and may be huge. An empty entry keeps
+            // the module well-formed for callers that look at it despite the error.
+            return Builder::new(kind, out_words).finish();
+        }
         let mut func = f.b.finish();
         debug_assert_eq!(ssa::validate(&func), Ok(()), "after lowering:\n{}", func.to_text());
         if self.options.simplify {
@@ -249,7 +285,27 @@ struct FnLower<'a> {
     budget: Option<Var>,
     /// Shared blocks that return a failure status, by status.
     fail_blocks: HashMap<u32, Block>,
+    /// User functions being inlined (for [`MAX_INLINE_DEPTH`]).
     depth: u32,
+    /// Statement and expression nesting across inlined bodies (for [`MAX_INLINED_NESTING`]).
+    nesting: u32,
+    /// The node body and user functions being inlined, outermost first: what a budget
+    /// diagnostic names.
+    inlining: Vec<Inlined>,
+    /// Bytes of slots allocated so far (for [`MAX_LOCAL_ARRAY_BYTES`]).
+    array_bytes: usize,
+    /// A budget was exceeded and reported: stop emitting code (the entry is discarded).
+    failed: bool,
+    /// The expression being lowered (where arrays without a declaration are reported).
+    here: Span,
+}
+
+/// One level of inlining: a node instance's body or a user function called from it.
+struct Inlined {
+    /// `` `s` (node `000/n`) `` for a node of type `s`, `` `f` `` for a call of `f`.
+    name: String,
+    /// The node type's declaration or the call.
+    span: Span,
 }
 
 impl FnLower<'_> {
@@ -351,6 +407,7 @@ impl FnLower<'_> {
         let lib = self.lib;
         let node = &self.wired.nodes[id];
         let func = lib.function(node.func);
+        self.inlining.push(Inlined { name: format!("`{}` (node `{}`)", func.name, node.label), span: func.span });
         let mut frame = self.frame(func);
         for (i, param) in func.params.iter().enumerate() {
             let value = if param.output {
@@ -372,26 +429,54 @@ impl FnLower<'_> {
             let value = self.load_local(&frame, LocalId(i as u32));
             self.node_out.insert((id, i), value);
         }
+        self.inlining.pop();
     }
 
     /// Storage for every local of a function, and its return block.
     fn frame(&mut self, func: &Function) -> Frame {
-        let locals = func.locals.iter().map(|l| self.storage(l.ty)).collect();
+        let locals = func.locals.iter().map(|l| self.storage(l.ty, l.span)).collect();
         let ret = self.b.block();
-        let ret_value = (func.ret != Type::VOID).then(|| self.storage(func.ret));
+        let ret_value = (func.ret != Type::VOID).then(|| self.storage(func.ret, func.span));
         Frame { locals, ret, ret_value, loops: Vec::new() }
     }
 
-    fn storage(&mut self, ty: Type) -> Storage {
+    /// Variables for a scalar or triple, a slot for an array (declared at `span`).
+    fn storage(&mut self, ty: Type, span: Span) -> Storage {
         match ty.array {
             Some(len) => {
                 let elem = ty.element();
                 let width = layout(elem).len() as u32;
-                let slot = self.b.slot(layout(elem)[0], len * width);
+                let slot = self.array_slot(layout(elem)[0], len * width, span);
                 Storage::Array { slot, elem, len }
             }
             None => Storage::Vars(layout(ty).into_iter().map(|t| self.b.var(t)).collect()),
         }
+    }
+
+    /// A slot of `words` words for an array declared (or written) at `span`, charged against
+    /// [`MAX_LOCAL_ARRAY_BYTES`].
+    fn array_slot(&mut self, ty: Ty, words: u32, span: Span) -> Slot {
+        if !self.failed {
+            self.array_bytes += words as usize * 4;
+            if self.array_bytes > MAX_LOCAL_ARRAY_BYTES {
+                let kind = self.b.func.kind.name();
+                self.give_up(
+                    format!(
+                        "local arrays of entry `{kind}` need {} KiB, more than the {} KiB limit",
+                        self.array_bytes.div_ceil(1024),
+                        MAX_LOCAL_ARRAY_BYTES / 1024
+                    ),
+                    span,
+                    format!("this array ({} KiB) crosses the limit", (words as usize * 4).div_ceil(1024)),
+                    "arrays live in the stack frame of the compiled shader, on a render thread's stack; \
+                     use fewer or shorter arrays (the arrays of every node and inlined function an entry \
+                     evaluates count together)"
+                        .to_string(),
+                );
+            }
+        }
+        // After a failure the code is discarded: a one-word slot stands in.
+        self.b.slot(ty, if self.failed { 1 } else { words })
     }
 
     fn store(&mut self, storage: &Storage, value: Lv) {
@@ -402,16 +487,104 @@ impl FnLower<'_> {
                 }
             }
             (Storage::Array { slot, elem, len }, Lv::Array { slot: from, .. }) => {
-                let n = len * layout(*elem).len() as u32;
                 if *slot != from {
-                    for k in 0..n as i32 {
-                        let i = self.b.iconst(k);
-                        let v = self.b.value(Inst::Load(from, i), self.b.func.slots[from.0 as usize].0);
-                        self.b.effect(Inst::Store(*slot, i, v));
-                    }
+                    self.copy_slot(from, *slot, len * layout(*elem).len() as u32);
                 }
             }
             _ => unreachable!("the checker matches array and scalar assignments"),
+        }
+    }
+
+    // ---- arrays ------------------------------------------------------------------------------
+
+    /// Emits `body(at)` for `at` in `0, step, 2·step, … < end`: unrolled for short arrays (as
+    /// straight-line stores they fold and read best), as a counted loop otherwise, so code
+    /// size never grows with an array's length. The loop is the compiler's own and bounded,
+    /// so it does not spend the loop budget.
+    fn for_each_word(&mut self, end: u32, step: u32, mut body: impl FnMut(&mut Self, ssa::Value)) {
+        /// Words up to which initialisation and copies are unrolled.
+        const UNROLL_WORDS: u32 = 16;
+        if end <= UNROLL_WORDS {
+            for at in (0..end).step_by(step.max(1) as usize) {
+                let at = self.b.iconst(at as i32);
+                body(self, at);
+            }
+            return;
+        }
+        let counter = self.b.var(Ty::I32);
+        let start = self.b.iconst(0);
+        self.b.effect(Inst::Set(counter, start));
+        let (header, looped, exit) = (self.b.block(), self.b.block(), self.b.block());
+        self.b.jump_to(header);
+        let at = self.b.value(Inst::Get(counter), Ty::I32);
+        let limit = self.b.iconst(end as i32);
+        let more = self.b.cmp(CmpOp::Lt, at, limit);
+        self.b.terminate(Terminator::Branch(more, looped, exit));
+        self.b.switch_to(looped);
+        body(self, at);
+        let step = self.b.iconst(step as i32);
+        let next = self.b.binary(BinOp::IAdd, at, step);
+        self.b.effect(Inst::Set(counter, next));
+        self.b.terminate(Terminator::Jump(header));
+        self.b.switch_to(exit);
+    }
+
+    /// Stores one element's words into every element of a slot of `len` elements.
+    fn fill_slot(&mut self, slot: Slot, len: u32, element: &[ssa::Value]) {
+        let width = element.len() as u32;
+        self.for_each_word(len * width, width, |f, at| {
+            for (k, v) in element.iter().enumerate() {
+                let k = f.b.iconst(k as i32);
+                let i = f.b.binary(BinOp::IAdd, at, k);
+                f.b.effect(Inst::Store(slot, i, *v));
+            }
+        });
+    }
+
+    /// Copies the first `words` words of `from` into `to`.
+    fn copy_slot(&mut self, from: Slot, to: Slot, words: u32) {
+        let ty = self.b.func.slots[from.0 as usize].0;
+        self.for_each_word(words, 1, |f, at| {
+            let v = f.b.value(Inst::Load(from, at), ty);
+            f.b.effect(Inst::Store(to, at, v));
+        });
+    }
+
+    /// Writes a constant array into a slot: one loop when every element is the same (zero
+    /// initialisation), element by element otherwise (a literal list, as long as its source).
+    fn store_constant_array(&mut self, slot: Slot, elem: Type, len: u32, items: &[Value]) {
+        if let Some(first) = items.first()
+            && items.len() == len as usize
+            && items.iter().all(|item| item == first)
+        {
+            let element = self.constant(first, elem).scalars();
+            self.fill_slot(slot, len, &element);
+            return;
+        }
+        if items.len() != len as usize {
+            // Never from the checker; zeros keep the backends in agreement on the rest.
+            let zero = self.zero(elem).scalars();
+            self.fill_slot(slot, len, &zero);
+        }
+        let width = layout(elem).len() as u32;
+        for (i, item) in items.iter().enumerate().take(len as usize) {
+            let scalars = self.constant(item, elem).scalars();
+            for (k, s) in scalars.into_iter().enumerate() {
+                let index = self.b.iconst((i as u32 * width + k as u32) as i32);
+                self.b.effect(Inst::Store(slot, index, s));
+            }
+        }
+    }
+
+    /// Evaluates `{a, b, …}` into a slot, element by element.
+    fn store_array_items(&mut self, slot: Slot, elem: Type, items: &[Expr], frame: &mut Frame) {
+        let width = layout(elem).len() as u32;
+        for (i, item) in items.iter().enumerate() {
+            let scalars = self.expr(item, frame).scalars();
+            for (k, s) in scalars.into_iter().enumerate() {
+                let index = self.b.iconst((i as u32 * width + k as u32) as i32);
+                self.b.effect(Inst::Store(slot, index, s));
+            }
         }
     }
 
@@ -465,14 +638,8 @@ impl FnLower<'_> {
         if let (Some(len), Value::Array(items)) = (ty.array, v) {
             let elem = ty.element();
             let width = layout(elem).len() as u32;
-            let slot = self.b.slot(layout(elem)[0], len * width);
-            for (i, item) in items.iter().enumerate().take(len as usize) {
-                let scalars = self.constant(item, elem).scalars();
-                for (k, s) in scalars.into_iter().enumerate() {
-                    let index = self.b.iconst((i as u32 * width + k as u32) as i32);
-                    self.b.effect(Inst::Store(slot, index, s));
-                }
-            }
+            let slot = self.array_slot(layout(elem)[0], len * width, self.here);
+            self.store_constant_array(slot, elem, len, items);
             return Lv::Array { slot, elem, len };
         }
         Lv::Scalars(match v {
@@ -491,6 +658,17 @@ impl FnLower<'_> {
     }
 
     fn zero(&mut self, ty: Type) -> Lv {
+        if let Some(len) = ty.array {
+            // Filled in a loop, without building a constant of `len` elements first.
+            let elem = ty.element();
+            let width = layout(elem).len() as u32;
+            let slot = self.array_slot(layout(elem)[0], len * width, self.here);
+            if !self.failed {
+                let element = self.zero(elem).scalars();
+                self.fill_slot(slot, len, &element);
+            }
+            return Lv::Array { slot, elem, len };
+        }
         match Value::zero(ty) {
             Some(v) => self.constant(&v, ty),
             None => {
@@ -519,6 +697,89 @@ impl FnLower<'_> {
         })
     }
 
+    // ---- budgets -----------------------------------------------------------------------------
+
+    /// The inlining chain, outermost first: `` `s` (node `000/n`) → `f24` → … → `f3` ``.
+    fn inlining_chain(&self) -> String {
+        let names: Vec<&str> = self.inlining.iter().map(|i| i.name.as_str()).collect();
+        if names.len() <= 12 {
+            names.join(" → ")
+        } else {
+            format!("{} → … → {}", names[..6].join(" → "), names[names.len() - 5..].join(" → "))
+        }
+    }
+
+    /// Reports a budget crossed and stops lowering this entry (only the first is reported).
+    fn give_up(&mut self, message: String, span: Span, label: String, note: String) {
+        if self.failed {
+            return;
+        }
+        self.failed = true;
+        let mut diagnostic = Diagnostic::error(message).at(span, label);
+        if self.inlining.len() > 1
+            && let Some(innermost) = self.inlining.last()
+            && innermost.span != span
+        {
+            diagnostic = diagnostic.also(innermost.span, "innermost call being inlined");
+        }
+        self.diags.push(diagnostic.note(note));
+    }
+
+    /// Checks the instruction budget and takes one more level of nesting; `false` once
+    /// lowering has given up (the caller then emits nothing).
+    fn enter(&mut self) -> bool {
+        if self.failed {
+            return false;
+        }
+        if self.b.appended() > MAX_ENTRY_INSTRUCTIONS {
+            let kind = self.b.func.kind.name();
+            // The outermost call of the chain is where the code can be changed.
+            let span = self.inlining.get(1).or(self.inlining.first()).map(|i| i.span).unwrap_or(self.here);
+            let chain = self.inlining_chain();
+            let message = if self.inlining.len() > 1 {
+                format!("inlining {chain} exceeds {MAX_ENTRY_INSTRUCTIONS} lowered instructions")
+            } else {
+                format!("{chain} lowers to more than {MAX_ENTRY_INSTRUCTIONS} instructions")
+            };
+            self.give_up(
+                message,
+                span,
+                "expands to too much code".into(),
+                format!(
+                    "while compiling entry `{kind}`: every call is inlined, so a function that calls \
+                     another twice is twice its size; call functions fewer times, or call them in a loop"
+                ),
+            );
+            return false;
+        }
+        if self.nesting >= MAX_INLINED_NESTING {
+            let span = self.here;
+            let chain = self.inlining_chain();
+            self.give_up(
+                format!("code nests deeper than {MAX_INLINED_NESTING} levels once {chain} is inlined"),
+                span,
+                "nesting limit reached here".into(),
+                "statements and expressions of inlined functions nest inside their callers'; \
+                 flatten the code or use local variables"
+                    .into(),
+            );
+            return false;
+        }
+        self.nesting += 1;
+        true
+    }
+
+    /// A stand-in value of type `ty` after lowering gave up.
+    fn placeholder(&mut self, ty: Type) -> Lv {
+        match ty.array {
+            Some(len) => {
+                let elem = ty.element();
+                Lv::Array { slot: self.b.slot(layout(elem)[0], 1), elem, len }
+            }
+            None => self.zero(ty),
+        }
+    }
+
     // ---- statements ------------------------------------------------------------------------
 
     fn block(&mut self, stmts: &[Stmt], frame: &mut Frame) {
@@ -528,8 +789,29 @@ impl FnLower<'_> {
     }
 
     fn stmt(&mut self, stmt: &Stmt, frame: &mut Frame) {
+        if self.enter() {
+            self.stmt_here(stmt, frame);
+            self.nesting -= 1;
+        }
+    }
+
+    fn stmt_here(&mut self, stmt: &Stmt, frame: &mut Frame) {
         match stmt {
             Stmt::Assign(place, value) => {
+                // An array initialised where it is declared is written in place (no temporary
+                // slot, which would double its stack).
+                if place.element.is_none()
+                    && place.component.is_none()
+                    && let Storage::Array { slot, elem, len } = frame.locals[place.local.0 as usize].clone()
+                {
+                    match &value.kind {
+                        ExprKind::Const(Value::Array(items)) => {
+                            return self.store_constant_array(slot, elem, len, items);
+                        }
+                        ExprKind::Array(items) => return self.store_array_items(slot, elem, items, frame),
+                        _ => {}
+                    }
+                }
                 let v = self.expr(value, frame);
                 self.assign(place, v, frame);
             }
@@ -680,6 +962,36 @@ impl FnLower<'_> {
     // ---- expressions -------------------------------------------------------------------------
 
     fn expr(&mut self, e: &Expr, frame: &mut Frame) -> Lv {
+        if !self.enter() {
+            return self.placeholder(e.ty);
+        }
+        self.here = e.span;
+        let value = self.expr_here(e, frame);
+        self.nesting -= 1;
+        value
+    }
+
+    /// Lowers a chain of binary operators and conversions along its left spine in a loop (see
+    /// `check::binary_chain`): innermost first, each step applied to the value so far, in the
+    /// order the recursive form would emit.
+    fn spine(&mut self, e: &Expr, frame: &mut Frame) -> Lv {
+        let (spine, leaf) = e.left_spine();
+        let mut acc = self.expr(leaf, frame);
+        let mut acc_ty = leaf.ty;
+        for node in spine.into_iter().rev() {
+            if self.failed {
+                return self.placeholder(e.ty);
+            }
+            acc = match &node.kind {
+                ExprKind::Binary(op, _, b) => self.binary(*op, acc, acc_ty, b, frame),
+                _ => self.convert(acc, acc_ty, node.ty),
+            };
+            acc_ty = node.ty;
+        }
+        acc
+    }
+
+    fn expr_here(&mut self, e: &Expr, frame: &mut Frame) -> Lv {
         match &e.kind {
             ExprKind::Const(v) => self.constant(v, e.ty),
             ExprKind::Local(id) => self.load_local(frame, *id),
@@ -708,7 +1020,7 @@ impl FnLower<'_> {
                     }
                 })
             }
-            ExprKind::Binary(op, a, b) => self.binary(*op, a, b, frame),
+            ExprKind::Binary(..) | ExprKind::Convert(_) => self.spine(e, frame),
             ExprKind::Select(c, a, b) => {
                 let cond = self.truthy(c, frame);
                 if let Some(k) = self.b.known(cond) {
@@ -721,7 +1033,7 @@ impl FnLower<'_> {
                         return Lv::Scalars(x.iter().zip(&y).map(|(x, y)| self.b.select(cond, *x, *y)).collect());
                     }
                 }
-                let result = self.storage(e.ty);
+                let result = self.storage(e.ty, e.span);
                 let (then_b, else_b, join) = (self.b.block(), self.b.block(), self.b.block());
                 self.b.terminate(Terminator::Branch(cond, then_b, else_b));
                 self.b.switch_to(then_b);
@@ -733,10 +1045,6 @@ impl FnLower<'_> {
                 self.store(&result, y);
                 self.b.jump_to(join);
                 self.load(&result)
-            }
-            ExprKind::Convert(a) => {
-                let v = self.expr(a, frame);
-                self.convert(v, a.ty, e.ty)
             }
             ExprKind::Construct(parts) => {
                 Lv::Scalars(parts.iter().map(|p| self.expr(p, frame).one()).collect::<Vec<_>>())
@@ -780,14 +1088,8 @@ impl FnLower<'_> {
                 let len = items.len() as u32;
                 let elem = e.ty.element();
                 let width = layout(elem).len() as u32;
-                let slot = self.b.slot(layout(elem)[0], len * width);
-                for (i, item) in items.iter().enumerate() {
-                    let scalars = self.expr(item, frame).scalars();
-                    for (k, s) in scalars.into_iter().enumerate() {
-                        let index = self.b.iconst((i as u32 * width + k as u32) as i32);
-                        self.b.effect(Inst::Store(slot, index, s));
-                    }
-                }
+                let slot = self.array_slot(layout(elem)[0], len * width, e.span);
+                self.store_array_items(slot, elem, items, frame);
                 Lv::Array { slot, elem, len }
             }
             ExprKind::Intrinsic(intrinsic, args) => self.intrinsic(*intrinsic, args, frame),
@@ -812,7 +1114,9 @@ impl FnLower<'_> {
                 // Locals start at zero, as the folder's frames do once assigned; the checker
                 // requires initialisers, so this only matters for robustness.
                 self.depth += 1;
+                self.inlining.push(Inlined { name: format!("`{}`", func.name), span: e.span });
                 self.block(&func.body, &mut callee);
+                self.inlining.pop();
                 self.depth -= 1;
                 self.b.jump_to(callee.ret);
                 match &callee.ret_value {
@@ -823,10 +1127,11 @@ impl FnLower<'_> {
         }
     }
 
-    fn binary(&mut self, op: BinaryOp, a: &Expr, b: &Expr, frame: &mut Frame) -> Lv {
+    /// `lhs op b`, where `lhs` (of type `lhs_ty`) is already lowered.
+    fn binary(&mut self, op: BinaryOp, lhs: Lv, lhs_ty: Type, b: &Expr, frame: &mut Frame) -> Lv {
         use BinaryOp::*;
         if matches!(op, And | Or) {
-            let l = self.truthy(a, frame);
+            let l = self.truth(lhs.one());
             if let Some(k) = self.b.known(l) {
                 // The left side decides, or the right side is the answer.
                 if (k != 0) == (op == Or) {
@@ -852,9 +1157,9 @@ impl FnLower<'_> {
             self.b.jump_to(join);
             return Lv::Scalars(vec![self.b.value(Inst::Get(result), Ty::I32)]);
         }
-        let x = self.expr(a, frame).scalars();
+        let x = lhs.scalars();
         let y = self.expr(b, frame).scalars();
-        let int = a.ty.base == BaseType::Int || a.ty.base == BaseType::String;
+        let int = lhs_ty.base == BaseType::Int || lhs_ty.base == BaseType::String;
         if matches!(op, Eq | Ne | Lt | Le | Gt | Ge) {
             let cmp = match op {
                 Eq | Ne => CmpOp::Eq,
@@ -1128,17 +1433,21 @@ impl FnLower<'_> {
 }
 
 /// Whether an expression is cheap, pure and cannot fail, so a select may evaluate it even on
-/// the side not taken.
+/// the side not taken. Walks the tree with an explicit stack (chains are as deep as long).
 fn is_simple(e: &Expr) -> bool {
-    match &e.kind {
-        ExprKind::Const(_) | ExprKind::Local(_) | ExprKind::Global(_) => true,
-        ExprKind::Unary(_, a) | ExprKind::Convert(a) | ExprKind::Component(a, _) => is_simple(a),
-        ExprKind::Binary(_, a, b) => is_simple(a) && is_simple(b),
-        ExprKind::Select(c, a, b) => is_simple(c) && is_simple(a) && is_simple(b),
-        ExprKind::Construct(parts) => parts.iter().all(is_simple),
-        ExprKind::Intrinsic(i, args) => *i != Intrinsic::Texture && args.iter().all(is_simple),
-        ExprKind::Index(..) | ExprKind::Array(_) | ExprKind::Call(..) => false,
+    let mut pending = vec![e];
+    while let Some(e) = pending.pop() {
+        match &e.kind {
+            ExprKind::Const(_) | ExprKind::Local(_) | ExprKind::Global(_) => {}
+            ExprKind::Unary(_, a) | ExprKind::Convert(a) | ExprKind::Component(a, _) => pending.push(a),
+            ExprKind::Binary(_, a, b) => pending.extend([&**a, &**b]),
+            ExprKind::Select(c, a, b) => pending.extend([&**c, &**a, &**b]),
+            ExprKind::Construct(parts) => pending.extend(parts.iter()),
+            ExprKind::Intrinsic(i, args) if *i != Intrinsic::Texture => pending.extend(args.iter()),
+            ExprKind::Intrinsic(..) | ExprKind::Index(..) | ExprKind::Array(_) | ExprKind::Call(..) => return false,
+        }
     }
+    true
 }
 
 /// Whether a body assigns local `local` anywhere.

@@ -531,12 +531,19 @@ pub struct Builder {
     current: Block,
     /// The constant word of each value, where known.
     known: Vec<Option<u32>>,
+    /// Instructions appended so far (dead ones included): what lowering charges its budget.
+    appended: usize,
 }
 
 impl Builder {
     /// Starts a function in its entry block.
     pub fn new(kind: EntryKind, out_words: u32) -> Builder {
-        Builder { func: Function::new(kind, out_words), current: Block(0), known: Vec::new() }
+        Builder { func: Function::new(kind, out_words), current: Block(0), known: Vec::new(), appended: 0 }
+    }
+
+    /// Instructions appended so far, including those later found dead.
+    pub fn appended(&self) -> usize {
+        self.appended
     }
 
     /// The constant word of `v`, if it is a compile-time constant.
@@ -617,6 +624,7 @@ impl Builder {
             Value(self.func.values.len() as u32 - 1)
         });
         self.func.blocks[self.current.0 as usize].insts.push(InstData { result, inst });
+        self.appended += 1;
         result
     }
 
@@ -1035,40 +1043,82 @@ fn for_each_operand(inst: &Inst, mut f: impl FnMut(Value)) {
 }
 
 /// Removes unreachable blocks, sets of variables nobody reads, and unused pure instructions,
-/// until nothing changes.
+/// until nothing changes. Removal cascades through use counts (an instruction whose last user
+/// goes becomes a candidate itself), so a dead chain of any length costs time linear in its
+/// size, not one sweep over the function per link.
 fn remove_dead(f: &mut Function) {
-    loop {
-        let before: usize = f.blocks.iter().map(|b| b.insts.len()).sum();
-        let mut builder = Builder {
-            func: std::mem::replace(f, Function::new(EntryKind::Displacement, 0)),
-            current: Block(0),
-            known: Vec::new(),
-        };
-        builder.current = Block(0);
-        *f = builder.finish_reachable();
-        let mut used = vec![false; f.values.len()];
-        let mut read = vec![false; f.vars.len()];
-        for block in &f.blocks {
-            for data in &block.insts {
-                for_each_operand(&data.inst, |v| used[v.0 as usize] = true);
-                if let Inst::Get(var) = data.inst {
-                    read[var.0 as usize] = true;
-                }
+    let builder = Builder {
+        func: std::mem::replace(f, Function::new(EntryKind::Displacement, 0)),
+        current: Block(0),
+        known: Vec::new(),
+        appended: 0,
+    };
+    *f = builder.finish_reachable();
+    let mut uses = vec![0u32; f.values.len()];
+    let mut reads = vec![0u32; f.vars.len()];
+    let mut def: Vec<Option<(u32, u32)>> = vec![None; f.values.len()];
+    let mut sets: Vec<Vec<(u32, u32)>> = vec![Vec::new(); f.vars.len()];
+    for (b, block) in f.blocks.iter().enumerate() {
+        for (i, data) in block.insts.iter().enumerate() {
+            let at = (b as u32, i as u32);
+            for_each_operand(&data.inst, |v| uses[v.0 as usize] += 1);
+            match data.inst {
+                Inst::Get(var) => reads[var.0 as usize] += 1,
+                Inst::Set(var, _) => sets[var.0 as usize].push(at),
+                _ => {}
             }
-            if let Some(Terminator::Branch(c, ..)) = &block.term {
-                used[c.0 as usize] = true;
+            if let Some(r) = data.result {
+                def[r.0 as usize] = Some(at);
             }
         }
-        for block in &mut f.blocks {
-            block.insts.retain(|data| match &data.inst {
-                Inst::Set(var, _) => read[var.0 as usize],
-                Inst::Store(..) | Inst::Out(..) => true,
-                _ => data.result.is_some_and(|r| used[r.0 as usize]),
-            });
+        if let Some(Terminator::Branch(c, ..)) = &block.term {
+            uses[c.0 as usize] += 1;
         }
-        let after: usize = f.blocks.iter().map(|b| b.insts.len()).sum();
-        if after == before {
-            break;
+    }
+    let mut dead: Vec<Vec<bool>> = f.blocks.iter().map(|b| vec![false; b.insts.len()]).collect();
+    let removable = |data: &InstData, uses: &[u32], reads: &[u32]| match &data.inst {
+        Inst::Set(var, _) => reads[var.0 as usize] == 0,
+        Inst::Store(..) | Inst::Out(..) => false,
+        _ => data.result.is_some_and(|r| uses[r.0 as usize] == 0),
+    };
+    let mut pending: Vec<(u32, u32)> = Vec::new();
+    for (b, block) in f.blocks.iter().enumerate() {
+        for (i, data) in block.insts.iter().enumerate() {
+            if removable(data, &uses, &reads) {
+                pending.push((b as u32, i as u32));
+            }
         }
+    }
+    while let Some((b, i)) = pending.pop() {
+        let (bu, iu) = (b as usize, i as usize);
+        if dead[bu][iu] {
+            continue;
+        }
+        let data = &f.blocks[bu].insts[iu];
+        if !removable(data, &uses, &reads) {
+            continue;
+        }
+        dead[bu][iu] = true;
+        for_each_operand(&data.inst, |v| {
+            uses[v.0 as usize] -= 1;
+            if uses[v.0 as usize] == 0
+                && let Some(at) = def[v.0 as usize]
+            {
+                pending.push(at);
+            }
+        });
+        if let Inst::Get(var) = data.inst {
+            reads[var.0 as usize] -= 1;
+            if reads[var.0 as usize] == 0 {
+                pending.extend(sets[var.0 as usize].iter().copied());
+            }
+        }
+    }
+    for (block, dead) in f.blocks.iter_mut().zip(dead) {
+        let mut index = 0;
+        block.insts.retain(|_| {
+            index += 1;
+            !dead[index - 1]
+        });
     }
 }

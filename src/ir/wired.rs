@@ -147,8 +147,18 @@ impl Default for PassOptions {
     }
 }
 
-/// Builds and optimises the wired IR of one composed material.
+/// Builds and optimises the wired IR of one composed material. Runs on the compiler stack
+/// ([`crate::stack`]): constant folding evaluates node bodies recursively.
 pub fn build(
+    lib: &Library,
+    material: &ComposedMaterial,
+    options: PassOptions,
+    diags: &mut Diagnostics,
+) -> WiredMaterial {
+    crate::stack::on_compiler_stack(|| build_here(lib, material, options, diags))
+}
+
+fn build_here(
     lib: &Library,
     material: &ComposedMaterial,
     options: PassOptions,
@@ -157,9 +167,17 @@ pub fn build(
     let mut b = Builder { lib, nodes: Vec::new(), diags };
     let mut layers = Vec::new();
     if material.layers.is_empty() {
-        let graph = lib.graph_by_name("default_substance").expect("the prelude defines default_substance");
-        let substance = MaterialRef { path: String::new(), graph, values: Vec::new(), span: Span::default() };
-        layers.push(b.layer(0, "default", &substance, &[]));
+        // The prelude's own graph, by its file: a user graph of the same name is rejected when
+        // the library loads, and could not be picked here anyway.
+        match lib.builtin_graph("default_substance") {
+            Some(graph) => {
+                let substance = MaterialRef { path: String::new(), graph, values: Vec::new(), span: Span::default() };
+                layers.push(b.layer(0, "default", &substance, &[]));
+            }
+            None => b.diags.push(Diagnostic::error(
+                "internal compiler error: the built-in library has no `default_substance` to shade unbound prims",
+            )),
+        }
     }
     for (index, layer) in material.layers.iter().enumerate() {
         let overrides: Vec<(String, &MaterialRef)> = layer.overrides.iter().map(|(s, m)| (s.name(), m)).collect();
@@ -330,56 +348,85 @@ fn for_each_root(layers: &mut [Layer], mut f: impl FnMut(&mut Operand)) {
 }
 
 /// Evaluates nodes whose inputs are all constant and whose body reads no globals, and replaces
-/// their outputs by constants, in dependency order until nothing changes.
+/// their outputs by constants. Nodes are visited once each, producers before their users (a
+/// graph may declare a node before the nodes it reads), so a folded output reaches every
+/// reader in the same pass.
 fn fold_constants(lib: &Library, nodes: &mut [Option<Node>], layers: &mut [Layer]) {
     let mut folded: HashMap<(NodeId, usize), (Value, Type)> = HashMap::new();
-    loop {
-        let before = folded.len();
-        for (index, slot) in nodes.iter_mut().enumerate() {
-            let Some(node) = slot else { continue };
-            for arg in &mut node.args {
-                substitute(arg, &folded);
-            }
-            let func = lib.function(node.func);
-            if func.varying || func.outputs().next().is_none() {
-                continue;
-            }
-            let mut inputs = Vec::with_capacity(func.params.len());
-            let mut constant = true;
-            for ((_, param), arg) in func.params.iter().enumerate().zip(&node.args) {
-                match arg {
-                    _ if param.output => inputs.push(None),
-                    Operand::Const(v, t) => inputs.push(Some(v.convert(*t, param.ty))),
-                    Operand::Default if param.default.as_ref().is_none_or(|d| matches!(d.kind, ExprKind::Const(_))) => {
-                        inputs.push(None)
-                    }
-                    _ => {
-                        constant = false;
-                        break;
-                    }
+    for index in dependency_order(nodes) {
+        let Some(node) = &mut nodes[index] else { continue };
+        for arg in &mut node.args {
+            substitute(arg, &folded);
+        }
+        let func = lib.function(node.func);
+        if func.varying || func.outputs().next().is_none() {
+            continue;
+        }
+        let mut inputs = Vec::with_capacity(func.params.len());
+        let mut constant = true;
+        for ((_, param), arg) in func.params.iter().enumerate().zip(&node.args) {
+            match arg {
+                _ if param.output => inputs.push(None),
+                Operand::Const(v, t) => inputs.push(Some(v.convert(*t, param.ty))),
+                Operand::Default if param.default.as_ref().is_none_or(|d| matches!(d.kind, ExprKind::Const(_))) => {
+                    inputs.push(None)
                 }
-            }
-            if !constant {
-                continue;
-            }
-            let Some(values) = eval_node(lib, func, &inputs) else { continue };
-            let id = NodeId(index as u32);
-            for (param, p) in func.outputs() {
-                if folded.contains_key(&(id, param)) {
-                    continue;
-                }
-                // Closures have no constant form; non-finite results stay for run time so the
-                // renderer's NaN guard sees them.
-                if p.ty != Type::CLOSURE && values[param].is_finite() {
-                    folded.insert((id, param), (values[param].clone(), p.ty));
+                _ => {
+                    constant = false;
+                    break;
                 }
             }
         }
-        if folded.len() == before {
-            break;
+        if !constant {
+            continue;
+        }
+        let Some(values) = eval_node(lib, func, &inputs) else { continue };
+        let id = NodeId(index as u32);
+        for (param, p) in func.outputs() {
+            // Closures have no constant form; non-finite results stay for run time so the
+            // renderer's NaN guard sees them.
+            if p.ty != Type::CLOSURE && values[param].is_finite() {
+                folded.insert((id, param), (values[param].clone(), p.ty));
+            }
         }
     }
     for_each_root(layers, |op| substitute(op, &folded));
+}
+
+/// Every node index, each after the nodes its arguments read (iterative depth-first search;
+/// a cycle, already reported by the graph checker, is cut where it closes).
+fn dependency_order(nodes: &[Option<Node>]) -> Vec<usize> {
+    let mut order = Vec::with_capacity(nodes.len());
+    let mut state = vec![0u8; nodes.len()]; // 0 unseen, 1 on the stack, 2 emitted
+    for root in 0..nodes.len() {
+        if state[root] != 0 {
+            continue;
+        }
+        state[root] = 1;
+        let mut stack = vec![(root, 0usize)];
+        while let Some((node, next)) = stack.last_mut() {
+            let node = *node;
+            let args = nodes[node].as_ref().map(|n| n.args.as_slice()).unwrap_or(&[]);
+            match args.get(*next) {
+                Some(arg) => {
+                    *next += 1;
+                    if let Operand::Node { node: dep, .. } = arg
+                        && let Some(s) = state.get_mut(dep.0 as usize)
+                        && *s == 0
+                    {
+                        *s = 1;
+                        stack.push((dep.0 as usize, 0));
+                    }
+                }
+                None => {
+                    state[node] = 2;
+                    order.push(node);
+                    stack.pop();
+                }
+            }
+        }
+    }
+    order
 }
 
 fn substitute(op: &mut Operand, folded: &HashMap<(NodeId, usize), (Value, Type)>) {
