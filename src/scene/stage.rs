@@ -17,7 +17,7 @@ use crate::scene::usda::{
     self, Layer, LayerMetadata, ListOp, MetadataEntry, PrimSpec, PropertySpec, Reference, Specifier, Target,
 };
 use crate::scene::value::{AssetPath, Value, ValueType, normalize};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 /// Index of a prim in a [`Stage`].
@@ -576,10 +576,11 @@ impl<'l> Pass<'l> {
         let layers = self.layers;
         // Root prim names, weakest layer first so stronger layers' new names come after.
         let mut names: Vec<&str> = Vec::new();
+        let mut seen: HashSet<&str> = HashSet::new();
         for &i in self.stack(self.root).iter().rev() {
             if let Some(l) = layers.get(i) {
                 for p in &l.layer.prims {
-                    if !names.contains(&p.name.as_str()) {
+                    if seen.insert(&p.name) {
                         names.push(&p.name);
                     }
                 }
@@ -652,9 +653,10 @@ impl<'l> Pass<'l> {
         // Child names, weakest opinion first, so an asset's order is kept and local
         // additions follow it.
         let mut names: Vec<&'l str> = Vec::new();
+        let mut seen: HashSet<&'l str> = HashSet::new();
         for (spec, _) in opinions.iter().rev() {
             for child in &spec.children {
-                if !names.contains(&child.name.as_str()) {
+                if seen.insert(&child.name) {
                     names.push(&child.name);
                 }
             }
@@ -1318,6 +1320,28 @@ def "Inactive" (active = false) { def "Kid" {} }
         assert!(stage.is_err());
         assert!(rendered.contains("scene.usda:4:16"), "{rendered}");
         assert!(rendered.contains("float3 x = (1, 2, \"a\")"), "{rendered}");
+    }
+
+    #[test]
+    fn fifty_thousand_siblings_compose() {
+        // Composition was quadratic in the number of siblings (109 000 took 89 s); with the
+        // name lookups hashed this is a fraction of a second, and a regression to quadratic
+        // would take minutes here — long past any test timeout.
+        let n = 50_000;
+        let mut scene = String::from("#usda 1.0\ndef Xform \"World\" {\n");
+        for i in 0..n {
+            scene += &format!("    def Xform \"S{i}\" {{ double x = {i} }}\n");
+        }
+        scene += "}\n";
+        for i in 0..n {
+            scene += &format!("def Xform \"R{i}\" {{}}\n");
+        }
+        let stage = ok(text(&scene));
+        assert_eq!(stage.len(), 2 * n + 1);
+        let world = prim(&stage, "/World");
+        assert_eq!(world.children.len(), n);
+        assert_eq!(prim(&stage, "/World/S49999").value("x"), Some(&Value::Float(49999.0)));
+        assert_eq!(prim(&stage, "/World/S123").value("x"), Some(&Value::Float(123.0)));
     }
 
     #[test]
