@@ -3,6 +3,7 @@
 //! The pipeline, one module per stage (dependencies point down this list only):
 //! - [`diag`]: source files, spans and diagnostics shared by every stage.
 //! - [`front`]: substance files (`.ash`) → checked node types and graphs.
+//! - [`input`]: bounded reads of every input file (scenes, substances, textures).
 //! - [`scene`]: USD ASCII scenes → a composed prim hierarchy.
 //! - [`compose`]: slot bindings → one composed material per renderable prim.
 //! - [`ir`]: the wired IR of a composed material, its passes and text form.
@@ -24,6 +25,7 @@ pub mod cli;
 pub mod compose;
 pub mod diag;
 pub mod front;
+pub mod input;
 pub mod ir;
 pub mod layering;
 pub mod render;

@@ -15,6 +15,12 @@ use std::f64::consts::{PI, TAU};
 /// Segments around a tessellated sphere or cylinder (rings of a sphere: half of it).
 const SEGMENTS: usize = 128;
 
+/// The largest world-space coordinate (absolute value, scene units, after every transform)
+/// geometry may have: 1e7. The renderer works in f32, whose spacing at 1e7 is already one
+/// unit, so detail and ray offsets break down beyond it; and far-apart geometry (1e13) made
+/// the BVH builder crawl while 1e38 crashed it. A prim that reaches past it is an error.
+pub const MAX_EXTENT: f64 = 1e7;
+
 /// One world-space triangle.
 #[derive(Clone, Copy, Debug)]
 pub struct Triangle {
@@ -81,13 +87,30 @@ pub fn build_with(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagnostics) 
             continue;
         }
         let index = geometry.prims.len() as u32;
-        let mut out = Emitter { geometry: &mut geometry, m: xf.world, prim: index };
+        let mut out = Emitter { geometry: &mut geometry, m: xf.world, prim: index, beyond_extent: None };
         match prim.type_name.as_deref() {
             Some("Mesh") => mesh(prim, &mut out, diags),
             Some("Sphere") => sphere(prim, &mut out, diags),
             Some("Cube") => cube(prim, &mut out, diags),
             Some("Cylinder") => cylinder(prim, &mut out, diags),
             _ => {}
+        }
+        if let Some(p) = out.beyond_extent {
+            let mut d = Diagnostic::error(format!(
+                "`{}` reaches ({}, {}, {}), beyond the scene extent of ±{MAX_EXTENT:e} units",
+                prim.path, p.x, p.y, p.z
+            ))
+            .at(prim.span, "this prim");
+            // Point at the nearest transform that placed it, when one did.
+            let mut placed_by = Some(prim);
+            while let Some(p) = placed_by {
+                if let Some(order) = p.attribute("xformOpOrder") {
+                    d = d.also(value_span(order), "placed by this transform (with its ancestors')");
+                    break;
+                }
+                placed_by = p.parent.map(|id| stage.prim(id));
+            }
+            diags.push(d.note("strata renders in f32: coordinates must be finite and within ±1e7 after transforms"));
         }
         geometry.prims.push(GeomPrim { path: prim.path.clone(), span: prim.span });
     }
@@ -105,12 +128,20 @@ struct Emitter<'g> {
     geometry: &'g mut Geometry,
     m: DMat4,
     prim: u32,
+    /// The first world-space point past [`MAX_EXTENT`] (or non-finite), if any.
+    beyond_extent: Option<DVec3>,
 }
 
 impl Emitter<'_> {
     /// Emits one triangle given in local space (`n` in local space, not necessarily unit).
     fn emit(&mut self, p: [DVec3; 3], n: Option<[DVec3; 3]>, uv: Option<[Vec2; 3]>) {
-        let wp = p.map(|p| self.m.transform_point3(p).as_vec3());
+        let world = p.map(|p| self.m.transform_point3(p));
+        // `!(x <= MAX)` also catches NaN.
+        if let Some(far) = world.iter().find(|w| !(w.abs().max_element() <= MAX_EXTENT)) {
+            self.beyond_extent.get_or_insert(*far);
+            return;
+        }
+        let wp = world.map(|p| p.as_vec3());
         let cross = (wp[1] - wp[0]).cross(wp[2] - wp[0]);
         let len2 = cross.length_squared();
         if len2.is_nan() || len2 <= 0.0 || !len2.is_finite() {
@@ -399,6 +430,60 @@ fn cylinder(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
 mod tests {
     use super::*;
     use crate::render::xform::tests::stage;
+
+    /// Two cylinders, the second moved by `xform_ops` (USD text) through its parent.
+    fn far_apart(ops: &str) -> (Geometry, Vec<String>) {
+        let text = format!(
+            r#"#usda 1.0
+def Cylinder "Near" {{}}
+def Xform "Far" {{
+    {ops}
+    def Cylinder "C" {{}}
+}}"#
+        );
+        let (stage, mut diags) = stage(&text);
+        let g = build(&stage, &mut diags);
+        let messages = diags
+            .items()
+            .iter()
+            .filter(|d| d.severity == crate::diag::Severity::Error)
+            .map(|d| d.message.clone())
+            .collect();
+        (g, messages)
+    }
+
+    #[test]
+    fn geometry_beyond_the_extent_is_an_error_before_any_bvh() {
+        // 1e38 crashed the BVH builder; 1e13 took it 8 s; 1e300 was silently dropped as
+        // "degenerate" (infinite in f32).
+        for ops in [
+            "double3 xformOp:translate = (1e38, 0, 0)\n    uniform token[] xformOpOrder = [\"xformOp:translate\"]",
+            "double3 xformOp:translate = (0, -1e13, 0)\n    uniform token[] xformOpOrder = [\"xformOp:translate\"]",
+            // Finite in f64, infinite as the renderer's f32.
+            "double3 xformOp:scale = (1e300, 1e300, 1e300)\n    uniform token[] xformOpOrder = [\"xformOp:scale\"]",
+        ] {
+            let (g, errors) = far_apart(ops);
+            assert_eq!(errors.len(), 1, "{ops}: {errors:?}");
+            assert!(
+                errors[0].starts_with("`/Far/C` reaches (") && errors[0].contains("beyond the scene extent"),
+                "{errors:?}"
+            );
+            assert!(g.triangles.iter().all(|t| t.p.iter().all(|p| p.abs().max_element() <= MAX_EXTENT as f32)));
+        }
+        let (_, errors) = far_apart(
+            "double3 xformOp:translate = (0, 9e6, 0)\n    uniform token[] xformOpOrder = [\"xformOp:translate\"]",
+        );
+        assert!(errors.is_empty(), "within the extent: {errors:?}");
+        // A huge implicit surface without any transform.
+        let (stage, mut diags) = stage("#usda 1.0\ndef Sphere \"S\" { double radius = 1e30 }");
+        build(&stage, &mut diags);
+        assert!(
+            diags
+                .items()
+                .iter()
+                .any(|d| d.severity == crate::diag::Severity::Error && d.message.contains("beyond the scene extent"))
+        );
+    }
 
     #[test]
     fn quad_is_two_triangles_with_normals_and_st() {

@@ -163,7 +163,7 @@ impl Stage {
     /// Reads and composes the stage whose root layer is the file at `path`.
     pub fn open(path: &Path, sources: &mut SourceMap, diags: &mut Diagnostics) -> Result<Stage, Failed> {
         let errors = diags.error_count();
-        let text = match std::fs::read_to_string(path) {
+        let text = match crate::input::read_text(path) {
             Ok(text) => text,
             Err(e) => {
                 diags.push(Diagnostic::error(format!("cannot read `{}`: {e}", path.display())));
@@ -315,6 +315,9 @@ struct Layers {
     list: Vec<LoadedLayer>,
     /// Canonical path → index, or `None` when loading failed (reported once).
     by_key: HashMap<PathBuf, Option<usize>>,
+    /// Sublayer cycles already reported, each as its sorted set of files: a cycle is one
+    /// error however many paths lead into it (5 000 self-sublayers printed 563 MB).
+    reported_cycles: HashSet<Vec<PathBuf>>,
 }
 
 impl Layers {
@@ -336,17 +339,21 @@ impl Layers {
         diags: &mut Diagnostics,
     ) -> Option<usize> {
         let key = Layers::key(path);
-        if chain.contains(&key) {
-            diags.push(
-                Diagnostic::error(format!("sublayer cycle: `{}` includes itself", path.display()))
-                    .at(span, "this sublayer is already being read"),
-            );
+        if let Some(start) = chain.iter().position(|k| *k == key) {
+            let mut cycle = chain[start..].to_vec();
+            cycle.sort();
+            if self.reported_cycles.insert(cycle) {
+                diags.push(
+                    Diagnostic::error(format!("sublayer cycle: `{}` includes itself", path.display()))
+                        .at(span, "this sublayer is already being read"),
+                );
+            }
             return None;
         }
         if let Some(known) = self.by_key.get(&key) {
             return *known;
         }
-        let text = match std::fs::read_to_string(path) {
+        let text = match crate::input::read_text(path) {
             Ok(text) => text,
             Err(e) => {
                 diags.push(
@@ -383,7 +390,21 @@ impl Layers {
             chain.push(key.clone());
         }
         let mut stack = vec![index];
+        // Each sublayer once per layer: listing one again adds no opinions, and reading it
+        // again would repeat its diagnostics.
+        let mut listed: HashSet<PathBuf> = HashSet::new();
+        let mut repeats = 0usize;
         for (asset, span) in sub_layers {
+            if !listed.insert(Layers::key(&asset.resolved)) {
+                if repeats == 0 {
+                    diags.push(
+                        Diagnostic::warning(format!("`{}` is listed more than once in subLayers", asset.authored))
+                            .at(span, "listed again here; repeats are ignored"),
+                    );
+                }
+                repeats += 1;
+                continue;
+            }
             if let Some(sub) = self.load(&asset.resolved, span, chain, sources, diags)
                 && let Some(sub_stack) = self.list.get(sub).map(|l| l.stack.clone())
             {
@@ -547,6 +568,9 @@ struct Pass<'l> {
     prims: Vec<Prim>,
     roots: Vec<PrimId>,
     by_path: HashMap<String, PrimId>,
+    /// Arcs whose cycle or size error was reported: each authored arc is reported once,
+    /// not once per prim that reaches it (every descendant of a prim re-walks its arcs).
+    reported_arcs: HashSet<Span>,
 }
 
 impl<'l> Pass<'l> {
@@ -559,6 +583,7 @@ impl<'l> Pass<'l> {
             prims: Vec::new(),
             roots: Vec::new(),
             by_path: HashMap::new(),
+            reported_arcs: HashSet::new(),
         }
     }
 
@@ -774,15 +799,20 @@ impl<'l> Pass<'l> {
     ) -> Option<Node<'l>> {
         if ancestors.iter().any(|(s, p)| *s == stack && *p == site) {
             let what = if arc == Arc::Inherit { "inherit" } else { "reference" };
-            self.diags.push(
-                Diagnostic::error(format!("{what} cycle: `{site}` depends on itself"))
-                    .at(span, format!("this {what} leads back to a prim that is being composed")),
-            );
+            if self.reported_arcs.insert(span) {
+                self.diags.push(
+                    Diagnostic::error(format!("{what} cycle: `{site}` depends on itself"))
+                        .at(span, format!("this {what} leads back to a prim that is being composed")),
+                );
+            }
             return None;
         }
         if ancestors.len() > 64 || from.count() > MAX_NODES {
-            self.diags
-                .push(Diagnostic::error("composition is too deep or too large").at(span, "while composing this arc"));
+            if self.reported_arcs.insert(span) {
+                self.diags.push(
+                    Diagnostic::error("composition is too deep or too large").at(span, "while composing this arc"),
+                );
+            }
             return None;
         }
         let specs = self.specs_at(stack, &site);
