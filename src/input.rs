@@ -15,7 +15,8 @@
 
 use std::fmt;
 use std::io::Read;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Default limit on the size of any one input file: 256 MiB. The largest scenes and
@@ -155,7 +156,58 @@ pub fn read_bytes_limited(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputE
     if bytes.len() as u64 > max_bytes {
         return Err(InputError::TooLarge { size: bytes.len() as u64, limit: max_bytes });
     }
+    record_read(path, &meta);
     Ok(bytes)
+}
+
+/// One file that was read: its canonical path and, on Unix, its device and inode (which
+/// also catch a hard link or a second path to it).
+#[derive(Clone, Debug, PartialEq, Eq)]
+struct FileIdentity {
+    path: PathBuf,
+    device_inode: Option<(u64, u64)>,
+}
+
+impl FileIdentity {
+    fn of(path: &Path, meta: &std::fs::Metadata) -> FileIdentity {
+        #[cfg(unix)]
+        let device_inode = {
+            use std::os::unix::fs::MetadataExt;
+            Some((meta.dev(), meta.ino()))
+        };
+        #[cfg(not(unix))]
+        let device_inode = {
+            let _ = meta;
+            None
+        };
+        FileIdentity { path: std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()), device_inode }
+    }
+
+    fn same_file(&self, other: &FileIdentity) -> bool {
+        match (self.device_inode, other.device_inode) {
+            (Some(a), Some(b)) => a == b,
+            _ => self.path == other.path,
+        }
+    }
+}
+
+/// Every input file this process has read, so outputs can be checked against them.
+static FILES_READ: Mutex<Vec<FileIdentity>> = Mutex::new(Vec::new());
+
+fn record_read(path: &Path, meta: &std::fs::Metadata) {
+    let identity = FileIdentity::of(path, meta);
+    let mut files = FILES_READ.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    if !files.contains(&identity) {
+        files.push(identity);
+    }
+}
+
+/// Whether `path` names a file this process has read as an input (a scene, layer, substance
+/// file, texture or dome map), through any path or link: writing it would destroy an input.
+pub fn was_read(path: &Path) -> bool {
+    let Ok(meta) = std::fs::metadata(path) else { return false };
+    let identity = FileIdentity::of(path, &meta);
+    FILES_READ.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).iter().any(|f| f.same_file(&identity))
 }
 
 /// Reads the whole of `path` under the current [`limits`].
@@ -185,6 +237,28 @@ mod tests {
         assert!(matches!(read_text(&path), Err(InputError::NotText)));
         let missing = read_bytes(&dir.path().join("missing")).unwrap_err();
         assert_eq!(missing.to_string(), "No such file or directory (os error 2)");
+    }
+
+    #[test]
+    fn files_read_are_remembered_through_any_path() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("input.usda");
+        std::fs::write(&path, "#usda 1.0\n").unwrap();
+        let other = dir.path().join("other.exr");
+        std::fs::write(&other, "x").unwrap();
+        assert!(!was_read(&path));
+        read_text(&path).unwrap();
+        assert!(was_read(&path) && !was_read(&other));
+        assert!(was_read(&dir.path().join(".").join("input.usda")));
+        #[cfg(unix)]
+        {
+            let link = dir.path().join("link.exr");
+            std::os::unix::fs::symlink(&path, &link).unwrap();
+            let hard = dir.path().join("hard.exr");
+            std::fs::hard_link(&path, &hard).unwrap();
+            assert!(was_read(&link) && was_read(&hard));
+        }
+        assert!(!was_read(&dir.path().join("missing.exr")));
     }
 
     #[test]

@@ -136,6 +136,12 @@ enum BenchCommand {
 
 fn main() -> ExitCode {
     let args = Args::parse();
+    // Interrupted (Ctrl-C, SIGTERM, SIGHUP): delete half-written outputs, then exit as a
+    // signal-killed process would. ctrlc runs this on its own thread, not in the handler.
+    let _ = ctrlc::set_handler(|| {
+        strata::render::output::remove_temporary_files();
+        std::process::exit(130);
+    });
     let defaults = strata::input::InputLimits::default();
     strata::input::set_limits(strata::input::InputLimits {
         max_file_bytes: args.max_input_size.unwrap_or(defaults.max_file_bytes),

@@ -96,9 +96,14 @@ pub fn build_with(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagnostics) 
             _ => {}
         }
         if let Some(p) = out.beyond_extent {
+            // 1e38 reads better than its 39 digits.
+            let coordinate = |x: f64| if x.abs() < 1e6 { format!("{x}") } else { format!("{x:e}") };
             let mut d = Diagnostic::error(format!(
                 "`{}` reaches ({}, {}, {}), beyond the scene extent of ±{MAX_EXTENT:e} units",
-                prim.path, p.x, p.y, p.z
+                prim.path,
+                coordinate(p.x),
+                coordinate(p.y),
+                coordinate(p.z)
             ))
             .at(prim.span, "this prim");
             // Point at the nearest transform that placed it, when one did.

@@ -33,5 +33,5 @@ mod tests;
 
 pub use film::{Channel, ChannelData, Image, Progress, RenderError, RenderSettings, RenderStats, render};
 pub use integrator::LayerMode;
-pub use output::{OutputError, write_exr, write_outputs, write_png};
+pub use output::{OutputError, PreparedOutputs, prepare_outputs, write_exr, write_outputs, write_png};
 pub use scene::Scene;
