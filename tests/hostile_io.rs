@@ -359,3 +359,37 @@ fn temporaries_of_killed_processes_are_removed_by_the_next_run() {
     assert!(!stale.exists() && unrelated.exists());
     assert!(exr.exists() && exr.with_extension("png").exists());
 }
+
+#[test]
+fn shader_faults_are_counted_and_located_never_fatal() {
+    // `/Bad`'s material indexes out of bounds on its upper half; `/Good` renders normally.
+    let dir = tempfile::tempdir().unwrap();
+    let exr = dir.path().join("fault.exr");
+    for backend in ["jit", "interp"] {
+        let out = strata(&[
+            "render",
+            "tests/in/hostile/shader_fault.usda",
+            "--res",
+            "16x16",
+            "--spp",
+            "2",
+            "--threads",
+            "2",
+            "--backend",
+            backend,
+            "-o",
+            exr.to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{stderr}");
+        assert!(stderr.contains("discarded: a shader indexed an array out of bounds"), "{stderr}");
+        assert!(
+            stderr.contains(
+                "first array index out of bounds: prim `/Bad`, material 1, slot `010`, pixel (11, 5) sample 1"
+            ),
+            "the same first occurrence from either backend, whatever the threads: {stderr}"
+        );
+        assert!(!stderr.contains("/Good"), "{stderr}");
+        assert!(exr.exists());
+    }
+}
