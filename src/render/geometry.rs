@@ -21,6 +21,12 @@ const SEGMENTS: usize = 128;
 /// the BVH builder crawl while 1e38 crashed it. A prim that reaches past it is an error.
 pub const MAX_EXTENT: f64 = 1e7;
 
+/// The most triangles a scene may have: 2^25 (33.5 million, about 3.5 GB of triangles plus
+/// their BVH). Implicit surfaces are tessellated into 16 384 triangles each, so a 50 MB
+/// scene of 137 000 spheres asked for 2.2 billion triangles and was killed by the kernel; past
+/// this budget the scene is an error naming the first prim that did not fit.
+pub const MAX_TRIANGLES: usize = 1 << 25;
+
 /// One world-space triangle.
 #[derive(Clone, Copy, Debug)]
 pub struct Triangle {
@@ -80,20 +86,45 @@ pub fn build(stage: &Stage, diags: &mut Diagnostics) -> Geometry {
 
 /// As [`build`], with transforms already computed.
 pub fn build_with(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagnostics) -> Geometry {
+    build_within(stage, xforms, MAX_TRIANGLES, diags)
+}
+
+/// As [`build_with`], with a triangle budget other than [`MAX_TRIANGLES`] (for tests).
+fn build_within(stage: &Stage, xforms: &[PrimXform], budget: usize, diags: &mut Diagnostics) -> Geometry {
     let mut geometry = Geometry::default();
     for (id, prim) in stage.depth_first() {
         let xf = xforms[id.0 as usize];
         if xf.hidden || !is_renderable(prim) {
             continue;
         }
+
         let index = geometry.prims.len() as u32;
-        let mut out = Emitter { geometry: &mut geometry, m: xf.world, prim: index, beyond_extent: None };
+        let mut out = Emitter {
+            geometry: &mut geometry,
+            m: xf.world,
+            prim: index,
+            beyond_extent: None,
+            budget,
+            over_budget: false,
+        };
         match prim.type_name.as_deref() {
             Some("Mesh") => mesh(prim, &mut out, diags),
             Some("Sphere") => sphere(prim, &mut out, diags),
             Some("Cube") => cube(prim, &mut out, diags),
             Some("Cylinder") => cylinder(prim, &mut out, diags),
             _ => {}
+        }
+        if out.over_budget {
+            diags.push(
+                Diagnostic::error(format!(
+                    "the scene has more than {budget} triangles; `{}` and the prims after it do not fit",
+                    prim.path
+                ))
+                .at(prim.span, "the first prim past the triangle budget")
+                .note("implicit surfaces (Sphere, Cylinder) are tessellated into up to 16384 triangles each"),
+            );
+            geometry.prims.push(GeomPrim { path: prim.path.clone(), span: prim.span });
+            break;
         }
         if let Some(p) = out.beyond_extent {
             // 1e38 reads better than its 39 digits.
@@ -135,6 +166,10 @@ struct Emitter<'g> {
     prim: u32,
     /// The first world-space point past [`MAX_EXTENT`] (or non-finite), if any.
     beyond_extent: Option<DVec3>,
+    /// The most triangles the scene may have ([`MAX_TRIANGLES`]).
+    budget: usize,
+    /// A triangle was dropped because the scene reached its budget.
+    over_budget: bool,
 }
 
 impl Emitter<'_> {
@@ -144,6 +179,11 @@ impl Emitter<'_> {
         // `!(x <= MAX)` also catches NaN.
         if let Some(far) = world.iter().find(|w| !(w.abs().max_element() <= MAX_EXTENT)) {
             self.beyond_extent.get_or_insert(*far);
+            return;
+        }
+        if self.geometry.triangles.len() >= self.budget {
+            // Reported by `build_with` after this prim; the memory stays bounded.
+            self.over_budget = true;
             return;
         }
         let wp = world.map(|p| p.as_vec3());
@@ -488,6 +528,24 @@ def Xform "Far" {{
                 .iter()
                 .any(|d| d.severity == crate::diag::Severity::Error && d.message.contains("beyond the scene extent"))
         );
+    }
+
+    #[test]
+    fn triangles_past_the_budget_are_an_error_not_an_allocation() {
+        // 137 000 implicit spheres (16 384 triangles each) were killed by the kernel at 24 GB.
+        let mut text = String::from("#usda 1.0\n");
+        for i in 0..5 {
+            text += &format!("def Sphere \"S{i}\" {{}}\n");
+        }
+        let (stage, mut diags) = stage(&text);
+        let xforms = world_transforms(&stage, &mut diags);
+        let per_sphere = build_within(&stage, &xforms, usize::MAX, &mut diags).triangles.len() / 5;
+        let g = build_within(&stage, &xforms, 2 * per_sphere + 10, &mut diags);
+        assert_eq!(g.triangles.len(), 2 * per_sphere + 10, "bounded by the budget");
+        let errors: Vec<&Diagnostic> =
+            diags.items().iter().filter(|d| d.severity == crate::diag::Severity::Error).collect();
+        assert_eq!(errors.len(), 1, "{errors:?}");
+        assert!(errors[0].message.contains("`/S2` and the prims after it do not fit"), "{}", errors[0].message);
     }
 
     #[test]
