@@ -176,8 +176,8 @@ impl Emitter<'_> {
     /// Emits one triangle given in local space (`n` in local space, not necessarily unit).
     fn emit(&mut self, p: [DVec3; 3], n: Option<[DVec3; 3]>, uv: Option<[Vec2; 3]>) {
         let world = p.map(|p| self.m.transform_point3(p));
-        // `!(x <= MAX)` also catches NaN.
-        if let Some(far) = world.iter().find(|w| !(w.abs().max_element() <= MAX_EXTENT)) {
+        // Non-finite points (NaN included) are beyond any extent too.
+        if let Some(far) = world.iter().find(|w| !w.is_finite() || w.abs().max_element() > MAX_EXTENT) {
             self.beyond_extent.get_or_insert(*far);
             return;
         }
