@@ -160,12 +160,13 @@ pub fn read_bytes_limited(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputE
     Ok(bytes)
 }
 
-/// One file that was read: its canonical path and, on Unix, its device and inode (which
-/// also catch a hard link or a second path to it).
+/// One file that was read: its canonical path and, on Unix, its device, inode and
+/// modification time (which also catch a hard link or a second path to it; the time tells a
+/// reused inode of a deleted input from the input itself).
 #[derive(Clone, Debug, PartialEq, Eq)]
 struct FileIdentity {
     path: PathBuf,
-    device_inode: Option<(u64, u64)>,
+    device_inode: Option<(u64, u64, i64, i64)>,
 }
 
 impl FileIdentity {
@@ -173,7 +174,7 @@ impl FileIdentity {
         #[cfg(unix)]
         let device_inode = {
             use std::os::unix::fs::MetadataExt;
-            Some((meta.dev(), meta.ino()))
+            Some((meta.dev(), meta.ino(), meta.mtime(), meta.mtime_nsec()))
         };
         #[cfg(not(unix))]
         let device_inode = {
@@ -184,10 +185,7 @@ impl FileIdentity {
     }
 
     fn same_file(&self, other: &FileIdentity) -> bool {
-        match (self.device_inode, other.device_inode) {
-            (Some(a), Some(b)) => a == b,
-            _ => self.path == other.path,
-        }
+        self.path == other.path || self.device_inode.is_some() && self.device_inode == other.device_inode
     }
 }
 
