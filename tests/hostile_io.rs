@@ -393,3 +393,16 @@ fn shader_faults_are_counted_and_located_never_fatal() {
         assert!(exr.exists());
     }
 }
+
+#[test]
+fn compile_output_naming_its_source_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let ash = dir.path().join("m.ash");
+    let source = "substance m { node d = diffuse(); surface = d.bsdf; }\n";
+    std::fs::write(&ash, source).unwrap();
+    let out = strata(&["compile", ash.to_str().unwrap(), "-o", ash.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("refusing to overwrite it"));
+    assert_eq!(std::fs::read_to_string(&ash).unwrap(), source);
+    assert!(temporaries(dir.path()).is_empty());
+}
