@@ -301,6 +301,15 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         eprintln!("error: the output must be an .exr file, not `{}`", args.output.display());
         return Err(Failure);
     }
+    // Both outputs' temporaries are created before anything else: an unwritable directory,
+    // or an `OUT.png` that is a directory, fails now rather than after the render.
+    let outputs = match crate::render::prepare_outputs(&args.output) {
+        Ok(outputs) => outputs,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return Err(Failure);
+        }
+    };
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
     let compiled = compile_scene(
@@ -315,6 +324,8 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         .and_then(|c| crate::render::Scene::from_stage(&c.stage, &|p| c.prim_material.get(p).copied(), &mut diags));
     report(&diags, &sources)?;
     let (Some(CompiledScene { materials, compiler, .. }), Some(scene)) = (compiled, scene) else { return Err(Failure) };
+    // Every input (layers, substance files, textures, dome maps) has been read by now.
+    refuse_to_overwrite_inputs(&[outputs.exr_path(), outputs.png_path()])?;
     if args.stats {
         eprintln!("compile ({}): {}", args.backend, compiler.stats);
     }
@@ -337,7 +348,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         bar.finish_and_clear();
     }
     let seconds = start.elapsed().as_secs_f64();
-    let png = match crate::render::write_outputs(&image, &args.output) {
+    let png = match outputs.write(&image) {
         Ok(png) => png,
         Err(e) => {
             eprintln!("error: {e}");
@@ -356,6 +367,18 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
     );
     if args.stats || stats.invalid_samples() > 0 {
         eprintln!("{stats}");
+    }
+    Ok(())
+}
+
+/// Fails if any of `outputs` is a file this process read as an input: `-o` naming the
+/// scene's texture (or any other input) would destroy it.
+fn refuse_to_overwrite_inputs(outputs: &[&Path]) -> Result<(), Failure> {
+    for output in outputs {
+        if crate::input::was_read(output) {
+            eprintln!("error: `{}` is an input of this run; refusing to overwrite it", output.display());
+            return Err(Failure);
+        }
     }
     Ok(())
 }
@@ -472,6 +495,7 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
         }
     };
     let header_path = output.with_extension("h");
+    refuse_to_overwrite_inputs(&[output, &header_path])?;
     for (path, bytes) in [(output, object.as_slice()), (header_path.as_path(), header.as_bytes())] {
         if let Err(e) = write_atomically(path, bytes) {
             eprintln!("error: cannot write {}: {e}", path.display());
@@ -488,16 +512,9 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
     Ok(())
 }
 
-/// Writes a file whole or not at all: a temporary file beside it, then a rename.
+/// Writes a file whole or not at all: a fsynced temporary file beside it, then a rename.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().ok_or_else(|| std::io::Error::other("not a file path"))?;
-    let tmp = dir.join(format!(".{}.tmp{}", name.to_string_lossy(), std::process::id()));
-    let result = std::fs::write(&tmp, bytes).and_then(|_| std::fs::rename(&tmp, path));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    crate::render::output::write_file_atomically(path, bytes).map_err(|e| std::io::Error::other(e.message))
 }
 
 /// `strata fuzz`: runs the fuzzer and prints its report; fails if any input failed.

@@ -4,6 +4,7 @@
 //! - [`diag`]: source files, spans and diagnostics shared by every stage; [`text`]: scanning
 //!   loops both lexers share.
 //! - [`front`]: substance files (`.ash`) → checked node types and graphs.
+//! - [`input`]: bounded reads of every input file (scenes, substances, textures).
 //! - [`scene`]: USD ASCII scenes → a composed prim hierarchy.
 //! - [`compose`]: slot bindings → one composed material per renderable prim.
 //! - [`ir`]: the wired IR of a composed material, its passes and text form.
@@ -28,6 +29,7 @@ pub mod compose;
 pub mod diag;
 pub mod front;
 pub mod fuzz;
+pub mod input;
 pub mod ir;
 pub mod layering;
 pub mod render;

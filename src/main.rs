@@ -16,6 +16,14 @@ use strata::render::{LayerMode, RenderSettings};
 struct Args {
     #[command(subcommand)]
     command: Command,
+    /// Largest input file read (scene, layer, substance, texture), in bytes; K, M and G
+    /// suffixes are binary multiples. Default 256M.
+    #[arg(long, global = true, value_name = "BYTES", value_parser = parse_size)]
+    max_input_size: Option<u64>,
+    /// Largest texture or dome map decoded, in pixels (checked from its header first).
+    /// Default 134217728 (16384 x 8192).
+    #[arg(long, global = true, value_name = "PIXELS", value_parser = parse_size)]
+    max_texture_pixels: Option<u64>,
 }
 
 #[derive(Subcommand)]
@@ -168,6 +176,17 @@ enum BenchCommand {
 
 fn main() -> ExitCode {
     let args = Args::parse();
+    // Interrupted (Ctrl-C, SIGTERM, SIGHUP): delete half-written outputs, then exit as a
+    // signal-killed process would. ctrlc runs this on its own thread, not in the handler.
+    let _ = ctrlc::set_handler(|| {
+        strata::render::output::remove_temporary_files();
+        std::process::exit(130);
+    });
+    let defaults = strata::input::InputLimits::default();
+    strata::input::set_limits(strata::input::InputLimits {
+        max_file_bytes: args.max_input_size.unwrap_or(defaults.max_file_bytes),
+        max_texture_pixels: args.max_texture_pixels.unwrap_or(defaults.max_texture_pixels),
+    });
     let result = match args.command {
         Command::Layers { scene, json } => cli::layers(scene.as_deref(), json),
         Command::Ir { scene, prim, no_optimize, stats, lowered } => {
@@ -258,4 +277,17 @@ fn parse_resolution(text: &str) -> Result<(usize, usize), String> {
         if (1..=16384).contains(&n) { Ok(n) } else { Err(format!("{n} is outside 1..=16384")) }
     };
     Ok((parse(w)?, parse(h)?))
+}
+
+/// Parses a count with an optional binary suffix: `1000`, `64K`, `512M`, `2G`.
+fn parse_size(text: &str) -> Result<u64, String> {
+    let text = text.trim();
+    let (digits, shift) = match text.char_indices().last() {
+        Some((i, 'k' | 'K')) => (&text[..i], 10),
+        Some((i, 'm' | 'M')) => (&text[..i], 20),
+        Some((i, 'g' | 'G')) => (&text[..i], 30),
+        _ => (text, 0),
+    };
+    let n: u64 = digits.parse().map_err(|_| format!("`{text}` is not a size (e.g. 1000, 64K, 512M, 2G)"))?;
+    n.checked_mul(1 << shift).ok_or_else(|| format!("`{text}` is too large"))
 }

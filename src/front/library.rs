@@ -57,7 +57,7 @@ impl Library {
             }
             let read = match crate::scenes::embedded(&path) {
                 Some(text) => Ok(text.to_string()),
-                None => std::fs::read_to_string(&path),
+                None => crate::input::read_text(&path),
             };
             let text = match read {
                 Ok(text) => text,

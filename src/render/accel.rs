@@ -11,6 +11,7 @@ use obvhs::cwbvh::CwBvh;
 use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::ray::{Ray, RayHit};
 use obvhs::{Boundable, BvhBuildParams};
+use std::collections::HashMap;
 use std::time::Duration;
 
 /// A closest hit.
@@ -40,27 +41,77 @@ pub struct Accel {
     bvh: Option<CwBvh>,
     triangles: Vec<Triangle>,
     shapes: Vec<Shape>,
+    /// The BVH's primitives are groups of primitives with bit-identical bounding boxes:
+    /// group `g` holds `group_members[group_start[g]..group_start[g + 1]]`, primitive indices
+    /// as in [`Hit::index`].
+    group_start: Vec<u32>,
+    group_members: Vec<u32>,
+}
+
+/// A primitive's box, padded, as exact bits (the key that groups coincident primitives);
+/// `None` when it is not finite.
+fn padded_box(lo: Vec3, hi: Vec3) -> Option<[u32; 6]> {
+    if !lo.is_finite() || !hi.is_finite() {
+        return None;
+    }
+    // obvhs' quantised CWBVH nodes can lose a flat (zero-thickness) box entirely, e.g. a
+    // scene that is one axis-aligned plane, so every box gets a thickness. The padding is
+    // relative to the primitive's own coordinates, not the scene's: padding by the scene's
+    // size made every triangle of a small object far from the origin (or in a scene with
+    // one distant object) the same box, on which the PLOC builder is quadratic.
+    let pad = lo.abs().max(hi.abs()).max_element().max(f32::MIN_POSITIVE) * 1e-6;
+    let (lo, hi) = (lo - Vec3::splat(pad), hi + Vec3::splat(pad));
+    Some([lo.x, lo.y, lo.z, hi.x, hi.y, hi.z].map(f32::to_bits))
 }
 
 impl Accel {
     /// Builds a BVH over `triangles` and `shapes` (none needed when there are none).
+    /// Primitives with non-finite bounds are kept (indices stay valid) but can never be hit;
+    /// the geometry stage reports them before this.
     pub fn new(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Accel {
-        let mut boxes: Vec<(Vec3, Vec3)> =
-            triangles.iter().map(|t| (t.p[0].min(t.p[1]).min(t.p[2]), t.p[0].max(t.p[1]).max(t.p[2]))).collect();
-        boxes.extend(shapes.iter().map(Shape::world_bounds));
+        // Primitives with bit-identical boxes (copies of one mesh at one place) become one BVH
+        // primitive: PLOC merges only mutually-nearest pairs, and among n equal boxes every
+        // pass merges one pair, so n coincident copies cost O(n²) to build.
+        let bounds = triangles
+            .iter()
+            .map(|t| (t.p[0].min(t.p[1]).min(t.p[2]), t.p[0].max(t.p[1]).max(t.p[2])))
+            .chain(shapes.iter().map(Shape::world_bounds));
+        let mut group_of_box: HashMap<[u32; 6], u32> = HashMap::new();
+        let mut boxes: Vec<Padded> = Vec::new();
+        let mut group_of_primitive: Vec<u32> = Vec::with_capacity(triangles.len() + shapes.len());
+        for (lo, hi) in bounds {
+            let group = match padded_box(lo, hi) {
+                Some(key) => *group_of_box.entry(key).or_insert_with(|| {
+                    let [lx, ly, lz, hx, hy, hz] = key.map(f32::from_bits);
+                    boxes.push(Padded(Aabb::new(Vec3A::new(lx, ly, lz), Vec3A::new(hx, hy, hz))));
+                    boxes.len() as u32 - 1
+                }),
+                None => u32::MAX,
+            };
+            group_of_primitive.push(group);
+        }
+        // Counting sort of primitive indices by group: the groups' lists, back to back.
+        let mut group_start = vec![0u32; boxes.len() + 1];
+        for &g in group_of_primitive.iter().filter(|&&g| g != u32::MAX) {
+            group_start[g as usize + 1] += 1;
+        }
+        for g in 0..boxes.len() {
+            group_start[g + 1] += group_start[g];
+        }
+        let mut next = group_start.clone();
+        let mut group_members = vec![0u32; group_start[boxes.len()] as usize];
+        for (index, &g) in group_of_primitive.iter().enumerate() {
+            if g != u32::MAX {
+                group_members[next[g as usize] as usize] = index as u32;
+                next[g as usize] += 1;
+            }
+        }
         let bvh = if boxes.is_empty() {
             None
         } else {
-            // Boxes are padded slightly: obvhs' quantised CWBVH nodes can lose a flat
-            // (zero-thickness) box entirely, e.g. a scene that is one axis-aligned plane.
-            let scale =
-                boxes.iter().fold(1.0f32, |m, (lo, hi)| m.max(lo.abs().max_element()).max(hi.abs().max_element()));
-            let pad = Vec3A::splat(scale * 1e-6);
-            let boxes: Vec<Padded> =
-                boxes.iter().map(|&(lo, hi)| Padded(Aabb::new(Vec3A::from(lo) - pad, Vec3A::from(hi) + pad))).collect();
             Some(build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut Duration::default()))
         };
-        Accel { bvh, triangles, shapes }
+        Accel { bvh, triangles, shapes, group_start, group_members }
     }
 
     /// The triangles, in the order given to [`Accel::new`].
@@ -103,6 +154,13 @@ impl Accel {
         }
     }
 
+    /// The primitives of BVH primitive `id`.
+    #[inline]
+    fn group(&self, bvh: &CwBvh, id: usize) -> &[u32] {
+        let g = bvh.primitive_indices[id] as usize;
+        &self.group_members[self.group_start[g] as usize..self.group_start[g + 1] as usize]
+    }
+
     /// The closest hit of the ray `o + t d`, `t` in `(tmin, tmax)`. `d` must be unit length.
     pub fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
         let bvh = self.bvh.as_ref()?;
@@ -116,14 +174,14 @@ impl Accel {
         let mut best: Option<Hit> = None;
         let mut hit = RayHit::none();
         bvh.ray_traverse(ray, &mut hit, |r, id| {
-            let index = bvh.primitive_indices[id];
-            match self.hit_primitive(&pre, o, d, index, tmin, r.tmax) {
-                Some((t, b1, b2)) => {
+            let mut closest = f32::INFINITY;
+            for &index in self.group(bvh, id) {
+                if let Some((t, b1, b2)) = self.hit_primitive(&pre, o, d, index, tmin, r.tmax.min(closest)) {
                     best = Some(Hit { t, index, b1, b2 });
-                    t
+                    closest = t;
                 }
-                None => f32::INFINITY,
             }
+            closest
         });
         best
     }
@@ -139,8 +197,10 @@ impl Accel {
         // wrong one and miss everything, so negative zeros become +0.0 (-0 + 0 = +0).
         let ray = Ray::new(o.into(), (d + Vec3::ZERO).into(), tmin, tmax);
         !bvh.ray_traverse_miss(ray, |r, id| {
-            let index = bvh.primitive_indices[id];
-            self.hit_primitive(&pre, o, d, index, tmin, r.tmax).map_or(f32::INFINITY, |h| h.0)
+            self.group(bvh, id)
+                .iter()
+                .find_map(|&index| self.hit_primitive(&pre, o, d, index, tmin, r.tmax))
+                .map_or(f32::INFINITY, |h| h.0)
         })
     }
 }
@@ -267,6 +327,33 @@ mod tests {
             let o = Vec3::new(x, x, 1.0);
             assert!(accel.intersect(o, -Vec3::Z, 0.0, f32::INFINITY).is_some(), "leak at {x}");
         }
+    }
+
+    #[test]
+    fn coincident_copies_build_fast_and_the_first_closest_copy_is_hit() {
+        // Copies of one triangle have identical boxes, on which PLOC merged one pair per pass:
+        // 20 000 copies took minutes. Grouped, they are one BVH primitive.
+        let t = tri([Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)]);
+        let nearer = tri([Vec3::new(-1.0, -1.0, 1.0), Vec3::new(1.0, -1.0, 1.0), Vec3::new(0.0, 1.0, 1.0)]);
+        let mut triangles = vec![t; 20_000];
+        triangles.push(nearer);
+        triangles.extend(vec![nearer; 20_000]);
+        let accel = Accel::new(triangles, vec![]);
+        let hit = accel.intersect(Vec3::ZERO, Vec3::Z, 0.0, f32::INFINITY).expect("hit");
+        assert_eq!(hit.index, 20_000, "the first of the coincident nearest triangles");
+        assert!(accel.occluded(Vec3::ZERO, Vec3::Z, 0.0, 1.5));
+        assert!(!accel.occluded(Vec3::ZERO, Vec3::Z, 0.0, 0.5));
+    }
+
+    #[test]
+    fn non_finite_triangles_are_never_hit_and_never_reach_the_builder() {
+        let bad = tri([Vec3::new(f32::NAN, 0.0, 1.0), Vec3::new(f32::INFINITY, 0.0, 1.0), Vec3::Y]);
+        let good = tri([Vec3::new(-1.0, -1.0, 1.0), Vec3::new(1.0, -1.0, 1.0), Vec3::new(0.0, 1.0, 1.0)]);
+        let accel = Accel::new(vec![bad, good], vec![]);
+        assert_eq!(accel.intersect(Vec3::ZERO, Vec3::Z, 0.0, f32::INFINITY).map(|h| h.index), Some(1));
+        let only_bad = Accel::new(vec![bad], vec![]);
+        assert!(only_bad.intersect(Vec3::ZERO, Vec3::Z, 0.0, f32::INFINITY).is_none());
+        assert_eq!(only_bad.triangles().len(), 1);
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //! (seed, pixel, sample) and are accumulated in sample order, which makes the image
 //! bit-identical whatever the thread count. Rows are rendered in parallel with rayon.
 
-use super::integrator::{ChannelMap, Context, Invalid, LayerMode, PathParams, Scratch};
+use super::integrator::{ChannelMap, Context, FaultSite, Invalid, LayerMode, PathParams, Scratch};
 use super::sampling::Rng;
 use super::scene::Scene;
 use crate::abi::{MaterialCode, ShaderError};
@@ -113,6 +113,77 @@ pub struct RenderStats {
     pub pass_through_limit: u64,
     /// Warnings about channel layout (same name, different kinds across materials).
     pub warnings: Vec<String>,
+    /// For each kind of shader fault that happened, where it first happened (in pixel order,
+    /// so the same whatever the thread count).
+    pub first_faults: Vec<FaultReport>,
+}
+
+/// A kind of shader fault that discards a sample.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FaultKind {
+    /// A loop ran past its iteration budget.
+    LoopBudget,
+    /// An array index was out of bounds.
+    OutOfBounds,
+    /// A closure parameter or shading normal was NaN or infinite.
+    NonFiniteClosure,
+}
+
+impl FaultKind {
+    const ALL: [FaultKind; 3] = [FaultKind::LoopBudget, FaultKind::OutOfBounds, FaultKind::NonFiniteClosure];
+
+    fn of(invalid: Invalid) -> FaultKind {
+        match invalid {
+            Invalid::Shader(ShaderError::LoopBudget) => FaultKind::LoopBudget,
+            Invalid::Shader(ShaderError::OutOfBounds) => FaultKind::OutOfBounds,
+            Invalid::NonFiniteClosure => FaultKind::NonFiniteClosure,
+        }
+    }
+}
+
+impl fmt::Display for FaultKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            FaultKind::LoopBudget => "loop budget exceeded",
+            FaultKind::OutOfBounds => "array index out of bounds",
+            FaultKind::NonFiniteClosure => "NaN/infinite closure value",
+        })
+    }
+}
+
+/// The first occurrence of one kind of shader fault.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FaultReport {
+    /// What failed.
+    pub kind: FaultKind,
+    /// The prim whose material failed.
+    pub prim: String,
+    /// Index of its material in the materials given to [`render`].
+    pub material: usize,
+    /// The layer's slot, when one layer's entry point failed.
+    pub slot: Option<String>,
+    /// The pixel `(x, y)` and camera sample.
+    pub pixel: (usize, usize),
+    /// The camera sample within the pixel.
+    pub sample: u32,
+}
+
+impl fmt::Display for FaultReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "first {}: prim `{}`, material {}", self.kind, self.prim, self.material)?;
+        if let Some(slot) = &self.slot {
+            write!(f, ", slot `{slot}`")?;
+        }
+        write!(f, ", pixel ({}, {}) sample {}", self.pixel.0, self.pixel.1, self.sample)
+    }
+}
+
+/// The first fault of a kind in a row, before prim and slot are looked up.
+#[derive(Clone, Copy, Debug)]
+struct RowFault {
+    site: FaultSite,
+    x: usize,
+    sample: u32,
 }
 
 impl RenderStats {
@@ -136,6 +207,9 @@ impl fmt::Display for RenderStats {
             if n > 0 {
                 write!(f, "; {n} {what}")?;
             }
+        }
+        for fault in &self.first_faults {
+            write!(f, "\n  {fault}")?;
         }
         Ok(())
     }
@@ -235,6 +309,8 @@ struct Row {
     depth: Vec<f32>,
     channels: Vec<f32>,
     stats: RenderStats,
+    /// The row's first fault of each [`FaultKind`] (indexed like `FaultKind::ALL`).
+    faults: [Option<RowFault>; 3],
 }
 
 /// Progress callback: `(rows done, rows total)`.
@@ -279,6 +355,7 @@ pub fn render(
             depth: vec![f32::INFINITY; w],
             channels: vec![0.0; w * channel_floats],
             stats: RenderStats::default(),
+            faults: [None; 3],
         };
         for x in 0..w {
             let pixel = (y * w + x) as u64;
@@ -324,9 +401,19 @@ pub fn render(
                         }
                     }
                     Ok(_) => row.stats.nonfinite_samples += 1,
-                    Err(Invalid::Shader(ShaderError::LoopBudget)) => row.stats.loop_budget_errors += 1,
-                    Err(Invalid::Shader(ShaderError::OutOfBounds)) => row.stats.out_of_bounds_errors += 1,
-                    Err(Invalid::NonFiniteClosure) => row.stats.nonfinite_closures += 1,
+                    Err(invalid) => {
+                        let kind = FaultKind::of(invalid);
+                        match kind {
+                            FaultKind::LoopBudget => row.stats.loop_budget_errors += 1,
+                            FaultKind::OutOfBounds => row.stats.out_of_bounds_errors += 1,
+                            FaultKind::NonFiniteClosure => row.stats.nonfinite_closures += 1,
+                        }
+                        // Where the failing shader ran: the integrator keeps `site` current.
+                        let first = &mut row.faults[kind as usize];
+                        if first.is_none() {
+                            *first = Some(RowFault { site: scratch.site, x, sample });
+                        }
+                    }
                 }
             }
             // Invalid samples count in the average as black (they are reported, not hidden).
@@ -369,7 +456,27 @@ pub fn render(
     let mut stats = RenderStats { warnings, ..RenderStats::default() };
     let n = w * h;
     let mut planes: Vec<Vec<f32>> = vec![Vec::with_capacity(n); 11 + channel_floats];
-    for row in &rows {
+    for (y, row) in rows.iter().enumerate() {
+        for (kind, fault) in FaultKind::ALL.into_iter().zip(row.faults) {
+            if let Some(fault) = fault
+                && !stats.first_faults.iter().any(|f| f.kind == kind)
+            {
+                let prim = fault.site.prim as usize;
+                let material = scene.prim_material.get(prim).copied().unwrap_or(0);
+                let slot = fault
+                    .site
+                    .layer
+                    .and_then(|l| Some(materials.get(material)?.info().layers.get(l as usize)?.slot.clone()));
+                stats.first_faults.push(FaultReport {
+                    kind,
+                    prim: scene.prims.get(prim).map(|p| p.path.clone()).unwrap_or_default(),
+                    material,
+                    slot,
+                    pixel: (fault.x, y),
+                    sample: fault.sample,
+                });
+            }
+        }
         let s = &row.stats;
         stats.samples += s.samples;
         stats.loop_budget_errors += s.loop_budget_errors;

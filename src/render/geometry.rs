@@ -12,6 +12,18 @@ use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::scene::{Attribute, Prim, Stage, Value};
 use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
 
+/// The largest world-space coordinate (absolute value, scene units, after every transform)
+/// geometry may have: 1e7. The renderer works in f32, whose spacing at 1e7 is already one
+/// unit, so detail and ray offsets break down beyond it; and far-apart geometry (1e13) made
+/// the BVH builder crawl while 1e38 crashed it. A prim that reaches past it is an error.
+pub const MAX_EXTENT: f64 = 1e7;
+
+/// The most triangles a scene may have: 2^25 (33.5 million, about 3.5 GB of triangles plus
+/// their BVH). Implicit surfaces are tessellated into 16 384 triangles each, so a 50 MB
+/// scene of 137 000 spheres asked for 2.2 billion triangles and was killed by the kernel; past
+/// this budget the scene is an error naming the first prim that did not fit.
+pub const MAX_TRIANGLES: usize = 1 << 25;
+
 /// One world-space triangle.
 #[derive(Clone, Copy, Debug)]
 pub struct Triangle {
@@ -77,14 +89,27 @@ pub fn build(stage: &Stage, diags: &mut Diagnostics) -> Geometry {
 
 /// As [`build`], with transforms already computed.
 pub fn build_with(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagnostics) -> Geometry {
+    build_within(stage, xforms, MAX_TRIANGLES, diags)
+}
+
+/// As [`build_with`], with a triangle budget other than [`MAX_TRIANGLES`] (for tests).
+fn build_within(stage: &Stage, xforms: &[PrimXform], budget: usize, diags: &mut Diagnostics) -> Geometry {
     let mut geometry = Geometry::default();
     for (id, prim) in stage.depth_first() {
         let xf = xforms[id.0 as usize];
         if xf.hidden || !is_renderable(prim) {
             continue;
         }
+
         let index = geometry.prims.len() as u32;
-        let mut out = Emitter { geometry: &mut geometry, m: xf.world, prim: index };
+        let mut out = Emitter {
+            geometry: &mut geometry,
+            m: xf.world,
+            prim: index,
+            beyond_extent: None,
+            budget,
+            over_budget: false,
+        };
         match prim.type_name.as_deref() {
             Some("Mesh") => mesh(prim, &mut out, diags),
             Some("Sphere") => sphere(prim, &mut out, diags),
@@ -94,6 +119,40 @@ pub fn build_with(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagnostics) 
             Some("Capsule") => capsule(prim, &mut out, diags),
             Some("Plane") => plane(prim, &mut out, diags),
             _ => {}
+        }
+        if out.over_budget {
+            diags.push(
+                Diagnostic::error(format!(
+                    "the scene has more than {budget} triangles; `{}` and the prims after it do not fit",
+                    prim.path
+                ))
+                .at(prim.span, "the first prim past the triangle budget")
+                .note("implicit surfaces (Sphere, Cylinder) are tessellated into up to 16384 triangles each"),
+            );
+            geometry.prims.push(GeomPrim { path: prim.path.clone(), span: prim.span });
+            break;
+        }
+        if let Some(p) = out.beyond_extent {
+            // 1e38 reads better than its 39 digits.
+            let coordinate = |x: f64| if x.abs() < 1e6 { format!("{x}") } else { format!("{x:e}") };
+            let mut d = Diagnostic::error(format!(
+                "`{}` reaches ({}, {}, {}), beyond the scene extent of ±{MAX_EXTENT:e} units",
+                prim.path,
+                coordinate(p.x),
+                coordinate(p.y),
+                coordinate(p.z)
+            ))
+            .at(prim.span, "this prim");
+            // Point at the nearest transform that placed it, when one did.
+            let mut placed_by = Some(prim);
+            while let Some(p) = placed_by {
+                if let Some(order) = p.attribute("xformOpOrder") {
+                    d = d.also(value_span(order), "placed by this transform (with its ancestors')");
+                    break;
+                }
+                placed_by = p.parent.map(|id| stage.prim(id));
+            }
+            diags.push(d.note("strata renders in f32: coordinates must be finite and within ±1e7 after transforms"));
         }
         geometry.prims.push(GeomPrim { path: prim.path.clone(), span: prim.span });
     }
@@ -111,12 +170,29 @@ struct Emitter<'g> {
     geometry: &'g mut Geometry,
     m: DMat4,
     prim: u32,
+    /// The first world-space point past [`MAX_EXTENT`] (or non-finite), if any.
+    beyond_extent: Option<DVec3>,
+    /// The most triangles the scene may have ([`MAX_TRIANGLES`]).
+    budget: usize,
+    /// A triangle was dropped because the scene reached its budget.
+    over_budget: bool,
 }
 
 impl Emitter<'_> {
     /// Emits one triangle given in local space (`n` in local space, not necessarily unit).
     fn emit(&mut self, p: [DVec3; 3], n: Option<[DVec3; 3]>, uv: Option<[Vec2; 3]>) {
-        let wp = p.map(|p| self.m.transform_point3(p).as_vec3());
+        let world = p.map(|p| self.m.transform_point3(p));
+        // Non-finite points (NaN included) are beyond any extent too.
+        if let Some(far) = world.iter().find(|w| !w.is_finite() || w.abs().max_element() > MAX_EXTENT) {
+            self.beyond_extent.get_or_insert(*far);
+            return;
+        }
+        if self.geometry.triangles.len() >= self.budget {
+            // Reported by `build_with` after this prim; the memory stays bounded.
+            self.over_budget = true;
+            return;
+        }
+        let wp = world.map(|p| p.as_vec3());
         let cross = (wp[1] - wp[0]).cross(wp[2] - wp[0]);
         let len2 = cross.length_squared();
         if len2.is_nan() || len2 <= 0.0 || !len2.is_finite() {
@@ -140,7 +216,14 @@ impl Emitter<'_> {
 
     /// Adds an analytic part built around z, turned so that z is the prim's `axis`.
     fn shape(&mut self, part: Part, axis: DMat4) {
-        match Shape::new(part, self.m * axis, self.prim) {
+        let m = self.m * axis;
+        // Its world box (the transformed corners of the object box) must lie within the extent.
+        let (lo, hi) = part.world_bounds(&m);
+        if let Some(far) = [lo, hi].into_iter().find(|w| !w.is_finite() || w.abs().max_element() > MAX_EXTENT) {
+            self.beyond_extent.get_or_insert(far);
+            return;
+        }
+        match Shape::new(part, m, self.prim) {
             Some(shape) => self.geometry.shapes.push(shape),
             None => self.geometry.degenerate += 1,
         }
@@ -412,6 +495,79 @@ fn plane(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
 mod tests {
     use super::*;
     use crate::render::xform::tests::stage;
+
+    /// Two cylinders, the second moved by `xform_ops` (USD text) through its parent.
+    fn far_apart(ops: &str) -> (Geometry, Vec<String>) {
+        let text = format!(
+            r#"#usda 1.0
+def Cylinder "Near" {{}}
+def Xform "Far" {{
+    {ops}
+    def Cylinder "C" {{}}
+}}"#
+        );
+        let (stage, mut diags) = stage(&text);
+        let g = build(&stage, &mut diags);
+        let messages = diags
+            .items()
+            .iter()
+            .filter(|d| d.severity == crate::diag::Severity::Error)
+            .map(|d| d.message.clone())
+            .collect();
+        (g, messages)
+    }
+
+    #[test]
+    fn geometry_beyond_the_extent_is_an_error_before_any_bvh() {
+        // 1e38 crashed the BVH builder; 1e13 took it 8 s; 1e300 was silently dropped as
+        // "degenerate" (infinite in f32).
+        for ops in [
+            "double3 xformOp:translate = (1e38, 0, 0)\n    uniform token[] xformOpOrder = [\"xformOp:translate\"]",
+            "double3 xformOp:translate = (0, -1e13, 0)\n    uniform token[] xformOpOrder = [\"xformOp:translate\"]",
+            // Finite in f64, infinite as the renderer's f32.
+            "double3 xformOp:scale = (1e300, 1e300, 1e300)\n    uniform token[] xformOpOrder = [\"xformOp:scale\"]",
+        ] {
+            let (g, errors) = far_apart(ops);
+            assert_eq!(errors.len(), 1, "{ops}: {errors:?}");
+            assert!(
+                errors[0].starts_with("`/Far/C` reaches (") && errors[0].contains("beyond the scene extent"),
+                "{errors:?}"
+            );
+            assert!(g.triangles.iter().all(|t| t.p.iter().all(|p| p.abs().max_element() <= MAX_EXTENT as f32)));
+        }
+        let (_, errors) = far_apart(
+            "double3 xformOp:translate = (0, 9e6, 0)\n    uniform token[] xformOpOrder = [\"xformOp:translate\"]",
+        );
+        assert!(errors.is_empty(), "within the extent: {errors:?}");
+        // A huge implicit surface without any transform.
+        let (stage, mut diags) = stage("#usda 1.0\ndef Sphere \"S\" { double radius = 1e30 }");
+        build(&stage, &mut diags);
+        assert!(
+            diags
+                .items()
+                .iter()
+                .any(|d| d.severity == crate::diag::Severity::Error && d.message.contains("beyond the scene extent"))
+        );
+    }
+
+    #[test]
+    fn triangles_past_the_budget_are_an_error_not_an_allocation() {
+        // 137 000 implicit spheres (16 384 triangles each, before spheres were analytic) were
+        // killed by the kernel at 24 GB. Cubes stand in for any triangle-making prim.
+        let mut text = String::from("#usda 1.0\n");
+        for i in 0..5 {
+            text += &format!("def Cube \"S{i}\" {{}}\n");
+        }
+        let (stage, mut diags) = stage(&text);
+        let xforms = world_transforms(&stage, &mut diags);
+        let per_sphere = build_within(&stage, &xforms, usize::MAX, &mut diags).triangles.len() / 5;
+        let g = build_within(&stage, &xforms, 2 * per_sphere + 10, &mut diags);
+        assert_eq!(g.triangles.len(), 2 * per_sphere + 10, "bounded by the budget");
+        let errors: Vec<&Diagnostic> =
+            diags.items().iter().filter(|d| d.severity == crate::diag::Severity::Error).collect();
+        assert_eq!(errors.len(), 1, "{errors:?}");
+        assert!(errors[0].message.contains("`/S2` and the prims after it do not fit"), "{}", errors[0].message);
+    }
 
     #[test]
     fn quad_is_two_triangles_with_normals_and_st() {

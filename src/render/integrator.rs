@@ -70,6 +70,17 @@ pub enum Invalid {
     NonFiniteClosure,
 }
 
+/// Where the shader that ran last was: the prim whose material it belongs to and, when a
+/// single layer's entry point ran, that layer. Kept current in [`Scratch::site`] (two stores
+/// per shading point, no allocation), so a failed sample can say where it failed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FaultSite {
+    /// Index of the prim in [`Scene::prims`].
+    pub prim: u32,
+    /// The layer, or `None` for entry points over every layer (masks, displacement).
+    pub layer: Option<u32>,
+}
+
 /// One evaluated layer at a shading point.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Lobe {
@@ -133,6 +144,8 @@ pub struct Scratch {
     material_channels: Vec<f32>,
     /// The sample's custom channels in the image's global layout.
     pub channels: Vec<f32>,
+    /// Where the last shader ran: read after a sample fails.
+    pub site: FaultSite,
 }
 
 impl Scratch {
@@ -149,6 +162,7 @@ impl Scratch {
             lobes: Vec::with_capacity(layers),
             material_channels: vec![0.0; floats],
             channels: vec![0.0; global_channels],
+            site: FaultSite::default(),
         }
     }
 }
@@ -188,6 +202,8 @@ struct SurfacePoint {
     dpdv: Vec3,
     uv: Vec2,
     material: usize,
+    /// Index of the prim in [`Scene::prims`].
+    prim: u32,
 }
 
 /// Surface geometry where the ray `o + t d` hit.
@@ -207,7 +223,7 @@ fn surface_point(accel: &Accel, scene: &Scene, o: Vec3, d: Vec3, hit: &Hit) -> S
             }
             let uv = tri.uv[0] * b0 + tri.uv[1] * hit.b1 + tri.uv[2] * hit.b2;
             let (dpdu, dpdv) = tangents(tri.p, tri.uv, ns);
-            SurfacePoint { p, ng, ns, dpdu, dpdv, uv, material: scene.prim_material[tri.prim as usize] }
+            SurfacePoint { p, ng, ns, dpdu, dpdv, uv, material: scene.prim_material[tri.prim as usize], prim: tri.prim }
         }
         Primitive::Shape(shape) => {
             let h = shape.surface(o, d, hit.t);
@@ -228,6 +244,7 @@ fn surface_point(accel: &Accel, scene: &Scene, o: Vec3, d: Vec3, hit: &Hit) -> S
                 dpdv,
                 uv: h.uv,
                 material: scene.prim_material[shape.prim as usize],
+                prim: shape.prim,
             }
         }
     }
@@ -284,6 +301,7 @@ impl Context<'_> {
         let material = self.materials[sp.material];
         let info = material.info();
         let nl = info.layers.len();
+        s.site = FaultSite { prim: sp.prim, layer: None };
         let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
         let mut g = self.globals(sp, facing, d);
         if nl == 0 {
@@ -312,11 +330,13 @@ impl Context<'_> {
                 None
             }
         };
+        s.site.layer = None;
         let bumped = bump(material, &g, &mut s.masks_du, &mut s.masks_dv, &mut s.disp)?;
         g.n = to_arr(bumped);
         s.lobes.clear();
         match picked {
             Some(i) => {
+                s.site.layer = Some(i as u32);
                 let lobe = self.lobe(material, &g, sp, d, i, 1.0)?;
                 s.lobes.push(lobe);
             }
@@ -324,6 +344,7 @@ impl Context<'_> {
                 let opaque: f32 = s.weights[..nl].iter().sum();
                 for i in (0..nl).rev() {
                     if s.weights[i] > 0.0 {
+                        s.site.layer = Some(i as u32);
                         let lobe = self.lobe(material, &g, sp, d, i, s.weights[i] / opaque)?;
                         s.lobes.push(lobe);
                     }
@@ -348,6 +369,7 @@ impl Context<'_> {
             if !map.is_empty() {
                 for k in 0..s.lobes.len() {
                     let (layer, weight) = (s.lobes[k].layer, s.lobes[k].weight);
+                    s.site.layer = Some(layer as u32);
                     material
                         .channels(&g, layer, &mut s.material_channels[..info.channel_floats])
                         .map_err(Invalid::Shader)?;
@@ -404,7 +426,7 @@ impl Context<'_> {
 
     /// Transmittance along a shadow segment: 0 behind an opaque surface, the product of
     /// transparencies across masked ones.
-    fn transmittance(&self, mut o: Vec3, d: Vec3, dist: f32) -> Result<f32, Invalid> {
+    fn transmittance(&self, mut o: Vec3, d: Vec3, dist: f32, site: &mut FaultSite) -> Result<f32, Invalid> {
         let accel = &self.scene.accel;
         if self.all_opaque {
             return Ok(if accel.occluded(o, d, 0.0, dist) { 0.0 } else { 1.0 });
@@ -417,6 +439,7 @@ impl Context<'_> {
             let material = self.materials[sp.material];
             let nl = material.info().layers.len();
             if nl > 0 {
+                *site = FaultSite { prim: sp.prim, layer: None };
                 let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
                 let g = self.globals(&sp, facing, d);
                 // Π(1 − m_i) over the layers that pick, from the top (`layering`).
@@ -455,7 +478,7 @@ impl Context<'_> {
         let side = if ng.dot(ls.wi) > 0.0 { ng } else { -ng };
         let o = offset_ray_origin(p, side);
         let dist = if ls.dist.is_finite() { ls.dist * (1.0 - 1e-4) } else { f32::INFINITY };
-        let tr = self.transmittance(o, ls.wi, dist)?;
+        let tr = self.transmittance(o, ls.wi, dist, &mut s.site)?;
         if tr <= 0.0 {
             return Ok(Vec3::ZERO);
         }

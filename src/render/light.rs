@@ -45,21 +45,15 @@ impl EnvMap {
         EnvMap { width, height, texels, distribution }
     }
 
-    /// Reads the first RGB(A) layer of an EXR file.
+    /// Reads the first RGB(A) layer of an EXR file (a bounded read, the header checked
+    /// against the texture pixel limit before decoding: see [`crate::input`]).
     pub fn load(path: &std::path::Path) -> Result<EnvMap, String> {
-        let image = exr::prelude::read_first_rgba_layer_from_file(
-            path,
-            |size, _| (size.width(), size.height(), vec![Vec3::ZERO; size.width() * size.height()]),
-            |(w, _, px): &mut (usize, usize, Vec<Vec3>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-                px[pos.y() * *w + pos.x()] = Vec3::new(r, g, b);
-            },
-        )
-        .map_err(|e| e.to_string())?;
-        let (w, h, texels) = image.layer_data.channel_data.pixels;
-        if w == 0 || h == 0 {
-            return Err("the image is empty".into());
-        }
-        let texels = texels.into_iter().map(|t| if t.is_finite() { t.max(Vec3::ZERO) } else { Vec3::ZERO }).collect();
+        let (w, h, texels) = crate::runtime::texture::read_rgb_exr(path)?;
+        let texels = texels
+            .into_iter()
+            .map(|[r, g, b]| Vec3::new(r, g, b))
+            .map(|t| if t.is_finite() { t.max(Vec3::ZERO) } else { Vec3::ZERO })
+            .collect();
         Ok(EnvMap::new(w, h, texels))
     }
 

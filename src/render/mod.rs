@@ -32,7 +32,9 @@ mod reference;
 #[cfg(test)]
 mod tests;
 
-pub use film::{Channel, ChannelData, Image, Progress, RenderError, RenderSettings, RenderStats, render};
+pub use film::{
+    Channel, ChannelData, FaultKind, FaultReport, Image, Progress, RenderError, RenderSettings, RenderStats, render,
+};
 pub use integrator::LayerMode;
-pub use output::{OutputError, write_exr, write_outputs, write_png};
+pub use output::{OutputError, PreparedOutputs, prepare_outputs, write_exr, write_outputs, write_png};
 pub use scene::Scene;

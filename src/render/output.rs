@@ -1,13 +1,23 @@
 //! Image files: one multi-layer EXR (single part, the channel names compositors expect) and
-//! a tone-mapped sRGB PNG preview. Both are written atomically: to a temporary file in the
-//! target's directory, then renamed over the target, so a failed write never leaves a
-//! partial file and never replaces an existing one.
+//! a tone-mapped sRGB PNG preview.
+//!
+//! Both are written atomically: into a temporary file beside the target (`.NAME.PID.tmp`),
+//! fsynced, then renamed over the target, so a failed or interrupted write never leaves a
+//! partial file and never replaces an existing one. [`prepare_outputs`] creates both
+//! temporaries before anything is rendered, so an unwritable directory or a `OUT.png` that is
+//! a directory fails at once, and [`PreparedOutputs::write`] renames only after both files
+//! are written: a failure leaves the previous `OUT.exr` and `OUT.png` as they were.
+//! Temporaries not yet renamed are listed so [`remove_temporary_files`] can delete them when
+//! the process is interrupted (the command line calls it on SIGINT/SIGTERM/SIGHUP); those of
+//! a process that was killed outright are removed by the next run writing the same target.
 
 use super::film::{ChannelData, Image};
 use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, WritableImage};
 use std::fmt;
-use std::io::Write;
+use std::fs::File;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
 /// A failed write.
 #[derive(Debug)]
@@ -26,23 +36,116 @@ impl fmt::Display for OutputError {
 
 impl std::error::Error for OutputError {}
 
-/// A temporary sibling of `path` that is removed unless committed.
+/// Temporary files created and not yet renamed into place or removed.
+static LIVE_TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+fn live_temporaries() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
+    // A panic elsewhere while holding the lock leaves a list that is still right.
+    LIVE_TEMPORARIES.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// Deletes every temporary output file this process has not yet renamed into place. Called
+/// when the process is interrupted; afterwards no output of this process is half-written.
+pub fn remove_temporary_files() {
+    for tmp in live_temporaries().drain(..) {
+        let _ = std::fs::remove_file(tmp);
+    }
+}
+
+/// The temporary name beside `target` for process `pid`.
+fn temporary_name(target: &Path, pid: u32) -> PathBuf {
+    let name = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    target.with_file_name(format!(".{name}.{pid}.tmp"))
+}
+
+/// Removes temporaries of `target` left by processes that no longer exist (killed outright,
+/// which no handler can catch). Only names of the exact `.NAME.PID.tmp` form are touched.
+fn remove_stale_temporaries(target: &Path) {
+    #[cfg(unix)]
+    {
+        let (Some(dir), Some(name)) = (target.parent(), target.file_name()) else { return };
+        let dir = if dir.as_os_str().is_empty() { Path::new(".") } else { dir };
+        let prefix = format!(".{}.", name.to_string_lossy());
+        let Ok(entries) = std::fs::read_dir(dir) else { return };
+        for entry in entries.flatten() {
+            let file_name = entry.file_name();
+            let file_name = file_name.to_string_lossy();
+            let Some(pid) = file_name.strip_prefix(&prefix).and_then(|rest| rest.strip_suffix(".tmp")) else {
+                continue;
+            };
+            let Ok(pid) = pid.parse::<i32>() else { continue };
+            if pid <= 0 || pid as u32 == std::process::id() {
+                continue;
+            }
+            // Signal 0 checks existence only; EPERM means it exists under another user.
+            // SAFETY: kill with signal 0 sends nothing and touches no memory.
+            let alive = unsafe { libc::kill(pid, 0) } == 0
+                || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM);
+            if !alive {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = target;
+}
+
+/// An open temporary sibling of a target file; removed unless committed.
 struct TempFile {
     tmp: PathBuf,
     target: PathBuf,
+    file: Option<File>,
     committed: bool,
 }
 
 impl TempFile {
-    fn new(target: &Path) -> TempFile {
-        let name = target.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        let tmp = target.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
-        TempFile { tmp, target: target.to_path_buf(), committed: false }
+    /// Checks that `target` can be replaced by a regular file (it is not a directory, a
+    /// device, ...) and creates the temporary beside it, which proves the directory writable.
+    fn create(target: &Path) -> Result<TempFile, OutputError> {
+        match std::fs::metadata(target) {
+            Ok(meta) if meta.is_dir() => return Err(error(target, "it is a directory")),
+            Ok(meta) if !meta.is_file() => return Err(error(target, "it exists and is not a regular file")),
+            _ => {}
+        }
+        if target.file_name().is_none() {
+            return Err(error(target, "not a file path"));
+        }
+        remove_stale_temporaries(target);
+        let tmp = temporary_name(target, std::process::id());
+        // A leftover of this very pid (an earlier run, long dead) is ours to replace.
+        let _ = std::fs::remove_file(&tmp);
+        let file = std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp).map_err(|e| {
+            let dir = target.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+            error(target, format!("cannot create a file in `{}`: {e}", dir.display()))
+        })?;
+        live_temporaries().push(tmp.clone());
+        Ok(TempFile { tmp, target: target.to_path_buf(), file: Some(file), committed: false })
     }
 
-    fn commit(mut self) -> std::io::Result<()> {
-        std::fs::rename(&self.tmp, &self.target)?;
+    /// Writes `bytes` with `write` and makes them durable (fsync) before any rename.
+    fn fill(&mut self, write: impl FnOnce(&mut BufWriter<&File>) -> Result<(), String>) -> Result<(), OutputError> {
+        let Some(file) = self.file.as_ref() else { return Err(error(&self.target, "already written")) };
+        let mut buffered = BufWriter::new(file);
+        write(&mut buffered).map_err(|e| error(&self.target, e))?;
+        buffered.flush().map_err(|e| error(&self.target, e))?;
+        drop(buffered);
+        file.sync_all().map_err(|e| error(&self.target, e))
+    }
+
+    /// Renames the (filled) temporary over the target, then syncs the directory so the
+    /// rename itself survives a crash.
+    fn commit(mut self) -> Result<(), OutputError> {
+        drop(self.file.take());
+        std::fs::rename(&self.tmp, &self.target).map_err(|e| error(&self.target, e))?;
         self.committed = true;
+        live_temporaries().retain(|t| *t != self.tmp);
+        #[cfg(unix)]
+        if let Some(dir) = self.target.parent() {
+            let dir = if dir.as_os_str().is_empty() { Path::new(".") } else { dir };
+            if let Ok(dir) = File::open(dir) {
+                let _ = dir.sync_all();
+            }
+        }
         Ok(())
     }
 }
@@ -50,7 +153,9 @@ impl TempFile {
 impl Drop for TempFile {
     fn drop(&mut self) {
         if !self.committed {
+            drop(self.file.take());
             let _ = std::fs::remove_file(&self.tmp);
+            live_temporaries().retain(|t| *t != self.tmp);
         }
     }
 }
@@ -59,9 +164,9 @@ fn error(path: &Path, message: impl ToString) -> OutputError {
     OutputError { path: path.to_path_buf(), message: message.to_string() }
 }
 
-/// Writes every channel of `image` into one single-part EXR at `path` (float channels as
-/// 32-bit float, integer channels as UINT, ZIP compression).
-pub fn write_exr(image: &Image, path: &Path) -> Result<(), OutputError> {
+/// Encodes every channel of `image` as one single-part EXR (float channels as 32-bit float,
+/// integer channels as UINT, ZIP compression).
+fn encode_exr(image: &Image, out: &mut BufWriter<&File>) -> Result<(), String> {
     let channels: Vec<AnyChannel<FlatSamples>> = image
         .channels
         .iter()
@@ -79,10 +184,14 @@ pub fn write_exr(image: &Image, path: &Path) -> Result<(), OutputError> {
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels.into_iter().collect()),
     );
-    let exr_image = exr::image::Image::from_layer(layer);
-    let tmp = TempFile::new(path);
-    exr_image.write().to_file(&tmp.tmp).map_err(|e| error(path, e))?;
-    tmp.commit().map_err(|e| error(path, e))
+    exr::image::Image::from_layer(layer).write().to_buffered(out).map_err(|e| e.to_string())
+}
+
+/// Writes every channel of `image` into one single-part EXR at `path`, atomically.
+pub fn write_exr(image: &Image, path: &Path) -> Result<(), OutputError> {
+    let mut tmp = TempFile::create(path)?;
+    tmp.fill(|out| encode_exr(image, out))?;
+    tmp.commit()
 }
 
 /// The preview's display transform: exposure (in stops), the ACES filmic fit of Narkowicz
@@ -96,11 +205,11 @@ pub fn tone_map(linear: f32, exposure: f32) -> u8 {
     (srgb * 255.0 + 0.5).clamp(0.0, 255.0) as u8
 }
 
-/// Writes the beauty (`R`, `G`, `B`) as an 8-bit sRGB PNG.
-pub fn write_png(image: &Image, path: &Path, exposure: f32) -> Result<(), OutputError> {
+/// Encodes the beauty (`R`, `G`, `B`) as an 8-bit sRGB PNG.
+fn encode_png(image: &Image, exposure: f32) -> Result<Vec<u8>, String> {
     let planes: Vec<&[f32]> = ["R", "G", "B"]
         .iter()
-        .map(|n| image.f32_channel(n).ok_or_else(|| error(path, format!("the image has no `{n}` channel"))))
+        .map(|n| image.f32_channel(n).ok_or_else(|| format!("the image has no `{n}` channel")))
         .collect::<Result<_, _>>()?;
     let mut pixels = Vec::with_capacity(image.width * image.height * 3);
     for i in 0..image.width * image.height {
@@ -114,23 +223,71 @@ pub fn write_png(image: &Image, path: &Path, exposure: f32) -> Result<(), Output
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
         encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-        let mut writer = encoder.write_header().map_err(|e| error(path, e))?;
-        writer.write_image_data(&pixels).map_err(|e| error(path, e))?;
-        writer.finish().map_err(|e| error(path, e))?;
+        let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
+        writer.write_image_data(&pixels).map_err(|e| e.to_string())?;
+        writer.finish().map_err(|e| e.to_string())?;
     }
-    let tmp = TempFile::new(path);
-    let mut file = std::fs::File::create(&tmp.tmp).map_err(|e| error(path, e))?;
-    file.write_all(&encoded).and_then(|()| file.sync_all()).map_err(|e| error(path, e))?;
-    drop(file);
-    tmp.commit().map_err(|e| error(path, e))
+    Ok(encoded)
 }
 
-/// Writes `OUT.exr` and the preview `OUT.png` beside it (same stem).
-pub fn write_outputs(image: &Image, exr_path: &Path) -> Result<PathBuf, OutputError> {
-    write_exr(image, exr_path)?;
+/// Writes the beauty (`R`, `G`, `B`) as an 8-bit sRGB PNG at `path`, atomically.
+pub fn write_png(image: &Image, path: &Path, exposure: f32) -> Result<(), OutputError> {
+    let encoded = encode_png(image, exposure).map_err(|e| error(path, e))?;
+    let mut tmp = TempFile::create(path)?;
+    tmp.fill(|out| out.write_all(&encoded).map_err(|e| e.to_string()))?;
+    tmp.commit()
+}
+
+/// `OUT.exr` and its preview `OUT.png`, opened as temporaries beside them before rendering.
+pub struct PreparedOutputs {
+    exr: TempFile,
+    png: TempFile,
+}
+
+/// Checks both outputs of a render can be written (neither is a directory, the directory
+/// takes new files) by creating their temporaries now, before any time is spent rendering.
+pub fn prepare_outputs(exr_path: &Path) -> Result<PreparedOutputs, OutputError> {
     let png_path = exr_path.with_extension("png");
-    write_png(image, &png_path, 0.0)?;
-    Ok(png_path)
+    let exr = TempFile::create(exr_path)?;
+    let png = TempFile::create(&png_path)?;
+    Ok(PreparedOutputs { exr, png })
+}
+
+impl PreparedOutputs {
+    /// The EXR's path.
+    pub fn exr_path(&self) -> &Path {
+        &self.exr.target
+    }
+
+    /// The PNG preview's path.
+    pub fn png_path(&self) -> &Path {
+        &self.png.target
+    }
+
+    /// Writes both files and only then renames them into place, EXR first. Returns the PNG's
+    /// path. On failure neither target has changed (short of a rename failing between the
+    /// two, in a directory both temporaries were just created in).
+    pub fn write(mut self, image: &Image) -> Result<PathBuf, OutputError> {
+        self.exr.fill(|out| encode_exr(image, out))?;
+        let encoded = encode_png(image, 0.0).map_err(|e| error(&self.png.target, e))?;
+        self.png.fill(|out| out.write_all(&encoded).map_err(|e| e.to_string()))?;
+        let png_path = self.png.target.clone();
+        self.exr.commit()?;
+        self.png.commit()?;
+        Ok(png_path)
+    }
+}
+
+/// Writes `OUT.exr` and the preview `OUT.png` beside it (same stem), both or neither.
+pub fn write_outputs(image: &Image, exr_path: &Path) -> Result<PathBuf, OutputError> {
+    prepare_outputs(exr_path)?.write(image)
+}
+
+/// Writes a file whole or not at all (a fsynced temporary beside it, then a rename).
+pub fn write_file_atomically(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+    let mut tmp = TempFile::create(path)?;
+    tmp.fill(|out| out.write_all(bytes).map_err(|e| e.to_string()))?;
+    tmp.commit()
 }
 
 #[cfg(test)]

@@ -174,6 +174,25 @@ impl Part {
         }
     }
 
+    /// Bounds `(min, max)` under the object-to-world transform `m`: the transformed corners
+    /// of the object box, in f64 (so that a transform beyond f32's range shows as such).
+    pub fn world_bounds(&self, m: &DMat4) -> (DVec3, DVec3) {
+        let (lo, hi) = self.bounds();
+        let mut min = DVec3::splat(f64::INFINITY);
+        let mut max = DVec3::splat(f64::NEG_INFINITY);
+        for k in 0..8 {
+            let c = DVec3::new(
+                if k & 1 == 0 { lo.x } else { hi.x },
+                if k & 2 == 0 { lo.y } else { hi.y },
+                if k & 4 == 0 { lo.z } else { hi.z },
+            );
+            let w = m.transform_point3(c);
+            min = min.min(w);
+            max = max.max(w);
+        }
+        (min, max)
+    }
+
     /// Position (projected back onto the surface), outward normal, `(u, v)`, ∂P/∂u and ∂P/∂v
     /// at an object-space point on the part.
     fn local_geometry(&self, p: DVec3) -> (DVec3, DVec3, (f64, f64), DVec3, DVec3) {
@@ -242,20 +261,8 @@ impl Shape {
 
     /// World-space bounds `(min, max)`: the transformed corners of the object box.
     pub fn world_bounds(&self) -> (Vec3, Vec3) {
-        let (lo, hi) = self.part.bounds();
-        let mut min = DVec3::splat(f64::INFINITY);
-        let mut max = DVec3::splat(f64::NEG_INFINITY);
-        for k in 0..8 {
-            let c = DVec3::new(
-                if k & 1 == 0 { lo.x } else { hi.x },
-                if k & 2 == 0 { lo.y } else { hi.y },
-                if k & 4 == 0 { lo.z } else { hi.z },
-            );
-            let w = self.to_world.transform_point3(c);
-            min = min.min(w);
-            max = max.max(w);
-        }
-        (min.as_vec3(), max.as_vec3())
+        let (lo, hi) = self.part.world_bounds(&self.to_world);
+        (lo.as_vec3(), hi.as_vec3())
     }
 
     /// The nearest hit distance of the world ray `o + t d` in `(tmin, tmax)`.

@@ -165,6 +165,9 @@ fn nan_closures_and_shader_errors_are_counted_not_rendered() {
     nan.closure.params[1] = f32::NAN;
     let (image, stats) = run(&scene, &ConstMaterial::new(vec![nan], &[]), &settings(4));
     assert_eq!(stats.nonfinite_closures, 8 * 8 * 4);
+    let [fault] = &stats.first_faults[..] else { panic!("{:?}", stats.first_faults) };
+    assert_eq!(fault.kind, super::FaultKind::NonFiniteClosure);
+    assert!(fault.slot.is_some(), "a surface's closure belongs to one layer: {fault:?}");
     assert!(image.channels.iter().all(|c| match &c.data {
         super::ChannelData::F32(v) => v.iter().all(|x| !x.is_nan()),
         super::ChannelData::U32(_) => true,
@@ -175,6 +178,14 @@ fn nan_closures_and_shader_errors_are_counted_not_rendered() {
     assert_eq!(stats.loop_budget_errors, 8 * 8 * 4);
     assert!(image.f32_channel("R").unwrap().iter().all(|&v| v == 0.0));
     assert!(stats.to_string().contains("iteration budget"));
+    // The first occurrence is located: prim, material and pixel (every sample fails here,
+    // so the first is pixel (0, 0), sample 0, whatever the thread count).
+    let [fault] = &stats.first_faults[..] else { panic!("{:?}", stats.first_faults) };
+    assert_eq!(fault.kind, super::FaultKind::LoopBudget);
+    assert_eq!(fault.prim, scene.prims[0].path);
+    assert_eq!((fault.material, fault.pixel, fault.sample), (0, (0, 0), 0));
+    let text = stats.to_string();
+    assert!(text.contains(&format!("first loop budget exceeded: prim `{}`, material 0", fault.prim)), "{text}");
 }
 
 #[test]

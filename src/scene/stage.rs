@@ -17,7 +17,7 @@ use crate::scene::usda::{
     self, Layer, LayerMetadata, ListOp, MetadataEntry, PrimSpec, PropertySpec, Reference, Specifier, Target,
 };
 use crate::scene::value::{AssetPath, Value, ValueType, normalize};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 /// Index of a prim in a [`Stage`].
@@ -163,7 +163,7 @@ impl Stage {
     /// Reads and composes the stage whose root layer is the file at `path`.
     pub fn open(path: &Path, sources: &mut SourceMap, diags: &mut Diagnostics) -> Result<Stage, Failed> {
         let errors = diags.error_count();
-        let text = match std::fs::read_to_string(path) {
+        let text = match crate::input::read_text(path) {
             Ok(text) => text,
             Err(e) => {
                 diags.push(Diagnostic::error(format!("cannot read `{}`: {e}", path.display())));
@@ -315,6 +315,9 @@ struct Layers {
     list: Vec<LoadedLayer>,
     /// Canonical path → index, or `None` when loading failed (reported once).
     by_key: HashMap<PathBuf, Option<usize>>,
+    /// Sublayer cycles already reported, each as its sorted set of files: a cycle is one
+    /// error however many paths lead into it (5 000 self-sublayers printed 563 MB).
+    reported_cycles: HashSet<Vec<PathBuf>>,
 }
 
 impl Layers {
@@ -336,17 +339,21 @@ impl Layers {
         diags: &mut Diagnostics,
     ) -> Option<usize> {
         let key = Layers::key(path);
-        if chain.contains(&key) {
-            diags.push(
-                Diagnostic::error(format!("sublayer cycle: `{}` includes itself", path.display()))
-                    .at(span, "this sublayer is already being read"),
-            );
+        if let Some(start) = chain.iter().position(|k| *k == key) {
+            let mut cycle = chain[start..].to_vec();
+            cycle.sort();
+            if self.reported_cycles.insert(cycle) {
+                diags.push(
+                    Diagnostic::error(format!("sublayer cycle: `{}` includes itself", path.display()))
+                        .at(span, "this sublayer is already being read"),
+                );
+            }
             return None;
         }
         if let Some(known) = self.by_key.get(&key) {
             return *known;
         }
-        let text = match std::fs::read_to_string(path) {
+        let text = match crate::input::read_text(path) {
             Ok(text) => text,
             Err(e) => {
                 diags.push(
@@ -383,7 +390,21 @@ impl Layers {
             chain.push(key.clone());
         }
         let mut stack = vec![index];
+        // Each sublayer once per layer: listing one again adds no opinions, and reading it
+        // again would repeat its diagnostics.
+        let mut listed: HashSet<PathBuf> = HashSet::new();
+        let mut repeats = 0usize;
         for (asset, span) in sub_layers {
+            if !listed.insert(Layers::key(&asset.resolved)) {
+                if repeats == 0 {
+                    diags.push(
+                        Diagnostic::warning(format!("`{}` is listed more than once in subLayers", asset.authored))
+                            .at(span, "listed again here; repeats are ignored"),
+                    );
+                }
+                repeats += 1;
+                continue;
+            }
             if let Some(sub) = self.load(&asset.resolved, span, chain, sources, diags)
                 && let Some(sub_stack) = self.list.get(sub).map(|l| l.stack.clone())
             {
@@ -547,6 +568,9 @@ struct Pass<'l> {
     prims: Vec<Prim>,
     roots: Vec<PrimId>,
     by_path: HashMap<String, PrimId>,
+    /// Arcs whose cycle or size error was reported: each authored arc is reported once,
+    /// not once per prim that reaches it (every descendant of a prim re-walks its arcs).
+    reported_arcs: HashSet<Span>,
 }
 
 impl<'l> Pass<'l> {
@@ -559,6 +583,7 @@ impl<'l> Pass<'l> {
             prims: Vec::new(),
             roots: Vec::new(),
             by_path: HashMap::new(),
+            reported_arcs: HashSet::new(),
         }
     }
 
@@ -576,10 +601,11 @@ impl<'l> Pass<'l> {
         let layers = self.layers;
         // Root prim names, weakest layer first so stronger layers' new names come after.
         let mut names: Vec<&str> = Vec::new();
+        let mut seen: HashSet<&str> = HashSet::new();
         for &i in self.stack(self.root).iter().rev() {
             if let Some(l) = layers.get(i) {
                 for p in &l.layer.prims {
-                    if !names.contains(&p.name.as_str()) {
+                    if seen.insert(&p.name) {
                         names.push(&p.name);
                     }
                 }
@@ -652,9 +678,10 @@ impl<'l> Pass<'l> {
         // Child names, weakest opinion first, so an asset's order is kept and local
         // additions follow it.
         let mut names: Vec<&'l str> = Vec::new();
+        let mut seen: HashSet<&'l str> = HashSet::new();
         for (spec, _) in opinions.iter().rev() {
             for child in &spec.children {
-                if !names.contains(&child.name.as_str()) {
+                if seen.insert(&child.name) {
                     names.push(&child.name);
                 }
             }
@@ -772,15 +799,20 @@ impl<'l> Pass<'l> {
     ) -> Option<Node<'l>> {
         if ancestors.iter().any(|(s, p)| *s == stack && *p == site) {
             let what = if arc == Arc::Inherit { "inherit" } else { "reference" };
-            self.diags.push(
-                Diagnostic::error(format!("{what} cycle: `{site}` depends on itself"))
-                    .at(span, format!("this {what} leads back to a prim that is being composed")),
-            );
+            if self.reported_arcs.insert(span) {
+                self.diags.push(
+                    Diagnostic::error(format!("{what} cycle: `{site}` depends on itself"))
+                        .at(span, format!("this {what} leads back to a prim that is being composed")),
+                );
+            }
             return None;
         }
         if ancestors.len() > 64 || from.count() > MAX_NODES {
-            self.diags
-                .push(Diagnostic::error("composition is too deep or too large").at(span, "while composing this arc"));
+            if self.reported_arcs.insert(span) {
+                self.diags.push(
+                    Diagnostic::error("composition is too deep or too large").at(span, "while composing this arc"),
+                );
+            }
             return None;
         }
         let specs = self.specs_at(stack, &site);
@@ -1318,6 +1350,28 @@ def "Inactive" (active = false) { def "Kid" {} }
         assert!(stage.is_err());
         assert!(rendered.contains("scene.usda:4:16"), "{rendered}");
         assert!(rendered.contains("float3 x = (1, 2, \"a\")"), "{rendered}");
+    }
+
+    #[test]
+    fn fifty_thousand_siblings_compose() {
+        // Composition was quadratic in the number of siblings (109 000 took 89 s); with the
+        // name lookups hashed this is a fraction of a second, and a regression to quadratic
+        // would take minutes here — long past any test timeout.
+        let n = 50_000;
+        let mut scene = String::from("#usda 1.0\ndef Xform \"World\" {\n");
+        for i in 0..n {
+            scene += &format!("    def Xform \"S{i}\" {{ double x = {i} }}\n");
+        }
+        scene += "}\n";
+        for i in 0..n {
+            scene += &format!("def Xform \"R{i}\" {{}}\n");
+        }
+        let stage = ok(text(&scene));
+        assert_eq!(stage.len(), 2 * n + 1);
+        let world = prim(&stage, "/World");
+        assert_eq!(world.children.len(), n);
+        assert_eq!(prim(&stage, "/World/S49999").value("x"), Some(&Value::Float(49999.0)));
+        assert_eq!(prim(&stage, "/World/S123").value("x"), Some(&Value::Float(123.0)));
     }
 
     #[test]

@@ -11,7 +11,11 @@ use super::{
 };
 use crate::diag::{Diagnostic, Diagnostics, FileId, Span};
 use crate::scene::value::{AssetPath, Value, ValueType};
+use std::collections::HashMap;
 use std::path::Path;
+
+/// A prim body's property names → positions in its `properties`.
+type PropertyIndex = HashMap<String, usize>;
 
 /// Past this many errors in one file the parser stops: the rest is likely noise.
 const MAX_ERRORS: usize = 50;
@@ -481,6 +485,7 @@ impl<'a> Parser<'a, '_> {
             metadata: PrimMetadata::default(),
             properties: Vec::new(),
             children: Vec::new(),
+            child_index: Default::default(),
             variant_sets: Vec::new(),
         };
         if self.peek_kind() == Some(TokenKind::LParen) {
@@ -541,6 +546,9 @@ impl<'a> Parser<'a, '_> {
     fn prim_body(&mut self, prim: &mut PrimSpec) -> PResult<()> {
         let open = self.expect(TokenKind::LBrace, "`{`")?;
         self.enter()?;
+        // Property name → position in `prim.properties`: statements about one property are
+        // merged, and searching the list for each statement was quadratic in property count.
+        let mut property_index = PropertyIndex::new();
         loop {
             while self.eat(TokenKind::Semi).is_some() {}
             let Some(token) = self.peek() else {
@@ -567,7 +575,7 @@ impl<'a> Parser<'a, '_> {
                     self.pos += 2;
                     self.expect(TokenKind::Eq, "`=`").and_then(|_| self.value()).map(|_| ())
                 }
-                _ => self.property(prim),
+                _ => self.property(prim, &mut property_index),
             };
             if result.is_err() {
                 self.recover(TokenKind::RBrace, start);
@@ -597,6 +605,7 @@ impl<'a> Parser<'a, '_> {
                 metadata: PrimMetadata::default(),
                 properties: Vec::new(),
                 children: Vec::new(),
+                child_index: Default::default(),
                 variant_sets: Vec::new(),
             };
             if self.peek_kind() == Some(TokenKind::LParen) {
@@ -612,7 +621,7 @@ impl<'a> Parser<'a, '_> {
     // ---- properties ----
 
     /// An attribute or relationship statement, merged into `prim`'s property of that name.
-    fn property(&mut self, prim: &mut PrimSpec) -> PResult<()> {
+    fn property(&mut self, prim: &mut PrimSpec, index: &mut PropertyIndex) -> PResult<()> {
         let start = self.here();
         let mut op = ListOpKind::Explicit;
         if let Some(kind) = self.peek_ident().and_then(ListOpKind::from_keyword) {
@@ -630,7 +639,7 @@ impl<'a> Parser<'a, '_> {
             _ => {}
         }
         if self.eat_ident("rel") {
-            return self.relationship(prim, start, op, custom);
+            return self.relationship(prim, index, start, op, custom);
         }
         let (type_word, _) = self.expect_name("a property: a type name, `rel`, `def`, `over`, `class` or `}`")?;
         let mut type_name = type_word.to_string();
@@ -651,9 +660,10 @@ impl<'a> Parser<'a, '_> {
             return Err(Reported);
         }
         let value_type = ValueType::parse(type_word, array);
-        let index = match prim.properties.iter().position(|p| p.name() == name) {
-            Some(i) => i,
+        let index = match index.get(name) {
+            Some(&i) => i,
             None => {
+                index.insert(name.to_string(), prim.properties.len());
                 prim.properties.push(PropertySpec::Attribute(Box::new(AttributeSpec {
                     name: name.to_string(),
                     span,
@@ -741,7 +751,14 @@ impl<'a> Parser<'a, '_> {
         }
     }
 
-    fn relationship(&mut self, prim: &mut PrimSpec, start: Span, op: ListOpKind, custom: bool) -> PResult<()> {
+    fn relationship(
+        &mut self,
+        prim: &mut PrimSpec,
+        index: &mut PropertyIndex,
+        start: Span,
+        op: ListOpKind,
+        custom: bool,
+    ) -> PResult<()> {
         let (name, name_span) = self.expect_name("a relationship name")?;
         let span = start.to(name_span);
         // `rel r.default = </x>` is an old spelling of `rel r = </x>`.
@@ -761,10 +778,10 @@ impl<'a> Parser<'a, '_> {
         } else {
             Vec::new()
         };
-        let existing = prim.properties.iter().position(|p| p.name() == name);
-        let index = match existing {
-            Some(i) => i,
+        let index = match index.get(name) {
+            Some(&i) => i,
             None => {
+                index.insert(name.to_string(), prim.properties.len());
                 prim.properties.push(PropertySpec::Relationship(Box::new(RelationshipSpec {
                     name: name.to_string(),
                     span,

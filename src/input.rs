@@ -1,0 +1,279 @@
+//! Reading input files: scenes and their sublayers, references and payloads, substance
+//! sources, textures and dome maps all come through [`read_bytes`] / [`read_text`].
+//!
+//! A scene names its inputs, so a hostile scene can name anything: a FIFO (reading blocks
+//! forever), `/dev/zero` (reading never ends), a directory, a 100 GB file. Only regular files
+//! no larger than [`InputLimits::max_file_bytes`] are read; everything else is an
+//! [`InputError`] that callers report as a diagnostic at the place the path was written.
+//! The file is opened without blocking and checked on the open handle (no window between
+//! checking a path and reading it), and never more than the limit is read even if the file
+//! grows meanwhile.
+//!
+//! The limits are process-wide, set once by the command line (`--max-input-size`,
+//! `--max-texture-pixels`) before anything is read, because textures are loaded deep inside
+//! compilation where no options are passed.
+
+use std::fmt;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Default limit on the size of any one input file: 256 MiB. The largest scenes and
+/// textures strata is meant for are a few tens of MB; a file beyond this is far more likely
+/// a mistake (or an attack) than a scene, and reading it would cost seconds and gigabytes.
+pub const DEFAULT_MAX_INPUT_BYTES: u64 = 256 << 20;
+
+/// Default limit on a texture's or dome map's pixel count: 2^27 = 134 million pixels, a
+/// 16384 × 8192 latitude-longitude map (the largest common HDRI size). Decoded, such an image
+/// takes 1.5 GiB (three f32 per texel). Checked from the header, before anything is allocated:
+/// an EXR header can claim any size in a few bytes.
+pub const DEFAULT_MAX_TEXTURE_PIXELS: u64 = 1 << 27;
+
+/// Limits on what input files may cost.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct InputLimits {
+    /// Largest input file read, in bytes.
+    pub max_file_bytes: u64,
+    /// Largest texture read, in pixels (of its largest layer).
+    pub max_texture_pixels: u64,
+}
+
+impl Default for InputLimits {
+    fn default() -> Self {
+        InputLimits { max_file_bytes: DEFAULT_MAX_INPUT_BYTES, max_texture_pixels: DEFAULT_MAX_TEXTURE_PIXELS }
+    }
+}
+
+static MAX_FILE_BYTES: AtomicU64 = AtomicU64::new(DEFAULT_MAX_INPUT_BYTES);
+static MAX_TEXTURE_PIXELS: AtomicU64 = AtomicU64::new(DEFAULT_MAX_TEXTURE_PIXELS);
+
+/// Sets the process-wide limits (the command line does this once, before reading anything).
+pub fn set_limits(limits: InputLimits) {
+    MAX_FILE_BYTES.store(limits.max_file_bytes, Ordering::Relaxed);
+    MAX_TEXTURE_PIXELS.store(limits.max_texture_pixels, Ordering::Relaxed);
+}
+
+/// The limits in force.
+pub fn limits() -> InputLimits {
+    InputLimits {
+        max_file_bytes: MAX_FILE_BYTES.load(Ordering::Relaxed),
+        max_texture_pixels: MAX_TEXTURE_PIXELS.load(Ordering::Relaxed),
+    }
+}
+
+/// Why an input file was not read.
+#[derive(Debug)]
+pub enum InputError {
+    /// The path names something other than a regular file (`what` says what).
+    NotAFile {
+        /// "a directory", "a FIFO (named pipe)", "a device", ...
+        what: &'static str,
+    },
+    /// The file is larger than the limit.
+    TooLarge {
+        /// Its size (at least `limit + 1` when it grew while being read).
+        size: u64,
+        /// The limit in force.
+        limit: u64,
+    },
+    /// The file is not UTF-8 text (for text inputs).
+    NotText,
+    /// The operating system refused (missing file, permissions, ...).
+    Io(std::io::Error),
+}
+
+impl fmt::Display for InputError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            InputError::NotAFile { what } => write!(f, "it is {what}, not a regular file"),
+            InputError::TooLarge { size, limit } => write!(
+                f,
+                "it is {} bytes, more than the input size limit of {limit} bytes (raise it with --max-input-size)",
+                size
+            ),
+            InputError::NotText => f.write_str("stream did not contain valid UTF-8"),
+            // Exactly the operating system's words, as before this module existed.
+            InputError::Io(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for InputError {}
+
+impl From<std::io::Error> for InputError {
+    fn from(e: std::io::Error) -> Self {
+        InputError::Io(e)
+    }
+}
+
+/// What a non-regular file is, for messages.
+fn describe(kind: std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if kind.is_fifo() {
+            return "a FIFO (named pipe)";
+        }
+        if kind.is_char_device() || kind.is_block_device() {
+            return "a device";
+        }
+        if kind.is_socket() {
+            return "a socket";
+        }
+    }
+    if kind.is_dir() { "a directory" } else { "not a regular file" }
+}
+
+/// Opens `path` for reading without blocking: opening a FIFO for reading otherwise waits for
+/// a writer, possibly forever, before any check could run.
+fn open_nonblocking(path: &Path) -> std::io::Result<std::fs::File> {
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc::O_NONBLOCK);
+    }
+    options.open(path)
+}
+
+/// Reads the whole of `path` if it is a regular file of at most `max_bytes` bytes.
+pub fn read_bytes_limited(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputError> {
+    let file = open_nonblocking(path)?;
+    // Checked on the open handle: the path cannot be swapped for a FIFO after the check.
+    let meta = file.metadata()?;
+    if !meta.is_file() {
+        return Err(InputError::NotAFile { what: describe(meta.file_type()) });
+    }
+    if meta.len() > max_bytes {
+        return Err(InputError::TooLarge { size: meta.len(), limit: max_bytes });
+    }
+    // `len` is a hint (files under /proc report 0; a file can grow): read at most one byte
+    // past the limit, so a file that grew is caught without reading all of it.
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    file.take(max_bytes.saturating_add(1)).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(InputError::TooLarge { size: bytes.len() as u64, limit: max_bytes });
+    }
+    record_read(path, &meta);
+    Ok(bytes)
+}
+
+/// One file that was read: its canonical path and, on Unix, its device, inode and
+/// modification time (which also catch a hard link or a second path to it; the time tells a
+/// reused inode of a deleted input from the input itself).
+#[derive(Clone, Debug, PartialEq, Eq)]
+struct FileIdentity {
+    path: PathBuf,
+    device_inode: Option<(u64, u64, i64, i64)>,
+}
+
+impl FileIdentity {
+    fn of(path: &Path, meta: &std::fs::Metadata) -> FileIdentity {
+        #[cfg(unix)]
+        let device_inode = {
+            use std::os::unix::fs::MetadataExt;
+            Some((meta.dev(), meta.ino(), meta.mtime(), meta.mtime_nsec()))
+        };
+        #[cfg(not(unix))]
+        let device_inode = {
+            let _ = meta;
+            None
+        };
+        FileIdentity { path: std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf()), device_inode }
+    }
+
+    fn same_file(&self, other: &FileIdentity) -> bool {
+        self.path == other.path || self.device_inode.is_some() && self.device_inode == other.device_inode
+    }
+}
+
+/// Every input file this process has read, so outputs can be checked against them.
+static FILES_READ: Mutex<Vec<FileIdentity>> = Mutex::new(Vec::new());
+
+fn record_read(path: &Path, meta: &std::fs::Metadata) {
+    let identity = FileIdentity::of(path, meta);
+    let mut files = FILES_READ.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    if !files.contains(&identity) {
+        files.push(identity);
+    }
+}
+
+/// Whether `path` names a file this process has read as an input (a scene, layer, substance
+/// file, texture or dome map), through any path or link: writing it would destroy an input.
+pub fn was_read(path: &Path) -> bool {
+    let Ok(meta) = std::fs::metadata(path) else { return false };
+    let identity = FileIdentity::of(path, &meta);
+    FILES_READ.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).iter().any(|f| f.same_file(&identity))
+}
+
+/// Reads the whole of `path` under the current [`limits`].
+pub fn read_bytes(path: &Path) -> Result<Vec<u8>, InputError> {
+    read_bytes_limited(path, limits().max_file_bytes)
+}
+
+/// Reads `path` as UTF-8 text under the current [`limits`].
+pub fn read_text(path: &Path) -> Result<String, InputError> {
+    String::from_utf8(read_bytes(path)?).map_err(|_| InputError::NotText)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn regular_files_are_read_up_to_the_limit() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.txt");
+        std::fs::write(&path, "hello").unwrap();
+        assert_eq!(read_bytes_limited(&path, 5).unwrap(), b"hello");
+        let err = read_bytes_limited(&path, 4).unwrap_err();
+        assert!(matches!(err, InputError::TooLarge { size: 5, limit: 4 }), "{err:?}");
+        assert!(err.to_string().contains("--max-input-size"), "{err}");
+        std::fs::write(&path, [0xff, 0xfe]).unwrap();
+        assert!(matches!(read_text(&path), Err(InputError::NotText)));
+        let missing = read_bytes(&dir.path().join("missing")).unwrap_err();
+        assert_eq!(missing.to_string(), "No such file or directory (os error 2)");
+    }
+
+    #[test]
+    fn files_read_are_remembered_through_any_path() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("input.usda");
+        std::fs::write(&path, "#usda 1.0\n").unwrap();
+        let other = dir.path().join("other.exr");
+        std::fs::write(&other, "x").unwrap();
+        assert!(!was_read(&path));
+        read_text(&path).unwrap();
+        assert!(was_read(&path) && !was_read(&other));
+        assert!(was_read(&dir.path().join(".").join("input.usda")));
+        #[cfg(unix)]
+        {
+            let link = dir.path().join("link.exr");
+            std::os::unix::fs::symlink(&path, &link).unwrap();
+            let hard = dir.path().join("hard.exr");
+            std::fs::hard_link(&path, &hard).unwrap();
+            assert!(was_read(&link) && was_read(&hard));
+        }
+        assert!(!was_read(&dir.path().join("missing.exr")));
+    }
+
+    #[test]
+    fn directories_devices_and_fifos_are_refused_without_blocking() {
+        let dir = tempfile::tempdir().unwrap();
+        let err = read_bytes(dir.path()).unwrap_err();
+        assert_eq!(err.to_string(), "it is a directory, not a regular file");
+        #[cfg(unix)]
+        {
+            let err = read_bytes(Path::new("/dev/zero")).unwrap_err();
+            assert_eq!(err.to_string(), "it is a device, not a regular file");
+            let fifo = dir.path().join("pipe");
+            let made = std::process::Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs");
+            assert!(made.success());
+            // No writer: a blocking open would wait forever.
+            let err = read_bytes(&fifo).unwrap_err();
+            assert_eq!(err.to_string(), "it is a FIFO (named pipe), not a regular file");
+        }
+    }
+}

@@ -1,0 +1,409 @@
+//! Hostile input files, scenes and outputs (issue 9): each gives a located diagnostic at
+//! once — never a hang, an unbounded read, a crash, a flood of messages or a destroyed input.
+//!
+//! Small inputs live in `tests/in/hostile/` (they also seed fuzzing); FIFOs, big generated
+//! scenes and output directories are made here. Every run of `strata` is killed after a
+//! deadline, so a regression to blocking fails the test instead of hanging the suite.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+/// Far more than any of these runs needs (they take well under a second each in a debug
+/// build); reaching it means the run hung.
+const DEADLINE: Duration = Duration::from_secs(120);
+
+/// Runs `strata args`, killing it at [`DEADLINE`].
+fn strata(args: &[&str]) -> Output {
+    let child = Command::new(env!("CARGO_BIN_EXE_strata"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("strata starts");
+    let pid = child.id();
+    // Output is collected on another thread: a full pipe must not stall the child.
+    let (send, receive) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = send.send(child.wait_with_output());
+    });
+    match receive.recv_timeout(DEADLINE) {
+        Ok(output) => output.expect("strata runs"),
+        Err(_) => {
+            let _ = Command::new("kill").args(["-KILL", &pid.to_string()]).status();
+            panic!("strata {args:?} did not finish within {DEADLINE:?}");
+        }
+    }
+}
+
+/// `strata check FILE`: exit code and stderr.
+fn check(file: &Path) -> (Option<i32>, String) {
+    let out = strata(&["check", file.to_str().expect("utf-8 path")]);
+    (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+/// Asserts `check` fails with `message` located at `location` (`file:line:col`).
+fn assert_located(file: &Path, location: &str, message: &str) {
+    let (code, stderr) = check(file);
+    assert_eq!(code, Some(1), "{}: {stderr}", file.display());
+    assert!(stderr.contains(message), "{}: expected `{message}` in\n{stderr}", file.display());
+    assert!(stderr.contains(location), "{}: expected at `{location}`:\n{stderr}", file.display());
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+fn hostile(name: &str) -> PathBuf {
+    Path::new("tests/in/hostile").join(name)
+}
+
+fn mkfifo(path: &Path) {
+    let made = Command::new("mkfifo").arg(path).status().expect("mkfifo runs");
+    assert!(made.success(), "mkfifo {}", path.display());
+}
+
+/// A small valid RGB EXR.
+fn write_small_exr(path: &Path) {
+    use exr::prelude::*;
+    let layer = Layer::new(
+        (4, 2),
+        LayerAttributes::default(),
+        Encoding::UNCOMPRESSED,
+        SpecificChannels::rgb(|_: Vec2<usize>| (0.5f32, 0.5f32, 0.5f32)),
+    );
+    Image::from_layer(layer).write().to_file(path).expect("write exr");
+}
+
+#[test]
+fn devices_and_directories_named_as_inputs_are_located_errors() {
+    assert_located(
+        &hostile("sublayer_dev_zero.usda"),
+        "sublayer_dev_zero.usda:3:18",
+        "cannot read layer `/dev/zero`: it is a device, not a regular file",
+    );
+    assert_located(
+        &hostile("source_dev_zero.usda"),
+        "source_dev_zero.usda:13:53",
+        "cannot read substance file `/dev/zero`: it is a device, not a regular file",
+    );
+    assert_located(&hostile("sublayer_directory.usda"), "sublayer_directory.usda:3:18", "it is a directory");
+    // The scene itself: no location to point at but the path, and no read.
+    let (code, stderr) = check(Path::new("/dev/zero"));
+    assert_eq!(code, Some(1));
+    assert!(stderr.contains("cannot read `/dev/zero`: it is a device"), "{stderr}");
+}
+
+#[test]
+fn fifos_named_as_inputs_never_block() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pipe = d.join("pipe.usda");
+    mkfifo(&pipe);
+    let (code, stderr) = check(&pipe);
+    assert_eq!(code, Some(1));
+    assert!(stderr.contains("it is a FIFO (named pipe), not a regular file"), "{stderr}");
+
+    let sublayer = d.join("sublayer.usda");
+    std::fs::write(&sublayer, "#usda 1.0\n(\n    subLayers = [@pipe.usda@]\n)\n").unwrap();
+    assert_located(&sublayer, "sublayer.usda:3:18", "cannot read layer");
+
+    let reference = d.join("reference.usda");
+    std::fs::write(&reference, "#usda 1.0\ndef Xform \"A\" (\n    references = @pipe.usda@</P>\n) {}\n").unwrap();
+    assert_located(&reference, "reference.usda:3:18", "it is a FIFO");
+
+    let ash = d.join("pipe.ash");
+    mkfifo(&ash);
+    let source = d.join("source.usda");
+    std::fs::write(
+        &source,
+        std::fs::read_to_string(hostile("source_dev_zero.usda")).unwrap().replace("/dev/zero", "pipe.ash"),
+    )
+    .unwrap();
+    assert_located(&source, "source.usda:13:53", "cannot read substance file");
+
+    let exr = d.join("pipe.exr");
+    mkfifo(&exr);
+    let dome = d.join("dome.usda");
+    std::fs::write(&dome, "#usda 1.0\ndef DomeLight \"Sky\" {\n    asset inputs:texture:file = @pipe.exr@\n}\n")
+        .unwrap();
+    assert_located(&dome, "dome.usda:3:33", "cannot read dome texture");
+
+    // A texture a shader names.
+    let ash_source = format!(
+        "substance t {{ node tx = texture(file: {:?}); node d = diffuse(albedo: tx.out); surface = d.bsdf; }}",
+        exr.to_str().unwrap()
+    );
+    std::fs::write(d.join("t.ash"), ash_source).unwrap();
+    let textured = d.join("textured.usda");
+    std::fs::write(
+        &textured,
+        std::fs::read_to_string(hostile("source_dev_zero.usda"))
+            .unwrap()
+            .replace("/dev/zero", "t.ash")
+            .replace("\"zero\"", "\"t\""),
+    )
+    .unwrap();
+    let (code, stderr) = check(&textured);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("cannot read texture") && stderr.contains("it is a FIFO"), "{stderr}");
+    // Located where the texture node reads its file (in the built-in node library: the
+    // lowering reports at the inlined node body, not yet at the node's instantiation).
+    assert!(stderr.contains("texture file named here"), "{stderr}");
+}
+
+#[test]
+fn input_size_limit_is_enforced_and_raised_by_the_flag() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("big.usda");
+    let mut text = String::from("#usda 1.0\n");
+    while text.len() < 4096 {
+        text += "def Xform \"A\" {}\n";
+    }
+    std::fs::write(&scene, &text).unwrap();
+    let path = scene.to_str().unwrap();
+    let small = strata(&["layers", path, "--max-input-size", "1K"]);
+    assert_eq!(small.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&small.stderr);
+    assert!(stderr.contains("more than the input size limit of 1024 bytes"), "{stderr}");
+    assert!(stderr.contains("--max-input-size"), "the message says how to raise it: {stderr}");
+    let raised = strata(&["--max-input-size", "1M", "layers", path]);
+    assert_eq!(raised.status.code(), Some(0), "{}", String::from_utf8_lossy(&raised.stderr));
+}
+
+#[test]
+fn huge_texture_headers_are_refused_before_allocating() {
+    // The header claims 2e6 x 2e6 pixels: a 48 TB allocation before this check.
+    let limit = "more than the texture limit of 134217728 pixels (raise it with --max-texture-pixels)";
+    assert_located(&hostile("huge_dome_texture.usda"), "huge_dome_texture.usda:5:33", limit);
+    // The same file as a shader's texture.
+    let dir = tempfile::tempdir().unwrap();
+    let exr = std::fs::canonicalize(hostile("huge_texture.exr")).unwrap();
+    let ash = format!(
+        "substance t {{ node tx = texture(file: {:?}); node d = diffuse(albedo: tx.out); surface = d.bsdf; }}",
+        exr.to_str().unwrap()
+    );
+    std::fs::write(dir.path().join("t.ash"), ash).unwrap();
+    let scene = dir.path().join("scene.usda");
+    std::fs::write(
+        &scene,
+        std::fs::read_to_string(hostile("source_dev_zero.usda"))
+            .unwrap()
+            .replace("/dev/zero", "t.ash")
+            .replace("\"zero\"", "\"t\""),
+    )
+    .unwrap();
+    assert_located(&scene, "texture file named here", limit);
+    // A lower limit refuses an ordinary texture, with the flag named.
+    let small = dir.path().join("small.exr");
+    write_small_exr(&small);
+    let dome = dir.path().join("dome.usda");
+    std::fs::write(&dome, "#usda 1.0\ndef DomeLight \"Sky\" {\n    asset inputs:texture:file = @small.exr@\n}\n")
+        .unwrap();
+    let refused = strata(&["check", dome.to_str().unwrap(), "--max-texture-pixels", "7"]);
+    assert_eq!(refused.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("4 x 2 = 8 pixels, more than the texture limit of 7"));
+    let allowed = strata(&["check", dome.to_str().unwrap(), "--max-texture-pixels", "8"]);
+    assert_eq!(allowed.status.code(), Some(0), "{}", String::from_utf8_lossy(&allowed.stderr));
+}
+
+#[test]
+fn geometry_beyond_the_scene_extent_is_an_error_before_the_bvh() {
+    // 1e38 panicked inside obvhs, 1e13 took 8 s, overflowing transforms became NaN boxes.
+    assert_located(&hostile("far_cylinders_1e38.usda"), "far_cylinders_1e38.usda:3:1", "`/Far` reaches (");
+    assert_located(&hostile("far_cylinders_1e13.usda"), "far_cylinders_1e13.usda:3:1", "`/Far` reaches (");
+    assert_located(&hostile("nan_transform.usda"), "nan_transform.usda:7:5", "`/Group/Huge` reaches (");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("far.exr");
+    let render =
+        strata(&["render", "tests/in/hostile/far_cylinders_1e38.usda", "--res", "8x8", "-o", out.to_str().unwrap()]);
+    assert_eq!(render.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&render.stderr);
+    assert!(stderr.contains("beyond the scene extent") && !stderr.contains("panicked"), "{stderr}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn a_sublayer_cycle_is_reported_once_however_often_it_is_listed() {
+    // 5 000 self-sublayers printed 563 MB of diagnostics.
+    let (code, stderr) = check(&hostile("self_sublayers.usda"));
+    assert_eq!(code, Some(1));
+    assert_eq!(stderr.matches("sublayer cycle").count(), 1, "{stderr}");
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("many.usda");
+    let list = vec!["@many.usda@"; 5000].join(", ");
+    std::fs::write(&scene, format!("#usda 1.0\n(\n    subLayers = [{list}]\n)\ndef Xform \"A\" {{}}\n")).unwrap();
+    let (code, stderr) = check(&scene);
+    assert_eq!(code, Some(1));
+    assert_eq!(stderr.matches("error: sublayer cycle").count(), 1);
+    assert_eq!(stderr.matches("warning:").count(), 1, "one warning for the repeats");
+    assert!(stderr.len() < 1 << 20, "{} bytes of diagnostics", stderr.len());
+    assert!(stderr.contains("many.usda:3:18"), "located");
+}
+
+/// A render that would take minutes: if it fails in seconds, it failed before rendering.
+const SLOW: [&str; 4] = ["--res", "4000x4000", "--spp", "10000"];
+
+fn render_args<'a>(output: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec!["render", "-o", output];
+    args.extend_from_slice(extra);
+    args
+}
+
+fn temporaries(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".tmp"))
+        .collect()
+}
+
+#[test]
+fn png_path_that_is_a_directory_fails_before_rendering_and_keeps_the_exr() {
+    let dir = tempfile::tempdir().unwrap();
+    let exr = dir.path().join("out.exr");
+    std::fs::write(&exr, "previous render").unwrap();
+    std::fs::create_dir(dir.path().join("out.png")).unwrap();
+    let out = strata(&render_args(exr.to_str().unwrap(), &SLOW));
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("out.png") && stderr.contains("it is a directory"), "{stderr}");
+    assert_eq!(std::fs::read_to_string(&exr).unwrap(), "previous render", "the old EXR is intact");
+    assert!(temporaries(dir.path()).is_empty(), "{:?}", temporaries(dir.path()));
+}
+
+#[test]
+fn unwritable_output_directory_fails_before_rendering() {
+    let dir = tempfile::tempdir().unwrap();
+    // A regular file where a directory should be: unwritable even for root.
+    let not_a_dir = dir.path().join("file");
+    std::fs::write(&not_a_dir, "").unwrap();
+    let exr = not_a_dir.join("out.exr");
+    let out = strata(&render_args(exr.to_str().unwrap(), &SLOW));
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("cannot create a file in"), "{stderr}");
+    assert!(!stderr.contains("rendered"), "{stderr}");
+}
+
+#[test]
+fn output_naming_an_input_texture_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let sky = dir.path().join("sky.exr");
+    write_small_exr(&sky);
+    let original = std::fs::read(&sky).unwrap();
+    let scene = dir.path().join("scene.usda");
+    std::fs::write(
+        &scene,
+        "#usda 1.0\ndef Sphere \"Ball\" {}\ndef DomeLight \"Sky\" {\n    asset inputs:texture:file = @sky.exr@\n}\n",
+    )
+    .unwrap();
+    let tiny = ["--res", "8x8", "--spp", "1"];
+    let mut args = render_args(sky.to_str().unwrap(), &tiny);
+    args.insert(1, scene.to_str().unwrap());
+    let out = strata(&args);
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("is an input of this run; refusing to overwrite it"), "{stderr}");
+    assert_eq!(std::fs::read(&sky).unwrap(), original, "the texture is untouched");
+    // Through another name for the same file, too.
+    let link = dir.path().join("link.exr");
+    std::fs::hard_link(&sky, &link).unwrap();
+    let mut args = render_args(link.to_str().unwrap(), &tiny);
+    args.insert(1, scene.to_str().unwrap());
+    assert_eq!(strata(&args).status.code(), Some(1));
+    assert_eq!(std::fs::read(&sky).unwrap(), original);
+    assert!(temporaries(dir.path()).is_empty());
+    // A different output renders.
+    let other = dir.path().join("render.exr");
+    let mut args = render_args(other.to_str().unwrap(), &tiny);
+    args.insert(1, scene.to_str().unwrap());
+    let ok = strata(&args);
+    assert_eq!(ok.status.code(), Some(0), "{}", String::from_utf8_lossy(&ok.stderr));
+}
+
+#[test]
+fn interrupted_render_leaves_no_temporary_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let exr = dir.path().join("out.exr");
+    let child = Command::new(env!("CARGO_BIN_EXE_strata"))
+        .args(render_args(exr.to_str().unwrap(), &SLOW))
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let pid = child.id().to_string();
+    // The temporaries exist from before compilation until the end.
+    let start = Instant::now();
+    while temporaries(dir.path()).len() < 2 {
+        assert!(start.elapsed() < DEADLINE, "no temporary files appeared");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(Command::new("kill").args(["-TERM", &pid]).status().unwrap().success());
+    let status = child.wait_with_output().unwrap().status;
+    assert!(!status.success());
+    assert!(temporaries(dir.path()).is_empty(), "{:?}", temporaries(dir.path()));
+    assert!(!exr.exists());
+}
+
+#[test]
+fn temporaries_of_killed_processes_are_removed_by_the_next_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let exr = dir.path().join("out.exr");
+    // Larger than any pid_max, so no live process has it.
+    let stale = dir.path().join(".out.exr.2147483646.tmp");
+    std::fs::write(&stale, "half a render").unwrap();
+    let unrelated = dir.path().join(".other.exr.2147483646.tmp");
+    std::fs::write(&unrelated, "not ours").unwrap();
+    let out = strata(&render_args(exr.to_str().unwrap(), &["--res", "8x8", "--spp", "1"]));
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(!stale.exists() && unrelated.exists());
+    assert!(exr.exists() && exr.with_extension("png").exists());
+}
+
+/// The scene `shader_fault.usda` binds the substances of `shader_fault.ash`.
+#[test]
+fn shader_faults_are_counted_and_located_never_fatal() {
+    // `/Bad`'s material indexes out of bounds on its upper half; `/Good` renders normally.
+    let dir = tempfile::tempdir().unwrap();
+    let exr = dir.path().join("fault.exr");
+    for backend in ["jit", "interp"] {
+        let out = strata(&[
+            "render",
+            "tests/in/hostile/shader_fault.usda",
+            "--res",
+            "16x16",
+            "--spp",
+            "2",
+            "--threads",
+            "2",
+            "--backend",
+            backend,
+            "-o",
+            exr.to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{stderr}");
+        assert!(stderr.contains("discarded: a shader indexed an array out of bounds"), "{stderr}");
+        assert!(
+            stderr.contains(
+                "first array index out of bounds: prim `/Bad`, material 1, slot `010`, pixel (11, 5) sample 1"
+            ),
+            "the same first occurrence from either backend, whatever the threads: {stderr}"
+        );
+        assert!(!stderr.contains("/Good"), "{stderr}");
+        assert!(exr.exists());
+    }
+}
+
+#[test]
+fn compile_output_naming_its_source_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let ash = dir.path().join("m.ash");
+    let source = "substance m { node d = diffuse(); surface = d.bsdf; }\n";
+    std::fs::write(&ash, source).unwrap();
+    let out = strata(&["compile", ash.to_str().unwrap(), "-o", ash.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("refusing to overwrite it"));
+    assert_eq!(std::fs::read_to_string(&ash).unwrap(), source);
+    assert!(temporaries(dir.path()).is_empty());
+}
