@@ -26,6 +26,33 @@ pub fn quoted_len(rest: &str, quote: u8) -> Option<usize> {
     None
 }
 
+/// Skips a closed block comment (a logos callback on the `/*` token); an unclosed one is an
+/// error spanning the rest of the file.
+pub fn skip_block_comment<'s, T: logos::Logos<'s, Source = str>>(
+    lex: &mut logos::Lexer<'s, T>,
+) -> logos::FilterResult<(), ()> {
+    let rest = lex.remainder();
+    match block_comment_len(rest) {
+        Some(n) => {
+            lex.bump(n);
+            logos::FilterResult::Skip
+        }
+        None => {
+            lex.bump(rest.len());
+            logos::FilterResult::Error(())
+        }
+    }
+}
+
+/// Extends a string token (a logos callback on its opening `quote`) to its closing quote,
+/// or, unterminated, to the end of its line, which makes it an error.
+pub fn close_quoted<'s, T: logos::Logos<'s, Source = str>>(lex: &mut logos::Lexer<'s, T>, quote: u8) -> bool {
+    let rest = lex.remainder();
+    let len = quoted_len(rest, quote);
+    lex.bump(len.unwrap_or_else(|| line_len(rest)));
+    len.is_some()
+}
+
 /// Length of the text up to (not including) the next line break, or all of it.
 pub fn line_len(rest: &str) -> usize {
     rest.find('\n').unwrap_or(rest.len())

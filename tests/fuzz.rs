@@ -2,46 +2,18 @@
 //! crashed, hung or flooded the terminal) is checked by `strata check` within a time and
 //! output budget, and a short fuzzing session with a fixed seed finds nothing.
 
-use std::io::Read;
+mod common;
+
 use std::path::Path;
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Runs `strata ARGS`, killing it after `limit`; returns (exit code, stdout, stderr), `None` for
 /// the code when it was killed or died of a signal.
 fn strata(args: &[&str], limit: Duration) -> (Option<i32>, Vec<u8>, Vec<u8>) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_strata"))
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("strata starts");
-    let mut out_pipe = child.stdout.take().unwrap();
-    let mut err_pipe = child.stderr.take().unwrap();
-    let out = std::thread::spawn(move || {
-        let mut v = Vec::new();
-        let _ = out_pipe.read_to_end(&mut v);
-        v
-    });
-    let err = std::thread::spawn(move || {
-        let mut v = Vec::new();
-        let _ = err_pipe.read_to_end(&mut v);
-        v
-    });
-    let start = Instant::now();
-    let code = loop {
-        if let Some(status) = child.try_wait().unwrap() {
-            break status.code();
-        }
-        if start.elapsed() > limit {
-            let _ = child.kill();
-            let _ = child.wait();
-            break None;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    (code, out.join().unwrap(), err.join().unwrap())
+    match common::run_strata(args, limit) {
+        Some(out) => (out.status.code(), out.stdout, out.stderr),
+        None => (None, Vec::new(), Vec::new()),
+    }
 }
 
 #[test]

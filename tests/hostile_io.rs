@@ -5,6 +5,8 @@
 //! scenes and output directories are made here. Every run of `strata` is killed after a
 //! deadline, so a regression to blocking fails the test instead of hanging the suite.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -15,26 +17,7 @@ const DEADLINE: Duration = Duration::from_secs(120);
 
 /// Runs `strata args`, killing it at [`DEADLINE`].
 fn strata(args: &[&str]) -> Output {
-    let child = Command::new(env!("CARGO_BIN_EXE_strata"))
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("strata starts");
-    let pid = child.id();
-    // Output is collected on another thread: a full pipe must not stall the child.
-    let (send, receive) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let _ = send.send(child.wait_with_output());
-    });
-    match receive.recv_timeout(DEADLINE) {
-        Ok(output) => output.expect("strata runs"),
-        Err(_) => {
-            let _ = Command::new("kill").args(["-KILL", &pid.to_string()]).status();
-            panic!("strata {args:?} did not finish within {DEADLINE:?}");
-        }
-    }
+    common::run_strata(args, DEADLINE).unwrap_or_else(|| panic!("strata {args:?} did not finish within {DEADLINE:?}"))
 }
 
 /// `strata check FILE`: exit code and stderr.

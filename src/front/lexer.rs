@@ -64,10 +64,10 @@ pub enum Tok {
     IntLit,
     #[regex(r"([0-9]+\.[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?|[0-9]+[eE][+-]?[0-9]+")]
     FloatLit,
-    #[token("\"", |lex| close(lex, crate::text::quoted_len(lex.remainder(), b'"')))]
+    #[token("\"", |lex| crate::text::close_quoted(lex, b'"'))]
     StrLit,
     /// A block comment: skipped when closed, an error to the end of the file when not.
-    #[token("/*", |lex| skip_comment(lex))]
+    #[token("/*", crate::text::skip_block_comment)]
     BlockComment,
 
     #[token("(")]
@@ -205,28 +205,6 @@ impl Tok {
             OrOr => "`||`",
             Bang => "`!`",
             Eof => "end of file",
-        }
-    }
-}
-
-/// Extends a string token to its closing quote, or (unterminated) to the end of its line.
-fn close(lex: &mut logos::Lexer<Tok>, len: Option<usize>) -> bool {
-    let rest = lex.remainder();
-    lex.bump(len.unwrap_or_else(|| crate::text::line_len(rest)));
-    len.is_some()
-}
-
-/// Skips a closed block comment; an unclosed one is an error spanning the rest of the file.
-fn skip_comment(lex: &mut logos::Lexer<Tok>) -> logos::FilterResult<(), ()> {
-    let rest = lex.remainder();
-    match crate::text::block_comment_len(rest) {
-        Some(n) => {
-            lex.bump(n);
-            logos::FilterResult::Skip
-        }
-        None => {
-            lex.bump(rest.len());
-            logos::FilterResult::Error(())
         }
     }
 }

@@ -2,7 +2,9 @@
 // Each test crate uses only some of these helpers.
 #![allow(dead_code)]
 
+use std::process::{Command, Output, Stdio};
 use std::sync::Arc;
+use std::time::Duration;
 use strata::abi::MaterialCode;
 use strata::backend::{BackendKind, Compiler};
 use strata::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
@@ -40,4 +42,28 @@ pub fn compile_stack(lib: &Library, names: &[String], backend: BackendKind, opti
     let code = compiler.compile(lib, &ComposedMaterial { layers }, &mut diags);
     assert!(!diags.has_errors());
     code.expect("compiled")
+}
+
+/// Runs the `strata` binary with `args`; `None` when it had to be killed at `deadline` (its
+/// output is collected on another thread, so a full pipe never stalls it).
+pub fn run_strata(args: &[&str], deadline: Duration) -> Option<Output> {
+    let child = Command::new(env!("CARGO_BIN_EXE_strata"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("strata starts");
+    let pid = child.id();
+    let (send, receive) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = send.send(child.wait_with_output());
+    });
+    match receive.recv_timeout(deadline) {
+        Ok(output) => Some(output.expect("strata runs")),
+        Err(_) => {
+            let _ = Command::new("kill").args(["-KILL", &pid.to_string()]).status();
+            None
+        }
+    }
 }

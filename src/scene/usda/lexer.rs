@@ -58,11 +58,11 @@ pub enum TokenKind {
     #[token("-inf")]
     Number,
     /// A single-line string in `"` or `'` quotes, escapes not yet processed.
-    #[token("\"", |lex| close_quote(lex, b'"'))]
-    #[token("'", |lex| close_quote(lex, b'\''))]
+    #[token("\"", |lex| crate::text::close_quoted(lex, b'"'))]
+    #[token("'", |lex| crate::text::close_quoted(lex, b'\''))]
     String,
     /// A block comment: skipped when closed, an error to the end of the file when not.
-    #[token("/*", skip_comment)]
+    #[token("/*", crate::text::skip_block_comment)]
     BlockComment,
     /// A triple-quoted string (`"""` or `'''`), which may span lines.
     #[token("\"\"\"", |lex| close_triple(lex, "\"\"\""))]
@@ -103,30 +103,6 @@ fn namespaces(lex: &mut Lexer<TokenKind>) {
         end += 1 + len;
     }
     lex.bump(end);
-}
-
-/// Extends a string token to its closing quote, or (unterminated: an error) to the end of
-/// its line.
-fn close_quote(lex: &mut Lexer<TokenKind>, quote: u8) -> bool {
-    let rest = lex.remainder();
-    let len = crate::text::quoted_len(rest, quote);
-    lex.bump(len.unwrap_or_else(|| crate::text::line_len(rest)));
-    len.is_some()
-}
-
-/// Skips a closed block comment; an unclosed one is an error spanning the rest of the file.
-fn skip_comment(lex: &mut Lexer<TokenKind>) -> logos::FilterResult<(), ()> {
-    let rest = lex.remainder();
-    match crate::text::block_comment_len(rest) {
-        Some(n) => {
-            lex.bump(n);
-            logos::FilterResult::Skip
-        }
-        None => {
-            lex.bump(rest.len());
-            logos::FilterResult::Error(())
-        }
-    }
 }
 
 /// Extends the current token to the closing delimiter, honouring backslash escapes.
