@@ -51,6 +51,7 @@ fn check_function_here(
         loop_depth: 0,
         ret: resolve_type(&decl.ret),
         kind: decl.kind,
+        array_elements: 0,
     };
     let mut params = Vec::new();
     for param in &decl.params {
@@ -65,6 +66,7 @@ fn check_function_here(
             cx.diags.push(Diagnostic::error("a parameter cannot be void").at(param.ty.span, "void"));
         }
         cx.check_array_element(ty, param.ty.span);
+        cx.within_array_budget(ty, param.ty.span);
         // Shader defaults may read globals but no other parameter.
         let default = param.default.as_ref().and_then(|d| {
             let value = cx.expr(d)?;
@@ -132,11 +134,39 @@ struct Checker<'a> {
     loop_depth: u32,
     ret: Type,
     kind: FunctionKind,
+    /// Elements of the arrays declared so far (parameters and locals), for
+    /// [`MAX_FUNCTION_ARRAY_ELEMENTS`].
+    array_elements: u64,
 }
+
+/// Most array elements one function may declare, parameters and locals together: 65 536,
+/// what lowering's 256 KiB of local arrays per entry holds at 4 bytes an element (so no
+/// program this rejects would compile). Each declared array is a value in the checked tree:
+/// without the cap, 5 000 declarations of `float a[65536]` took 10 GB to check.
+pub const MAX_FUNCTION_ARRAY_ELEMENTS: u64 = 1 << 16;
 
 impl Checker<'_> {
     fn error(&mut self, span: Span, message: impl Into<String>, label: impl Into<String>) {
         self.diags.push(Diagnostic::error(message).at(span, label));
+    }
+
+    /// Counts an array declaration against [`MAX_FUNCTION_ARRAY_ELEMENTS`]; `false` (reported
+    /// once per function) past it.
+    fn within_array_budget(&mut self, ty: Type, span: Span) -> bool {
+        let Some(n) = ty.array else { return true };
+        let before = self.array_elements;
+        self.array_elements = before.saturating_add(u64::from(n));
+        if self.array_elements <= MAX_FUNCTION_ARRAY_ELEMENTS {
+            return true;
+        }
+        if before <= MAX_FUNCTION_ARRAY_ELEMENTS {
+            self.error(
+                span,
+                format!("this function's arrays hold more than {MAX_FUNCTION_ARRAY_ELEMENTS} elements in all"),
+                "past the limit here",
+            );
+        }
+        false
     }
 
     fn declare(&mut self, name: &ast::Ident, ty: Type, readonly: bool) -> LocalId {
@@ -213,11 +243,13 @@ impl Checker<'_> {
                     self.error(name.span, "a variable cannot be void", "void");
                 }
                 self.check_array_element(ty, written.span);
+                let within = self.within_array_budget(ty, written.span);
                 let init = match init {
                     Some(init) => {
                         self.expr_expecting(init, ty).and_then(|v| self.coerce(v, ty, init.span, "initial value"))
                     }
-                    None => Value::zero(ty).map(|v| Expr::constant(v, ty, name.span)),
+                    None if within => Value::zero(ty).map(|v| Expr::constant(v, ty, name.span)),
+                    None => None,
                 };
                 let id = self.declare(name, ty, false);
                 if let Some(init) = init {
