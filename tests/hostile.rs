@@ -394,6 +394,15 @@ fn for_without_a_condition_loops_until_break_or_the_budget() {
     for (mask, _) in agree(&forever, "for (;;) without break") {
         assert_eq!(mask, Err(ShaderError::LoopBudget));
     }
+    // An array declared in an endless loop is filled on every iteration; the fill spends the
+    // budget too, so this ends as quickly (found by `strata fuzz`: it ran for minutes).
+    let filling =
+        text.replace("        o = u;\n    }\n}\nsubstance a", "        float a[65536]; o = u;\n    }\n}\nsubstance a");
+    assert_ne!(filling, text, "the seed changed: update the replacement");
+    let filling = compile(&path, &filling, "b");
+    for (mask, _) in agree(&filling, "for (;;) filling an array") {
+        assert_eq!(mask, Err(ShaderError::LoopBudget));
+    }
 }
 
 // ---- row: a user `substance default_substance` -----------------------------------------------

@@ -52,6 +52,11 @@ pub const MAX_ENTRY_INSTRUCTIONS: usize = 1 << 19;
 /// (65 536 floats). Past it, a diagnostic at the declaration that crosses the limit.
 pub const MAX_LOCAL_ARRAY_BYTES: usize = 256 << 10;
 
+/// Words an array fill or copy moves per unit of the loop budget it spends: one, so that the
+/// budget bounds a call's array traffic as it bounds its iterations (a 65 536-element fill
+/// spends 6 % of it).
+const WORDS_PER_BUDGET_UNIT: u32 = 1;
+
 /// Words of a closure in an output buffer: kind + 8 parameters.
 const CLOSURE_WORDS: u32 = 9;
 
@@ -495,12 +500,28 @@ impl FnLower<'_> {
         }
     }
 
+    /// Takes `amount` from the loop budget, or returns [`abi::STATUS_LOOP_BUDGET`] when less
+    /// than that is left (nothing when loops are not charged).
+    fn spend_budget(&mut self, amount: i32) {
+        if let Some(budget) = self.budget {
+            let left = self.b.value(Inst::Get(budget), Ty::I32);
+            let need = self.b.iconst(amount - 1);
+            let ok = self.b.cmp(CmpOp::Gt, left, need);
+            self.guard(ok, abi::STATUS_LOOP_BUDGET);
+            let amount = self.b.iconst(amount);
+            let next = self.b.binary(BinOp::ISub, left, amount);
+            self.b.effect(Inst::Set(budget, next));
+        }
+    }
+
     // ---- arrays ------------------------------------------------------------------------------
 
     /// Emits `body(at)` for `at` in `0, step, 2·step, … < end`: unrolled for short arrays (as
     /// straight-line stores they fold and read best), as a counted loop otherwise, so code
     /// size never grows with an array's length. The loop is the compiler's own and bounded,
-    /// so it does not spend the loop budget.
+    /// but it may run inside a user loop: it spends one unit of the loop budget per
+    /// [`WORDS_PER_BUDGET_UNIT`] words, so that `for (;;) { float a[65536]; }` ends in
+    /// milliseconds (it ran for minutes: 2^20 iterations of a 65 536-word fill).
     fn for_each_word(&mut self, end: u32, step: u32, mut body: impl FnMut(&mut Self, ssa::Value)) {
         /// Words up to which initialisation and copies are unrolled.
         const UNROLL_WORDS: u32 = 16;
@@ -511,6 +532,7 @@ impl FnLower<'_> {
             }
             return;
         }
+        self.spend_budget(end.div_ceil(WORDS_PER_BUDGET_UNIT) as i32);
         let counter = self.b.var(Ty::I32);
         let start = self.b.iconst(0);
         self.b.effect(Inst::Set(counter, start));
@@ -848,15 +870,7 @@ impl FnLower<'_> {
                     None => self.b.jump_to(body_b),
                 }
                 // The iteration budget: a runaway loop returns a status instead of hanging.
-                if let Some(budget) = self.budget {
-                    let left = self.b.value(Inst::Get(budget), Ty::I32);
-                    let zero = self.b.iconst(0);
-                    let ok = self.b.cmp(CmpOp::Gt, left, zero);
-                    self.guard(ok, abi::STATUS_LOOP_BUDGET);
-                    let one = self.b.iconst(1);
-                    let next = self.b.binary(BinOp::ISub, left, one);
-                    self.b.effect(Inst::Set(budget, next));
-                }
+                self.spend_budget(1);
                 frame.loops.push((exit, step_b));
                 self.block(body, frame);
                 frame.loops.pop();
