@@ -61,7 +61,7 @@ pub enum ChannelData {
 /// One named channel, row-major, top row first.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Channel {
-    /// Full EXR channel name, e.g. `R`, `albedo.G`, `N.X`, `Z`, `mask.R`.
+    /// Full EXR channel name, e.g. `R`, `albedo.G`, `N.R`, `P.B`, `Z`, `mask.R`.
     pub name: String,
     /// Pixels.
     pub data: ChannelData,
@@ -74,7 +74,8 @@ pub struct Image {
     pub width: usize,
     /// Height in pixels.
     pub height: usize,
-    /// Channels: `R G B A`, `albedo.R/G/B`, `N.X/Y/Z`, `Z`, then custom channels by name.
+    /// Channels: `R G B A`, `albedo.R/G/B`, `N.R/G/B`, `P.R/G/B`, `Z`, then custom channels
+    /// by name (see [`render`] for what each holds).
     pub channels: Vec<Channel>,
 }
 
@@ -301,11 +302,21 @@ fn channel_layout(
     (channels, offset, map)
 }
 
+/// The channels every render writes, in order, before the materials' custom channels.
+pub const BUILTIN_CHANNELS: [&str; 14] =
+    ["R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B", "N.R", "N.G", "N.B", "P.R", "P.G", "P.B", "Z"];
+
+/// `Z` where no sample of a pixel hit a surface. Finite, because compositing tools (depth
+/// of field, fog, deep merges) misbehave on infinities; far beyond any scene's extent, so a
+/// `Z < 1e9` test separates geometry from background.
+pub const DEPTH_MISS: f32 = 1.0e10;
+
 /// Per-row accumulation buffers.
 struct Row {
     rgba: Vec<[f32; 4]>,
     albedo: Vec<Vec3>,
     normal: Vec<Vec3>,
+    position: Vec<Vec3>,
     depth: Vec<f32>,
     channels: Vec<f32>,
     stats: RenderStats,
@@ -317,6 +328,20 @@ struct Row {
 pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
 
 /// Renders `scene` through `materials` (indexed by `scene.prim_material`).
+///
+/// The image's channels ([`BUILTIN_CHANNELS`], then custom channels):
+/// - `R G B A`: linear Rec.709 radiance, premultiplied by `A`, the fraction of samples that
+///   reached a non-transparent surface. Where the camera sees a visible dome, `RGB` holds the
+///   dome's radiance with `A = 0` (additive emission, valid in premultiplied alpha: a comp
+///   *over* a plate adds the sky); a dome with `strata:visibleToCamera = false` leaves `RGB`
+///   at 0 there.
+/// - `albedo.R/G/B`: albedo of the first hit, averaged over all samples (0 on misses).
+/// - `N.R/G/B`: world-space shading normal of the first hit, averaged over the samples that
+///   hit and renormalised (0 where none hit).
+/// - `P.R/G/B`: world-space position of the first hit, averaged over the samples that hit
+///   (0 where none hit).
+/// - `Z`: camera-space depth (distance along the viewing axis, positive) of the nearest first
+///   hit among the pixel's samples; [`DEPTH_MISS`] where none hit.
 pub fn render(
     scene: &Scene,
     materials: &[&dyn MaterialCode],
@@ -352,7 +377,8 @@ pub fn render(
             rgba: vec![[0.0; 4]; w],
             albedo: vec![Vec3::ZERO; w],
             normal: vec![Vec3::ZERO; w],
-            depth: vec![f32::INFINITY; w],
+            position: vec![Vec3::ZERO; w],
+            depth: vec![DEPTH_MISS; w],
             channels: vec![0.0; w * channel_floats],
             stats: RenderStats::default(),
             faults: [None; 3],
@@ -363,8 +389,9 @@ pub fn render(
             let mut alpha = 0.0f32;
             let mut albedo = Vec3::ZERO;
             let mut normal = Vec3::ZERO;
+            let mut position = Vec3::ZERO;
             let mut hits = 0u32;
-            let mut depth = f32::INFINITY;
+            let mut depth = DEPTH_MISS;
             let px_channels = &mut row.channels[x * channel_floats..(x + 1) * channel_floats];
             for sample in 0..settings.spp {
                 let mut rng = Rng::new(settings.seed, pixel, sample as u64);
@@ -382,9 +409,15 @@ pub fn render(
                         albedo += r.albedo;
                         if r.alpha > 0.0 {
                             normal += r.normal;
+                            position += r.position;
                             hits += 1;
+                            // Depth along the viewing axis, not along the ray; the lens
+                            // origin of a depth-of-field ray lies in the plane of the camera.
+                            let z = (r.position - camera.origin()).dot(camera.forward());
+                            if z.is_finite() {
+                                depth = depth.min(z.max(0.0));
+                            }
                         }
-                        depth = depth.min(r.depth);
                         for c in &channels {
                             for k in 0..width(c.kind) {
                                 let v = scratch.channels[c.offset + k];
@@ -422,6 +455,7 @@ pub fn render(
             row.rgba[x] = [c.x, c.y, c.z, alpha * inv];
             row.albedo[x] = albedo * inv;
             row.normal[x] = if hits > 0 { (normal / hits as f32).normalize_or_zero() } else { Vec3::ZERO };
+            row.position[x] = if hits > 0 { position / hits as f32 } else { Vec3::ZERO };
             row.depth[x] = depth;
             for c in &channels {
                 if c.kind != ChannelKind::Integer {
@@ -455,7 +489,7 @@ pub fn render(
     // Assemble channels and stats in row order.
     let mut stats = RenderStats { warnings, ..RenderStats::default() };
     let n = w * h;
-    let mut planes: Vec<Vec<f32>> = vec![Vec::with_capacity(n); 11 + channel_floats];
+    let mut planes: Vec<Vec<f32>> = vec![Vec::with_capacity(n); BUILTIN_CHANNELS.len() + channel_floats];
     for (y, row) in rows.iter().enumerate() {
         for (kind, fault) in FaultKind::ALL.into_iter().zip(row.faults) {
             if let Some(fault) = fault
@@ -496,19 +530,22 @@ pub fn render(
                 row.normal[x].x,
                 row.normal[x].y,
                 row.normal[x].z,
+                row.position[x].x,
+                row.position[x].y,
+                row.position[x].z,
                 row.depth[x],
             ];
             for (plane, v) in planes.iter_mut().zip(values) {
                 plane.push(v);
             }
             for k in 0..channel_floats {
-                planes[11 + k].push(row.channels[x * channel_floats + k]);
+                planes[BUILTIN_CHANNELS.len() + k].push(row.channels[x * channel_floats + k]);
             }
         }
     }
     let mut planes = planes.into_iter();
     let mut out = Vec::new();
-    for name in ["R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z"] {
+    for name in BUILTIN_CHANNELS {
         out.push(Channel { name: name.into(), data: ChannelData::F32(planes.next().unwrap_or_default()) });
     }
     for c in &channels {

@@ -36,5 +36,5 @@ pub use film::{
     Channel, ChannelData, FaultKind, FaultReport, Image, Progress, RenderError, RenderSettings, RenderStats, render,
 };
 pub use integrator::LayerMode;
-pub use output::{OutputError, PreparedOutputs, prepare_outputs, write_exr, write_outputs, write_png};
+pub use output::{ExrOptions, OutputError, PreparedOutputs, prepare_outputs, write_exr, write_outputs, write_png};
 pub use scene::Scene;
