@@ -442,7 +442,13 @@ fn exr_options(
             ("strata/backend".into(), args.backend.to_string()),
             ("strata/layerMode".into(), mode.into()),
             ("strata/optimize".into(), args.optimize.to_string()),
-        ],
+        ]
+        .into_iter()
+        .chain(crate::render::cryptomatte::header_attributes(
+            crate::render::cryptomatte::OBJECT_LAYER,
+            scene.prims.iter().map(|p| p.path.as_str()),
+        ))
+        .collect(),
     }
 }
 

@@ -299,3 +299,52 @@ fn a_dome_hidden_from_the_camera_leaves_the_background_empty_but_still_lights() 
     assert!(!covered.is_empty());
     assert!(covered.iter().all(|&i| r[i] == r_seen[i]), "the dome still lights what the camera sees");
 }
+
+#[test]
+fn a_cryptomatte_pixel_decodes_to_its_prim_path_through_the_manifest() {
+    let dir = tempfile::tempdir().unwrap();
+    let (out, _) = render(dir.path(), None, &["--res", "48x32", "--half"]);
+    let image = read(&out);
+    // The header: one layer, named, with the specification's hash and conversion.
+    let other = &image.layer_data.attributes.other;
+    let key = other
+        .iter()
+        .find_map(|(k, v)| {
+            let k = k.to_string();
+            (k.starts_with("cryptomatte/")
+                && k.ends_with("/name")
+                && matches!(v, AttributeValue::Text(t) if *t == *"CryptoObject"))
+            .then(|| k.split('/').nth(1).unwrap().to_string())
+        })
+        .expect("a CryptoObject layer in the header");
+    assert_eq!(text(&image, &format!("cryptomatte/{key}/hash")), "MurmurHash3_32");
+    assert_eq!(text(&image, &format!("cryptomatte/{key}/conversion")), "uint32_to_float32");
+    let manifest: std::collections::HashMap<String, String> =
+        serde_json::from_str(&text(&image, &format!("cryptomatte/{key}/manifest"))).expect("JSON manifest");
+    let by_id: std::collections::HashMap<&str, &str> = manifest.iter().map(|(k, v)| (v.as_str(), k.as_str())).collect();
+    // IDs stay float even with --half.
+    for c in ["CryptoObject00.R", "CryptoObject00.G", "CryptoObject01.A"] {
+        assert!(matches!(channel(&image, c), FlatSamples::F32(_)), "{c}");
+    }
+    let (w, h) = (48, 32);
+    let decode = |x: usize, y: usize| -> (String, f32) {
+        let id = floats(&image, "CryptoObject00.R")[y * w + x];
+        let coverage = floats(&image, "CryptoObject00.G")[y * w + x];
+        let hex = format!("{:08x}", id.to_bits());
+        (by_id.get(hex.as_str()).map_or(format!("<unknown {hex}>"), |s| s.to_string()), coverage)
+    };
+    // The image centre sees the centre ball; low on the left, the floor; the top, only sky.
+    assert_eq!(decode(w / 2, h / 2), ("/World/Balls/Center".to_string(), 1.0));
+    assert_eq!(decode(1, h - 2).0, "/World/Floor");
+    assert_eq!(floats(&image, "CryptoObject00.G")[w / 2], 0.0, "sky has no coverage");
+    // Coverage over the ranks sums to alpha where at most four prims share a pixel.
+    let a = floats(&image, "A");
+    let ranks: Vec<Vec<f32>> = ["CryptoObject00.G", "CryptoObject00.A", "CryptoObject01.G", "CryptoObject01.A"]
+        .iter()
+        .map(|c| floats(&image, c))
+        .collect();
+    for i in 0..a.len() {
+        let sum: f32 = ranks.iter().map(|r| r[i]).sum();
+        assert!((sum - a[i]).abs() < 2e-3, "pixel {i}: coverage {sum} vs A {}", a[i]);
+    }
+}

@@ -5,6 +5,7 @@
 //! (seed, pixel, sample) and are accumulated in sample order, which makes the image
 //! bit-identical whatever the thread count. Rows are rendered in parallel with rayon.
 
+use super::cryptomatte;
 use super::integrator::{ChannelMap, Context, FaultSite, Invalid, LayerMode, PathParams, Scratch};
 use super::sampling::Rng;
 use super::scene::Scene;
@@ -318,6 +319,8 @@ struct Row {
     normal: Vec<Vec3>,
     position: Vec<Vec3>,
     depth: Vec<f32>,
+    /// Per pixel, the Cryptomatte `(id, coverage)` pairs of its most-covering prims.
+    crypto: Vec<[f32; 2 * cryptomatte::RANKS]>,
     channels: Vec<f32>,
     stats: RenderStats,
     /// The row's first fault of each [`FaultKind`] (indexed like `FaultKind::ALL`).
@@ -342,6 +345,8 @@ pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
 ///   (0 where none hit).
 /// - `Z`: camera-space depth (distance along the viewing axis, positive) of the nearest first
 ///   hit among the pixel's samples; [`DEPTH_MISS`] where none hit.
+/// - `CryptoObject00.R/G/B/A`, `CryptoObject01.R/G/B/A`: Cryptomatte of the first hit's prim
+///   path (see [`cryptomatte`]); coverages sum to `A`.
 pub fn render(
     scene: &Scene,
     materials: &[&dyn MaterialCode],
@@ -372,13 +377,16 @@ pub fn render(
     };
     let done = AtomicUsize::new(0);
     let progress_lock = Mutex::new(());
+    let object_ids: Vec<f32> = scene.prims.iter().map(|p| cryptomatte::id(&p.path)).collect();
     let render_row = |y: usize, scratch: &mut Scratch| -> Row {
+        let mut coverage = cryptomatte::PixelCoverage::default();
         let mut row = Row {
             rgba: vec![[0.0; 4]; w],
             albedo: vec![Vec3::ZERO; w],
             normal: vec![Vec3::ZERO; w],
             position: vec![Vec3::ZERO; w],
             depth: vec![DEPTH_MISS; w],
+            crypto: vec![[0.0; 2 * cryptomatte::RANKS]; w],
             channels: vec![0.0; w * channel_floats],
             stats: RenderStats::default(),
             faults: [None; 3],
@@ -392,6 +400,7 @@ pub fn render(
             let mut position = Vec3::ZERO;
             let mut hits = 0u32;
             let mut depth = DEPTH_MISS;
+            coverage.clear();
             let px_channels = &mut row.channels[x * channel_floats..(x + 1) * channel_floats];
             for sample in 0..settings.spp {
                 let mut rng = Rng::new(settings.seed, pixel, sample as u64);
@@ -411,6 +420,9 @@ pub fn render(
                             normal += r.normal;
                             position += r.position;
                             hits += 1;
+                            if let Some(prim) = r.prim {
+                                coverage.add(prim, r.alpha / settings.spp as f32);
+                            }
                             // Depth along the viewing axis, not along the ray; the lens
                             // origin of a depth-of-field ray lies in the plane of the camera.
                             let z = (r.position - camera.origin()).dot(camera.forward());
@@ -455,6 +467,7 @@ pub fn render(
             row.rgba[x] = [c.x, c.y, c.z, alpha * inv];
             row.albedo[x] = albedo * inv;
             row.normal[x] = if hits > 0 { (normal / hits as f32).normalize_or_zero() } else { Vec3::ZERO };
+            row.crypto[x] = coverage.ranked(&object_ids);
             row.position[x] = if hits > 0 { position / hits as f32 } else { Vec3::ZERO };
             row.depth[x] = depth;
             for c in &channels {
@@ -547,6 +560,10 @@ pub fn render(
     let mut out = Vec::new();
     for name in BUILTIN_CHANNELS {
         out.push(Channel { name: name.into(), data: ChannelData::F32(planes.next().unwrap_or_default()) });
+    }
+    for (k, name) in cryptomatte::channel_names(cryptomatte::OBJECT_LAYER).into_iter().enumerate() {
+        let plane = rows.iter().flat_map(|row| row.crypto.iter().map(move |px| px[k])).collect();
+        out.push(Channel { name, data: ChannelData::F32(plane) });
     }
     for c in &channels {
         let suffixes: &[&str] = if c.kind == ChannelKind::Color { &[".R", ".G", ".B"] } else { &[""] };

@@ -59,6 +59,8 @@ pub struct SampleResult {
     pub depth: f32,
     /// World position of the first visible hit (zero on a miss).
     pub position: Vec3,
+    /// Index in [`Scene::prims`] of the first visible hit's prim (`None` on a miss).
+    pub prim: Option<u32>,
     /// Transparent surfaces passed through that hit [`MAX_PASS_THROUGH`].
     pub pass_limit: bool,
 }
@@ -580,6 +582,7 @@ impl Context<'_> {
                 out.normal = normal;
                 out.depth = travelled + hit.t;
                 out.position = sp.p;
+                out.prim = Some(sp.prim);
             }
             if s.lobes.is_empty() || bounces >= self.params.max_depth {
                 break;

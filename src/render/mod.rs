@@ -14,6 +14,7 @@ pub mod bsdf;
 pub mod camera;
 #[cfg(test)]
 pub(crate) mod chi2;
+pub mod cryptomatte;
 pub mod film;
 pub mod frame;
 pub mod geometry;

@@ -186,13 +186,16 @@ pub struct ExrOptions {
 }
 
 /// Whether a channel is stored as half under `--half`: `R G B A`, `albedo.*`, `N.*` and custom
-/// colour channels (`name.R/G/B`). Depth (`Z`), position (`P.*`), custom scalar channels (any
-/// range, so kept exact) and integer channels stay 32-bit.
+/// colour channels (`name.R/G/B`). Depth (`Z`), position (`P.*`), Cryptomatte, custom scalar
+/// channels (any range, so kept exact) and integer channels stay 32-bit.
 pub fn is_half_channel(name: &str) -> bool {
     if matches!(name, "R" | "G" | "B" | "A") || name.starts_with("albedo.") || name.starts_with("N.") {
         return true;
     }
-    !name.starts_with("P.") && [".R", ".G", ".B"].iter().any(|suffix| name.ends_with(suffix))
+    // Cryptomatte IDs are hash bits: half would destroy them.
+    !name.starts_with("P.")
+        && !name.starts_with("Crypto")
+        && [".R", ".G", ".B"].iter().any(|suffix| name.ends_with(suffix))
 }
 
 /// The EXR text for `s`: OpenEXR strings are 8-bit, so characters beyond Latin-1 (a scene
