@@ -275,6 +275,8 @@ pub struct CompiledScene {
     pub materials: Vec<Arc<dyn MaterialCode>>,
     /// Per renderable prim path, its index in `materials`.
     pub prim_material: HashMap<String, usize>,
+    /// Per material, a name for its slot stack (see [`material_name`]), for ID mattes.
+    pub material_names: Vec<String>,
     /// The compiler, with its statistics.
     pub compiler: Compiler,
 }
@@ -299,7 +301,31 @@ pub fn compile_scene(
     }
     let prim_material =
         composition.stacks.iter().zip(&composition.prim_material).map(|(s, m)| (s.prim.clone(), *m)).collect();
-    Some(CompiledScene { stage, materials, prim_material, compiler })
+    // Each material is named after the first prim stack composing it: identical compositions
+    // are shared (DESIGN.md rule 8), so that stack stands for all of them.
+    let material_names = (0..materials.len())
+        .map(|m| {
+            let first = composition.prim_material.iter().position(|&pm| pm == m);
+            first.and_then(|i| composition.stacks.get(i)).map_or_else(|| format!("material {m}"), material_name)
+        })
+        .collect();
+    Some(CompiledScene { stage, materials, prim_material, material_names, compiler })
+}
+
+/// The name of a composed material in ID mattes: its slot stack, bottom first, as
+/// `slot=/Material/Path` entries (overrides as `slot:_:override=/Path`) joined by ` | `.
+pub fn material_name(stack: &PrimStack) -> String {
+    if stack.layers.is_empty() {
+        return "(default substance)".into();
+    }
+    let mut parts = Vec::new();
+    for layer in &stack.layers {
+        parts.push(format!("{}={}", layer.slot.name(), layer.applied.material));
+        for o in &layer.overrides {
+            parts.push(format!("{}={}", o.slot.name(), o.applied.material));
+        }
+    }
+    parts.join(" | ")
 }
 
 /// `strata render [SCENE] -o OUT.exr …`
@@ -339,7 +365,10 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         crate::render::Scene::from_stage_with(&c.stage, &|p| c.prim_material.get(p).copied(), &options, &mut diags)
     });
     report(&diags, &sources)?;
-    let (Some(CompiledScene { materials, compiler, .. }), Some(scene)) = (compiled, scene) else { return Err(Failure) };
+    let (Some(CompiledScene { materials, compiler, material_names, .. }), Some(mut scene)) = (compiled, scene) else {
+        return Err(Failure);
+    };
+    scene.material_names = material_names;
     let compile_seconds = compile_start.elapsed().as_secs_f64();
     // Every input (layers, substance files, textures, dome maps) has been read by now.
     refuse_to_overwrite_inputs(&[outputs.exr_path(), outputs.png_path()])?;
@@ -447,6 +476,10 @@ fn exr_options(
         .chain(crate::render::cryptomatte::header_attributes(
             crate::render::cryptomatte::OBJECT_LAYER,
             scene.prims.iter().map(|p| p.path.as_str()),
+        ))
+        .chain(crate::render::cryptomatte::header_attributes(
+            crate::render::cryptomatte::MATERIAL_LAYER,
+            scene.material_names.iter().map(String::as_str),
         ))
         .collect(),
     }

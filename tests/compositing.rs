@@ -337,6 +337,15 @@ fn a_cryptomatte_pixel_decodes_to_its_prim_path_through_the_manifest() {
     assert_eq!(decode(w / 2, h / 2), ("/World/Balls/Center".to_string(), 1.0));
     assert_eq!(decode(1, h - 2).0, "/World/Floor");
     assert_eq!(floats(&image, "CryptoObject00.G")[w / 2], 0.0, "sky has no coverage");
+    // The composed material (the slot stack) decodes the same way through its own layer.
+    let material_key = strata::render::cryptomatte::layer_key("CryptoMaterial");
+    assert_eq!(text(&image, &format!("cryptomatte/{material_key}/name")), "CryptoMaterial");
+    let materials: std::collections::HashMap<String, String> =
+        serde_json::from_str(&text(&image, &format!("cryptomatte/{material_key}/manifest"))).expect("JSON manifest");
+    let centre = floats(&image, "CryptoMaterial00.R")[(h / 2) * w + w / 2];
+    let hex = format!("{:08x}", centre.to_bits());
+    let name = materials.iter().find(|(_, v)| **v == hex).map(|(k, _)| k.as_str());
+    assert_eq!(name, Some("000=/Looks/Clay | 000::010=/Looks/RedPaint | 050=/Looks/Dirt | 050::010=/Looks/DirtMarker"));
     // Coverage over the ranks sums to alpha where at most four prims share a pixel.
     let a = floats(&image, "A");
     let ranks: Vec<Vec<f32>> = ["CryptoObject00.G", "CryptoObject00.A", "CryptoObject01.G", "CryptoObject01.A"]

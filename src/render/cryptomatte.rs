@@ -11,6 +11,9 @@ use std::collections::BTreeMap;
 /// The object layer's name (the channel prefix).
 pub const OBJECT_LAYER: &str = "CryptoObject";
 
+/// The composed-material layer's name.
+pub const MATERIAL_LAYER: &str = "CryptoMaterial";
+
 /// ID/coverage pairs per pixel: two channel groups of four channels each.
 pub const RANKS: usize = 4;
 

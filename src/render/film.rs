@@ -321,6 +321,8 @@ struct Row {
     depth: Vec<f32>,
     /// Per pixel, the Cryptomatte `(id, coverage)` pairs of its most-covering prims.
     crypto: Vec<[f32; 2 * cryptomatte::RANKS]>,
+    /// The same for composed materials (empty when the scene names no materials).
+    crypto_material: Vec<[f32; 2 * cryptomatte::RANKS]>,
     channels: Vec<f32>,
     stats: RenderStats,
     /// The row's first fault of each [`FaultKind`] (indexed like `FaultKind::ALL`).
@@ -347,6 +349,8 @@ pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
 ///   hit among the pixel's samples; [`DEPTH_MISS`] where none hit.
 /// - `CryptoObject00.R/G/B/A`, `CryptoObject01.R/G/B/A`: Cryptomatte of the first hit's prim
 ///   path (see [`cryptomatte`]); coverages sum to `A`.
+/// - `CryptoMaterial00/01.R/G/B/A`: the same for the composed material, when
+///   `scene.material_names` names every material.
 pub fn render(
     scene: &Scene,
     materials: &[&dyn MaterialCode],
@@ -378,8 +382,14 @@ pub fn render(
     let done = AtomicUsize::new(0);
     let progress_lock = Mutex::new(());
     let object_ids: Vec<f32> = scene.prims.iter().map(|p| cryptomatte::id(&p.path)).collect();
+    let material_ids: Vec<f32> = if scene.material_names.len() == materials.len() {
+        scene.material_names.iter().map(|n| cryptomatte::id(n)).collect()
+    } else {
+        Vec::new()
+    };
     let render_row = |y: usize, scratch: &mut Scratch| -> Row {
         let mut coverage = cryptomatte::PixelCoverage::default();
+        let mut material_coverage = cryptomatte::PixelCoverage::default();
         let mut row = Row {
             rgba: vec![[0.0; 4]; w],
             albedo: vec![Vec3::ZERO; w],
@@ -387,6 +397,7 @@ pub fn render(
             position: vec![Vec3::ZERO; w],
             depth: vec![DEPTH_MISS; w],
             crypto: vec![[0.0; 2 * cryptomatte::RANKS]; w],
+            crypto_material: vec![[0.0; 2 * cryptomatte::RANKS]; if material_ids.is_empty() { 0 } else { w }],
             channels: vec![0.0; w * channel_floats],
             stats: RenderStats::default(),
             faults: [None; 3],
@@ -401,6 +412,7 @@ pub fn render(
             let mut hits = 0u32;
             let mut depth = DEPTH_MISS;
             coverage.clear();
+            material_coverage.clear();
             let px_channels = &mut row.channels[x * channel_floats..(x + 1) * channel_floats];
             for sample in 0..settings.spp {
                 let mut rng = Rng::new(settings.seed, pixel, sample as u64);
@@ -422,6 +434,9 @@ pub fn render(
                             hits += 1;
                             if let Some(prim) = r.prim {
                                 coverage.add(prim, r.alpha / settings.spp as f32);
+                                if let Some(&m) = scene.prim_material.get(prim as usize) {
+                                    material_coverage.add(m as u32, r.alpha / settings.spp as f32);
+                                }
                             }
                             // Depth along the viewing axis, not along the ray; the lens
                             // origin of a depth-of-field ray lies in the plane of the camera.
@@ -468,6 +483,9 @@ pub fn render(
             row.albedo[x] = albedo * inv;
             row.normal[x] = if hits > 0 { (normal / hits as f32).normalize_or_zero() } else { Vec3::ZERO };
             row.crypto[x] = coverage.ranked(&object_ids);
+            if let Some(px) = row.crypto_material.get_mut(x) {
+                *px = material_coverage.ranked(&material_ids);
+            }
             row.position[x] = if hits > 0 { position / hits as f32 } else { Vec3::ZERO };
             row.depth[x] = depth;
             for c in &channels {
@@ -564,6 +582,12 @@ pub fn render(
     for (k, name) in cryptomatte::channel_names(cryptomatte::OBJECT_LAYER).into_iter().enumerate() {
         let plane = rows.iter().flat_map(|row| row.crypto.iter().map(move |px| px[k])).collect();
         out.push(Channel { name, data: ChannelData::F32(plane) });
+    }
+    if !material_ids.is_empty() {
+        for (k, name) in cryptomatte::channel_names(cryptomatte::MATERIAL_LAYER).into_iter().enumerate() {
+            let plane = rows.iter().flat_map(|row| row.crypto_material.iter().map(move |px| px[k])).collect();
+            out.push(Channel { name, data: ChannelData::F32(plane) });
+        }
     }
     for c in &channels {
         let suffixes: &[&str] = if c.kind == ChannelKind::Color { &[".R", ".G", ".B"] } else { &[""] };

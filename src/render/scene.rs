@@ -25,6 +25,10 @@ pub struct Scene {
     pub camera: Camera,
     /// The Camera prim it was read from (`None`: a camera framing the scene).
     pub camera_path: Option<String>,
+    /// Per material index, the composed material's name for ID mattes (`CryptoMaterial`,
+    /// written only when there is one name per material given to `render`). Empty unless
+    /// the caller sets it.
+    pub material_names: Vec<String>,
     /// World bounds of the geometry (a unit box when there is none).
     pub bounds: (Vec3, Vec3),
     /// Zero-area triangles that were skipped.
@@ -179,6 +183,7 @@ impl Scene {
             lights,
             camera,
             camera_path,
+            material_names: Vec::new(),
             bounds,
         })
     }
