@@ -75,8 +75,8 @@ pub struct Image {
     pub width: usize,
     /// Height in pixels.
     pub height: usize,
-    /// Channels: `R G B A`, `albedo.R/G/B`, `N.R/G/B`, `P.R/G/B`, `Z`, then custom channels
-    /// by name (see [`render`] for what each holds).
+    /// Channels: `R G B A`, `albedo.R/G/B`, `N.R/G/B`, `P.R/G/B`, `Z`, Cryptomatte, then
+    /// custom channels by name (see [`render`] for what each holds).
     pub channels: Vec<Channel>,
 }
 
@@ -303,7 +303,8 @@ fn channel_layout(
     (channels, offset, map)
 }
 
-/// The channels every render writes, in order, before the materials' custom channels.
+/// The channels every render writes first, in order; the Cryptomatte channels and then the
+/// materials' custom channels follow.
 pub const BUILTIN_CHANNELS: [&str; 14] =
     ["R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B", "N.R", "N.G", "N.B", "P.R", "P.G", "P.B", "Z"];
 
@@ -334,7 +335,7 @@ pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
 
 /// Renders `scene` through `materials` (indexed by `scene.prim_material`).
 ///
-/// The image's channels ([`BUILTIN_CHANNELS`], then custom channels):
+/// The image's channels ([`BUILTIN_CHANNELS`], Cryptomatte, then custom channels):
 /// - `R G B A`: linear Rec.709 radiance, premultiplied by `A`, the fraction of samples that
 ///   reached a non-transparent surface. Where the camera sees a visible dome, `RGB` holds the
 ///   dome's radiance with `A = 0` (additive emission, valid in premultiplied alpha: a comp
