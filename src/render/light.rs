@@ -608,6 +608,20 @@ def Xform "X" { float xformOp:rotateY = 30  uniform token[] xformOpOrder = ["xfo
     }
 
     #[test]
+    fn invisible_lights_are_dropped_and_camera_visibility_is_read() {
+        let l = lights(
+            r#"#usda 1.0
+def DomeLight "Hidden" { token visibility = "invisible" }
+def Xform "Off" { token visibility = "invisible"
+    def SphereLight "Child" { float inputs:radius = 0.5 } }
+def DomeLight "Sky" { bool strata:visibleToCamera = false }
+def SphereLight "Lamp" { float inputs:radius = 0.5 }"#,
+        );
+        let seen: Vec<(&str, bool)> = l.iter().map(|l| (l.path.as_str(), l.visible_to_camera)).collect();
+        assert_eq!(seen, [("/Sky", false), ("/Lamp", true)]);
+    }
+
+    #[test]
     fn intensity_exposure_color_and_normalize() {
         let l = lights(
             r#"#usda 1.0
