@@ -456,6 +456,32 @@ mod tests {
     }
 
     #[test]
+    fn text_beyond_latin1_is_escaped_not_a_panic() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("out.exr");
+        let mut image = sample_image();
+        image.channels.push(Channel { name: "温度".into(), data: ChannelData::F32(vec![1.0; 12]) });
+        let options = ExrOptions {
+            half: true,
+            strings: vec![("strata/scene".into(), "/場面.usda".into())],
+            ..ExrOptions::default()
+        };
+        prepare_outputs(&path).unwrap().write_with(&image, &options).unwrap();
+        let read = exr::prelude::read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .first_valid_layer()
+            .all_attributes()
+            .from_file(&path)
+            .unwrap();
+        let names: Vec<String> = read.layer_data.channel_data.list.iter().map(|c| c.name.to_string()).collect();
+        assert!(names.contains(&"\\u{6e29}\\u{5ea6}".to_string()), "{names:?}");
+        let scene = &read.layer_data.attributes.other[&Text::from("strata/scene")];
+        assert!(matches!(scene, AttributeValue::Text(t) if *t == *"/\\u{5834}\\u{9762}.usda"), "{scene:?}");
+    }
+
+    #[test]
     fn failed_write_creates_nothing_and_keeps_existing_file() {
         let dir = tempfile::tempdir().unwrap();
         let missing = dir.path().join("no/such/dir/out.exr");

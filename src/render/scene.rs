@@ -215,6 +215,47 @@ def DomeLight "Sky" {}"#,
     }
 
     #[test]
+    fn render_settings_choose_camera_and_resolution_unless_overridden() {
+        let text = r#"#usda 1.0
+def Camera "A" {}
+def Camera "B" {}
+def Sphere "S" {}
+def RenderSettings "Settings" {
+    rel camera = </B>
+    uniform int2 resolution = (320, 200)
+}"#;
+        let (two, mut diags) = stage(text);
+        let view = choose_view(&two, None, &mut diags).expect("view");
+        assert_eq!(view, View { camera: Some("/B".into()), resolution: Some((320, 200)) });
+        let view = choose_view(&two, Some("/A"), &mut diags).expect("view");
+        assert_eq!(view.camera.as_deref(), Some("/A"));
+        assert!(!diags.has_errors());
+        let scene =
+            Scene::from_stage_with(&two, &|_| Some(0), &SceneOptions { camera: view.camera }, &mut diags).unwrap();
+        assert_eq!(scene.camera_path.as_deref(), Some("/A"));
+        // Not a camera: an error naming what it is and listing the cameras.
+        assert!(choose_view(&two, Some("/S"), &mut diags).is_none());
+        let error = diags.items().last().expect("an error");
+        assert!(error.message.contains("is a Sphere, not a Camera"), "{}", error.message);
+        assert_eq!(error.notes, ["cameras: /A, /B"]);
+        // Settings pointing at a non-camera, with a bad resolution: warnings, first camera, default size.
+        let (bad, mut diags) = stage(&text_with(
+            r#"rel camera = </S>
+    uniform int2 resolution = (0, 200)"#,
+        ));
+        let view = choose_view(&bad, None, &mut diags).expect("view");
+        assert_eq!(view, View::default());
+        assert!(!diags.has_errors());
+        assert_eq!(diags.items().len(), 2, "{:?}", diags.items());
+    }
+
+    fn text_with(settings: &str) -> String {
+        format!(
+            "#usda 1.0\ndef Camera \"A\" {{}}\ndef Sphere \"S\" {{}}\ndef RenderSettings \"R\" {{\n    {settings}\n}}"
+        )
+    }
+
+    #[test]
     fn default_camera_frames_the_scene_and_missing_material_is_an_error() {
         let (stage, mut diags) = stage("#usda 1.0\ndef Cube \"C\" { double size = 3 }\ndef DomeLight \"D\" {}");
         let scene = Scene::from_stage(&stage, &|_| Some(0), &mut diags).expect("scene");
