@@ -46,9 +46,15 @@ pub fn murmur3_x86_32(data: &[u8], seed: u32) -> u32 {
 }
 
 /// The ID of `name` as the bits of the float stored in the image: its MurmurHash3 with the
-/// exponent clamped to 1..=254 (the specification's `uint32_to_float32` conversion).
+/// exponent clamped to 1..=254 (the specification's `uint32_to_float32` conversion; the
+/// reference flips bit 23 when the exponent is 0 or 255, which is the same). The manifest
+/// holds these bits, so a reader can compare them with the pixel's float directly.
 pub fn id_bits(name: &str) -> u32 {
-    let hash = murmur3_x86_32(name.as_bytes(), 0);
+    float_bits(murmur3_x86_32(name.as_bytes(), 0))
+}
+
+/// `hash` with its float32 exponent kept in 1..=254 (never denormal, infinite or NaN).
+fn float_bits(hash: u32) -> u32 {
     let exponent = ((hash >> 23) & 0xff).clamp(1, 254);
     (hash & 0x8000_0000) | (exponent << 23) | (hash & 0x007f_ffff)
 }
@@ -63,10 +69,10 @@ pub fn channel_names(layer: &str) -> Vec<String> {
     (0..RANKS.div_ceil(2)).flat_map(|group| ["R", "G", "B", "A"].map(|c| format!("{layer}{group:02}.{c}"))).collect()
 }
 
-/// The header key of `layer`: the first 7 hex digits of its name's hash, as the reference
-/// implementations write it.
+/// The header key of `layer`: the first 7 hex digits of its name's ID (the float-converted
+/// hash), as the reference implementation (Psyop's `layer_hash`) writes it.
 pub fn layer_key(layer: &str) -> String {
-    format!("{:08x}", murmur3_x86_32(layer.as_bytes(), 0))[..7].to_string()
+    format!("{:08x}", id_bits(layer))[..7].to_string()
 }
 
 /// The header attributes (`cryptomatte/<key>/name|hash|conversion|manifest`) of a layer whose
@@ -163,6 +169,22 @@ mod tests {
         assert_eq!(parsed["/ünï"], format!("{:08x}", id("/ünï").to_bits()));
         assert_eq!(attrs[0].0, format!("cryptomatte/{}/name", layer_key(OBJECT_LAYER)));
         assert_eq!(layer_key(OBJECT_LAYER).len(), 7);
+    }
+
+    #[test]
+    fn conversion_flips_bit_23_only_for_exponents_0_and_255() {
+        for (hash, expected) in [
+            (0x0000_0000, 0x0080_0000),
+            (0x807f_ffff, 0x80ff_ffff),
+            (0x7f80_0000, 0x7f00_0000),
+            (0xffff_ffff, 0xff7f_ffff),
+            (0x3f80_0001, 0x3f80_0001),
+        ] {
+            assert_eq!(float_bits(hash), expected, "{hash:08x}");
+            let exponent = (hash >> 23) & 0xff;
+            let reference = if exponent == 0 || exponent == 255 { hash ^ (1 << 23) } else { hash };
+            assert_eq!(float_bits(hash), reference);
+        }
     }
 
     #[test]
