@@ -9,6 +9,7 @@ use crate::diag::{Diagnostics, SourceMap};
 use crate::front::library::Library;
 use crate::ir::ssa::EntryKind;
 use crate::ir::wired::{self, PassOptions};
+use crate::render::ExrOptions;
 use crate::scene::Stage;
 use crate::scenes;
 use serde::Serialize;
@@ -256,6 +257,14 @@ pub struct RenderArgs {
     pub optimize: bool,
     /// Print compile and render statistics.
     pub stats: bool,
+    /// Store beauty and colour channels as half floats.
+    pub half: bool,
+    /// The camera prim to render through (`None`: the stage's render settings camera, else
+    /// the first camera).
+    pub camera: Option<String>,
+    /// Whether `settings.width`/`height` were given (`--res`); if not, a UsdRender
+    /// `RenderSettings` prim's `resolution` replaces them.
+    pub resolution_given: bool,
 }
 
 /// A scene with every distinct material compiled.
@@ -266,6 +275,8 @@ pub struct CompiledScene {
     pub materials: Vec<Arc<dyn MaterialCode>>,
     /// Per renderable prim path, its index in `materials`.
     pub prim_material: HashMap<String, usize>,
+    /// Per material, a name for its slot stack (see [`material_name`]), for ID mattes.
+    pub material_names: Vec<String>,
     /// The compiler, with its statistics.
     pub compiler: Compiler,
 }
@@ -290,7 +301,31 @@ pub fn compile_scene(
     }
     let prim_material =
         composition.stacks.iter().zip(&composition.prim_material).map(|(s, m)| (s.prim.clone(), *m)).collect();
-    Some(CompiledScene { stage, materials, prim_material, compiler })
+    // Each material is named after the first prim stack composing it: identical compositions
+    // are shared (DESIGN.md rule 8), so that stack stands for all of them.
+    let material_names = (0..materials.len())
+        .map(|m| {
+            let first = composition.prim_material.iter().position(|&pm| pm == m);
+            first.and_then(|i| composition.stacks.get(i)).map_or_else(|| format!("material {m}"), material_name)
+        })
+        .collect();
+    Some(CompiledScene { stage, materials, prim_material, material_names, compiler })
+}
+
+/// The name of a composed material in ID mattes: its slot stack, bottom first, as
+/// `slot=/Material/Path` entries (overrides as `slot:_:override=/Path`) joined by ` | `.
+pub fn material_name(stack: &PrimStack) -> String {
+    if stack.layers.is_empty() {
+        return "(default substance)".into();
+    }
+    let mut parts = Vec::new();
+    for layer in &stack.layers {
+        parts.push(format!("{}={}", layer.slot.name(), layer.applied.material));
+        for o in &layer.overrides {
+            parts.push(format!("{}={}", o.slot.name(), o.applied.material));
+        }
+    }
+    parts.join(" | ")
 }
 
 /// `strata render [SCENE] -o OUT.exr …`
@@ -310,6 +345,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
             return Err(Failure);
         }
     };
+    let compile_start = std::time::Instant::now();
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
     let compiled = compile_scene(
@@ -319,25 +355,35 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         &mut sources,
         &mut diags,
     );
-    let scene = compiled
-        .as_ref()
-        .and_then(|c| crate::render::Scene::from_stage(&c.stage, &|p| c.prim_material.get(p).copied(), &mut diags));
+    let mut settings = args.settings.clone();
+    let scene = compiled.as_ref().and_then(|c| {
+        let view = crate::render::scene::choose_view(&c.stage, args.camera.as_deref(), &mut diags)?;
+        if let (false, Some((w, h))) = (args.resolution_given, view.resolution) {
+            (settings.width, settings.height) = (w, h);
+        }
+        let options = crate::render::scene::SceneOptions { camera: view.camera };
+        crate::render::Scene::from_stage_with(&c.stage, &|p| c.prim_material.get(p).copied(), &options, &mut diags)
+    });
     report(&diags, &sources)?;
-    let (Some(CompiledScene { materials, compiler, .. }), Some(scene)) = (compiled, scene) else { return Err(Failure) };
+    let (Some(CompiledScene { materials, compiler, material_names, .. }), Some(mut scene)) = (compiled, scene) else {
+        return Err(Failure);
+    };
+    scene.material_names = material_names;
+    let compile_seconds = compile_start.elapsed().as_secs_f64();
     // Every input (layers, substance files, textures, dome maps) has been read by now.
     refuse_to_overwrite_inputs(&[outputs.exr_path(), outputs.png_path()])?;
     if args.stats {
         eprintln!("compile ({}): {}", args.backend, compiler.stats);
     }
     let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
-    let bar = progress_bar(args.settings.height as u64);
-    let progress = |done: usize, _total: usize| {
-        if let Some(bar) = &bar {
-            bar.set_position(done as u64);
-        }
-    };
+    let bar = progress_bar(settings.height as u64);
     let start = std::time::Instant::now();
-    let (image, stats) = match crate::render::render(&scene, &refs, &args.settings, Some(&progress)) {
+    let log = LogProgress::new(start);
+    let progress = |done: usize, total: usize| match &bar {
+        Some(bar) => bar.set_position(done as u64),
+        None => log.update(done, total),
+    };
+    let (image, stats) = match crate::render::render(&scene, &refs, &settings, Some(&progress)) {
         Ok(result) => result,
         Err(e) => {
             eprintln!("error: {e}");
@@ -348,20 +394,24 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         bar.finish_and_clear();
     }
     let seconds = start.elapsed().as_secs_f64();
-    let png = match outputs.write(&image) {
+    let exr_options = exr_options(args, &settings, &scene);
+    let png = match outputs.write_with(&image, &exr_options) {
         Ok(png) => png,
         Err(e) => {
             eprintln!("error: {e}");
             return Err(Failure);
         }
     };
-    let s = &args.settings;
+    let s = &settings;
+    // One line that always reaches the log, whatever stderr is.
     eprintln!(
-        "rendered {}x{} at {} spp in {seconds:.2} s ({} backend): {} and {}",
+        "rendered {}x{} at {} spp in {seconds:.2} s ({} backend; compile {compile_seconds:.2} s, render {seconds:.2} s, \
+         {} samples/s): {} and {}",
         s.width,
         s.height,
         s.spp,
         args.backend,
+        samples_per_second(stats.samples, seconds),
         args.output.display(),
         png.display()
     );
@@ -381,6 +431,83 @@ fn refuse_to_overwrite_inputs(outputs: &[&Path]) -> Result<(), Failure> {
         }
     }
     Ok(())
+}
+
+/// `samples / seconds`, readable: `1.23M`, `45.6K` or a plain number.
+fn samples_per_second(samples: u64, seconds: f64) -> String {
+    let rate = samples as f64 / seconds.max(1e-9);
+    match rate {
+        r if r >= 1e6 => format!("{:.2}M", r / 1e6),
+        r if r >= 1e3 => format!("{:.1}K", r / 1e3),
+        r => format!("{r:.0}"),
+    }
+}
+
+/// The EXR header of a render: the camera's matrices and the settings that made the image,
+/// so a compositor (or a person reading `exrheader`) can tell how it was made.
+fn exr_options(
+    args: &RenderArgs,
+    settings: &crate::render::RenderSettings,
+    scene: &crate::render::Scene,
+) -> ExrOptions {
+    let camera = scene.camera.with_aspect(settings.width as f32 / settings.height as f32);
+    let world_to_camera = camera.world_to_camera();
+    let mode = match settings.mode {
+        crate::render::LayerMode::Stochastic => "stochastic",
+        crate::render::LayerMode::Weighted => "weighted",
+    };
+    let scene_name = args.scene.as_ref().map_or("(embedded default scene)".to_string(), |p| p.display().to_string());
+    ExrOptions {
+        half: args.half,
+        world_to_camera: Some(world_to_camera),
+        world_to_ndc: Some(camera.camera_to_ndc() * world_to_camera),
+        clipping: Some(camera.clipping_range()),
+        strings: vec![
+            ("strata/scene".into(), scene_name),
+            ("strata/camera".into(), scene.camera_path.clone().unwrap_or_else(|| "(framing camera)".into())),
+            ("strata/spp".into(), settings.spp.to_string()),
+            ("strata/seed".into(), settings.seed.to_string()),
+            ("strata/maxDepth".into(), settings.max_depth.to_string()),
+            ("strata/backend".into(), args.backend.to_string()),
+            ("strata/layerMode".into(), mode.into()),
+            ("strata/optimize".into(), args.optimize.to_string()),
+        ]
+        .into_iter()
+        .chain(crate::render::cryptomatte::header_attributes(
+            crate::render::cryptomatte::OBJECT_LAYER,
+            scene.prims.iter().map(|p| p.path.as_str()),
+        ))
+        .chain(crate::render::cryptomatte::header_attributes(
+            crate::render::cryptomatte::MATERIAL_LAYER,
+            scene.material_names.iter().map(String::as_str),
+        ))
+        .collect(),
+    }
+}
+
+/// Progress for a log (stderr not a terminal, e.g. a render farm): one plain line per 5 % of
+/// rows, with elapsed and estimated remaining time.
+struct LogProgress {
+    start: std::time::Instant,
+    /// The last 5 % step printed.
+    printed: std::sync::atomic::AtomicUsize,
+}
+
+impl LogProgress {
+    fn new(start: std::time::Instant) -> LogProgress {
+        LogProgress { start, printed: std::sync::atomic::AtomicUsize::new(0) }
+    }
+
+    /// Prints a line when `done` of `total` rows reaches a new 5 % step.
+    fn update(&self, done: usize, total: usize) {
+        let step = done.saturating_mul(20) / total.max(1);
+        if step <= self.printed.fetch_max(step, std::sync::atomic::Ordering::Relaxed) {
+            return;
+        }
+        let elapsed = self.start.elapsed().as_secs_f64();
+        let left = elapsed * (total - done.min(total)) as f64 / done.max(1) as f64;
+        eprintln!("render: {:3}% ({done}/{total} rows), {elapsed:.1} s elapsed, about {left:.1} s left", step * 5);
+    }
 }
 
 /// A progress bar on stderr when it is a terminal (and not in CI logs).

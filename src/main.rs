@@ -63,9 +63,18 @@ enum Command {
         /// Camera samples per pixel.
         #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
         spp: u32,
-        /// Image size, WIDTHxHEIGHT.
-        #[arg(long, default_value = "640x480", value_parser = parse_resolution)]
-        res: (usize, usize),
+        /// Image size, WIDTHxHEIGHT (default: a UsdRender RenderSettings prim's `resolution`,
+        /// else 640x480).
+        #[arg(long, value_parser = parse_resolution)]
+        res: Option<(usize, usize)>,
+        /// The Camera prim to render through (default: the RenderSettings prim's `camera`,
+        /// else the first Camera, else a camera framing the scene).
+        #[arg(long, value_name = "PRIM")]
+        camera: Option<String>,
+        /// Store RGBA and colour AOVs (albedo, N, colour channels) as 16-bit half floats;
+        /// Z, P, scalar and integer channels stay 32-bit.
+        #[arg(long)]
+        half: bool,
         /// Seed of all sampling: the same seed gives the same image whatever the thread count.
         #[arg(long, default_value_t = 0)]
         seed: u64,
@@ -197,6 +206,8 @@ fn main() -> ExitCode {
             output,
             spp,
             res,
+            camera,
+            half,
             seed,
             threads,
             max_depth,
@@ -208,8 +219,8 @@ fn main() -> ExitCode {
             scene,
             output,
             settings: RenderSettings {
-                width: res.0,
-                height: res.1,
+                width: res.map_or(640, |r| r.0),
+                height: res.map_or(480, |r| r.1),
                 spp,
                 seed,
                 threads: threads.map(|t| t as usize),
@@ -219,6 +230,9 @@ fn main() -> ExitCode {
             backend,
             optimize: !no_optimize,
             stats,
+            half,
+            camera,
+            resolution_given: res.is_some(),
         }),
         Command::Compile { file, output } => cli::compile(&file, &output),
         Command::Bench { what } => {

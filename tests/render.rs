@@ -142,7 +142,7 @@ fn mean_normal(scene: &Path) -> [f32; 3] {
         let v = image.f32_channel(c).unwrap();
         v.iter().sum::<f32>() / v.len() as f32
     };
-    [mean("N.X"), mean("N.Y"), mean("N.Z")]
+    [mean("N.R"), mean("N.G"), mean("N.B")]
 }
 
 fn assert_close(got: [f32; 3], want: [f32; 3]) {

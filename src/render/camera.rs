@@ -11,7 +11,7 @@ use super::sampling::concentric_disk;
 use super::xform::value_span;
 use crate::diag::{Diagnostic, Diagnostics};
 use crate::scene::{Prim, Value};
-use glam::{DMat4, Vec2, Vec3};
+use glam::{DMat4, Mat4, Vec2, Vec3};
 
 /// A perspective camera in world space.
 #[derive(Clone, Copy, Debug)]
@@ -151,6 +151,44 @@ impl Camera {
         self.forward
     }
 
+    /// The world-to-camera transform (column vectors), camera space as in USD and OpenEXR:
+    /// right-handed, looking down −Z with +Y up.
+    pub fn world_to_camera(&self) -> Mat4 {
+        let camera_to_world = Mat4::from_cols(
+            self.right.extend(0.0),
+            self.up.extend(0.0),
+            (-self.forward).extend(0.0),
+            self.origin.extend(1.0),
+        );
+        camera_to_world.inverse()
+    }
+
+    /// The camera-to-NDC projection (column vectors, OpenGL-style clip space): after the
+    /// divide by `w`, x and y run over −1..1 across the image (x right, y up, aperture offsets
+    /// included) and z runs from −1 at the near clipping plane to 1 at the far one (a far
+    /// plane at infinity maps to 1 in the limit).
+    pub fn camera_to_ndc(&self) -> Mat4 {
+        let near = if self.near > 0.0 { self.near } else { 1e-3 };
+        let (c, d) = if self.far.is_finite() && self.far > near {
+            let (n, f) = (near, self.far);
+            (-(f + n) / (f - n), -2.0 * f * n / (f - n))
+        } else {
+            (-1.0, -2.0 * near)
+        };
+        // x_ndc = (x / tan_x + shift_x · z) / −z: the inverse of `ray`'s film mapping.
+        Mat4::from_cols(
+            glam::Vec4::new(1.0 / self.tan_half.x, 0.0, 0.0, 0.0),
+            glam::Vec4::new(0.0, 1.0 / self.tan_half.y, 0.0, 0.0),
+            glam::Vec4::new(self.shift.x, self.shift.y, c, -1.0),
+            glam::Vec4::new(0.0, 0.0, d, 0.0),
+        )
+    }
+
+    /// The near and far clipping distances along the viewing axis (far may be infinite).
+    pub fn clipping_range(&self) -> (f32, f32) {
+        (self.near, self.far)
+    }
+
     /// The ray through film position `film` (`[0,1]²`, x to the right, y downwards) using
     /// lens sample `lens` (`[0,1)²`, unused for a pinhole).
     pub fn ray(&self, film: Vec2, lens: Vec2) -> CameraRay {
@@ -204,6 +242,35 @@ def Camera "C" {
         assert_eq!(r.o, Vec3::new(0.0, 0.0, 5.0));
         // Near clip 1 along the axis is 1/cos along an oblique ray.
         assert!((r.tmin - 2f32.sqrt()).abs() < 1e-5);
+    }
+
+    #[test]
+    fn camera_matrices_map_film_positions_back_to_ndc() {
+        let (stage, mut diags) = stage(
+            r#"#usda 1.0
+def Camera "C" {
+    float focalLength = 35
+    float horizontalAperture = 36
+    float horizontalApertureOffset = 3
+    double3 xformOp:rotateXYZ = (10, 30, 0)
+    double3 xformOp:translate = (1, 2, 5)
+    uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateXYZ"]
+}"#,
+        );
+        let xf = world_transforms(&stage, &mut diags);
+        let id = stage.find("/C").unwrap();
+        let cam = Camera::from_prim(stage.prim(id), xf[id.0 as usize].world, 1.5, &mut diags);
+        let to_ndc = cam.camera_to_ndc() * cam.world_to_camera();
+        for film in [Vec2::new(0.5, 0.5), Vec2::new(0.1, 0.9), Vec2::new(0.95, 0.2)] {
+            let r = cam.ray(film, Vec2::ZERO);
+            let p = r.o + r.d * 7.0;
+            // In camera space the point is in front: negative z.
+            assert!(cam.world_to_camera().transform_point3(p).z < 0.0);
+            let ndc = to_ndc.project_point3(p);
+            let expected = Vec2::new(2.0 * film.x - 1.0, 1.0 - 2.0 * film.y);
+            assert!((ndc.truncate() - expected).length() < 1e-4, "{film}: {ndc}");
+            assert!((-1.0..=1.0).contains(&ndc.z), "{ndc}");
+        }
     }
 
     #[test]

@@ -5,6 +5,7 @@
 //! (seed, pixel, sample) and are accumulated in sample order, which makes the image
 //! bit-identical whatever the thread count. Rows are rendered in parallel with rayon.
 
+use super::cryptomatte;
 use super::integrator::{ChannelMap, Context, FaultSite, Invalid, LayerMode, PathParams, Scratch};
 use super::sampling::Rng;
 use super::scene::Scene;
@@ -61,7 +62,7 @@ pub enum ChannelData {
 /// One named channel, row-major, top row first.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Channel {
-    /// Full EXR channel name, e.g. `R`, `albedo.G`, `N.X`, `Z`, `mask.R`.
+    /// Full EXR channel name, e.g. `R`, `albedo.G`, `N.R`, `P.B`, `Z`, `mask.R`.
     pub name: String,
     /// Pixels.
     pub data: ChannelData,
@@ -74,7 +75,8 @@ pub struct Image {
     pub width: usize,
     /// Height in pixels.
     pub height: usize,
-    /// Channels: `R G B A`, `albedo.R/G/B`, `N.X/Y/Z`, `Z`, then custom channels by name.
+    /// Channels: `R G B A`, `albedo.R/G/B`, `N.R/G/B`, `P.R/G/B`, `Z`, Cryptomatte, then
+    /// custom channels by name (see [`render`] for what each holds).
     pub channels: Vec<Channel>,
 }
 
@@ -301,12 +303,27 @@ fn channel_layout(
     (channels, offset, map)
 }
 
+/// The channels every render writes first, in order; the Cryptomatte channels and then the
+/// materials' custom channels follow.
+pub const BUILTIN_CHANNELS: [&str; 14] =
+    ["R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B", "N.R", "N.G", "N.B", "P.R", "P.G", "P.B", "Z"];
+
+/// `Z` where no sample of a pixel hit a surface. Finite, because compositing tools (depth
+/// of field, fog, deep merges) misbehave on infinities; far beyond any scene's extent, so a
+/// `Z < 1e9` test separates geometry from background.
+pub const DEPTH_MISS: f32 = 1.0e10;
+
 /// Per-row accumulation buffers.
 struct Row {
     rgba: Vec<[f32; 4]>,
     albedo: Vec<Vec3>,
     normal: Vec<Vec3>,
+    position: Vec<Vec3>,
     depth: Vec<f32>,
+    /// Per pixel, the Cryptomatte `(id, coverage)` pairs of its most-covering prims.
+    crypto: Vec<[f32; 2 * cryptomatte::RANKS]>,
+    /// The same for composed materials (empty when the scene names no materials).
+    crypto_material: Vec<[f32; 2 * cryptomatte::RANKS]>,
     channels: Vec<f32>,
     stats: RenderStats,
     /// The row's first fault of each [`FaultKind`] (indexed like `FaultKind::ALL`).
@@ -317,6 +334,24 @@ struct Row {
 pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
 
 /// Renders `scene` through `materials` (indexed by `scene.prim_material`).
+///
+/// The image's channels ([`BUILTIN_CHANNELS`], Cryptomatte, then custom channels):
+/// - `R G B A`: linear Rec.709 radiance, premultiplied by `A`, the fraction of samples that
+///   reached a non-transparent surface. Where the camera sees a visible dome, `RGB` holds the
+///   dome's radiance with `A = 0` (additive emission, valid in premultiplied alpha: a comp
+///   *over* a plate adds the sky); a dome with `strata:visibleToCamera = false` leaves `RGB`
+///   at 0 there.
+/// - `albedo.R/G/B`: albedo of the first hit, averaged over all samples (0 on misses).
+/// - `N.R/G/B`: world-space shading normal of the first hit, averaged over the samples that
+///   hit and renormalised (0 where none hit).
+/// - `P.R/G/B`: world-space position of the first hit, averaged over the samples that hit
+///   (0 where none hit).
+/// - `Z`: camera-space depth (distance along the viewing axis, positive) of the nearest first
+///   hit among the pixel's samples; [`DEPTH_MISS`] where none hit.
+/// - `CryptoObject00.R/G/B/A`, `CryptoObject01.R/G/B/A`: Cryptomatte of the first hit's prim
+///   path (see [`cryptomatte`]); coverages sum to `A`.
+/// - `CryptoMaterial00/01.R/G/B/A`: the same for the composed material, when
+///   `scene.material_names` names every material.
 pub fn render(
     scene: &Scene,
     materials: &[&dyn MaterialCode],
@@ -347,12 +382,23 @@ pub fn render(
     };
     let done = AtomicUsize::new(0);
     let progress_lock = Mutex::new(());
+    let object_ids: Vec<f32> = scene.prims.iter().map(|p| cryptomatte::id(&p.path)).collect();
+    let material_ids: Vec<f32> = if scene.material_names.len() == materials.len() {
+        scene.material_names.iter().map(|n| cryptomatte::id(n)).collect()
+    } else {
+        Vec::new()
+    };
     let render_row = |y: usize, scratch: &mut Scratch| -> Row {
+        let mut coverage = cryptomatte::PixelCoverage::default();
+        let mut material_coverage = cryptomatte::PixelCoverage::default();
         let mut row = Row {
             rgba: vec![[0.0; 4]; w],
             albedo: vec![Vec3::ZERO; w],
             normal: vec![Vec3::ZERO; w],
-            depth: vec![f32::INFINITY; w],
+            position: vec![Vec3::ZERO; w],
+            depth: vec![DEPTH_MISS; w],
+            crypto: vec![[0.0; 2 * cryptomatte::RANKS]; w],
+            crypto_material: vec![[0.0; 2 * cryptomatte::RANKS]; if material_ids.is_empty() { 0 } else { w }],
             channels: vec![0.0; w * channel_floats],
             stats: RenderStats::default(),
             faults: [None; 3],
@@ -363,8 +409,11 @@ pub fn render(
             let mut alpha = 0.0f32;
             let mut albedo = Vec3::ZERO;
             let mut normal = Vec3::ZERO;
+            let mut position = Vec3::ZERO;
             let mut hits = 0u32;
-            let mut depth = f32::INFINITY;
+            let mut depth = DEPTH_MISS;
+            coverage.clear();
+            material_coverage.clear();
             let px_channels = &mut row.channels[x * channel_floats..(x + 1) * channel_floats];
             for sample in 0..settings.spp {
                 let mut rng = Rng::new(settings.seed, pixel, sample as u64);
@@ -382,9 +431,21 @@ pub fn render(
                         albedo += r.albedo;
                         if r.alpha > 0.0 {
                             normal += r.normal;
+                            position += r.position;
                             hits += 1;
+                            if let Some(prim) = r.prim {
+                                coverage.add(prim, r.alpha / settings.spp as f32);
+                                if let Some(&m) = scene.prim_material.get(prim as usize) {
+                                    material_coverage.add(m as u32, r.alpha / settings.spp as f32);
+                                }
+                            }
+                            // Depth along the viewing axis, not along the ray; the lens
+                            // origin of a depth-of-field ray lies in the plane of the camera.
+                            let z = (r.position - camera.origin()).dot(camera.forward());
+                            if z.is_finite() {
+                                depth = depth.min(z.max(0.0));
+                            }
                         }
-                        depth = depth.min(r.depth);
                         for c in &channels {
                             for k in 0..width(c.kind) {
                                 let v = scratch.channels[c.offset + k];
@@ -422,6 +483,11 @@ pub fn render(
             row.rgba[x] = [c.x, c.y, c.z, alpha * inv];
             row.albedo[x] = albedo * inv;
             row.normal[x] = if hits > 0 { (normal / hits as f32).normalize_or_zero() } else { Vec3::ZERO };
+            row.crypto[x] = coverage.ranked(&object_ids);
+            if let Some(px) = row.crypto_material.get_mut(x) {
+                *px = material_coverage.ranked(&material_ids);
+            }
+            row.position[x] = if hits > 0 { position / hits as f32 } else { Vec3::ZERO };
             row.depth[x] = depth;
             for c in &channels {
                 if c.kind != ChannelKind::Integer {
@@ -455,7 +521,7 @@ pub fn render(
     // Assemble channels and stats in row order.
     let mut stats = RenderStats { warnings, ..RenderStats::default() };
     let n = w * h;
-    let mut planes: Vec<Vec<f32>> = vec![Vec::with_capacity(n); 11 + channel_floats];
+    let mut planes: Vec<Vec<f32>> = vec![Vec::with_capacity(n); BUILTIN_CHANNELS.len() + channel_floats];
     for (y, row) in rows.iter().enumerate() {
         for (kind, fault) in FaultKind::ALL.into_iter().zip(row.faults) {
             if let Some(fault) = fault
@@ -496,20 +562,33 @@ pub fn render(
                 row.normal[x].x,
                 row.normal[x].y,
                 row.normal[x].z,
+                row.position[x].x,
+                row.position[x].y,
+                row.position[x].z,
                 row.depth[x],
             ];
             for (plane, v) in planes.iter_mut().zip(values) {
                 plane.push(v);
             }
             for k in 0..channel_floats {
-                planes[11 + k].push(row.channels[x * channel_floats + k]);
+                planes[BUILTIN_CHANNELS.len() + k].push(row.channels[x * channel_floats + k]);
             }
         }
     }
     let mut planes = planes.into_iter();
     let mut out = Vec::new();
-    for name in ["R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z"] {
+    for name in BUILTIN_CHANNELS {
         out.push(Channel { name: name.into(), data: ChannelData::F32(planes.next().unwrap_or_default()) });
+    }
+    for (k, name) in cryptomatte::channel_names(cryptomatte::OBJECT_LAYER).into_iter().enumerate() {
+        let plane = rows.iter().flat_map(|row| row.crypto.iter().map(move |px| px[k])).collect();
+        out.push(Channel { name, data: ChannelData::F32(plane) });
+    }
+    if !material_ids.is_empty() {
+        for (k, name) in cryptomatte::channel_names(cryptomatte::MATERIAL_LAYER).into_iter().enumerate() {
+            let plane = rows.iter().flat_map(|row| row.crypto_material.iter().map(move |px| px[k])).collect();
+            out.push(Channel { name, data: ChannelData::F32(plane) });
+        }
     }
     for c in &channels {
         let suffixes: &[&str] = if c.kind == ChannelKind::Color { &[".R", ".G", ".B"] } else { &[""] };

@@ -57,6 +57,10 @@ pub struct SampleResult {
     pub normal: Vec3,
     /// Distance from the camera (`f32::INFINITY` on a miss).
     pub depth: f32,
+    /// World position of the first visible hit (zero on a miss).
+    pub position: Vec3,
+    /// Index in [`Scene::prims`] of the first visible hit's prim (`None` on a miss).
+    pub prim: Option<u32>,
     /// Transparent surfaces passed through that hit [`MAX_PASS_THROUGH`].
     pub pass_limit: bool,
 }
@@ -489,10 +493,12 @@ impl Context<'_> {
 
     /// Emission of area lights crossed by the segment `o + t d`, `t < tmax`, MIS-weighted
     /// against the vertex that chose `d` (which transparent picks may have left behind `o`).
-    fn area_emission(&self, o: Vec3, d: Vec3, tmax: f32, from: &Scatter) -> Vec3 {
+    /// `camera_ray`: the ray left the camera (perhaps through transparent surfaces), so lights
+    /// hidden from the camera contribute nothing.
+    fn area_emission(&self, o: Vec3, d: Vec3, tmax: f32, from: &Scatter, camera_ray: bool) -> Vec3 {
         let mut sum = Vec3::ZERO;
         let select = 1.0 / self.scene.lights.len().max(1) as f32;
-        for light in &self.scene.lights {
+        for light in self.scene.lights.iter().filter(|l| l.visible_to_camera || !camera_ray) {
             if let Some((le, _)) = light.hit(o, d, tmax) {
                 sum += le * from.mis(light, d, select);
             }
@@ -500,11 +506,12 @@ impl Context<'_> {
         sum
     }
 
-    /// Emission of infinite lights reached in direction `d`, MIS-weighted against `from`.
-    fn escape_emission(&self, d: Vec3, from: &Scatter) -> Vec3 {
+    /// Emission of infinite lights reached in direction `d`, MIS-weighted against `from`
+    /// (`camera_ray` as in [`Context::area_emission`]).
+    fn escape_emission(&self, d: Vec3, from: &Scatter, camera_ray: bool) -> Vec3 {
         let mut sum = Vec3::ZERO;
         let select = 1.0 / self.scene.lights.len().max(1) as f32;
-        for light in self.scene.lights.iter().filter(|l| l.is_infinite()) {
+        for light in self.scene.lights.iter().filter(|l| l.is_infinite() && (l.visible_to_camera || !camera_ray)) {
             let le = light.escape(d);
             if le != Vec3::ZERO {
                 sum += le * from.mis(light, d, select);
@@ -541,9 +548,11 @@ impl Context<'_> {
         loop {
             let hit = accel.intersect(o, d, tmin, tmax);
             let t_hit = hit.map_or(f32::INFINITY, |h| h.t);
-            out.radiance += throughput * self.area_emission(o, d, t_hit, &from);
+            // Still the camera's ray until the first bounce (passing through is not one).
+            let camera_ray = bounces == 0;
+            out.radiance += throughput * self.area_emission(o, d, t_hit, &from, camera_ray);
             let Some(hit) = hit else {
-                out.radiance += throughput * self.escape_emission(d, &from);
+                out.radiance += throughput * self.escape_emission(d, &from, camera_ray);
                 break;
             };
             let sp = surface_point(accel, self.scene, o, d, &hit);
@@ -572,6 +581,8 @@ impl Context<'_> {
                 out.albedo = albedo;
                 out.normal = normal;
                 out.depth = travelled + hit.t;
+                out.position = sp.p;
+                out.prim = Some(sp.prim);
             }
             if s.lobes.is_empty() || bounces >= self.params.max_depth {
                 break;

@@ -160,7 +160,15 @@ pub struct Light {
     pub path: String,
     /// Geometry and emission.
     pub kind: LightKind,
+    /// Whether camera rays see the light itself (`bool strata:visibleToCamera`, default
+    /// true). A hidden light still lights the scene and shows in reflections.
+    pub visible_to_camera: bool,
 }
+
+/// The attribute that hides a light from camera rays. UsdLux has no standard one (renderers
+/// use their own: Karma's `karma:light:renderlightgeo`, RenderMan's
+/// `primvars:ri:attributes:visibility:camera`), so strata reads its own namespace.
+pub const VISIBLE_TO_CAMERA: &str = "strata:visibleToCamera";
 
 /// A light sample as seen from a shading point.
 #[derive(Clone, Copy, Debug)]
@@ -391,7 +399,8 @@ pub fn lights_from_stage(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagno
             continue;
         }
         if let Some(kind) = light_kind(prim, ty, xforms[id.0 as usize], diags) {
-            lights.push(Light { path: prim.path.clone(), kind });
+            let visible_to_camera = prim.value(VISIBLE_TO_CAMERA).and_then(Value::as_bool).unwrap_or(true);
+            lights.push(Light { path: prim.path.clone(), kind, visible_to_camera });
         }
     }
     lights
@@ -596,6 +605,20 @@ def Xform "X" { float xformOp:rotateY = 30  uniform token[] xformOpOrder = ["xfo
             };
             assert!((solid_angle - expected).abs() < 0.02 * expected, "{}: {solid_angle} vs {expected}", light.path);
         }
+    }
+
+    #[test]
+    fn invisible_lights_are_dropped_and_camera_visibility_is_read() {
+        let l = lights(
+            r#"#usda 1.0
+def DomeLight "Hidden" { token visibility = "invisible" }
+def Xform "Off" { token visibility = "invisible"
+    def SphereLight "Child" { float inputs:radius = 0.5 } }
+def DomeLight "Sky" { bool strata:visibleToCamera = false }
+def SphereLight "Lamp" { float inputs:radius = 0.5 }"#,
+        );
+        let seen: Vec<(&str, bool)> = l.iter().map(|l| (l.path.as_str(), l.visible_to_camera)).collect();
+        assert_eq!(seen, [("/Sky", false), ("/Lamp", true)]);
     }
 
     #[test]

@@ -14,6 +14,7 @@ pub mod bsdf;
 pub mod camera;
 #[cfg(test)]
 pub(crate) mod chi2;
+pub mod cryptomatte;
 pub mod film;
 pub mod frame;
 pub mod geometry;
@@ -36,5 +37,5 @@ pub use film::{
     Channel, ChannelData, FaultKind, FaultReport, Image, Progress, RenderError, RenderSettings, RenderStats, render,
 };
 pub use integrator::LayerMode;
-pub use output::{OutputError, PreparedOutputs, prepare_outputs, write_exr, write_outputs, write_png};
+pub use output::{ExrOptions, OutputError, PreparedOutputs, prepare_outputs, write_exr, write_outputs, write_png};
 pub use scene::Scene;

@@ -12,7 +12,11 @@
 //! a process that was killed outright are removed by the next run writing the same target.
 
 use super::film::{ChannelData, Image};
-use exr::prelude::{AnyChannel, AnyChannels, Encoding, FlatSamples, Layer, LayerAttributes, WritableImage};
+use exr::meta::attribute::{AttributeValue, Chromaticities, Text};
+use exr::prelude::{
+    AnyChannel, AnyChannels, Encoding, FlatSamples, ImageAttributes, IntegerBounds, Layer, LayerAttributes, Vec2,
+    WritableImage, f16,
+};
 use std::fmt;
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -164,33 +168,130 @@ fn error(path: &Path, message: impl ToString) -> OutputError {
     OutputError { path: path.to_path_buf(), message: message.to_string() }
 }
 
-/// Encodes every channel of `image` as one single-part EXR (float channels as 32-bit float,
-/// integer channels as UINT, ZIP compression).
-fn encode_exr(image: &Image, out: &mut BufWriter<&File>) -> Result<(), String> {
+/// What goes into the EXR besides the pixels.
+#[derive(Clone, Debug, Default)]
+pub struct ExrOptions {
+    /// Store beauty and colour-like channels as 16-bit half floats (see [`is_half_channel`]).
+    pub half: bool,
+    /// The render camera's `worldToCamera` (column vectors; written in OpenEXR's row-vector
+    /// layout).
+    pub world_to_camera: Option<glam::Mat4>,
+    /// The render camera's `worldToNDC` (column vectors, NDC as in
+    /// [`super::camera::Camera::camera_to_ndc`]).
+    pub world_to_ndc: Option<glam::Mat4>,
+    /// Near and far clipping planes (a non-finite far plane is not written).
+    pub clipping: Option<(f32, f32)>,
+    /// Extra string attributes (render settings), written as given.
+    pub strings: Vec<(String, String)>,
+}
+
+/// Whether a channel is stored as half under `--half`: `R G B A`, `albedo.*`, `N.*` and custom
+/// colour channels (`name.R/G/B`). Depth (`Z`), position (`P.*`), Cryptomatte, custom scalar
+/// channels (any range, so kept exact) and integer channels stay 32-bit.
+pub fn is_half_channel(name: &str) -> bool {
+    if matches!(name, "R" | "G" | "B" | "A") || name.starts_with("albedo.") || name.starts_with("N.") {
+        return true;
+    }
+    // Cryptomatte IDs are hash bits: half would destroy them.
+    !name.starts_with("P.")
+        && !name.starts_with("Crypto")
+        && [".R", ".G", ".B"].iter().any(|suffix| name.ends_with(suffix))
+}
+
+/// The EXR text for `s`: OpenEXR strings are 8-bit, so characters beyond Latin-1 (a scene
+/// path in another script) are written as `\u{…}` escapes rather than refused.
+fn exr_text(s: &str) -> Text {
+    Text::new_or_none(s).unwrap_or_else(|| {
+        let escaped: String = s
+            .chars()
+            .map(|c| if (c as u32) < 256 { c.to_string() } else { format!("\\u{{{:x}}}", c as u32) })
+            .collect();
+        Text::new_or_none(&escaped).unwrap_or_else(|| Text::from("?"))
+    })
+}
+
+/// `m` (column vectors) in OpenEXR/Imath's layout: row vectors, translation in the last row,
+/// which is `m`'s column-major array.
+fn imath_matrix(m: glam::Mat4) -> [f32; 16] {
+    m.to_cols_array()
+}
+
+/// The attributes every strata EXR carries, whatever the render: colour space, software, and
+/// what the vector and depth channels mean.
+fn standard_attributes() -> Vec<(&'static str, String)> {
+    vec![
+        ("strata/colorSpace", "lin_rec709 (linear Rec.709 primaries, D65 white)".into()),
+        (
+            "strata/alpha",
+            "premultiplied; A is surface coverage, RGB may be non-zero where A = 0 (a visible dome)".into(),
+        ),
+        ("strata/N/space", "world".into()),
+        ("strata/P/space", "world".into()),
+        ("strata/albedo/space", "lin_rec709".into()),
+        ("strata/Z/space", "camera (depth along the viewing axis, positive)".into()),
+        ("strata/Z/miss", format!("{:e}", super::film::DEPTH_MISS)),
+    ]
+}
+
+/// Encodes every channel of `image` as one single-part EXR (float channels as 32-bit float or,
+/// with `options.half`, half where [`is_half_channel`]; integer channels as UINT; ZIP
+/// compression), with the standard and strata header attributes.
+fn encode_exr(image: &Image, options: &ExrOptions, out: &mut BufWriter<&File>) -> Result<(), String> {
     let channels: Vec<AnyChannel<FlatSamples>> = image
         .channels
         .iter()
         .map(|c| {
             let samples = match &c.data {
+                ChannelData::F32(v) if options.half && is_half_channel(&c.name) => {
+                    FlatSamples::F16(v.iter().map(|&x| f16::from_f32(x)).collect())
+                }
                 ChannelData::F32(v) => FlatSamples::F32(v.clone()),
                 ChannelData::U32(v) => FlatSamples::U32(v.clone()),
             };
-            AnyChannel::new(c.name.as_str(), samples)
+            let mut channel = AnyChannel::new(exr_text(&c.name), samples);
+            // OpenEXR's own default (what Nuke and OIIO write): the exr crate guesses from the
+            // bare name and would mark `albedo.R` perceptually linear but `Z` not. The flag
+            // only steers lossy compression; ours is lossless.
+            channel.quantize_linearly = false;
+            channel
         })
         .collect();
+    let mut layer_attributes = LayerAttributes {
+        software_name: Some(exr_text(&format!("strata {}", env!("CARGO_PKG_VERSION")))),
+        world_to_camera: options.world_to_camera.map(imath_matrix),
+        world_to_normalized_device: options.world_to_ndc.map(imath_matrix),
+        ..LayerAttributes::default()
+    };
+    if let Some((near, far)) = options.clipping {
+        layer_attributes.near_clip_plane = Some(near);
+        layer_attributes.far_clip_plane = far.is_finite().then_some(far);
+    }
+    let strings = standard_attributes().into_iter().map(|(k, v)| (k.to_string(), v));
+    for (key, value) in strings.chain(options.strings.iter().cloned()) {
+        layer_attributes.other.insert(exr_text(&key), AttributeValue::Text(exr_text(&value)));
+    }
     let layer = Layer::new(
         (image.width, image.height),
-        LayerAttributes::default(),
+        layer_attributes,
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels.into_iter().collect()),
     );
-    exr::image::Image::from_layer(layer).write().to_buffered(out).map_err(|e| e.to_string())
+    let mut image_attributes = ImageAttributes::new(IntegerBounds::new(Vec2(0, 0), Vec2(image.width, image.height)));
+    // Rec.709 / sRGB primaries with a D65 white point: what strata's linear radiance is in.
+    image_attributes.chromaticities = Some(Chromaticities {
+        red: Vec2(0.64, 0.33),
+        green: Vec2(0.30, 0.60),
+        blue: Vec2(0.15, 0.06),
+        white: Vec2(0.3127, 0.3290),
+    });
+    exr::image::Image::new(image_attributes, layer).write().to_buffered(out).map_err(|e| e.to_string())
 }
 
-/// Writes every channel of `image` into one single-part EXR at `path`, atomically.
+/// Writes every channel of `image` into one single-part EXR at `path`, atomically, with the
+/// standard attributes only.
 pub fn write_exr(image: &Image, path: &Path) -> Result<(), OutputError> {
     let mut tmp = TempFile::create(path)?;
-    tmp.fill(|out| encode_exr(image, out))?;
+    tmp.fill(|out| encode_exr(image, &ExrOptions::default(), out))?;
     tmp.commit()
 }
 
@@ -267,8 +368,13 @@ impl PreparedOutputs {
     /// Writes both files and only then renames them into place, EXR first. Returns the PNG's
     /// path. On failure neither target has changed (short of a rename failing between the
     /// two, in a directory both temporaries were just created in).
-    pub fn write(mut self, image: &Image) -> Result<PathBuf, OutputError> {
-        self.exr.fill(|out| encode_exr(image, out))?;
+    pub fn write(self, image: &Image) -> Result<PathBuf, OutputError> {
+        self.write_with(image, &ExrOptions::default())
+    }
+
+    /// [`PreparedOutputs::write`] with header attributes and sample types from `options`.
+    pub fn write_with(mut self, image: &Image, options: &ExrOptions) -> Result<PathBuf, OutputError> {
+        self.exr.fill(|out| encode_exr(image, options, out))?;
         let encoded = encode_png(image, 0.0).map_err(|e| error(&self.png.target, e))?;
         self.png.fill(|out| out.write_all(&encoded).map_err(|e| e.to_string()))?;
         let png_path = self.png.target.clone();
@@ -301,9 +407,12 @@ mod tests {
         let (w, h) = (4, 3);
         let ramp = |k: f32| (0..w * h).map(|i| i as f32 * k).collect::<Vec<f32>>();
         let mut channels = Vec::new();
-        for (i, name) in ["R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B", "N.X", "N.Y", "N.Z", "Z", "wear"]
-            .iter()
-            .enumerate()
+        for (i, name) in [
+            "R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B", "N.R", "N.G", "N.B", "P.R", "P.G", "P.B", "Z",
+            "wear",
+        ]
+        .iter()
+        .enumerate()
         {
             channels.push(Channel { name: name.to_string(), data: ChannelData::F32(ramp(i as f32 + 0.5)) });
         }
@@ -344,6 +453,32 @@ mod tests {
         // No temporary files are left behind.
         let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
         assert_eq!(left.len(), 2, "{left:?}");
+    }
+
+    #[test]
+    fn text_beyond_latin1_is_escaped_not_a_panic() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("out.exr");
+        let mut image = sample_image();
+        image.channels.push(Channel { name: "温度".into(), data: ChannelData::F32(vec![1.0; 12]) });
+        let options = ExrOptions {
+            half: true,
+            strings: vec![("strata/scene".into(), "/場面.usda".into())],
+            ..ExrOptions::default()
+        };
+        prepare_outputs(&path).unwrap().write_with(&image, &options).unwrap();
+        let read = exr::prelude::read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .first_valid_layer()
+            .all_attributes()
+            .from_file(&path)
+            .unwrap();
+        let names: Vec<String> = read.layer_data.channel_data.list.iter().map(|c| c.name.to_string()).collect();
+        assert!(names.contains(&"\\u{6e29}\\u{5ea6}".to_string()), "{names:?}");
+        let scene = &read.layer_data.attributes.other[&Text::from("strata/scene")];
+        assert!(matches!(scene, AttributeValue::Text(t) if *t == *"/\\u{5834}\\u{9762}.usda"), "{scene:?}");
     }
 
     #[test]

@@ -23,10 +23,105 @@ pub struct Scene {
     pub lights: Vec<Light>,
     /// The camera (its aspect is set per render from the resolution).
     pub camera: Camera,
+    /// The Camera prim it was read from (`None`: a camera framing the scene).
+    pub camera_path: Option<String>,
+    /// Per material index, the composed material's name for ID mattes (`CryptoMaterial`,
+    /// written only when there is one name per material given to `render`). Empty unless
+    /// the caller sets it.
+    pub material_names: Vec<String>,
     /// World bounds of the geometry (a unit box when there is none).
     pub bounds: (Vec3, Vec3),
     /// Zero-area triangles that were skipped.
     pub degenerate_triangles: usize,
+}
+
+/// Choices about how a stage is rendered that do not come from the stage alone.
+#[derive(Clone, Debug, Default)]
+pub struct SceneOptions {
+    /// The Camera prim to look through (`None`: the first Camera prim, or a framing camera
+    /// when there is none). Must name a Camera prim (see [`choose_view`]).
+    pub camera: Option<String>,
+}
+
+/// The camera and resolution a render uses, from the command line and the stage's UsdRender
+/// settings.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct View {
+    /// The Camera prim to render through (`None`: the first Camera, or a framing camera).
+    pub camera: Option<String>,
+    /// A `RenderSettings` prim's `resolution`, when authored and valid.
+    pub resolution: Option<(usize, usize)>,
+}
+
+/// Every Camera prim of `stage`, in depth-first order.
+pub fn camera_paths(stage: &Stage) -> Vec<String> {
+    stage.depth_first().filter(|(_, p)| p.type_name.as_deref() == Some("Camera")).map(|(_, p)| p.path.clone()).collect()
+}
+
+/// Chooses the camera and resolution: `requested` (`--camera`) if given, which must name a
+/// Camera prim (an error listing the stage's cameras otherwise); else the first UsdRender
+/// `RenderSettings` prim's `rel camera` when it targets a Camera; else none (the first
+/// Camera). The resolution is that `RenderSettings` prim's `int2 resolution`, if any.
+/// `None` when an error was reported.
+pub fn choose_view(stage: &Stage, requested: Option<&str>, diags: &mut Diagnostics) -> Option<View> {
+    let settings = stage.depth_first().find(|(_, p)| p.type_name.as_deref() == Some("RenderSettings")).map(|(_, p)| p);
+    let is_camera =
+        |path: &str| stage.find(path).is_some_and(|id| stage.prim(id).type_name.as_deref() == Some("Camera"));
+    let listing = || {
+        let cameras = camera_paths(stage);
+        if cameras.is_empty() {
+            "the stage has no Camera prim".to_string()
+        } else {
+            format!("cameras: {}", cameras.join(", "))
+        }
+    };
+    let mut view = View::default();
+    if let Some(path) = requested {
+        if !is_camera(path) {
+            let what = match stage.find(path).map(|id| stage.prim(id).type_name.clone()) {
+                None => "does not exist".to_string(),
+                Some(Some(ty)) => format!("is a {ty}, not a Camera"),
+                Some(None) => "has no type, so is not a Camera".to_string(),
+            };
+            diags.push(Diagnostic::error(format!("--camera `{path}` {what}")).note(listing()));
+            return None;
+        }
+        view.camera = Some(path.to_string());
+    }
+    if let Some(settings) = settings {
+        if view.camera.is_none()
+            && let Some(rel) = settings.relationship("camera")
+            && let Some((target, span)) = rel.targets.first()
+        {
+            if is_camera(target) {
+                view.camera = Some(target.clone());
+            } else {
+                diags.push(
+                    Diagnostic::warning(format!(
+                        "render settings `{}`: camera `{target}` is not a Camera prim; using the first camera",
+                        settings.path
+                    ))
+                    .at(*span, "here")
+                    .note(listing()),
+                );
+            }
+        }
+        if let Some(value) = settings.value("resolution") {
+            match value.as_vec2() {
+                Some([w, h]) if (1.0..=16384.0).contains(&w) && (1.0..=16384.0).contains(&h) => {
+                    view.resolution = Some((w as usize, h as usize));
+                }
+                _ => diags.push(
+                    Diagnostic::warning(format!(
+                        "render settings `{}`: `resolution` must be two whole numbers in 1..=16384; ignored",
+                        settings.path
+                    ))
+                    .at(settings.attribute("resolution").map_or(settings.span, |a| a.span), "here"),
+                ),
+            }
+        }
+    }
+    Some(view)
 }
 
 impl Scene {
@@ -36,6 +131,16 @@ impl Scene {
     pub fn from_stage(
         stage: &Stage,
         material_of_prim: &dyn Fn(&str) -> Option<usize>,
+        diags: &mut Diagnostics,
+    ) -> Option<Scene> {
+        Scene::from_stage_with(stage, material_of_prim, &SceneOptions::default(), diags)
+    }
+
+    /// [`Scene::from_stage`] with the camera chosen by `options`.
+    pub fn from_stage_with(
+        stage: &Stage,
+        material_of_prim: &dyn Fn(&str) -> Option<usize>,
+        options: &SceneOptions,
         diags: &mut Diagnostics,
     ) -> Option<Scene> {
         let errors = diags.error_count();
@@ -59,9 +164,12 @@ impl Scene {
             diags.push(Diagnostic::warning("the scene has no lights: the image will be black"));
         }
         let bounds = geometry.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
-        let camera = stage
-            .depth_first()
-            .find(|(_, p)| p.type_name.as_deref() == Some("Camera"))
+        let chosen = match &options.camera {
+            Some(path) => stage.find(path).map(|id| (id, stage.prim(id))),
+            None => stage.depth_first().find(|(_, p)| p.type_name.as_deref() == Some("Camera")),
+        };
+        let camera_path = chosen.map(|(_, prim)| prim.path.clone());
+        let camera = chosen
             .map(|(id, prim)| Camera::from_prim(prim, xforms[id.0 as usize].world, 1.0, diags))
             .unwrap_or_else(|| Camera::framing(bounds.0, bounds.1, 1.0, stage.up_axis()));
         if diags.error_count() > errors {
@@ -74,6 +182,8 @@ impl Scene {
             prim_material,
             lights,
             camera,
+            camera_path,
+            material_names: Vec::new(),
             bounds,
         })
     }
@@ -102,6 +212,47 @@ def DomeLight "Sky" {}"#,
         let hit = scene.accel.intersect(r.o, r.d, r.tmin, r.tmax).expect("hit");
         assert_eq!(scene.prims[scene.accel.prim_of(hit.index) as usize].path, "/Ahead");
         assert!((hit.t - 9.0).abs() < 1e-2, "{}", hit.t);
+    }
+
+    #[test]
+    fn render_settings_choose_camera_and_resolution_unless_overridden() {
+        let text = r#"#usda 1.0
+def Camera "A" {}
+def Camera "B" {}
+def Sphere "S" {}
+def RenderSettings "Settings" {
+    rel camera = </B>
+    uniform int2 resolution = (320, 200)
+}"#;
+        let (two, mut diags) = stage(text);
+        let view = choose_view(&two, None, &mut diags).expect("view");
+        assert_eq!(view, View { camera: Some("/B".into()), resolution: Some((320, 200)) });
+        let view = choose_view(&two, Some("/A"), &mut diags).expect("view");
+        assert_eq!(view.camera.as_deref(), Some("/A"));
+        assert!(!diags.has_errors());
+        let scene =
+            Scene::from_stage_with(&two, &|_| Some(0), &SceneOptions { camera: view.camera }, &mut diags).unwrap();
+        assert_eq!(scene.camera_path.as_deref(), Some("/A"));
+        // Not a camera: an error naming what it is and listing the cameras.
+        assert!(choose_view(&two, Some("/S"), &mut diags).is_none());
+        let error = diags.items().last().expect("an error");
+        assert!(error.message.contains("is a Sphere, not a Camera"), "{}", error.message);
+        assert_eq!(error.notes, ["cameras: /A, /B"]);
+        // Settings pointing at a non-camera, with a bad resolution: warnings, first camera, default size.
+        let (bad, mut diags) = stage(&text_with(
+            r#"rel camera = </S>
+    uniform int2 resolution = (0, 200)"#,
+        ));
+        let view = choose_view(&bad, None, &mut diags).expect("view");
+        assert_eq!(view, View::default());
+        assert!(!diags.has_errors());
+        assert_eq!(diags.items().len(), 2, "{:?}", diags.items());
+    }
+
+    fn text_with(settings: &str) -> String {
+        format!(
+            "#usda 1.0\ndef Camera \"A\" {{}}\ndef Sphere \"S\" {{}}\ndef RenderSettings \"R\" {{\n    {settings}\n}}"
+        )
     }
 
     #[test]
