@@ -399,6 +399,20 @@ pub fn write_file_atomically(path: &Path, bytes: &[u8]) -> Result<(), OutputErro
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The written EXR, every channel and attribute.
+    fn read_back(
+        path: &Path,
+    ) -> exr::image::Image<exr::image::Layer<exr::image::AnyChannels<exr::image::FlatSamples>>> {
+        exr::prelude::read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .all_channels()
+            .first_valid_layer()
+            .all_attributes()
+            .from_file(path)
+            .unwrap()
+    }
     use crate::render::film::Channel;
     use exr::prelude::ReadChannels;
     use exr::prelude::ReadLayers;
@@ -427,14 +441,7 @@ mod tests {
         let image = sample_image();
         let png = write_outputs(&image, &path).unwrap();
         assert!(png.exists());
-        let read = exr::prelude::read()
-            .no_deep_data()
-            .largest_resolution_level()
-            .all_channels()
-            .first_valid_layer()
-            .all_attributes()
-            .from_file(&path)
-            .unwrap();
+        let read = read_back(&path);
         let layer = read.layer_data;
         assert_eq!(layer.size.width(), 4);
         let mut names: Vec<String> = layer.channel_data.list.iter().map(|c| c.name.to_string()).collect();
@@ -467,14 +474,7 @@ mod tests {
             ..ExrOptions::default()
         };
         prepare_outputs(&path).unwrap().write_with(&image, &options).unwrap();
-        let read = exr::prelude::read()
-            .no_deep_data()
-            .largest_resolution_level()
-            .all_channels()
-            .first_valid_layer()
-            .all_attributes()
-            .from_file(&path)
-            .unwrap();
+        let read = read_back(&path);
         let names: Vec<String> = read.layer_data.channel_data.list.iter().map(|c| c.name.to_string()).collect();
         assert!(names.contains(&"\\u{6e29}\\u{5ea6}".to_string()), "{names:?}");
         let scene = &read.layer_data.attributes.other[&Text::from("strata/scene")];
