@@ -81,3 +81,30 @@ fn layers_json_contract_on_listing1() {
     assert_eq!(first["layers"][0]["bound_at"], "/Root");
     assert_eq!(first["layers"][0]["overrides"], serde_json::json!([]));
 }
+
+/// Everything a production renderer would draw and strata does not is reported, once per
+/// kind, naming the first prim: the independent list below is what the fixture authors.
+#[test]
+fn unsupported_content_is_reported_not_dropped() {
+    let path = "tests/in/warnings/unsupported.usda";
+    let (diags, sources, _) = check_file(Path::new(path));
+    assert!(!diags.has_errors(), "{}", diags.render(&sources));
+    let text = diags.render(&sources);
+    for expected in [
+        "`BasisCurves` prims are not supported",
+        "`Points` prims are not supported",
+        "`SkelRoot` prims are not supported",
+        "`PortalLight` prims are not supported",
+        "prim type `Frobnicator` is not a schema strata knows",
+        "API schema `MeshLightAPI` is not supported",
+        "API schema `ShapingAPI` is not supported",
+        "light shaping (`inputs:shaping:*`) is not applied",
+        "light `inputs:diffuse`",
+        "mesh `creaseIndices`",
+    ] {
+        assert_eq!(text.matches(expected).count(), 1, "`{expected}` reported once in:\n{text}");
+    }
+    assert!(text.contains("1 more prim(s)"), "the second curve is counted, the hidden one is not:\n{text}");
+    assert!(!text.contains("HiddenHair"), "{text}");
+    insta::assert_snapshot!("unsupported_content", text);
+}

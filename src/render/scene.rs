@@ -159,6 +159,7 @@ impl Scene {
                 }
             }
         }
+        super::support::report_unsupported(stage, &xforms, diags);
         let lights = lights_from_stage(stage, &xforms, diags);
         if lights.is_empty() {
             diags.push(Diagnostic::warning("the scene has no lights: the image will be black"));
