@@ -71,6 +71,12 @@ enum Command {
         /// else the first Camera, else a camera framing the scene).
         #[arg(long, value_name = "PRIM")]
         camera: Option<String>,
+        /// Catmull-Clark levels for subdivision-surface meshes (UsdGeom's default scheme); 0
+        /// renders the control cage. A mesh is refined fewer times when it would pass 262 144
+        /// faces.
+        #[arg(long, default_value_t = strata::render::geometry::DEFAULT_SUBDIV_LEVEL,
+              value_parser = clap::value_parser!(u32).range(0..=6))]
+        subdiv_level: u32,
         /// Store RGBA and colour AOVs (albedo, N, colour channels) as 16-bit half floats;
         /// Z, P, scalar and integer channels stay 32-bit.
         #[arg(long)]
@@ -207,6 +213,7 @@ fn main() -> ExitCode {
             spp,
             res,
             camera,
+            subdiv_level,
             half,
             seed,
             threads,
@@ -232,6 +239,7 @@ fn main() -> ExitCode {
             stats,
             half,
             camera,
+            subdiv_level,
             resolution_given: res.is_some(),
         }),
         Command::Compile { file, output } => cli::compile(&file, &output),

@@ -26,6 +26,7 @@ pub mod output;
 pub mod sampling;
 pub mod scene;
 pub mod shapes;
+pub mod subdiv;
 pub mod support;
 pub mod testing;
 pub mod xform;
