@@ -484,8 +484,8 @@ fn poly_mesh(
         if count >= 3 {
             mesh.counts.push(count as u32);
             mesh.holes.push(holes.contains(&(face as i64)));
-            for c in start..start + count {
-                let pi = indices[c] as usize;
+            for (c, &index) in indices.iter().enumerate().skip(start).take(count) {
+                let pi = index as usize;
                 mesh.indices.push(pi as u32);
                 if let Some(out) = uv.as_mut() {
                     match st.and_then(|pv| pv.at(face, c, pi)) {

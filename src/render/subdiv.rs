@@ -162,10 +162,9 @@ fn refine(mesh: &PolyMesh) -> PolyMesh {
     let mut indices = Vec::with_capacity(quads * 4);
     let mut uv = mesh.uv.as_ref().map(|_| Vec::with_capacity(quads * 4));
     let mut holes = Vec::with_capacity(quads);
-    for f in 0..faces {
+    for (f, &o) in offsets.iter().enumerate() {
         let vs = face(f);
         let m = vs.len();
-        let o = offsets[f];
         let centre_uv = mesh.uv.as_ref().map(|t| t[o..o + m].iter().copied().sum::<Vec2>() / m as f32);
         for k in 0..m {
             let prev = (k + m - 1) % m;
