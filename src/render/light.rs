@@ -10,7 +10,9 @@
 //! ([`Light::escape`]). Every sampleable light gives the same density from
 //! [`Light::sample_li`] and [`Light::pdf_li`], which multiple importance sampling needs.
 
-use super::sampling::{Distribution2D, concentric_disk, uniform_cone, uniform_sphere};
+use super::sampling::{
+    Distribution1D, Distribution2D, concentric_disk, cosine_hemisphere, uniform_cone, uniform_sphere,
+};
 use super::xform::{PrimXform, value_span};
 use crate::diag::{Diagnostic, Diagnostics};
 use crate::scene::{Prim, Stage, Value};
@@ -205,10 +207,20 @@ impl Light {
         matches!(self.kind, LightKind::Dome { .. } | LightKind::Distant { .. })
     }
 
-    /// Samples incident light at `p` with uniform numbers `u`.
-    pub fn sample_li(&self, p: Vec3, u: Vec2) -> Option<LightSample> {
+    /// Samples incident light at `p` with uniform numbers `u`. `n` is the unit normal of the
+    /// side of the surface at `p` that the light can reach (the side of the outgoing
+    /// direction), or zero where there is none: a constant dome is then sampled
+    /// cosine-weighted over that hemisphere instead of uniformly over the sphere, so no sample
+    /// is spent below the surface. (Light through the surface, for transmission, is left to
+    /// BSDF sampling, which MIS weights fully where this pdf is zero.)
+    pub fn sample_li(&self, p: Vec3, n: Vec3, u: Vec2) -> Option<LightSample> {
         let s = match &self.kind {
             LightKind::Dome { radiance, map, to_world, .. } => match map {
+                None if n != Vec3::ZERO => {
+                    let wi = super::bsdf::Frame::from_normal(n).to_world(cosine_hemisphere(u)).normalize();
+                    let pdf = wi.dot(n).max(0.0) / PI;
+                    LightSample { wi, li: *radiance, pdf, dist: f32::INFINITY, delta: false }
+                }
                 None => {
                     let wi = uniform_sphere(u);
                     LightSample { wi, li: *radiance, pdf: 1.0 / (4.0 * PI), dist: f32::INFINITY, delta: false }
@@ -282,10 +294,11 @@ impl Light {
         (s.pdf > 0.0 && s.pdf.is_finite() && s.wi.is_finite()).then_some(s)
     }
 
-    /// Solid-angle density with which [`Light::sample_li`] at `p` picks direction `wi`
-    /// (0 for delta lights and directions that miss the light).
-    pub fn pdf_li(&self, p: Vec3, wi: Vec3) -> f32 {
+    /// Solid-angle density with which [`Light::sample_li`] at `p` (with the same `n`) picks
+    /// direction `wi` (0 for delta lights and directions that miss the light).
+    pub fn pdf_li(&self, p: Vec3, n: Vec3, wi: Vec3) -> f32 {
         match &self.kind {
+            LightKind::Dome { map: None, .. } if n != Vec3::ZERO => wi.dot(n).max(0.0) / PI,
             LightKind::Dome { map: None, .. } => 1.0 / (4.0 * PI),
             LightKind::Dome { map: Some(map), to_local, .. } => {
                 let local = (*to_local * wi).normalize();
@@ -352,6 +365,101 @@ impl Light {
             LightKind::Distant { dir, cos_max, radiance } if *cos_max < 1.0 && wi.dot(*dir) >= *cos_max => *radiance,
             _ => Vec3::ZERO,
         }
+    }
+}
+
+impl Light {
+    /// The light's emitted power as luminance (for choosing lights, so only its proportions
+    /// matter). Lights at infinity deliver power over the scene's cross-section: a disk of
+    /// `scene_radius` (pbrt-v4's convention).
+    pub fn power(&self, scene_radius: f32) -> f32 {
+        let disk = PI * scene_radius * scene_radius;
+        match &self.kind {
+            LightKind::Rect { ex, ey, radiance, .. } => luminance(*radiance) * 4.0 * ex.cross(*ey).length() * PI,
+            LightKind::Disk { ex, ey, radiance, .. } => luminance(*radiance) * PI * ex.cross(*ey).length() * PI,
+            LightKind::Sphere { radius, radiance, .. } => luminance(*radiance) * 4.0 * PI * radius * radius * PI,
+            LightKind::Cylinder { half_length, radius, radiance, .. } => {
+                luminance(*radiance) * cylinder_area(*half_length, *radius) * PI
+            }
+            LightKind::Point { intensity, .. } => luminance(*intensity) * 4.0 * PI,
+            LightKind::Distant { cos_max, radiance, .. } => {
+                // A delta light's `radiance` is its irradiance; a cone's irradiance is L π sin².
+                let irradiance = if *cos_max >= 1.0 {
+                    luminance(*radiance)
+                } else {
+                    luminance(*radiance) * PI * (1.0 - cos_max * cos_max)
+                };
+                irradiance * disk
+            }
+            LightKind::Dome { radiance, map, .. } => {
+                let average = map.as_ref().map_or(1.0, |m| {
+                    m.texels.iter().map(|t| luminance(*t)).sum::<f32>() / m.texels.len().max(1) as f32
+                });
+                luminance(*radiance) * average * 4.0 * PI * disk
+            }
+        }
+    }
+}
+
+/// How next-event estimation chooses one light per shading point.
+///
+/// Lights at infinity each get an equal share, as do the bounded lights together (pbrt-v4's
+/// BVH light sampler does the same: an infinite light's power says nothing about how much of
+/// it reaches a point). Within the bounded lights the choice follows power, mixed with 10 %
+/// uniform so that a dim light near the point is never starved by a bright one far away.
+#[derive(Clone, Debug)]
+pub struct LightSelection {
+    distribution: Option<Distribution1D>,
+}
+
+/// Share of the bounded lights' probability spread uniformly (see [`LightSelection`]).
+const UNIFORM_SHARE: f32 = 0.1;
+
+impl LightSelection {
+    /// The selection for `lights` in a scene of bounding radius `scene_radius`.
+    pub fn new(lights: &[Light], scene_radius: f32) -> LightSelection {
+        if lights.is_empty() {
+            return LightSelection { distribution: None };
+        }
+        let infinite = lights.iter().filter(|l| l.is_infinite()).count();
+        let bounded = lights.len() - infinite;
+        let groups = infinite + usize::from(bounded > 0);
+        let bounded_power: f32 = lights
+            .iter()
+            .filter(|l| !l.is_infinite())
+            .map(|l| l.power(scene_radius))
+            .filter(|p| p.is_finite() && *p > 0.0)
+            .sum();
+        let weights: Vec<f32> = lights
+            .iter()
+            .map(|l| {
+                if l.is_infinite() {
+                    return 1.0 / groups as f32;
+                }
+                let power = l.power(scene_radius);
+                let by_power =
+                    if bounded_power > 0.0 && power.is_finite() && power > 0.0 { power / bounded_power } else { 0.0 };
+                let uniform = 1.0 / bounded as f32;
+                let share = if bounded_power > 0.0 {
+                    (1.0 - UNIFORM_SHARE) * by_power + UNIFORM_SHARE * uniform
+                } else {
+                    uniform
+                };
+                share / groups as f32
+            })
+            .collect();
+        LightSelection { distribution: Some(Distribution1D::new(&weights)) }
+    }
+
+    /// Chooses a light with uniform `u`: its index and probability.
+    pub fn sample(&self, u: f32) -> Option<(usize, f32)> {
+        let (i, pmf) = self.distribution.as_ref()?.sample_discrete(u);
+        (pmf > 0.0).then_some((i, pmf))
+    }
+
+    /// The probability of choosing light `i`.
+    pub fn pmf(&self, i: usize) -> f32 {
+        self.distribution.as_ref().map_or(0.0, |d| d.discrete_pdf(i))
     }
 }
 
@@ -725,7 +833,7 @@ def CylinderLight "C" { float inputs:length = 3  float inputs:radius = 0.4
             let mut inv_pdf_sum = 0.0f64;
             let mut samples = 0;
             for _ in 0..n {
-                let Some(s) = light.sample_li(p, rng.uniform2()) else { continue };
+                let Some(s) = light.sample_li(p, Vec3::ZERO, rng.uniform2()) else { continue };
                 samples += 1;
                 inv_pdf_sum += 1.0 / s.pdf as f64;
                 // A cylinder has a silhouette: there the light's cosine (in the area pdf) is
@@ -738,7 +846,7 @@ def CylinderLight "C" { float inputs:length = 3  float inputs:radius = 0.4
                         continue;
                     }
                 }
-                let pdf = light.pdf_li(p, s.wi);
+                let pdf = light.pdf_li(p, Vec3::ZERO, s.wi);
                 assert!((pdf - s.pdf).abs() <= 2e-3 * s.pdf, "{}: {pdf} vs {}", light.path, s.pdf);
                 if !light.is_infinite() {
                     let (_, t) = light.hit(p, s.wi, f32::INFINITY).expect("sampled direction hits the light");
@@ -892,5 +1000,57 @@ def SphereLight "Off" { float inputs:radius = 0.5  float inputs:colorTemperature
         assert!((*radiance - expected).length() < 1e-5, "{radiance} vs {expected}");
         let LightKind::Sphere { radiance, .. } = &l[1].kind else { panic!() };
         assert_eq!(*radiance, Vec3::ONE);
+    }
+
+    /// With a surface normal the constant dome is sampled cosine-weighted over that
+    /// hemisphere: the pdf matches, nothing is sampled below, and E[1/pdf] is the
+    /// hemisphere's solid angle 2π.
+    #[test]
+    fn constant_dome_is_sampled_over_the_hemisphere_of_the_normal() {
+        let l = lights("#usda 1.0\ndef DomeLight \"D\" {}\n");
+        let n = Vec3::new(0.3, 0.8, -0.2).normalize();
+        let p = Vec3::ZERO;
+        let mut rng = Rng::new(3, 0, 0);
+        let count = 100_000;
+        let mut inv_pdf = 0.0f64;
+        for _ in 0..count {
+            let s = l[0].sample_li(p, n, rng.uniform2()).expect("a sample");
+            assert!(s.wi.dot(n) >= 0.0);
+            assert!((l[0].pdf_li(p, n, s.wi) - s.pdf).abs() <= 1e-4 * s.pdf.max(1.0));
+            inv_pdf += 1.0 / s.pdf as f64;
+        }
+        let solid_angle = inv_pdf / count as f64;
+        // 1/pdf = π/cosθ has infinite variance at the horizon; the mean still converges.
+        assert!((solid_angle - 2.0 * std::f64::consts::PI).abs() < 0.05 * 2.0 * std::f64::consts::PI, "{solid_angle}");
+        assert_eq!(l[0].pdf_li(p, n, -n), 0.0);
+    }
+
+    /// Bounded lights are chosen by power (with a 10 % uniform floor); each light at infinity
+    /// gets the same share as all bounded lights together; the probabilities sum to one.
+    #[test]
+    fn lights_are_selected_by_power_and_infinite_lights_by_share() {
+        let l = lights(
+            r#"#usda 1.0
+def SphereLight "Bright" { float inputs:radius = 1  float inputs:intensity = 90 }
+def SphereLight "Dim" { float inputs:radius = 1  float inputs:intensity = 10 }
+def DomeLight "Sky" { float inputs:intensity = 1000 }"#,
+        );
+        let sel = LightSelection::new(&l, 10.0);
+        let p: Vec<f32> = (0..3).map(|i| sel.pmf(i)).collect();
+        assert!((p.iter().sum::<f32>() - 1.0).abs() < 1e-6, "{p:?}");
+        assert!((p[2] - 0.5).abs() < 1e-6, "the dome: one of two groups ({p:?})");
+        let bright = 0.5 * (0.9 * 0.9 + 0.1 * 0.5);
+        let dim = 0.5 * (0.9 * 0.1 + 0.1 * 0.5);
+        assert!((p[0] - bright).abs() < 1e-5 && (p[1] - dim).abs() < 1e-5, "{p:?}");
+        let mut counts = [0usize; 3];
+        for i in 0..10_000 {
+            let (k, pmf) = sel.sample((i as f32 + 0.5) / 10_000.0).unwrap();
+            assert_eq!(pmf, p[k]);
+            counts[k] += 1;
+        }
+        for k in 0..3 {
+            assert!((counts[k] as f32 / 10_000.0 - p[k]).abs() < 1e-3, "{counts:?} vs {p:?}");
+        }
+        assert!(LightSelection::new(&[], 1.0).sample(0.5).is_none());
     }
 }
