@@ -15,7 +15,7 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 
 /// Prim types that are rendered, and so get a composed material.
-pub const RENDERABLE_TYPES: &[&str] = &["Mesh", "Sphere", "Cube", "Cylinder", "Cone", "Capsule", "Plane"];
+pub const RENDERABLE_TYPES: &[&str] = &["Mesh", "Sphere", "Cube", "Cylinder", "Cone", "Capsule", "Plane", "Points"];
 
 /// Whether a prim is renderable geometry.
 pub fn is_renderable(prim: &Prim) -> bool {

@@ -41,7 +41,6 @@ const UNSUPPORTED_TYPES: &[(&str, &str)] = &[
     ("BasisCurves", "curves are not rendered"),
     ("NurbsCurves", "curves are not rendered"),
     ("HermiteCurves", "curves are not rendered"),
-    ("Points", "points are not rendered"),
     ("NurbsPatch", "NURBS patches are not rendered"),
     ("TetMesh", "tetrahedral meshes are not rendered"),
     ("PointInstancer", "point instancers are not rendered: neither the instances nor the prototypes draw"),
