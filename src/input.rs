@@ -9,6 +9,12 @@
 //! checking a path and reading it), and never more than the limit is read even if the file
 //! grows meanwhile.
 //!
+//! **Packages.** A path of the form `dir/a.usdz[tex/b.exr]` (USD's package-relative asset
+//! path) names the member `tex/b.exr` of the zip package `dir/a.usdz`; packages nest
+//! (`a.usdz[b.usdz[c.usda]]`). [`read_bytes`] reads the package under the same rules as any
+//! file, then the member, itself held to the size limit, so every caller (layers, substance
+//! files, textures) reads inside packages without knowing about them.
+//!
 //! The limits are process-wide, set once by the command line (`--max-input-size`,
 //! `--max-texture-pixels`) before anything is read, because textures are loaded deep inside
 //! compilation where no options are passed.
@@ -79,6 +85,8 @@ pub enum InputError {
     },
     /// The file is not UTF-8 text (for text inputs).
     NotText,
+    /// A package-relative path (`a.usdz[member]`) whose package or member could not be read.
+    Package(String),
     /// The operating system refused (missing file, permissions, ...).
     Io(std::io::Error),
 }
@@ -93,6 +101,7 @@ impl fmt::Display for InputError {
                 size
             ),
             InputError::NotText => f.write_str("stream did not contain valid UTF-8"),
+            InputError::Package(message) => f.write_str(message),
             // Exactly the operating system's words, as before this module existed.
             InputError::Io(e) => write!(f, "{e}"),
         }
@@ -208,9 +217,139 @@ pub fn was_read(path: &Path) -> bool {
     FILES_READ.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).iter().any(|f| f.same_file(&identity))
 }
 
-/// Reads the whole of `path` under the current [`limits`].
+/// Reads the whole of `path` under the current [`limits`]; a package-relative path
+/// (`a.usdz[member]`) reads that member of the package.
 pub fn read_bytes(path: &Path) -> Result<Vec<u8>, InputError> {
-    read_bytes_limited(path, limits().max_file_bytes)
+    let max = limits().max_file_bytes;
+    match split_package_path(path) {
+        Some((package, member)) => {
+            let bytes = read_bytes_limited(&package, max)?;
+            read_member(bytes, &member, max, &package.display().to_string(), 0)
+        }
+        None => read_bytes_limited(path, max),
+    }
+}
+
+/// Packages inside packages deeper than this are refused (a hostile path cannot recurse).
+const MAX_PACKAGE_NESTING: usize = 8;
+
+/// Splits USD's package-relative path `pkg[member]` at the outermost brackets into the
+/// package file and the member (which may itself be package-relative). `None` for a plain
+/// path, and for an existing file whose name merely ends in `]`.
+pub fn split_package_path(path: &Path) -> Option<(PathBuf, String)> {
+    let text = path.to_str()?;
+    let (package, member) = split_brackets(text)?;
+    if std::fs::symlink_metadata(path).is_ok() {
+        return None;
+    }
+    Some((PathBuf::from(package), member.to_string()))
+}
+
+/// `a[b[c]]` → `("a", "b[c]")`: the text before the first `[` and inside the last `]`.
+fn split_brackets(text: &str) -> Option<(&str, &str)> {
+    let inner = text.strip_suffix(']')?;
+    let open = inner.find('[')?;
+    let (package, member) = (&inner[..open], &inner[open + 1..]);
+    (!package.is_empty() && !member.is_empty()).then_some((package, member))
+}
+
+/// Reads `member` (maybe `inner.usdz[deeper]`) out of the zip package held in `bytes`.
+fn read_member(bytes: Vec<u8>, member: &str, max: u64, package: &str, depth: usize) -> Result<Vec<u8>, InputError> {
+    if depth >= MAX_PACKAGE_NESTING {
+        return Err(InputError::Package(format!("packages nested more than {MAX_PACKAGE_NESTING} deep")));
+    }
+    let (name, rest) = match split_brackets(member) {
+        Some((outer, inner)) => (outer, Some(inner)),
+        None => (member, None),
+    };
+    let name = normalize_member(name);
+    let mut archive = zip::ZipArchive::new(std::io::Cursor::new(bytes))
+        .map_err(|e| InputError::Package(format!("`{package}` is not a readable zip package: {e}")))?;
+    let mut file = archive
+        .by_name(&name)
+        .map_err(|_| InputError::Package(format!("the package `{package}` has no member `{name}`")))?;
+    // The declared size is checked first, and the read is bounded anyway: a deflated member
+    // can inflate past what its header claims.
+    if file.size() > max {
+        return Err(InputError::TooLarge { size: file.size(), limit: max });
+    }
+    let mut out = Vec::with_capacity(file.size() as usize);
+    (&mut file)
+        .take(max.saturating_add(1))
+        .read_to_end(&mut out)
+        .map_err(|e| InputError::Package(format!("cannot read `{name}` in the package `{package}`: {e}")))?;
+    if out.len() as u64 > max {
+        return Err(InputError::TooLarge { size: out.len() as u64, limit: max });
+    }
+    match rest {
+        Some(inner) => read_member(out, inner, max, &format!("{package}[{name}]"), depth + 1),
+        None => Ok(out),
+    }
+}
+
+/// A member name as zip stores it: `/`-separated, no `./`, `..` applied.
+fn normalize_member(name: &str) -> String {
+    let mut parts: Vec<&str> = Vec::new();
+    for part in name.split(['/', '\\']) {
+        match part {
+            "" | "." => {}
+            ".." => {
+                if parts.pop().is_none() {
+                    parts.push("..");
+                }
+            }
+            other => parts.push(other),
+        }
+    }
+    parts.join("/")
+}
+
+/// Resolves an asset path authored in a layer whose directory is `base_dir`. Inside a
+/// package (`base_dir` = `pkg.usdz[sub]`) a relative path stays inside it, as USD resolves
+/// package-relative assets: `tex/a.exr` → `pkg.usdz[sub/tex/a.exr]`.
+pub fn resolve_asset(base_dir: &Path, authored: &str) -> PathBuf {
+    if let Some(text) = base_dir.to_str()
+        && let Some((package, dir)) = split_brackets_allow_empty(text)
+        && !Path::new(authored).is_absolute()
+    {
+        let member = normalize_member(&format!("{dir}/{authored}"));
+        return PathBuf::from(format!("{package}[{member}]"));
+    }
+    crate::scene::value::normalize(&base_dir.join(authored))
+}
+
+/// Like [`split_brackets`], but `pkg[]` (a package's top directory) is allowed.
+fn split_brackets_allow_empty(text: &str) -> Option<(&str, &str)> {
+    let inner = text.strip_suffix(']')?;
+    let open = inner.find('[')?;
+    let package = &inner[..open];
+    (!package.is_empty()).then_some((package, &inner[open + 1..]))
+}
+
+/// The directory asset paths in the layer at `path` resolve against: the parent directory,
+/// or for a package member `pkg.usdz[sub/a.usdc]`, `pkg.usdz[sub]`.
+pub fn layer_dir(path: &Path) -> PathBuf {
+    if let Some(text) = path.to_str()
+        && let Some((package, member)) = split_brackets(text)
+        && split_package_path(path).is_some()
+    {
+        let dir = member.rsplit_once('/').map(|(d, _)| d).unwrap_or("");
+        return PathBuf::from(format!("{package}[{dir}]"));
+    }
+    path.parent().unwrap_or(Path::new("")).to_path_buf()
+}
+
+/// A canonical identity for `path` (symlinks and `..` resolved), package members included:
+/// `pkg.usdz[m]` → `<canonical pkg.usdz>[m]`. Falls back to a lexical normalisation when the
+/// file does not exist.
+pub fn canonicalize(path: &Path) -> std::io::Result<PathBuf> {
+    match split_package_path(path) {
+        Some((package, member)) => {
+            let package = std::fs::canonicalize(package)?;
+            Ok(PathBuf::from(format!("{}[{}]", package.display(), normalize_member(&member))))
+        }
+        None => std::fs::canonicalize(path),
+    }
 }
 
 /// Reads `path` as UTF-8 text under the current [`limits`].
