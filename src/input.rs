@@ -398,6 +398,65 @@ mod tests {
         assert!(!was_read(&dir.path().join("missing.exr")));
     }
 
+    fn write_zip(path: &Path, members: &[(&str, &[u8])]) {
+        let mut zip = zip::ZipWriter::new(std::fs::File::create(path).unwrap());
+        for (name, bytes) in members {
+            let options = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+            zip.start_file(*name, options).unwrap();
+            std::io::Write::write_all(&mut zip, bytes).unwrap();
+        }
+        zip.finish().unwrap();
+    }
+
+    #[test]
+    fn package_members_are_read_under_the_limit() {
+        let dir = tempfile::tempdir().unwrap();
+        let inner = dir.path().join("inner.usdz");
+        write_zip(&inner, &[("deep/c.txt", b"nested")]);
+        let outer = dir.path().join("a.usdz");
+        let inner_bytes = std::fs::read(&inner).unwrap();
+        write_zip(&outer, &[("root.usda", b"#usda 1.0\n"), ("tex/b.txt", &[7u8; 1000]), ("in.usdz", &inner_bytes)]);
+        let member = |m: &str| PathBuf::from(format!("{}[{m}]", outer.display()));
+        assert_eq!(read_bytes(&member("tex/b.txt")).unwrap(), vec![7u8; 1000]);
+        assert_eq!(read_bytes(&member("./tex/../tex/b.txt")).unwrap().len(), 1000, "member names are normalised");
+        assert_eq!(read_bytes(&member("in.usdz[deep/c.txt]")).unwrap(), b"nested", "packages nest");
+        let err = read_bytes(&member("nope.png")).unwrap_err().to_string();
+        assert!(err.contains("has no member `nope.png`"), "{err}");
+        // The member's own size is held to the limit, however small the package is.
+        let err = read_member(std::fs::read(&outer).unwrap(), "tex/b.txt", 999, "a.usdz", 0).unwrap_err();
+        assert!(matches!(err, InputError::TooLarge { size: 1000, limit: 999 }), "{err:?}");
+        let err = read_bytes(&PathBuf::from(format!("{}[x]", dir.path().join("missing.usdz").display()))).unwrap_err();
+        assert!(matches!(err, InputError::Io(_)), "{err:?}");
+        std::fs::write(dir.path().join("text.usdz"), "not a zip").unwrap();
+        let err = read_bytes(&PathBuf::from(format!("{}[x]", dir.path().join("text.usdz").display()))).unwrap_err();
+        assert!(err.to_string().contains("not a readable zip package"), "{err}");
+        assert!(was_read(&outer), "the package counts as an input");
+    }
+
+    #[test]
+    fn asset_paths_resolve_inside_packages() {
+        let dir = tempfile::tempdir().unwrap();
+        let pkg = dir.path().join("a.usdz");
+        write_zip(&pkg, &[("sub/root.usdc", b"x")]);
+        let root = PathBuf::from(format!("{}[sub/root.usdc]", pkg.display()));
+        let base = layer_dir(&root);
+        assert_eq!(base, PathBuf::from(format!("{}[sub]", pkg.display())));
+        assert_eq!(resolve_asset(&base, "tex/a.exr"), PathBuf::from(format!("{}[sub/tex/a.exr]", pkg.display())));
+        assert_eq!(resolve_asset(&base, "../b.usda"), PathBuf::from(format!("{}[b.usda]", pkg.display())));
+        assert_eq!(resolve_asset(&base, "/abs/c.exr"), PathBuf::from("/abs/c.exr"), "absolute paths leave the package");
+        assert_eq!(resolve_asset(Path::new("/d/x"), "./y/../z.usda"), PathBuf::from("/d/x/z.usda"));
+        assert_eq!(layer_dir(Path::new("/d/x/s.usda")), PathBuf::from("/d/x"));
+        // An existing file whose name merely ends in `]` is a file, not a package member.
+        let odd = dir.path().join("shot[1]");
+        std::fs::write(&odd, "plain").unwrap();
+        assert!(split_package_path(&odd).is_none());
+        assert_eq!(read_bytes(&odd).unwrap(), b"plain");
+        assert_eq!(
+            canonicalize(&root).unwrap(),
+            PathBuf::from(format!("{}[sub/root.usdc]", pkg.canonicalize().unwrap().display()))
+        );
+    }
+
     #[test]
     fn directories_devices_and_fifos_are_refused_without_blocking() {
         let dir = tempfile::tempdir().unwrap();
