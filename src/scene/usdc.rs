@@ -19,10 +19,13 @@
 //! sorted by key, as USD writes them.
 //!
 //! **Hostile input.** openusd indexes its tables with values read from the file and has
-//! `todo!()`s for old crate versions, so it can panic on a malformed file. The header and
-//! table sizes are checked here first ([`precheck`]), and every call into openusd runs under
-//! `catch_unwind`: a panic becomes a "malformed usdc" diagnostic, and a panic hook keeps
-//! its message off the terminal. A panic never reaches the user.
+//! `todo!()`s for old crate versions, so it can panic on a malformed file; and it allocates
+//! as many elements as a count read from the file says before reading them, where a failed
+//! allocation aborts. The header, sections and compressed blocks are checked here first
+//! ([`precheck`]), then the framing of every value (`Probe`): no count may claim more than
+//! the bytes after it hold. Every call into openusd runs under `catch_unwind`: a panic
+//! becomes a "malformed usdc" diagnostic, and a panic hook keeps its message off the
+//! terminal. A panic never reaches the user.
 
 use crate::diag::{Diagnostic, Diagnostics, FileId, SourceMap, Span};
 use crate::scene::usda::{
