@@ -1008,12 +1008,15 @@ impl Converter<'_> {
     fn typed(&mut self, path: &str, field: &str, value: &sdf::Value, ty: &ValueType, span: Span) -> Option<Value> {
         let converted = match convert_value(value, self.base_dir, false) {
             Ok(v) => v,
+            // A value strata would read but cannot convert is an error, never a silently
+            // missing value (unlike metadata strata never reads, below: a warning).
             Err(kind) => {
-                self.warn(
+                self.error(
                     span,
-                    format!("`{path}`: field `{field}` holds a {kind}, which strata does not convert; ignored"),
+                    format!(
+                        "unsupported in usdc: `{path}` field `{field}` holds a {kind}, which strata does not convert"
+                    ),
                     "this property",
-                    None,
                 );
                 return None;
             }
@@ -1222,6 +1225,14 @@ fn convert_value(value: &sdf::Value, base_dir: &Path, metadata: bool) -> Result<
             }
             .into(),
         ),
+        S::Permission(p) => Value::Token(
+            match p {
+                sdf::Permission::Public => "public",
+                sdf::Permission::Private => "private",
+            }
+            .into(),
+        ),
+        S::PathExpression(e) => Value::String(e.clone()),
         S::Variability(v) => Value::Token(
             match v {
                 sdf::Variability::Varying => "varying",
@@ -1338,6 +1349,55 @@ mod tests {
         for x in [0.1f32, 1.0 / 3.0, 123456.79, 7e-39] {
             assert_eq!(widen_f32(x) as f32, x);
         }
+    }
+
+    /// A crate written by openusd's own writer, with a prim `/A` holding attribute `x`.
+    fn crate_with(default: sdf::Value, metadata: Option<(&str, sdf::Value)>) -> Vec<u8> {
+        let mut data = sdf::Data::new();
+        let root = sdf::Path::abs_root();
+        let a = sdf::path("/A").unwrap();
+        let x = sdf::path("/A.x").unwrap();
+        data.create_spec(root.clone(), sdf::SpecType::PseudoRoot);
+        data.set_field(&root, "primChildren", sdf::Value::TokenVec(vec!["A".into()]));
+        data.create_spec(a.clone(), sdf::SpecType::Prim);
+        data.set_field(&a, "specifier", sdf::Value::Specifier(sdf::Specifier::Def));
+        data.set_field(&a, "propertyChildren", sdf::Value::TokenVec(vec!["x".into()]));
+        data.create_spec(x.clone(), sdf::SpecType::Attribute);
+        data.set_field(&x, "typeName", sdf::Value::Token("int".into()));
+        data.set_field(&x, "default", default);
+        if let Some((key, value)) = metadata {
+            data.set_field(&x, key, value);
+        }
+        let mut out = std::io::Cursor::new(Vec::new());
+        openusd::usdc::CrateWriter::write(&data, &mut out).unwrap();
+        out.into_inner()
+    }
+
+    fn convert_text(bytes: &[u8]) -> (Layer, Diagnostics, SourceMap) {
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let layer = convert("t.usdc", bytes, Path::new("/d"), &mut sources, &mut diags);
+        (layer, diags, sources)
+    }
+
+    #[test]
+    fn values_strata_cannot_convert_are_errors_and_metadata_a_warning() {
+        let (layer, diags, _) = convert_text(&crate_with(sdf::Value::Int(3), None));
+        assert!(!diags.has_errors());
+        let Some(PropertySpec::Attribute(x)) = layer.prims[0].property("x") else { panic!("x") };
+        assert_eq!(x.default.as_ref().map(|(v, _)| v.clone()), Some(Value::Int(3)));
+
+        let op = sdf::IntListOp { explicit: true, explicit_items: vec![1], ..Default::default() };
+        let (_, diags, sources) = convert_text(&crate_with(sdf::Value::IntListOp(op.clone()), None));
+        let text = diags.render(&sources);
+        assert!(diags.has_errors(), "{text}");
+        assert!(text.contains("`/A.x` field `default` holds a IntListOp") && text.contains("t.usdc:"), "{text}");
+        assert!(text.contains("int </A.x>"), "the outline line names the property: {text}");
+
+        let (_, diags, sources) =
+            convert_text(&crate_with(sdf::Value::Int(3), Some(("weird", sdf::Value::IntListOp(op)))));
+        let text = diags.render(&sources);
+        assert!(!diags.has_errors() && text.contains("metadata `weird`"), "{text}");
     }
 
     #[test]
