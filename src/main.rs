@@ -30,7 +30,7 @@ struct Args {
 enum Command {
     /// Print the composed slot table of every renderable prim.
     Layers {
-        /// A `.usda` scene (default: the embedded default scene).
+        /// A USD scene: `.usda`, `.usdc`, `.usd` or `.usdz` (default: the embedded default scene).
         scene: Option<PathBuf>,
         /// Print JSON instead of a table.
         #[arg(long)]
@@ -38,7 +38,7 @@ enum Command {
     },
     /// Print the wired IR of one prim's composed material.
     Ir {
-        /// A `.usda` scene.
+        /// A USD scene: `.usda`, `.usdc`, `.usd` or `.usdz`.
         scene: PathBuf,
         /// The prim path (`/World/Ball`).
         #[arg(long)]
@@ -55,7 +55,7 @@ enum Command {
     },
     /// Render a scene through its compiled materials to a multi-layer EXR and a PNG preview.
     Render {
-        /// A `.usda` scene (default: the embedded default scene).
+        /// A USD scene: `.usda`, `.usdc`, `.usd` or `.usdz` (default: the embedded default scene).
         scene: Option<PathBuf>,
         /// The EXR to write (the PNG preview goes beside it).
         #[arg(short, long, default_value = "strata.exr")]
@@ -119,7 +119,7 @@ enum Command {
     },
     /// Check a substance file or a scene and report every problem.
     Check {
-        /// A `.ash` substance file or a `.usda` scene.
+        /// A `.ash` substance file or a USD scene (`.usda`, `.usdc`, `.usd`, `.usdz`).
         file: PathBuf,
     },
     /// Mutation-fuzz both front ends and the check pipeline; exit 1 if any input crashes,
