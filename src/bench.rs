@@ -1190,7 +1190,7 @@ pub fn bench_scale() -> Result<String, String> {
     let scene = Scene::from_stage(&stage, &|_| Some(0), &mut diags)
         .ok_or_else(|| diag_error("cannot build the grid", &diags, &sources))?;
     let build_ms = ms_since(build_start);
-    let triangles = scene.accel.triangles().len();
+    let triangles = scene.accel.triangle_count();
     let grown = (peak_rss_mib() - before).max(0.0);
     out += &format!(
         "\n  {triangles} triangles ({n}x{n} grid mesh): parse {parse_ms:.0} ms, triangles + BVH {build_ms:.0} ms, peak memory +{grown:.0} MiB ({:.0} B per triangle, parsed text included)\n",

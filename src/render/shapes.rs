@@ -59,6 +59,8 @@ pub enum Part {
 pub struct SurfaceHit {
     /// The point on the surface.
     pub p: Vec3,
+    /// A conservative bound on the absolute error of each component of `p`.
+    pub p_error: Vec3,
     /// Outward unit normal.
     pub n: Vec3,
     /// Texture coordinates.
@@ -282,8 +284,17 @@ impl Shape {
         let od = self.to_object.transform_vector3(d.as_dvec3());
         let (p, n, (u, v), dpdu, dpdv) = self.part.local_geometry(oo + od * t as f64);
         let n = (self.normal_to_world * n).normalize_or_zero();
+        let world = self.to_world.transform_point3(p);
+        // The point is on the surface to f64 precision (projected onto it in object space);
+        // what remains is the f64 transform's rounding, bounded by 1e-14 of the terms it
+        // sums (|M| |p| + |t|), and the rounding to f32, half an f32 ULP (γ(2) is generous).
+        let m = &self.to_world;
+        let abs_m = DMat3::from_cols(m.x_axis.truncate().abs(), m.y_axis.truncate().abs(), m.z_axis.truncate().abs());
+        let f64_error = (abs_m * p.abs() + m.w_axis.truncate().abs()) * 1e-14;
+        let p32 = world.as_vec3();
         SurfaceHit {
-            p: self.to_world.transform_point3(p).as_vec3(),
+            p: p32,
+            p_error: p32.abs() * crate::render::accel::gamma(2) + f64_error.as_vec3(),
             n: n.as_vec3(),
             uv: Vec2::new(u as f32, v as f32),
             dpdu: self.to_world.transform_vector3(dpdu).as_vec3(),
