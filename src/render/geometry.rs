@@ -1199,4 +1199,92 @@ def Xform "G" {
         let cube = g.triangles.iter().filter(|t| t.prim == 1).count();
         assert_eq!(cube, 12);
     }
+
+    /// A point instancer of a unit cube with the given attribute lines.
+    fn instancer(attrs: &str) -> (Geometry, Diagnostics, crate::diag::SourceMap) {
+        let text = format!(
+            "#usda 1.0\ndef PointInstancer \"P\" {{\n    rel prototypes = [</P/Protos/C>]\n{attrs}\n    def Scope \"Protos\" {{\n        def Cube \"C\" {{ double size = 1 }}\n    }}\n}}\n"
+        );
+        let mut sources = crate::diag::SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let stage = Stage::from_text("pi.usda", &text, std::path::Path::new("."), &mut sources, &mut diags).unwrap();
+        let g = build(&stage, &mut diags);
+        (g, diags, sources)
+    }
+
+    #[test]
+    fn point_instancer_places_points_and_hides_its_prototypes() {
+        let (g, diags, _) = instancer(
+            "    int[] protoIndices = [0, 0, 0]\n    point3f[] positions = [(0, 0, 0), (5, 0, 0), (0, 5, 0)]\n    quath[] orientations = [(1, 0, 0, 0), (0.70710677, 0, 0, 0.70710677), (1, 0, 0, 0)]\n    float3[] scales = [(1, 1, 1), (2, 1, 1), (1, 1, 1)]\n    int64[] invisibleIds = [2]",
+        );
+        assert!(!diags.has_errors(), "{diags:?}");
+        assert!(g.triangles.is_empty(), "the prototype is drawn only through the instancer");
+        assert_eq!(g.prototypes.len(), 1);
+        assert_eq!(g.instances.len(), 2, "id 2 (no ids: the index) is invisible");
+        // (real, i, j, k) = (cos 45°, 0, 0, sin 45°): 90° about z, applied after the scale:
+        // x scaled by 2, then turned onto y.
+        let m = g.instances[1].to_world;
+        let x = m.transform_vector3(DVec3::X);
+        assert!((x - DVec3::new(0.0, 2.0, 0.0)).length() < 1e-6, "{x}");
+        assert!((m.transform_point3(DVec3::ZERO) - DVec3::new(5.0, 0.0, 0.0)).length() < 1e-12);
+        assert_eq!(g.prims.len(), 1);
+        assert_eq!(g.prims[0].path, "/P/Protos/C");
+    }
+
+    #[test]
+    fn point_instancer_mismatches_are_errors_at_the_attribute() {
+        for (attrs, want, line) in [
+            ("    int[] protoIndices = [0, 0]\n    point3f[] positions = [(0, 0, 0)]", "`positions` has 1 entries but `protoIndices` has 2", 5),
+            ("    int[] protoIndices = [0, 3]\n    point3f[] positions = [(0, 0, 0), (1, 1, 1)]", "`protoIndices`[1] = 3 is out of range (1 prototypes)", 4),
+            ("    int[] protoIndices = [0]\n    point3f[] positions = [(0, 0, 0)]\n    quath[] orientations = [(0, 0, 0, 0)]", "`orientations`[0] is a zero quaternion", 6),
+            ("    int[] protoIndices = [0]\n    point3f[] positions = [(0, 0, 0)]\n    float3[] scales = [(1, 1, 1), (2, 2, 2)]", "`scales` has 2 entries", 6),
+            ("    int[] protoIndices = [0]\n    point3f[] positions = [(0, nan, 0)]", "`positions`[0] is not finite", 5),
+            ("    int[] protoIndices = [0]", "1 instances but no `positions`", 4),
+            ("    int[] protoIndices = [0]\n    point3f[] positions = [(2e7, 0, 0)]", "beyond the scene extent", 2),
+        ] {
+            let (g, diags, sources) = instancer(attrs);
+            assert!(g.instances.is_empty(), "{attrs}");
+            let errors: Vec<_> = diags.items().iter().filter(|d| d.severity == crate::diag::Severity::Error).collect();
+            assert_eq!(errors.len(), 1, "{attrs}: {errors:?}");
+            assert!(errors[0].message.contains(want), "{}", errors[0].message);
+            let rendered = diags.render(&sources);
+            assert!(rendered.contains(&format!("pi.usda:{line}:")), "{rendered}");
+        }
+        // A target that does not exist.
+        let (stage, mut diags) = stage(
+            "#usda 1.0\ndef PointInstancer \"P\" {\n    rel prototypes = [</Nowhere>]\n    int[] protoIndices = [0]\n    point3f[] positions = [(0, 0, 0)]\n}",
+        );
+        let g = build(&stage, &mut diags);
+        assert!(g.instances.is_empty() && diags.items()[0].message.contains("`/Nowhere` does not exist"));
+    }
+
+    #[test]
+    fn instanceable_references_share_a_prototype_unless_edited() {
+        // Three instances of /Proto, one of them with a local opinion inside it: two share.
+        let (stage, mut diags) = stage(
+            r#"#usda 1.0
+class Xform "Proto" {
+    def Mesh "M" {
+        int[] faceVertexCounts = [3]
+        int[] faceVertexIndices = [0, 1, 2]
+        point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]
+    }
+}
+def Xform "A" (instanceable = true references = </Proto>) { double3 xformOp:translate = (5, 0, 0)
+    uniform token[] xformOpOrder = ["xformOp:translate"] }
+def Xform "B" (instanceable = true references = </Proto>) { }
+def Xform "C" (instanceable = true references = </Proto>) {
+    over "M" { point3f[] points = [(0, 0, 0), (2, 0, 0), (0, 2, 0)] }
+}"#,
+        );
+        let g = build(&stage, &mut diags);
+        assert!(!diags.has_errors(), "{diags:?}");
+        assert_eq!(g.prototypes.len(), 1, "A and B share; C is flattened (its prototype occurs once)");
+        assert_eq!(g.instances.len(), 2);
+        assert_eq!(g.triangles.len(), 1, "C's own triangle");
+        let paths: Vec<_> = g.prims.iter().map(|p| p.path.as_str()).collect();
+        assert_eq!(paths, ["/A/M", "/B/M", "/C/M"]);
+        assert_eq!(g.instance_prims, [0, 1], "each instance's own prim");
+        assert_eq!(g.instances[0].to_world.transform_point3(DVec3::ZERO), DVec3::new(5.0, 0.0, 0.0));
+    }
 }
