@@ -29,8 +29,15 @@ fn scene(name: &str) -> (Scene, Vec<std::sync::Arc<dyn MaterialCode>>) {
 fn image(name: &str) -> Image {
     let (scene, materials) = scene(name);
     let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
-    let settings =
-        RenderSettings { width: 96, height: 72, spp: 4, seed: 3, threads: Some(2), max_depth: 3, mode: LayerMode::Stochastic };
+    let settings = RenderSettings {
+        width: 96,
+        height: 72,
+        spp: 4,
+        seed: 3,
+        threads: Some(2),
+        max_depth: 3,
+        mode: LayerMode::Stochastic,
+    };
     let (image, stats) = render(&scene, &refs, &settings, None).expect("renders");
     assert_eq!(stats.invalid_samples(), 0, "{stats}");
     image

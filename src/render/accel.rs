@@ -604,19 +604,21 @@ pub fn gamma(n: i32) -> f32 {
     (n as f32 * e) / (1.0 - n as f32 * e)
 }
 
-/// Per-ray precomputation of the watertight test: the axis permutation and shear that map
-/// the ray to +z. The test runs in f64 (scalar f64 costs the same as f32 here): with f32, the
-/// hit distance on a large triangle is only accurate to ~1e-7 of the triangle's size, which
-/// is more than a robust ray-origin offset, and secondary rays would re-hit their surface.
+/// Per-ray precomputation of the watertight test (pbrt-v4's, after Woop, Benthin & Wald
+/// 2013): the axis permutation that makes the direction's largest component z, and the shear
+/// that maps the ray to +z. The test runs in f32 on the compact positions; its rounding is
+/// bounded (see [`RayPre::intersect`]) so a hit is never reported behind the origin, and
+/// hit points carry an error bound that [`offset_ray_origin`] moves past.
 struct RayPre {
-    o: DVec3,
+    o: Vec3,
     k: [usize; 3],
-    s: DVec3,
+    /// `(−dx/dz, −dy/dz, 1/dz)` in the permuted axes.
+    s: Vec3,
 }
 
 impl RayPre {
+    #[inline]
     fn new(o: Vec3, d: Vec3) -> RayPre {
-        let d = d.as_dvec3();
         let a = d.abs();
         let kz = if a.x > a.y {
             if a.x > a.z { 0 } else { 2 }
@@ -625,62 +627,87 @@ impl RayPre {
         } else {
             2
         };
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
-        if d[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
-        let s = DVec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
-        RayPre { o: o.as_dvec3(), k: [kx, ky, kz], s }
+        let kx = (kz + 1) % 3;
+        let ky = (kx + 1) % 3;
+        let s = Vec3::new(-d[kx] / d[kz], -d[ky] / d[kz], 1.0 / d[kz]);
+        RayPre { o, k: [kx, ky, kz], s }
     }
 
     /// `(t, b1, b2)` of a hit with `t` in `(tmin, tmax)`.
     #[inline]
     fn intersect(&self, p: &[Vec3; 3], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
         let [kx, ky, kz] = self.k;
-        let a = p[0].as_dvec3() - self.o;
-        let b = p[1].as_dvec3() - self.o;
-        let c = p[2].as_dvec3() - self.o;
-        let ax = a[kx] - self.s.x * a[kz];
-        let ay = a[ky] - self.s.y * a[kz];
-        let bx = b[kx] - self.s.x * b[kz];
-        let by = b[ky] - self.s.y * b[kz];
-        let cx = c[kx] - self.s.x * c[kz];
-        let cy = c[ky] - self.s.y * c[kz];
-        let u = cx * by - cy * bx;
-        let v = ax * cy - ay * cx;
-        let w = bx * ay - by * ax;
-        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        // Translate to the ray origin, permute, shear.
+        let shear = |v: Vec3| {
+            let v = v - self.o;
+            let z = v[kz];
+            (v[kx] + self.s.x * z, v[ky] + self.s.y * z, z)
+        };
+        let (x0, y0, z0) = shear(p[0]);
+        let (x1, y1, z1) = shear(p[1]);
+        let (x2, y2, z2) = shear(p[2]);
+        // Edge functions; an exact zero may be a rounding artefact on an edge, so it is
+        // decided in f64 (where the products of f32 values are exact).
+        let (mut e0, mut e1, mut e2) = (x1 * y2 - y1 * x2, x2 * y0 - y2 * x0, x0 * y1 - y0 * x1);
+        if e0 == 0.0 || e1 == 0.0 || e2 == 0.0 {
+            let d = |a: f32, b: f32, c: f32, e: f32| (a as f64 * b as f64 - c as f64 * e as f64) as f32;
+            e0 = d(x1, y2, y1, x2);
+            e1 = d(x2, y0, y2, x0);
+            e2 = d(x0, y1, y0, x1);
+        }
+        if (e0 < 0.0 || e1 < 0.0 || e2 < 0.0) && (e0 > 0.0 || e1 > 0.0 || e2 > 0.0) {
             return None;
         }
-        let det = u + v + w;
+        let det = e0 + e1 + e2;
         if det == 0.0 {
             return None;
         }
-        let t_scaled = u * self.s.z * a[kz] + v * self.s.z * b[kz] + w * self.s.z * c[kz];
-        let inv = 1.0 / det;
-        let t = (t_scaled * inv) as f32;
-        if !(t > tmin && t < tmax) {
+        let (z0, z1, z2) = (z0 * self.s.z, z1 * self.s.z, z2 * self.s.z);
+        let t_scaled = e0 * z0 + e1 * z1 + e2 * z2;
+        // Range test before the division: t in (0, tmax).
+        if det < 0.0 && (t_scaled >= 0.0 || t_scaled < tmax * det) {
             return None;
         }
-        Some((t, (v * inv) as f32, (w * inv) as f32))
+        if det > 0.0 && (t_scaled <= 0.0 || t_scaled > tmax * det) {
+            return None;
+        }
+        let inv = 1.0 / det;
+        let t = t_scaled * inv;
+        // A conservative bound on t's rounding error (pbrt-v4, "Conservative Ray–Bounds
+        // Intersections"): a t within it of zero may really be behind the origin — a ray
+        // leaving the surface that re-hits it — so it is no hit.
+        let max_z = z0.abs().max(z1.abs()).max(z2.abs());
+        let max_x = x0.abs().max(x1.abs()).max(x2.abs());
+        let max_y = y0.abs().max(y1.abs()).max(y2.abs());
+        let delta_z = gamma(3) * max_z;
+        let delta_x = gamma(5) * (max_x + max_z);
+        let delta_y = gamma(5) * (max_y + max_z);
+        let delta_e = 2.0 * (gamma(2) * max_x * max_y + delta_y * max_x + delta_x * max_y);
+        let max_e = e0.abs().max(e1.abs()).max(e2.abs());
+        let delta_t = 3.0 * (gamma(3) * max_e * max_z + delta_e * max_z + delta_z * max_e) * inv.abs();
+        if t <= delta_t || t <= tmin || t >= tmax {
+            return None;
+        }
+        Some((t, e1 * inv, e2 * inv))
     }
 }
 
-/// Moves `p` off its surface along the geometric normal `n` (pointing to the side the new
-/// ray leaves from) by a few ULPs, scaled to `p`'s magnitude (Wächter & Binder 2019).
-pub fn offset_ray_origin(p: Vec3, n: Vec3) -> Vec3 {
-    const ORIGIN: f32 = 1.0 / 32.0;
-    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
-    const INT_SCALE: f32 = 256.0;
-    let mut out = p;
+/// A spawn point for a ray leaving a surface point `p` whose components are uncertain by
+/// `p_error`, towards the side of the geometric normal `n` (pointing to where the ray goes):
+/// `p` moved along `n` past the error box, then rounded away from the surface (pbrt-v4's
+/// `OffsetRayOrigin`). The offset is as small as the error bound allows, at any scale.
+pub fn offset_ray_origin(p: Vec3, p_error: Vec3, n: Vec3) -> Vec3 {
+    let d = n.abs().dot(p_error);
+    let offset = n * d;
+    let mut po = p + offset;
     for i in 0..3 {
-        let of = (INT_SCALE * n[i]) as i32;
-        let bits = p[i].to_bits() as i32;
-        let moved = f32::from_bits((if p[i] < 0.0 { bits - of } else { bits + of }) as u32);
-        out[i] = if p[i].abs() < ORIGIN { p[i] + FLOAT_SCALE * n[i] } else { moved };
+        if offset[i] > 0.0 {
+            po[i] = po[i].next_up();
+        } else if offset[i] < 0.0 {
+            po[i] = po[i].next_down();
+        }
     }
-    out
+    po
 }
 
 #[cfg(test)]
@@ -750,11 +777,138 @@ mod tests {
     fn offset_origin_escapes_surface() {
         let t = tri([Vec3::new(-100.0, -100.0, 7.3), Vec3::new(100.0, -100.0, 7.3), Vec3::new(0.0, 100.0, 7.3)]);
         let accel = Accel::new(vec![t], vec![]);
-        let p = Vec3::new(0.123, 0.456, 7.3);
-        let o = offset_ray_origin(p, Vec3::Z);
-        assert!(o.z > p.z);
+        let hit = accel.intersect(Vec3::new(0.123, 0.456, 20.0), -Vec3::Z, 0.0, f32::INFINITY).unwrap();
+        let g = accel.surface(Vec3::new(0.123, 0.456, 20.0), -Vec3::Z, &hit);
+        assert!(g.p_error.max_element() > 0.0 && g.p_error.max_element() < 1e-4, "{}", g.p_error);
+        let o = offset_ray_origin(g.p, g.p_error, Vec3::Z);
+        assert!(o.z > 7.3);
         assert!(accel.intersect(o, Vec3::new(0.3, 0.0, 0.01).normalize(), 0.0, f32::INFINITY).is_none());
-        let below = offset_ray_origin(p, -Vec3::Z);
-        assert!(accel.intersect(below, Vec3::new(0.3, 0.0, 0.01).normalize(), 0.0, f32::INFINITY).is_some());
+        let below = offset_ray_origin(g.p, g.p_error, -Vec3::Z);
+        assert!(below.z < 7.3);
+        assert!(accel.intersect(below - Vec3::Z, Vec3::new(0.3, 0.0, 0.1).normalize(), 0.0, f32::INFINITY).is_some());
+    }
+
+    /// A tilted square of `4 × 4` cells (32 coplanar triangles) of side `scale` around `centre`.
+    fn tilted_plane(scale: f32, centre: Vec3) -> (Vec<Triangle>, Vec3) {
+        let (u, v) = (Vec3::new(0.8, 0.36, 0.48).normalize(), Vec3::new(-0.36, 0.93, 0.0));
+        let v = (v - u * u.dot(v)).normalize();
+        let at = |i: usize, j: usize| centre + (u * (i as f32 / 4.0 - 0.5) + v * (j as f32 / 4.0 - 0.5)) * scale;
+        let mut out = Vec::new();
+        for i in 0..4 {
+            for j in 0..4 {
+                out.push(tri([at(i, j), at(i + 1, j), at(i + 1, j + 1)]));
+                out.push(tri([at(i, j), at(i + 1, j + 1), at(i, j + 1)]));
+            }
+        }
+        (out, u.cross(v))
+    }
+
+    /// Rays that leave a surface point, from grazing (cos 1e-5 against the normal) to
+    /// straight out, on either side (`both_sides`; else outward only: into a sphere, a ray
+    /// meets its far side), never hit the surface they leave.
+    fn assert_no_self_hits(accel: &Accel, both_sides: bool, aim: impl Fn(usize) -> (Vec3, Vec3), what: &str) {
+        let mut self_hits = 0;
+        for i in 0..3000 {
+            let (o, d) = aim(i);
+            let Some(hit) = accel.intersect(o, d, 0.0, f32::INFINITY) else { continue };
+            let g = accel.surface(o, d, &hit);
+            let n = if i % 2 == 0 || !both_sides { g.ng } else { -g.ng };
+            let t = n.any_orthonormal_vector();
+            let t = (t * (i as f32 * 0.37).cos() + n.cross(t) * (i as f32 * 0.37).sin()).normalize();
+            let cos = 10f32.powf(-5.0 * (i % 60) as f32 / 59.0);
+            let out = (n * cos + t * (1.0 - cos * cos).sqrt()).normalize();
+            let start = offset_ray_origin(g.p, g.p_error, n);
+            if accel.intersect(start, out, 0.0, f32::INFINITY).is_some()
+                || accel.occluded(start, out, 0.0, f32::INFINITY)
+            {
+                self_hits += 1;
+            }
+        }
+        assert_eq!(self_hits, 0, "{what}: rays re-hit the surface they leave");
+    }
+
+    #[test]
+    fn grazing_rays_never_rehit_their_surface_at_any_scale() {
+        for (scale, centre) in [
+            (1e-3, Vec3::ZERO),
+            (1.0, Vec3::new(0.3, -0.2, 0.1)),
+            (1e5, Vec3::ZERO),
+            (1e5, Vec3::new(3e6, -1e6, 2e6)),
+            (1e-3, Vec3::new(1.0, 2.0, -3.0)),
+        ] {
+            let (plane, n) = tilted_plane(scale, centre);
+            let sphere = Shape::new(
+                super::super::shapes::Part::Sphere { r: 1.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY },
+                DMat4::from_scale_rotation_translation(
+                    glam::DVec3::new(1.0, 0.6, 0.8) * scale as f64 * 0.2,
+                    glam::DQuat::from_rotation_y(0.4),
+                    (centre + n * scale).as_dvec3(),
+                ),
+                0,
+            )
+            .unwrap();
+            // Flat and convex: a ray leaving either never meets it again.
+            let worlds = [Accel::new(plane.clone(), vec![]), Accel::new(vec![], vec![sphere.clone()])];
+            let sphere_at = centre + n * scale;
+            let aim = |i: usize| {
+                // Half the rays at the plane from both sides, half at the sphere.
+                let s = (i as f32 * 0.618_034).fract() - 0.5;
+                let r = (i as f32 * 0.414_214).fract() - 0.5;
+                let side = if i % 4 < 2 { 1.0 } else { -1.0 };
+                if i % 3 == 0 {
+                    let target = sphere_at + Vec3::new(s, r, s * r) * (0.2 * scale);
+                    let o = sphere_at + Vec3::new(r, 1.0, s).normalize() * (3.0 * scale);
+                    (o, (target - o).normalize())
+                } else {
+                    let target = centre
+                        + n.any_orthonormal_vector() * (s * 0.8 * scale)
+                        + n.cross(n.any_orthonormal_vector()) * (r * 0.8 * scale);
+                    let o = target + (n * side + Vec3::new(r, s, 0.3) * 0.5) * scale;
+                    (o, (target - o).normalize())
+                }
+            };
+            for (k, world) in worlds.iter().enumerate() {
+                assert_no_self_hits(world, k == 0, aim, &format!("world {k}, scale {scale}, centre {centre}"));
+            }
+            // The same geometry as an instance: built around the origin at unit size, placed
+            // by a transform that scales, turns and moves it.
+            let (unit_plane, _) = tilted_plane(1.0, Vec3::ZERO);
+            let unit_sphere = Shape::new(
+                super::super::shapes::Part::Sphere { r: 1.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY },
+                DMat4::from_scale_rotation_translation(
+                    glam::DVec3::new(1.0, 0.6, 0.8) * 0.2,
+                    glam::DQuat::from_rotation_y(0.4),
+                    n.as_dvec3(),
+                ),
+                0,
+            )
+            .unwrap();
+            let to_world =
+                DMat4::from_translation(centre.as_dvec3()) * DMat4::from_scale(glam::DVec3::splat(scale as f64));
+            let instanced = Accel::with_instances(
+                Blas::new(Vec::new(), Vec::new()),
+                vec![Blas::new(unit_plane, vec![]), Blas::new(vec![], vec![unit_sphere.clone()])],
+                &[InstanceDesc { to_world, prototype: 0, prims: 0 }, InstanceDesc { to_world, prototype: 1, prims: 0 }],
+                vec![0],
+            );
+            assert_eq!(instanced.blas_count(), 2);
+            // Each instance alone (the other one's prototype is placed out of the way).
+            for k in 0..2 {
+                let away = DMat4::from_translation(glam::DVec3::splat(9e6));
+                let descs: Vec<InstanceDesc> = (0..2)
+                    .map(|p| InstanceDesc { to_world: if p == k { to_world } else { away }, prototype: p, prims: 0 })
+                    .collect();
+                let alone = Accel::with_instances(
+                    Blas::new(Vec::new(), Vec::new()),
+                    vec![
+                        Blas::new(tilted_plane(1.0, Vec3::ZERO).0, vec![]),
+                        Blas::new(vec![], vec![unit_sphere.clone()]),
+                    ],
+                    &descs,
+                    vec![0],
+                );
+                assert_no_self_hits(&alone, k == 0, aim, &format!("instance {k}, scale {scale}, centre {centre}"));
+            }
+        }
     }
 }

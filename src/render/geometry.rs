@@ -1234,11 +1234,31 @@ def Xform "G" {
     #[test]
     fn point_instancer_mismatches_are_errors_at_the_attribute() {
         for (attrs, want, line) in [
-            ("    int[] protoIndices = [0, 0]\n    point3f[] positions = [(0, 0, 0)]", "`positions` has 1 entries but `protoIndices` has 2", 5),
-            ("    int[] protoIndices = [0, 3]\n    point3f[] positions = [(0, 0, 0), (1, 1, 1)]", "`protoIndices`[1] = 3 is out of range (1 prototypes)", 4),
-            ("    int[] protoIndices = [0]\n    point3f[] positions = [(0, 0, 0)]\n    quath[] orientations = [(0, 0, 0, 0)]", "`orientations`[0] is a zero quaternion", 6),
-            ("    int[] protoIndices = [0]\n    point3f[] positions = [(0, 0, 0)]\n    float3[] scales = [(1, 1, 1), (2, 2, 2)]", "`scales` has 2 entries", 6),
-            ("    int[] protoIndices = [0]\n    point3f[] positions = [(0, nan, 0)]", "`positions`[0] is not finite", 5),
+            (
+                "    int[] protoIndices = [0, 0]\n    point3f[] positions = [(0, 0, 0)]",
+                "`positions` has 1 entries but `protoIndices` has 2",
+                5,
+            ),
+            (
+                "    int[] protoIndices = [0, 3]\n    point3f[] positions = [(0, 0, 0), (1, 1, 1)]",
+                "`protoIndices`[1] = 3 is out of range (1 prototypes)",
+                4,
+            ),
+            (
+                "    int[] protoIndices = [0]\n    point3f[] positions = [(0, 0, 0)]\n    quath[] orientations = [(0, 0, 0, 0)]",
+                "`orientations`[0] is a zero quaternion",
+                6,
+            ),
+            (
+                "    int[] protoIndices = [0]\n    point3f[] positions = [(0, 0, 0)]\n    float3[] scales = [(1, 1, 1), (2, 2, 2)]",
+                "`scales` has 2 entries",
+                6,
+            ),
+            (
+                "    int[] protoIndices = [0]\n    point3f[] positions = [(0, nan, 0)]",
+                "`positions`[0] is not finite",
+                5,
+            ),
             ("    int[] protoIndices = [0]", "1 instances but no `positions`", 4),
             ("    int[] protoIndices = [0]\n    point3f[] positions = [(2e7, 0, 0)]", "beyond the scene extent", 2),
         ] {

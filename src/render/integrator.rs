@@ -408,7 +408,7 @@ impl Context<'_> {
                 return Ok(0.0);
             }
             let side = if sp.ng.dot(d) > 0.0 { sp.ng } else { -sp.ng };
-            let next = offset_ray_origin(sp.p, side);
+            let next = offset_ray_origin(sp.p, sp.p_error, side);
             remaining -= (next - o).dot(d);
             o = next;
             if remaining <= 0.0 {
@@ -419,7 +419,15 @@ impl Context<'_> {
     }
 
     /// Direct light at a shading point by sampling one light (uniform selection), MIS-weighted.
-    fn direct(&self, p: Vec3, ng: Vec3, wo: Vec3, rng: &mut Rng, s: &mut Scratch) -> Result<Vec3, Invalid> {
+    fn direct(
+        &self,
+        p: Vec3,
+        p_error: Vec3,
+        ng: Vec3,
+        wo: Vec3,
+        rng: &mut Rng,
+        s: &mut Scratch,
+    ) -> Result<Vec3, Invalid> {
         let lights = &self.scene.lights;
         if lights.is_empty() {
             return Ok(Vec3::ZERO);
@@ -434,7 +442,7 @@ impl Context<'_> {
             return Ok(Vec3::ZERO);
         }
         let side = if ng.dot(ls.wi) > 0.0 { ng } else { -ng };
-        let o = offset_ray_origin(p, side);
+        let o = offset_ray_origin(p, p_error, side);
         let dist = if ls.dist.is_finite() { ls.dist * (1.0 - 1e-4) } else { f32::INFINITY };
         let tr = self.transmittance(o, ls.wi, dist, &mut s.site)?;
         if tr <= 0.0 {
@@ -521,7 +529,7 @@ impl Context<'_> {
                     break;
                 }
                 let side = if sp.ng.dot(d) > 0.0 { sp.ng } else { -sp.ng };
-                let next = offset_ray_origin(sp.p, side);
+                let next = offset_ray_origin(sp.p, sp.p_error, side);
                 let advanced = (next - o).dot(d);
                 travelled += advanced;
                 tmax = (tmax - advanced).max(0.0);
@@ -542,7 +550,7 @@ impl Context<'_> {
                 break;
             }
             let wo = -d;
-            out.radiance += throughput * self.direct(sp.p, sp.ng, wo, rng, s)?;
+            out.radiance += throughput * self.direct(sp.p, sp.p_error, sp.ng, wo, rng, s)?;
             // Sample the next direction from the picked lobe(s).
             let uc = rng.uniform();
             let u2 = rng.uniform2();
@@ -567,7 +575,7 @@ impl Context<'_> {
                 throughput /= p;
             }
             let side = if sp.ng.dot(wi) > 0.0 { sp.ng } else { -sp.ng };
-            o = offset_ray_origin(sp.p, side);
+            o = offset_ray_origin(sp.p, sp.p_error, side);
             d = wi;
             tmin = 0.0;
             tmax = f32::INFINITY;

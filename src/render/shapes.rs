@@ -290,7 +290,8 @@ impl Shape {
         // sums (|M| |p| + |t|), and the rounding to f32, half an f32 ULP (γ(2) is generous).
         let m = &self.to_world;
         let abs_m = DMat3::from_cols(m.x_axis.truncate().abs(), m.y_axis.truncate().abs(), m.z_axis.truncate().abs());
-        let f64_error = (abs_m * p.abs() + m.w_axis.truncate().abs()) * 1e-14;
+        let (lo, hi) = self.part.bounds();
+        let f64_error = (abs_m * (p.abs() + lo.abs().max(hi.abs())) + m.w_axis.truncate().abs()) * 1e-14;
         let p32 = world.as_vec3();
         SurfaceHit {
             p: p32,
@@ -366,7 +367,7 @@ mod tests {
             let tangent = h.n.any_orthonormal_vector();
             let cos = 10f32.powf(-4.0 * (i % 50) as f32 / 49.0);
             let out = (h.n * cos + tangent * (1.0 - cos * cos).sqrt()).normalize();
-            let start = offset_ray_origin(h.p, h.n);
+            let start = offset_ray_origin(h.p, h.p_error, h.n);
             if s.intersect(start, out, 0.0, f32::INFINITY).is_some() {
                 misses += 1;
             }
@@ -384,7 +385,7 @@ mod tests {
             let n = Vec3::new(a.cos(), a.sin(), 0.0);
             let p = Vec3::new(3.0, 0.0, 0.0) + n;
             let inward = (-n + n.any_orthonormal_vector() * 0.5).normalize();
-            let start = offset_ray_origin(p, -n);
+            let start = offset_ray_origin(p, p.abs() * crate::render::accel::gamma(3), -n);
             let t = s.intersect(start, inward, 0.0, f32::INFINITY).expect("far side");
             // The chord at this angle: 2 cos(angle to the normal).
             assert!((t - 2.0 * inward.dot(-n)).abs() < 1e-4, "{t}");
