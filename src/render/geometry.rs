@@ -140,6 +140,8 @@ struct Builder<'s> {
     prototype_of: HashMap<String, (u32, u32)>,
     /// Stop: the triangle budget was exceeded (reported once).
     over_budget: bool,
+    /// Instances skipped because their transform is singular (a zero scale).
+    singular_instances: usize,
 }
 
 /// As [`build_with`], with a triangle budget other than [`MAX_TRIANGLES`] (for tests).
@@ -178,6 +180,7 @@ fn build_within(stage: &Stage, xforms: &[PrimXform], budget: usize, diags: &mut 
         prim_index: HashMap::new(),
         prototype_of: HashMap::new(),
         over_budget: false,
+        singular_instances: 0,
     };
     for (id, prim) in stage.depth_first() {
         let i = id.0 as usize;
@@ -206,6 +209,12 @@ fn build_within(stage: &Stage, xforms: &[PrimXform], budget: usize, diags: &mut 
         if b.over_budget {
             break;
         }
+    }
+    if b.singular_instances > 0 {
+        diags.push(Diagnostic::warning(format!(
+            "{} instance(s) with a singular transform (a zero scale) skipped",
+            b.singular_instances
+        )));
     }
     let mut geometry = b.geometry;
     if geometry.degenerate > 0 {
@@ -422,6 +431,12 @@ impl Builder<'_> {
             }
             diags.push(d);
             return false;
+        }
+        let det = DMat3::from_mat4(to_world).determinant();
+        if det == 0.0 || !det.is_finite() {
+            // Flat in some direction: as a flattened copy's triangles would be, degenerate.
+            self.singular_instances += 1;
+            return true;
         }
         self.geometry.instances.push(InstanceDesc { to_world, prototype, prims });
         true
