@@ -1209,8 +1209,15 @@ fn instancing_report(dir: &Path) -> Result<String, String> {
         std::fs::write(&path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
         Ok::<PathBuf, String>(path)
     };
-    let settings =
-        RenderSettings { width: 64, height: 64, spp: 1, seed: 1, threads: None, max_depth: 2, mode: LayerMode::Stochastic };
+    let settings = RenderSettings {
+        width: 64,
+        height: 64,
+        spp: 1,
+        seed: 1,
+        threads: None,
+        max_depth: 2,
+        mode: LayerMode::Stochastic,
+    };
     let mib = |b: usize| b as f64 / 1048576.0;
     let n = 224;
     let one = grid_mesh_scene(n);
@@ -1219,7 +1226,13 @@ fn instancing_report(dir: &Path) -> Result<String, String> {
     let count = side * side;
     let mut positions = String::with_capacity(count * 24);
     for k in 0..count {
-        let _ = write!(positions, "({}, {}, {}), ", (k % side) as f64 * 120.0 - 6000.0, (k % 7) as f64, (k / side) as f64 * 120.0 - 6000.0);
+        let _ = write!(
+            positions,
+            "({}, {}, {}), ",
+            (k % side) as f64 * 120.0 - 6000.0,
+            (k % 7) as f64,
+            (k / side) as f64 * 120.0 - 6000.0
+        );
     }
     let field = format!(
         "#usda 1.0\ndef PointInstancer \"Field\" {{\n    rel prototypes = [</Field/Protos/Grid>]\n    int[] protoIndices = [{}]\n    point3f[] positions = [{}]\n    def Scope \"Protos\" {{\n{mesh}\n    }}\n}}\ndef DomeLight \"Sky\" {{}}\n",
@@ -1265,7 +1278,8 @@ fn instancing_report(dir: &Path) -> Result<String, String> {
     let (one_copy, _) = row(&format!("one {}-triangle grid", 2 * n * n), &write("grid_once.usda", &one)?)?;
     let (blas, tlas) = row(&format!("{count} instances of it (PointInstancer)"), &write("grid_field.usda", &field)?)?;
     // Two thousand references to one sphere asset, each instanceable.
-    let mut spheres = String::from("#usda 1.0\nclass Xform \"Ball\" {\n    def Sphere \"S\" { double radius = 0.4 }\n}\n");
+    let mut spheres =
+        String::from("#usda 1.0\nclass Xform \"Ball\" {\n    def Sphere \"S\" { double radius = 0.4 }\n}\n");
     for k in 0..2000 {
         let _ = write!(
             spheres,

@@ -855,7 +855,7 @@ mod tests {
                 let s = (i as f32 * 0.618_034).fract() - 0.5;
                 let r = (i as f32 * 0.414_214).fract() - 0.5;
                 let side = if i % 4 < 2 { 1.0 } else { -1.0 };
-                if i % 3 == 0 {
+                if i.is_multiple_of(3) {
                     let target = sphere_at + Vec3::new(s, r, s * r) * (0.2 * scale);
                     let o = sphere_at + Vec3::new(r, 1.0, s).normalize() * (3.0 * scale);
                     (o, (target - o).normalize())
