@@ -488,6 +488,10 @@ impl Accel {
             let inst = &self.instances[i as usize];
             let oo = inst.to_object.transform_point3(od).as_vec3();
             let ob = inst.to_object.transform_vector3(dd).as_vec3();
+            // A nearly singular instance can overflow f32 in object space: no hit there.
+            if !oo.is_finite() || !ob.is_finite() || ob == Vec3::ZERO {
+                return f32::INFINITY;
+            }
             match self.prototypes[inst.prototype as usize].intersect(oo, ob, tmin, r.tmax) {
                 Some((t, index, b1, b2)) => {
                     best = Some(Hit { t, index, instance: i, b1, b2 });
@@ -514,7 +518,12 @@ impl Accel {
             let inst = &self.instances[tlas.primitive_indices[id] as usize];
             let oo = inst.to_object.transform_point3(od).as_vec3();
             let ob = inst.to_object.transform_vector3(dd).as_vec3();
-            if self.prototypes[inst.prototype as usize].occluded(oo, ob, tmin, r.tmax) { 0.0 } else { f32::INFINITY }
+            let finite = oo.is_finite() && ob.is_finite() && ob != Vec3::ZERO;
+            if finite && self.prototypes[inst.prototype as usize].occluded(oo, ob, tmin, r.tmax) {
+                0.0
+            } else {
+                f32::INFINITY
+            }
         })
     }
 

@@ -26,6 +26,11 @@ pub const MAX_EXTENT: f64 = 1e7;
 /// this budget the scene is an error naming the first prim that did not fit.
 pub const MAX_TRIANGLES: usize = 1 << 25;
 
+/// The most instances a scene may have: 2^22 (4.2 million, about 1.5 GB of instance table
+/// and top-level BVH). A 256 MiB point-instancer file can list 25 million points; past this
+/// budget the instancer is an error.
+pub const MAX_INSTANCES: usize = 1 << 22;
+
 /// One world-space triangle.
 #[derive(Clone, Copy, Debug)]
 pub struct Triangle {
@@ -430,6 +435,20 @@ impl Builder<'_> {
                 d = d.also(span, format!("instance {i}"));
             }
             diags.push(d);
+            return false;
+        }
+        if self.geometry.instances.len() >= MAX_INSTANCES {
+            let mut d = Diagnostic::error(format!(
+                "the scene has more than {MAX_INSTANCES} instances; `{}` and the instances after it do not fit",
+                prim.path
+            ))
+            .at(prim.span, "the first prim past the instance budget");
+            if let Some((i, span)) = which {
+                d = d.also(span, format!("instance {i}"));
+            }
+            diags.push(d);
+            // Stops the build: one error, bounded memory.
+            self.over_budget = true;
             return false;
         }
         let det = DMat3::from_mat4(to_world).determinant();
