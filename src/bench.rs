@@ -1190,11 +1190,112 @@ pub fn bench_scale() -> Result<String, String> {
     let scene = Scene::from_stage(&stage, &|_| Some(0), &mut diags)
         .ok_or_else(|| diag_error("cannot build the grid", &diags, &sources))?;
     let build_ms = ms_since(build_start);
-    let triangles = scene.accel.triangles().len();
+    let triangles = scene.accel.triangle_count();
     let grown = (peak_rss_mib() - before).max(0.0);
     out += &format!(
         "\n  {triangles} triangles ({n}x{n} grid mesh): parse {parse_ms:.0} ms, triangles + BVH {build_ms:.0} ms, peak memory +{grown:.0} MiB ({:.0} B per triangle, parsed text included)\n",
         grown * 1048576.0 / triangles.max(1) as f64
+    );
+    out += &instancing_report(&dir.0)?;
+    Ok(out)
+}
+
+/// `bench scale`'s instancing section: 10 000 point-instancer instances of a 100 352-triangle
+/// grid against one copy of it (build time, bytes held by the BVHs and the instance table,
+/// peak memory, a first render), and 2000 instanceable references to a sphere asset.
+fn instancing_report(dir: &Path) -> Result<String, String> {
+    let write = |name: &str, text: &str| {
+        let path = dir.join(name);
+        std::fs::write(&path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        Ok::<PathBuf, String>(path)
+    };
+    let settings = RenderSettings {
+        width: 64,
+        height: 64,
+        spp: 1,
+        seed: 1,
+        threads: None,
+        max_depth: 2,
+        mode: LayerMode::Stochastic,
+    };
+    let mib = |b: usize| b as f64 / 1048576.0;
+    let n = 224;
+    let one = grid_mesh_scene(n);
+    let mesh = one.split("def DomeLight").next().unwrap_or_default().trim_end();
+    let side = 100usize;
+    let count = side * side;
+    let mut positions = String::with_capacity(count * 24);
+    for k in 0..count {
+        let _ = write!(
+            positions,
+            "({}, {}, {}), ",
+            (k % side) as f64 * 120.0 - 6000.0,
+            (k % 7) as f64,
+            (k / side) as f64 * 120.0 - 6000.0
+        );
+    }
+    let field = format!(
+        "#usda 1.0\ndef PointInstancer \"Field\" {{\n    rel prototypes = [</Field/Protos/Grid>]\n    int[] protoIndices = [{}]\n    point3f[] positions = [{}]\n    def Scope \"Protos\" {{\n{mesh}\n    }}\n}}\ndef DomeLight \"Sky\" {{}}\n",
+        "0, ".repeat(count).trim_end_matches(", "),
+        positions.trim_end_matches(", ")
+    );
+    let mut out = String::from(
+        "\n  instancing: scene file to first pixel (64x64, 1 spp); bytes held by the BVHs (bottom levels | instance table and top level);\n  resident memory grown while the scene is loaded (stage, materials, geometry)\n",
+    );
+    let _ = writeln!(
+        out,
+        "  {:<44} {:>9} {:>10} {:>9} {:>12} {:>10} {:>9}",
+        "scene", "triangles", "load ms", "render ms", "BLAS MiB", "TLAS MiB", "+RSS MiB"
+    );
+    // Resident memory (`VmRSS`) now, in MiB: the peak is the earlier million-triangle row's.
+    let rss_mib = || {
+        std::fs::read_to_string("/proc/self/status")
+            .ok()
+            .and_then(|s| s.lines().find_map(|l| l.strip_prefix("VmRSS:")).map(str::to_string))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
+            .map_or(0.0, |kb| kb / 1024.0)
+    };
+    let mut row = |label: &str, path: &Path| -> Result<(usize, usize), String> {
+        let before = rss_mib();
+        let start = Instant::now();
+        let loaded = load_scene(path)?;
+        let load_ms = ms_since(start);
+        let (render_s, _) = render_rgb(&loaded, &settings)?;
+        let (blas, tlas) = loaded.scene.accel.bytes();
+        let _ = writeln!(
+            out,
+            "  {:<44} {:>9} {:>10.0} {:>9.1} {:>12.2} {:>10.2} {:>9.0}",
+            label,
+            loaded.scene.accel.triangle_count(),
+            load_ms,
+            render_s * 1e3,
+            mib(blas),
+            mib(tlas),
+            rss_mib() - before
+        );
+        Ok((blas, tlas))
+    };
+    let (one_copy, _) = row(&format!("one {}-triangle grid", 2 * n * n), &write("grid_once.usda", &one)?)?;
+    let (blas, tlas) = row(&format!("{count} instances of it (PointInstancer)"), &write("grid_field.usda", &field)?)?;
+    // Two thousand references to one sphere asset, each instanceable.
+    let mut spheres =
+        String::from("#usda 1.0\nclass Xform \"Ball\" {\n    def Sphere \"S\" { double radius = 0.4 }\n}\n");
+    for k in 0..2000 {
+        let _ = write!(
+            spheres,
+            "def Xform \"B{k}\" (instanceable = true references = </Ball>) {{\n    double3 xformOp:translate = ({}, 0, {})\n    uniform token[] xformOpOrder = [\"xformOp:translate\"]\n}}\n",
+            (k % 50) as f64 - 25.0,
+            (k / 50) as f64 - 20.0
+        );
+    }
+    spheres += "def DomeLight \"Sky\" {}\n";
+    row("2000 instanceable spheres", &write("instanced_spheres.usda", &spheres)?)?;
+    let _ = writeln!(
+        out,
+        "  {count} instances hold {:.3}x one copy plus the instance table and top level ({:.1} MiB + {:.1} MiB)",
+        (blas + tlas) as f64 / (one_copy + tlas) as f64,
+        mib(one_copy),
+        mib(tlas)
     );
     Ok(out)
 }

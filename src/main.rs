@@ -73,7 +73,7 @@ enum Command {
         camera: Option<String>,
         /// Catmull-Clark levels for subdivision-surface meshes (UsdGeom's default scheme); 0
         /// renders the control cage. A mesh is refined fewer times when it would pass 262 144
-        /// faces.
+        /// faces, and a cage that passes it at one level is rendered as it is.
         #[arg(long, default_value_t = strata::render::geometry::DEFAULT_SUBDIV_LEVEL,
               value_parser = clap::value_parser!(u32).range(0..=6))]
         subdiv_level: u32,

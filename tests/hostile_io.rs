@@ -390,3 +390,46 @@ fn compile_output_naming_its_source_is_refused() {
     assert_eq!(std::fs::read_to_string(&ash).unwrap(), source);
     assert!(temporaries(dir.path()).is_empty());
 }
+
+#[test]
+fn bad_instances_and_degenerate_geometry_are_diagnosed_or_rendered_never_a_panic() {
+    // Instances 1e30 away (an instanceable reference and a point of a PointInstancer): the
+    // extent error, at the prim, before any BVH.
+    let (code, stderr) = check(&hostile("far_instances.usda"));
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("`/Far` reaches (1e30, 0, 0), beyond the scene extent"), "{stderr}");
+    assert!(stderr.contains("far_instances.usda:12:1"), "{stderr}");
+    assert!(stderr.contains("`/Points` reaches (1e30, "), "{stderr}");
+    assert!(stderr.contains("instance 1"), "the point is named: {stderr}");
+    // Non-finite instance data: a NaN scale on an instanceable prim, an infinite
+    // point-instancer scale.
+    let (code, stderr) = check(&hostile("nonfinite_instances.usda"));
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("the transform of `/Bad` is not finite"), "{stderr}");
+    assert!(
+        stderr.contains("`scales`[1] is not finite") && stderr.contains("nonfinite_instances.usda:7:23"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"));
+    // Zero-area triangles (a repeated index, collinear points), 3000 coincident copies of
+    // one triangle and a zero-scale instance: warnings, and an image of what remains.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("degenerate.exr");
+    let start = std::time::Instant::now();
+    let render = strata(&[
+        "render",
+        "tests/in/hostile/degenerate_coincident.usda",
+        "--res",
+        "32x24",
+        "--spp",
+        "2",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&render.stderr);
+    assert_eq!(render.status.code(), Some(0), "{stderr}");
+    assert!(start.elapsed().as_secs() < 60, "coincident triangles must not make the build quadratic");
+    assert!(stderr.contains("100 degenerate (zero-area or non-finite) triangle(s) skipped"), "{stderr}");
+    assert!(stderr.contains("1 instance(s) with a singular transform (a zero scale) skipped"), "{stderr}");
+    assert!(out.exists());
+}

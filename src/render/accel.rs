@@ -1,11 +1,19 @@
-//! Ray queries over the scene's triangles and analytic shapes: an obvhs compressed-wide BVH
-//! (CWBVH) over both, with a watertight ray/triangle test (Woop, Benthin & Wald 2013, in f64), so rays through shared edges
-//! and vertices never slip between triangles, and robust ray origins (Wächter & Binder,
-//! Ray Tracing Gems ch. 6) so secondary rays do not re-hit their own surface.
+//! Ray queries over the scene's triangles and analytic shapes, in two levels: a bottom-level
+//! BVH ([`Blas`]) per unique piece of geometry — the world's un-instanced geometry, and one
+//! per instancing prototype — and a top-level BVH over the instances, each a prototype under
+//! an affine transform. Rays are moved into an instance's object space for its BLAS, so
+//! memory grows with unique geometry, not with copies. A scene without instances has no top
+//! level at all: its rays traverse the world BLAS only, as a single-level BVH would.
+//!
+//! Each BVH is an obvhs compressed-wide BVH (CWBVH) over triangles and shapes alike, with a
+//! watertight ray/triangle test (Woop, Benthin & Wald 2013), so rays through shared edges and
+//! vertices never slip between triangles, and robust ray origins so secondary rays do not
+//! re-hit their own surface.
 
+use super::frame::Frame;
 use super::geometry::Triangle;
 use super::shapes::Shape;
-use glam::{DVec3, Vec3, Vec3A};
+use glam::{DAffine3, DMat3, DMat4, DVec3, Vec2, Vec3, Vec3A};
 use obvhs::aabb::Aabb;
 use obvhs::cwbvh::CwBvh;
 use obvhs::cwbvh::builder::build_cwbvh;
@@ -14,38 +22,70 @@ use obvhs::{Boundable, BvhBuildParams};
 use std::collections::HashMap;
 use std::time::Duration;
 
+/// [`Hit::instance`] of a hit on the world's (un-instanced) geometry.
+pub const WORLD: u32 = u32::MAX;
+
 /// A closest hit.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
     /// Distance along the (unit) ray direction.
     pub t: f32,
-    /// The primitive: triangles first, then shapes ([`Accel::primitive`]).
+    /// The primitive within its BLAS: triangles first, then shapes.
     pub index: u32,
+    /// The instance hit, or [`WORLD`].
+    pub instance: u32,
     /// Barycentric weight of vertex 1 (triangles only).
     pub b1: f32,
     /// Barycentric weight of vertex 2 (triangles only).
     pub b2: f32,
 }
 
-/// One primitive of the acceleration structure.
+/// What a triangle needs only after it was hit: kept apart from the positions, so the
+/// intersection loop reads 36 bytes per triangle.
 #[derive(Clone, Copy, Debug)]
-pub enum Primitive<'a> {
-    /// A world-space triangle.
-    Triangle(&'a Triangle),
-    /// An analytic shape.
-    Shape(&'a Shape),
+struct TriangleAttrs {
+    n: [Vec3; 3],
+    uv: [Vec2; 3],
+    /// The prim: a global prim index in the world BLAS, a prototype-local one in a prototype's.
+    prim: u32,
 }
 
-/// The acceleration structure and the primitives it indexes.
-pub struct Accel {
+/// Surface geometry at a hit, in world space.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceGeom {
+    /// The hit point.
+    pub p: Vec3,
+    /// A conservative bound on the absolute error of each component of `p`: the true surface
+    /// point lies within `p ± p_error` ([`offset_ray_origin`] moves past it).
+    pub p_error: Vec3,
+    /// Geometric normal (unit), outward by winding (triangles) or outward (shapes).
+    pub ng: Vec3,
+    /// Interpolated shading normal (unit), on `ng`'s side.
+    pub ns: Vec3,
+    /// ∂P/∂u.
+    pub dpdu: Vec3,
+    /// ∂P/∂v.
+    pub dpdv: Vec3,
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// The renderable prim (index into `Scene::prims`).
+    pub prim: u32,
+}
+
+/// One bottom-level acceleration structure: a BVH over object-space triangles and shapes.
+pub struct Blas {
     bvh: Option<CwBvh>,
-    triangles: Vec<Triangle>,
+    /// Triangle positions, the only triangle data the intersection loop reads.
+    positions: Vec<[Vec3; 3]>,
+    attrs: Vec<TriangleAttrs>,
     shapes: Vec<Shape>,
     /// The BVH's primitives are groups of primitives with bit-identical bounding boxes:
     /// group `g` holds `group_members[group_start[g]..group_start[g + 1]]`, primitive indices
     /// as in [`Hit::index`].
     group_start: Vec<u32>,
     group_members: Vec<u32>,
+    /// Object-space bounds `(min, max)` of the finite primitives; `None` when there are none.
+    bounds: Option<(Vec3, Vec3)>,
 }
 
 /// A primitive's box, padded, as exact bits (the key that groups coincident primitives);
@@ -64,75 +104,113 @@ fn padded_box(lo: Vec3, hi: Vec3) -> Option<[u32; 6]> {
     Some([lo.x, lo.y, lo.z, hi.x, hi.y, hi.z].map(f32::to_bits))
 }
 
-impl Accel {
+/// A BVH over `bounds` (`(min, max)` per primitive), grouping bit-identical boxes; returns
+/// the BVH (`None` when no box is finite) and the groups as `(group_start, group_members)`.
+fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (Option<CwBvh>, Vec<u32>, Vec<u32>) {
+    // Primitives with bit-identical boxes (copies of one mesh at one place) become one BVH
+    // primitive: PLOC merges only mutually-nearest pairs, and among n equal boxes every
+    // pass merges one pair, so n coincident copies cost O(n²) to build.
+    let mut group_of_box: HashMap<[u32; 6], u32> = HashMap::new();
+    let mut boxes: Vec<Padded> = Vec::new();
+    let mut group_of_primitive: Vec<u32> = Vec::with_capacity(count);
+    for (lo, hi) in bounds {
+        let group = match padded_box(lo, hi) {
+            Some(key) => *group_of_box.entry(key).or_insert_with(|| {
+                let [lx, ly, lz, hx, hy, hz] = key.map(f32::from_bits);
+                boxes.push(Padded(Aabb::new(Vec3A::new(lx, ly, lz), Vec3A::new(hx, hy, hz))));
+                boxes.len() as u32 - 1
+            }),
+            None => u32::MAX,
+        };
+        group_of_primitive.push(group);
+    }
+    // Counting sort of primitive indices by group: the groups' lists, back to back.
+    let mut group_start = vec![0u32; boxes.len() + 1];
+    for &g in group_of_primitive.iter().filter(|&&g| g != u32::MAX) {
+        group_start[g as usize + 1] += 1;
+    }
+    for g in 0..boxes.len() {
+        group_start[g + 1] += group_start[g];
+    }
+    let mut next = group_start.clone();
+    let mut group_members = vec![0u32; group_start[boxes.len()] as usize];
+    for (index, &g) in group_of_primitive.iter().enumerate() {
+        if g != u32::MAX {
+            group_members[next[g as usize] as usize] = index as u32;
+            next[g as usize] += 1;
+        }
+    }
+    let bvh = if boxes.is_empty() {
+        None
+    } else {
+        Some(build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut Duration::default()))
+    };
+    (bvh, group_start, group_members)
+}
+
+impl Blas {
     /// Builds a BVH over `triangles` and `shapes` (none needed when there are none).
     /// Primitives with non-finite bounds are kept (indices stay valid) but can never be hit;
     /// the geometry stage reports them before this.
-    pub fn new(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Accel {
-        // Primitives with bit-identical boxes (copies of one mesh at one place) become one BVH
-        // primitive: PLOC merges only mutually-nearest pairs, and among n equal boxes every
-        // pass merges one pair, so n coincident copies cost O(n²) to build.
-        let bounds = triangles
-            .iter()
-            .map(|t| (t.p[0].min(t.p[1]).min(t.p[2]), t.p[0].max(t.p[1]).max(t.p[2])))
-            .chain(shapes.iter().map(Shape::world_bounds));
-        let mut group_of_box: HashMap<[u32; 6], u32> = HashMap::new();
-        let mut boxes: Vec<Padded> = Vec::new();
-        let mut group_of_primitive: Vec<u32> = Vec::with_capacity(triangles.len() + shapes.len());
-        for (lo, hi) in bounds {
-            let group = match padded_box(lo, hi) {
-                Some(key) => *group_of_box.entry(key).or_insert_with(|| {
-                    let [lx, ly, lz, hx, hy, hz] = key.map(f32::from_bits);
-                    boxes.push(Padded(Aabb::new(Vec3A::new(lx, ly, lz), Vec3A::new(hx, hy, hz))));
-                    boxes.len() as u32 - 1
-                }),
-                None => u32::MAX,
-            };
-            group_of_primitive.push(group);
-        }
-        // Counting sort of primitive indices by group: the groups' lists, back to back.
-        let mut group_start = vec![0u32; boxes.len() + 1];
-        for &g in group_of_primitive.iter().filter(|&&g| g != u32::MAX) {
-            group_start[g as usize + 1] += 1;
-        }
-        for g in 0..boxes.len() {
-            group_start[g + 1] += group_start[g];
-        }
-        let mut next = group_start.clone();
-        let mut group_members = vec![0u32; group_start[boxes.len()] as usize];
-        for (index, &g) in group_of_primitive.iter().enumerate() {
-            if g != u32::MAX {
-                group_members[next[g as usize] as usize] = index as u32;
-                next[g as usize] += 1;
+    pub fn new(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Blas {
+        let tri_bounds = |t: &Triangle| (t.p[0].min(t.p[1]).min(t.p[2]), t.p[0].max(t.p[1]).max(t.p[2]));
+        let mut bounds: Option<(Vec3, Vec3)> = None;
+        for (lo, hi) in triangles.iter().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds)) {
+            if lo.is_finite() && hi.is_finite() {
+                bounds = Some(bounds.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
             }
         }
-        let bvh = if boxes.is_empty() {
-            None
-        } else {
-            Some(build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut Duration::default()))
-        };
-        Accel { bvh, triangles, shapes, group_start, group_members }
+        let count = triangles.len() + shapes.len();
+        let (bvh, group_start, group_members) =
+            build_grouped(triangles.iter().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds)), count);
+        let positions = triangles.iter().map(|t| t.p).collect();
+        let attrs = triangles
+            .iter()
+            .map(|t| TriangleAttrs {
+                n: t.n,
+                // Parametric coordinates when the prim has none: (0,0), (1,0), (0,1).
+                uv: if t.has_uv { t.uv } else { [Vec2::ZERO, Vec2::X, Vec2::Y] },
+                prim: t.prim,
+            })
+            .collect();
+        Blas { bvh, positions, attrs, shapes, group_start, group_members, bounds }
     }
 
-    /// The triangles, in the order given to [`Accel::new`].
-    pub fn triangles(&self) -> &[Triangle] {
-        &self.triangles
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.positions.len()
     }
 
-    /// The primitive of a [`Hit::index`].
-    pub fn primitive(&self, index: u32) -> Primitive<'_> {
+    /// Number of analytic shape parts.
+    pub fn shape_count(&self) -> usize {
+        self.shapes.len()
+    }
+
+    /// Object-space bounds of the finite primitives.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        self.bounds
+    }
+
+    /// Bytes held: triangles, shapes, BVH nodes and indices, groups.
+    pub fn bytes(&self) -> usize {
+        use std::mem::size_of;
+        let bvh = self
+            .bvh
+            .as_ref()
+            .map_or(0, |b| b.nodes.len() * size_of::<obvhs::cwbvh::node::CwBvhNode>() + b.primitive_indices.len() * 4);
+        self.positions.len() * size_of::<[Vec3; 3]>()
+            + self.attrs.len() * size_of::<TriangleAttrs>()
+            + self.shapes.len() * size_of::<Shape>()
+            + (self.group_start.len() + self.group_members.len()) * 4
+            + bvh
+    }
+
+    /// The prim of primitive `index` (BLAS-local numbering in a prototype).
+    fn prim_of(&self, index: u32) -> u32 {
         let i = index as usize;
-        match self.triangles.get(i) {
-            Some(t) => Primitive::Triangle(t),
-            None => Primitive::Shape(&self.shapes[i - self.triangles.len()]),
-        }
-    }
-
-    /// The renderable prim a primitive belongs to.
-    pub fn prim_of(&self, index: u32) -> u32 {
-        match self.primitive(index) {
-            Primitive::Triangle(t) => t.prim,
-            Primitive::Shape(s) => s.prim,
+        match self.attrs.get(i) {
+            Some(a) => a.prim,
+            None => self.shapes[i - self.attrs.len()].prim,
         }
     }
 
@@ -148,9 +226,9 @@ impl Accel {
         tmax: f32,
     ) -> Option<(f32, f32, f32)> {
         let i = index as usize;
-        match self.triangles.get(i) {
-            Some(tri) => pre.intersect(tri, tmin, tmax),
-            None => self.shapes[i - self.triangles.len()].intersect(o, d, tmin, tmax).map(|t| (t, 0.0, 0.0)),
+        match self.positions.get(i) {
+            Some(p) => pre.intersect(p, tmin, tmax),
+            None => self.shapes[i - self.positions.len()].intersect(o, d, tmin, tmax).map(|t| (t, 0.0, 0.0)),
         }
     }
 
@@ -161,23 +239,22 @@ impl Accel {
         &self.group_members[self.group_start[g] as usize..self.group_start[g + 1] as usize]
     }
 
-    /// The closest hit of the ray `o + t d`, `t` in `(tmin, tmax)`. `d` must be unit length.
-    pub fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
+    /// The closest hit `(t, index, b1, b2)` of `o + t d`, `t` in `(tmin, tmax)`; `d` need
+    /// not be unit length (object-space rays are not), and `t` is in its units.
+    #[inline]
+    fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32, f32, f32)> {
         let bvh = self.bvh.as_ref()?;
-        if !o.is_finite() || !d.is_finite() || d == Vec3::ZERO {
-            return None;
-        }
         let pre = RayPre::new(o, d);
         // obvhs picks the traversal octant from sign bits: a -0.0 component would select the
         // wrong one and miss everything, so negative zeros become +0.0 (-0 + 0 = +0).
         let ray = Ray::new(o.into(), (d + Vec3::ZERO).into(), tmin, tmax);
-        let mut best: Option<Hit> = None;
+        let mut best = None;
         let mut hit = RayHit::none();
         bvh.ray_traverse(ray, &mut hit, |r, id| {
             let mut closest = f32::INFINITY;
             for &index in self.group(bvh, id) {
                 if let Some((t, b1, b2)) = self.hit_primitive(&pre, o, d, index, tmin, r.tmax.min(closest)) {
-                    best = Some(Hit { t, index, b1, b2 });
+                    best = Some((t, index, b1, b2));
                     closest = t;
                 }
             }
@@ -186,15 +263,11 @@ impl Accel {
         best
     }
 
-    /// Whether anything lies on the ray within `(tmin, tmax)` (shadow rays: stops at the first hit).
-    pub fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
+    /// Whether anything lies on `o + t d` within `(tmin, tmax)`.
+    #[inline]
+    fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
         let Some(bvh) = self.bvh.as_ref() else { return false };
-        if !o.is_finite() || !d.is_finite() || d == Vec3::ZERO {
-            return false;
-        }
         let pre = RayPre::new(o, d);
-        // obvhs picks the traversal octant from sign bits: a -0.0 component would select the
-        // wrong one and miss everything, so negative zeros become +0.0 (-0 + 0 = +0).
         let ray = Ray::new(o.into(), (d + Vec3::ZERO).into(), tmin, tmax);
         !bvh.ray_traverse_miss(ray, |r, id| {
             self.group(bvh, id)
@@ -203,9 +276,327 @@ impl Accel {
                 .map_or(f32::INFINITY, |h| h.0)
         })
     }
+
+    /// Surface geometry in this BLAS's space where `o + t d` hit primitive `index`, with the
+    /// triangle's vertices (for callers that move them to another space).
+    fn surface(&self, o: Vec3, d: Vec3, t: f32, index: u32, b1: f32, b2: f32) -> (SurfaceGeom, Option<[Vec3; 3]>) {
+        let i = index as usize;
+        match self.positions.get(i) {
+            Some(&p) => {
+                let a = &self.attrs[i];
+                let b0 = 1.0 - b1 - b2;
+                let pos = p[0] * b0 + p[1] * b1 + p[2] * b2;
+                let err = (p[0] * b0).abs() + (p[1] * b1).abs() + (p[2] * b2).abs();
+                let ng = (p[1] - p[0]).cross(p[2] - p[0]).normalize();
+                let ns = shading_normal(a.n[0] * b0 + a.n[1] * b1 + a.n[2] * b2, ng);
+                let uv = a.uv[0] * b0 + a.uv[1] * b1 + a.uv[2] * b2;
+                let (dpdu, dpdv) = tangents(p, a.uv, ns);
+                let geom = SurfaceGeom { p: pos, p_error: err * gamma(7), ng, ns, dpdu, dpdv, uv, prim: a.prim };
+                (geom, Some(p))
+            }
+            None => {
+                let shape = &self.shapes[i - self.positions.len()];
+                let h = shape.surface(o, d, t);
+                let n = if h.n == Vec3::ZERO || !h.n.is_finite() { -d.normalize_or_zero() } else { h.n };
+                let (dpdu, dpdv) = frame_or(h.dpdu, h.dpdv, n);
+                let geom =
+                    SurfaceGeom { p: h.p, p_error: h.p_error, ng: n, ns: n, dpdu, dpdv, uv: h.uv, prim: shape.prim };
+                (geom, None)
+            }
+        }
+    }
 }
 
-/// A triangle's bounding box as the BVH builder sees it.
+/// `(dpdu, dpdv)`, or a frame around `n` when they do not span a plane (at a pole ∂P/∂u
+/// vanishes).
+fn frame_or(dpdu: Vec3, dpdv: Vec3, n: Vec3) -> (Vec3, Vec3) {
+    if dpdu.cross(dpdv).length_squared() > 0.0 && dpdu.is_finite() && dpdv.is_finite() {
+        (dpdu, dpdv)
+    } else {
+        let f = Frame::from_normal(n);
+        (f.t, f.b)
+    }
+}
+
+/// The interpolated shading normal, normalised and kept on the geometric normal's side
+/// (shading normals are authored on either side); `ng` when it vanishes.
+fn shading_normal(n: Vec3, ng: Vec3) -> Vec3 {
+    let ns = n.normalize_or_zero();
+    if ns == Vec3::ZERO || !ns.is_finite() {
+        ng
+    } else if ns.dot(ng) < 0.0 {
+        -ns
+    } else {
+        ns
+    }
+}
+
+/// dP/du and dP/dv from the triangle's texture coordinates, or a frame around `n` when
+/// they are degenerate.
+fn tangents(p: [Vec3; 3], uv: [Vec2; 3], n: Vec3) -> (Vec3, Vec3) {
+    let d1 = uv[1] - uv[0];
+    let d2 = uv[2] - uv[0];
+    let det = d1.x * d2.y - d1.y * d2.x;
+    let e1 = p[1] - p[0];
+    let e2 = p[2] - p[0];
+    if det.abs() > 1e-12 {
+        let inv = 1.0 / det;
+        let dpdu = (e1 * d2.y - e2 * d1.y) * inv;
+        let dpdv = (e2 * d1.x - e1 * d2.x) * inv;
+        if dpdu.is_finite() && dpdv.is_finite() && dpdu.cross(dpdv).length_squared() > 0.0 {
+            return (dpdu, dpdv);
+        }
+    }
+    let f = Frame::from_normal(n);
+    (f.t, f.b)
+}
+
+/// A prototype placed in the world.
+#[derive(Clone, Copy, Debug)]
+pub struct InstanceDesc {
+    /// Object (prototype) space to world.
+    pub to_world: DMat4,
+    /// Index of the prototype's BLAS.
+    pub prototype: u32,
+    /// Where the instance's prim table starts in the instance prim table: prototype-local
+    /// prim `j` of this instance is the renderable prim `instance_prims[prims + j]`.
+    pub prims: u32,
+}
+
+/// An instance as the traversal uses it.
+#[derive(Clone, Copy, Debug)]
+struct Instance {
+    /// World → object, in f64: the object-space ray is rounded to f32 once.
+    to_object: DAffine3,
+    to_world: DAffine3,
+    /// Whether the transform mirrors (negative determinant): winding normals flip.
+    mirrors: bool,
+    prototype: u32,
+    prims: u32,
+}
+
+/// The acceleration structure: the world's BLAS, the prototypes' BLASes and the instances.
+pub struct Accel {
+    world: Blas,
+    prototypes: Vec<Blas>,
+    instances: Vec<Instance>,
+    /// Per-instance prim tables (see [`InstanceDesc::prims`]).
+    instance_prims: Vec<u32>,
+    /// The top-level BVH over the instances' world boxes; `None` without instances.
+    tlas: Option<CwBvh>,
+    /// Instances with a singular or non-finite transform, or an empty prototype: skipped.
+    pub skipped_instances: usize,
+}
+
+impl Accel {
+    /// A single-level structure over world-space `triangles` and `shapes` (no instances).
+    pub fn new(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Accel {
+        Accel::with_instances(Blas::new(triangles, shapes), Vec::new(), &[], Vec::new())
+    }
+
+    /// The world BLAS plus `prototypes` placed by `instances` (prim tables in `instance_prims`).
+    pub fn with_instances(
+        world: Blas,
+        prototypes: Vec<Blas>,
+        instances: &[InstanceDesc],
+        instance_prims: Vec<u32>,
+    ) -> Accel {
+        let mut skipped = 0;
+        let mut kept = Vec::with_capacity(instances.len());
+        let mut boxes = Vec::with_capacity(instances.len());
+        for desc in instances {
+            let m = desc.to_world;
+            let det = DMat3::from_mat4(m).determinant();
+            let bounds = prototypes.get(desc.prototype as usize).and_then(Blas::bounds);
+            let Some((lo, hi)) = bounds.filter(|_| det != 0.0 && det.is_finite() && m.is_finite()) else {
+                skipped += 1;
+                continue;
+            };
+            let (wlo, whi) = transformed_box(&m, lo.as_dvec3(), hi.as_dvec3());
+            let (wlo, whi) = (wlo.as_vec3(), whi.as_vec3());
+            if !wlo.is_finite() || !whi.is_finite() {
+                skipped += 1;
+                continue;
+            }
+            let to_world = DAffine3::from_mat4(m);
+            kept.push(Instance {
+                to_object: to_world.inverse(),
+                to_world,
+                mirrors: det < 0.0,
+                prototype: desc.prototype,
+                prims: desc.prims,
+            });
+            // Padded like every other box (see `padded_box`), and outward for the f32 rounding
+            // of the transformed corners.
+            let pad = wlo.abs().max(whi.abs()).max_element().max(f32::MIN_POSITIVE) * 1e-6;
+            boxes.push(Padded(Aabb::new((wlo - Vec3::splat(pad)).into(), (whi + Vec3::splat(pad)).into())));
+        }
+        let tlas =
+            (!boxes.is_empty()).then(|| build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut Duration::default()));
+        Accel { world, prototypes, instances: kept, instance_prims, tlas, skipped_instances: skipped }
+    }
+
+    /// Number of triangles stored (unique geometry: each prototype's once).
+    pub fn triangle_count(&self) -> usize {
+        self.world.triangle_count() + self.prototypes.iter().map(Blas::triangle_count).sum::<usize>()
+    }
+
+    /// Number of bottom-level structures in use: the world's (when not empty) and the prototypes'.
+    pub fn blas_count(&self) -> usize {
+        usize::from(self.world.bvh.is_some()) + self.prototypes.len()
+    }
+
+    /// Number of instances in the top level.
+    pub fn instance_count(&self) -> usize {
+        self.instances.len()
+    }
+
+    /// Bytes held by the geometry and its BVHs, split as (bottom levels, instance table and top level).
+    pub fn bytes(&self) -> (usize, usize) {
+        use std::mem::size_of;
+        let blas = self.world.bytes() + self.prototypes.iter().map(Blas::bytes).sum::<usize>();
+        let tlas = self
+            .tlas
+            .as_ref()
+            .map_or(0, |b| b.nodes.len() * size_of::<obvhs::cwbvh::node::CwBvhNode>() + b.primitive_indices.len() * 4);
+        (blas, self.instances.len() * size_of::<Instance>() + self.instance_prims.len() * 4 + tlas)
+    }
+
+    /// The renderable prim a hit belongs to.
+    pub fn prim_of(&self, hit: &Hit) -> u32 {
+        if hit.instance == WORLD {
+            return self.world.prim_of(hit.index);
+        }
+        let inst = &self.instances[hit.instance as usize];
+        let local = self.prototypes[inst.prototype as usize].prim_of(hit.index);
+        self.instance_prims[(inst.prims + local) as usize]
+    }
+
+    /// The closest hit of the ray `o + t d`, `t` in `(tmin, tmax)`. `d` must be unit length.
+    pub fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
+        if !o.is_finite() || !d.is_finite() || d == Vec3::ZERO {
+            return None;
+        }
+        let mut best =
+            self.world.intersect(o, d, tmin, tmax).map(|(t, index, b1, b2)| Hit { t, index, instance: WORLD, b1, b2 });
+        let Some(tlas) = &self.tlas else { return best };
+        let ray = Ray::new(o.into(), (d + Vec3::ZERO).into(), tmin, best.map_or(tmax, |h| h.t));
+        let mut hit = RayHit::none();
+        let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+        tlas.ray_traverse(ray, &mut hit, |r, id| {
+            let i = tlas.primitive_indices[id];
+            let inst = &self.instances[i as usize];
+            let oo = inst.to_object.transform_point3(od).as_vec3();
+            let ob = inst.to_object.transform_vector3(dd).as_vec3();
+            // A nearly singular instance can overflow f32 in object space: no hit there.
+            if !oo.is_finite() || !ob.is_finite() || ob == Vec3::ZERO {
+                return f32::INFINITY;
+            }
+            match self.prototypes[inst.prototype as usize].intersect(oo, ob, tmin, r.tmax) {
+                Some((t, index, b1, b2)) => {
+                    best = Some(Hit { t, index, instance: i, b1, b2 });
+                    t
+                }
+                None => f32::INFINITY,
+            }
+        });
+        best
+    }
+
+    /// Whether anything lies on the ray within `(tmin, tmax)` (shadow rays: stops at the first hit).
+    pub fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
+        if !o.is_finite() || !d.is_finite() || d == Vec3::ZERO {
+            return false;
+        }
+        if self.world.occluded(o, d, tmin, tmax) {
+            return true;
+        }
+        let Some(tlas) = &self.tlas else { return false };
+        let ray = Ray::new(o.into(), (d + Vec3::ZERO).into(), tmin, tmax);
+        let (od, dd) = (o.as_dvec3(), d.as_dvec3());
+        !tlas.ray_traverse_miss(ray, |r, id| {
+            let inst = &self.instances[tlas.primitive_indices[id] as usize];
+            let oo = inst.to_object.transform_point3(od).as_vec3();
+            let ob = inst.to_object.transform_vector3(dd).as_vec3();
+            let finite = oo.is_finite() && ob.is_finite() && ob != Vec3::ZERO;
+            if finite && self.prototypes[inst.prototype as usize].occluded(oo, ob, tmin, r.tmax) {
+                0.0
+            } else {
+                f32::INFINITY
+            }
+        })
+    }
+
+    /// World-space surface geometry where the ray `o + t d` made `hit`.
+    pub fn surface(&self, o: Vec3, d: Vec3, hit: &Hit) -> SurfaceGeom {
+        if hit.instance == WORLD {
+            return self.world.surface(o, d, hit.t, hit.index, hit.b1, hit.b2).0;
+        }
+        let inst = &self.instances[hit.instance as usize];
+        let oo = inst.to_object.transform_point3(o.as_dvec3()).as_vec3();
+        let ob = inst.to_object.transform_vector3(d.as_dvec3()).as_vec3();
+        let blas = &self.prototypes[inst.prototype as usize];
+        let (local, vertices) = blas.surface(oo, ob, hit.t, hit.index, hit.b1, hit.b2);
+        let m = &inst.to_world;
+        let point = |p: Vec3| m.transform_point3(p.as_dvec3()).as_vec3();
+        let vector = |v: Vec3| m.transform_vector3(v.as_dvec3()).as_vec3();
+        // Normals transform by the inverse transpose.
+        let normal_matrix = inst.to_object.matrix3.transpose();
+        let normal = |n: Vec3| (normal_matrix * n.as_dvec3()).as_vec3().normalize_or_zero();
+        let p = point(local.p);
+        // The object-space error carried to world space (|M| p_error), plus the rounding of
+        // the object-space point and of its world image to f32: the next ray's origin is
+        // rounded to f32 again when it is moved into object space.
+        let abs_m = DMat3::from_cols(m.matrix3.x_axis.abs(), m.matrix3.y_axis.abs(), m.matrix3.z_axis.abs());
+        let local_err = local.p_error.as_dvec3() + local.p.abs().as_dvec3() * gamma(2) as f64;
+        let p_error = (abs_m * local_err).as_vec3() + p.abs() * gamma(2);
+        let mut geom = match vertices {
+            Some(v) => {
+                // The winding normal of the world-space vertices, as a flattened copy has it.
+                let w = v.map(point);
+                let ng = (w[1] - w[0]).cross(w[2] - w[0]).normalize_or_zero();
+                let ng = if ng == Vec3::ZERO || !ng.is_finite() {
+                    let n = normal(local.ng);
+                    if inst.mirrors { -n } else { n }
+                } else {
+                    ng
+                };
+                let a = &blas.attrs[hit.index as usize];
+                let b0 = 1.0 - hit.b1 - hit.b2;
+                let ns = shading_normal(normal(a.n[0] * b0 + a.n[1] * hit.b1 + a.n[2] * hit.b2), ng);
+                let (dpdu, dpdv) = tangents(w, a.uv, ns);
+                SurfaceGeom { p, p_error, ng, ns, dpdu, dpdv, uv: local.uv, prim: local.prim }
+            }
+            None => {
+                let n = normal(local.ng);
+                let n = if n == Vec3::ZERO || !n.is_finite() { -d } else { n };
+                let (dpdu, dpdv) = frame_or(vector(local.dpdu), vector(local.dpdv), n);
+                SurfaceGeom { p, p_error, ng: n, ns: n, dpdu, dpdv, uv: local.uv, prim: local.prim }
+            }
+        };
+        geom.prim = self.instance_prims[(inst.prims + local.prim) as usize];
+        geom
+    }
+}
+
+/// The box of the 8 transformed corners of `(lo, hi)` under `m`.
+fn transformed_box(m: &DMat4, lo: DVec3, hi: DVec3) -> (DVec3, DVec3) {
+    let mut min = DVec3::splat(f64::INFINITY);
+    let mut max = DVec3::splat(f64::NEG_INFINITY);
+    for k in 0..8 {
+        let c = DVec3::new(
+            if k & 1 == 0 { lo.x } else { hi.x },
+            if k & 2 == 0 { lo.y } else { hi.y },
+            if k & 4 == 0 { lo.z } else { hi.z },
+        );
+        let w = m.transform_point3(c);
+        min = min.min(w);
+        max = max.max(w);
+    }
+    (min, max)
+}
+
+/// A box as the BVH builder sees it.
 struct Padded(Aabb);
 
 impl Boundable for Padded {
@@ -214,19 +605,29 @@ impl Boundable for Padded {
     }
 }
 
-/// Per-ray precomputation of the watertight test: the axis permutation and shear that map
-/// the ray to +z. The test runs in f64 (scalar f64 costs the same as f32 here): with f32, the
-/// hit distance on a large triangle is only accurate to ~1e-7 of the triangle's size, which
-/// is more than a robust ray-origin offset, and secondary rays would re-hit their surface.
+/// `γ(n) = n ε / (1 − n ε)`, ε = 2⁻²⁴ (half an f32 ULP at 1): the bound on the relative
+/// error of `n` successive f32 operations (Higham; pbrt-v4 `gamma`).
+#[inline]
+pub fn gamma(n: i32) -> f32 {
+    let e = f32::EPSILON * 0.5;
+    (n as f32 * e) / (1.0 - n as f32 * e)
+}
+
+/// Per-ray precomputation of the watertight test (pbrt-v4's, after Woop, Benthin & Wald
+/// 2013): the axis permutation that makes the direction's largest component z, and the shear
+/// that maps the ray to +z. The test runs in f32 on the compact positions; its rounding is
+/// bounded (see [`RayPre::intersect`]) so a hit is never reported behind the origin, and
+/// hit points carry an error bound that [`offset_ray_origin`] moves past.
 struct RayPre {
-    o: DVec3,
+    o: Vec3,
     k: [usize; 3],
-    s: DVec3,
+    /// `(−dx/dz, −dy/dz, 1/dz)` in the permuted axes.
+    s: Vec3,
 }
 
 impl RayPre {
+    #[inline]
     fn new(o: Vec3, d: Vec3) -> RayPre {
-        let d = d.as_dvec3();
         let a = d.abs();
         let kz = if a.x > a.y {
             if a.x > a.z { 0 } else { 2 }
@@ -235,62 +636,87 @@ impl RayPre {
         } else {
             2
         };
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
-        if d[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
-        let s = DVec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
-        RayPre { o: o.as_dvec3(), k: [kx, ky, kz], s }
+        let kx = (kz + 1) % 3;
+        let ky = (kx + 1) % 3;
+        let s = Vec3::new(-d[kx] / d[kz], -d[ky] / d[kz], 1.0 / d[kz]);
+        RayPre { o, k: [kx, ky, kz], s }
     }
 
     /// `(t, b1, b2)` of a hit with `t` in `(tmin, tmax)`.
     #[inline]
-    fn intersect(&self, tri: &Triangle, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    fn intersect(&self, p: &[Vec3; 3], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
         let [kx, ky, kz] = self.k;
-        let a = tri.p[0].as_dvec3() - self.o;
-        let b = tri.p[1].as_dvec3() - self.o;
-        let c = tri.p[2].as_dvec3() - self.o;
-        let ax = a[kx] - self.s.x * a[kz];
-        let ay = a[ky] - self.s.y * a[kz];
-        let bx = b[kx] - self.s.x * b[kz];
-        let by = b[ky] - self.s.y * b[kz];
-        let cx = c[kx] - self.s.x * c[kz];
-        let cy = c[ky] - self.s.y * c[kz];
-        let u = cx * by - cy * bx;
-        let v = ax * cy - ay * cx;
-        let w = bx * ay - by * ax;
-        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        // Translate to the ray origin, permute, shear.
+        let shear = |v: Vec3| {
+            let v = v - self.o;
+            let z = v[kz];
+            (v[kx] + self.s.x * z, v[ky] + self.s.y * z, z)
+        };
+        let (x0, y0, z0) = shear(p[0]);
+        let (x1, y1, z1) = shear(p[1]);
+        let (x2, y2, z2) = shear(p[2]);
+        // Edge functions; an exact zero may be a rounding artefact on an edge, so it is
+        // decided in f64 (where the products of f32 values are exact).
+        let (mut e0, mut e1, mut e2) = (x1 * y2 - y1 * x2, x2 * y0 - y2 * x0, x0 * y1 - y0 * x1);
+        if e0 == 0.0 || e1 == 0.0 || e2 == 0.0 {
+            let d = |a: f32, b: f32, c: f32, e: f32| (a as f64 * b as f64 - c as f64 * e as f64) as f32;
+            e0 = d(x1, y2, y1, x2);
+            e1 = d(x2, y0, y2, x0);
+            e2 = d(x0, y1, y0, x1);
+        }
+        if (e0 < 0.0 || e1 < 0.0 || e2 < 0.0) && (e0 > 0.0 || e1 > 0.0 || e2 > 0.0) {
             return None;
         }
-        let det = u + v + w;
+        let det = e0 + e1 + e2;
         if det == 0.0 {
             return None;
         }
-        let t_scaled = u * self.s.z * a[kz] + v * self.s.z * b[kz] + w * self.s.z * c[kz];
-        let inv = 1.0 / det;
-        let t = (t_scaled * inv) as f32;
-        if !(t > tmin && t < tmax) {
+        let (z0, z1, z2) = (z0 * self.s.z, z1 * self.s.z, z2 * self.s.z);
+        let t_scaled = e0 * z0 + e1 * z1 + e2 * z2;
+        // Range test before the division: t in (0, tmax).
+        if det < 0.0 && (t_scaled >= 0.0 || t_scaled < tmax * det) {
             return None;
         }
-        Some((t, (v * inv) as f32, (w * inv) as f32))
+        if det > 0.0 && (t_scaled <= 0.0 || t_scaled > tmax * det) {
+            return None;
+        }
+        let inv = 1.0 / det;
+        let t = t_scaled * inv;
+        // A conservative bound on t's rounding error (pbrt-v4, "Conservative Ray–Bounds
+        // Intersections"): a t within it of zero may really be behind the origin — a ray
+        // leaving the surface that re-hits it — so it is no hit.
+        let max_z = z0.abs().max(z1.abs()).max(z2.abs());
+        let max_x = x0.abs().max(x1.abs()).max(x2.abs());
+        let max_y = y0.abs().max(y1.abs()).max(y2.abs());
+        let delta_z = gamma(3) * max_z;
+        let delta_x = gamma(5) * (max_x + max_z);
+        let delta_y = gamma(5) * (max_y + max_z);
+        let delta_e = 2.0 * (gamma(2) * max_x * max_y + delta_y * max_x + delta_x * max_y);
+        let max_e = e0.abs().max(e1.abs()).max(e2.abs());
+        let delta_t = 3.0 * (gamma(3) * max_e * max_z + delta_e * max_z + delta_z * max_e) * inv.abs();
+        if t <= delta_t || t <= tmin || t >= tmax {
+            return None;
+        }
+        Some((t, e1 * inv, e2 * inv))
     }
 }
 
-/// Moves `p` off its surface along the geometric normal `n` (pointing to the side the new
-/// ray leaves from) by a few ULPs, scaled to `p`'s magnitude (Wächter & Binder 2019).
-pub fn offset_ray_origin(p: Vec3, n: Vec3) -> Vec3 {
-    const ORIGIN: f32 = 1.0 / 32.0;
-    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
-    const INT_SCALE: f32 = 256.0;
-    let mut out = p;
+/// A spawn point for a ray leaving a surface point `p` whose components are uncertain by
+/// `p_error`, towards the side of the geometric normal `n` (pointing to where the ray goes):
+/// `p` moved along `n` past the error box, then rounded away from the surface (pbrt-v4's
+/// `OffsetRayOrigin`). The offset is as small as the error bound allows, at any scale.
+pub fn offset_ray_origin(p: Vec3, p_error: Vec3, n: Vec3) -> Vec3 {
+    let d = n.abs().dot(p_error);
+    let offset = n * d;
+    let mut po = p + offset;
     for i in 0..3 {
-        let of = (INT_SCALE * n[i]) as i32;
-        let bits = p[i].to_bits() as i32;
-        let moved = f32::from_bits((if p[i] < 0.0 { bits - of } else { bits + of }) as u32);
-        out[i] = if p[i].abs() < ORIGIN { p[i] + FLOAT_SCALE * n[i] } else { moved };
+        if offset[i] > 0.0 {
+            po[i] = po[i].next_up();
+        } else if offset[i] < 0.0 {
+            po[i] = po[i].next_down();
+        }
     }
-    out
+    po
 }
 
 #[cfg(test)]
@@ -353,18 +779,145 @@ mod tests {
         assert_eq!(accel.intersect(Vec3::ZERO, Vec3::Z, 0.0, f32::INFINITY).map(|h| h.index), Some(1));
         let only_bad = Accel::new(vec![bad], vec![]);
         assert!(only_bad.intersect(Vec3::ZERO, Vec3::Z, 0.0, f32::INFINITY).is_none());
-        assert_eq!(only_bad.triangles().len(), 1);
+        assert_eq!(only_bad.triangle_count(), 1);
     }
 
     #[test]
     fn offset_origin_escapes_surface() {
         let t = tri([Vec3::new(-100.0, -100.0, 7.3), Vec3::new(100.0, -100.0, 7.3), Vec3::new(0.0, 100.0, 7.3)]);
         let accel = Accel::new(vec![t], vec![]);
-        let p = Vec3::new(0.123, 0.456, 7.3);
-        let o = offset_ray_origin(p, Vec3::Z);
-        assert!(o.z > p.z);
+        let hit = accel.intersect(Vec3::new(0.123, 0.456, 20.0), -Vec3::Z, 0.0, f32::INFINITY).unwrap();
+        let g = accel.surface(Vec3::new(0.123, 0.456, 20.0), -Vec3::Z, &hit);
+        assert!(g.p_error.max_element() > 0.0 && g.p_error.max_element() < 1e-4, "{}", g.p_error);
+        let o = offset_ray_origin(g.p, g.p_error, Vec3::Z);
+        assert!(o.z > 7.3);
         assert!(accel.intersect(o, Vec3::new(0.3, 0.0, 0.01).normalize(), 0.0, f32::INFINITY).is_none());
-        let below = offset_ray_origin(p, -Vec3::Z);
-        assert!(accel.intersect(below, Vec3::new(0.3, 0.0, 0.01).normalize(), 0.0, f32::INFINITY).is_some());
+        let below = offset_ray_origin(g.p, g.p_error, -Vec3::Z);
+        assert!(below.z < 7.3);
+        assert!(accel.intersect(below - Vec3::Z, Vec3::new(0.3, 0.0, 0.1).normalize(), 0.0, f32::INFINITY).is_some());
+    }
+
+    /// A tilted square of `4 × 4` cells (32 coplanar triangles) of side `scale` around `centre`.
+    fn tilted_plane(scale: f32, centre: Vec3) -> (Vec<Triangle>, Vec3) {
+        let (u, v) = (Vec3::new(0.8, 0.36, 0.48).normalize(), Vec3::new(-0.36, 0.93, 0.0));
+        let v = (v - u * u.dot(v)).normalize();
+        let at = |i: usize, j: usize| centre + (u * (i as f32 / 4.0 - 0.5) + v * (j as f32 / 4.0 - 0.5)) * scale;
+        let mut out = Vec::new();
+        for i in 0..4 {
+            for j in 0..4 {
+                out.push(tri([at(i, j), at(i + 1, j), at(i + 1, j + 1)]));
+                out.push(tri([at(i, j), at(i + 1, j + 1), at(i, j + 1)]));
+            }
+        }
+        (out, u.cross(v))
+    }
+
+    /// Rays that leave a surface point, from grazing (cos 1e-5 against the normal) to
+    /// straight out, on either side (`both_sides`; else outward only: into a sphere, a ray
+    /// meets its far side), never hit the surface they leave.
+    fn assert_no_self_hits(accel: &Accel, both_sides: bool, aim: impl Fn(usize) -> (Vec3, Vec3), what: &str) {
+        let mut self_hits = 0;
+        for i in 0..3000 {
+            let (o, d) = aim(i);
+            let Some(hit) = accel.intersect(o, d, 0.0, f32::INFINITY) else { continue };
+            let g = accel.surface(o, d, &hit);
+            let n = if i % 2 == 0 || !both_sides { g.ng } else { -g.ng };
+            let t = n.any_orthonormal_vector();
+            let t = (t * (i as f32 * 0.37).cos() + n.cross(t) * (i as f32 * 0.37).sin()).normalize();
+            let cos = 10f32.powf(-5.0 * (i % 60) as f32 / 59.0);
+            let out = (n * cos + t * (1.0 - cos * cos).sqrt()).normalize();
+            let start = offset_ray_origin(g.p, g.p_error, n);
+            if accel.intersect(start, out, 0.0, f32::INFINITY).is_some()
+                || accel.occluded(start, out, 0.0, f32::INFINITY)
+            {
+                self_hits += 1;
+            }
+        }
+        assert_eq!(self_hits, 0, "{what}: rays re-hit the surface they leave");
+    }
+
+    #[test]
+    fn grazing_rays_never_rehit_their_surface_at_any_scale() {
+        for (scale, centre) in [
+            (1e-3, Vec3::ZERO),
+            (1.0, Vec3::new(0.3, -0.2, 0.1)),
+            (1e5, Vec3::ZERO),
+            (1e5, Vec3::new(3e6, -1e6, 2e6)),
+            (1e-3, Vec3::new(1.0, 2.0, -3.0)),
+        ] {
+            let (plane, n) = tilted_plane(scale, centre);
+            let sphere = Shape::new(
+                super::super::shapes::Part::Sphere { r: 1.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY },
+                DMat4::from_scale_rotation_translation(
+                    glam::DVec3::new(1.0, 0.6, 0.8) * scale as f64 * 0.2,
+                    glam::DQuat::from_rotation_y(0.4),
+                    (centre + n * scale).as_dvec3(),
+                ),
+                0,
+            )
+            .unwrap();
+            // Flat and convex: a ray leaving either never meets it again.
+            let worlds = [Accel::new(plane.clone(), vec![]), Accel::new(vec![], vec![sphere.clone()])];
+            let sphere_at = centre + n * scale;
+            let aim = |i: usize| {
+                // Half the rays at the plane from both sides, half at the sphere.
+                let s = (i as f32 * 0.618_034).fract() - 0.5;
+                let r = (i as f32 * 0.414_214).fract() - 0.5;
+                let side = if i % 4 < 2 { 1.0 } else { -1.0 };
+                if i.is_multiple_of(3) {
+                    let target = sphere_at + Vec3::new(s, r, s * r) * (0.2 * scale);
+                    let o = sphere_at + Vec3::new(r, 1.0, s).normalize() * (3.0 * scale);
+                    (o, (target - o).normalize())
+                } else {
+                    let target = centre
+                        + n.any_orthonormal_vector() * (s * 0.8 * scale)
+                        + n.cross(n.any_orthonormal_vector()) * (r * 0.8 * scale);
+                    let o = target + (n * side + Vec3::new(r, s, 0.3) * 0.5) * scale;
+                    (o, (target - o).normalize())
+                }
+            };
+            for (k, world) in worlds.iter().enumerate() {
+                assert_no_self_hits(world, k == 0, aim, &format!("world {k}, scale {scale}, centre {centre}"));
+            }
+            // The same geometry as an instance: built around the origin at unit size, placed
+            // by a transform that scales, turns and moves it.
+            let (unit_plane, _) = tilted_plane(1.0, Vec3::ZERO);
+            let unit_sphere = Shape::new(
+                super::super::shapes::Part::Sphere { r: 1.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY },
+                DMat4::from_scale_rotation_translation(
+                    glam::DVec3::new(1.0, 0.6, 0.8) * 0.2,
+                    glam::DQuat::from_rotation_y(0.4),
+                    n.as_dvec3(),
+                ),
+                0,
+            )
+            .unwrap();
+            let to_world =
+                DMat4::from_translation(centre.as_dvec3()) * DMat4::from_scale(glam::DVec3::splat(scale as f64));
+            let instanced = Accel::with_instances(
+                Blas::new(Vec::new(), Vec::new()),
+                vec![Blas::new(unit_plane, vec![]), Blas::new(vec![], vec![unit_sphere.clone()])],
+                &[InstanceDesc { to_world, prototype: 0, prims: 0 }, InstanceDesc { to_world, prototype: 1, prims: 0 }],
+                vec![0],
+            );
+            assert_eq!(instanced.blas_count(), 2);
+            // Each instance alone (the other one's prototype is placed out of the way).
+            for k in 0..2 {
+                let away = DMat4::from_translation(glam::DVec3::splat(9e6));
+                let descs: Vec<InstanceDesc> = (0..2)
+                    .map(|p| InstanceDesc { to_world: if p == k { to_world } else { away }, prototype: p, prims: 0 })
+                    .collect();
+                let alone = Accel::with_instances(
+                    Blas::new(Vec::new(), Vec::new()),
+                    vec![
+                        Blas::new(tilted_plane(1.0, Vec3::ZERO).0, vec![]),
+                        Blas::new(vec![], vec![unit_sphere.clone()]),
+                    ],
+                    &descs,
+                    vec![0],
+                );
+                assert_no_self_hits(&alone, k == 0, aim, &format!("instance {k}, scale {scale}, centre {centre}"));
+            }
+        }
     }
 }

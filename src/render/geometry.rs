@@ -5,13 +5,15 @@
 //! become analytic [`Shape`]s, intersected exactly in object space: nothing is tessellated.
 //! Malformed meshes are diagnosed (never a panic); zero-area triangles are skipped and counted.
 
+use super::accel::InstanceDesc;
 use super::shapes::{Part, Shape};
 use super::subdiv::{PolyMesh, catmull_clark, refined_faces};
-use super::xform::{PrimXform, value_span, world_transforms};
+use super::xform::{PrimXform, local_transform, value_span, world_transforms};
 use crate::compose::scene::is_renderable;
 use crate::diag::{Diagnostic, Diagnostics, Span};
-use crate::scene::{Attribute, Prim, Stage, Value};
-use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
+use crate::scene::{Attribute, Prim, PrimId, Stage, Value};
+use glam::{DMat3, DMat4, DQuat, DVec3, Vec2, Vec3};
+use std::collections::{HashMap, HashSet};
 
 /// The largest world-space coordinate (absolute value, scene units, after every transform)
 /// geometry may have: 1e7. The renderer works in f32, whose spacing at 1e7 is already one
@@ -27,7 +29,8 @@ pub const MAX_TRIANGLES: usize = 1 << 25;
 
 /// The most faces subdivision may make of one mesh: 2^18 (262 144 quads, half a million
 /// triangles). A mesh is refined to `--subdiv-level` levels, or fewer when that would pass
-/// this, so a dense cage is not multiplied into millions of triangles it does not need.
+/// this, so a dense cage is not multiplied into millions of triangles it does not need; a cage
+/// that passes it at one level is rendered as it is.
 pub const SUBDIV_FACE_BUDGET: u64 = 1 << 18;
 
 /// The default `--subdiv-level`: two levels put a coarse cage's limit surface within a few
@@ -47,6 +50,11 @@ impl Default for GeometryOptions {
         GeometryOptions { subdiv_level: DEFAULT_SUBDIV_LEVEL }
     }
 }
+
+/// The most instances a scene may have: 2^22 (4.2 million, about 1.5 GB of instance table
+/// and top-level BVH). A 256 MiB point-instancer file can list 25 million points; past this
+/// budget the instancer is an error.
+pub const MAX_INSTANCES: usize = 1 << 22;
 
 /// One world-space triangle.
 #[derive(Clone, Copy, Debug)]
@@ -79,29 +87,50 @@ pub struct GeomPrim {
     pub span: Span,
 }
 
+/// Geometry that instances share: built once, in the space of its root prim.
+#[derive(Clone, Debug, Default)]
+pub struct Prototype {
+    /// Triangles in prototype space; `prim` is prototype-local.
+    pub triangles: Vec<Triangle>,
+    /// Analytic surfaces in prototype space; `prim` is prototype-local.
+    pub shapes: Vec<Shape>,
+    /// Number of prototype-local prims.
+    pub prims: u32,
+    /// Prototype-space bounds `(min, max)`; `None` when empty.
+    pub bounds: Option<(DVec3, DVec3)>,
+}
+
 /// The triangles of a whole stage.
 #[derive(Clone, Debug, Default)]
 pub struct Geometry {
-    /// World-space triangles.
+    /// World-space triangles (of prims that are not instanced).
     pub triangles: Vec<Triangle>,
     /// Analytic surfaces.
     pub shapes: Vec<Shape>,
-    /// Renderable, visible prims, indexed by [`Triangle::prim`].
+    /// Renderable, visible prims, indexed by [`Triangle::prim`] and the instance prim table.
     pub prims: Vec<GeomPrim>,
     /// Zero-area or non-finite triangles that were skipped.
     pub degenerate: usize,
+    /// Geometry shared by instances: of `instanceable` prims with the same source, and the
+    /// prototypes of point instancers.
+    pub prototypes: Vec<Prototype>,
+    /// Placed prototypes.
+    pub instances: Vec<InstanceDesc>,
+    /// Per-instance prim tables: prototype-local prim `j` of an instance is the renderable
+    /// prim `instance_prims[instance.prims + j]`.
+    pub instance_prims: Vec<u32>,
 }
 
 impl Geometry {
-    /// World-space bounds `(min, max)` of every triangle and shape; `None` when empty.
+    /// World-space bounds `(min, max)` of every triangle, shape and instance; `None` when empty.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
-        let shape_corners = self.shapes.iter().flat_map(|s| {
-            let (lo, hi) = s.world_bounds();
-            [lo, hi]
+        let world = bounds_of(&self.triangles, &self.shapes);
+        let instances = self.instances.iter().filter_map(|i| {
+            let (lo, hi) = self.prototypes[i.prototype as usize].bounds?;
+            Some(box_under(&i.to_world, lo, hi))
         });
-        let mut it = self.triangles.iter().flat_map(|t| t.p).chain(shape_corners);
-        let first = it.next()?;
-        Some(it.fold((first, first), |(lo, hi), p| (lo.min(p), hi.max(p))))
+        let (lo, hi) = world.into_iter().chain(instances).reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))?;
+        Some((lo.as_vec3(), hi.as_vec3()))
     }
 }
 
@@ -126,7 +155,38 @@ pub fn build_with_options(
     build_within(stage, xforms, options, MAX_TRIANGLES, diags)
 }
 
-/// As [`build_with_options`], with a triangle budget other than [`MAX_TRIANGLES`] (for tests).
+/// What a prim is to instancing.
+#[derive(Clone, Copy, PartialEq)]
+enum Role {
+    /// Ordinary: rendered where it is.
+    Plain,
+    /// The outermost `instanceable` prim of its branch: its subtree is one instance.
+    InstanceRoot,
+    /// A PointInstancer outside any instance: its subtree holds prototypes, drawn only
+    /// through it.
+    PointInstancer,
+}
+
+/// The state of one geometry build.
+struct Builder<'s> {
+    stage: &'s Stage,
+    xforms: &'s [PrimXform],
+    geometry: Geometry,
+    budget: usize,
+    /// Renderable prim index by path (prototypes of several point instancers share theirs).
+    prim_index: HashMap<String, u32>,
+    /// Prototype index by key (see [`prototype_key`], and `pi:<prim id>` for point
+    /// instancer prototypes), with the start of its prim table for shared tables.
+    prototype_of: HashMap<String, (u32, u32)>,
+    /// Stop: the triangle budget was exceeded (reported once).
+    over_budget: bool,
+    /// Instances skipped because their transform is singular (a zero scale).
+    singular_instances: usize,
+    /// Subdivision levels for subdivision-surface meshes.
+    subdiv_level: u32,
+}
+
+/// As [`build_with`], with a triangle budget other than [`MAX_TRIANGLES`] (for tests).
 fn build_within(
     stage: &Stage,
     xforms: &[PrimXform],
@@ -134,87 +194,423 @@ fn build_within(
     budget: usize,
     diags: &mut Diagnostics,
 ) -> Geometry {
-    let mut geometry = Geometry::default();
+    // Roles: an `instanceable` prim inside another instance is part of that instance's
+    // prototype (nested instancing is flattened into it).
+    let mut role = vec![Role::Plain; stage.len()];
+    let mut inside = vec![false; stage.len()];
     for (id, prim) in stage.depth_first() {
-        let xf = xforms[id.0 as usize];
-        if xf.hidden || !is_renderable(prim) {
+        let i = id.0 as usize;
+        inside[i] = prim.parent.is_some_and(|p| inside[p.0 as usize] || role[p.0 as usize] != Role::Plain);
+        if !inside[i] {
+            if prim.type_name.as_deref() == Some("PointInstancer") {
+                role[i] = Role::PointInstancer;
+            } else if prim.instanceable {
+                role[i] = Role::InstanceRoot;
+            }
+        }
+    }
+    // Instance roots whose prototype occurs once are flattened: an instance costs a
+    // top-level traversal and a ray transform, which only sharing pays for.
+    let mut key_of: HashMap<u32, String> = HashMap::new();
+    let mut key_count: HashMap<String, usize> = HashMap::new();
+    for (id, _) in stage.depth_first() {
+        if role[id.0 as usize] == Role::InstanceRoot && !xforms[id.0 as usize].hidden {
+            let key = prototype_key(stage, id);
+            *key_count.entry(key.clone()).or_default() += 1;
+            key_of.insert(id.0, key);
+        }
+    }
+    let mut b = Builder {
+        stage,
+        xforms,
+        geometry: Geometry::default(),
+        budget,
+        prim_index: HashMap::new(),
+        prototype_of: HashMap::new(),
+        over_budget: false,
+        singular_instances: 0,
+        subdiv_level: options.subdiv_level,
+    };
+    for (id, prim) in stage.depth_first() {
+        let i = id.0 as usize;
+        if inside[i] || xforms[i].hidden {
             continue;
         }
-
-        let index = geometry.prims.len() as u32;
-        let mut out = Emitter {
-            geometry: &mut geometry,
-            m: xf.world,
-            prim: index,
-            beyond_extent: None,
-            budget,
-            over_budget: false,
-            subdiv_level: options.subdiv_level,
-        };
-        match prim.type_name.as_deref() {
-            Some("Mesh") => mesh(prim, &mut out, diags),
-            Some("Sphere") => sphere(prim, &mut out, diags),
-            Some("Cube") => cube(prim, &mut out, diags),
-            Some("Cylinder") => cylinder(prim, &mut out, diags),
-            Some("Cone") => cone(prim, &mut out, diags),
-            Some("Capsule") => capsule(prim, &mut out, diags),
-            Some("Plane") => plane(prim, &mut out, diags),
-            Some("Points") => points(prim, &mut out, diags),
-            _ => {}
+        match role[i] {
+            Role::Plain => b.world_prim(prim, xforms[i].world, diags),
+            Role::InstanceRoot => {
+                let key = &key_of[&id.0];
+                if key_count[key] > 1 {
+                    b.instance(id, key, diags);
+                } else {
+                    for (sub, p) in stage.subtree(id) {
+                        let xf = xforms[sub.0 as usize];
+                        if !xf.hidden && p.type_name.as_deref() != Some("PointInstancer") {
+                            b.world_prim(p, xf.world, diags);
+                        } else if !xf.hidden {
+                            nested_instancer_warning(p, diags);
+                        }
+                    }
+                }
+            }
+            Role::PointInstancer => b.point_instancer(id, prim, diags),
         }
-        if out.over_budget {
-            diags.push(
-                Diagnostic::error(format!(
-                    "the scene has more than {budget} triangles; `{}` and the prims after it do not fit",
-                    prim.path
-                ))
-                .at(prim.span, "the first prim past the triangle budget")
-                .note("implicit surfaces (Sphere, Cylinder) are tessellated into up to 16384 triangles each"),
-            );
-            geometry.prims.push(GeomPrim { path: prim.path.clone(), span: prim.span });
+        if b.over_budget {
             break;
         }
-        if let Some(p) = out.beyond_extent {
-            // 1e38 reads better than its 39 digits.
-            let coordinate = |x: f64| if x.abs() < 1e6 { format!("{x}") } else { format!("{x:e}") };
-            let mut d = Diagnostic::error(format!(
-                "`{}` reaches ({}, {}, {}), beyond the scene extent of ±{MAX_EXTENT:e} units",
-                prim.path,
-                coordinate(p.x),
-                coordinate(p.y),
-                coordinate(p.z)
-            ))
-            .at(prim.span, "this prim");
-            // Point at the nearest transform that placed it, when one did.
-            let mut placed_by = Some(prim);
-            while let Some(p) = placed_by {
-                if let Some(order) = p.attribute("xformOpOrder") {
-                    d = d.also(value_span(order), "placed by this transform (with its ancestors')");
-                    break;
-                }
-                placed_by = p.parent.map(|id| stage.prim(id));
-            }
-            diags.push(d.note("strata renders in f32: coordinates must be finite and within ±1e7 after transforms"));
-        }
-        geometry.prims.push(GeomPrim { path: prim.path.clone(), span: prim.span });
     }
+    if b.singular_instances > 0 {
+        diags.push(Diagnostic::warning(format!(
+            "{} instance(s) with a singular transform (a zero scale) skipped",
+            b.singular_instances
+        )));
+    }
+    let mut geometry = b.geometry;
     if geometry.degenerate > 0 {
         diags.push(Diagnostic::warning(format!(
             "{} degenerate (zero-area or non-finite) triangle(s) skipped",
             geometry.degenerate
         )));
     }
+    geometry.prototypes.shrink_to_fit();
     geometry
 }
 
-/// Transforms local-space triangles and shapes to world space and appends them.
+fn nested_instancer_warning(prim: &Prim, diags: &mut Diagnostics) {
+    diags.push(
+        Diagnostic::warning(format!(
+            "PointInstancer `{}` inside an instance or a point instancer's prototype is not drawn \
+             (nested instancing is not supported)",
+            prim.path
+        ))
+        .at(prim.span, "this instancer"),
+    );
+}
+
+/// The key under which instances share a prototype: for every prim of the instance's
+/// subtree, its path below the root, its type, and where each attribute's value was authored
+/// (file and byte offset). Instances that reference one asset compose the same authored
+/// values, so they share a key; any local opinion inside an instance makes it a prototype
+/// of its own. The root's own transform and visibility belong to the instance, not to the
+/// prototype. Values without a source position (none today) are keyed by their content.
+pub fn prototype_key(stage: &Stage, root: PrimId) -> String {
+    use std::fmt::Write;
+    let root_len = stage.prim(root).path.len();
+    let mut key = String::new();
+    for (id, prim) in stage.subtree(root) {
+        let _ = write!(key, "{}|{}|", &prim.path[root_len..], prim.type_name.as_deref().unwrap_or(""));
+        for attr in &prim.attributes {
+            let placement = attr.name.starts_with("xformOp") || attr.name == "visibility" || attr.name == "purpose";
+            if id == root && placement {
+                continue;
+            }
+            match &attr.value {
+                Some((_, span)) if span.end > span.start => {
+                    let _ = write!(key, "{}@{}:{}:{};", attr.name, span.file.0, span.start, span.end);
+                }
+                Some((value, _)) => {
+                    let _ = write!(key, "{}={value:?};", attr.name);
+                }
+                None => {
+                    let _ = write!(key, "{}!{};", attr.name, attr.blocked);
+                }
+            }
+        }
+        key.push('\n');
+    }
+    key
+}
+
+/// Whether a prim itself (not its ancestors) is invisible or a guide/proxy.
+fn own_hidden(prim: &Prim) -> bool {
+    prim.value("visibility").and_then(Value::as_str) == Some("invisible")
+        || matches!(prim.value("purpose").and_then(Value::as_str), Some("guide" | "proxy"))
+}
+
+impl Builder<'_> {
+    /// The index of the renderable prim at `prim`'s path, added when new.
+    fn prim_index(&mut self, prim: &Prim) -> u32 {
+        let prims = &mut self.geometry.prims;
+        *self.prim_index.entry(prim.path.clone()).or_insert_with(|| {
+            prims.push(GeomPrim { path: prim.path.clone(), span: prim.span });
+            prims.len() as u32 - 1
+        })
+    }
+
+    /// Triangles in every buffer, for the budget.
+    fn triangles_so_far(&self) -> usize {
+        self.geometry.triangles.len() + self.geometry.prototypes.iter().map(|p| p.triangles.len()).sum::<usize>()
+    }
+
+    /// A visible renderable prim (or any other prim, which emits nothing) in world space.
+    fn world_prim(&mut self, prim: &Prim, world: DMat4, diags: &mut Diagnostics) {
+        if !is_renderable(prim) {
+            return;
+        }
+        let index = self.prim_index(prim);
+        let others = self.triangles_so_far() - self.geometry.triangles.len();
+        let g = &mut self.geometry;
+        let mut out = Emitter::new(
+            &mut g.triangles,
+            &mut g.shapes,
+            &mut g.degenerate,
+            world,
+            index,
+            self.budget - others.min(self.budget),
+        );
+        out.subdiv_level = self.subdiv_level;
+        emit_prim(prim, &mut out, diags);
+        let (beyond, over) = (out.beyond_extent, out.over_budget);
+        self.report(prim, beyond, over, diags);
+    }
+
+    /// Reports a prim past the extent or the budget.
+    fn report(&mut self, prim: &Prim, beyond: Option<DVec3>, over_budget: bool, diags: &mut Diagnostics) {
+        if over_budget && !self.over_budget {
+            self.over_budget = true;
+            diags.push(
+                Diagnostic::error(format!(
+                    "the scene has more than {} triangles; `{}` and the prims after it do not fit",
+                    self.budget, prim.path
+                ))
+                .at(prim.span, "the first prim past the triangle budget")
+                .note("instanced geometry counts once per prototype"),
+            );
+        }
+        if let Some(p) = beyond {
+            diags.push(beyond_extent(self.stage, prim, p));
+        }
+    }
+
+    /// The prototype built from the subtree at `root`, its geometry relative to the root
+    /// (the root's own transform excluded), prims numbered locally in subtree order; and the
+    /// renderable prims of that subtree in the same order.
+    fn build_prototype(&mut self, root: PrimId, diags: &mut Diagnostics) -> (Prototype, Vec<PrimId>) {
+        let stage = self.stage;
+        let mut proto = Prototype::default();
+        let mut members = Vec::new();
+        let mut rel: HashMap<u32, (DMat4, bool)> = HashMap::new();
+        let root_world = self.xforms[root.0 as usize].world;
+        let mut scratch = Diagnostics::new();
+        for (id, prim) in stage.subtree(root) {
+            let parent = prim.parent.filter(|_| id != root).and_then(|p| rel.get(&p.0).copied());
+            let (m, hidden) = match parent {
+                None => (DMat4::IDENTITY, own_hidden(prim)),
+                Some((pm, ph)) => {
+                    // Transforms already diagnosed by `world_transforms`.
+                    let (local, reset) = local_transform(prim, &mut scratch);
+                    let m = if reset { root_world.inverse() * self.xforms[id.0 as usize].world } else { pm * local };
+                    (m, ph || own_hidden(prim))
+                }
+            };
+            rel.insert(id.0, (m, hidden));
+            if hidden {
+                continue;
+            }
+            if id != root && prim.type_name.as_deref() == Some("PointInstancer") {
+                nested_instancer_warning(prim, diags);
+                continue;
+            }
+            if !is_renderable(prim) || rel_inside_instancer(stage, root, id) {
+                continue;
+            }
+            let local = members.len() as u32;
+            members.push(id);
+            let others = self.triangles_so_far();
+            let mut out = Emitter::new(
+                &mut proto.triangles,
+                &mut proto.shapes,
+                &mut self.geometry.degenerate,
+                m,
+                local,
+                self.budget - others.min(self.budget),
+            );
+            out.subdiv_level = self.subdiv_level;
+            emit_prim(prim, &mut out, diags);
+            let (beyond, over) = (out.beyond_extent, out.over_budget);
+            self.report(prim, beyond, over, diags);
+        }
+        proto.prims = members.len() as u32;
+        proto.bounds = bounds_of(&proto.triangles, &proto.shapes);
+        (proto, members)
+    }
+
+    /// An instanceable prim whose prototype other instances share.
+    fn instance(&mut self, root: PrimId, key: &str, diags: &mut Diagnostics) {
+        let stage = self.stage;
+        let (prototype, members) = match self.prototype_of.get(key) {
+            Some(&(p, _)) => {
+                // The same key means the same renderable prims in the same order.
+                let members = renderable_members(stage, root);
+                (p, members)
+            }
+            None => {
+                let (proto, members) = self.build_prototype(root, diags);
+                self.geometry.prototypes.push(proto);
+                let p = self.geometry.prototypes.len() as u32 - 1;
+                self.prototype_of.insert(key.to_string(), (p, u32::MAX));
+                (p, members)
+            }
+        };
+        // This instance's own prims: each composes its own materials (slots are inherited
+        // down the instance's own path), while the geometry is shared.
+        let start = self.geometry.instance_prims.len() as u32;
+        for id in members {
+            let index = self.prim_index(stage.prim(id));
+            self.geometry.instance_prims.push(index);
+        }
+        let to_world = self.xforms[root.0 as usize].world;
+        self.place(stage.prim(root), prototype, start, to_world, None, diags);
+    }
+
+    /// Adds an instance after checking that it lies within the extent.
+    fn place(
+        &mut self,
+        prim: &Prim,
+        prototype: u32,
+        prims: u32,
+        to_world: DMat4,
+        which: Option<(usize, Span)>,
+        diags: &mut Diagnostics,
+    ) -> bool {
+        let Some((lo, hi)) = self.geometry.prototypes[prototype as usize].bounds else { return true };
+        let (wlo, whi) = box_under(&to_world, lo, hi);
+        if let Some(far) = [wlo, whi].into_iter().find(|w| !w.is_finite() || w.abs().max_element() > MAX_EXTENT) {
+            let mut d = beyond_extent(self.stage, prim, far);
+            if let Some((i, span)) = which {
+                d = d.also(span, format!("instance {i}"));
+            }
+            diags.push(d);
+            return false;
+        }
+        if self.geometry.instances.len() >= MAX_INSTANCES {
+            let mut d = Diagnostic::error(format!(
+                "the scene has more than {MAX_INSTANCES} instances; `{}` and the instances after it do not fit",
+                prim.path
+            ))
+            .at(prim.span, "the first prim past the instance budget");
+            if let Some((i, span)) = which {
+                d = d.also(span, format!("instance {i}"));
+            }
+            diags.push(d);
+            // Stops the build: one error, bounded memory.
+            self.over_budget = true;
+            return false;
+        }
+        let det = DMat3::from_mat4(to_world).determinant();
+        if det == 0.0 || !det.is_finite() {
+            // Flat in some direction: as a flattened copy's triangles would be, degenerate.
+            self.singular_instances += 1;
+            return true;
+        }
+        self.geometry.instances.push(InstanceDesc { to_world, prototype, prims });
+        true
+    }
+}
+
+/// The visible renderable prims of the subtree at `root` that a prototype built from it
+/// holds, in subtree order (as [`Builder::build_prototype`] numbers them).
+fn renderable_members(stage: &Stage, root: PrimId) -> Vec<PrimId> {
+    let mut hidden: HashMap<u32, bool> = HashMap::new();
+    let mut out = Vec::new();
+    for (id, prim) in stage.subtree(root) {
+        let parent = prim.parent.filter(|_| id != root).and_then(|p| hidden.get(&p.0).copied()).unwrap_or(false);
+        let h = parent || own_hidden(prim);
+        hidden.insert(id.0, h);
+        if !h
+            && is_renderable(prim)
+            && (id == root || prim.type_name.as_deref() != Some("PointInstancer"))
+            && !rel_inside_instancer(stage, root, id)
+        {
+            out.push(id);
+        }
+    }
+    out
+}
+
+/// Whether `id` lies under a PointInstancer strictly between `root` and itself (a nested
+/// instancer's prototypes are not drawn).
+fn rel_inside_instancer(stage: &Stage, root: PrimId, id: PrimId) -> bool {
+    if id == root {
+        return false;
+    }
+    let mut p = stage.prim(id).parent;
+    while let Some(pid) = p {
+        if pid == root {
+            return false;
+        }
+        let prim = stage.prim(pid);
+        if prim.type_name.as_deref() == Some("PointInstancer") {
+            return true;
+        }
+        p = prim.parent;
+    }
+    false
+}
+
+/// World-space bounds `(min, max)` of triangles and shapes; `None` when there are none.
+fn bounds_of(triangles: &[Triangle], shapes: &[Shape]) -> Option<(DVec3, DVec3)> {
+    let shape_corners = shapes.iter().flat_map(|s| {
+        let (lo, hi) = s.world_bounds();
+        [lo, hi]
+    });
+    let mut it = triangles.iter().flat_map(|t| t.p).chain(shape_corners);
+    let first = it.next()?;
+    let (lo, hi) = it.fold((first, first), |(lo, hi), p| (lo.min(p), hi.max(p)));
+    Some((lo.as_dvec3(), hi.as_dvec3()))
+}
+
+/// The error for a prim whose geometry reaches `p`, beyond [`MAX_EXTENT`].
+fn beyond_extent(stage: &Stage, prim: &Prim, p: DVec3) -> Diagnostic {
+    // 1e38 reads better than its 39 digits.
+    let coordinate = |x: f64| if x.abs() < 1e6 { format!("{x}") } else { format!("{x:e}") };
+    let mut d = Diagnostic::error(format!(
+        "`{}` reaches ({}, {}, {}), beyond the scene extent of ±{MAX_EXTENT:e} units",
+        prim.path,
+        coordinate(p.x),
+        coordinate(p.y),
+        coordinate(p.z)
+    ))
+    .at(prim.span, "this prim");
+    // Point at the nearest transform that placed it, when one did.
+    let mut placed_by = Some(prim);
+    while let Some(p) = placed_by {
+        if let Some(order) = p.attribute("xformOpOrder") {
+            d = d.also(value_span(order), "placed by this transform (with its ancestors')");
+            break;
+        }
+        placed_by = p.parent.map(|id| stage.prim(id));
+    }
+    d.note("strata renders in f32: coordinates must be finite and within ±1e7 after transforms")
+}
+
+/// Emits the geometry of one renderable prim.
+fn emit_prim(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
+    match prim.type_name.as_deref() {
+        Some("Mesh") => mesh(prim, out, diags),
+        Some("Sphere") => sphere(prim, out, diags),
+        Some("Cube") => cube(prim, out, diags),
+        Some("Cylinder") => cylinder(prim, out, diags),
+        Some("Cone") => cone(prim, out, diags),
+        Some("Capsule") => capsule(prim, out, diags),
+        Some("Plane") => plane(prim, out, diags),
+        Some("Points") => points(prim, out, diags),
+        _ => {}
+    }
+}
+
+/// Transforms local-space triangles and shapes to the target space and appends them.
 struct Emitter<'g> {
-    geometry: &'g mut Geometry,
+    triangles: &'g mut Vec<Triangle>,
+    shapes: &'g mut Vec<Shape>,
+    degenerate: &'g mut usize,
     m: DMat4,
+    /// Inverse transpose of `m`'s linear part, for normals.
+    nm: DMat3,
     prim: u32,
-    /// The first world-space point past [`MAX_EXTENT`] (or non-finite), if any.
+    /// The first target-space point past [`MAX_EXTENT`] (or non-finite), if any.
     beyond_extent: Option<DVec3>,
-    /// The most triangles the scene may have ([`MAX_TRIANGLES`]).
+    /// The most triangles `triangles` may hold (what [`MAX_TRIANGLES`] leaves).
     budget: usize,
     /// A triangle was dropped because the scene reached its budget.
     over_budget: bool,
@@ -222,7 +618,30 @@ struct Emitter<'g> {
     subdiv_level: u32,
 }
 
-impl Emitter<'_> {
+impl<'g> Emitter<'g> {
+    fn new(
+        triangles: &'g mut Vec<Triangle>,
+        shapes: &'g mut Vec<Shape>,
+        degenerate: &'g mut usize,
+        m: DMat4,
+        prim: u32,
+        budget: usize,
+    ) -> Emitter<'g> {
+        let nm = DMat3::from_mat4(m).inverse().transpose();
+        Emitter {
+            triangles,
+            shapes,
+            degenerate,
+            m,
+            nm,
+            prim,
+            beyond_extent: None,
+            budget,
+            over_budget: false,
+            subdiv_level: DEFAULT_SUBDIV_LEVEL,
+        }
+    }
+
     /// Emits one triangle given in local space (`n` in local space, not necessarily unit).
     fn emit(&mut self, p: [DVec3; 3], n: Option<[DVec3; 3]>, uv: Option<[Vec2; 3]>) {
         let world = p.map(|p| self.m.transform_point3(p));
@@ -231,8 +650,8 @@ impl Emitter<'_> {
             self.beyond_extent.get_or_insert(*far);
             return;
         }
-        if self.geometry.triangles.len() >= self.budget {
-            // Reported by `build_with` after this prim; the memory stays bounded.
+        if self.triangles.len() >= self.budget {
+            // Reported by the builder after this prim; the memory stays bounded.
             self.over_budget = true;
             return;
         }
@@ -240,22 +659,21 @@ impl Emitter<'_> {
         let cross = (wp[1] - wp[0]).cross(wp[2] - wp[0]);
         let len2 = cross.length_squared();
         if len2.is_nan() || len2 <= 0.0 || !len2.is_finite() {
-            self.geometry.degenerate += 1;
+            *self.degenerate += 1;
             return;
         }
         let ng = cross / len2.sqrt();
         // Normals transform by the inverse transpose.
-        let nm = DMat3::from_mat4(self.m).inverse().transpose();
         let n = match n {
             Some(n) => n.map(|n| {
-                let w = (nm * n).as_vec3().normalize_or_zero();
+                let w = (self.nm * n).as_vec3().normalize_or_zero();
                 if w == Vec3::ZERO || !w.is_finite() { ng } else { w }
             }),
             None => [ng; 3],
         };
         let has_uv = uv.is_some();
         let uv = uv.unwrap_or([Vec2::ZERO, Vec2::X, Vec2::Y]);
-        self.geometry.triangles.push(Triangle { p: wp, n, uv, prim: self.prim, has_uv });
+        self.triangles.push(Triangle { p: wp, n, uv, prim: self.prim, has_uv });
     }
 
     /// Adds an analytic part built around z, turned so that z is the prim's `axis`.
@@ -268,10 +686,165 @@ impl Emitter<'_> {
             return;
         }
         match Shape::new(part, m, self.prim) {
-            Some(shape) => self.geometry.shapes.push(shape),
-            None => self.geometry.degenerate += 1,
+            Some(shape) => self.shapes.push(shape),
+            None => *self.degenerate += 1,
         }
     }
+}
+
+/// An error about a PointInstancer attribute (at its value).
+fn instancer_error(prim: &Prim, name: &str, message: String) -> Diagnostic {
+    Diagnostic::error(format!("point instancer `{}`: {message}", prim.path)).at(span_of(prim, name), "here")
+}
+
+impl Builder<'_> {
+    /// A UsdGeomPointInstancer: each point places one of the `prototypes` targets (with the
+    /// prototype root's own transform) by `positions`, `orientations` and `scales`, under the
+    /// instancer's transform. Points listed in `invisibleIds` are not drawn.
+    fn point_instancer(&mut self, id: PrimId, prim: &Prim, diags: &mut Diagnostics) {
+        let stage = self.stage;
+        let errors = diags.error_count();
+        let targets: Vec<(String, Span)> = prim
+            .relationship("prototypes")
+            .map(|r| r.targets.iter().map(|(p, s)| (p.clone(), *s)).collect())
+            .unwrap_or_default();
+        let mut protos = Vec::with_capacity(targets.len());
+        for (path, span) in &targets {
+            match stage.find(path) {
+                Some(p) => protos.push(p),
+                None => diags.push(
+                    Diagnostic::error(format!("point instancer `{}`: prototype `{path}` does not exist", prim.path))
+                        .at(*span, "this target"),
+                ),
+            }
+        }
+        let indices = prim.value("protoIndices").and_then(Value::as_int_array).unwrap_or(&[]);
+        let n = indices.len();
+        let tuples = |name: &str, width: usize, diags: &mut Diagnostics| -> Option<&[f64]> {
+            let attr = prim.attribute(name)?;
+            let Some((w, data)) = attr.get()?.as_tuple_array() else {
+                diags.push(instancer_error(prim, name, format!("`{name}` must be an array of {width}-tuples")));
+                return None;
+            };
+            if w != width {
+                diags.push(instancer_error(prim, name, format!("`{name}` must be an array of {width}-tuples")));
+                return None;
+            }
+            if data.len() / width != n {
+                diags.push(instancer_error(
+                    prim,
+                    name,
+                    format!("`{name}` has {} entries but `protoIndices` has {n}", data.len() / width),
+                ));
+                return None;
+            }
+            if let Some(k) = data.iter().position(|x| !x.is_finite()) {
+                diags.push(instancer_error(prim, name, format!("`{name}`[{}] is not finite", k / width)));
+                return None;
+            }
+            Some(data)
+        };
+        let positions = tuples("positions", 3, diags);
+        if positions.is_none() && prim.attribute("positions").is_none() && n > 0 {
+            diags.push(instancer_error(prim, "protoIndices", format!("{n} instances but no `positions`")));
+        }
+        // USD reads `orientations` (quath) or, when authored, `orientationsf` (quatf).
+        let orient_name = if prim.attribute("orientationsf").is_some() { "orientationsf" } else { "orientations" };
+        let orientations = tuples(orient_name, 4, diags);
+        let scales = tuples("scales", 3, diags);
+        let ids = prim.value("ids").and_then(Value::as_int_array);
+        if let Some(ids) = ids
+            && ids.len() != n
+        {
+            diags.push(instancer_error(
+                prim,
+                "ids",
+                format!("`ids` has {} entries but `protoIndices` has {n}", ids.len()),
+            ));
+        }
+        if let Some((k, bad)) = indices.iter().enumerate().find(|&(_, &i)| i < 0 || i as usize >= targets.len()) {
+            diags.push(instancer_error(
+                prim,
+                "protoIndices",
+                format!("`protoIndices`[{k}] = {bad} is out of range ({} prototypes)", targets.len()),
+            ));
+        }
+        if let Some(k) = orientations.and_then(|q| q.chunks(4).position(|q| q.iter().all(|&c| c == 0.0))) {
+            diags.push(instancer_error(prim, orient_name, format!("`{orient_name}`[{k}] is a zero quaternion")));
+        }
+        if diags.error_count() > errors || protos.len() != targets.len() {
+            return;
+        }
+        let Some(positions) = positions else { return };
+        let invisible: HashSet<i64> = prim
+            .value("invisibleIds")
+            .and_then(Value::as_int_array)
+            .map(|v| v.iter().copied().collect())
+            .unwrap_or_default();
+
+        // One prototype per target prim, shared by every instancer that targets it; its
+        // prims are the prototype's own (all its instances share their materials).
+        let mut placed: Vec<(u32, u32, DMat4)> = Vec::with_capacity(protos.len());
+        for &proto in &protos {
+            let key = format!("pi:{}", proto.0);
+            let (p, prims) = match self.prototype_of.get(&key) {
+                Some(&entry) => entry,
+                None => {
+                    let (built, members) = self.build_prototype(proto, diags);
+                    self.geometry.prototypes.push(built);
+                    let p = self.geometry.prototypes.len() as u32 - 1;
+                    let start = self.geometry.instance_prims.len() as u32;
+                    for m in members {
+                        let index = self.prim_index(stage.prim(m));
+                        self.geometry.instance_prims.push(index);
+                    }
+                    self.prototype_of.insert(key, (p, start));
+                    (p, start)
+                }
+            };
+            // The prototype root's own transform applies under each instance's.
+            let (local, _) = local_transform(stage.prim(proto), &mut Diagnostics::new());
+            placed.push((p, prims, local));
+        }
+        let instancer = self.xforms[id.0 as usize].world;
+        let positions_span = span_of(prim, "positions");
+        for k in 0..n {
+            let instance_id = ids.map_or(k as i64, |ids| ids[k]);
+            if invisible.contains(&instance_id) {
+                continue;
+            }
+            let (p, prims, local) = placed[indices[k] as usize];
+            let t = DVec3::from_slice(&positions[3 * k..3 * k + 3]);
+            // USD writes quaternions (real, i, j, k).
+            let r = orientations.map_or(DQuat::IDENTITY, |q| {
+                DQuat::from_xyzw(q[4 * k + 1], q[4 * k + 2], q[4 * k + 3], q[4 * k]).normalize()
+            });
+            let s = scales.map_or(DVec3::ONE, |s| DVec3::from_slice(&s[3 * k..3 * k + 3]));
+            // Row-vector USD: proto · scale · orient · translate; column-vector: T R S proto.
+            let m = instancer * DMat4::from_scale_rotation_translation(s, r, t) * local;
+            if !self.place(prim, p, prims, m, Some((k, positions_span)), diags) {
+                // One extent error per instancer is enough.
+                break;
+            }
+        }
+    }
+}
+
+/// The box of the 8 transformed corners of `(lo, hi)` under `m`.
+fn box_under(m: &DMat4, lo: DVec3, hi: DVec3) -> (DVec3, DVec3) {
+    let mut min = DVec3::splat(f64::INFINITY);
+    let mut max = DVec3::splat(f64::NEG_INFINITY);
+    for k in 0..8 {
+        let c = DVec3::new(
+            if k & 1 == 0 { lo.x } else { hi.x },
+            if k & 2 == 0 { lo.y } else { hi.y },
+            if k & 4 == 0 { lo.z } else { hi.z },
+        );
+        let w = m.transform_point3(c);
+        min = min.min(w);
+        max = max.max(w);
+    }
+    (min, max)
 }
 
 /// The rotation taking z to the prim's `axis` attribute (`X`, `Y` or `Z`, default `Z`), as
@@ -405,7 +978,8 @@ fn mesh(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
     let scheme_attr = prim.attribute("subdivisionScheme");
     let scheme = prim.value("subdivisionScheme").and_then(Value::as_str).unwrap_or("catmullClark");
     match scheme {
-        "catmullClark" | "loop" if out.subdiv_level > 0 => {
+        // A cage already past the face budget at one level is dense enough to render as it is.
+        "catmullClark" | "loop" if out.subdiv_level > 0 && refined_faces_of(counts, 1) <= SUBDIV_FACE_BUDGET => {
             if scheme == "loop" {
                 diags.push(
                     Diagnostic::warning(format!(
@@ -504,6 +1078,12 @@ fn poly_mesh(
 
 /// Emits the limit surface of `poly`, refined to the emitter's level or as many levels as fit
 /// [`SUBDIV_FACE_BUDGET`] (at least one).
+/// [`refined_faces`] of the faces with three or more vertices of authored `counts`.
+fn refined_faces_of(counts: &[i64], level: u32) -> u64 {
+    let counts: Vec<u32> = counts.iter().filter(|&&c| c >= 3).map(|&c| c.min(u32::MAX as i64) as u32).collect();
+    refined_faces(&counts, level)
+}
+
 fn subdivided(poly: &PolyMesh, left_handed: bool, flip: bool, out: &mut Emitter) {
     let mut level = out.subdiv_level;
     while level > 1 && refined_faces(&poly.counts, level) > SUBDIV_FACE_BUDGET {
@@ -595,7 +1175,7 @@ fn points(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
         let width = widths[if widths.len() == 1 { 0 } else { i }];
         let centre = DVec3::new(p[0], p[1], p[2]);
         if !(width.is_finite() && width > 0.0 && centre.is_finite()) {
-            out.geometry.degenerate += 1;
+            *out.degenerate += 1;
             continue;
         }
         let part = Part::Sphere { r: width / 2.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY };
@@ -855,6 +1435,114 @@ def Xform "G" {
         assert!(g.shapes.iter().filter(|s| s.prim == 2).any(|s| down(&s)));
         let cube = g.triangles.iter().filter(|t| t.prim == 1).count();
         assert_eq!(cube, 12);
+    }
+
+    /// A point instancer of a unit cube with the given attribute lines.
+    fn instancer(attrs: &str) -> (Geometry, Diagnostics, crate::diag::SourceMap) {
+        let text = format!(
+            "#usda 1.0\ndef PointInstancer \"P\" {{\n    rel prototypes = [</P/Protos/C>]\n{attrs}\n    def Scope \"Protos\" {{\n        def Cube \"C\" {{ double size = 1 }}\n    }}\n}}\n"
+        );
+        let mut sources = crate::diag::SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let stage = Stage::from_text("pi.usda", &text, std::path::Path::new("."), &mut sources, &mut diags).unwrap();
+        let g = build(&stage, &mut diags);
+        (g, diags, sources)
+    }
+
+    #[test]
+    fn point_instancer_places_points_and_hides_its_prototypes() {
+        let (g, diags, _) = instancer(
+            "    int[] protoIndices = [0, 0, 0]\n    point3f[] positions = [(0, 0, 0), (5, 0, 0), (0, 5, 0)]\n    quath[] orientations = [(1, 0, 0, 0), (0.70710677, 0, 0, 0.70710677), (1, 0, 0, 0)]\n    float3[] scales = [(1, 1, 1), (2, 1, 1), (1, 1, 1)]\n    int64[] invisibleIds = [2]",
+        );
+        assert!(!diags.has_errors(), "{diags:?}");
+        assert!(g.triangles.is_empty(), "the prototype is drawn only through the instancer");
+        assert_eq!(g.prototypes.len(), 1);
+        assert_eq!(g.instances.len(), 2, "id 2 (no ids: the index) is invisible");
+        // (real, i, j, k) = (cos 45°, 0, 0, sin 45°): 90° about z, applied after the scale:
+        // x scaled by 2, then turned onto y.
+        let m = g.instances[1].to_world;
+        let x = m.transform_vector3(DVec3::X);
+        assert!((x - DVec3::new(0.0, 2.0, 0.0)).length() < 1e-6, "{x}");
+        assert!((m.transform_point3(DVec3::ZERO) - DVec3::new(5.0, 0.0, 0.0)).length() < 1e-12);
+        assert_eq!(g.prims.len(), 1);
+        assert_eq!(g.prims[0].path, "/P/Protos/C");
+    }
+
+    #[test]
+    fn point_instancer_mismatches_are_errors_at_the_attribute() {
+        for (attrs, want, line) in [
+            (
+                "    int[] protoIndices = [0, 0]\n    point3f[] positions = [(0, 0, 0)]",
+                "`positions` has 1 entries but `protoIndices` has 2",
+                5,
+            ),
+            (
+                "    int[] protoIndices = [0, 3]\n    point3f[] positions = [(0, 0, 0), (1, 1, 1)]",
+                "`protoIndices`[1] = 3 is out of range (1 prototypes)",
+                4,
+            ),
+            (
+                "    int[] protoIndices = [0]\n    point3f[] positions = [(0, 0, 0)]\n    quath[] orientations = [(0, 0, 0, 0)]",
+                "`orientations`[0] is a zero quaternion",
+                6,
+            ),
+            (
+                "    int[] protoIndices = [0]\n    point3f[] positions = [(0, 0, 0)]\n    float3[] scales = [(1, 1, 1), (2, 2, 2)]",
+                "`scales` has 2 entries",
+                6,
+            ),
+            (
+                "    int[] protoIndices = [0]\n    point3f[] positions = [(0, nan, 0)]",
+                "`positions`[0] is not finite",
+                5,
+            ),
+            ("    int[] protoIndices = [0]", "1 instances but no `positions`", 4),
+            ("    int[] protoIndices = [0]\n    point3f[] positions = [(2e7, 0, 0)]", "beyond the scene extent", 2),
+        ] {
+            let (g, diags, sources) = instancer(attrs);
+            assert!(g.instances.is_empty(), "{attrs}");
+            let errors: Vec<_> = diags.items().iter().filter(|d| d.severity == crate::diag::Severity::Error).collect();
+            assert_eq!(errors.len(), 1, "{attrs}: {errors:?}");
+            assert!(errors[0].message.contains(want), "{}", errors[0].message);
+            let rendered = diags.render(&sources);
+            assert!(rendered.contains(&format!("pi.usda:{line}:")), "{rendered}");
+        }
+        // A target that does not exist.
+        let (stage, mut diags) = stage(
+            "#usda 1.0\ndef PointInstancer \"P\" {\n    rel prototypes = [</Nowhere>]\n    int[] protoIndices = [0]\n    point3f[] positions = [(0, 0, 0)]\n}",
+        );
+        let g = build(&stage, &mut diags);
+        assert!(g.instances.is_empty() && diags.items()[0].message.contains("`/Nowhere` does not exist"));
+    }
+
+    #[test]
+    fn instanceable_references_share_a_prototype_unless_edited() {
+        // Three instances of /Proto, one of them with a local opinion inside it: two share.
+        let (stage, mut diags) = stage(
+            r#"#usda 1.0
+class Xform "Proto" {
+    def Mesh "M" { uniform token subdivisionScheme = "none"
+        int[] faceVertexCounts = [3]
+        int[] faceVertexIndices = [0, 1, 2]
+        point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0)]
+    }
+}
+def Xform "A" (instanceable = true references = </Proto>) { double3 xformOp:translate = (5, 0, 0)
+    uniform token[] xformOpOrder = ["xformOp:translate"] }
+def Xform "B" (instanceable = true references = </Proto>) { }
+def Xform "C" (instanceable = true references = </Proto>) {
+    over "M" { point3f[] points = [(0, 0, 0), (2, 0, 0), (0, 2, 0)] }
+}"#,
+        );
+        let g = build(&stage, &mut diags);
+        assert!(!diags.has_errors(), "{diags:?}");
+        assert_eq!(g.prototypes.len(), 1, "A and B share; C is flattened (its prototype occurs once)");
+        assert_eq!(g.instances.len(), 2);
+        assert_eq!(g.triangles.len(), 1, "C's own triangle");
+        let paths: Vec<_> = g.prims.iter().map(|p| p.path.as_str()).collect();
+        assert_eq!(paths, ["/A/M", "/B/M", "/C/M"]);
+        assert_eq!(g.instance_prims, [0, 1], "each instance's own prim");
+        assert_eq!(g.instances[0].to_world.transform_point3(DVec3::ZERO), DVec3::new(5.0, 0.0, 0.0));
     }
 
     const CUBE_MESH: &str = r#"

@@ -11,7 +11,7 @@
 //! against. Shadow rays account for transparency by its expected value (the product of
 //! `w_T` at the surfaces they cross), which matches the stochastic pass-through on average.
 
-use super::accel::{Accel, Hit, Primitive, offset_ray_origin};
+use super::accel::{Accel, Hit, offset_ray_origin};
 use super::bsdf::{Bsdf, Frame};
 use super::light::{Light, LightSelection};
 use super::sampling::{Rng, power_heuristic};
@@ -200,6 +200,8 @@ pub fn is_opaque(material: &dyn MaterialCode) -> bool {
 /// Surface geometry at a hit.
 struct SurfacePoint {
     p: Vec3,
+    /// Conservative absolute error bound of `p` (per component).
+    p_error: Vec3,
     /// Geometric normal, outward by winding.
     ng: Vec3,
     /// Interpolated shading normal, outward.
@@ -214,66 +216,18 @@ struct SurfacePoint {
 
 /// Surface geometry where the ray `o + t d` hit.
 fn surface_point(accel: &Accel, scene: &Scene, o: Vec3, d: Vec3, hit: &Hit) -> SurfacePoint {
-    match accel.primitive(hit.index) {
-        Primitive::Triangle(tri) => {
-            let b0 = 1.0 - hit.b1 - hit.b2;
-            let p = tri.p[0] * b0 + tri.p[1] * hit.b1 + tri.p[2] * hit.b2;
-            let ng = tri.cross().normalize();
-            let mut ns = (tri.n[0] * b0 + tri.n[1] * hit.b1 + tri.n[2] * hit.b2).normalize_or_zero();
-            if ns == Vec3::ZERO || !ns.is_finite() {
-                ns = ng;
-            }
-            // Shading normals are authored on either side; keep them on the winding's side.
-            if ns.dot(ng) < 0.0 {
-                ns = -ns;
-            }
-            let uv = tri.uv[0] * b0 + tri.uv[1] * hit.b1 + tri.uv[2] * hit.b2;
-            let (dpdu, dpdv) = tangents(tri.p, tri.uv, ns);
-            SurfacePoint { p, ng, ns, dpdu, dpdv, uv, material: scene.prim_material[tri.prim as usize], prim: tri.prim }
-        }
-        Primitive::Shape(shape) => {
-            let h = shape.surface(o, d, hit.t);
-            let n = if h.n == Vec3::ZERO || !h.n.is_finite() { -d } else { h.n };
-            let (dpdu, dpdv) =
-                if h.dpdu.cross(h.dpdv).length_squared() > 0.0 && h.dpdu.is_finite() && h.dpdv.is_finite() {
-                    (h.dpdu, h.dpdv)
-                } else {
-                    // At a pole dP/du vanishes: any frame around the normal serves.
-                    let f = Frame::from_normal(n);
-                    (f.t, f.b)
-                };
-            SurfacePoint {
-                p: h.p,
-                ng: n,
-                ns: n,
-                dpdu,
-                dpdv,
-                uv: h.uv,
-                material: scene.prim_material[shape.prim as usize],
-                prim: shape.prim,
-            }
-        }
+    let g = accel.surface(o, d, hit);
+    SurfacePoint {
+        p: g.p,
+        p_error: g.p_error,
+        ng: g.ng,
+        ns: g.ns,
+        dpdu: g.dpdu,
+        dpdv: g.dpdv,
+        uv: g.uv,
+        material: scene.prim_material[g.prim as usize],
+        prim: g.prim,
     }
-}
-
-/// dP/du and dP/dv from the triangle's texture coordinates, or a frame around `n` when
-/// they are degenerate.
-fn tangents(p: [Vec3; 3], uv: [Vec2; 3], n: Vec3) -> (Vec3, Vec3) {
-    let d1 = uv[1] - uv[0];
-    let d2 = uv[2] - uv[0];
-    let det = d1.x * d2.y - d1.y * d2.x;
-    let e1 = p[1] - p[0];
-    let e2 = p[2] - p[0];
-    if det.abs() > 1e-12 {
-        let inv = 1.0 / det;
-        let dpdu = (e1 * d2.y - e2 * d1.y) * inv;
-        let dpdv = (e2 * d1.x - e1 * d2.x) * inv;
-        if dpdu.is_finite() && dpdv.is_finite() && dpdu.cross(dpdv).length_squared() > 0.0 {
-            return (dpdu, dpdv);
-        }
-    }
-    let f = Frame::from_normal(n);
-    (f.t, f.b)
 }
 
 fn to_arr(v: Vec3) -> [f32; 3] {
@@ -456,7 +410,7 @@ impl Context<'_> {
                 return Ok(0.0);
             }
             let side = if sp.ng.dot(d) > 0.0 { sp.ng } else { -sp.ng };
-            let next = offset_ray_origin(sp.p, side);
+            let next = offset_ray_origin(sp.p, sp.p_error, side);
             remaining -= (next - o).dot(d);
             o = next;
             if remaining <= 0.0 {
@@ -467,9 +421,16 @@ impl Context<'_> {
     }
 
     /// Direct light at a shading point by sampling one light (chosen by
-    /// [`Context::light_selection`]), MIS-weighted. `n` is the geometric normal on the side of
-    /// `wo`.
-    fn direct(&self, p: Vec3, ng: Vec3, wo: Vec3, rng: &mut Rng, s: &mut Scratch) -> Result<Vec3, Invalid> {
+    /// [`Context::light_selection`]), MIS-weighted. `p_error` bounds `p`'s rounding error.
+    fn direct(
+        &self,
+        p: Vec3,
+        p_error: Vec3,
+        ng: Vec3,
+        wo: Vec3,
+        rng: &mut Rng,
+        s: &mut Scratch,
+    ) -> Result<Vec3, Invalid> {
         let choice = self.light_selection.sample(rng.uniform());
         let u = rng.uniform2();
         let Some((pick, select_pdf)) = choice else { return Ok(Vec3::ZERO) };
@@ -481,7 +442,7 @@ impl Context<'_> {
             return Ok(Vec3::ZERO);
         }
         let side = if ng.dot(ls.wi) > 0.0 { ng } else { -ng };
-        let o = offset_ray_origin(p, side);
+        let o = offset_ray_origin(p, p_error, side);
         let dist = if ls.dist.is_finite() { ls.dist * (1.0 - 1e-4) } else { f32::INFINITY };
         let tr = self.transmittance(o, ls.wi, dist, &mut s.site)?;
         if tr <= 0.0 {
@@ -567,7 +528,7 @@ impl Context<'_> {
                     break;
                 }
                 let side = if sp.ng.dot(d) > 0.0 { sp.ng } else { -sp.ng };
-                let next = offset_ray_origin(sp.p, side);
+                let next = offset_ray_origin(sp.p, sp.p_error, side);
                 let advanced = (next - o).dot(d);
                 travelled += advanced;
                 tmax = (tmax - advanced).max(0.0);
@@ -588,7 +549,7 @@ impl Context<'_> {
                 break;
             }
             let wo = -d;
-            out.radiance += throughput * self.direct(sp.p, sp.ng, wo, rng, s)?;
+            out.radiance += throughput * self.direct(sp.p, sp.p_error, sp.ng, wo, rng, s)?;
             // Sample the next direction from the picked lobe(s).
             let uc = rng.uniform();
             let u2 = rng.uniform2();
@@ -613,7 +574,7 @@ impl Context<'_> {
                 throughput /= p;
             }
             let side = if sp.ng.dot(wi) > 0.0 { sp.ng } else { -sp.ng };
-            o = offset_ray_origin(sp.p, side);
+            o = offset_ray_origin(sp.p, sp.p_error, side);
             d = wi;
             tmin = 0.0;
             tmax = f32::INFINITY;

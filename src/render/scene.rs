@@ -1,7 +1,7 @@
 //! The render scene: triangles in a BVH, the material of each renderable prim, lights and
 //! the camera, built once from a composed stage.
 
-use super::accel::Accel;
+use super::accel::{Accel, Blas};
 use super::camera::Camera;
 use super::geometry::{self, GeomPrim};
 use super::light::{Light, lights_from_stage};
@@ -13,7 +13,7 @@ use glam::Vec3;
 /// Everything the integrator needs about the scene, materials excepted (they are passed to
 /// [`crate::render::render`] as `abi::MaterialCode`s, indexed by [`Scene::prim_material`]).
 pub struct Scene {
-    /// Triangles and their BVH.
+    /// Triangles, shapes and instances in their BVHs.
     pub accel: Accel,
     /// Renderable prims, indexed by `Triangle::prim`.
     pub prims: Vec<GeomPrim>,
@@ -180,7 +180,12 @@ impl Scene {
         }
         Some(Scene {
             degenerate_triangles: geometry.degenerate,
-            accel: Accel::new(geometry.triangles, geometry.shapes),
+            accel: Accel::with_instances(
+                Blas::new(geometry.triangles, geometry.shapes),
+                geometry.prototypes.into_iter().map(|p| Blas::new(p.triangles, p.shapes)).collect(),
+                &geometry.instances,
+                geometry.instance_prims,
+            ),
             prims: geometry.prims,
             prim_material,
             lights,
@@ -213,7 +218,7 @@ def DomeLight "Sky" {}"#,
         let scene = Scene::from_stage(&stage, &|_| Some(0), &mut diags).expect("scene");
         let r = scene.camera.ray(Vec2::splat(0.5), Vec2::ZERO);
         let hit = scene.accel.intersect(r.o, r.d, r.tmin, r.tmax).expect("hit");
-        assert_eq!(scene.prims[scene.accel.prim_of(hit.index) as usize].path, "/Ahead");
+        assert_eq!(scene.prims[scene.accel.prim_of(&hit) as usize].path, "/Ahead");
         assert!((hit.t - 9.0).abs() < 1e-2, "{}", hit.t);
     }
 

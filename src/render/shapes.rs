@@ -59,6 +59,8 @@ pub enum Part {
 pub struct SurfaceHit {
     /// The point on the surface.
     pub p: Vec3,
+    /// A conservative bound on the absolute error of each component of `p`.
+    pub p_error: Vec3,
     /// Outward unit normal.
     pub n: Vec3,
     /// Texture coordinates.
@@ -282,8 +284,18 @@ impl Shape {
         let od = self.to_object.transform_vector3(d.as_dvec3());
         let (p, n, (u, v), dpdu, dpdv) = self.part.local_geometry(oo + od * t as f64);
         let n = (self.normal_to_world * n).normalize_or_zero();
+        let world = self.to_world.transform_point3(p);
+        // The point is on the surface to f64 precision (projected onto it in object space);
+        // what remains is the f64 transform's rounding, bounded by 1e-14 of the terms it
+        // sums (|M| |p| + |t|), and the rounding to f32, half an f32 ULP (γ(2) is generous).
+        let m = &self.to_world;
+        let abs_m = DMat3::from_cols(m.x_axis.truncate().abs(), m.y_axis.truncate().abs(), m.z_axis.truncate().abs());
+        let (lo, hi) = self.part.bounds();
+        let f64_error = (abs_m * (p.abs() + lo.abs().max(hi.abs())) + m.w_axis.truncate().abs()) * 1e-14;
+        let p32 = world.as_vec3();
         SurfaceHit {
-            p: self.to_world.transform_point3(p).as_vec3(),
+            p: p32,
+            p_error: p32.abs() * crate::render::accel::gamma(2) + f64_error.as_vec3(),
             n: n.as_vec3(),
             uv: Vec2::new(u as f32, v as f32),
             dpdu: self.to_world.transform_vector3(dpdu).as_vec3(),
@@ -355,7 +367,7 @@ mod tests {
             let tangent = h.n.any_orthonormal_vector();
             let cos = 10f32.powf(-4.0 * (i % 50) as f32 / 49.0);
             let out = (h.n * cos + tangent * (1.0 - cos * cos).sqrt()).normalize();
-            let start = offset_ray_origin(h.p, h.n);
+            let start = offset_ray_origin(h.p, h.p_error, h.n);
             if s.intersect(start, out, 0.0, f32::INFINITY).is_some() {
                 misses += 1;
             }
@@ -373,7 +385,7 @@ mod tests {
             let n = Vec3::new(a.cos(), a.sin(), 0.0);
             let p = Vec3::new(3.0, 0.0, 0.0) + n;
             let inward = (-n + n.any_orthonormal_vector() * 0.5).normalize();
-            let start = offset_ray_origin(p, -n);
+            let start = offset_ray_origin(p, p.abs() * crate::render::accel::gamma(3), -n);
             let t = s.intersect(start, inward, 0.0, f32::INFINITY).expect("far side");
             // The chord at this angle: 2 cos(angle to the normal).
             assert!((t - 2.0 * inward.dot(-n)).abs() < 1e-4, "{t}");
