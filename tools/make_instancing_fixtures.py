@@ -28,6 +28,8 @@ def box_mesh(stage, path):
     mesh.CreatePointsAttr([Gf.Vec3f(*p) for p in pts])
     mesh.CreateFaceVertexCountsAttr([4] * 6)
     mesh.CreateFaceVertexIndicesAttr([0, 3, 2, 1, 4, 5, 6, 7, 0, 1, 5, 4, 2, 3, 7, 6, 1, 2, 6, 5, 0, 4, 7, 3])
+    # A polygonal box, not a subdivision surface (UsdGeom's default scheme).
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     return mesh
 
 
@@ -50,6 +52,7 @@ def common(stage):
     floor.CreatePointsAttr([Gf.Vec3f(-20, -1, -20), Gf.Vec3f(-20, -1, 20), Gf.Vec3f(20, -1, 20), Gf.Vec3f(20, -1, -20)])
     floor.CreateFaceVertexCountsAttr([4])
     floor.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
+    floor.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     for name, albedo in [("Red", (0.8, 0.2, 0.1)), ("Blue", (0.1, 0.3, 0.8))]:
         mat = stage.DefinePrim(f"/Looks/{name}", "Material")
         sh = stage.DefinePrim(f"/Looks/{name}/Surface", "Shader")
