@@ -4,8 +4,10 @@
 //! interface inputs, as UsdShade resolves them), and assembles one [`ComposedMaterial`] per
 //! renderable prim.
 
-use super::slots::{Binding, BindingPrim, BindingTree, PrimStack, SLOT_BINDING_PREFIX, decode_slot, resolve_stacks};
-use super::{ComposedLayer, ComposedMaterial, MaterialRef};
+use super::slots::{
+    Binding, BindingPrim, BindingTree, PrimStack, SLOT_BINDING_PREFIX, Slot, decode_slot, resolve_stacks,
+};
+use super::{ComposedLayer, ComposedMaterial, MaterialRef, preview};
 use crate::diag::{Diagnostic, Diagnostics, SourceMap, Span};
 use crate::front::ast::{BaseType, GraphKind};
 use crate::front::library::Library;
@@ -22,7 +24,86 @@ pub fn is_renderable(prim: &Prim) -> bool {
     prim.type_name.as_deref().is_some_and(|t| RENDERABLE_TYPES.contains(&t))
 }
 
-/// Reads the slot bindings of every prim (depth first, parents before children).
+/// Whether a prim is a `UsdGeomSubset` that binds a material to some faces of its parent Mesh
+/// (`familyName = "materialBind"`, `elementType = "face"`): it gets its own composed material,
+/// layered like a child of the mesh, and the renderer shades those faces with it.
+pub fn is_bound_subset(stage: &Stage, prim: &Prim) -> bool {
+    prim.type_name.as_deref() == Some("GeomSubset")
+        && prim.value("familyName").and_then(UsdValue::as_str) == Some("materialBind")
+        && prim.value("elementType").and_then(UsdValue::as_str).unwrap_or("face") == "face"
+        && prim.parent.is_some_and(|p| stage.prim(p).type_name.as_deref() == Some("Mesh"))
+}
+
+/// The `material:binding` relationships strata reads, strongest purpose first: `full` (the
+/// final-render purpose), then the all-purpose binding, then `preview`.
+const MATERIAL_BINDING_RELS: [&str; 3] = ["material:binding:full", "material:binding", "material:binding:preview"];
+
+/// The UsdShade direct binding of a prim, as a binding of the base layer
+/// ([`Slot::material_binding`]). A relationship with no target binds nothing (UsdShade's
+/// `IsBound()` is false, so the ancestors' binding applies); more than one target is an error.
+fn material_binding(prim: &Prim, diags: &mut Diagnostics) -> Option<Binding> {
+    for name in MATERIAL_BINDING_RELS {
+        let Some(rel) = prim.relationship(name) else { continue };
+        let (path, span) = match rel.targets.as_slice() {
+            [] => continue,
+            [(path, span)] => (path.clone(), *span),
+            targets => {
+                let mut d = Diagnostic::error(format!(
+                    "`{name}` on `{}` has {} targets; a direct binding names one material",
+                    prim.path,
+                    targets.len()
+                ))
+                .at(rel.span, "one material");
+                for (_, span) in targets {
+                    d = d.also(*span, "target");
+                }
+                diags.push(d);
+                return None;
+            }
+        };
+        let strength = rel.metadata.iter().find(|m| m.key == "bindMaterialAs");
+        let stronger = match strength.map(|m| (&m.value, m.span)) {
+            None => false,
+            Some((v, span)) => match v.as_str() {
+                Some("strongerThanDescendants") => true,
+                Some("weakerThanDescendants") | Some("fallbackStrength") => false,
+                _ => {
+                    diags.push(
+                        Diagnostic::warning(format!(
+                            "`bindMaterialAs` on `{}.{name}` must be \"strongerThanDescendants\" or \"weakerThanDescendants\"; read as weaker",
+                            prim.path
+                        ))
+                        .at(span, "this value"),
+                    );
+                    false
+                }
+            },
+        };
+        return Some(Binding { slot: Slot::material_binding(), material: Some(path), span, stronger });
+    }
+    None
+}
+
+/// Warns about the collection-based bindings (`material:binding:collection:NAME`) strata
+/// does not resolve: the prims they name keep their direct bindings.
+fn warn_collection_bindings(prim: &Prim, diags: &mut Diagnostics) {
+    for rel in prim.relationships_with_prefix("material:binding:collection:") {
+        if rel.targets.is_empty() {
+            continue;
+        }
+        diags.push(
+            Diagnostic::warning(format!(
+                "collection-based binding `{}` on `{}` is not supported; it is ignored",
+                rel.name, prim.path
+            ))
+            .at(rel.span, "this binding")
+            .note("strata resolves direct `material:binding` relationships (and GeomSubset bindings)"),
+        );
+    }
+}
+
+/// Reads the slot bindings of every prim (depth first, parents before children), with
+/// UsdShade's `material:binding` as the base layer below every slot.
 pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
     let mut tree = BindingTree::default();
     let mut index: HashMap<PrimId, usize> = HashMap::new();
@@ -60,11 +141,14 @@ pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
                     continue;
                 }
             };
-            bindings.push(Binding { slot, material, span });
+            bindings.push(Binding { slot, material, span, stronger: false });
         }
+        bindings.extend(material_binding(prim, diags));
+        warn_collection_bindings(prim, diags);
         let parent = prim.parent.and_then(|p| index.get(&p).copied());
         index.insert(id, tree.prims.len());
-        tree.prims.push(BindingPrim { path: prim.path.clone(), parent, bindings, renderable: is_renderable(prim) });
+        let renderable = is_renderable(prim) || is_bound_subset(stage, prim);
+        tree.prims.push(BindingPrim { path: prim.path.clone(), parent, bindings, renderable });
     }
     tree
 }
@@ -122,10 +206,20 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
     let stacks = resolve_stacks(&tree, diags);
     // Find every material used, once.
     let mut found: HashMap<String, Option<MaterialSource>> = HashMap::new();
+    // Materials shaded by a UsdShade preview network (`compose::preview`), with the first
+    // binding that uses each.
+    let mut previews: Vec<(String, Span)> = Vec::new();
+    let mut preview_paths: std::collections::HashSet<String> = std::collections::HashSet::new();
     for stack in &stacks {
         for layer in &stack.layers {
             let applied = std::iter::once(&layer.applied).chain(layer.overrides.iter().map(|o| &o.applied));
             for applied in applied {
+                if stage.find(&applied.material).is_some_and(|id| preview::is_preview_material(stage, id)) {
+                    if preview_paths.insert(applied.material.clone()) {
+                        previews.push((applied.material.clone(), applied.span));
+                    }
+                    continue;
+                }
                 if !found.contains_key(&applied.material) {
                     let source = material_source(stage, &applied.material, applied.span, diags);
                     found.insert(applied.material.clone(), source);
@@ -136,9 +230,14 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
     let mut files: Vec<(PathBuf, Span)> = found.values().flatten().map(|m| (m.file.clone(), m.file_span)).collect();
     files.sort_by(|a, b| a.0.cmp(&b.0));
     files.dedup_by(|a, b| a.0 == b.0);
-    let library = Library::load(&files, sources, diags);
+    let mut library = Library::load(&files, sources, diags);
 
     let mut refs: HashMap<String, Option<MaterialRef>> = HashMap::new();
+    let mut shared = preview::Shared::default();
+    for (path, span) in previews {
+        let instance = preview::instantiate(stage, &mut library, &mut shared, &path, span, diags);
+        refs.insert(path, instance);
+    }
     let mut materials = Vec::new();
     let mut prim_material = Vec::with_capacity(stacks.len());
     let mut by_key: HashMap<String, usize> = HashMap::new();
@@ -293,7 +392,33 @@ fn value_producer<'s>(
     seen: &mut Vec<String>,
     diags: &mut Diagnostics,
 ) -> Option<(&'s Prim, &'s Attribute)> {
-    let own = attr.value.is_some().then_some((prim, attr));
+    match producer(stage, prim, attr, false, seen, diags)? {
+        Producer::Value(prim, attr) => Some((prim, attr)),
+        Producer::Output(..) => None, // never returned when shader outputs are not wanted
+    }
+}
+
+/// What an input resolves to through its connections.
+#[derive(Clone, Copy)]
+pub(super) enum Producer<'s> {
+    /// An attribute whose authored value the input takes.
+    Value(&'s Prim, &'s Attribute),
+    /// An output of a shader (not a Material or NodeGraph): a node of the network.
+    Output(&'s Prim, &'s Attribute),
+}
+
+/// [`value_producer`], optionally stopping at shader outputs (`outputs`: the preview networks
+/// of `compose::preview` evaluate them as nodes) instead of warning that strata cannot
+/// evaluate them.
+pub(super) fn producer<'s>(
+    stage: &'s Stage,
+    prim: &'s Prim,
+    attr: &'s Attribute,
+    outputs: bool,
+    seen: &mut Vec<String>,
+    diags: &mut Diagnostics,
+) -> Option<Producer<'s>> {
+    let own = attr.value.is_some().then_some(Producer::Value(prim, attr));
     let (target, span) = match attr.connections.as_slice() {
         [] => return own,
         [one] => one,
@@ -343,7 +468,8 @@ fn value_producer<'s>(
         return own;
     }
     let found = match (name.split_once(':').map(|(ns, _)| ns), is_container(source)) {
-        (Some("inputs" | "outputs"), true) => value_producer(stage, source, source_attr, seen, diags),
+        (Some("inputs" | "outputs"), true) => producer(stage, source, source_attr, outputs, seen, diags),
+        (Some("outputs"), false) if outputs => Some(Producer::Output(source, source_attr)),
         (Some("outputs"), false) => {
             diags.push(
                 Diagnostic::warning(format!(
@@ -472,7 +598,7 @@ fn usd_type(name: &str) -> Result<Option<Type>, ()> {
 
 /// Converts a scene value to a substance input's type, rejecting NaN, infinities and
 /// incompatible types.
-fn convert_input(value: &UsdValue, type_name: &str, to: Type) -> Result<Value, String> {
+pub(super) fn convert_input(value: &UsdValue, type_name: &str, to: Type) -> Result<Value, String> {
     let from = usd_type(type_name).map_err(|_| format!("USD type `{type_name}` cannot set a {to} input"))?;
     let compatible = match from {
         Some(from) => {

@@ -74,10 +74,103 @@ pub fn read_rgb_exr(path: &Path) -> Result<RgbImage, String> {
     decode_rgb_exr(&bytes, input::limits().max_texture_pixels)
 }
 
-/// Loads an OpenEXR file (its first RGBA layer). Non-finite texels become 0, so a broken
-/// pixel cannot put NaN into every render that samples it.
-pub fn load_exr(path: &Path) -> Result<Texture, String> {
-    let (width, height, mut texels) = read_rgb_exr(path)?;
+/// How 8-bit and 16-bit texels are turned into linear values (UsdUVTexture's
+/// `sourceColorSpace`). Float images (EXR, HDR) are linear in every mode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ColorSpace {
+    /// sRGB-decode the colour channels of 8-bit RGB(A) images; everything else is raw.
+    Auto,
+    /// sRGB-decode the colour channels of every integer image (alpha stays linear).
+    Srgb,
+    /// Use texel values as they are (normalised to [0, 1]).
+    Raw,
+}
+
+impl ColorSpace {
+    /// Parses `auto`, `sRGB` or `raw` (UsdUVTexture's tokens; the empty string is `auto`).
+    pub fn parse(name: &str) -> Option<ColorSpace> {
+        match name {
+            "" | "auto" => Some(ColorSpace::Auto),
+            "sRGB" => Some(ColorSpace::Srgb),
+            "raw" => Some(ColorSpace::Raw),
+            _ => None,
+        }
+    }
+
+    fn key(self) -> &'static str {
+        match self {
+            ColorSpace::Auto => "auto",
+            ColorSpace::Srgb => "sRGB",
+            ColorSpace::Raw => "raw",
+        }
+    }
+}
+
+/// The sRGB transfer function inverted: an encoded value in [0, 1] to linear (IEC 61966-2-1).
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+/// Whether the bytes start like an OpenEXR file.
+fn is_exr(bytes: &[u8]) -> bool {
+    bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01])
+}
+
+/// The width and height a PNG, JPEG or Radiance HDR header claims, read without decoding
+/// (the `image` crate reads only the header for this).
+pub fn image_dimensions(bytes: &[u8]) -> Result<(u32, u32), String> {
+    let reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| e.to_string())?;
+    if reader.format().is_none() {
+        return Err("not a supported image format (expected OpenEXR, PNG, JPEG or Radiance HDR)".into());
+    }
+    reader.into_dimensions().map_err(|e| e.to_string())
+}
+
+/// Decodes an image held in memory (OpenEXR, PNG, JPEG or Radiance HDR, told apart by their
+/// first bytes) into linear RGBA, after checking the header's size against `max_pixels`.
+/// Non-finite texels become 0.
+pub fn decode_texture(bytes: &[u8], space: ColorSpace, max_pixels: u64) -> Result<Texture, String> {
+    let (width, height, mut texels) = if is_exr(bytes) {
+        let (w, h, rgb) = decode_rgb_exr(bytes, max_pixels)?;
+        (w, h, rgb.into_iter().map(|[r, g, b]| [r, g, b, 1.0]).collect::<Vec<_>>())
+    } else {
+        let (w, h) = image_dimensions(bytes)?;
+        let pixels = u64::from(w) * u64::from(h);
+        if pixels > max_pixels {
+            return Err(format!(
+                "the image is {w} x {h} = {pixels} pixels, more than the texture limit of {max_pixels} pixels \
+                 (raise it with --max-texture-pixels)"
+            ));
+        }
+        if pixels == 0 {
+            return Err("the image is empty".into());
+        }
+        let mut reader =
+            image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| e.to_string())?;
+        // A second guard inside the decoder: nothing it allocates may exceed RGBA f32 pixels.
+        let mut limits = image::Limits::default();
+        limits.max_alloc = Some(max_pixels.saturating_mul(16).max(1 << 20));
+        reader.limits(limits);
+        let image = reader.decode().map_err(|e| e.to_string())?;
+        let color = image.color();
+        let float = matches!(color, image::ColorType::Rgb32F | image::ColorType::Rgba32F);
+        let eight_bit = color.bytes_per_pixel() == color.channel_count();
+        let srgb = match space {
+            ColorSpace::Raw => false,
+            ColorSpace::Srgb => !float,
+            ColorSpace::Auto => eight_bit && color.has_color(),
+        };
+        let rgba = image.into_rgba32f();
+        let (w, h) = (rgba.width() as usize, rgba.height() as usize);
+        let texels = rgba
+            .pixels()
+            .map(|p| {
+                let [r, g, b, a] = p.0;
+                if srgb { [srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b), a] } else { [r, g, b, a] }
+            })
+            .collect();
+        (w, h, texels)
+    };
     for texel in &mut texels {
         for c in texel.iter_mut() {
             if !c.is_finite() {
@@ -88,14 +181,29 @@ pub fn load_exr(path: &Path) -> Result<Texture, String> {
     Ok(Texture { width, height, texels })
 }
 
-/// Loads `path` (once per process) into the registry and returns its id.
+/// Loads `path` (once per process and colour space) into the registry and returns its id.
+/// The file is read through [`input::read_bytes`] (size limit, package paths); its header
+/// is checked against [`input::limits`] before decoding.
 pub fn register_file(path: &Path) -> Result<i32, String> {
-    let canonical = path.canonicalize().map_err(|e| format!("cannot open texture `{}`: {e}", path.display()))?;
-    if let Some(id) = strata_rt::texture::find(&canonical) {
+    register_file_as(path, ColorSpace::Auto)
+}
+
+/// [`register_file`] with an explicit colour space.
+pub fn register_file_as(path: &Path, space: ColorSpace) -> Result<i32, String> {
+    // Paths inside packages (`a.usdz[tex.png]`) do not exist on disk as such: only a path that
+    // does is canonicalised; `input` reports the rest.
+    let canonical = path.canonicalize().unwrap_or_else(|_| path.to_path_buf());
+    let mut key = canonical.clone().into_os_string();
+    key.push(format!("#{}", space.key()));
+    let key = std::path::PathBuf::from(key);
+    if let Some(id) = strata_rt::texture::find(&key) {
         return Ok(id);
     }
-    let texture = load_exr(&canonical).map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
-    register(canonical, texture)
+    let texture = input::read_bytes(&canonical)
+        .map_err(|e| e.to_string())
+        .and_then(|bytes| decode_texture(&bytes, space, input::limits().max_texture_pixels))
+        .map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
+    register(key, texture)
 }
 
 #[cfg(test)]

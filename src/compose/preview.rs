@@ -1,0 +1,398 @@
+//! UsdShade preview networks (UsdPreviewSurface, UsdUVTexture, UsdPrimvarReader_*,
+//! UsdTransform2d) as composed instances of the built-in `UsdPreviewSurface` substance
+//! (`front/prelude.ash`).
+//!
+//! A Material whose `outputs:surface` connects to a Shader with `info:id = "UsdPreviewSurface"`
+//! (through NodeGraphs and interface inputs, as UsdShade resolves connections: the same
+//! [`producer`] walk that strata's own materials use) becomes a copy of the built-in graph in
+//! which every input connected to another shader's output is driven by a node of that
+//! shader's type instead of the exposed input. Values (authored, or reaching the shader through
+//! interface inputs) set the exposed inputs, as for any substance. Networks of the same shape
+//! share one graph, so identical materials still share one compiled material (DESIGN.md rule 8).
+
+use super::MaterialRef;
+use super::scene::{Producer, convert_input, producer};
+use crate::diag::{Diagnostic, Diagnostics, Span};
+use crate::front::ast::Product;
+use crate::front::graph::{NodeInstance, Source};
+use crate::front::library::{GraphId, Library};
+use crate::front::types::{Type, Value};
+use crate::scene::{Attribute, Prim, PrimId, Stage, Value as UsdValue};
+use std::collections::HashMap;
+
+/// The built-in substance a preview network instantiates.
+pub const PREVIEW_SUBSTANCE: &str = "UsdPreviewSurface";
+
+/// The surface shader id strata implements.
+const SURFACE_ID: &str = "UsdPreviewSurface";
+
+/// Whether a Material is shaded by a UsdShade network rather than a strata source asset: no
+/// shader below it names `info:strata:sourceAsset`, and it has an `outputs:surface`.
+pub fn is_preview_material(stage: &Stage, id: PrimId) -> bool {
+    let prim = stage.prim(id);
+    prim.attribute("outputs:surface").is_some()
+        && !stage.subtree(id).any(|(_, p)| p.attribute("info:strata:sourceAsset").is_some())
+}
+
+/// Graphs already built for a scene, by network shape.
+#[derive(Default)]
+pub struct Shared {
+    by_shape: HashMap<String, GraphId>,
+}
+
+/// Builds the composed `UsdPreviewSurface` instance of the Material at `path` (bound at
+/// `binding`). `None`, after a warning, when the network has no UsdPreviewSurface: the layer
+/// then falls back to the default substance.
+pub fn instantiate(
+    stage: &Stage,
+    lib: &mut Library,
+    shared: &mut Shared,
+    path: &str,
+    binding: Span,
+    diags: &mut Diagnostics,
+) -> Option<MaterialRef> {
+    let material = stage.prim(stage.find(path)?);
+    let terminal = material.attribute("outputs:surface")?;
+    let mut seen = Vec::new();
+    let surface = match producer(stage, material, terminal, true, &mut seen, diags) {
+        Some(Producer::Output(prim, _)) => prim,
+        _ => {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "`{path}.outputs:surface` connects to no shader; the default substance is used"
+                ))
+                .at(terminal.span, "this output")
+                .also(binding, "bound here"),
+            );
+            return None;
+        }
+    };
+    let id = info_id(surface);
+    if id != Some(SURFACE_ID) {
+        diags.push(
+            Diagnostic::warning(format!(
+                "shader `{}` has `info:id = \"{}\"`, which strata does not implement; `{path}` falls back to the default substance",
+                surface.path,
+                id.unwrap_or("")
+            ))
+            .at(surface.attribute("info:id").map_or(surface.span, |a| a.span), "unknown shader")
+            .also(binding, "bound here")
+            .note("strata implements UsdPreviewSurface, UsdUVTexture, UsdPrimvarReader_* and UsdTransform2d"),
+        );
+        return None;
+    }
+    let template = lib.builtin_graph(PREVIEW_SUBSTANCE)?;
+    let mut builder = Builder { stage, lib, nodes: Vec::new(), memo: HashMap::new(), diags };
+    let mut graph = lib.get(template).clone();
+    let mut values: Vec<(usize, Value)> = Vec::new();
+    // Inputs driven by nodes, and inputs set at all (normal and displacement products stay
+    // only when something sets them: a bump of 0 costs the integrator a bump per hit).
+    let mut driven: Vec<(usize, Source)> = Vec::new();
+    let mut set: Vec<String> = Vec::new();
+    for attr in &surface.attributes {
+        let Some(usd_name) = attr.name.strip_prefix("inputs:") else { continue };
+        let name = if usd_name == "normal" { "normal_ts" } else { usd_name };
+        let Some((index, input)) = graph.input(name) else {
+            builder.diags.push(
+                Diagnostic::warning(format!(
+                    "UsdPreviewSurface has no input `{usd_name}`; `{}` is ignored",
+                    attribute_path(surface, attr)
+                ))
+                .at(attr.span, "unknown input"),
+            );
+            continue;
+        };
+        let ty = input.ty;
+        let mut seen = Vec::new();
+        match producer(stage, surface, attr, true, &mut seen, builder.diags) {
+            None => continue,
+            Some(Producer::Value(prim, value_attr)) => {
+                let Some((value, span)) = &value_attr.value else { continue };
+                match node_value(value, &value_attr.type_name, ty) {
+                    Ok(v) => {
+                        if name == "emissiveColor" && v != Value::Triple([0.0; 3]) {
+                            builder.warn_emission(surface, *span);
+                        }
+                        values.push((index, v));
+                        set.push(name.to_string());
+                    }
+                    Err(message) => builder.diags.push(
+                        Diagnostic::error(format!("input `{}`: {message}", attribute_path(prim, value_attr)))
+                            .at(*span, "this value"),
+                    ),
+                }
+            }
+            Some(Producer::Output(prim, output)) => {
+                let Some((source, from)) = builder.output(prim, output, attr.span) else { continue };
+                if !from.converts_to(ty) {
+                    builder.diags.push(
+                        Diagnostic::error(format!(
+                            "`{}` is {from} and cannot drive UsdPreviewSurface's {ty} input `{usd_name}`",
+                            attribute_path(prim, output)
+                        ))
+                        .at(attr.span, "connected here"),
+                    );
+                    continue;
+                }
+                if name == "emissiveColor" {
+                    builder.warn_emission(surface, attr.span);
+                }
+                driven.push((index, source));
+                set.push(name.to_string());
+            }
+        }
+    }
+    // The network's nodes go after the template's, so template node indices stay valid.
+    let offset = graph.nodes.len();
+    let shift = |s: Source| match s {
+        Source::Node { node, param } => Source::Node { node: node + offset, param },
+        other => other,
+    };
+    for node in &mut builder.nodes {
+        for arg in node.args.iter_mut().flatten() {
+            *arg = shift(arg.clone());
+        }
+    }
+    for (index, source) in driven {
+        let source = shift(source);
+        for arg in graph.nodes.iter_mut().flat_map(|n| n.args.iter_mut()) {
+            if *arg == Some(Source::Input(index)) {
+                *arg = Some(source.clone());
+            }
+        }
+    }
+    graph.nodes.append(&mut builder.nodes);
+    let keep = |p: Product| match p {
+        Product::Normal => set.iter().any(|s| s == "normal_ts"),
+        Product::Displacement => set.iter().any(|s| s == "displacement"),
+        _ => true,
+    };
+    graph.products.retain(|p| keep(p.product));
+    values.sort_by_key(|(i, _)| *i);
+    let shape = format!(
+        "{:?}|{:?}",
+        graph.nodes.iter().map(|n| (n.func, &n.args)).collect::<Vec<_>>(),
+        graph.products.iter().map(|p| p.product).collect::<Vec<_>>()
+    );
+    let graph_id = match shared.by_shape.get(&shape) {
+        Some(id) => *id,
+        None => {
+            graph.name = format!("{PREVIEW_SUBSTANCE}<{path}>");
+            let id = lib.add_graph(graph);
+            shared.by_shape.insert(shape, id);
+            id
+        }
+    };
+    Some(MaterialRef { path: path.to_string(), graph: graph_id, values, span: binding })
+}
+
+/// A shader's `info:id`.
+fn info_id(prim: &Prim) -> Option<&str> {
+    prim.value("info:id").and_then(UsdValue::as_str)
+}
+
+/// `/Prim.name`.
+fn attribute_path(prim: &Prim, attr: &Attribute) -> String {
+    format!("{}.{}", prim.path, attr.name)
+}
+
+/// Converts a USD value for a node or substance input. USD's shading triples (color3f,
+/// normal3f, float3, ...) all set `color` inputs, a float2 sets one with z = 0 and a float4
+/// its first three components (the fourth goes to the `_a` input, see [`Builder::node`]).
+fn node_value(value: &UsdValue, type_name: &str, to: Type) -> Result<Value, String> {
+    if let UsdValue::Tuple(t) = value
+        && to.is_triple()
+    {
+        let finite = |x: f64| {
+            let y = x as f32;
+            if y.is_finite() { Ok(y) } else { Err(format!("value {x} is not finite")) }
+        };
+        return match t.as_slice() {
+            [x, y] => Ok(Value::Triple([finite(*x)?, finite(*y)?, 0.0])),
+            [x, y, z] | [x, y, z, _] => Ok(Value::Triple([finite(*x)?, finite(*y)?, finite(*z)?])),
+            _ => Err(format!("a {}-component value cannot set a {to} input", t.len())),
+        };
+    }
+    convert_input(value, type_name, to)
+}
+
+/// Builds the nodes of one network, each shader once.
+struct Builder<'a, 's> {
+    stage: &'s Stage,
+    lib: &'a Library,
+    /// Nodes in dependency order (indices local to this list).
+    nodes: Vec<NodeInstance>,
+    /// Shader prim path → its node (`None` while it is being built: a cycle).
+    memo: HashMap<String, Option<usize>>,
+    diags: &'a mut Diagnostics,
+}
+
+impl<'s> Builder<'_, 's> {
+    fn warn_emission(&mut self, surface: &Prim, span: Span) {
+        self.diags.push(
+            Diagnostic::warning(format!("`{}`: strata surfaces do not emit light; emissiveColor is ignored", surface.path))
+                .at(span, "emission set here")
+                .note("use a UsdLux light (e.g. a RectLight or SphereLight) for emitters"),
+        );
+    }
+
+    /// The source for output `output` of shader `prim`, and its type.
+    fn output(&mut self, prim: &'s Prim, output: &Attribute, at: Span) -> Option<(Source, Type)> {
+        let name = output.name.strip_prefix("outputs:").unwrap_or(&output.name);
+        if info_id(prim) == Some("UsdPrimvarReader_string") {
+            // Strings are constants when compiling: the reader gives its fallback.
+            let fallback = prim.value("inputs:fallback").and_then(UsdValue::as_str).unwrap_or("");
+            return Some((Source::Const(Value::Str(fallback.to_string()), Type::STRING), Type::STRING));
+        }
+        let node = self.node(prim, at)?;
+        let func = self.lib.function(self.nodes[node].func);
+        match func.param(name) {
+            Some((param, p)) if p.output => Some((Source::Node { node, param }, p.ty)),
+            _ => {
+                self.diags.push(
+                    Diagnostic::error(format!("`{}` has no output `{name}`", prim.path))
+                        .at(output.span, "this output")
+                        .also(at, "connected here"),
+                );
+                None
+            }
+        }
+    }
+
+    /// The node for shader `prim`, built on first use.
+    fn node(&mut self, prim: &'s Prim, at: Span) -> Option<usize> {
+        match self.memo.get(&prim.path) {
+            Some(Some(node)) => return Some(*node),
+            Some(None) => {
+                self.diags.push(
+                    Diagnostic::error(format!("connection cycle through shader `{}`", prim.path))
+                        .at(at, "this connection closes the cycle"),
+                );
+                return None;
+            }
+            None => {}
+        }
+        let id = info_id(prim).unwrap_or("");
+        let node_type = match id {
+            "UsdUVTexture" | "UsdTransform2d" | "UsdPrimvarReader_float2" | "UsdPrimvarReader_float3"
+            | "UsdPrimvarReader_float" | "UsdPrimvarReader_int" => id,
+            "UsdPrimvarReader_normal" | "UsdPrimvarReader_point" | "UsdPrimvarReader_vector" => {
+                "UsdPrimvarReader_float3"
+            }
+            _ => {
+                self.diags.push(
+                    Diagnostic::warning(format!(
+                        "shader `{}` has `info:id = \"{id}\"`, which strata does not implement; its output is not connected",
+                        prim.path
+                    ))
+                    .at(prim.attribute("info:id").map_or(prim.span, |a| a.span), "unknown shader")
+                    .also(at, "connected here")
+                    .note("the input takes its own authored value, else the default"),
+                );
+                return None;
+            }
+        };
+        let func_id = *self.lib.shaders.get(node_type)?;
+        self.memo.insert(prim.path.clone(), None);
+        let func = self.lib.function(func_id);
+        let mut args: Vec<Option<Source>> = vec![None; func.params.len()];
+        for attr in &prim.attributes {
+            let Some(usd_name) = attr.name.strip_prefix("inputs:") else { continue };
+            let name = if usd_name == "in" { "in_" } else { usd_name };
+            let func = self.lib.function(func_id);
+            let Some((index, param)) = func.param(name).filter(|(_, p)| !p.output) else {
+                self.diags.push(
+                    Diagnostic::warning(format!("{id} has no input `{usd_name}`; `{}` is ignored", attribute_path(prim, attr)))
+                        .at(attr.span, "unknown input"),
+                );
+                continue;
+            };
+            let ty = param.ty;
+            let alpha = func.param(&format!("{name}_a")).map(|(i, _)| i);
+            let mut seen = Vec::new();
+            match producer(self.stage, prim, attr, true, &mut seen, self.diags) {
+                None => {}
+                Some(Producer::Value(vprim, vattr)) => {
+                    let Some((value, span)) = &vattr.value else { continue };
+                    match node_value(value, &vattr.type_name, ty) {
+                        Ok(v) => {
+                            self.check_token(id, name, &v, *span);
+                            args[index] = Some(Source::Const(v, ty));
+                            if let (Some(a), UsdValue::Tuple(t)) = (alpha, value)
+                                && let [_, _, _, w] = t.as_slice()
+                                && (*w as f32).is_finite()
+                            {
+                                args[a] = Some(Source::Const(Value::Float(*w as f32), Type::FLOAT));
+                            }
+                        }
+                        Err(message) => self.diags.push(
+                            Diagnostic::error(format!("input `{}`: {message}", attribute_path(vprim, vattr)))
+                                .at(*span, "this value"),
+                        ),
+                    }
+                }
+                Some(Producer::Output(oprim, output)) => {
+                    let Some((source, from)) = self.output(oprim, output, attr.span) else { continue };
+                    if !from.converts_to(ty) {
+                        self.diags.push(
+                            Diagnostic::error(format!(
+                                "`{}` is {from} and cannot drive the {ty} input `{}`",
+                                attribute_path(oprim, output),
+                                attribute_path(prim, attr)
+                            ))
+                            .at(attr.span, "connected here"),
+                        );
+                        continue;
+                    }
+                    args[index] = Some(source);
+                }
+            }
+        }
+        let node = self.nodes.len();
+        self.nodes.push(NodeInstance {
+            name: prim.path.rsplit('/').next().unwrap_or("shader").to_string(),
+            func: func_id,
+            args,
+            span: prim.span,
+        });
+        self.memo.insert(prim.path.clone(), Some(node));
+        Some(node)
+    }
+
+    /// Checks the tokens whose meaning strata must know: colour spaces (an error: the texture
+    /// would decode wrongly), wrap modes and primvar names (warnings: a documented fallback).
+    fn check_token(&mut self, id: &str, input: &str, value: &Value, span: Span) {
+        let Value::Str(token) = value else { return };
+        match (id, input) {
+            ("UsdUVTexture", "sourceColorSpace") if !matches!(token.as_str(), "auto" | "sRGB" | "raw") => {
+                self.diags.push(
+                    Diagnostic::error(format!("unknown sourceColorSpace `{token}`; expected `auto`, `sRGB` or `raw`"))
+                        .at(span, "this value"),
+                );
+            }
+            ("UsdUVTexture", "wrapS" | "wrapT")
+                if !matches!(token.as_str(), "black" | "clamp" | "repeat" | "mirror" | "useMetadata") =>
+            {
+                self.diags.push(
+                    Diagnostic::warning(format!("unknown wrap mode `{token}`; strata repeats"))
+                        .at(span, "this value")
+                        .note("UsdUVTexture's wrap modes: black, clamp, repeat, mirror, useMetadata"),
+                );
+            }
+            ("UsdUVTexture", "file") if token.contains("<UDIM>") => {
+                self.diags.push(
+                    Diagnostic::error("UDIM texture sets are not supported").at(span, "a `<UDIM>` path"),
+                );
+            }
+            (reader, "varname") if reader.starts_with("UsdPrimvarReader_") && token != "st" => {
+                self.diags.push(
+                    Diagnostic::warning(format!(
+                        "strata's shading points carry only the `st` primvar; `{token}` reads the reader's fallback"
+                    ))
+                    .at(span, "this primvar"),
+                );
+            }
+            _ => {}
+        }
+    }
+}
