@@ -7,7 +7,7 @@
 
 use super::shapes::{Part, Shape};
 use super::xform::{PrimXform, value_span, world_transforms};
-use crate::compose::scene::is_renderable;
+use crate::compose::scene::{is_bound_subset, is_renderable};
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::scene::{Attribute, Prim, Stage, Value};
 use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
@@ -102,10 +102,17 @@ fn build_within(stage: &Stage, xforms: &[PrimXform], budget: usize, diags: &mut 
         }
 
         let index = geometry.prims.len() as u32;
+        // GeomSubset material bindings: their faces are renderable prims of their own, right
+        // after the mesh, so each gets its composed material.
+        let (face_prims, subsets) = match prim.type_name.as_deref() {
+            Some("Mesh") => material_subsets(stage, prim, index, diags),
+            _ => (Vec::new(), Vec::new()),
+        };
         let mut out = Emitter {
             geometry: &mut geometry,
             m: xf.world,
             prim: index,
+            face_prims,
             beyond_extent: None,
             budget,
             over_budget: false,
@@ -130,6 +137,7 @@ fn build_within(stage: &Stage, xforms: &[PrimXform], budget: usize, diags: &mut 
                 .note("implicit surfaces (Sphere, Cylinder) are tessellated into up to 16384 triangles each"),
             );
             geometry.prims.push(GeomPrim { path: prim.path.clone(), span: prim.span });
+            geometry.prims.extend(subsets);
             break;
         }
         if let Some(p) = out.beyond_extent {
@@ -155,6 +163,7 @@ fn build_within(stage: &Stage, xforms: &[PrimXform], budget: usize, diags: &mut 
             diags.push(d.note("strata renders in f32: coordinates must be finite and within ±1e7 after transforms"));
         }
         geometry.prims.push(GeomPrim { path: prim.path.clone(), span: prim.span });
+        geometry.prims.extend(subsets);
     }
     if geometry.degenerate > 0 {
         diags.push(Diagnostic::warning(format!(
@@ -165,11 +174,63 @@ fn build_within(stage: &Stage, xforms: &[PrimXform], budget: usize, diags: &mut 
     geometry
 }
 
+/// The GeomSubsets of `mesh` that bind materials to faces ([`is_bound_subset`]), numbered
+/// after the mesh's own index `base`: the prim index of every face, and the subsets' entries
+/// for [`Geometry::prims`]. Indices outside the mesh's faces are errors; a face in two
+/// subsets (the `materialBind` family must not overlap) warns and keeps the first.
+fn material_subsets(stage: &Stage, mesh: &Prim, base: u32, diags: &mut Diagnostics) -> (Vec<u32>, Vec<GeomPrim>) {
+    let subsets: Vec<&Prim> =
+        mesh.children.iter().map(|&c| stage.prim(c)).filter(|p| is_bound_subset(stage, p)).collect();
+    if subsets.is_empty() {
+        return (Vec::new(), Vec::new());
+    }
+    let faces = mesh.value("faceVertexCounts").and_then(Value::as_int_array).map_or(0, <[i64]>::len);
+    let mut face_prims = vec![base; faces];
+    let mut prims = Vec::with_capacity(subsets.len());
+    for (k, subset) in subsets.iter().enumerate() {
+        let index = base + 1 + k as u32;
+        let indices = subset.value("indices").and_then(Value::as_int_array).unwrap_or(&[]);
+        let span = span_of(subset, "indices");
+        if let Some(bad) = indices.iter().find(|&&i| i < 0 || i as usize >= faces) {
+            diags.push(
+                Diagnostic::error(format!(
+                    "GeomSubset `{}`: face index {bad} is outside the mesh's {faces} face(s)",
+                    subset.path
+                ))
+                .at(span, "these indices"),
+            );
+        }
+        let mut shared = 0usize;
+        for &i in indices.iter().filter(|&&i| i >= 0 && (i as usize) < faces) {
+            let slot = &mut face_prims[i as usize];
+            if *slot == base {
+                *slot = index;
+            } else if *slot != index {
+                shared += 1;
+            }
+        }
+        if shared > 0 {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "GeomSubset `{}`: {shared} face(s) are already in an earlier materialBind subset, which keeps them",
+                    subset.path
+                ))
+                .at(span, "overlapping indices")
+                .note("the materialBind family of a mesh must not overlap (familyType nonOverlapping or partition)"),
+            );
+        }
+        prims.push(GeomPrim { path: subset.path.clone(), span: subset.span });
+    }
+    (face_prims, prims)
+}
+
 /// Transforms local-space triangles and shapes to world space and appends them.
 struct Emitter<'g> {
     geometry: &'g mut Geometry,
     m: DMat4,
     prim: u32,
+    /// For meshes with GeomSubset bindings: the prim index of each face (empty: all `prim`).
+    face_prims: Vec<u32>,
     /// The first world-space point past [`MAX_EXTENT`] (or non-finite), if any.
     beyond_extent: Option<DVec3>,
     /// The most triangles the scene may have ([`MAX_TRIANGLES`]).
@@ -344,7 +405,9 @@ fn mesh(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
     let point = |i: usize| DVec3::new(points[3 * i], points[3 * i + 1], points[3 * i + 2]);
     let mut start = 0usize;
     let mut short_faces = 0usize;
+    let base = out.prim;
     for (face, &count) in counts.iter().enumerate() {
+        out.prim = out.face_prims.get(face).copied().unwrap_or(base);
         let count = count as usize;
         if count < 3 {
             short_faces += 1;
