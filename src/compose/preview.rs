@@ -396,3 +396,116 @@ impl<'s> Builder<'_, 's> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::abi::{Closure, ClosureKind, Globals};
+    use crate::backend::{BackendKind, Compiler};
+    use crate::compose::scene::compose_stage;
+    use crate::diag::{Diagnostics, SourceMap};
+    use crate::ir::wired::PassOptions;
+    use crate::render::bsdf::Bsdf;
+    use crate::render::sampling::Rng;
+    use crate::scene::Stage;
+    use glam::Vec3;
+    use std::path::Path;
+
+    /// The closure `/Ball`'s material (a UsdPreviewSurface with `inputs`, as USDA lines)
+    /// evaluates to, and the rendered diagnostics.
+    fn closure_of(inputs: &str) -> (Closure, String) {
+        let text = format!(
+            "#usda 1.0\ndef Sphere \"Ball\" {{ rel material:binding = </M> }}\n\
+             def Material \"M\" {{\n    token outputs:surface.connect = </M/S.outputs:surface>\n    \
+             def Shader \"S\" {{\n        uniform token info:id = \"UsdPreviewSurface\"\n{inputs}\n        \
+             token outputs:surface\n    }}\n}}\n"
+        );
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let stage = Stage::from_text("scene.usda", &text, Path::new("."), &mut sources, &mut diags).expect("parses");
+        let c = compose_stage(&stage, &mut sources, &mut diags);
+        let material = c.material_of("/Ball").expect("composed").clone();
+        assert_eq!(material.layers.len(), 1, "{}", diags.render(&sources));
+        let code = Compiler::new(BackendKind::Jit, PassOptions::default())
+            .compile(&c.library, &material, &mut diags)
+            .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
+        let g = Globals { n: [0.0, 0.0, 1.0], ng: [0.0, 0.0, 1.0], ..Globals::default() };
+        let mut closure = Closure::default();
+        code.surface(&g, 0, &mut closure).expect("evaluates");
+        (closure, diags.render(&sources))
+    }
+
+    /// The directional albedo ∫ f cos dωi of the largest channel for outgoing `wo`, estimated
+    /// by BSDF sampling: (mean, standard error).
+    fn albedo(b: &Bsdf, wo: Vec3, n: usize) -> (f64, f64) {
+        let mut rng = Rng::new(17, (wo.z * 1000.0) as u64, 0);
+        let (mut sum, mut sum2) = (0.0f64, 0.0f64);
+        for _ in 0..n {
+            let uc = rng.uniform();
+            let u = rng.uniform2();
+            if let Some(s) = b.sample(wo, uc, u) {
+                let w = (s.f.max_element() * s.wi.z.abs() / s.pdf) as f64;
+                sum += w;
+                sum2 += w * w;
+            }
+        }
+        let mean = sum / n as f64;
+        (mean, ((sum2 / n as f64 - mean * mean).max(0.0) / n as f64).sqrt())
+    }
+
+    #[test]
+    fn white_furnace_metallic_clearcoat_and_specular_never_gain_energy() {
+        let white = "        color3f inputs:diffuseColor = (1, 1, 1)\n";
+        let cases = [
+            ("metallic 1, smooth", format!("{white}        float inputs:metallic = 1\n        float inputs:roughness = 0.05"), ClosureKind::Metal),
+            ("metallic 1, rough", format!("{white}        float inputs:metallic = 1\n        float inputs:roughness = 1"), ClosureKind::Metal),
+            ("metallic 0.6", format!("{white}        float inputs:metallic = 0.6\n        float inputs:roughness = 0.4"), ClosureKind::Metal),
+            ("clearcoat 1", format!("{white}        float inputs:clearcoat = 1\n        float inputs:roughness = 0.8"), ClosureKind::Glossy),
+            ("clearcoat 1, ior 4", format!("{white}        float inputs:clearcoat = 1\n        float inputs:ior = 4"), ClosureKind::Glossy),
+            (
+                "specular workflow",
+                format!("{white}        int inputs:useSpecularWorkflow = 1\n        color3f inputs:specularColor = (1, 1, 1)"),
+                ClosureKind::Glossy,
+            ),
+        ];
+        let mut failures = Vec::new();
+        for (name, inputs, kind) in &cases {
+            let (closure, rendered) = closure_of(inputs);
+            assert!(rendered.is_empty(), "{name}: {rendered}");
+            assert_eq!(ClosureKind::from_u32(closure.kind), *kind, "{name}: {closure:?}");
+            let b = Bsdf::from_closure(&closure);
+            for cos in [0.05f32, 0.3, 0.7, 1.0] {
+                let wo = Vec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
+                let (e, se) = albedo(&b, wo, 40_000);
+                if e > 1.0 + 4.0 * se + 1e-3 {
+                    failures.push(format!("{name} at cos {cos}: reflects {e} ± {se} of what it receives"));
+                }
+            }
+        }
+        assert!(failures.is_empty(), "{failures:#?}");
+    }
+
+    #[test]
+    fn preview_surface_maps_onto_strata_closures() {
+        // Defaults: diffuseColor 0.18, roughness 0.5, ior 1.5, metallic 0 → coat over Lambert.
+        let (c, rendered) = closure_of("");
+        assert!(rendered.is_empty(), "{rendered}");
+        assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Glossy);
+        assert_eq!(&c.params[..8], &[0.18, 0.18, 0.18, 1.0, 1.0, 1.0, 0.5, 1.5]);
+        // Metallic 1: a conductor with the base colour at normal incidence.
+        let (c, _) = closure_of("        color3f inputs:diffuseColor = (0.9, 0.6, 0.2)\n        float inputs:metallic = 1");
+        assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Metal);
+        assert_eq!(&c.params[..7], &[0.9, 0.6, 0.2, 1.0, 1.0, 1.0, 0.5]);
+        // Specular workflow: F0 = 0.04 is ior 1.5, untinted.
+        let (c, _) = closure_of(
+            "        int inputs:useSpecularWorkflow = 1\n        color3f inputs:specularColor = (0.04, 0.04, 0.04)",
+        );
+        assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Glossy);
+        assert!((c.params[7] - 1.5).abs() < 1e-5 && c.params[3] == 1.0, "{c:?}");
+        // Clearcoat 1 moves the coat roughness to clearcoatRoughness.
+        let (c, _) = closure_of("        float inputs:clearcoat = 1\n        float inputs:clearcoatRoughness = 0.1");
+        assert!((c.params[6] - 0.1).abs() < 1e-6, "{c:?}");
+        // Emission is reported, never silently dropped.
+        let (_, rendered) = closure_of("        color3f inputs:emissiveColor = (1, 1, 1)");
+        assert!(rendered.contains("strata surfaces do not emit light; emissiveColor is ignored"), "{rendered}");
+    }
+}

@@ -120,7 +120,8 @@ fn is_exr(bytes: &[u8]) -> bool {
 /// (the `image` crate reads only the header for this).
 pub fn image_dimensions(bytes: &[u8]) -> Result<(u32, u32), String> {
     let reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| e.to_string())?;
-    if reader.format().is_none() {
+    use image::ImageFormat::{Hdr, Jpeg, Png};
+    if !matches!(reader.format(), Some(Png | Jpeg | Hdr)) {
         return Err("not a supported image format (expected OpenEXR, PNG, JPEG or Radiance HDR)".into());
     }
     reader.into_dimensions().map_err(|e| e.to_string())
@@ -199,9 +200,9 @@ pub fn register_file_as(path: &Path, space: ColorSpace) -> Result<i32, String> {
     if let Some(id) = strata_rt::texture::find(&key) {
         return Ok(id);
     }
-    let texture = input::read_bytes(&canonical)
-        .map_err(|e| e.to_string())
-        .and_then(|bytes| decode_texture(&bytes, space, input::limits().max_texture_pixels))
+    let bytes =
+        input::read_bytes(&canonical).map_err(|e| format!("cannot open texture `{}`: {e}", path.display()))?;
+    let texture = decode_texture(&bytes, space, input::limits().max_texture_pixels)
         .map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
     register(key, texture)
 }
@@ -258,5 +259,83 @@ pub(crate) mod tests {
         // Garbage is an error too, never a panic.
         assert!(decode_rgb_exr(b"v/1\x01garbage", 100).is_err());
         assert!(decode_rgb_exr(&[], 100).is_err());
+    }
+
+    /// An 8-bit PNG in memory, written with the `png` crate (not the decoder under test).
+    pub(crate) fn small_png(width: u32, height: u32, color: png::ColorType, data: &[u8]) -> Vec<u8> {
+        let mut bytes = Vec::new();
+        let mut encoder = png::Encoder::new(&mut bytes, width, height);
+        encoder.set_color(color);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().expect("header");
+        writer.write_image_data(data).expect("data");
+        writer.finish().expect("finish");
+        bytes
+    }
+
+    #[test]
+    fn png_decodes_with_srgb_and_alpha() {
+        // 2×1 RGBA: (255, 128, 0, 64) and (0, 0, 0, 255).
+        let bytes = small_png(2, 1, png::ColorType::Rgba, &[255, 128, 0, 64, 0, 0, 0, 255]);
+        let srgb = |c: f32| if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) };
+        let tex = decode_texture(&bytes, ColorSpace::Auto, 100).expect("decodes");
+        assert_eq!((tex.width, tex.height), (2, 1));
+        let [r, g, b, a] = tex.texels[0];
+        assert_eq!((r, b), (1.0, 0.0));
+        assert!((g - srgb(128.0 / 255.0)).abs() < 1e-6, "{g}");
+        assert!((a - 64.0 / 255.0).abs() < 1e-6, "alpha stays linear: {a}");
+        let raw = decode_texture(&bytes, ColorSpace::Raw, 100).expect("decodes");
+        assert!((raw.texels[0][1] - 128.0 / 255.0).abs() < 1e-6);
+        // Grey images are data (roughness, masks): auto leaves them raw, sRGB decodes them.
+        let grey = small_png(1, 1, png::ColorType::Grayscale, &[128]);
+        let t = decode_texture(&grey, ColorSpace::Auto, 100).unwrap();
+        assert!((t.texels[0][0] - 128.0 / 255.0).abs() < 1e-6 && t.texels[0][3] == 1.0);
+        let t = decode_texture(&grey, ColorSpace::Srgb, 100).unwrap();
+        assert!((t.texels[0][2] - srgb(128.0 / 255.0)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn image_headers_are_checked_before_decoding() {
+        let bytes = small_png(4, 4, png::ColorType::Rgb, &[7; 48]);
+        let err = decode_texture(&bytes, ColorSpace::Auto, 15).unwrap_err();
+        assert!(err.contains("4 x 4 = 16 pixels, more than the texture limit of 15"), "{err}");
+        // A 60-byte file claiming 100000 × 100000 RGB pixels (30 GB decoded): refused from
+        // the header alone.
+        let crc32 = |data: &[u8]| {
+            let mut crc = !0u32;
+            for &b in data {
+                crc ^= u32::from(b);
+                for _ in 0..8 {
+                    crc = if crc & 1 != 0 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+                }
+            }
+            !crc
+        };
+        let chunk = |kind: &[u8], data: &[u8]| {
+            let mut c = (data.len() as u32).to_be_bytes().to_vec();
+            let body = [kind, data].concat();
+            c.extend_from_slice(&body);
+            c.extend_from_slice(&crc32(&body).to_be_bytes());
+            c
+        };
+        let mut ihdr = 100_000u32.to_be_bytes().repeat(2);
+        ihdr.extend_from_slice(&[8, 2, 0, 0, 0]);
+        let huge = [
+            b"\x89PNG\r\n\x1a\n".to_vec(),
+            chunk(b"IHDR", &ihdr),
+            chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]),
+            chunk(b"IEND", &[]),
+        ]
+        .concat();
+        assert!(huge.len() < 80);
+        let err = decode_texture(&huge, ColorSpace::Auto, input::DEFAULT_MAX_TEXTURE_PIXELS).unwrap_err();
+        assert!(err.contains("100000 x 100000"), "{err}");
+        let err = decode_texture(b"GIF89a not supported", ColorSpace::Auto, 100).unwrap_err();
+        assert!(err.contains("not a supported image format"), "{err}");
+        assert!(decode_texture(&bytes[..30], ColorSpace::Auto, 100).is_err(), "truncated");
+        assert!(decode_texture(&[], ColorSpace::Auto, 100).is_err());
+        // EXR still goes through its own header check.
+        assert!(decode_texture(&small_exr(3, 2), ColorSpace::Auto, 5).unwrap_err().contains("3 x 2 = 6"));
+        assert_eq!(decode_texture(&small_exr(3, 2), ColorSpace::Srgb, 6).unwrap().texels[5], [2.0, 1.0, 0.5, 1.0]);
     }
 }
