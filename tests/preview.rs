@@ -29,8 +29,15 @@ fn render_fixture(name: &str) -> Image {
     let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
     assert!(!diags.has_errors(), "{}", diags.render(&sources));
     let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
-    let settings =
-        RenderSettings { width: RES, height: RES, spp: 4, seed: 3, threads: Some(2), max_depth: 2, mode: LayerMode::Stochastic };
+    let settings = RenderSettings {
+        width: RES,
+        height: RES,
+        spp: 4,
+        seed: 3,
+        threads: Some(2),
+        max_depth: 2,
+        mode: LayerMode::Stochastic,
+    };
     let (image, stats) = render(&scene, &refs, &settings, None).expect("renders");
     assert_eq!(stats.invalid_samples(), 0, "{stats}");
     image
@@ -88,7 +95,11 @@ fn albedo_aov_is_the_srgb_decoded_texel_under_each_pixel() {
     }
     distinct.sort();
     distinct.dedup();
-    assert_eq!(distinct.len(), 16, "the checker's 16 cells have distinct colours, so a flipped or shifted mapping fails");
+    assert_eq!(
+        distinct.len(),
+        16,
+        "the checker's 16 cells have distinct colours, so a flipped or shifted mapping fails"
+    );
 }
 
 #[test]

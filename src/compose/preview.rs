@@ -230,9 +230,12 @@ struct Builder<'a, 's> {
 impl<'s> Builder<'_, 's> {
     fn warn_emission(&mut self, surface: &Prim, span: Span) {
         self.diags.push(
-            Diagnostic::warning(format!("`{}`: strata surfaces do not emit light; emissiveColor is ignored", surface.path))
-                .at(span, "emission set here")
-                .note("use a UsdLux light (e.g. a RectLight or SphereLight) for emitters"),
+            Diagnostic::warning(format!(
+                "`{}`: strata surfaces do not emit light; emissiveColor is ignored",
+                surface.path
+            ))
+            .at(span, "emission set here")
+            .note("use a UsdLux light (e.g. a RectLight or SphereLight) for emitters"),
         );
     }
 
@@ -274,8 +277,12 @@ impl<'s> Builder<'_, 's> {
         }
         let id = info_id(prim).unwrap_or("");
         let node_type = match id {
-            "UsdUVTexture" | "UsdTransform2d" | "UsdPrimvarReader_float2" | "UsdPrimvarReader_float3"
-            | "UsdPrimvarReader_float" | "UsdPrimvarReader_int" => id,
+            "UsdUVTexture"
+            | "UsdTransform2d"
+            | "UsdPrimvarReader_float2"
+            | "UsdPrimvarReader_float3"
+            | "UsdPrimvarReader_float"
+            | "UsdPrimvarReader_int" => id,
             "UsdPrimvarReader_normal" | "UsdPrimvarReader_point" | "UsdPrimvarReader_vector" => {
                 "UsdPrimvarReader_float3"
             }
@@ -302,8 +309,11 @@ impl<'s> Builder<'_, 's> {
             let func = self.lib.function(func_id);
             let Some((index, param)) = func.param(name).filter(|(_, p)| !p.output) else {
                 self.diags.push(
-                    Diagnostic::warning(format!("{id} has no input `{usd_name}`; `{}` is ignored", attribute_path(prim, attr)))
-                        .at(attr.span, "unknown input"),
+                    Diagnostic::warning(format!(
+                        "{id} has no input `{usd_name}`; `{}` is ignored",
+                        attribute_path(prim, attr)
+                    ))
+                    .at(attr.span, "unknown input"),
                 );
                 continue;
             };
@@ -380,9 +390,7 @@ impl<'s> Builder<'_, 's> {
                 );
             }
             ("UsdUVTexture", "file") if token.contains("<UDIM>") => {
-                self.diags.push(
-                    Diagnostic::error("UDIM texture sets are not supported").at(span, "a `<UDIM>` path"),
-                );
+                self.diags.push(Diagnostic::error("UDIM texture sets are not supported").at(span, "a `<UDIM>` path"));
             }
             (reader, "varname") if reader.starts_with("UsdPrimvarReader_") && token != "st" => {
                 self.diags.push(
@@ -456,14 +464,36 @@ mod tests {
     fn white_furnace_metallic_clearcoat_and_specular_never_gain_energy() {
         let white = "        color3f inputs:diffuseColor = (1, 1, 1)\n";
         let cases = [
-            ("metallic 1, smooth", format!("{white}        float inputs:metallic = 1\n        float inputs:roughness = 0.05"), ClosureKind::Metal),
-            ("metallic 1, rough", format!("{white}        float inputs:metallic = 1\n        float inputs:roughness = 1"), ClosureKind::Metal),
-            ("metallic 0.6", format!("{white}        float inputs:metallic = 0.6\n        float inputs:roughness = 0.4"), ClosureKind::Metal),
-            ("clearcoat 1", format!("{white}        float inputs:clearcoat = 1\n        float inputs:roughness = 0.8"), ClosureKind::Glossy),
-            ("clearcoat 1, ior 4", format!("{white}        float inputs:clearcoat = 1\n        float inputs:ior = 4"), ClosureKind::Glossy),
+            (
+                "metallic 1, smooth",
+                format!("{white}        float inputs:metallic = 1\n        float inputs:roughness = 0.05"),
+                ClosureKind::Metal,
+            ),
+            (
+                "metallic 1, rough",
+                format!("{white}        float inputs:metallic = 1\n        float inputs:roughness = 1"),
+                ClosureKind::Metal,
+            ),
+            (
+                "metallic 0.6",
+                format!("{white}        float inputs:metallic = 0.6\n        float inputs:roughness = 0.4"),
+                ClosureKind::Metal,
+            ),
+            (
+                "clearcoat 1",
+                format!("{white}        float inputs:clearcoat = 1\n        float inputs:roughness = 0.8"),
+                ClosureKind::Glossy,
+            ),
+            (
+                "clearcoat 1, ior 4",
+                format!("{white}        float inputs:clearcoat = 1\n        float inputs:ior = 4"),
+                ClosureKind::Glossy,
+            ),
             (
                 "specular workflow",
-                format!("{white}        int inputs:useSpecularWorkflow = 1\n        color3f inputs:specularColor = (1, 1, 1)"),
+                format!(
+                    "{white}        int inputs:useSpecularWorkflow = 1\n        color3f inputs:specularColor = (1, 1, 1)"
+                ),
                 ClosureKind::Glossy,
             ),
         ];
@@ -492,7 +522,8 @@ mod tests {
         assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Glossy);
         assert_eq!(&c.params[..8], &[0.18, 0.18, 0.18, 1.0, 1.0, 1.0, 0.5, 1.5]);
         // Metallic 1: a conductor with the base colour at normal incidence.
-        let (c, _) = closure_of("        color3f inputs:diffuseColor = (0.9, 0.6, 0.2)\n        float inputs:metallic = 1");
+        let (c, _) =
+            closure_of("        color3f inputs:diffuseColor = (0.9, 0.6, 0.2)\n        float inputs:metallic = 1");
         assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Metal);
         assert_eq!(&c.params[..7], &[0.9, 0.6, 0.2, 1.0, 1.0, 1.0, 0.5]);
         // Specular workflow: F0 = 0.04 is ior 1.5, untinted.

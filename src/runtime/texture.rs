@@ -200,8 +200,7 @@ pub fn register_file_as(path: &Path, space: ColorSpace) -> Result<i32, String> {
     if let Some(id) = strata_rt::texture::find(&key) {
         return Ok(id);
     }
-    let bytes =
-        input::read_bytes(&canonical).map_err(|e| format!("cannot open texture `{}`: {e}", path.display()))?;
+    let bytes = input::read_bytes(&canonical).map_err(|e| format!("cannot open texture `{}`: {e}", path.display()))?;
     let texture = decode_texture(&bytes, space, input::limits().max_texture_pixels)
         .map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
     register(key, texture)

@@ -100,7 +100,7 @@ pub fn lookup(id: i32, s: f32, t: f32, mode: i32) -> f32 {
     let Ok(registry) = REGISTRY.read() else { return 0.0 };
     let (channel, wrap_s, wrap_t) = (mode & 15, (mode >> 4) & 15, (mode >> 8) & 15);
     match (usize::try_from(id).ok().and_then(|i| registry.textures.get(i)), channel) {
-        (Some((_, tex)), 0..=3) if mode >= 0 && mode < 4096 => {
+        (Some((_, tex)), 0..=3) if (0..4096).contains(&mode) => {
             tex.sample_wrapped(s, t, channel as usize, wrap_s, wrap_t)
         }
         _ => 0.0,
