@@ -169,3 +169,49 @@ fn the_texture_node_reads_png() {
         assert_close([out[0], out[1], out[2]], texel_under(x, y), &format!("texel ({x}, {y})"));
     }
 }
+
+#[test]
+fn jit_and_interpreter_agree_on_a_preview_network() {
+    let path = format!("{DIR}/dirt.usda");
+    let image = |backend| {
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let compiled = compile_scene(Some(Path::new(&path)), backend, PassOptions::default(), &mut sources, &mut diags)
+            .expect("compiles");
+        let scene = Scene::from_stage(&compiled.stage, &|p| compiled.prim_material.get(p).copied(), &mut diags)
+            .expect("scene builds");
+        let refs: Vec<&dyn MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
+        let settings = RenderSettings {
+            width: 16,
+            height: 16,
+            spp: 2,
+            seed: 5,
+            threads: Some(2),
+            max_depth: 3,
+            mode: LayerMode::Stochastic,
+        };
+        render(&scene, &refs, &settings, None).expect("renders").0
+    };
+    let (jit, interp) = (image(BackendKind::Jit), image(BackendKind::Interp));
+    for c in ["R", "G", "B", "albedo.R", "albedo.G", "albedo.B"] {
+        assert_eq!(jit.f32_channel(c), interp.f32_channel(c), "channel {c}");
+    }
+}
+
+#[test]
+fn a_missing_or_broken_texture_is_one_error_at_the_usd_attribute() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(format!("{DIR}/textured.usda")).unwrap();
+    std::fs::write(dir.path().join("missing.usda"), text.replace("@checker.png@", "@missing.png@")).unwrap();
+    std::fs::write(dir.path().join("broken.png"), b"\x89PNG\r\n\x1a\nnot really").unwrap();
+    std::fs::write(dir.path().join("broken.usda"), text.replace("@checker.png@", "@broken.png@")).unwrap();
+    let line = text.lines().position(|l| l.contains("@checker.png@")).unwrap() + 1;
+    for (file, message) in [("missing.usda", "cannot open texture"), ("broken.usda", "cannot read texture")] {
+        let path = dir.path().join(file);
+        let (diags, sources, _) = check_file(&path);
+        let text = diags.render(&sources);
+        assert_eq!(diags.error_count(), 1, "{text}");
+        assert!(text.contains(message), "{text}");
+        assert!(text.contains(&format!("{file}:{line}:")), "located at the asset path: {text}");
+    }
+}

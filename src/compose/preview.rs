@@ -17,6 +17,7 @@ use crate::front::ast::Product;
 use crate::front::graph::{NodeInstance, Source};
 use crate::front::library::{GraphId, Library};
 use crate::front::types::{Type, Value};
+use crate::runtime::texture;
 use crate::scene::{Attribute, Prim, PrimId, Stage, Value as UsdValue};
 use std::collections::HashMap;
 
@@ -358,6 +359,9 @@ impl<'s> Builder<'_, 's> {
                 }
             }
         }
+        if id == "UsdUVTexture" {
+            self.load_texture(prim, func_id, &mut args);
+        }
         let node = self.nodes.len();
         self.nodes.push(NodeInstance {
             name: prim.path.rsplit('/').next().unwrap_or("shader").to_string(),
@@ -367,6 +371,31 @@ impl<'s> Builder<'_, 's> {
         });
         self.memo.insert(prim.path.clone(), Some(node));
         Some(node)
+    }
+
+    /// Loads a UsdUVTexture's file now, so that a missing or broken image is reported at the
+    /// USD attribute that names it (lowering would point into the built-in node, once per
+    /// channel). The file is decoded once per process either way; after an error the node
+    /// reads its fallback.
+    fn load_texture(&mut self, prim: &Prim, func: crate::front::hir::FuncId, args: &mut [Option<Source>]) {
+        let f = self.lib.function(func);
+        let (Some((file_index, _)), Some((space_index, _))) = (f.param("file"), f.param("sourceColorSpace")) else {
+            return;
+        };
+        let Some(Source::Const(Value::Str(file), _)) = &args[file_index] else { return };
+        if file.is_empty() {
+            return;
+        }
+        let space = match &args[space_index] {
+            Some(Source::Const(Value::Str(s), _)) => texture::ColorSpace::parse(s),
+            _ => Some(texture::ColorSpace::Auto),
+        };
+        let Some(space) = space else { return }; // reported by `check_token`
+        if let Err(message) = texture::register_file_as(std::path::Path::new(file), space) {
+            let span = prim.attribute("inputs:file").map_or(prim.span, |a| a.value.as_ref().map_or(a.span, |v| v.1));
+            self.diags.push(Diagnostic::error(message).at(span, "texture file named here"));
+            args[file_index] = Some(Source::Const(Value::Str(String::new()), Type::STRING));
+        }
     }
 
     /// Checks the tokens whose meaning strata must know: colour spaces (an error: the texture
