@@ -450,11 +450,21 @@ mod tests {
     /// The closure `/Ball`'s material (a UsdPreviewSurface with `inputs`, as USDA lines)
     /// evaluates to, and the rendered diagnostics.
     fn closure_of(inputs: &str) -> (Closure, String) {
+        let (code, rendered) = compiled(inputs, "");
+        let g = Globals { n: [0.0, 0.0, 1.0], ng: [0.0, 0.0, 1.0], ..Globals::default() };
+        let mut closure = Closure::default();
+        code.surface(&g, 0, &mut closure).expect("evaluates");
+        (closure, rendered)
+    }
+
+    /// `/Ball`'s compiled material: a UsdPreviewSurface with `inputs` and more shaders
+    /// (`shaders`, USDA) in the Material `/M`; and the rendered diagnostics.
+    fn compiled(inputs: &str, shaders: &str) -> (std::sync::Arc<dyn crate::abi::MaterialCode>, String) {
         let text = format!(
             "#usda 1.0\ndef Sphere \"Ball\" {{ rel material:binding = </M> }}\n\
              def Material \"M\" {{\n    token outputs:surface.connect = </M/S.outputs:surface>\n    \
              def Shader \"S\" {{\n        uniform token info:id = \"UsdPreviewSurface\"\n{inputs}\n        \
-             token outputs:surface\n    }}\n}}\n"
+             token outputs:surface\n    }}\n{shaders}\n}}\n"
         );
         let mut sources = SourceMap::new();
         let mut diags = Diagnostics::new();
@@ -465,10 +475,46 @@ mod tests {
         let code = Compiler::new(BackendKind::Jit, PassOptions::default())
             .compile(&c.library, &material, &mut diags)
             .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-        let g = Globals { n: [0.0, 0.0, 1.0], ng: [0.0, 0.0, 1.0], ..Globals::default() };
+        (code, diags.render(&sources))
+    }
+
+    #[test]
+    fn opacity_is_the_layer_mask_and_a_threshold_cuts_out() {
+        let g = Globals::default();
+        let mask = |inputs: &str| compiled(inputs, "").0.mask(&g, 0).unwrap();
+        assert_eq!(mask(""), 1.0);
+        assert_eq!(mask("        float inputs:opacity = 0.25"), 0.25);
+        assert_eq!(mask("        float inputs:opacity = 0.4\n        float inputs:opacityThreshold = 0.5"), 0.0);
+        assert_eq!(mask("        float inputs:opacity = 0.6\n        float inputs:opacityThreshold = 0.5"), 1.0);
+    }
+
+    #[test]
+    fn texture_alpha_scale_bias_and_wrap_reach_the_surface() {
+        // checker.png's top-left cell is (255, 0, 0); alpha is 1 (RGB image). Opacity from
+        // `a` · 0.5 + 0.25 = 0.75; roughness from `g` of the top-left cell (0) · 1 + 0.3.
+        let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/usd/preview/checker.png");
+        let shaders = format!(
+            "    def Shader \"T\" {{\n        uniform token info:id = \"UsdUVTexture\"\n        \
+             asset inputs:file = @{}@\n        float2 inputs:st.connect = </M/X.outputs:result>\n        \
+             token inputs:wrapS = \"clamp\"\n        float4 inputs:scale = (1, 1, 1, 0.5)\n        \
+             float4 inputs:bias = (0, 0.3, 0, 0.25)\n        float outputs:a\n        float outputs:g\n    }}\n    \
+             def Shader \"X\" {{\n        uniform token info:id = \"UsdTransform2d\"\n        \
+             float2 inputs:in = (0.35, 0.9)\n        float2 inputs:translation = (-3, 0)\n        \
+             float2 outputs:result\n    }}",
+            file.display()
+        );
+        let inputs = "        float inputs:opacity.connect = </M/T.outputs:a>\n        \
+                      float inputs:roughness.connect = </M/T.outputs:g>\n        float inputs:metallic = 1";
+        let (code, rendered) = compiled(inputs, &shaders);
+        assert!(rendered.is_empty(), "{rendered}");
+        let g = Globals::default();
+        assert_eq!(code.mask(&g, 0).unwrap(), 0.75);
         let mut closure = Closure::default();
-        code.surface(&g, 0, &mut closure).expect("evaluates");
-        (closure, diags.render(&sources))
+        code.surface(&g, 0, &mut closure).unwrap();
+        // st = (0.35 − 3, 0.9): clamped along s to the left column, the red cell (g = 0); repeat
+        // would read 0.35, the green cell (g = 1, roughness 1).
+        assert_eq!(ClosureKind::from_u32(closure.kind), ClosureKind::Metal);
+        assert!((closure.params[6] - 0.3).abs() < 1e-6, "{closure:?}");
     }
 
     /// The directional albedo ∫ f cos dωi of the largest channel for outgoing `wo`, estimated
