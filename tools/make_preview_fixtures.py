@@ -10,7 +10,7 @@
   dirt.usda         the same, with a strata slot binding (_100, dirt.ash) over the right half.
   subset.usda       a two-face mesh bound to Blue; a GeomSubset (materialBind) binds face 1 to Red.
   strength.usda     strongerThanDescendants on an ancestor vs a descendant's own binding, purposes,
-                    and a metallic/roughness-only material.
+                    a metallic/roughness-only material and a collection-based binding.
   unknown_shader.usda  a Material whose surface is a shader strata does not implement.
 Each .usda is also exported as .usdc (for the binary-USD loader).
 
@@ -203,6 +203,19 @@ def strength():
     pbr.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(1.0)
     pbr.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.25)
     bind(UsdGeom.Sphere.Define(stage, "/World/Gold"), metal)
+    # A collection-based binding: /World/Coll binds Red directly and Green to the collection
+    # `shiny` (A and below, minus A/Inner); A/Own's own direct binding is closer than both.
+    coll = UsdGeom.Xform.Define(stage, "/World/Coll")
+    shiny = Usd.CollectionAPI.Apply(coll.GetPrim(), "shiny")
+    shiny.CreateIncludesRel().AddTarget("/World/Coll/A")
+    shiny.CreateExcludesRel().AddTarget("/World/Coll/A/Inner")
+    bind(coll, red)
+    UsdShade.MaterialBindingAPI.Apply(coll.GetPrim()).Bind(shiny, green, "shinyBinding")
+    UsdGeom.Xform.Define(stage, "/World/Coll/A")
+    UsdGeom.Sphere.Define(stage, "/World/Coll/A/Ball")
+    UsdGeom.Sphere.Define(stage, "/World/Coll/A/Inner")
+    bind(UsdGeom.Sphere.Define(stage, "/World/Coll/A/Own"), metal)
+    UsdGeom.Sphere.Define(stage, "/World/Coll/Other")
     save(stage, "strength.usda")
 
 

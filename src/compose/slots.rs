@@ -96,6 +96,9 @@ pub struct Binding {
     /// UsdShade's `bindingStrength = "strongerThanDescendants"`: descendants cannot replace
     /// it (the outermost such binding wins). Slot bindings are always weaker.
     pub stronger: bool,
+    /// A binding already resolved for this prim by UsdShade's rules (collection bindings,
+    /// `compose::scene`): the prim it is authored on. It applies whatever ancestors bound.
+    pub authored_at: Option<String>,
 }
 
 /// A prim of the hierarchy, reduced to what slot resolution needs.
@@ -173,7 +176,7 @@ pub fn resolve_stacks(tree: &BindingTree, diags: &mut Diagnostics) -> Vec<PrimSt
             None => (BTreeMap::new(), Vec::new()),
         };
         for binding in &prim.bindings {
-            if strong.contains(&binding.slot) {
+            if strong.contains(&binding.slot) && binding.authored_at.is_none() {
                 continue;
             }
             if binding.stronger {
@@ -183,7 +186,7 @@ pub fn resolve_stacks(tree: &BindingTree, diags: &mut Diagnostics) -> Vec<PrimSt
             // removal itself is inherited until a deeper prim binds the slot again).
             let applied = binding.material.as_ref().map(|m| Applied {
                 material: m.clone(),
-                bound_at: prim.path.clone(),
+                bound_at: binding.authored_at.clone().unwrap_or_else(|| prim.path.clone()),
                 span: binding.span,
             });
             slots.insert(binding.slot.clone(), applied);
@@ -253,6 +256,7 @@ mod tests {
                                 material: material.map(str::to_string),
                                 span: Span::default(),
                                 stronger,
+                                authored_at: None,
                             }
                         })
                         .collect(),
