@@ -191,17 +191,22 @@ pub fn register_file(path: &Path) -> Result<i32, String> {
 
 /// [`register_file`] with an explicit colour space.
 pub fn register_file_as(path: &Path, space: ColorSpace) -> Result<i32, String> {
-    // Paths inside packages (`a.usdz[tex.png]`) do not exist on disk as such: only a path that
-    // does is canonicalised; `input` reports the rest.
-    let canonical = path.canonicalize().unwrap_or_else(|_| path.to_path_buf());
+    // Paths inside packages (`a.usdz[tex.png]`) do not exist on disk as such: `input` resolves
+    // and reports them; any other path must exist.
+    let canonical = match path.canonicalize() {
+        Ok(canonical) => canonical,
+        Err(_) if path.to_string_lossy().ends_with(']') => path.to_path_buf(),
+        Err(e) => return Err(format!("cannot open texture `{}`: {e}", path.display())),
+    };
     let mut key = canonical.clone().into_os_string();
     key.push(format!("#{}", space.key()));
     let key = std::path::PathBuf::from(key);
     if let Some(id) = strata_rt::texture::find(&key) {
         return Ok(id);
     }
-    let bytes = input::read_bytes(&canonical).map_err(|e| format!("cannot open texture `{}`: {e}", path.display()))?;
-    let texture = decode_texture(&bytes, space, input::limits().max_texture_pixels)
+    let texture = input::read_bytes(&canonical)
+        .map_err(|e| e.to_string())
+        .and_then(|bytes| decode_texture(&bytes, space, input::limits().max_texture_pixels))
         .map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
     register(key, texture)
 }
