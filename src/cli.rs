@@ -102,6 +102,14 @@ pub fn layers_json(stacks: &[PrimStack]) -> String {
 /// on the prim itself (the paper's bright icons) rather than inherited.
 pub fn layers_table(stacks: &[PrimStack]) -> String {
     let mut out = String::new();
+    // Slot names are padded to 12 columns, or to the longest (`material:binding`) when wider.
+    let width = stacks
+        .iter()
+        .flat_map(|s| s.layers.iter().flat_map(|l| std::iter::once(&l.slot).chain(l.overrides.iter().map(|o| &o.slot))))
+        .map(|s| s.name().chars().count())
+        .max()
+        .unwrap_or(0)
+        .max(12);
     for stack in stacks {
         out += &format!("{}\n", stack.prim);
         if stack.layers.is_empty() {
@@ -110,7 +118,7 @@ pub fn layers_table(stacks: &[PrimStack]) -> String {
         for layer in &stack.layers {
             let mark = if layer.applied.bound_at == stack.prim { '*' } else { ' ' };
             out += &format!(
-                "  {mark} {:<12} {:<40} bound at {}\n",
+                "  {mark} {:<width$} {:<40} bound at {}\n",
                 layer.slot.name(),
                 layer.applied.material,
                 layer.applied.bound_at
@@ -118,7 +126,7 @@ pub fn layers_table(stacks: &[PrimStack]) -> String {
             for o in &layer.overrides {
                 let mark = if o.applied.bound_at == stack.prim { '*' } else { ' ' };
                 out += &format!(
-                    "  {mark} {:<12} {:<40} bound at {}\n",
+                    "  {mark} {:<width$} {:<40} bound at {}\n",
                     o.slot.name(),
                     o.applied.material,
                     o.applied.bound_at

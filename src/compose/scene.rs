@@ -4,14 +4,16 @@
 //! interface inputs, as UsdShade resolves them), and assembles one [`ComposedMaterial`] per
 //! renderable prim.
 
-use super::slots::{Binding, BindingPrim, BindingTree, PrimStack, SLOT_BINDING_PREFIX, decode_slot, resolve_stacks};
-use super::{ComposedLayer, ComposedMaterial, MaterialRef};
+use super::slots::{
+    Binding, BindingPrim, BindingTree, PrimStack, SLOT_BINDING_PREFIX, Slot, decode_slot, resolve_stacks,
+};
+use super::{ComposedLayer, ComposedMaterial, MaterialRef, preview};
 use crate::diag::{Diagnostic, Diagnostics, SourceMap, Span, did_you_mean};
 use crate::front::ast::{BaseType, GraphKind};
 use crate::front::library::Library;
 use crate::front::types::{Type, Value};
 use crate::scene::{Attribute, Prim, PrimId, Stage, Value as UsdValue};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
 
 /// Prim types that are rendered, and so get a composed material.
@@ -22,10 +24,250 @@ pub fn is_renderable(prim: &Prim) -> bool {
     prim.type_name.as_deref().is_some_and(|t| RENDERABLE_TYPES.contains(&t))
 }
 
-/// Reads the slot bindings of every prim (depth first, parents before children).
+/// Whether a prim is a `UsdGeomSubset` that binds a material to some faces of its parent Mesh
+/// (`familyName = "materialBind"`, `elementType = "face"`): it gets its own composed material,
+/// layered like a child of the mesh, and the renderer shades those faces with it.
+pub fn is_bound_subset(stage: &Stage, prim: &Prim) -> bool {
+    prim.type_name.as_deref() == Some("GeomSubset")
+        && prim.value("familyName").and_then(UsdValue::as_str) == Some("materialBind")
+        && prim.value("elementType").and_then(UsdValue::as_str).unwrap_or("face") == "face"
+        && prim.parent.is_some_and(|p| stage.prim(p).type_name.as_deref() == Some("Mesh"))
+}
+
+/// The `material:binding` relationships strata reads, strongest purpose first: `full` (the
+/// final-render purpose), then the all-purpose binding, then `preview`.
+const MATERIAL_BINDING_RELS: [&str; 3] = ["material:binding:full", "material:binding", "material:binding:preview"];
+
+/// The UsdShade direct binding of a prim, as a binding of the base layer
+/// ([`Slot::material_binding`]). A relationship with no target binds nothing (UsdShade's
+/// `IsBound()` is false, so the ancestors' binding applies); more than one target is an error.
+fn material_binding(prim: &Prim, diags: &mut Diagnostics) -> Option<Binding> {
+    for name in MATERIAL_BINDING_RELS {
+        let Some(rel) = prim.relationship(name) else { continue };
+        let (path, span) = match rel.targets.as_slice() {
+            [] => continue,
+            [(path, span)] => (path.clone(), *span),
+            targets => {
+                let mut d = Diagnostic::error(format!(
+                    "`{name}` on `{}` has {} targets; a direct binding names one material",
+                    prim.path,
+                    targets.len()
+                ))
+                .at(rel.span, "one material");
+                for (_, span) in targets {
+                    d = d.also(*span, "target");
+                }
+                diags.push(d);
+                return None;
+            }
+        };
+        let stronger = binding_strength(prim, rel, diags);
+        return Some(Binding {
+            slot: Slot::material_binding(),
+            material: Some(path),
+            span,
+            stronger,
+            authored_at: None,
+        });
+    }
+    None
+}
+
+/// The strength a binding relationship's `bindMaterialAs` metadata gives it: whether it is
+/// `strongerThanDescendants`.
+fn binding_strength(prim: &Prim, rel: &crate::scene::Relationship, diags: &mut Diagnostics) -> bool {
+    match rel.metadata.iter().find(|m| m.key == "bindMaterialAs").map(|m| (m.value.as_str(), m.span)) {
+        None => false,
+        Some((Some("strongerThanDescendants"), _)) => true,
+        Some((Some("weakerThanDescendants" | "fallbackStrength"), _)) => false,
+        Some((_, span)) => {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "`bindMaterialAs` on `{}.{}` must be \"strongerThanDescendants\" or \"weakerThanDescendants\"; read as weaker",
+                    prim.path, rel.name
+                ))
+                .at(span, "this value"),
+            );
+            false
+        }
+    }
+}
+
+/// A UsdCollectionAPI collection, as far as material binding needs it: which prims it holds.
+struct Collection {
+    includes: HashSet<String>,
+    excludes: HashSet<String>,
+    /// `expansionRule = "explicitOnly"`: only the included paths themselves.
+    explicit_only: bool,
+    /// `includeRoot`: the pseudo-root's descendants, i.e. everything not excluded.
+    include_root: bool,
+}
+
+impl Collection {
+    /// Reads collection `name` of `owner` (`collection:NAME:includes`, `excludes`,
+    /// `expansionRule`, `includeRoot`).
+    fn read(owner: &Prim, name: &str) -> Collection {
+        let paths = |rel: &str| -> HashSet<String> {
+            owner
+                .relationship(&format!("collection:{name}:{rel}"))
+                .map(|r| r.targets.iter().map(|(p, _)| p.clone()).collect())
+                .unwrap_or_default()
+        };
+        Collection {
+            includes: paths("includes"),
+            excludes: paths("excludes"),
+            explicit_only: owner.value(&format!("collection:{name}:expansionRule")).and_then(UsdValue::as_str)
+                == Some("explicitOnly"),
+            include_root: matches!(owner.value(&format!("collection:{name}:includeRoot")), Some(UsdValue::Bool(true))),
+        }
+    }
+
+    /// Whether `path` is a member: with `expandPrims`, the closest of its ancestors (itself
+    /// included) that the collection names decides, an exclude beating an include.
+    fn contains(&self, path: &str) -> bool {
+        if self.explicit_only {
+            return self.includes.contains(path) && !self.excludes.contains(path);
+        }
+        let mut p = path;
+        loop {
+            if self.excludes.contains(p) {
+                return false;
+            }
+            if self.includes.contains(p) {
+                return true;
+            }
+            match p.rsplit_once('/') {
+                Some(("", _)) | None => return self.include_root && !self.excludes.contains("/"),
+                Some((parent, _)) => p = parent,
+            }
+        }
+    }
+}
+
+/// A collection-based binding: `material:binding:collection:NAME = [<collection>, <material>]`.
+struct CollectionBinding {
+    collection: Collection,
+    material: String,
+    span: Span,
+    stronger: bool,
+}
+
+/// The collection-based bindings authored on a prim, in property order (the first whose
+/// collection holds a prim binds it). Only the all-purpose form is read; bindings with a
+/// purpose, or whose collection is missing, warn.
+fn collection_bindings(stage: &Stage, prim: &Prim, diags: &mut Diagnostics) -> Vec<CollectionBinding> {
+    let mut out = Vec::new();
+    for rel in prim.relationships_with_prefix("material:binding:") {
+        let rest = &rel.name["material:binding:".len()..];
+        let binding_name = match rest.strip_prefix("collection:") {
+            Some(name) => name,
+            None if rest.contains("collection:") => "", // a purpose: `full:collection:NAME`
+            None => continue,
+        };
+        if rel.targets.is_empty() {
+            continue;
+        }
+        if binding_name.is_empty() || binding_name.contains(':') {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "collection-based binding `{}` on `{}` has a purpose or a namespaced name; strata reads only `material:binding:collection:NAME`",
+                    rel.name, prim.path
+                ))
+                .at(rel.span, "ignored"),
+            );
+            continue;
+        }
+        let [(collection_path, _), (material, span)] = rel.targets.as_slice() else {
+            diags.push(
+                Diagnostic::error(format!(
+                    "`{}` on `{}` must target a collection and a material, in that order",
+                    rel.name, prim.path
+                ))
+                .at(rel.span, format!("{} target(s)", rel.targets.len())),
+            );
+            continue;
+        };
+        let owner_and_name = collection_path.split_once(".collection:");
+        let owner = owner_and_name.and_then(|(owner, _)| stage.find(owner)).map(|id| stage.prim(id));
+        let (Some(owner), Some((_, name))) = (owner, owner_and_name) else {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "`{}` on `{}`: collection `{collection_path}` does not exist; the binding is ignored",
+                    rel.name, prim.path
+                ))
+                .at(rel.span, "this binding"),
+            );
+            continue;
+        };
+        let collection = Collection::read(owner, name);
+        if let Some(nested) =
+            collection.includes.iter().chain(&collection.excludes).find(|p| p.contains(".collection:"))
+        {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "collection `{collection_path}` names the collection `{nested}`; strata does not expand nested collections"
+                ))
+                .at(rel.span, "bound here")
+                .note("list the prims in `includes` instead"),
+            );
+        }
+        out.push(CollectionBinding {
+            collection,
+            material: material.clone(),
+            span: *span,
+            stronger: binding_strength(prim, rel, diags),
+        });
+    }
+    out
+}
+
+/// The `material:binding` of renderable prim `at` (a tree index) when collection bindings
+/// take part, by UsdShade's `ComputeBoundMaterial`: from the prim up to the root, each level
+/// offers its first collection binding that holds the prim, else its direct binding; the
+/// closest level's offer wins unless a farther one is `strongerThanDescendants` (the
+/// farthest such wins). The result carries the prim it is authored on.
+fn resolve_with_collections(
+    tree: &BindingTree,
+    direct: &[Option<Binding>],
+    collections: &[Vec<CollectionBinding>],
+    at: usize,
+    path: &str,
+) -> Option<Binding> {
+    let mut winner: Option<Binding> = None;
+    let mut level = Some(at);
+    while let Some(l) = level {
+        let offer = collections[l]
+            .iter()
+            .find(|c| c.collection.contains(path))
+            .map(|c| Binding {
+                slot: Slot::material_binding(),
+                material: Some(c.material.clone()),
+                span: c.span,
+                stronger: c.stronger,
+                authored_at: None,
+            })
+            .or_else(|| direct[l].clone());
+        if let Some(mut offer) = offer
+            && (winner.is_none() || offer.stronger)
+        {
+            offer.authored_at = Some(tree.prims[l].path.clone());
+            winner = Some(offer);
+        }
+        level = tree.prims[l].parent;
+    }
+    winner
+}
+
+/// Reads the slot bindings of every prim (depth first, parents before children), with
+/// UsdShade's `material:binding` as the base layer below every slot.
 pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
     let mut tree = BindingTree::default();
     let mut index: HashMap<PrimId, usize> = HashMap::new();
+    // Per tree index: the direct `material:binding`, the collection bindings, and whether any
+    // prim from the root to it has collection bindings.
+    let mut direct: Vec<Option<Binding>> = Vec::new();
+    let mut collections: Vec<Vec<CollectionBinding>> = Vec::new();
+    let mut under_collections: Vec<bool> = Vec::new();
     for (id, prim) in stage.depth_first() {
         let mut bindings = Vec::new();
         for rel in prim.relationships_with_prefix(SLOT_BINDING_PREFIX) {
@@ -60,11 +302,36 @@ pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
                     continue;
                 }
             };
-            bindings.push(Binding { slot, material, span });
+            bindings.push(Binding { slot, material, span, stronger: false, authored_at: None });
         }
         let parent = prim.parent.and_then(|p| index.get(&p).copied());
-        index.insert(id, tree.prims.len());
-        tree.prims.push(BindingPrim { path: prim.path.clone(), parent, bindings, renderable: is_renderable(prim) });
+        let here = tree.prims.len();
+        index.insert(id, here);
+        let renderable = is_renderable(prim) || is_bound_subset(stage, prim);
+        let own = material_binding(prim, diags);
+        collections.push(collection_bindings(stage, prim, diags));
+        under_collections.push(!collections[here].is_empty() || parent.is_some_and(|p| under_collections[p]));
+        direct.push(own.clone());
+        let resolve = renderable && under_collections[here];
+        if !resolve {
+            bindings.extend(own);
+        }
+        tree.prims.push(BindingPrim { path: prim.path.clone(), parent, bindings, renderable });
+        if resolve {
+            // Collections take part: this prim's binding is resolved whole, by UsdShade's
+            // rules (it may differ from what inheriting direct bindings gives).
+            // No binding at all must hide what a renderable ancestor (a mesh above a subset,
+            // a collection member above a non-member) resolved for itself.
+            let resolved =
+                resolve_with_collections(&tree, &direct, &collections, here, &prim.path).unwrap_or(Binding {
+                    slot: Slot::material_binding(),
+                    material: None,
+                    span: prim.span,
+                    stronger: false,
+                    authored_at: Some(prim.path.clone()),
+                });
+            tree.prims[here].bindings.push(resolved);
+        }
     }
     tree
 }
@@ -122,10 +389,20 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
     let stacks = resolve_stacks(&tree, diags);
     // Find every material used, once.
     let mut found: HashMap<String, Option<MaterialSource>> = HashMap::new();
+    // Materials shaded by a UsdShade preview network (`compose::preview`), with the first
+    // binding that uses each.
+    let mut previews: Vec<(String, Span)> = Vec::new();
+    let mut preview_paths: std::collections::HashSet<String> = std::collections::HashSet::new();
     for stack in &stacks {
         for layer in &stack.layers {
             let applied = std::iter::once(&layer.applied).chain(layer.overrides.iter().map(|o| &o.applied));
             for applied in applied {
+                if stage.find(&applied.material).is_some_and(|id| preview::is_preview_material(stage, id)) {
+                    if preview_paths.insert(applied.material.clone()) {
+                        previews.push((applied.material.clone(), applied.span));
+                    }
+                    continue;
+                }
                 if !found.contains_key(&applied.material) {
                     let source = material_source(stage, &applied.material, applied.span, diags);
                     found.insert(applied.material.clone(), source);
@@ -136,9 +413,14 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
     let mut files: Vec<(PathBuf, Span)> = found.values().flatten().map(|m| (m.file.clone(), m.file_span)).collect();
     files.sort_by(|a, b| a.0.cmp(&b.0));
     files.dedup_by(|a, b| a.0 == b.0);
-    let library = Library::load(&files, sources, diags);
+    let mut library = Library::load(&files, sources, diags);
 
     let mut refs: HashMap<String, Option<MaterialRef>> = HashMap::new();
+    let mut shared = preview::Shared::default();
+    for (path, span) in previews {
+        let instance = preview::instantiate(stage, &mut library, &mut shared, &path, span, diags);
+        refs.insert(path, instance);
+    }
     let mut materials = Vec::new();
     let mut prim_material = Vec::with_capacity(stacks.len());
     let mut by_key: HashMap<String, usize> = HashMap::new();
@@ -293,7 +575,33 @@ fn value_producer<'s>(
     seen: &mut Vec<String>,
     diags: &mut Diagnostics,
 ) -> Option<(&'s Prim, &'s Attribute)> {
-    let own = attr.value.is_some().then_some((prim, attr));
+    match producer(stage, prim, attr, false, seen, diags)? {
+        Producer::Value(prim, attr) => Some((prim, attr)),
+        Producer::Output(..) => None, // never returned when shader outputs are not wanted
+    }
+}
+
+/// What an input resolves to through its connections.
+#[derive(Clone, Copy)]
+pub(super) enum Producer<'s> {
+    /// An attribute whose authored value the input takes.
+    Value(&'s Prim, &'s Attribute),
+    /// An output of a shader (not a Material or NodeGraph): a node of the network.
+    Output(&'s Prim, &'s Attribute),
+}
+
+/// [`value_producer`], optionally stopping at shader outputs (`outputs`: the preview networks
+/// of `compose::preview` evaluate them as nodes) instead of warning that strata cannot
+/// evaluate them.
+pub(super) fn producer<'s>(
+    stage: &'s Stage,
+    prim: &'s Prim,
+    attr: &'s Attribute,
+    outputs: bool,
+    seen: &mut Vec<String>,
+    diags: &mut Diagnostics,
+) -> Option<Producer<'s>> {
+    let own = attr.value.is_some().then_some(Producer::Value(prim, attr));
     let (target, span) = match attr.connections.as_slice() {
         [] => return own,
         [one] => one,
@@ -343,7 +651,8 @@ fn value_producer<'s>(
         return own;
     }
     let found = match (name.split_once(':').map(|(ns, _)| ns), is_container(source)) {
-        (Some("inputs" | "outputs"), true) => value_producer(stage, source, source_attr, seen, diags),
+        (Some("inputs" | "outputs"), true) => producer(stage, source, source_attr, outputs, seen, diags),
+        (Some("outputs"), false) if outputs => Some(Producer::Output(source, source_attr)),
         (Some("outputs"), false) => {
             diags.push(
                 Diagnostic::warning(format!(
@@ -475,7 +784,7 @@ fn usd_type(name: &str) -> Result<Option<Type>, ()> {
 
 /// Converts a scene value to a substance input's type, rejecting NaN, infinities and
 /// incompatible types.
-fn convert_input(value: &UsdValue, type_name: &str, to: Type) -> Result<Value, String> {
+pub(super) fn convert_input(value: &UsdValue, type_name: &str, to: Type) -> Result<Value, String> {
     let from = usd_type(type_name).map_err(|_| format!("USD type `{type_name}` cannot set a {to} input"))?;
     let compatible = match from {
         Some(from) => {
@@ -841,5 +1150,48 @@ over "Root" {
         assert!(rendered.contains("warning: strata cannot evaluate `/M/B/Noise.outputs:out`"), "{rendered}");
         assert!(rendered.contains("error: `/M/B/S.inputs:coverage` connects to 2 sources"), "{rendered}");
         assert_eq!(values, vec![("albedo".to_string(), Value::Triple([1.0, 0.0, 0.0]))]);
+    }
+
+    #[test]
+    fn collection_bindings_resolve_as_usdshade() {
+        let (lines, rendered, errors) = stacks(
+            r#"#usda 1.0
+def Xform "Root" {
+    rel material:binding = </M/Strong> ( bindMaterialAs = "strongerThanDescendants" )
+    rel material:binding:collection:c = [</Root.collection:c>, </M/Coll>]
+    rel collection:c:includes = [</Root/Mid/In>, </Root/Mid/Explicit>]
+    uniform token collection:c:expansionRule = "expandPrims"
+    def Xform "Mid" {
+        rel material:binding = </M/Mid>
+        def Sphere "In" { }
+        def Sphere "Out" { }
+        def Sphere "Explicit" { def Sphere "Child" { } }
+    }
+}
+def Xform "Only" {
+    rel material:binding:collection:e = [</Only.collection:e>, </M/E>]
+    rel collection:e:includes = </Only/A>
+    uniform token collection:e:expansionRule = "explicitOnly"
+    def Sphere "A" { def Sphere "B" { } }
+}
+"#,
+            &paper_dir(),
+        );
+        assert!(!errors, "{rendered}");
+        assert_eq!(
+            lines,
+            vec![
+                // At /Root the collection holds In: it is /Root's offer, so /Root's strong direct
+                // binding does not apply to In; Mid's direct binding is closer and wins.
+                "/Root/Mid/In: material:binding=/M/Mid@/Root/Mid",
+                // Out is not in the collection: /Root offers its strong direct binding.
+                "/Root/Mid/Out: material:binding=/M/Strong@/Root",
+                "/Root/Mid/Explicit: material:binding=/M/Mid@/Root/Mid",
+                "/Root/Mid/Explicit/Child: material:binding=/M/Mid@/Root/Mid",
+                // explicitOnly: the named prim, not its descendants.
+                "/Only/A: material:binding=/M/E@/Only",
+                "/Only/A/B: ",
+            ]
+        );
     }
 }

@@ -8,6 +8,11 @@ use std::collections::BTreeMap;
 /// The relationship namespace that carries slot bindings.
 pub const SLOT_BINDING_PREFIX: &str = "material:slotBinding:";
 
+/// The name the UsdShade `material:binding` layer shows under (`strata layers`). It is the
+/// slot with an empty name ([`Slot::material_binding`]), which no authored slot can have, so
+/// byte order puts it below every slot: slot bindings layer over a DCC's own materials.
+pub const MATERIAL_BINDING_SLOT: &str = "material:binding";
+
 /// A parsed slot name: `050` or the override slot `050::010`.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct Slot {
@@ -32,8 +37,22 @@ impl Slot {
         Ok(Slot { base, over })
     }
 
+    /// The base layer that UsdShade's `material:binding` resolves to (DESIGN.md,
+    /// "UsdShade material:binding").
+    pub fn material_binding() -> Slot {
+        Slot { base: String::new(), over: None }
+    }
+
+    /// Whether this is the `material:binding` base layer.
+    pub fn is_material_binding(&self) -> bool {
+        self.base.is_empty()
+    }
+
     /// The canonical name.
     pub fn name(&self) -> String {
+        if self.is_material_binding() {
+            return MATERIAL_BINDING_SLOT.to_string();
+        }
         match &self.over {
             Some(o) => format!("{}::{o}", self.base),
             None => self.base.clone(),
@@ -74,6 +93,12 @@ pub struct Binding {
     pub material: Option<String>,
     /// Where it is authored.
     pub span: Span,
+    /// UsdShade's `bindingStrength = "strongerThanDescendants"`: descendants cannot replace
+    /// it (the outermost such binding wins). Slot bindings are always weaker.
+    pub stronger: bool,
+    /// A binding already resolved for this prim by UsdShade's rules (collection bindings,
+    /// `compose::scene`): the prim it is authored on. It applies whatever ancestors bound.
+    pub authored_at: Option<String>,
 }
 
 /// A prim of the hierarchy, reduced to what slot resolution needs.
@@ -141,18 +166,27 @@ pub struct PrimStack {
 pub fn resolve_stacks(tree: &BindingTree, diags: &mut Diagnostics) -> Vec<PrimStack> {
     // The slots in effect at each prim, built incrementally from the parent's.
     let mut effective: Vec<BTreeMap<Slot, Option<Applied>>> = Vec::with_capacity(tree.prims.len());
+    // The slots an ancestor bound with `strongerThanDescendants`, which no deeper binding
+    // replaces.
+    let mut locked: Vec<Vec<Slot>> = Vec::with_capacity(tree.prims.len());
     let mut stacks = Vec::new();
     for prim in &tree.prims {
-        let mut slots = match prim.parent {
-            Some(p) => effective[p].clone(),
-            None => BTreeMap::new(),
+        let (mut slots, mut strong) = match prim.parent {
+            Some(p) => (effective[p].clone(), locked[p].clone()),
+            None => (BTreeMap::new(), Vec::new()),
         };
         for binding in &prim.bindings {
+            if strong.contains(&binding.slot) && binding.authored_at.is_none() {
+                continue;
+            }
+            if binding.stronger {
+                strong.push(binding.slot.clone());
+            }
             // A deeper binding replaces; an empty one removes (kept as `None` so that the
             // removal itself is inherited until a deeper prim binds the slot again).
             let applied = binding.material.as_ref().map(|m| Applied {
                 material: m.clone(),
-                bound_at: prim.path.clone(),
+                bound_at: binding.authored_at.clone().unwrap_or_else(|| prim.path.clone()),
                 span: binding.span,
             });
             slots.insert(binding.slot.clone(), applied);
@@ -161,6 +195,7 @@ pub fn resolve_stacks(tree: &BindingTree, diags: &mut Diagnostics) -> Vec<PrimSt
             stacks.push(stack_of(&prim.path, &slots, diags));
         }
         effective.push(slots);
+        locked.push(strong);
     }
     stacks
 }
@@ -205,10 +240,24 @@ mod tests {
                     parent: *parent,
                     bindings: bindings
                         .iter()
-                        .map(|(slot, material)| Binding {
-                            slot: Slot::parse(slot).unwrap(),
-                            material: material.map(str::to_string),
-                            span: Span::default(),
+                        .map(|(slot, material)| {
+                            // `!` marks a strongerThanDescendants binding; `material:binding`
+                            // names the base layer.
+                            let (slot, stronger) = match slot.strip_suffix('!') {
+                                Some(s) => (s, true),
+                                None => (*slot, false),
+                            };
+                            Binding {
+                                slot: if slot == MATERIAL_BINDING_SLOT {
+                                    Slot::material_binding()
+                                } else {
+                                    Slot::parse(slot).unwrap()
+                                },
+                                material: material.map(str::to_string),
+                                span: Span::default(),
+                                stronger,
+                                authored_at: None,
+                            }
                         })
                         .collect(),
                     renderable: *renderable,
@@ -345,5 +394,29 @@ mod tests {
         let stacks = resolve_stacks(&t, &mut diags);
         assert_eq!(stacks[0].layers.len(), 64);
         assert!(stacks[0].layers.windows(2).all(|w| w[0].slot.base < w[1].slot.base));
+    }
+
+    #[test]
+    fn material_binding_is_the_bottom_layer_and_strength_locks_it() {
+        let t = tree(&[
+            ("/Root", None, &[("material:binding", Some("/M/Dcc")), ("000", Some("/M/Dirt"))], false),
+            // The mesh's own binding replaces the inherited one, and still sorts below `000`.
+            ("/Root/Mesh", Some(0), &[("material:binding", Some("/M/Own"))], true),
+            ("/Strong", None, &[("material:binding!", Some("/M/Strong"))], false),
+            // An ancestor's strongerThanDescendants binding beats the descendant's own.
+            ("/Strong/Mesh", Some(2), &[("material:binding", Some("/M/Weak")), ("010", Some("/M/A"))], true),
+            ("/Strong/Mesh/Sub", Some(3), &[("material:binding!", Some("/M/Sub"))], true),
+        ]);
+        let (lines, diags) = resolve(&t);
+        assert_eq!(diags.error_count(), 0);
+        assert_eq!(
+            lines,
+            vec![
+                "/Root/Mesh: material:binding=/M/Own@/Root/Mesh 000=/M/Dirt@/Root",
+                "/Strong/Mesh: material:binding=/M/Strong@/Strong 010=/M/A@/Strong/Mesh",
+                // The outermost strong binding wins over a deeper strong one too.
+                "/Strong/Mesh/Sub: material:binding=/M/Strong@/Strong 010=/M/A@/Strong/Mesh",
+            ]
+        );
     }
 }

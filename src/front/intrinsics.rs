@@ -55,6 +55,7 @@ const P: Type = Type::POINT;
 const V: Type = Type::VECTOR;
 const S: Type = Type::STRING;
 const CL: Type = Type::CLOSURE;
+const I: Type = Type::INT;
 
 intrinsics! {
     Sin = "sin": Generic1,
@@ -97,6 +98,9 @@ intrinsics! {
     Cellnoise = "cellnoise": Fixed(&[P], F),
     Cellular = "cellular": Fixed(&[P], F),
     Texture = "texture": Fixed(&[S, F, F], C),
+    // texture_channel(file, colour space, s, t, mode): one channel (mode % 16: r, g, b, a) with
+    // wrap modes (mode / 16 % 16 along s, mode / 256 along t; see `strata_rt::texture`).
+    TextureChannel = "texture_channel": Fixed(&[S, S, F, F, I], F),
     DiffuseBsdf = "diffuse_bsdf": Fixed(&[C], CL),
     GlossyBsdf = "glossy_bsdf": Fixed(&[C, C, F, F], CL),
     MetalBsdf = "metal_bsdf": Fixed(&[C, C, F], CL),
@@ -112,7 +116,7 @@ impl Intrinsic {
     /// Whether the result depends on something other than the arguments (files on disk), so
     /// it must not be folded at compile time.
     pub fn is_varying(self) -> bool {
-        matches!(self, Intrinsic::Texture)
+        matches!(self, Intrinsic::Texture | Intrinsic::TextureChannel)
     }
 
     /// Whether this builds a BSDF closure.

@@ -209,6 +209,15 @@ impl Library {
         self.graph_index.get(&(canonical, name.to_string())).copied()
     }
 
+    /// Adds a graph built outside any source file (composition's instances of built-in
+    /// substances, `compose::preview`) and returns its id. It belongs to no file, so it can be
+    /// found only by id.
+    pub fn add_graph(&mut self, graph: Graph) -> GraphId {
+        self.graphs.push(graph);
+        self.graph_files.push(PathBuf::from("<composed>"));
+        GraphId(self.graphs.len() as u32 - 1)
+    }
+
     /// Finds a graph of the built-in library (the prelude) by name.
     pub fn builtin_graph(&self, name: &str) -> Option<GraphId> {
         self.graph_index.get(&(PathBuf::new(), name.to_string())).copied()

@@ -132,6 +132,161 @@ shader color_to_float(color value = 0.0, output float out) {
     out = luminance(value);
 }
 
+// ---- UsdPreviewSurface (https://openusd.org/release/spec_usdpreviewsurface.html) -----------
+// The nodes of UsdShade's preview networks, which `compose::preview` instantiates from a bound
+// Material's shaders. USD's float2/float3/normal3f/point3f/vector3f values all travel as
+// `color` triples here (a float2 has z = 0): UsdShade connects them freely, and one triple type
+// keeps every such connection well-typed.
+
+// The BSDF of UsdPreviewSurface on strata's closures (one closure per layer, so no lobe sums):
+// - metallic workflow, metallic < 0.5: GGX dielectric coat (ior) over Lambert, the base
+//   darkened by (1 - metallic) and the coat tinted towards the base colour by metallic;
+//   metallic >= 0.5: GGX conductor with normal-incidence reflectance mix(F0(ior), base,
+//   metallic) and a white edge. The switch at 0.5 stands in for the spec's linear blend of
+//   the two lobes, which one closure cannot express.
+// - specular workflow: the coat's Fresnel is matched to specularColor at normal incidence
+//   (ior from the largest channel, the colour as tint; ior ≤ 4 caps F0 at 0.36).
+// - clearcoat: strata has one coat, so clearcoat blends its roughness towards
+//   clearcoatRoughness instead of adding a second specular lobe (none on conductors).
+// - roughness is perceptual (GGX alpha = roughness²), as in the spec.
+shader UsdPreviewSurface_bsdf(color diffuseColor = color(0.18, 0.18, 0.18), int useSpecularWorkflow = 0,
+                              color specularColor = 0.0, float metallic = 0.0, float roughness = 0.5,
+                              float clearcoat = 0.0, float clearcoatRoughness = 0.01, float ior = 1.5,
+                              output closure bsdf) {
+    color base = clamp(diffuseColor, 0.0, 1.0);
+    float r = clamp(roughness, 0.0, 1.0);
+    float coat = clamp(clearcoat, 0.0, 1.0);
+    float coat_r = mix(r, clamp(clearcoatRoughness, 0.0, 1.0), coat);
+    float eta = clamp(ior, 1.0, 4.0);
+    if (useSpecularWorkflow != 0) {
+        color f0 = clamp(specularColor, 0.0, 0.36);
+        float f = max(max(f0.r, f0.g), f0.b);
+        float s = sqrt(f);
+        float matched = f > 0.0 ? (1.0 + s) / (1.0 - s) : 1.0;
+        color tint = f > 0.0 ? f0 / f : color(0.0);
+        bsdf = glossy_bsdf(base, tint, coat_r, clamp(matched, 1.0, 4.0));
+    } else {
+        float m = clamp(metallic, 0.0, 1.0);
+        float k = (eta - 1.0) / (eta + 1.0);
+        if (m >= 0.5) {
+            bsdf = metal_bsdf(clamp(mix(color(k * k), base, m), 0.0, 0.999), color(1.0), r);
+        } else {
+            bsdf = glossy_bsdf(base * (1.0 - m), mix(color(1.0), base, m), coat_r, eta);
+        }
+    }
+}
+
+// Presence: opacity, or with opacityThreshold > 0 a cutout (opaque where opacity reaches the
+// threshold, fully transparent elsewhere). It drives the layer mask (DESIGN.md rule 5).
+shader UsdPreviewSurface_opacity(float opacity = 1.0, float opacityThreshold = 0.0, output float out) {
+    float o = clamp(opacity, 0.0, 1.0);
+    out = opacityThreshold > 0.0 ? (o >= opacityThreshold ? 1.0 : 0.0) : o;
+}
+
+// UsdPreviewSurface's `normal`: a tangent-space normal in [-1, 1] (a normal-map texture read
+// with scale 2 and bias -1), applied as normal_map does with the [0, 1] encoding.
+shader UsdPreviewSurface_normal(color normal_ts = color(0.0, 0.0, 1.0), output normal out) {
+    vector t = dPdu - N * dot(N, dPdu);
+    if (length(t) < 1e-8) {
+        t = abs(N.x) < 0.9 ? cross(N, vector(1, 0, 0)) : cross(N, vector(0, 1, 0));
+    }
+    t = normalize(t);
+    vector b = cross(N, t);
+    vector m = vector(normal_ts);
+    vector n = t * m.x + b * m.y + N * m.z;
+    out = length(n) > 1e-8 ? normalize(n) : N;
+}
+
+// The built-in UsdPreviewSurface substance, with the spec's inputs and defaults (`normal` is
+// `normal_ts`: `normal` is a type name here). emissiveColor and occlusion are accepted and
+// unused: strata surfaces do not emit (composition warns when emission is authored), and
+// occlusion is a real-time approximation a path tracer computes. `displacement` is a bump
+// (the shading normal moves, the surface does not). A composed instance drops the normal and
+// displacement products when nothing sets them.
+substance UsdPreviewSurface {
+    input color diffuseColor = color(0.18, 0.18, 0.18);
+    input color emissiveColor = color(0.0, 0.0, 0.0);
+    input int useSpecularWorkflow = 0;
+    input color specularColor = color(0.0, 0.0, 0.0);
+    input float metallic = 0.0;
+    input float roughness = 0.5;
+    input float clearcoat = 0.0;
+    input float clearcoatRoughness = 0.01;
+    input float opacity = 1.0;
+    input float opacityThreshold = 0.0;
+    input float ior = 1.5;
+    input color normal_ts = color(0.0, 0.0, 1.0);
+    input float displacement = 0.0;
+    input float occlusion = 1.0;
+    node bsdf = UsdPreviewSurface_bsdf(diffuseColor: diffuseColor, useSpecularWorkflow: useSpecularWorkflow,
+                                       specularColor: specularColor, metallic: metallic, roughness: roughness,
+                                       clearcoat: clearcoat, clearcoatRoughness: clearcoatRoughness, ior: ior);
+    node presence = UsdPreviewSurface_opacity(opacity: opacity, opacityThreshold: opacityThreshold);
+    node normals = UsdPreviewSurface_normal(normal_ts: normal_ts);
+    node height = bump(height: displacement, scale: 1.0, mode: "add");
+    surface = bsdf.bsdf;
+    mask = presence.out;
+    normal = normals.out;
+    displacement = height.out;
+}
+
+// Wrap tokens to the runtime's codes (strata_rt::texture::WRAP_*); `useMetadata` (and anything
+// unknown, which composition reports) is repeat, since PNG, JPEG and EXR carry no wrap metadata
+// strata reads.
+int usd_wrap_code(string mode) {
+    return mode == "black" ? 1 : (mode == "clamp" ? 2 : (mode == "mirror" ? 3 : 0));
+}
+
+// UsdUVTexture: bilinear lookup at st (t = 0 is the image's bottom row), value · scale + bias
+// per channel. float4 inputs travel as colour + alpha (`scale` + `scale_a`). An empty file
+// gives the fallback. Channels the image lacks read 1 for alpha, grey for colour.
+shader UsdUVTexture(string file = "", color st = color(0.0, 0.0, 0.0), string wrapS = "useMetadata",
+                    string wrapT = "useMetadata", string sourceColorSpace = "auto",
+                    color scale = 1.0, float scale_a = 1.0, color bias = 0.0, float bias_a = 0.0,
+                    color fallback = color(0.0, 0.0, 0.0), float fallback_a = 1.0,
+                    output color rgb, output float r, output float g, output float b, output float a) {
+    if (file == "") {
+        rgb = fallback;
+        a = fallback_a;
+    } else {
+        int wrap = 16 * usd_wrap_code(wrapS) + 256 * usd_wrap_code(wrapT);
+        float s = st.r;
+        float t = st.g;
+        rgb = color(texture_channel(file, sourceColorSpace, s, t, wrap),
+                    texture_channel(file, sourceColorSpace, s, t, wrap + 1),
+                    texture_channel(file, sourceColorSpace, s, t, wrap + 2)) * scale + bias;
+        a = texture_channel(file, sourceColorSpace, s, t, wrap + 3) * scale_a + bias_a;
+    }
+    r = rgb.r;
+    g = rgb.g;
+    b = rgb.b;
+}
+
+// UsdPrimvarReader_*: strata's shading points carry one primvar, the mesh's `st` (as u, v);
+// `varname` "st" reads it, every other name gives the fallback (composition warns).
+shader UsdPrimvarReader_float2(string varname = "", color fallback = color(0.0, 0.0, 0.0), output color result) {
+    result = varname == "st" ? color(u, v, 0.0) : fallback;
+}
+shader UsdPrimvarReader_float3(string varname = "", color fallback = color(0.0, 0.0, 0.0), output color result) {
+    result = varname == "st" ? color(u, v, 0.0) : fallback;
+}
+shader UsdPrimvarReader_float(string varname = "", float fallback = 0.0, output float result) {
+    result = fallback;
+}
+shader UsdPrimvarReader_int(string varname = "", int fallback = 0, output int result) {
+    result = fallback;
+}
+
+// UsdTransform2d: in · scale, rotated by `rotation` degrees (counter-clockwise), + translation.
+shader UsdTransform2d(color in_ = color(0.0, 0.0, 0.0), float rotation = 0.0, color scale = color(1.0, 1.0, 1.0),
+                      color translation = color(0.0, 0.0, 0.0), output color result) {
+    float x = in_.r * scale.r;
+    float y = in_.g * scale.g;
+    float c = cos(radians(rotation));
+    float s = sin(radians(rotation));
+    result = color(x * c - y * s + translation.r, x * s + y * c + translation.g, 0.0);
+}
+
 // ---- The default substance: what a prim with no slot binding renders with (DESIGN.md rule 4) --
 
 substance default_substance {

@@ -468,6 +468,6 @@ fn intrinsic_value(i: Intrinsic, a: &[Value]) -> Result<Value, Stop> {
             let p = v3(0)?;
             Value::Float(noise::cellular3(p[0], p[1], p[2]))
         }
-        Texture | DiffuseBsdf | GlossyBsdf | MetalBsdf | GlassBsdf => return Err(Stop::NotConstant),
+        Texture | TextureChannel | DiffuseBsdf | GlossyBsdf | MetalBsdf | GlassBsdf => return Err(Stop::NotConstant),
     })
 }

@@ -1246,6 +1246,9 @@ impl FnLower<'_> {
         if i == Texture {
             return self.texture(args, frame);
         }
+        if i == TextureChannel {
+            return self.texture_channel(args, frame);
+        }
         let a: Vec<Vec<ssa::Value>> = args.iter().map(|x| self.expr(x, frame).scalars()).collect();
         let rt1 = |f: RtFn| move |s: &mut Self, l: &[ssa::Value]| s.b.call(f, vec![l[0]]);
         let un = |op: UnOp| move |s: &mut Self, l: &[ssa::Value]| s.b.unary(op, l[0]);
@@ -1378,7 +1381,7 @@ impl FnLower<'_> {
                 }
                 Lv::Scalars(scalars)
             }
-            Texture => unreachable!("handled above"),
+            Texture | TextureChannel => unreachable!("handled above"),
         }
     }
 
@@ -1408,6 +1411,55 @@ impl FnLower<'_> {
         let stepped = self.b.select(below, zero, one);
         let same = self.b.cmp(CmpOp::Eq, e1, e0);
         self.b.select(same, stepped, smooth)
+    }
+
+    /// A string argument that must be known when compiling (a literal or an input the scene
+    /// sets), or `None` after reporting that it is not.
+    fn constant_string(&mut self, arg: &Expr, frame: &mut Frame, what: &str) -> Option<String> {
+        let value = self.expr(arg, frame).one();
+        let known = self.b.known(value).and_then(|id| self.strings.get(id as usize).cloned());
+        if known.is_none() {
+            self.diags.push(
+                Diagnostic::error(format!("{what} must be a constant string (a literal or an input)"))
+                    .at(arg.span, "not known when compiling"),
+            );
+        }
+        known
+    }
+
+    /// `texture_channel(file, colour space, s, t, mode)`: like [`Self::texture`], one channel,
+    /// with the file decoded in the given colour space (`auto`, `sRGB`, `raw`) and the wrap
+    /// modes packed into `mode` (passed on to the runtime as it is).
+    fn texture_channel(&mut self, args: &[Expr], frame: &mut Frame) -> Lv {
+        let file = self.constant_string(&args[0], frame, "texture_channel(): the file name");
+        let space = self.constant_string(&args[1], frame, "texture_channel(): the colour space");
+        let s = self.expr(&args[2], frame).one();
+        let t = self.expr(&args[3], frame).one();
+        let mode = self.expr(&args[4], frame).one();
+        let space = match space.as_deref().map(|name| (name, texture::ColorSpace::parse(name))) {
+            Some((_, Some(space))) => Some(space),
+            Some((name, None)) => {
+                self.diags.push(
+                    Diagnostic::error(format!("unknown colour space `{name}`; expected `auto`, `sRGB` or `raw`"))
+                        .at(args[1].span, "colour space named here"),
+                );
+                None
+            }
+            None => None,
+        };
+        let id = match (file, space) {
+            (Some(f), Some(_)) if f.is_empty() => -1,
+            (Some(f), Some(space)) => match texture::register_file_as(Path::new(&f), space) {
+                Ok(id) => id,
+                Err(msg) => {
+                    self.diags.push(Diagnostic::error(msg).at(args[0].span, "texture file named here"));
+                    -1
+                }
+            },
+            _ => -1,
+        };
+        let id = self.b.iconst(id);
+        Lv::Scalars(vec![self.b.call(RtFn::Texture, vec![id, s, t, mode])])
     }
 
     /// `texture(file, s, t)`: the file must be known when compiling (a literal or an input
@@ -1457,7 +1509,7 @@ fn is_simple(e: &Expr) -> bool {
             ExprKind::Binary(_, a, b) => pending.extend([&**a, &**b]),
             ExprKind::Select(c, a, b) => pending.extend([&**c, &**a, &**b]),
             ExprKind::Construct(parts) => pending.extend(parts.iter()),
-            ExprKind::Intrinsic(i, args) if *i != Intrinsic::Texture => pending.extend(args.iter()),
+            ExprKind::Intrinsic(i, args) if !i.is_varying() => pending.extend(args.iter()),
             ExprKind::Intrinsic(..) | ExprKind::Index(..) | ExprKind::Array(_) | ExprKind::Call(..) => return false,
         }
     }

@@ -9,7 +9,7 @@ use super::accel::InstanceDesc;
 use super::shapes::{Part, Shape};
 use super::subdiv::{PolyMesh, catmull_clark, refined_faces};
 use super::xform::{PrimXform, local_transform, value_span, world_transforms};
-use crate::compose::scene::is_renderable;
+use crate::compose::scene::{is_bound_subset, is_renderable};
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::scene::{Attribute, Prim, PrimId, Stage, Value};
 use glam::{DMat3, DMat4, DQuat, DVec3, Vec2, Vec3};
@@ -348,6 +348,14 @@ impl Builder<'_> {
             return;
         }
         let index = self.prim_index(prim);
+        // GeomSubset material bindings: their faces are renderable prims of their own, so
+        // each gets its composed material.
+        let face_prims = if prim.type_name.as_deref() == Some("Mesh") {
+            let stage = self.stage;
+            material_subsets(stage, prim, index, &mut |subset| self.prim_index(subset), diags)
+        } else {
+            Vec::new()
+        };
         let others = self.triangles_so_far() - self.geometry.triangles.len();
         let g = &mut self.geometry;
         let mut out = Emitter::new(
@@ -359,6 +367,7 @@ impl Builder<'_> {
             self.budget - others.min(self.budget),
         );
         out.subdiv_level = self.subdiv_level;
+        out.face_prims = face_prims;
         emit_prim(prim, &mut out, diags);
         let (beyond, over) = (out.beyond_extent, out.over_budget);
         self.report(prim, beyond, over, diags);
@@ -413,6 +422,16 @@ impl Builder<'_> {
             }
             if !is_renderable(prim) || rel_inside_instancer(stage, root, id) {
                 continue;
+            }
+            if prim.children.iter().any(|&c| is_bound_subset(stage, stage.prim(c))) {
+                diags.push(
+                    Diagnostic::warning(format!(
+                        "mesh `{}` is instanced: its GeomSubset material bindings are not applied (the mesh's own \
+                         material is)",
+                        prim.path
+                    ))
+                    .at(prim.span, "inside an instance"),
+                );
             }
             let local = members.len() as u32;
             members.push(id);
@@ -584,6 +603,60 @@ fn beyond_extent(stage: &Stage, prim: &Prim, p: DVec3) -> Diagnostic {
     d.note("strata renders in f32: coordinates must be finite and within ±1e7 after transforms")
 }
 
+/// The GeomSubsets of `mesh` that bind materials to faces ([`is_bound_subset`]): the prim
+/// index of every face (`base`, the mesh's own, or the subset's from `index_of`), empty when
+/// there are none. Indices outside the mesh's faces are errors; a face in two subsets (the
+/// `materialBind` family must not overlap) warns and keeps the first.
+fn material_subsets(
+    stage: &Stage,
+    mesh: &Prim,
+    base: u32,
+    index_of: &mut dyn FnMut(&Prim) -> u32,
+    diags: &mut Diagnostics,
+) -> Vec<u32> {
+    let subsets: Vec<&Prim> =
+        mesh.children.iter().map(|&c| stage.prim(c)).filter(|p| is_bound_subset(stage, p)).collect();
+    if subsets.is_empty() {
+        return Vec::new();
+    }
+    let faces = mesh.value("faceVertexCounts").and_then(Value::as_int_array).map_or(0, <[i64]>::len);
+    let mut face_prims = vec![base; faces];
+    for subset in &subsets {
+        let index = index_of(subset);
+        let indices = subset.value("indices").and_then(Value::as_int_array).unwrap_or(&[]);
+        let span = span_of(subset, "indices");
+        if let Some(bad) = indices.iter().find(|&&i| i < 0 || i as usize >= faces) {
+            diags.push(
+                Diagnostic::error(format!(
+                    "GeomSubset `{}`: face index {bad} is outside the mesh's {faces} face(s)",
+                    subset.path
+                ))
+                .at(span, "these indices"),
+            );
+        }
+        let mut shared = 0usize;
+        for &i in indices.iter().filter(|&&i| i >= 0 && (i as usize) < faces) {
+            let slot = &mut face_prims[i as usize];
+            if *slot == base {
+                *slot = index;
+            } else if *slot != index {
+                shared += 1;
+            }
+        }
+        if shared > 0 {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "GeomSubset `{}`: {shared} face(s) are already in an earlier materialBind subset, which keeps them",
+                    subset.path
+                ))
+                .at(span, "overlapping indices")
+                .note("the materialBind family of a mesh must not overlap (familyType nonOverlapping or partition)"),
+            );
+        }
+    }
+    face_prims
+}
+
 /// Emits the geometry of one renderable prim.
 fn emit_prim(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
     match prim.type_name.as_deref() {
@@ -616,6 +689,8 @@ struct Emitter<'g> {
     over_budget: bool,
     /// Subdivision levels for subdivision-surface meshes.
     subdiv_level: u32,
+    /// For meshes with GeomSubset bindings: the prim index of each face (empty: all `prim`).
+    face_prims: Vec<u32>,
 }
 
 impl<'g> Emitter<'g> {
@@ -639,6 +714,7 @@ impl<'g> Emitter<'g> {
             budget,
             over_budget: false,
             subdiv_level: DEFAULT_SUBDIV_LEVEL,
+            face_prims: Vec::new(),
         }
     }
 
@@ -1006,7 +1082,9 @@ fn mesh(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
 
     let point = |i: usize| DVec3::new(points[3 * i], points[3 * i + 1], points[3 * i + 2]);
     let mut start = 0usize;
+    let base = out.prim;
     for (face, &count) in counts.iter().enumerate() {
+        out.prim = out.face_prims.get(face).copied().unwrap_or(base);
         let count = count as usize;
         if count < 3 || holes.contains(&(face as i64)) {
             start += count;
@@ -1059,6 +1137,7 @@ fn poly_mesh(
         if count >= 3 {
             mesh.counts.push(count as u32);
             mesh.holes.push(holes.contains(&(face as i64)));
+            mesh.origin.push(face as u32);
             for (c, &index) in indices.iter().enumerate().skip(start).take(count) {
                 let pi = index as usize;
                 mesh.indices.push(pi as u32);
@@ -1090,6 +1169,7 @@ fn subdivided(poly: &PolyMesh, left_handed: bool, flip: bool, out: &mut Emitter)
         level -= 1;
     }
     let q = catmull_clark(poly, level);
+    let base = out.prim;
     // Limit normals follow the right-hand rule of the faces' winding; a left-handed mesh
     // faces the other way.
     let sign = if left_handed { -1.0 } else { 1.0 };
@@ -1097,6 +1177,7 @@ fn subdivided(poly: &PolyMesh, left_handed: bool, flip: bool, out: &mut Emitter)
         if q.holes[i] {
             continue;
         }
+        out.prim = out.face_prims.get(q.origin[i] as usize).copied().unwrap_or(base);
         for mut corners in [[0, 1, 2], [0, 2, 3]] {
             if flip {
                 corners.swap(1, 2);

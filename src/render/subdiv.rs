@@ -28,6 +28,8 @@ pub struct PolyMesh {
     pub uv: Option<Vec<Vec2>>,
     /// Faces that are holes (`holeIndices`): refined with the rest, never emitted.
     pub holes: Vec<bool>,
+    /// Per face, the authored face it comes from (GeomSubsets name authored faces).
+    pub origin: Vec<u32>,
 }
 
 /// A refined quad mesh on the limit surface.
@@ -43,6 +45,8 @@ pub struct QuadMesh {
     pub uv: Option<Vec<[Vec2; 4]>>,
     /// Whether each quad lies in a hole.
     pub holes: Vec<bool>,
+    /// Per quad, the authored face it refines.
+    pub origin: Vec<u32>,
 }
 
 /// Number of faces after `level` refinements of `mesh`: an n-gon becomes n quads, then
@@ -162,6 +166,7 @@ fn refine(mesh: &PolyMesh) -> PolyMesh {
     let mut indices = Vec::with_capacity(quads * 4);
     let mut uv = mesh.uv.as_ref().map(|_| Vec::with_capacity(quads * 4));
     let mut holes = Vec::with_capacity(quads);
+    let mut origin = Vec::with_capacity(quads);
     for (f, &o) in offsets.iter().enumerate() {
         let vs = face(f);
         let m = vs.len();
@@ -180,9 +185,10 @@ fn refine(mesh: &PolyMesh) -> PolyMesh {
                 out.extend([here, (here + next) / 2.0, c, (before + here) / 2.0]);
             }
             holes.push(mesh.holes.get(f).copied().unwrap_or(false));
+            origin.push(mesh.origin.get(f).copied().unwrap_or(f as u32));
         }
     }
-    PolyMesh { points, counts, indices, uv, holes }
+    PolyMesh { points, counts, indices, uv, holes, origin }
 }
 
 /// Limit positions of a quad mesh's vertices (valid after at least one refinement, when
@@ -259,7 +265,7 @@ pub fn catmull_clark(mesh: &PolyMesh, level: u32) -> QuadMesh {
         *n = n.normalize_or_zero();
     }
     let uv = refined.uv.map(|t| t.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect());
-    QuadMesh { points, normals, quads, uv, holes: refined.holes }
+    QuadMesh { points, normals, quads, uv, holes: refined.holes, origin: refined.origin }
 }
 
 #[cfg(test)]
@@ -278,6 +284,7 @@ mod tests {
             indices: faces.iter().flatten().copied().collect(),
             uv: None,
             holes: vec![false; 6],
+            origin: (0..6).collect(),
         }
     }
 
@@ -324,6 +331,7 @@ mod tests {
             indices: vec![0, 1, 2, 3],
             uv: Some(vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)]),
             holes: vec![false],
+            origin: vec![0],
         };
         let q = catmull_clark(&mesh, 2);
         assert_eq!(q.quads.len(), 16);

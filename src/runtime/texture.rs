@@ -74,10 +74,104 @@ pub fn read_rgb_exr(path: &Path) -> Result<RgbImage, String> {
     decode_rgb_exr(&bytes, input::limits().max_texture_pixels)
 }
 
-/// Loads an OpenEXR file (its first RGBA layer). Non-finite texels become 0, so a broken
-/// pixel cannot put NaN into every render that samples it.
-pub fn load_exr(path: &Path) -> Result<Texture, String> {
-    let (width, height, mut texels) = read_rgb_exr(path)?;
+/// How 8-bit and 16-bit texels are turned into linear values (UsdUVTexture's
+/// `sourceColorSpace`). Float images (EXR, HDR) are linear in every mode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ColorSpace {
+    /// sRGB-decode the colour channels of 8-bit RGB(A) images; everything else is raw.
+    Auto,
+    /// sRGB-decode the colour channels of every integer image (alpha stays linear).
+    Srgb,
+    /// Use texel values as they are (normalised to [0, 1]).
+    Raw,
+}
+
+impl ColorSpace {
+    /// Parses `auto`, `sRGB` or `raw` (UsdUVTexture's tokens; the empty string is `auto`).
+    pub fn parse(name: &str) -> Option<ColorSpace> {
+        match name {
+            "" | "auto" => Some(ColorSpace::Auto),
+            "sRGB" => Some(ColorSpace::Srgb),
+            "raw" => Some(ColorSpace::Raw),
+            _ => None,
+        }
+    }
+
+    fn key(self) -> &'static str {
+        match self {
+            ColorSpace::Auto => "auto",
+            ColorSpace::Srgb => "sRGB",
+            ColorSpace::Raw => "raw",
+        }
+    }
+}
+
+/// The sRGB transfer function inverted: an encoded value in [0, 1] to linear (IEC 61966-2-1).
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+/// Whether the bytes start like an OpenEXR file.
+fn is_exr(bytes: &[u8]) -> bool {
+    bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01])
+}
+
+/// The width and height a PNG, JPEG or Radiance HDR header claims, read without decoding
+/// (the `image` crate reads only the header for this).
+pub fn image_dimensions(bytes: &[u8]) -> Result<(u32, u32), String> {
+    let reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| e.to_string())?;
+    use image::ImageFormat::{Hdr, Jpeg, Png};
+    if !matches!(reader.format(), Some(Png | Jpeg | Hdr)) {
+        return Err("not a supported image format (expected OpenEXR, PNG, JPEG or Radiance HDR)".into());
+    }
+    reader.into_dimensions().map_err(|e| e.to_string())
+}
+
+/// Decodes an image held in memory (OpenEXR, PNG, JPEG or Radiance HDR, told apart by their
+/// first bytes) into linear RGBA, after checking the header's size against `max_pixels`.
+/// Non-finite texels become 0.
+pub fn decode_texture(bytes: &[u8], space: ColorSpace, max_pixels: u64) -> Result<Texture, String> {
+    let (width, height, mut texels) = if is_exr(bytes) {
+        let (w, h, rgb) = decode_rgb_exr(bytes, max_pixels)?;
+        (w, h, rgb.into_iter().map(|[r, g, b]| [r, g, b, 1.0]).collect::<Vec<_>>())
+    } else {
+        let (w, h) = image_dimensions(bytes)?;
+        let pixels = u64::from(w) * u64::from(h);
+        if pixels > max_pixels {
+            return Err(format!(
+                "the image is {w} x {h} = {pixels} pixels, more than the texture limit of {max_pixels} pixels \
+                 (raise it with --max-texture-pixels)"
+            ));
+        }
+        if pixels == 0 {
+            return Err("the image is empty".into());
+        }
+        let mut reader =
+            image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| e.to_string())?;
+        // A second guard inside the decoder: nothing it allocates may exceed RGBA f32 pixels.
+        let mut limits = image::Limits::default();
+        limits.max_alloc = Some(max_pixels.saturating_mul(16).max(1 << 20));
+        reader.limits(limits);
+        let image = reader.decode().map_err(|e| e.to_string())?;
+        let color = image.color();
+        let float = matches!(color, image::ColorType::Rgb32F | image::ColorType::Rgba32F);
+        let eight_bit = color.bytes_per_pixel() == color.channel_count();
+        let srgb = match space {
+            ColorSpace::Raw => false,
+            ColorSpace::Srgb => !float,
+            ColorSpace::Auto => eight_bit && color.has_color(),
+        };
+        let rgba = image.into_rgba32f();
+        let (w, h) = (rgba.width() as usize, rgba.height() as usize);
+        let texels = rgba
+            .pixels()
+            .map(|p| {
+                let [r, g, b, a] = p.0;
+                if srgb { [srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b), a] } else { [r, g, b, a] }
+            })
+            .collect();
+        (w, h, texels)
+    };
     for texel in &mut texels {
         for c in texel.iter_mut() {
             if !c.is_finite() {
@@ -88,15 +182,29 @@ pub fn load_exr(path: &Path) -> Result<Texture, String> {
     Ok(Texture { width, height, texels })
 }
 
-/// Loads `path` (once per process) into the registry and returns its id.
+/// Loads `path` (once per process and colour space) into the registry and returns its id.
+/// The file is read through [`input::read_bytes`] (size limit, package paths); its header
+/// is checked against [`input::limits`] before decoding.
 pub fn register_file(path: &Path) -> Result<i32, String> {
+    register_file_as(path, ColorSpace::Auto)
+}
+
+/// [`register_file`] with an explicit colour space.
+pub fn register_file_as(path: &Path, space: ColorSpace) -> Result<i32, String> {
+    // `input` canonicalizes package paths (`a.usdz[tex.png]`) too.
     let canonical =
         crate::input::canonicalize(path).map_err(|e| format!("cannot open texture `{}`: {e}", path.display()))?;
-    if let Some(id) = strata_rt::texture::find(&canonical) {
+    let mut key = canonical.clone().into_os_string();
+    key.push(format!("#{}", space.key()));
+    let key = std::path::PathBuf::from(key);
+    if let Some(id) = strata_rt::texture::find(&key) {
         return Ok(id);
     }
-    let texture = load_exr(&canonical).map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
-    register(canonical, texture)
+    let texture = input::read_bytes(&canonical)
+        .map_err(|e| e.to_string())
+        .and_then(|bytes| decode_texture(&bytes, space, input::limits().max_texture_pixels))
+        .map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
+    register(key, texture)
 }
 
 #[cfg(test)]
@@ -151,5 +259,83 @@ pub(crate) mod tests {
         // Garbage is an error too, never a panic.
         assert!(decode_rgb_exr(b"v/1\x01garbage", 100).is_err());
         assert!(decode_rgb_exr(&[], 100).is_err());
+    }
+
+    /// An 8-bit PNG in memory, written with the `png` crate (not the decoder under test).
+    pub(crate) fn small_png(width: u32, height: u32, color: png::ColorType, data: &[u8]) -> Vec<u8> {
+        let mut bytes = Vec::new();
+        let mut encoder = png::Encoder::new(&mut bytes, width, height);
+        encoder.set_color(color);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().expect("header");
+        writer.write_image_data(data).expect("data");
+        writer.finish().expect("finish");
+        bytes
+    }
+
+    #[test]
+    fn png_decodes_with_srgb_and_alpha() {
+        // 2×1 RGBA: (255, 128, 0, 64) and (0, 0, 0, 255).
+        let bytes = small_png(2, 1, png::ColorType::Rgba, &[255, 128, 0, 64, 0, 0, 0, 255]);
+        let srgb = |c: f32| if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) };
+        let tex = decode_texture(&bytes, ColorSpace::Auto, 100).expect("decodes");
+        assert_eq!((tex.width, tex.height), (2, 1));
+        let [r, g, b, a] = tex.texels[0];
+        assert_eq!((r, b), (1.0, 0.0));
+        assert!((g - srgb(128.0 / 255.0)).abs() < 1e-6, "{g}");
+        assert!((a - 64.0 / 255.0).abs() < 1e-6, "alpha stays linear: {a}");
+        let raw = decode_texture(&bytes, ColorSpace::Raw, 100).expect("decodes");
+        assert!((raw.texels[0][1] - 128.0 / 255.0).abs() < 1e-6);
+        // Grey images are data (roughness, masks): auto leaves them raw, sRGB decodes them.
+        let grey = small_png(1, 1, png::ColorType::Grayscale, &[128]);
+        let t = decode_texture(&grey, ColorSpace::Auto, 100).unwrap();
+        assert!((t.texels[0][0] - 128.0 / 255.0).abs() < 1e-6 && t.texels[0][3] == 1.0);
+        let t = decode_texture(&grey, ColorSpace::Srgb, 100).unwrap();
+        assert!((t.texels[0][2] - srgb(128.0 / 255.0)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn image_headers_are_checked_before_decoding() {
+        let bytes = small_png(4, 4, png::ColorType::Rgb, &[7; 48]);
+        let err = decode_texture(&bytes, ColorSpace::Auto, 15).unwrap_err();
+        assert!(err.contains("4 x 4 = 16 pixels, more than the texture limit of 15"), "{err}");
+        // A 60-byte file claiming 100000 × 100000 RGB pixels (30 GB decoded): refused from
+        // the header alone.
+        let crc32 = |data: &[u8]| {
+            let mut crc = !0u32;
+            for &b in data {
+                crc ^= u32::from(b);
+                for _ in 0..8 {
+                    crc = if crc & 1 != 0 { (crc >> 1) ^ 0xEDB8_8320 } else { crc >> 1 };
+                }
+            }
+            !crc
+        };
+        let chunk = |kind: &[u8], data: &[u8]| {
+            let mut c = (data.len() as u32).to_be_bytes().to_vec();
+            let body = [kind, data].concat();
+            c.extend_from_slice(&body);
+            c.extend_from_slice(&crc32(&body).to_be_bytes());
+            c
+        };
+        let mut ihdr = 100_000u32.to_be_bytes().repeat(2);
+        ihdr.extend_from_slice(&[8, 2, 0, 0, 0]);
+        let huge = [
+            b"\x89PNG\r\n\x1a\n".to_vec(),
+            chunk(b"IHDR", &ihdr),
+            chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]),
+            chunk(b"IEND", &[]),
+        ]
+        .concat();
+        assert!(huge.len() < 80);
+        let err = decode_texture(&huge, ColorSpace::Auto, input::DEFAULT_MAX_TEXTURE_PIXELS).unwrap_err();
+        assert!(err.contains("100000 x 100000"), "{err}");
+        let err = decode_texture(b"GIF89a not supported", ColorSpace::Auto, 100).unwrap_err();
+        assert!(err.contains("not a supported image format"), "{err}");
+        assert!(decode_texture(&bytes[..30], ColorSpace::Auto, 100).is_err(), "truncated");
+        assert!(decode_texture(&[], ColorSpace::Auto, 100).is_err());
+        // EXR still goes through its own header check.
+        assert!(decode_texture(&small_exr(3, 2), ColorSpace::Auto, 5).unwrap_err().contains("3 x 2 = 6"));
+        assert_eq!(decode_texture(&small_exr(3, 2), ColorSpace::Srgb, 6).unwrap().texels[5], [2.0, 1.0, 0.5, 1.0]);
     }
 }

@@ -95,5 +95,5 @@ runtime! {
     Snoise = strata_rt_snoise(x: f32, y: f32, z: f32) { noise::snoise3(x, y, z) },
     Cellnoise = strata_rt_cellnoise(x: f32, y: f32, z: f32) { noise::cellnoise3(x, y, z) },
     Cellular = strata_rt_cellular(x: f32, y: f32, z: f32) { noise::cellular3(x, y, z) },
-    Texture = strata_rt_texture(id: i32, s: f32, t: f32, channel: i32) { texture::lookup(id, s, t, channel) },
+    Texture = strata_rt_texture(id: i32, s: f32, t: f32, mode: i32) { texture::lookup(id, s, t, mode) },
 }

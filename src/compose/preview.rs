@@ -1,0 +1,617 @@
+//! UsdShade preview networks (UsdPreviewSurface, UsdUVTexture, UsdPrimvarReader_*,
+//! UsdTransform2d) as composed instances of the built-in `UsdPreviewSurface` substance
+//! (`front/prelude.ash`).
+//!
+//! A Material whose `outputs:surface` connects to a Shader with `info:id = "UsdPreviewSurface"`
+//! (through NodeGraphs and interface inputs, as UsdShade resolves connections: the same
+//! [`producer`] walk that strata's own materials use) becomes a copy of the built-in graph in
+//! which every input connected to another shader's output is driven by a node of that
+//! shader's type instead of the exposed input. Values (authored, or reaching the shader through
+//! interface inputs) set the exposed inputs, as for any substance. Networks of the same shape
+//! share one graph, so identical materials still share one compiled material (DESIGN.md rule 8).
+
+use super::MaterialRef;
+use super::scene::{Producer, convert_input, producer};
+use crate::diag::{Diagnostic, Diagnostics, Span};
+use crate::front::ast::Product;
+use crate::front::graph::{NodeInstance, Source};
+use crate::front::library::{GraphId, Library};
+use crate::front::types::{Type, Value};
+use crate::runtime::texture;
+use crate::scene::{Attribute, Prim, PrimId, Stage, Value as UsdValue};
+use std::collections::HashMap;
+
+/// The built-in substance a preview network instantiates.
+pub const PREVIEW_SUBSTANCE: &str = "UsdPreviewSurface";
+
+/// The surface shader id strata implements.
+const SURFACE_ID: &str = "UsdPreviewSurface";
+
+/// Whether a Material is shaded by a UsdShade network rather than a strata source asset: no
+/// shader below it names `info:strata:sourceAsset`, and it has an `outputs:surface`.
+pub fn is_preview_material(stage: &Stage, id: PrimId) -> bool {
+    let prim = stage.prim(id);
+    prim.attribute("outputs:surface").is_some()
+        && !stage.subtree(id).any(|(_, p)| p.attribute("info:strata:sourceAsset").is_some())
+}
+
+/// Graphs already built for a scene, by network shape.
+#[derive(Default)]
+pub struct Shared {
+    by_shape: HashMap<String, GraphId>,
+}
+
+/// Builds the composed `UsdPreviewSurface` instance of the Material at `path` (bound at
+/// `binding`). `None`, after a warning, when the network has no UsdPreviewSurface: the layer
+/// then falls back to the default substance.
+pub fn instantiate(
+    stage: &Stage,
+    lib: &mut Library,
+    shared: &mut Shared,
+    path: &str,
+    binding: Span,
+    diags: &mut Diagnostics,
+) -> Option<MaterialRef> {
+    let material = stage.prim(stage.find(path)?);
+    let terminal = material.attribute("outputs:surface")?;
+    let mut seen = Vec::new();
+    let surface = match producer(stage, material, terminal, true, &mut seen, diags) {
+        Some(Producer::Output(prim, _)) => prim,
+        _ => {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "`{path}.outputs:surface` connects to no shader; the default substance is used"
+                ))
+                .at(terminal.span, "this output")
+                .also(binding, "bound here"),
+            );
+            return None;
+        }
+    };
+    let id = info_id(surface);
+    if id != Some(SURFACE_ID) {
+        diags.push(
+            Diagnostic::warning(format!(
+                "shader `{}` has `info:id = \"{}\"`, which strata does not implement; `{path}` falls back to the default substance",
+                surface.path,
+                id.unwrap_or("")
+            ))
+            .at(surface.attribute("info:id").map_or(surface.span, |a| a.span), "unknown shader")
+            .also(binding, "bound here")
+            .note("strata implements UsdPreviewSurface, UsdUVTexture, UsdPrimvarReader_* and UsdTransform2d"),
+        );
+        return None;
+    }
+    let template = lib.builtin_graph(PREVIEW_SUBSTANCE)?;
+    let mut builder = Builder { stage, lib, nodes: Vec::new(), memo: HashMap::new(), diags };
+    let mut graph = lib.get(template).clone();
+    let mut values: Vec<(usize, Value)> = Vec::new();
+    // Inputs driven by nodes, and inputs set at all (normal and displacement products stay
+    // only when something sets them: a bump of 0 costs the integrator a bump per hit).
+    let mut driven: Vec<(usize, Source)> = Vec::new();
+    let mut set: Vec<String> = Vec::new();
+    for attr in &surface.attributes {
+        let Some(usd_name) = attr.name.strip_prefix("inputs:") else { continue };
+        let name = if usd_name == "normal" { "normal_ts" } else { usd_name };
+        let Some((index, input)) = graph.input(name) else {
+            builder.diags.push(
+                Diagnostic::warning(format!(
+                    "UsdPreviewSurface has no input `{usd_name}`; `{}` is ignored",
+                    attribute_path(surface, attr)
+                ))
+                .at(attr.span, "unknown input"),
+            );
+            continue;
+        };
+        let ty = input.ty;
+        let mut seen = Vec::new();
+        match producer(stage, surface, attr, true, &mut seen, builder.diags) {
+            None => continue,
+            Some(Producer::Value(prim, value_attr)) => {
+                let Some((value, span)) = &value_attr.value else { continue };
+                match node_value(value, &value_attr.type_name, ty) {
+                    Ok(v) => {
+                        if name == "emissiveColor" && v != Value::Triple([0.0; 3]) {
+                            builder.warn_emission(surface, *span);
+                        }
+                        values.push((index, v));
+                        set.push(name.to_string());
+                    }
+                    Err(message) => builder.diags.push(
+                        Diagnostic::error(format!("input `{}`: {message}", attribute_path(prim, value_attr)))
+                            .at(*span, "this value"),
+                    ),
+                }
+            }
+            Some(Producer::Output(prim, output)) => {
+                let Some((source, from)) = builder.output(prim, output, attr.span) else { continue };
+                if !from.converts_to(ty) {
+                    builder.diags.push(
+                        Diagnostic::error(format!(
+                            "`{}` is {from} and cannot drive UsdPreviewSurface's {ty} input `{usd_name}`",
+                            attribute_path(prim, output)
+                        ))
+                        .at(attr.span, "connected here"),
+                    );
+                    continue;
+                }
+                if name == "emissiveColor" {
+                    builder.warn_emission(surface, attr.span);
+                }
+                driven.push((index, source));
+                set.push(name.to_string());
+            }
+        }
+    }
+    // The network's nodes go after the template's, so template node indices stay valid.
+    let offset = graph.nodes.len();
+    let shift = |s: Source| match s {
+        Source::Node { node, param } => Source::Node { node: node + offset, param },
+        other => other,
+    };
+    for node in &mut builder.nodes {
+        for arg in node.args.iter_mut().flatten() {
+            *arg = shift(arg.clone());
+        }
+    }
+    for (index, source) in driven {
+        let source = shift(source);
+        for arg in graph.nodes.iter_mut().flat_map(|n| n.args.iter_mut()) {
+            if *arg == Some(Source::Input(index)) {
+                *arg = Some(source.clone());
+            }
+        }
+    }
+    graph.nodes.append(&mut builder.nodes);
+    let keep = |p: Product| match p {
+        Product::Normal => set.iter().any(|s| s == "normal_ts"),
+        Product::Displacement => set.iter().any(|s| s == "displacement"),
+        _ => true,
+    };
+    graph.products.retain(|p| keep(p.product));
+    values.sort_by_key(|(i, _)| *i);
+    let shape = format!(
+        "{:?}|{:?}",
+        graph.nodes.iter().map(|n| (n.func, &n.args)).collect::<Vec<_>>(),
+        graph.products.iter().map(|p| p.product).collect::<Vec<_>>()
+    );
+    let graph_id = match shared.by_shape.get(&shape) {
+        Some(id) => *id,
+        None => {
+            graph.name = format!("{PREVIEW_SUBSTANCE}<{path}>");
+            let id = lib.add_graph(graph);
+            shared.by_shape.insert(shape, id);
+            id
+        }
+    };
+    Some(MaterialRef { path: path.to_string(), graph: graph_id, values, span: binding })
+}
+
+/// A shader's `info:id`.
+fn info_id(prim: &Prim) -> Option<&str> {
+    prim.value("info:id").and_then(UsdValue::as_str)
+}
+
+/// `/Prim.name`.
+fn attribute_path(prim: &Prim, attr: &Attribute) -> String {
+    format!("{}.{}", prim.path, attr.name)
+}
+
+/// Converts a USD value for a node or substance input. USD's shading triples (color3f,
+/// normal3f, float3, ...) all set `color` inputs, a float2 sets one with z = 0 and a float4
+/// its first three components (the fourth goes to the `_a` input, see [`Builder::node`]).
+fn node_value(value: &UsdValue, type_name: &str, to: Type) -> Result<Value, String> {
+    if let UsdValue::Tuple(t) = value
+        && to.is_triple()
+    {
+        let finite = |x: f64| {
+            let y = x as f32;
+            if y.is_finite() { Ok(y) } else { Err(format!("value {x} is not finite")) }
+        };
+        return match t.as_slice() {
+            [x, y] => Ok(Value::Triple([finite(*x)?, finite(*y)?, 0.0])),
+            [x, y, z] | [x, y, z, _] => Ok(Value::Triple([finite(*x)?, finite(*y)?, finite(*z)?])),
+            _ => Err(format!("a {}-component value cannot set a {to} input", t.len())),
+        };
+    }
+    convert_input(value, type_name, to)
+}
+
+/// Builds the nodes of one network, each shader once.
+struct Builder<'a, 's> {
+    stage: &'s Stage,
+    lib: &'a Library,
+    /// Nodes in dependency order (indices local to this list).
+    nodes: Vec<NodeInstance>,
+    /// Shader prim path → its node (`None` while it is being built: a cycle).
+    memo: HashMap<String, Option<usize>>,
+    diags: &'a mut Diagnostics,
+}
+
+impl<'s> Builder<'_, 's> {
+    fn warn_emission(&mut self, surface: &Prim, span: Span) {
+        self.diags.push(
+            Diagnostic::warning(format!(
+                "`{}`: strata surfaces do not emit light; emissiveColor is ignored",
+                surface.path
+            ))
+            .at(span, "emission set here")
+            .note("use a UsdLux light (e.g. a RectLight or SphereLight) for emitters"),
+        );
+    }
+
+    /// The source for output `output` of shader `prim`, and its type.
+    fn output(&mut self, prim: &'s Prim, output: &Attribute, at: Span) -> Option<(Source, Type)> {
+        let name = output.name.strip_prefix("outputs:").unwrap_or(&output.name);
+        if info_id(prim) == Some("UsdPrimvarReader_string") {
+            // Strings are constants when compiling: the reader gives its fallback.
+            let fallback = prim.value("inputs:fallback").and_then(UsdValue::as_str).unwrap_or("");
+            return Some((Source::Const(Value::Str(fallback.to_string()), Type::STRING), Type::STRING));
+        }
+        let node = self.node(prim, at)?;
+        let func = self.lib.function(self.nodes[node].func);
+        match func.param(name) {
+            Some((param, p)) if p.output => Some((Source::Node { node, param }, p.ty)),
+            _ => {
+                self.diags.push(
+                    Diagnostic::error(format!("`{}` has no output `{name}`", prim.path))
+                        .at(output.span, "this output")
+                        .also(at, "connected here"),
+                );
+                None
+            }
+        }
+    }
+
+    /// The node for shader `prim`, built on first use.
+    fn node(&mut self, prim: &'s Prim, at: Span) -> Option<usize> {
+        match self.memo.get(&prim.path) {
+            Some(Some(node)) => return Some(*node),
+            Some(None) => {
+                self.diags.push(
+                    Diagnostic::error(format!("connection cycle through shader `{}`", prim.path))
+                        .at(at, "this connection closes the cycle"),
+                );
+                return None;
+            }
+            None => {}
+        }
+        let id = info_id(prim).unwrap_or("");
+        let node_type = match id {
+            "UsdUVTexture"
+            | "UsdTransform2d"
+            | "UsdPrimvarReader_float2"
+            | "UsdPrimvarReader_float3"
+            | "UsdPrimvarReader_float"
+            | "UsdPrimvarReader_int" => id,
+            "UsdPrimvarReader_normal" | "UsdPrimvarReader_point" | "UsdPrimvarReader_vector" => {
+                "UsdPrimvarReader_float3"
+            }
+            _ => {
+                self.diags.push(
+                    Diagnostic::warning(format!(
+                        "shader `{}` has `info:id = \"{id}\"`, which strata does not implement; its output is not connected",
+                        prim.path
+                    ))
+                    .at(prim.attribute("info:id").map_or(prim.span, |a| a.span), "unknown shader")
+                    .also(at, "connected here")
+                    .note("the input takes its own authored value, else the default"),
+                );
+                return None;
+            }
+        };
+        let func_id = *self.lib.shaders.get(node_type)?;
+        self.memo.insert(prim.path.clone(), None);
+        let func = self.lib.function(func_id);
+        let mut args: Vec<Option<Source>> = vec![None; func.params.len()];
+        for attr in &prim.attributes {
+            let Some(usd_name) = attr.name.strip_prefix("inputs:") else { continue };
+            let name = if usd_name == "in" { "in_" } else { usd_name };
+            let func = self.lib.function(func_id);
+            let Some((index, param)) = func.param(name).filter(|(_, p)| !p.output) else {
+                self.diags.push(
+                    Diagnostic::warning(format!(
+                        "{id} has no input `{usd_name}`; `{}` is ignored",
+                        attribute_path(prim, attr)
+                    ))
+                    .at(attr.span, "unknown input"),
+                );
+                continue;
+            };
+            let ty = param.ty;
+            let alpha = func.param(&format!("{name}_a")).map(|(i, _)| i);
+            let mut seen = Vec::new();
+            match producer(self.stage, prim, attr, true, &mut seen, self.diags) {
+                None => {}
+                Some(Producer::Value(vprim, vattr)) => {
+                    let Some((value, span)) = &vattr.value else { continue };
+                    match node_value(value, &vattr.type_name, ty) {
+                        Ok(v) => {
+                            self.check_token(id, name, &v, *span);
+                            args[index] = Some(Source::Const(v, ty));
+                            if let (Some(a), UsdValue::Tuple(t)) = (alpha, value)
+                                && let [_, _, _, w] = t.as_slice()
+                                && (*w as f32).is_finite()
+                            {
+                                args[a] = Some(Source::Const(Value::Float(*w as f32), Type::FLOAT));
+                            }
+                        }
+                        Err(message) => self.diags.push(
+                            Diagnostic::error(format!("input `{}`: {message}", attribute_path(vprim, vattr)))
+                                .at(*span, "this value"),
+                        ),
+                    }
+                }
+                Some(Producer::Output(oprim, output)) => {
+                    let Some((source, from)) = self.output(oprim, output, attr.span) else { continue };
+                    if !from.converts_to(ty) {
+                        self.diags.push(
+                            Diagnostic::error(format!(
+                                "`{}` is {from} and cannot drive the {ty} input `{}`",
+                                attribute_path(oprim, output),
+                                attribute_path(prim, attr)
+                            ))
+                            .at(attr.span, "connected here"),
+                        );
+                        continue;
+                    }
+                    args[index] = Some(source);
+                }
+            }
+        }
+        if id == "UsdUVTexture" {
+            self.load_texture(prim, func_id, &mut args);
+        }
+        let node = self.nodes.len();
+        self.nodes.push(NodeInstance {
+            name: prim.path.rsplit('/').next().unwrap_or("shader").to_string(),
+            func: func_id,
+            args,
+            span: prim.span,
+        });
+        self.memo.insert(prim.path.clone(), Some(node));
+        Some(node)
+    }
+
+    /// Loads a UsdUVTexture's file now, so that a missing or broken image is reported at the
+    /// USD attribute that names it (lowering would point into the built-in node, once per
+    /// channel). The file is decoded once per process either way; after an error the node
+    /// reads its fallback.
+    fn load_texture(&mut self, prim: &Prim, func: crate::front::hir::FuncId, args: &mut [Option<Source>]) {
+        let f = self.lib.function(func);
+        let (Some((file_index, _)), Some((space_index, _))) = (f.param("file"), f.param("sourceColorSpace")) else {
+            return;
+        };
+        let Some(Source::Const(Value::Str(file), _)) = &args[file_index] else { return };
+        if file.is_empty() {
+            return;
+        }
+        let space = match &args[space_index] {
+            Some(Source::Const(Value::Str(s), _)) => texture::ColorSpace::parse(s),
+            _ => Some(texture::ColorSpace::Auto),
+        };
+        let Some(space) = space else { return }; // reported by `check_token`
+        if let Err(message) = texture::register_file_as(std::path::Path::new(file), space) {
+            let span = prim.attribute("inputs:file").map_or(prim.span, |a| a.value.as_ref().map_or(a.span, |v| v.1));
+            self.diags.push(Diagnostic::error(message).at(span, "texture file named here"));
+            args[file_index] = Some(Source::Const(Value::Str(String::new()), Type::STRING));
+        }
+    }
+
+    /// Checks the tokens whose meaning strata must know: colour spaces (an error: the texture
+    /// would decode wrongly), wrap modes and primvar names (warnings: a documented fallback).
+    fn check_token(&mut self, id: &str, input: &str, value: &Value, span: Span) {
+        let Value::Str(token) = value else { return };
+        match (id, input) {
+            ("UsdUVTexture", "sourceColorSpace") if !matches!(token.as_str(), "auto" | "sRGB" | "raw") => {
+                self.diags.push(
+                    Diagnostic::error(format!("unknown sourceColorSpace `{token}`; expected `auto`, `sRGB` or `raw`"))
+                        .at(span, "this value"),
+                );
+            }
+            ("UsdUVTexture", "wrapS" | "wrapT")
+                if !matches!(token.as_str(), "black" | "clamp" | "repeat" | "mirror" | "useMetadata") =>
+            {
+                self.diags.push(
+                    Diagnostic::warning(format!("unknown wrap mode `{token}`; strata repeats"))
+                        .at(span, "this value")
+                        .note("UsdUVTexture's wrap modes: black, clamp, repeat, mirror, useMetadata"),
+                );
+            }
+            ("UsdUVTexture", "file") if token.contains("<UDIM>") => {
+                self.diags.push(Diagnostic::error("UDIM texture sets are not supported").at(span, "a `<UDIM>` path"));
+            }
+            (reader, "varname") if reader.starts_with("UsdPrimvarReader_") && token != "st" => {
+                self.diags.push(
+                    Diagnostic::warning(format!(
+                        "strata's shading points carry only the `st` primvar; `{token}` reads the reader's fallback"
+                    ))
+                    .at(span, "this primvar"),
+                );
+            }
+            _ => {}
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::abi::{Closure, ClosureKind, Globals};
+    use crate::backend::{BackendKind, Compiler};
+    use crate::compose::scene::compose_stage;
+    use crate::diag::{Diagnostics, SourceMap};
+    use crate::ir::wired::PassOptions;
+    use crate::render::bsdf::Bsdf;
+    use crate::render::sampling::Rng;
+    use crate::scene::Stage;
+    use glam::Vec3;
+    use std::path::Path;
+
+    /// The closure `/Ball`'s material (a UsdPreviewSurface with `inputs`, as USDA lines)
+    /// evaluates to, and the rendered diagnostics.
+    fn closure_of(inputs: &str) -> (Closure, String) {
+        let (code, rendered) = compiled(inputs, "");
+        let g = Globals { n: [0.0, 0.0, 1.0], ng: [0.0, 0.0, 1.0], ..Globals::default() };
+        let mut closure = Closure::default();
+        code.surface(&g, 0, &mut closure).expect("evaluates");
+        (closure, rendered)
+    }
+
+    /// `/Ball`'s compiled material: a UsdPreviewSurface with `inputs` and more shaders
+    /// (`shaders`, USDA) in the Material `/M`; and the rendered diagnostics.
+    fn compiled(inputs: &str, shaders: &str) -> (std::sync::Arc<dyn crate::abi::MaterialCode>, String) {
+        let text = format!(
+            "#usda 1.0\ndef Sphere \"Ball\" {{ rel material:binding = </M> }}\n\
+             def Material \"M\" {{\n    token outputs:surface.connect = </M/S.outputs:surface>\n    \
+             def Shader \"S\" {{\n        uniform token info:id = \"UsdPreviewSurface\"\n{inputs}\n        \
+             token outputs:surface\n    }}\n{shaders}\n}}\n"
+        );
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let stage = Stage::from_text("scene.usda", &text, Path::new("."), &mut sources, &mut diags).expect("parses");
+        let c = compose_stage(&stage, &mut sources, &mut diags);
+        let material = c.material_of("/Ball").expect("composed").clone();
+        assert_eq!(material.layers.len(), 1, "{}", diags.render(&sources));
+        let code = Compiler::new(BackendKind::Jit, PassOptions::default())
+            .compile(&c.library, &material, &mut diags)
+            .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
+        (code, diags.render(&sources))
+    }
+
+    #[test]
+    fn opacity_is_the_layer_mask_and_a_threshold_cuts_out() {
+        let g = Globals::default();
+        let mask = |inputs: &str| compiled(inputs, "").0.mask(&g, 0).unwrap();
+        assert_eq!(mask(""), 1.0);
+        assert_eq!(mask("        float inputs:opacity = 0.25"), 0.25);
+        assert_eq!(mask("        float inputs:opacity = 0.4\n        float inputs:opacityThreshold = 0.5"), 0.0);
+        assert_eq!(mask("        float inputs:opacity = 0.6\n        float inputs:opacityThreshold = 0.5"), 1.0);
+    }
+
+    #[test]
+    fn texture_alpha_scale_bias_and_wrap_reach_the_surface() {
+        // checker.png's top-left cell is (255, 0, 0); alpha is 1 (RGB image). Opacity from
+        // `a` · 0.5 + 0.25 = 0.75; roughness from `g` of the top-left cell (0) · 1 + 0.3.
+        let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/usd/preview/checker.png");
+        let shaders = format!(
+            "    def Shader \"T\" {{\n        uniform token info:id = \"UsdUVTexture\"\n        \
+             asset inputs:file = @{}@\n        float2 inputs:st.connect = </M/X.outputs:result>\n        \
+             token inputs:wrapS = \"clamp\"\n        float4 inputs:scale = (1, 1, 1, 0.5)\n        \
+             float4 inputs:bias = (0, 0.3, 0, 0.25)\n        float outputs:a\n        float outputs:g\n    }}\n    \
+             def Shader \"X\" {{\n        uniform token info:id = \"UsdTransform2d\"\n        \
+             float2 inputs:in = (0.35, 0.9)\n        float2 inputs:translation = (-3, 0)\n        \
+             float2 outputs:result\n    }}",
+            file.display()
+        );
+        let inputs = "        float inputs:opacity.connect = </M/T.outputs:a>\n        \
+                      float inputs:roughness.connect = </M/T.outputs:g>\n        float inputs:metallic = 1";
+        let (code, rendered) = compiled(inputs, &shaders);
+        assert!(rendered.is_empty(), "{rendered}");
+        let g = Globals::default();
+        assert_eq!(code.mask(&g, 0).unwrap(), 0.75);
+        let mut closure = Closure::default();
+        code.surface(&g, 0, &mut closure).unwrap();
+        // st = (0.35 − 3, 0.9): clamped along s to the left column, the red cell (g = 0); repeat
+        // would read 0.35, the green cell (g = 1, roughness 1).
+        assert_eq!(ClosureKind::from_u32(closure.kind), ClosureKind::Metal);
+        assert!((closure.params[6] - 0.3).abs() < 1e-6, "{closure:?}");
+    }
+
+    /// The directional albedo ∫ f cos dωi of the largest channel for outgoing `wo`, estimated
+    /// by BSDF sampling: (mean, standard error).
+    fn albedo(b: &Bsdf, wo: Vec3, n: usize) -> (f64, f64) {
+        let mut rng = Rng::new(17, (wo.z * 1000.0) as u64, 0);
+        let (mut sum, mut sum2) = (0.0f64, 0.0f64);
+        for _ in 0..n {
+            let uc = rng.uniform();
+            let u = rng.uniform2();
+            if let Some(s) = b.sample(wo, uc, u) {
+                let w = (s.f.max_element() * s.wi.z.abs() / s.pdf) as f64;
+                sum += w;
+                sum2 += w * w;
+            }
+        }
+        let mean = sum / n as f64;
+        (mean, ((sum2 / n as f64 - mean * mean).max(0.0) / n as f64).sqrt())
+    }
+
+    #[test]
+    fn white_furnace_metallic_clearcoat_and_specular_never_gain_energy() {
+        let white = "        color3f inputs:diffuseColor = (1, 1, 1)\n";
+        let cases = [
+            (
+                "metallic 1, smooth",
+                format!("{white}        float inputs:metallic = 1\n        float inputs:roughness = 0.05"),
+                ClosureKind::Metal,
+            ),
+            (
+                "metallic 1, rough",
+                format!("{white}        float inputs:metallic = 1\n        float inputs:roughness = 1"),
+                ClosureKind::Metal,
+            ),
+            (
+                "metallic 0.6",
+                format!("{white}        float inputs:metallic = 0.6\n        float inputs:roughness = 0.4"),
+                ClosureKind::Metal,
+            ),
+            (
+                "clearcoat 1",
+                format!("{white}        float inputs:clearcoat = 1\n        float inputs:roughness = 0.8"),
+                ClosureKind::Glossy,
+            ),
+            (
+                "clearcoat 1, ior 4",
+                format!("{white}        float inputs:clearcoat = 1\n        float inputs:ior = 4"),
+                ClosureKind::Glossy,
+            ),
+            (
+                "specular workflow",
+                format!(
+                    "{white}        int inputs:useSpecularWorkflow = 1\n        color3f inputs:specularColor = (1, 1, 1)"
+                ),
+                ClosureKind::Glossy,
+            ),
+        ];
+        let mut failures = Vec::new();
+        for (name, inputs, kind) in &cases {
+            let (closure, rendered) = closure_of(inputs);
+            assert!(rendered.is_empty(), "{name}: {rendered}");
+            assert_eq!(ClosureKind::from_u32(closure.kind), *kind, "{name}: {closure:?}");
+            let b = Bsdf::from_closure(&closure);
+            for cos in [0.05f32, 0.3, 0.7, 1.0] {
+                let wo = Vec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
+                let (e, se) = albedo(&b, wo, 40_000);
+                if e > 1.0 + 4.0 * se + 1e-3 {
+                    failures.push(format!("{name} at cos {cos}: reflects {e} ± {se} of what it receives"));
+                }
+            }
+        }
+        assert!(failures.is_empty(), "{failures:#?}");
+    }
+
+    #[test]
+    fn preview_surface_maps_onto_strata_closures() {
+        // Defaults: diffuseColor 0.18, roughness 0.5, ior 1.5, metallic 0 → coat over Lambert.
+        let (c, rendered) = closure_of("");
+        assert!(rendered.is_empty(), "{rendered}");
+        assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Glossy);
+        assert_eq!(&c.params[..8], &[0.18, 0.18, 0.18, 1.0, 1.0, 1.0, 0.5, 1.5]);
+        // Metallic 1: a conductor with the base colour at normal incidence.
+        let (c, _) =
+            closure_of("        color3f inputs:diffuseColor = (0.9, 0.6, 0.2)\n        float inputs:metallic = 1");
+        assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Metal);
+        assert_eq!(&c.params[..7], &[0.9, 0.6, 0.2, 1.0, 1.0, 1.0, 0.5]);
+        // Specular workflow: F0 = 0.04 is ior 1.5, untinted.
+        let (c, _) = closure_of(
+            "        int inputs:useSpecularWorkflow = 1\n        color3f inputs:specularColor = (0.04, 0.04, 0.04)",
+        );
+        assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Glossy);
+        assert!((c.params[7] - 1.5).abs() < 1e-5 && c.params[3] == 1.0, "{c:?}");
+        // Clearcoat 1 moves the coat roughness to clearcoatRoughness.
+        let (c, _) = closure_of("        float inputs:clearcoat = 1\n        float inputs:clearcoatRoughness = 0.1");
+        assert!((c.params[6] - 0.1).abs() < 1e-6, "{c:?}");
+        // Emission is reported, never silently dropped.
+        let (_, rendered) = closure_of("        color3f inputs:emissiveColor = (1, 1, 1)");
+        assert!(rendered.contains("strata surfaces do not emit light; emissiveColor is ignored"), "{rendered}");
+    }
+}
