@@ -181,6 +181,21 @@ enum BenchCommand {
         #[arg(long, default_value = "64x64", value_parser = parse_resolution)]
         res: (usize, usize),
     },
+    /// Measure and draw every chart of README's Charts section and docs/STABILITY.md as SVG:
+    /// error vs time of stochastic vs weighted layering (1-64 layers; constant, noise and thin
+    /// masks), JIT vs interpreter, strata vs Mitsuba 3 (from the committed CSV), per-point
+    /// cost, compile time vs graph size, GGX and glass energy. A few minutes on 2 cores.
+    Charts {
+        /// The directory to write the SVGs into (created if missing).
+        #[arg(long, value_name = "DIR")]
+        plot: PathBuf,
+        /// `tools/compare_mitsuba.py`'s CSV; the Mitsuba chart is skipped if it does not exist.
+        #[arg(long, default_value = "docs/mitsuba_compare.csv")]
+        mitsuba_csv: PathBuf,
+        /// Tiny images and one repetition: checks that everything draws, in seconds.
+        #[arg(long)]
+        quick: bool,
+    },
 }
 
 fn main() -> ExitCode {
@@ -240,6 +255,14 @@ fn main() -> ExitCode {
                 BenchCommand::Shade { scene, prim } => strata::bench::bench_shade(scene.as_deref(), prim.as_deref()),
                 BenchCommand::Render { scene, spp, res } => strata::bench::bench_render(scene.as_deref(), spp, res),
                 BenchCommand::Scale => strata::bench::bench_scale(),
+                BenchCommand::Charts { plot, mitsuba_csv, quick } => {
+                    let options = if quick {
+                        strata::bench::ChartOptions::quick()
+                    } else {
+                        strata::bench::ChartOptions::default()
+                    };
+                    strata::bench::bench_charts(&plot, Some(&mitsuba_csv), &options)
+                }
             };
             match report {
                 Ok(text) => {
