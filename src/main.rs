@@ -181,6 +181,17 @@ enum BenchCommand {
         #[arg(long, default_value = "64x64", value_parser = parse_resolution)]
         res: (usize, usize),
     },
+    /// What a scene pays for features it contains but does not use where the camera looks:
+    /// time and shader calls per sample with one extra AOV, displacement, texture or
+    /// transparent material on an invisible prim, against the scene without it.
+    Features {
+        /// Samples per pixel of the timed renders.
+        #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=4096))]
+        spp: u32,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "96x64", value_parser = parse_resolution)]
+        res: (usize, usize),
+    },
     /// Measure and draw every chart of README's Charts section and docs/STABILITY.md as SVG:
     /// error vs time of stochastic vs weighted layering (1-64 layers; constant, noise and thin
     /// masks), JIT vs interpreter, strata vs Mitsuba 3 (from the committed CSV), per-point
@@ -255,6 +266,7 @@ fn main() -> ExitCode {
                 BenchCommand::Shade { scene, prim } => strata::bench::bench_shade(scene.as_deref(), prim.as_deref()),
                 BenchCommand::Render { scene, spp, res } => strata::bench::bench_render(scene.as_deref(), spp, res),
                 BenchCommand::Scale => strata::bench::bench_scale(),
+                BenchCommand::Features { spp, res } => strata::bench::bench_features(res, spp, 7),
                 BenchCommand::Charts { plot, mitsuba_csv, quick } => {
                     let options = if quick {
                         strata::bench::ChartOptions::quick()

@@ -291,6 +291,15 @@ fn surface_point(accel: &Accel, scene: &Scene, o: Vec3, d: Vec3, hit: &Hit) -> S
     }
 }
 
+/// The material index of a hit's prim, without the surface geometry [`surface_point`] builds.
+fn hit_material(accel: &Accel, scene: &Scene, hit: &Hit) -> usize {
+    let prim = match accel.primitive(hit.index) {
+        Primitive::Triangle(tri) => tri.prim,
+        Primitive::Shape(shape) => shape.prim,
+    };
+    scene.prim_material[prim as usize]
+}
+
 /// dP/du and dP/dv from the triangle's texture coordinates, or a frame around `n` when
 /// they are degenerate.
 fn tangents(p: [Vec3; 3], uv: [Vec2; 3], n: Vec3) -> (Vec3, Vec3) {
@@ -354,9 +363,14 @@ impl Context<'_> {
         let picked = match self.params.mode {
             LayerMode::Stochastic => {
                 let counts = &mut s.counts;
-                let mask_of = |i| {
-                    counts.masks += 1;
-                    material.mask(&g, i)
+                // A mask known at compile time (an opaque layer's 1, a constant) is not a
+                // shader call: a scene without varying masks pays nothing for transparency.
+                let mask_of = |i: usize| match info.layers[i].constant_mask {
+                    Some(m) => Ok(m),
+                    None => {
+                        counts.masks += 1;
+                        material.mask(&g, i)
+                    }
                 };
                 match layering::pick(&info.layers, u, mask_of).map_err(Invalid::Shader)? {
                     Some(i) => Some(i),
@@ -501,6 +515,11 @@ impl Context<'_> {
         let mut t_total = 1.0f32;
         for _ in 0..MAX_PASS_THROUGH {
             let Some(hit) = accel.intersect(o, d, 0.0, remaining) else { return Ok(t_total) };
+            // An opaque material stops the ray before any surface geometry or shader runs: a
+            // scene with one transparent prim does not make shadow rays pay at the others.
+            if is_opaque(self.materials[hit_material(accel, self.scene, &hit)]) {
+                return Ok(0.0);
+            }
             let sp = surface_point(accel, self.scene, o, d, &hit);
             let material = self.materials[sp.material];
             let nl = material.info().layers.len();
@@ -509,11 +528,15 @@ impl Context<'_> {
                 let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
                 let g = self.globals(&sp, facing, d);
                 // Π(1 − m_i) over the layers that pick, from the top (`layering`).
-                let mask_of = |i| {
-                    counts.shadow_masks += 1;
-                    material.mask(&g, i)
+                let layers = &material.info().layers;
+                let mask_of = |i: usize| match layers[i].constant_mask {
+                    Some(m) => Ok(m),
+                    None => {
+                        counts.shadow_masks += 1;
+                        material.mask(&g, i)
+                    }
                 };
-                t_total *= layering::transmittance(&material.info().layers, mask_of).map_err(Invalid::Shader)?;
+                t_total *= layering::transmittance(layers, mask_of).map_err(Invalid::Shader)?;
             }
             if t_total <= 0.0 {
                 return Ok(0.0);
