@@ -1495,11 +1495,11 @@ impl Default for ChartOptions {
     fn default() -> Self {
         ChartOptions {
             layers: vec![1, 4, 16, 64],
-            spp: vec![1, 2, 4, 8, 16],
-            res: (32, 32),
+            spp: vec![1, 2, 4, 8, 16, 32],
+            res: (56, 56),
             default_res: (64, 48),
-            reference_spp: 512,
-            reps: 3,
+            reference_spp: 1024,
+            reps: 7,
             shade_points: 1 << 14,
             sizes: GRAPH_SIZES.to_vec(),
         }
@@ -1523,30 +1523,38 @@ impl ChartOptions {
     }
 }
 
-/// One error-vs-time curve: (ms per image on one thread, RMSE) per spp of the ladder.
-fn error_curve(
-    l: &Loaded,
-    base: &RenderSettings,
+/// Error-vs-time curves of several contenders (a scene and its settings each): per spp of the
+/// ladder, (ms per image on one thread, RMSE against `reference`). The contenders are measured
+/// interleaved, spp by spp and repetition by repetition, so that load from other processes
+/// affects them alike; the time is the fastest of `reps` (the least disturbed by that load)
+/// and the RMSE the root of the mean squared error over the repetitions, each with its own
+/// seed (one image's RMSE is itself noisy).
+fn error_curves(
+    contenders: &[(&Loaded, RenderSettings)],
     spp: &[u32],
     reference: &[[f32; 3]],
     reps: usize,
-) -> Result<Vec<(f64, f64)>, String> {
-    let mut points = Vec::new();
+) -> Result<Vec<Vec<(f64, f64)>>, String> {
+    let mut curves = vec![Vec::new(); contenders.len()];
     for &n in spp {
-        let settings = RenderSettings { spp: n, ..base.clone() };
-        let mut times = Vec::new();
-        let mut error = 0.0;
+        let mut times = vec![f64::INFINITY; contenders.len()];
+        let mut mse = vec![0.0; contenders.len()];
         // Repetition 0 is the warm-up.
         for rep in 0..=reps {
-            let (secs, rgb) = render_rgb(l, &settings)?;
-            if rep > 0 {
-                times.push(secs * 1e3);
+            for (k, (l, base)) in contenders.iter().enumerate() {
+                let settings = RenderSettings { spp: n, seed: base.seed + rep as u64, ..base.clone() };
+                let (secs, rgb) = render_rgb(l, &settings)?;
+                if rep > 0 {
+                    times[k] = times[k].min(secs * 1e3);
+                    mse[k] += rmse(&rgb, reference).powi(2) / reps as f64;
+                }
             }
-            error = rmse(&rgb, reference);
         }
-        points.push((median(times), error));
+        for (k, curve) in curves.iter_mut().enumerate() {
+            curve.push((times[k], mse[k].sqrt()));
+        }
     }
-    Ok(points)
+    Ok(curves)
 }
 
 /// Formats a ratio pair of [`crate::plot::equal_ratios`] for a caption.
@@ -1589,25 +1597,25 @@ pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) ->
         let mut cross = Vec::new();
         let mut series = Vec::new();
         let mut caption = vec![format!(
-            "{}x{} px, spp {:?}, 1 thread, median of {}; reference: weighted, {} spp, other seed. Ratios are stochastic / weighted:",
-            o.res.0, o.res.1, o.spp, o.reps, o.reference_spp
+            "{}x{} px, spp {:?}, 1 thread, fastest of {} interleaved, RMSE over {} seeds; reference: weighted, {} spp. Ratios stochastic / weighted:",
+            o.res.0, o.res.1, o.spp, o.reps, o.reps, o.reference_spp
         )];
         writeln!(out, "layering, {} masks ({}x{}; stochastic / weighted):", kind.name(), o.res.0, o.res.1).unwrap();
         for (c, &n) in o.layers.iter().enumerate() {
             let name = format!("{}{n}", kind.name());
             let l = load_generated(&tmp.0, &name, n, &mask_stack_source(n, kind), BackendKind::Jit)?;
             let (_, reference) = render_rgb(&l, &reference_settings)?;
-            let mut curves = Vec::new();
-            for (mode, label) in [(LayerMode::Stochastic, "stochastic"), (LayerMode::Weighted, "weighted")] {
-                let settings = RenderSettings { mode, ..base.clone() };
-                let points = error_curve(&l, &settings, &o.spp, &reference, o.reps)?;
+            let modes = [(LayerMode::Stochastic, "stochastic"), (LayerMode::Weighted, "weighted")];
+            let contenders: Vec<(&Loaded, RenderSettings)> =
+                modes.iter().map(|&(mode, _)| (&l, RenderSettings { mode, ..base.clone() })).collect();
+            let curves = error_curves(&contenders, &o.spp, &reference, o.reps)?;
+            for ((mode, label), points) in modes.iter().zip(&curves) {
                 series.push(Series {
                     label: format!("{n} layer{}, {label}", if n == 1 { "" } else { "s" }),
                     points: points.clone(),
                     color: c,
-                    dashed: mode == LayerMode::Weighted,
+                    dashed: *mode == LayerMode::Weighted,
                 });
-                curves.push(points);
             }
             let ratios = ratio_text(&curves[0], &curves[1]);
             if let Some((_, t, _)) = crate::plot::equal_ratios(&curves[0], &curves[1]) {
@@ -1662,8 +1670,9 @@ pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) ->
     let reference_settings =
         RenderSettings { spp: o.reference_spp, seed: 0x5eed_0001, threads: None, ..default_base.clone() };
     let (_, reference) = render_rgb(&jit, &reference_settings)?;
-    let jit_curve = error_curve(&jit, &default_base, &o.spp, &reference, o.reps)?;
-    let interp_curve = error_curve(&interp, &default_base, &o.spp, &reference, o.reps)?;
+    let curves =
+        error_curves(&[(&jit, default_base.clone()), (&interp, default_base.clone())], &o.spp, &reference, o.reps)?;
+    let (jit_curve, interp_curve) = (curves[0].clone(), curves[1].clone());
     let ratios = ratio_text(&jit_curve, &interp_curve);
     writeln!(out, "default scene, JIT / interpreter: {ratios}").unwrap();
     loglog(
@@ -1677,8 +1686,8 @@ pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) ->
         ],
         &[
             format!(
-                "{}x{} px, spp {:?}, 1 thread, median of {}; reference: JIT, {} spp, other seed.",
-                o.default_res.0, o.default_res.1, o.spp, o.reps, o.reference_spp
+                "{}x{} px, spp {:?}, 1 thread, fastest of {} interleaved, RMSE over {} seeds; reference: JIT, {} spp, other seed.",
+                o.default_res.0, o.default_res.1, o.spp, o.reps, o.reps, o.reference_spp
             ),
             "Both backends compute the same bits, so equal spp gives equal RMSE: only time differs.".into(),
             format!("JIT / interpreter: {ratios}"),
@@ -1742,8 +1751,9 @@ pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) ->
     // (d) Compile time vs graph size.
     let (_, rows) = compile_sweep_rows(&o.sizes, o.reps.max(1))?;
     let line = |f: fn(&CompileRow) -> f64| rows.iter().map(|r| (r.nodes as f64, f(r))).collect::<Vec<_>>();
+    // Between the two largest graphs, where fixed per-compile costs no longer dominate.
     let slope = {
-        let (a, b) = (rows.first(), rows.last());
+        let (a, b) = (rows.len().checked_sub(2).and_then(|i| rows.get(i)), rows.last());
         match (a, b) {
             (Some(a), Some(b)) if b.nodes > a.nodes => {
                 let t = |r: &CompileRow| r.compose + r.codegen;
@@ -1756,7 +1766,7 @@ pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) ->
         "Tree of noise/math/mix_float nodes reading P; median of runs; compose = wire + fold + lower; codegen = Cranelift JIT.".into(),
         format!(
             "log-log slope of compose + codegen from {} to {} nodes: {slope:.2} (1 = linear); {} instructions at the largest size.",
-            rows.first().map_or(0, |r| r.nodes),
+            rows.len().checked_sub(2).and_then(|i| rows.get(i)).map_or(0, |r| r.nodes),
             rows.last().map_or(0, |r| r.nodes),
             rows.last().map_or(0, |r| r.insts)
         ),

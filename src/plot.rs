@@ -255,7 +255,7 @@ pub fn bars(path: &Path, title: &str, y_desc: &str, bars: &[Bar], caption: &[Str
 /// time ratio A/B, how they were found).
 ///
 /// Where the curves overlap in time (error), each is interpolated linearly in log–log space at
-/// the geometric middle of the overlap. Without overlap, each curve is summarised by its
+/// nine points spread over the overlap and the ratios' geometric mean is taken. Without overlap, each curve is summarised by its
 /// efficiency `t · e²` (the constant of unbiased Monte Carlo, `e ∝ t^-1/2`), geometric mean
 /// over its points: then error ratio = sqrt(time ratio).
 pub fn equal_ratios(a: &[(f64, f64)], b: &[(f64, f64)]) -> Option<(f64, f64, &'static str)> {
@@ -271,16 +271,27 @@ pub fn equal_ratios(a: &[(f64, f64)], b: &[(f64, f64)]) -> Option<(f64, f64, &'s
     }
     let at_time = |c: &[(f64, f64)], t: f64| interp_loglog(c.iter().map(|p| (p.0, p.1)), t);
     let at_error = |c: &[(f64, f64)], e: f64| interp_loglog(c.iter().map(|p| (p.1, p.0)), e);
+    // Nine points spread evenly (in log) over the overlap; the log ratios are averaged, so one
+    // noisy measurement moves the result less than a single interpolation would.
     let overlap = |f: fn(&(f64, f64)) -> f64| {
         let lo = a.iter().map(f).fold(f64::INFINITY, f64::min).max(b.iter().map(f).fold(f64::INFINITY, f64::min));
         let hi = a.iter().map(f).fold(0.0, f64::max).min(b.iter().map(f).fold(0.0, f64::max));
-        (hi > lo).then(|| (lo * hi).sqrt())
+        (hi > lo).then(|| (0..9).map(move |i| (lo.ln() + (hi.ln() - lo.ln()) * i as f64 / 8.0).exp()))
     };
-    if let (Some(t), Some(e)) = (overlap(|p| p.0), overlap(|p| p.1))
-        && let (Some(ea), Some(eb), Some(ta), Some(tb)) =
-            (at_time(&a, t), at_time(&b, t), at_error(&a, e), at_error(&b, e))
+    let mean_log_ratio = |xs: &mut dyn Iterator<Item = f64>, at: &dyn Fn(&[(f64, f64)], f64) -> Option<f64>| {
+        let (mut sum, mut n) = (0.0, 0);
+        for x in xs {
+            if let (Some(ya), Some(yb)) = (at(&a, x), at(&b, x)) {
+                sum += (ya / yb).ln();
+                n += 1;
+            }
+        }
+        (n > 0).then(|| (sum / n as f64).exp())
+    };
+    if let (Some(mut ts), Some(mut es)) = (overlap(|p| p.0), overlap(|p| p.1))
+        && let (Some(e), Some(t)) = (mean_log_ratio(&mut ts, &at_time), mean_log_ratio(&mut es, &at_error))
     {
-        return Some((ea / eb, ta / tb, "interpolated"));
+        return Some((e, t, "interpolated"));
     }
     let efficiency = |c: &[(f64, f64)]| (c.iter().map(|p| (p.0 * p.1 * p.1).ln()).sum::<f64>() / c.len() as f64).exp();
     let r = efficiency(&a) / efficiency(&b);

@@ -271,3 +271,21 @@ fn dome_with_1e4_to_1_dynamic_range() {
     assert!((mean - want).abs() < 3.0 * se, "{mean} ± {se} vs {want}");
     assert!(se / mean < 0.02, "relative standard error {}", se / mean);
 }
+
+/// `strata render --stats` reports what was compiled, the shader calls per sample and the time
+/// split (README, Performance).
+#[test]
+fn render_stats_report_calls_and_time_split() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_strata"))
+        .args(["render", "--res", "16x12", "--spp", "2", "--stats", "-o"])
+        .arg(dir.path().join("s.exr"))
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    for needle in ["layers pruned:", "instructions:", "evaluated per camera sample: masks", "AOV writes", "time: parse"]
+    {
+        assert!(err.contains(needle), "`{needle}` missing from:\n{err}");
+    }
+}
