@@ -278,7 +278,7 @@ pub fn equal_ratios(a: &[(f64, f64)], b: &[(f64, f64)]) -> Option<(f64, f64, &'s
         let hi = a.iter().map(f).fold(0.0, f64::max).min(b.iter().map(f).fold(0.0, f64::max));
         (hi > lo).then(|| (0..9).map(move |i| (lo.ln() + (hi.ln() - lo.ln()) * i as f64 / 8.0).exp()))
     };
-    let mean_log_ratio = |xs: &mut dyn Iterator<Item = f64>, at: &dyn Fn(&[(f64, f64)], f64) -> Option<f64>| {
+    let mean_log_ratio = |xs: &mut dyn Iterator<Item = f64>, at: &Lookup| {
         let (mut sum, mut n) = (0.0, 0);
         for x in xs {
             if let (Some(ya), Some(yb)) = (at(&a, x), at(&b, x)) {
@@ -297,6 +297,9 @@ pub fn equal_ratios(a: &[(f64, f64)], b: &[(f64, f64)]) -> Option<(f64, f64, &'s
     let r = efficiency(&a) / efficiency(&b);
     Some((r.sqrt(), r, "from t*e^2"))
 }
+
+/// A curve's y at an x (`None` outside its range).
+type Lookup = dyn Fn(&[(f64, f64)], f64) -> Option<f64>;
 
 /// Linear interpolation in log–log space of y at x over points that may be in any order along
 /// x (sorted here); `None` outside their range.
