@@ -101,10 +101,24 @@ fn compare(image: &Image, reference: &Image) -> (f64, f64, f64) {
 
 #[test]
 fn intersection_at_scene_scales_1e_minus_3_and_1e5() {
+    check_scales(&[1e-3, 1e5]);
+}
+
+/// Below 1e-4 the image falls apart today: at 1e-5 the floor loses 66 % of its pixel coverage
+/// (64 % with the sphere removed, so the triangle path; a near clip of 1e-12 changes nothing),
+/// at 1e-6 79 %. docs/STABILITY.md records it; the intersection rewrite should make this pass.
+#[test]
+#[ignore = "fails today (docs/STABILITY.md): mesh coverage lost at scale 1e-5 and below"]
+fn intersection_at_scene_scales_1e_minus_6_and_1e_minus_5() {
+    check_scales(&[1e-6, 1e-5]);
+}
+
+/// Renders the scene at each scale and compares it with scale 1.
+fn check_scales(scales: &[f64]) {
     let reference = render_scale(1.0);
     let alpha_ref = reference.f32_channel("A").unwrap().to_vec();
     let mut failures = Vec::new();
-    for s in [1e-3, 1e5] {
+    for &s in scales {
         let image = render_scale(s);
         let r = image.f32_channel("R").unwrap();
         assert!(r.iter().all(|x| x.is_finite()), "scale {s}: non-finite pixels");
