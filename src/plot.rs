@@ -189,8 +189,9 @@ pub fn bars(path: &Path, title: &str, y_desc: &str, bars: &[Bar], caption: &[Str
         }
     }
     let per_group = groups.iter().map(|g| bars.iter().filter(|b| b.group == *g).count()).max().unwrap_or(1);
+    // Room below the smallest bar (so it shows) and above the tallest (labels, legend).
     let ys = log_range(bars.iter().map(|b| b.value));
-    let ys = ys.start..ys.end * 2.0;
+    let ys = ys.start / 3.0..ys.end * 6.0;
     let mut chart = ChartBuilder::on(&top)
         .caption(title, ("sans-serif", 20))
         .margin(12)

@@ -104,9 +104,9 @@ fn intersection_at_scene_scales_1e_minus_3_and_1e5() {
     check_scales(&[1e-3, 1e5]);
 }
 
-/// Below 1e-4 the image falls apart today: at 1e-5 the floor loses 66 % of its pixel coverage
-/// (64 % with the sphere removed, so the triangle path; a near clip of 1e-12 changes nothing),
-/// at 1e-6 79 %. docs/STABILITY.md records it; the intersection rewrite should make this pass.
+/// Below 1e-4 the image falls apart today: the mesh floor vanishes (mean per-pixel alpha error
+/// 0.66 at 1e-5, 0.64 with the sphere removed, so the triangle path; a near clip of 1e-12
+/// changes nothing; 0.79 at 1e-6, all the coverage there is). docs/STABILITY.md records it; the intersection rewrite should make this pass.
 #[test]
 #[ignore = "fails today (docs/STABILITY.md): mesh coverage lost at scale 1e-5 and below"]
 fn intersection_at_scene_scales_1e_minus_6_and_1e_minus_5() {
