@@ -262,6 +262,8 @@ pub struct RenderArgs {
     /// The camera prim to render through (`None`: the stage's render settings camera, else
     /// the first camera).
     pub camera: Option<String>,
+    /// Subdivision levels for subdivision-surface meshes (`--subdiv-level`).
+    pub subdiv_level: u32,
     /// Whether `settings.width`/`height` were given (`--res`); if not, a UsdRender
     /// `RenderSettings` prim's `resolution` replaces them.
     pub resolution_given: bool,
@@ -374,7 +376,10 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         if let (false, Some((w, h))) = (args.resolution_given, view.resolution) {
             (settings.width, settings.height) = (w, h);
         }
-        let options = crate::render::scene::SceneOptions { camera: view.camera };
+        let options = crate::render::scene::SceneOptions {
+            camera: view.camera,
+            geometry: crate::render::geometry::GeometryOptions { subdiv_level: args.subdiv_level },
+        };
         crate::render::Scene::from_stage_with(&c.stage, &|p| c.prim_material.get(p).copied(), &options, &mut diags)
     });
     let scene_ms = scene_start.elapsed().as_secs_f64() * 1e3;

@@ -117,7 +117,7 @@ impl SourceMap {
 }
 
 /// How bad a diagnostic is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Severity {
     /// Informational; never fails a run.
     Note,
@@ -128,7 +128,7 @@ pub enum Severity {
 }
 
 /// A labelled span inside a diagnostic.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub struct Label {
     /// Where.
     pub span: Span,
@@ -139,7 +139,7 @@ pub struct Label {
 }
 
 /// One problem found in the user's input.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub struct Diagnostic {
     /// Error, warning or note.
     pub severity: Severity,
@@ -376,6 +376,9 @@ impl<'a> csfiles::Files<'a> for Excerpts {
 #[derive(Default, Debug)]
 pub struct Diagnostics {
     items: Vec<Diagnostic>,
+    /// Hashes of the recorded diagnostics: the same finding reached twice (one override wired
+    /// into several compositions, one material on many prims) is reported once.
+    seen: std::collections::HashSet<u64>,
 }
 
 impl Diagnostics {
@@ -386,7 +389,10 @@ impl Diagnostics {
 
     /// Records one diagnostic.
     pub fn push(&mut self, diagnostic: Diagnostic) {
-        self.items.push(diagnostic);
+        use std::hash::{BuildHasher, BuildHasherDefault, DefaultHasher};
+        if self.seen.insert(BuildHasherDefault::<DefaultHasher>::default().hash_one(&diagnostic)) {
+            self.items.push(diagnostic);
+        }
     }
 
     /// Whether any error (not warning) was recorded.
@@ -406,7 +412,9 @@ impl Diagnostics {
 
     /// Moves every diagnostic of `other` into `self`.
     pub fn extend(&mut self, other: Diagnostics) {
-        self.items.extend(other.items);
+        for d in other.items {
+            self.push(d);
+        }
     }
 
     /// Renders the diagnostics in order, at most [`MAX_SHOWN_PER_FILE`] per file (the file of
@@ -460,5 +468,53 @@ pub struct Failed;
 impl fmt::Display for Failed {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str("failed with errors (see diagnostics)")
+    }
+}
+
+/// The candidate a misspelt `name` most likely meant: the nearest by edit distance, when it
+/// is near enough to be a typo (at most a third of the name's length, at least one edit), or
+/// one that differs only in case. `None` when nothing is close: a wild guess misleads more
+/// than no guess.
+pub fn closest_name<'c>(name: &str, candidates: impl IntoIterator<Item = &'c str>) -> Option<&'c str> {
+    let limit = (name.chars().count() / 3).max(1);
+    candidates
+        .into_iter()
+        .filter(|c| *c != name)
+        .map(|c| {
+            let d = if c.eq_ignore_ascii_case(name) { 0 } else { strsim::damerau_levenshtein(name, c) };
+            (d, c)
+        })
+        .filter(|(d, _)| *d <= limit)
+        .min_by_key(|(d, c)| (*d, *c))
+        .map(|(_, c)| c)
+}
+
+/// `did you mean `x`?` for a note, when [`closest_name`] finds one.
+pub fn did_you_mean<'c>(name: &str, candidates: impl IntoIterator<Item = &'c str>) -> Option<String> {
+    closest_name(name, candidates).map(|c| format!("did you mean `{c}`?"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn closest_name_suggests_typos_only() {
+        let names = ["albedo", "roughness", "ior", "specular"];
+        assert_eq!(closest_name("albdo", names), Some("albedo"));
+        assert_eq!(closest_name("roughnes", names), Some("roughness"));
+        assert_eq!(closest_name("Roughness", names), Some("roughness"));
+        assert_eq!(closest_name("iro", names), Some("ior"), "a transposition is one edit");
+        assert_eq!(closest_name("metallic", names), None, "nothing close: no guess");
+        assert_eq!(closest_name("albedo", names), None, "an exact name is not a typo");
+    }
+
+    #[test]
+    fn the_same_diagnostic_is_recorded_once() {
+        let mut d = Diagnostics::new();
+        d.push(Diagnostic::warning("w"));
+        d.push(Diagnostic::warning("w"));
+        d.push(Diagnostic::warning("v"));
+        assert_eq!(d.items().len(), 2);
     }
 }

@@ -52,7 +52,7 @@ impl Entry {
 /// The files inputs are made from, and the other files they may refer to.
 #[derive(Clone, Debug, Default)]
 pub struct Corpus {
-    /// `.ash` and `.usda` files, sorted by path (so input `k` is the same on every machine).
+    /// `.ash`, `.usda` and `.usdc` files, sorted by path (so input `k` is the same on every machine).
     pub entries: Vec<Entry>,
     /// Every other staged file (textures and the like), relative path and bytes.
     pub assets: Vec<Entry>,
@@ -74,7 +74,9 @@ impl Corpus {
                 } else if kind.is_file() && entry.metadata()?.len() <= MAX_CORPUS_FILE {
                     let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
                     let item = Entry { rel, bytes: std::fs::read(&path)? };
-                    if item.rel.extension().is_some_and(|e| e == "ash" || e == "usda") {
+                    // Binary layers are mutated too: the usdc reader must turn every corrupt
+                    // crate into a diagnostic (src/scene/usdc.rs).
+                    if item.rel.extension().is_some_and(|e| e == "ash" || e == "usda" || e == "usdc") {
                         corpus.entries.push(item);
                     } else {
                         corpus.assets.push(item);

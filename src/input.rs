@@ -9,6 +9,12 @@
 //! checking a path and reading it), and never more than the limit is read even if the file
 //! grows meanwhile.
 //!
+//! **Packages.** A path of the form `dir/a.usdz[tex/b.exr]` (USD's package-relative asset
+//! path) names the member `tex/b.exr` of the zip package `dir/a.usdz`; packages nest
+//! (`a.usdz[b.usdz[c.usda]]`). [`read_bytes`] reads the package under the same rules as any
+//! file, then the member, itself held to the size limit, so every caller (layers, substance
+//! files, textures) reads inside packages without knowing about them.
+//!
 //! The limits are process-wide, set once by the command line (`--max-input-size`,
 //! `--max-texture-pixels`) before anything is read, because textures are loaded deep inside
 //! compilation where no options are passed.
@@ -79,6 +85,8 @@ pub enum InputError {
     },
     /// The file is not UTF-8 text (for text inputs).
     NotText,
+    /// A package-relative path (`a.usdz[member]`) whose package or member could not be read.
+    Package(String),
     /// The operating system refused (missing file, permissions, ...).
     Io(std::io::Error),
 }
@@ -93,6 +101,7 @@ impl fmt::Display for InputError {
                 size
             ),
             InputError::NotText => f.write_str("stream did not contain valid UTF-8"),
+            InputError::Package(message) => f.write_str(message),
             // Exactly the operating system's words, as before this module existed.
             InputError::Io(e) => write!(f, "{e}"),
         }
@@ -208,9 +217,139 @@ pub fn was_read(path: &Path) -> bool {
     FILES_READ.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).iter().any(|f| f.same_file(&identity))
 }
 
-/// Reads the whole of `path` under the current [`limits`].
+/// Reads the whole of `path` under the current [`limits`]; a package-relative path
+/// (`a.usdz[member]`) reads that member of the package.
 pub fn read_bytes(path: &Path) -> Result<Vec<u8>, InputError> {
-    read_bytes_limited(path, limits().max_file_bytes)
+    let max = limits().max_file_bytes;
+    match split_package_path(path) {
+        Some((package, member)) => {
+            let bytes = read_bytes_limited(&package, max)?;
+            read_member(bytes, &member, max, &package.display().to_string(), 0)
+        }
+        None => read_bytes_limited(path, max),
+    }
+}
+
+/// Packages inside packages deeper than this are refused (a hostile path cannot recurse).
+const MAX_PACKAGE_NESTING: usize = 8;
+
+/// Splits USD's package-relative path `pkg[member]` at the outermost brackets into the
+/// package file and the member (which may itself be package-relative). `None` for a plain
+/// path, and for an existing file whose name merely ends in `]`.
+pub fn split_package_path(path: &Path) -> Option<(PathBuf, String)> {
+    let text = path.to_str()?;
+    let (package, member) = split_brackets(text)?;
+    if std::fs::symlink_metadata(path).is_ok() {
+        return None;
+    }
+    Some((PathBuf::from(package), member.to_string()))
+}
+
+/// `a[b[c]]` → `("a", "b[c]")`: the text before the first `[` and inside the last `]`.
+fn split_brackets(text: &str) -> Option<(&str, &str)> {
+    let inner = text.strip_suffix(']')?;
+    let open = inner.find('[')?;
+    let (package, member) = (&inner[..open], &inner[open + 1..]);
+    (!package.is_empty() && !member.is_empty()).then_some((package, member))
+}
+
+/// Reads `member` (maybe `inner.usdz[deeper]`) out of the zip package held in `bytes`.
+fn read_member(bytes: Vec<u8>, member: &str, max: u64, package: &str, depth: usize) -> Result<Vec<u8>, InputError> {
+    if depth >= MAX_PACKAGE_NESTING {
+        return Err(InputError::Package(format!("packages nested more than {MAX_PACKAGE_NESTING} deep")));
+    }
+    let (name, rest) = match split_brackets(member) {
+        Some((outer, inner)) => (outer, Some(inner)),
+        None => (member, None),
+    };
+    let name = normalize_member(name);
+    let mut archive = zip::ZipArchive::new(std::io::Cursor::new(bytes))
+        .map_err(|e| InputError::Package(format!("`{package}` is not a readable zip package: {e}")))?;
+    let mut file = archive
+        .by_name(&name)
+        .map_err(|_| InputError::Package(format!("the package `{package}` has no member `{name}`")))?;
+    // The declared size is checked first, and the read is bounded anyway: a deflated member
+    // can inflate past what its header claims.
+    if file.size() > max {
+        return Err(InputError::TooLarge { size: file.size(), limit: max });
+    }
+    let mut out = Vec::with_capacity(file.size() as usize);
+    (&mut file)
+        .take(max.saturating_add(1))
+        .read_to_end(&mut out)
+        .map_err(|e| InputError::Package(format!("cannot read `{name}` in the package `{package}`: {e}")))?;
+    if out.len() as u64 > max {
+        return Err(InputError::TooLarge { size: out.len() as u64, limit: max });
+    }
+    match rest {
+        Some(inner) => read_member(out, inner, max, &format!("{package}[{name}]"), depth + 1),
+        None => Ok(out),
+    }
+}
+
+/// A member name as zip stores it: `/`-separated, no `./`, `..` applied.
+fn normalize_member(name: &str) -> String {
+    let mut parts: Vec<&str> = Vec::new();
+    for part in name.split(['/', '\\']) {
+        match part {
+            "" | "." => {}
+            ".." => {
+                if parts.pop().is_none() {
+                    parts.push("..");
+                }
+            }
+            other => parts.push(other),
+        }
+    }
+    parts.join("/")
+}
+
+/// Resolves an asset path authored in a layer whose directory is `base_dir`. Inside a
+/// package (`base_dir` = `pkg.usdz[sub]`) a relative path stays inside it, as USD resolves
+/// package-relative assets: `tex/a.exr` → `pkg.usdz[sub/tex/a.exr]`.
+pub fn resolve_asset(base_dir: &Path, authored: &str) -> PathBuf {
+    if let Some(text) = base_dir.to_str()
+        && let Some((package, dir)) = split_brackets_allow_empty(text)
+        && !Path::new(authored).is_absolute()
+    {
+        let member = normalize_member(&format!("{dir}/{authored}"));
+        return PathBuf::from(format!("{package}[{member}]"));
+    }
+    crate::scene::value::normalize(&base_dir.join(authored))
+}
+
+/// Like [`split_brackets`], but `pkg[]` (a package's top directory) is allowed.
+fn split_brackets_allow_empty(text: &str) -> Option<(&str, &str)> {
+    let inner = text.strip_suffix(']')?;
+    let open = inner.find('[')?;
+    let package = &inner[..open];
+    (!package.is_empty()).then_some((package, &inner[open + 1..]))
+}
+
+/// The directory asset paths in the layer at `path` resolve against: the parent directory,
+/// or for a package member `pkg.usdz[sub/a.usdc]`, `pkg.usdz[sub]`.
+pub fn layer_dir(path: &Path) -> PathBuf {
+    if let Some(text) = path.to_str()
+        && let Some((package, member)) = split_brackets(text)
+        && split_package_path(path).is_some()
+    {
+        let dir = member.rsplit_once('/').map(|(d, _)| d).unwrap_or("");
+        return PathBuf::from(format!("{package}[{dir}]"));
+    }
+    path.parent().unwrap_or(Path::new("")).to_path_buf()
+}
+
+/// A canonical identity for `path` (symlinks and `..` resolved), package members included:
+/// `pkg.usdz[m]` → `<canonical pkg.usdz>[m]`. Falls back to a lexical normalisation when the
+/// file does not exist.
+pub fn canonicalize(path: &Path) -> std::io::Result<PathBuf> {
+    match split_package_path(path) {
+        Some((package, member)) => {
+            let package = std::fs::canonicalize(package)?;
+            Ok(PathBuf::from(format!("{}[{}]", package.display(), normalize_member(&member))))
+        }
+        None => std::fs::canonicalize(path),
+    }
 }
 
 /// Reads `path` as UTF-8 text under the current [`limits`].
@@ -257,6 +396,65 @@ mod tests {
             assert!(was_read(&link) && was_read(&hard));
         }
         assert!(!was_read(&dir.path().join("missing.exr")));
+    }
+
+    fn write_zip(path: &Path, members: &[(&str, &[u8])]) {
+        let mut zip = zip::ZipWriter::new(std::fs::File::create(path).unwrap());
+        for (name, bytes) in members {
+            let options = zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Deflated);
+            zip.start_file(*name, options).unwrap();
+            std::io::Write::write_all(&mut zip, bytes).unwrap();
+        }
+        zip.finish().unwrap();
+    }
+
+    #[test]
+    fn package_members_are_read_under_the_limit() {
+        let dir = tempfile::tempdir().unwrap();
+        let inner = dir.path().join("inner.usdz");
+        write_zip(&inner, &[("deep/c.txt", b"nested")]);
+        let outer = dir.path().join("a.usdz");
+        let inner_bytes = std::fs::read(&inner).unwrap();
+        write_zip(&outer, &[("root.usda", b"#usda 1.0\n"), ("tex/b.txt", &[7u8; 1000]), ("in.usdz", &inner_bytes)]);
+        let member = |m: &str| PathBuf::from(format!("{}[{m}]", outer.display()));
+        assert_eq!(read_bytes(&member("tex/b.txt")).unwrap(), vec![7u8; 1000]);
+        assert_eq!(read_bytes(&member("./tex/../tex/b.txt")).unwrap().len(), 1000, "member names are normalised");
+        assert_eq!(read_bytes(&member("in.usdz[deep/c.txt]")).unwrap(), b"nested", "packages nest");
+        let err = read_bytes(&member("nope.png")).unwrap_err().to_string();
+        assert!(err.contains("has no member `nope.png`"), "{err}");
+        // The member's own size is held to the limit, however small the package is.
+        let err = read_member(std::fs::read(&outer).unwrap(), "tex/b.txt", 999, "a.usdz", 0).unwrap_err();
+        assert!(matches!(err, InputError::TooLarge { size: 1000, limit: 999 }), "{err:?}");
+        let err = read_bytes(&PathBuf::from(format!("{}[x]", dir.path().join("missing.usdz").display()))).unwrap_err();
+        assert!(matches!(err, InputError::Io(_)), "{err:?}");
+        std::fs::write(dir.path().join("text.usdz"), "not a zip").unwrap();
+        let err = read_bytes(&PathBuf::from(format!("{}[x]", dir.path().join("text.usdz").display()))).unwrap_err();
+        assert!(err.to_string().contains("not a readable zip package"), "{err}");
+        assert!(was_read(&outer), "the package counts as an input");
+    }
+
+    #[test]
+    fn asset_paths_resolve_inside_packages() {
+        let dir = tempfile::tempdir().unwrap();
+        let pkg = dir.path().join("a.usdz");
+        write_zip(&pkg, &[("sub/root.usdc", b"x")]);
+        let root = PathBuf::from(format!("{}[sub/root.usdc]", pkg.display()));
+        let base = layer_dir(&root);
+        assert_eq!(base, PathBuf::from(format!("{}[sub]", pkg.display())));
+        assert_eq!(resolve_asset(&base, "tex/a.exr"), PathBuf::from(format!("{}[sub/tex/a.exr]", pkg.display())));
+        assert_eq!(resolve_asset(&base, "../b.usda"), PathBuf::from(format!("{}[b.usda]", pkg.display())));
+        assert_eq!(resolve_asset(&base, "/abs/c.exr"), PathBuf::from("/abs/c.exr"), "absolute paths leave the package");
+        assert_eq!(resolve_asset(Path::new("/d/x"), "./y/../z.usda"), PathBuf::from("/d/x/z.usda"));
+        assert_eq!(layer_dir(Path::new("/d/x/s.usda")), PathBuf::from("/d/x"));
+        // An existing file whose name merely ends in `]` is a file, not a package member.
+        let odd = dir.path().join("shot[1]");
+        std::fs::write(&odd, "plain").unwrap();
+        assert!(split_package_path(&odd).is_none());
+        assert_eq!(read_bytes(&odd).unwrap(), b"plain");
+        assert_eq!(
+            canonicalize(&root).unwrap(),
+            PathBuf::from(format!("{}[sub/root.usdc]", pkg.canonicalize().unwrap().display()))
+        );
     }
 
     #[test]

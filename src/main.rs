@@ -30,7 +30,7 @@ struct Args {
 enum Command {
     /// Print the composed slot table of every renderable prim.
     Layers {
-        /// A `.usda` scene (default: the embedded default scene).
+        /// A USD scene: `.usda`, `.usdc`, `.usd` or `.usdz` (default: the embedded default scene).
         scene: Option<PathBuf>,
         /// Print JSON instead of a table.
         #[arg(long)]
@@ -38,7 +38,7 @@ enum Command {
     },
     /// Print the wired IR of one prim's composed material.
     Ir {
-        /// A `.usda` scene.
+        /// A USD scene: `.usda`, `.usdc`, `.usd` or `.usdz`.
         scene: PathBuf,
         /// The prim path (`/World/Ball`).
         #[arg(long)]
@@ -55,7 +55,7 @@ enum Command {
     },
     /// Render a scene through its compiled materials to a multi-layer EXR and a PNG preview.
     Render {
-        /// A `.usda` scene (default: the embedded default scene).
+        /// A USD scene: `.usda`, `.usdc`, `.usd` or `.usdz` (default: the embedded default scene).
         scene: Option<PathBuf>,
         /// The EXR to write (the PNG preview goes beside it).
         #[arg(short, long, default_value = "strata.exr")]
@@ -71,6 +71,12 @@ enum Command {
         /// else the first Camera, else a camera framing the scene).
         #[arg(long, value_name = "PRIM")]
         camera: Option<String>,
+        /// Catmull-Clark levels for subdivision-surface meshes (UsdGeom's default scheme); 0
+        /// renders the control cage. A mesh is refined fewer times when it would pass 262 144
+        /// faces.
+        #[arg(long, default_value_t = strata::render::geometry::DEFAULT_SUBDIV_LEVEL,
+              value_parser = clap::value_parser!(u32).range(0..=6))]
+        subdiv_level: u32,
         /// Store RGBA and colour AOVs (albedo, N, colour channels) as 16-bit half floats;
         /// Z, P, scalar and integer channels stay 32-bit.
         #[arg(long)]
@@ -113,7 +119,7 @@ enum Command {
     },
     /// Check a substance file or a scene and report every problem.
     Check {
-        /// A `.ash` substance file or a `.usda` scene.
+        /// A `.ash` substance file or a USD scene (`.usda`, `.usdc`, `.usd`, `.usdz`).
         file: PathBuf,
     },
     /// Mutation-fuzz both front ends and the check pipeline; exit 1 if any input crashes,
@@ -233,6 +239,7 @@ fn main() -> ExitCode {
             spp,
             res,
             camera,
+            subdiv_level,
             half,
             seed,
             threads,
@@ -258,6 +265,7 @@ fn main() -> ExitCode {
             stats,
             half,
             camera,
+            subdiv_level,
             resolution_given: res.is_some(),
         }),
         Command::Compile { file, output } => cli::compile(&file, &output),

@@ -34,6 +34,7 @@ error_snapshots! {
     usda_bindings => "tests/in/errors/bindings.usda",
     usda_connections => "tests/in/errors/connections.usda",
     usda_geometry => "tests/in/errors/geometry.usda",
+    ash_typos => "tests/in/errors/typos.ash",
 }
 
 fn strata(args: &[&str]) -> std::process::Output {
@@ -80,4 +81,44 @@ fn layers_json_contract_on_listing1() {
     assert_eq!(first["layers"][0]["material"], "/Materials/SubstanceA");
     assert_eq!(first["layers"][0]["bound_at"], "/Root");
     assert_eq!(first["layers"][0]["overrides"], serde_json::json!([]));
+}
+
+/// Everything a production renderer would draw and strata does not is reported, once per
+/// kind, naming the first prim: the independent list below is what the fixture authors.
+#[test]
+fn unsupported_content_is_reported_not_dropped() {
+    let path = "tests/in/warnings/unsupported.usda";
+    let (diags, sources, _) = check_file(Path::new(path));
+    assert!(!diags.has_errors(), "{}", diags.render(&sources));
+    let text = diags.render(&sources);
+    for expected in [
+        "`BasisCurves` prims are not supported",
+        "`SkelRoot` prims are not supported",
+        "`PortalLight` prims are not supported",
+        "prim type `Frobnicator` is not a schema strata knows",
+        "API schema `MeshLightAPI` is not supported",
+        "API schema `ShapingAPI` is not supported",
+        "light shaping (`inputs:shaping:*`) is not applied",
+        "light `inputs:diffuse`",
+        "mesh `creaseIndices`",
+    ] {
+        assert_eq!(text.matches(expected).count(), 1, "`{expected}` reported once in:\n{text}");
+    }
+    assert!(text.contains("1 more prim(s)"), "the second curve is counted, the hidden one is not:\n{text}");
+    assert!(!text.contains("HiddenHair"), "{text}");
+    insta::assert_snapshot!("unsupported_content", text);
+}
+
+/// A misspelt override output or scene input is a warning (the scene still has a meaning) that
+/// names the input that was meant; the same finding in two prims is reported once.
+#[test]
+fn misspelt_override_output_and_input_suggest_the_name_meant() {
+    let path = "tests/in/warnings/typo.usda";
+    let (diags, sources, _) = check_file(Path::new(path));
+    let text = diags.render(&sources);
+    assert!(!diags.has_errors(), "{text}");
+    assert_eq!(text.matches("override `tint` output `albedoo` matches no input").count(), 1, "{text}");
+    assert_eq!(text.matches("did you mean `albedo`?").count(), 1, "{text}");
+    assert_eq!(text.matches("did you mean `roughness`?").count(), 1, "{text}");
+    insta::assert_snapshot!("misspelt_names", text);
 }

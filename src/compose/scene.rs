@@ -6,7 +6,7 @@
 
 use super::slots::{Binding, BindingPrim, BindingTree, PrimStack, SLOT_BINDING_PREFIX, decode_slot, resolve_stacks};
 use super::{ComposedLayer, ComposedMaterial, MaterialRef};
-use crate::diag::{Diagnostic, Diagnostics, SourceMap, Span};
+use crate::diag::{Diagnostic, Diagnostics, SourceMap, Span, did_you_mean};
 use crate::front::ast::{BaseType, GraphKind};
 use crate::front::library::Library;
 use crate::front::types::{Type, Value};
@@ -15,7 +15,7 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 
 /// Prim types that are rendered, and so get a composed material.
-pub const RENDERABLE_TYPES: &[&str] = &["Mesh", "Sphere", "Cube", "Cylinder", "Cone", "Capsule", "Plane"];
+pub const RENDERABLE_TYPES: &[&str] = &["Mesh", "Sphere", "Cube", "Cylinder", "Cone", "Capsule", "Plane", "Points"];
 
 /// Whether a prim is renderable geometry.
 pub fn is_renderable(prim: &Prim) -> bool {
@@ -419,10 +419,13 @@ fn material_ref(
     let mut values = Vec::new();
     for InputValue { name, value, type_name, span, connected } in &source.inputs {
         let Some((index, input)) = g.input(name) else {
-            diags.push(
+            let mut d =
                 Diagnostic::warning(format!("`{}` has no input `{name}`; the value set on `{path}` is unused", g.name))
-                    .at(connected.unwrap_or(*span), "unused"),
-            );
+                    .at(connected.unwrap_or(*span), "unused");
+            if let Some(hint) = did_you_mean(name, g.inputs.iter().map(|i| i.name.as_str())) {
+                d = d.note(hint);
+            }
+            diags.push(d);
             continue;
         };
         match convert_input(value, type_name, input.ty) {

@@ -5,7 +5,7 @@ use super::ast::{self, BaseType, ExprKind as A, GraphKind, Product};
 use super::check::resolve_type;
 use super::hir::{FuncId, Function};
 use super::types::{Type, Value};
-use crate::diag::{Diagnostic, Diagnostics, Span};
+use crate::diag::{Diagnostic, Diagnostics, Span, did_you_mean};
 use std::collections::HashMap;
 
 /// What drives a port, an output or a product.
@@ -262,11 +262,17 @@ pub fn resolve_graph(
                     continue;
                 }
                 let Some(&func) = shaders.get(&node_type.name) else {
-                    diags.push(
-                        Diagnostic::error(format!("unknown node type `{}`", node_type.name))
-                            .at(node_type.span, "no shader of this name")
-                            .note("node types are the built-in library and `shader` declarations of this file and its imports"),
-                    );
+                    let mut d = Diagnostic::error(format!("unknown node type `{}`", node_type.name))
+                        .at(node_type.span, "no shader of this name");
+                    match did_you_mean(&node_type.name, shaders.keys().map(String::as_str)) {
+                        Some(hint) => d = d.note(hint),
+                        None => {
+                            d = d.note(
+                                "node types are the built-in library and `shader` declarations of this file and its imports",
+                            )
+                        }
+                    }
+                    diags.push(d);
                     continue;
                 };
                 let params = functions[func.0 as usize].params.len();
@@ -295,16 +301,25 @@ pub fn resolve_graph(
                     } else {
                         "not an input of this graph"
                     };
-                    diags.push(Diagnostic::error(format!("unknown input `{n}`")).at(expr.span, hint));
+                    let mut d = Diagnostic::error(format!("unknown input `{n}`")).at(expr.span, hint);
+                    if !node_index.contains_key(n)
+                        && let Some(hint) = did_you_mean(n, graph.inputs.iter().map(|i| i.name.as_str()))
+                    {
+                        d = d.note(hint);
+                    }
+                    diags.push(d);
                     None
                 }
             },
             A::Member(base, port) if matches!(base.kind, A::Name(_)) => {
                 let A::Name(node_name) = &base.kind else { return None };
                 let Some(&node) = node_index.get(node_name) else {
-                    diags.push(
-                        Diagnostic::error(format!("unknown node `{node_name}`")).at(base.span, "no node of this name"),
-                    );
+                    let mut d =
+                        Diagnostic::error(format!("unknown node `{node_name}`")).at(base.span, "no node of this name");
+                    if let Some(hint) = did_you_mean(node_name, node_index.keys().map(String::as_str)) {
+                        d = d.note(hint);
+                    }
+                    diags.push(d);
                     return None;
                 };
                 let func = &functions[graph.nodes[node].func.0 as usize];
@@ -319,14 +334,16 @@ pub fn resolve_graph(
                     }
                     None => {
                         let outputs: Vec<&str> = func.outputs().map(|(_, p)| p.name.as_str()).collect();
-                        diags.push(
+                        let mut d =
                             Diagnostic::error(format!("node type `{}` has no output `{}`", func.name, port.name))
-                                .at(port.span, "unknown port")
-                                .note(format!(
-                                    "outputs: {}",
-                                    if outputs.is_empty() { "none".to_string() } else { outputs.join(", ") }
-                                )),
-                        );
+                                .at(port.span, "unknown port");
+                        if let Some(hint) = did_you_mean(&port.name, outputs.iter().copied()) {
+                            d = d.note(hint);
+                        }
+                        diags.push(d.note(format!(
+                            "outputs: {}",
+                            if outputs.is_empty() { "none".to_string() } else { outputs.join(", ") }
+                        )));
                         None
                     }
                 }
@@ -364,11 +381,12 @@ pub fn resolve_graph(
             }
             let Some((param, p)) = func.param(&port.name) else {
                 let inputs: Vec<&str> = func.inputs().map(|(_, p)| p.name.as_str()).collect();
-                diags.push(
-                    Diagnostic::error(format!("node type `{}` has no input `{}`", func.name, port.name))
-                        .at(port.span, "unknown port")
-                        .note(format!("inputs: {}", inputs.join(", "))),
-                );
+                let mut d = Diagnostic::error(format!("node type `{}` has no input `{}`", func.name, port.name))
+                    .at(port.span, "unknown port");
+                if let Some(hint) = did_you_mean(&port.name, inputs.iter().copied()) {
+                    d = d.note(hint);
+                }
+                diags.push(d.note(format!("inputs: {}", inputs.join(", "))));
                 continue;
             };
             if p.output {

@@ -9,7 +9,7 @@
 use super::eval::eval_node;
 use crate::abi::LayerInfo;
 use crate::compose::{ComposedMaterial, MaterialRef};
-use crate::diag::{Diagnostic, Diagnostics, Span};
+use crate::diag::{Diagnostic, Diagnostics, Span, did_you_mean};
 use crate::front::ast::{GraphKind, Product};
 use crate::front::graph::{ChannelKind, DisplacementMode, Graph, Source};
 use crate::front::hir::{ExprKind, FuncId};
@@ -269,7 +269,21 @@ impl Builder<'_> {
             let over_inputs = Self::input_values(og, over);
             let instance = self.instantiate(og, over_slot, index, over_inputs);
             for output in &og.outputs {
-                let Some((i, input)) = graph.input(&output.name) else { continue };
+                let Some((i, input)) = graph.input(&output.name) else {
+                    // An override output drives only a same-named input (DESIGN.md rule 3):
+                    // one that names none does nothing, which is almost always a typo.
+                    let mut d = Diagnostic::warning(format!(
+                        "override `{}` output `{}` matches no input of substance `{}`: it does nothing",
+                        og.name, output.name, graph.name
+                    ))
+                    .at(output.span, "drives nothing")
+                    .also(over.span, format!("bound to slot `{over_slot}` here"));
+                    if let Some(hint) = did_you_mean(&output.name, graph.inputs.iter().map(|i| i.name.as_str())) {
+                        d = d.note(hint);
+                    }
+                    self.diags.push(d);
+                    continue;
+                };
                 if !output.ty.converts_to(input.ty) {
                     self.diags.push(
                         Diagnostic::error(format!(

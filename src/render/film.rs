@@ -399,6 +399,10 @@ pub fn render(
         channel_map: &channel_map,
         params: PathParams { max_depth: settings.max_depth, rr_depth: 3, mode: settings.mode },
         all_opaque: materials.iter().all(|m| super::integrator::is_opaque(*m)),
+        light_selection: super::light::LightSelection::new(
+            &scene.lights,
+            (scene.bounds.1 - scene.bounds.0).length() / 2.0,
+        ),
     };
     let done = AtomicUsize::new(0);
     let progress_lock = Mutex::new(());

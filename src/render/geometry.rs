@@ -6,6 +6,7 @@
 //! Malformed meshes are diagnosed (never a panic); zero-area triangles are skipped and counted.
 
 use super::shapes::{Part, Shape};
+use super::subdiv::{PolyMesh, catmull_clark, refined_faces};
 use super::xform::{PrimXform, value_span, world_transforms};
 use crate::compose::scene::is_renderable;
 use crate::diag::{Diagnostic, Diagnostics, Span};
@@ -23,6 +24,29 @@ pub const MAX_EXTENT: f64 = 1e7;
 /// scene of 137 000 spheres asked for 2.2 billion triangles and was killed by the kernel; past
 /// this budget the scene is an error naming the first prim that did not fit.
 pub const MAX_TRIANGLES: usize = 1 << 25;
+
+/// The most faces subdivision may make of one mesh: 2^18 (262 144 quads, half a million
+/// triangles). A mesh is refined to `--subdiv-level` levels, or fewer when that would pass
+/// this, so a dense cage is not multiplied into millions of triangles it does not need.
+pub const SUBDIV_FACE_BUDGET: u64 = 1 << 18;
+
+/// The default `--subdiv-level`: two levels put a coarse cage's limit surface within a few
+/// tenths of a percent of its size (every vertex is on the limit surface; only the flat
+/// facets between them deviate), and a cube becomes 96 quads.
+pub const DEFAULT_SUBDIV_LEVEL: u32 = 2;
+
+/// How geometry is built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GeometryOptions {
+    /// Subdivision levels for `catmullClark` (and `loop`) meshes; 0 renders every cage.
+    pub subdiv_level: u32,
+}
+
+impl Default for GeometryOptions {
+    fn default() -> GeometryOptions {
+        GeometryOptions { subdiv_level: DEFAULT_SUBDIV_LEVEL }
+    }
+}
 
 /// One world-space triangle.
 #[derive(Clone, Copy, Debug)]
@@ -89,11 +113,27 @@ pub fn build(stage: &Stage, diags: &mut Diagnostics) -> Geometry {
 
 /// As [`build`], with transforms already computed.
 pub fn build_with(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagnostics) -> Geometry {
-    build_within(stage, xforms, MAX_TRIANGLES, diags)
+    build_within(stage, xforms, GeometryOptions::default(), MAX_TRIANGLES, diags)
 }
 
-/// As [`build_with`], with a triangle budget other than [`MAX_TRIANGLES`] (for tests).
-fn build_within(stage: &Stage, xforms: &[PrimXform], budget: usize, diags: &mut Diagnostics) -> Geometry {
+/// As [`build_with`], with options.
+pub fn build_with_options(
+    stage: &Stage,
+    xforms: &[PrimXform],
+    options: GeometryOptions,
+    diags: &mut Diagnostics,
+) -> Geometry {
+    build_within(stage, xforms, options, MAX_TRIANGLES, diags)
+}
+
+/// As [`build_with_options`], with a triangle budget other than [`MAX_TRIANGLES`] (for tests).
+fn build_within(
+    stage: &Stage,
+    xforms: &[PrimXform],
+    options: GeometryOptions,
+    budget: usize,
+    diags: &mut Diagnostics,
+) -> Geometry {
     let mut geometry = Geometry::default();
     for (id, prim) in stage.depth_first() {
         let xf = xforms[id.0 as usize];
@@ -109,6 +149,7 @@ fn build_within(stage: &Stage, xforms: &[PrimXform], budget: usize, diags: &mut 
             beyond_extent: None,
             budget,
             over_budget: false,
+            subdiv_level: options.subdiv_level,
         };
         match prim.type_name.as_deref() {
             Some("Mesh") => mesh(prim, &mut out, diags),
@@ -118,6 +159,7 @@ fn build_within(stage: &Stage, xforms: &[PrimXform], budget: usize, diags: &mut 
             Some("Cone") => cone(prim, &mut out, diags),
             Some("Capsule") => capsule(prim, &mut out, diags),
             Some("Plane") => plane(prim, &mut out, diags),
+            Some("Points") => points(prim, &mut out, diags),
             _ => {}
         }
         if out.over_budget {
@@ -176,6 +218,8 @@ struct Emitter<'g> {
     budget: usize,
     /// A triangle was dropped because the scene reached its budget.
     over_budget: bool,
+    /// Subdivision levels for subdivision-surface meshes.
+    subdiv_level: u32,
 }
 
 impl Emitter<'_> {
@@ -341,13 +385,56 @@ fn mesh(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
     let st = Primvar::get(prim, "primvars:st", 2, "faceVarying");
     let st = st.filter(|pv| check_primvar(prim, pv, npoints, faces, indices.len(), diags));
 
+    let holes: std::collections::HashSet<i64> = prim
+        .value("holeIndices")
+        .and_then(Value::as_int_array)
+        .map(|h| h.iter().copied().collect())
+        .unwrap_or_default();
+    let short_faces = counts.iter().filter(|&&c| c < 3).count();
+    if short_faces > 0 {
+        diags.push(
+            Diagnostic::warning(format!(
+                "mesh `{}`: {short_faces} face(s) with fewer than 3 vertices skipped",
+                prim.path
+            ))
+            .at(span_of(prim, "faceVertexCounts"), "here"),
+        );
+    }
+    // UsdGeom's default scheme is catmullClark: a mesh without the attribute is a smooth
+    // surface, and its points are only the cage.
+    let scheme_attr = prim.attribute("subdivisionScheme");
+    let scheme = prim.value("subdivisionScheme").and_then(Value::as_str).unwrap_or("catmullClark");
+    match scheme {
+        "catmullClark" | "loop" if out.subdiv_level > 0 => {
+            if scheme == "loop" {
+                diags.push(
+                    Diagnostic::warning(format!(
+                        "mesh `{}`: Loop subdivision is approximated by Catmull-Clark (a slightly different smooth surface)",
+                        prim.path
+                    ))
+                    .at(scheme_attr.map_or(prim.span, value_span), "here"),
+                );
+            }
+            let poly = poly_mesh(points, counts, indices, st.as_ref(), &holes);
+            // Normals are not authored on subdivision surfaces (UsdGeom): the limit's are used.
+            subdivided(&poly, left, flip, out);
+            return;
+        }
+        "catmullClark" | "loop" | "none" | "bilinear" => {}
+        other => diags.push(
+            Diagnostic::warning(format!(
+                "mesh `{}`: unknown subdivisionScheme `{other}`; the cage is rendered",
+                prim.path
+            ))
+            .at(scheme_attr.map_or(prim.span, value_span), "here"),
+        ),
+    }
+
     let point = |i: usize| DVec3::new(points[3 * i], points[3 * i + 1], points[3 * i + 2]);
     let mut start = 0usize;
-    let mut short_faces = 0usize;
     for (face, &count) in counts.iter().enumerate() {
         let count = count as usize;
-        if count < 3 {
-            short_faces += 1;
+        if count < 3 || holes.contains(&(face as i64)) {
             start += count;
             continue;
         }
@@ -376,14 +463,69 @@ fn mesh(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
         }
         start += count;
     }
-    if short_faces > 0 {
-        diags.push(
-            Diagnostic::warning(format!(
-                "mesh `{}`: {short_faces} face(s) with fewer than 3 vertices skipped",
-                prim.path
-            ))
-            .at(span_of(prim, "faceVertexCounts"), "here"),
-        );
+}
+
+/// The faces of a validated mesh with three or more vertices, as a [`PolyMesh`], with `st`
+/// per face-vertex when every corner has one.
+fn poly_mesh(
+    points: &[f64],
+    counts: &[i64],
+    indices: &[i64],
+    st: Option<&Primvar>,
+    holes: &std::collections::HashSet<i64>,
+) -> PolyMesh {
+    let mut mesh = PolyMesh {
+        points: points.chunks_exact(3).map(|c| DVec3::new(c[0], c[1], c[2])).collect(),
+        ..PolyMesh::default()
+    };
+    let mut uv = st.map(|_| Vec::with_capacity(indices.len()));
+    let mut start = 0usize;
+    for (face, &count) in counts.iter().enumerate() {
+        let count = count as usize;
+        if count >= 3 {
+            mesh.counts.push(count as u32);
+            mesh.holes.push(holes.contains(&(face as i64)));
+            for (c, &index) in indices.iter().enumerate().skip(start).take(count) {
+                let pi = index as usize;
+                mesh.indices.push(pi as u32);
+                if let Some(out) = uv.as_mut() {
+                    match st.and_then(|pv| pv.at(face, c, pi)) {
+                        Some(t) => out.push(Vec2::new(t[0] as f32, t[1] as f32)),
+                        None => uv = None,
+                    }
+                }
+            }
+        }
+        start += count;
+    }
+    mesh.uv = uv;
+    mesh
+}
+
+/// Emits the limit surface of `poly`, refined to the emitter's level or as many levels as fit
+/// [`SUBDIV_FACE_BUDGET`] (at least one).
+fn subdivided(poly: &PolyMesh, left_handed: bool, flip: bool, out: &mut Emitter) {
+    let mut level = out.subdiv_level;
+    while level > 1 && refined_faces(&poly.counts, level) > SUBDIV_FACE_BUDGET {
+        level -= 1;
+    }
+    let q = catmull_clark(poly, level);
+    // Limit normals follow the right-hand rule of the faces' winding; a left-handed mesh
+    // faces the other way.
+    let sign = if left_handed { -1.0 } else { 1.0 };
+    for (i, quad) in q.quads.iter().enumerate() {
+        if q.holes[i] {
+            continue;
+        }
+        for mut corners in [[0, 1, 2], [0, 2, 3]] {
+            if flip {
+                corners.swap(1, 2);
+            }
+            let p = corners.map(|k| q.points[quad[k] as usize]);
+            let n = corners.map(|k| q.normals[quad[k] as usize] * sign);
+            let uv = q.uv.as_ref().map(|uv| corners.map(|k| uv[i][k]));
+            out.emit(p, Some(n), uv);
+        }
     }
 }
 
@@ -422,6 +564,43 @@ fn positive(prim: &Prim, name: &str, default: f64, diags: &mut Diagnostics) -> O
 fn sphere(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
     let Some(r) = positive(prim, "radius", 1.0, diags) else { return };
     out.shape(Part::Sphere { r, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY }, DMat4::IDENTITY);
+}
+
+/// UsdGeomPoints as spheres of diameter `widths` (one per point, or one for all; 1 when
+/// absent, as Hydra draws them), each an analytic sphere.
+fn points(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
+    let Some((3, points)) = prim.value("points").and_then(Value::as_tuple_array) else {
+        if prim.attribute("points").is_some() {
+            diags.push(
+                Diagnostic::error(format!("points `{}`: `points` must be an array of 3-vectors", prim.path))
+                    .at(span_of(prim, "points"), "here"),
+            );
+        }
+        return;
+    };
+    let count = points.len() / 3;
+    let widths = prim.value("widths").and_then(Value::as_float_array).unwrap_or(&[1.0]);
+    if widths.len() != 1 && widths.len() != count {
+        diags.push(
+            Diagnostic::error(format!(
+                "points `{}`: {} widths for {count} points (give one, or one per point)",
+                prim.path,
+                widths.len()
+            ))
+            .at(span_of(prim, "widths"), "here"),
+        );
+        return;
+    }
+    for (i, p) in points.chunks_exact(3).enumerate() {
+        let width = widths[if widths.len() == 1 { 0 } else { i }];
+        let centre = DVec3::new(p[0], p[1], p[2]);
+        if !(width.is_finite() && width > 0.0 && centre.is_finite()) {
+            out.geometry.degenerate += 1;
+            continue;
+        }
+        let part = Part::Sphere { r: width / 2.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY };
+        out.shape(part, DMat4::from_translation(centre));
+    }
 }
 
 fn cube(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
@@ -560,8 +739,9 @@ def Xform "Far" {{
         }
         let (stage, mut diags) = stage(&text);
         let xforms = world_transforms(&stage, &mut diags);
-        let per_sphere = build_within(&stage, &xforms, usize::MAX, &mut diags).triangles.len() / 5;
-        let g = build_within(&stage, &xforms, 2 * per_sphere + 10, &mut diags);
+        let per_sphere =
+            build_within(&stage, &xforms, GeometryOptions::default(), usize::MAX, &mut diags).triangles.len() / 5;
+        let g = build_within(&stage, &xforms, GeometryOptions::default(), 2 * per_sphere + 10, &mut diags);
         assert_eq!(g.triangles.len(), 2 * per_sphere + 10, "bounded by the budget");
         let errors: Vec<&Diagnostic> =
             diags.items().iter().filter(|d| d.severity == crate::diag::Severity::Error).collect();
@@ -573,7 +753,7 @@ def Xform "Far" {{
     fn quad_is_two_triangles_with_normals_and_st() {
         let (stage, mut diags) = stage(
             r#"#usda 1.0
-def Mesh "M" {
+def Mesh "M" { uniform token subdivisionScheme = "none"
     int[] faceVertexCounts = [4]
     int[] faceVertexIndices = [0, 1, 2, 3]
     point3f[] points = [(-1, 0, -1), (-1, 0, 1), (1, 0, 1), (1, 0, -1)]
@@ -629,7 +809,7 @@ def Mesh "M" {
     fn degenerate_triangles_are_skipped_and_counted() {
         let (stage, mut diags) = stage(
             r#"#usda 1.0
-def Mesh "M" {
+def Mesh "M" { uniform token subdivisionScheme = "none"
     int[] faceVertexCounts = [3, 3]
     int[] faceVertexIndices = [0, 1, 2, 0, 1, 3]
     point3f[] points = [(0, 0, 0), (1, 0, 0), (0, 1, 0), (2, 0, 0)]
@@ -675,5 +855,68 @@ def Xform "G" {
         assert!(g.shapes.iter().filter(|s| s.prim == 2).any(|s| down(&s)));
         let cube = g.triangles.iter().filter(|t| t.prim == 1).count();
         assert_eq!(cube, 12);
+    }
+
+    const CUBE_MESH: &str = r#"
+    int[] faceVertexCounts = [4, 4, 4, 4, 4, 4]
+    int[] faceVertexIndices = [0, 2, 3, 1, 4, 5, 7, 6, 0, 1, 5, 4, 2, 6, 7, 3, 0, 4, 6, 2, 1, 3, 7, 5]
+    point3f[] points = [(-1, -1, -1), (1, -1, -1), (-1, 1, -1), (1, 1, -1),
+                        (-1, -1, 1), (1, -1, 1), (-1, 1, 1), (1, 1, 1)]"#;
+
+    /// UsdGeom's default scheme is catmullClark: a cube mesh without `subdivisionScheme` is a
+    /// rounded surface inside its cage, with outward normals; `none` and level 0 keep the
+    /// cage; holes are skipped; a left-handed mesh's normals face the other way.
+    #[test]
+    fn meshes_subdivide_by_default_and_the_cage_on_request() {
+        let build = |extra: &str, level: u32| {
+            let text = format!("#usda 1.0\ndef Mesh \"M\" {{ {extra} {CUBE_MESH} }}\n");
+            let (stage, mut diags) = stage(&text);
+            let xforms = world_transforms(&stage, &mut diags);
+            let g = build_with_options(&stage, &xforms, GeometryOptions { subdiv_level: level }, &mut diags);
+            assert!(!diags.has_errors(), "{diags:?}");
+            g
+        };
+        let smooth = build("", 2);
+        assert_eq!(smooth.triangles.len(), 6 * 16 * 2);
+        for t in &smooth.triangles {
+            let centre = (t.p[0] + t.p[1] + t.p[2]) / 3.0;
+            assert!(t.p.iter().all(|p| p.abs().max_element() <= 1.0 + 1e-6), "inside the cage");
+            assert!(t.cross().dot(centre) > 0.0 && t.n.iter().all(|n| n.dot(centre) > 0.0), "faces outwards");
+        }
+        let nearest = smooth.triangles.iter().flat_map(|t| t.p).map(|p| p.length()).fold(f32::MAX, f32::min);
+        assert!(nearest < 0.9, "rounded: the face centres move in ({nearest})");
+        assert_eq!(build(r#"uniform token subdivisionScheme = "none""#, 2).triangles.len(), 12);
+        assert_eq!(build("", 0).triangles.len(), 12);
+        assert_eq!(build("int[] holeIndices = [0]", 2).triangles.len(), 5 * 16 * 2);
+        assert_eq!(build("int[] holeIndices = [0]", 0).triangles.len(), 10);
+        let left = build(r#"uniform token orientation = "leftHanded""#, 1);
+        for t in &left.triangles {
+            let centre = (t.p[0] + t.p[1] + t.p[2]) / 3.0;
+            assert!(t.n.iter().all(|n| n.dot(centre) < 0.0), "left-handed winding faces inwards");
+        }
+    }
+
+    /// Points are spheres of diameter `widths`: a ray down the z axis meets the first at
+    /// z = r, exactly; a widths array of the wrong length is an error.
+    #[test]
+    fn points_render_as_spheres_of_their_widths() {
+        let (good, mut diags) = stage(
+            "#usda 1.0\ndef Points \"P\" { point3f[] points = [(0, 0, 0), (3, 0, 0)]  float[] widths = [0.5, 1] }\n",
+        );
+        let xforms = world_transforms(&good, &mut diags);
+        let g = build_with(&good, &xforms, &mut diags);
+        assert!(!diags.has_errors(), "{diags:?}");
+        assert_eq!(g.shapes.len(), 2);
+        let accel = super::super::accel::Accel::new(g.triangles, g.shapes);
+        let hit = accel.intersect(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z, 0.0, f32::INFINITY).expect("hit");
+        assert!((hit.t - 4.75).abs() < 1e-5, "{}", hit.t);
+        let hit = accel.intersect(Vec3::new(3.0, 0.0, 5.0), -Vec3::Z, 0.0, f32::INFINITY).expect("hit");
+        assert!((hit.t - 4.5).abs() < 1e-5, "{}", hit.t);
+        let (bad, mut diags) = stage(
+            "#usda 1.0\ndef Points \"P\" { point3f[] points = [(0, 0, 0), (3, 0, 0)]  float[] widths = [1, 2, 3] }\n",
+        );
+        let xforms = world_transforms(&bad, &mut diags);
+        build_with(&bad, &xforms, &mut diags);
+        assert!(diags.has_errors());
     }
 }

@@ -13,7 +13,7 @@
 
 use super::accel::{Accel, Hit, Primitive, offset_ray_origin};
 use super::bsdf::{Bsdf, Frame};
-use super::light::Light;
+use super::light::{Light, LightSelection};
 use super::sampling::{Rng, power_heuristic};
 use super::scene::Scene;
 use crate::abi::{Closure, ClosureKind, Globals, MaterialCode, ShaderError};
@@ -224,6 +224,8 @@ pub struct Context<'a> {
     /// Whether every material has a layer whose mask is 1 at compile time: then no surface
     /// lets light through and shadow rays can stop at their first hit, in any order.
     pub all_opaque: bool,
+    /// How next-event estimation chooses a light (by power; see [`LightSelection`]).
+    pub light_selection: LightSelection,
 }
 
 /// Whether a material never lets light through: a layer with a surface and a mask of 1 at
@@ -552,17 +554,16 @@ impl Context<'_> {
         Ok(0.0)
     }
 
-    /// Direct light at a shading point by sampling one light (uniform selection), MIS-weighted.
+    /// Direct light at a shading point by sampling one light (chosen by
+    /// [`Context::light_selection`]), MIS-weighted. `n` is the geometric normal on the side of
+    /// `wo`.
     fn direct(&self, p: Vec3, ng: Vec3, wo: Vec3, rng: &mut Rng, s: &mut Scratch) -> Result<Vec3, Invalid> {
-        let lights = &self.scene.lights;
-        if lights.is_empty() {
-            return Ok(Vec3::ZERO);
-        }
-        let pick = ((rng.uniform() * lights.len() as f32) as usize).min(lights.len() - 1);
+        let choice = self.light_selection.sample(rng.uniform());
         let u = rng.uniform2();
-        let select_pdf = 1.0 / lights.len() as f32;
-        let light = &lights[pick];
-        let Some(ls) = light.sample_li(p, u) else { return Ok(Vec3::ZERO) };
+        let Some((pick, select_pdf)) = choice else { return Ok(Vec3::ZERO) };
+        let light = &self.scene.lights[pick];
+        let n = facing(ng, wo);
+        let Some(ls) = light.sample_li(p, n, u) else { return Ok(Vec3::ZERO) };
         let (f, bsdf_pdf) = Self::eval_lobes(&s.lobes, wo, ls.wi);
         if f == Vec3::ZERO || ls.li == Vec3::ZERO {
             return Ok(Vec3::ZERO);
@@ -585,10 +586,9 @@ impl Context<'_> {
     /// hidden from the camera contribute nothing.
     fn area_emission(&self, o: Vec3, d: Vec3, tmax: f32, from: &Scatter, camera_ray: bool) -> Vec3 {
         let mut sum = Vec3::ZERO;
-        let select = 1.0 / self.scene.lights.len().max(1) as f32;
-        for light in self.scene.lights.iter().filter(|l| l.visible_to_camera || !camera_ray) {
+        for (i, light) in self.scene.lights.iter().enumerate().filter(|(_, l)| l.visible_to_camera || !camera_ray) {
             if let Some((le, _)) = light.hit(o, d, tmax) {
-                sum += le * from.mis(light, d, select);
+                sum += le * from.mis(light, d, self.light_selection.pmf(i));
             }
         }
         sum
@@ -598,11 +598,11 @@ impl Context<'_> {
     /// (`camera_ray` as in [`Context::area_emission`]).
     fn escape_emission(&self, d: Vec3, from: &Scatter, camera_ray: bool) -> Vec3 {
         let mut sum = Vec3::ZERO;
-        let select = 1.0 / self.scene.lights.len().max(1) as f32;
-        for light in self.scene.lights.iter().filter(|l| l.is_infinite() && (l.visible_to_camera || !camera_ray)) {
+        let lights = self.scene.lights.iter().enumerate();
+        for (i, light) in lights.filter(|(_, l)| l.is_infinite() && (l.visible_to_camera || !camera_ray)) {
             let le = light.escape(d);
             if le != Vec3::ZERO {
-                sum += le * from.mis(light, d, select);
+                sum += le * from.mis(light, d, self.light_selection.pmf(i));
             }
         }
         sum
@@ -627,7 +627,7 @@ impl Context<'_> {
         s.channels.iter_mut().for_each(|c| *c = 0.0);
         let mut throughput = Vec3::ONE;
         // The camera "scattered" the first ray; emission it sees directly takes no MIS weight.
-        let mut from = Scatter { p: o, pdf: None };
+        let mut from = Scatter { p: o, n: Vec3::ZERO, pdf: None };
         let mut bounces = 0u32;
         let mut passes = 0u32;
         let mut first = true;
@@ -683,7 +683,7 @@ impl Context<'_> {
             let Some(next) = sample_lobes(&s.lobes, wo, uc, u2) else { break };
             let wi = next.wi;
             throughput *= next.weight;
-            from = Scatter { p: sp.p, pdf: next.pdf };
+            from = Scatter { p: sp.p, n: facing(sp.ng, wo), pdf: next.pdf };
             if !throughput.is_finite() {
                 // Reported by the caller as a non-finite sample.
                 out.radiance = Vec3::NAN;
@@ -826,10 +826,18 @@ pub fn shading_state(material: &dyn MaterialCode, g: &Globals) -> Result<Shading
     Ok(ShadingState { weights, transparency, displacement, normal, picked })
 }
 
+/// `ng` turned to the side of `w`.
+fn facing(ng: Vec3, w: Vec3) -> Vec3 {
+    if ng.dot(w) >= 0.0 { ng } else { -ng }
+}
+
 /// The path vertex that chose the current ray direction (pbrt-v4's previous interaction).
 struct Scatter {
     /// Where it scattered (the camera for primary rays).
     p: Vec3,
+    /// The geometric normal on the side it scattered from (zero for the camera): light
+    /// sampling there used it (see [`Light::sample_li`]), so its pdf does too.
+    n: Vec3,
     /// The BSDF's solid-angle pdf of the direction; `None` for camera rays and delta lobes,
     /// which light sampling cannot reach.
     pdf: Option<f32>,
@@ -841,7 +849,7 @@ impl Scatter {
     fn mis(&self, light: &Light, d: Vec3, select: f32) -> f32 {
         match self.pdf {
             None => 1.0,
-            Some(pdf) => power_heuristic(pdf, light.pdf_li(self.p, d) * select),
+            Some(pdf) => power_heuristic(pdf, light.pdf_li(self.p, self.n, d) * select),
         }
     }
 }

@@ -3,7 +3,8 @@
 //!
 //! - [`xform`]: xformOps and imageability; [`geometry`]: world-space triangles;
 //!   [`accel`]: BVH and ray queries; [`camera`]; [`light`]: UsdLux lights;
-//!   [`shapes`]: analytic quadrics; [`scene`]: the render scene.
+//!   [`shapes`]: analytic quadrics; [`scene`]: the render scene; [`support`]: what is not
+//!   rendered, reported.
 //! - [`bsdf`]: BSDF evaluation and sampling ([`microfacet`]: GGX and Fresnel; [`frame`]: shading frames); [`sampling`]: RNG and warps.
 //! - [`integrator`]: path tracing with NEE + MIS and layer picking (DESIGN.md rules 5–7);
 //!   [`film`]: the driver, AOVs and statistics; [`output`]: EXR and PNG files.
@@ -25,6 +26,8 @@ pub mod output;
 pub mod sampling;
 pub mod scene;
 pub mod shapes;
+pub mod subdiv;
+pub mod support;
 pub mod testing;
 pub mod xform;
 

@@ -41,6 +41,8 @@ pub struct SceneOptions {
     /// The Camera prim to look through (`None`: the first Camera prim, or a framing camera
     /// when there is none). Must name a Camera prim (see [`choose_view`]).
     pub camera: Option<String>,
+    /// How geometry is built (subdivision level).
+    pub geometry: geometry::GeometryOptions,
 }
 
 /// The camera and resolution a render uses, from the command line and the stage's UsdRender
@@ -145,7 +147,7 @@ impl Scene {
     ) -> Option<Scene> {
         let errors = diags.error_count();
         let xforms = world_transforms(stage, diags);
-        let geometry = geometry::build_with(stage, &xforms, diags);
+        let geometry = geometry::build_with_options(stage, &xforms, options.geometry, diags);
         let mut prim_material = Vec::with_capacity(geometry.prims.len());
         for prim in &geometry.prims {
             match material_of_prim(&prim.path) {
@@ -159,6 +161,7 @@ impl Scene {
                 }
             }
         }
+        super::support::report_unsupported(stage, &xforms, diags);
         let lights = lights_from_stage(stage, &xforms, diags);
         if lights.is_empty() {
             diags.push(Diagnostic::warning("the scene has no lights: the image will be black"));
@@ -230,8 +233,13 @@ def RenderSettings "Settings" {
         let view = choose_view(&two, Some("/A"), &mut diags).expect("view");
         assert_eq!(view.camera.as_deref(), Some("/A"));
         assert!(!diags.has_errors());
-        let scene =
-            Scene::from_stage_with(&two, &|_| Some(0), &SceneOptions { camera: view.camera }, &mut diags).unwrap();
+        let scene = Scene::from_stage_with(
+            &two,
+            &|_| Some(0),
+            &SceneOptions { camera: view.camera, ..Default::default() },
+            &mut diags,
+        )
+        .unwrap();
         assert_eq!(scene.camera_path.as_deref(), Some("/A"));
         // Not a camera: an error naming what it is and listing the cameras.
         assert!(choose_view(&two, Some("/S"), &mut diags).is_none());

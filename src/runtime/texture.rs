@@ -90,7 +90,8 @@ pub fn load_exr(path: &Path) -> Result<Texture, String> {
 
 /// Loads `path` (once per process) into the registry and returns its id.
 pub fn register_file(path: &Path) -> Result<i32, String> {
-    let canonical = path.canonicalize().map_err(|e| format!("cannot open texture `{}`: {e}", path.display()))?;
+    let canonical =
+        crate::input::canonicalize(path).map_err(|e| format!("cannot open texture `{}`: {e}", path.display()))?;
     if let Some(id) = strata_rt::texture::find(&canonical) {
         return Ok(id);
     }

@@ -1,8 +1,10 @@
-//! Scene description: reading USD ASCII layers ([`usda`]), typed values ([`value`]) and
-//! composing layers into a renderable prim tree ([`stage`]).
+//! Scene description: reading USD ASCII layers ([`usda`]) and binary ones (crate files and
+//! usdz packages, [`usdc`]) into one syntax tree, typed values ([`value`]) and composing
+//! layers into a renderable prim tree ([`stage`]).
 
 pub mod stage;
 pub mod usda;
+pub mod usdc;
 pub mod value;
 
 pub use stage::{Attribute, Prim, PrimId, Relationship, Stage};

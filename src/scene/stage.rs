@@ -9,6 +9,10 @@
 //! walk of that tree. A child prim's tree is derived from its parent's by looking up the
 //! child's name in every node, which is how an ancestor's reference reaches its children.
 //!
+//! Every layer — the root and each sublayer, reference and payload — is read by
+//! [`usdc::read_layer_file`], which tells `.usda` text, `.usdc` crates and usdz packages apart
+//! by content; crates are converted to the same [`Layer`] syntax tree the usda parser builds.
+//!
 //! Referenced layers are loaded lazily: a composition pass records the layers it is missing,
 //! they are loaded, and the pass is redone, so layers in unselected variants are never read.
 
@@ -16,6 +20,7 @@ use crate::diag::{Diagnostic, Diagnostics, Failed, FileId, SourceMap, Span};
 use crate::scene::usda::{
     self, Layer, LayerMetadata, ListOp, MetadataEntry, PrimSpec, PropertySpec, Reference, Specifier, Target,
 };
+use crate::scene::usdc::{self, LayerSource};
 use crate::scene::value::{AssetPath, Value, ValueType, normalize};
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -163,16 +168,17 @@ impl Stage {
     /// Reads and composes the stage whose root layer is the file at `path`.
     pub fn open(path: &Path, sources: &mut SourceMap, diags: &mut Diagnostics) -> Result<Stage, Failed> {
         let errors = diags.error_count();
-        let text = match crate::input::read_text(path) {
-            Ok(text) => text,
+        // Text, crate or usdz, told by content (`usdc::read_layer_file`).
+        let file = match usdc::read_layer_file(path) {
+            Ok(file) => file,
             Err(e) => {
                 diags.push(Diagnostic::error(format!("cannot read `{}`: {e}", path.display())));
                 return Err(Failed);
             }
         };
-        let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
-        let key = std::fs::canonicalize(path).unwrap_or_else(|_| normalize(path));
-        Stage::compose(&path.display().to_string(), text, dir, Some(key), sources, diags, errors)
+        let dir = crate::input::layer_dir(&file.path);
+        let key = Layers::key(&file.path);
+        Stage::compose(&file.path.display().to_string(), file.source, dir, Some(key), sources, diags, errors)
     }
 
     /// Composes a stage from text (tests, embedded scenes). `name` is the display name for
@@ -185,12 +191,13 @@ impl Stage {
         diags: &mut Diagnostics,
     ) -> Result<Stage, Failed> {
         let errors = diags.error_count();
-        Stage::compose(name, text.to_string(), base_dir.to_path_buf(), None, sources, diags, errors)
+        let source = LayerSource::Text(text.to_string());
+        Stage::compose(name, source, base_dir.to_path_buf(), None, sources, diags, errors)
     }
 
     fn compose(
         name: &str,
-        text: String,
+        source: LayerSource,
         dir: PathBuf,
         key: Option<PathBuf>,
         sources: &mut SourceMap,
@@ -199,7 +206,7 @@ impl Stage {
     ) -> Result<Stage, Failed> {
         let mut layers = Layers::default();
         let mut chain = Vec::new();
-        let root = layers.add(name, text, dir, key, &mut chain, sources, diags);
+        let root = layers.add(name, source, dir, key, &mut chain, sources, diags);
         // Redo the pass until it needs no layer that is not loaded yet.
         let stage = loop {
             let mut pass = Pass::new(&layers, root);
@@ -326,7 +333,7 @@ impl Layers {
     }
 
     fn key(path: &Path) -> PathBuf {
-        std::fs::canonicalize(path).unwrap_or_else(|_| normalize(path))
+        crate::input::canonicalize(path).unwrap_or_else(|_| normalize(path))
     }
 
     /// Loads the layer at `path` (and its sublayers) unless known; errors point at `span`.
@@ -353,8 +360,8 @@ impl Layers {
         if let Some(known) = self.by_key.get(&key) {
             return *known;
         }
-        let text = match crate::input::read_text(path) {
-            Ok(text) => text,
+        let file = match usdc::read_layer_file(path) {
+            Ok(file) => file,
             Err(e) => {
                 diags.push(
                     Diagnostic::error(format!("cannot read layer `{}`: {e}", path.display()))
@@ -364,8 +371,19 @@ impl Layers {
                 return None;
             }
         };
-        let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
-        Some(self.add(&path.display().to_string(), text, dir, Some(key), chain, sources, diags))
+        let dir = crate::input::layer_dir(&file.path);
+        // A usdz is known by its path and by its root layer's (`a.usdz[root.usdc]`).
+        let file_key = Layers::key(&file.path);
+        if file_key != key
+            && let Some(known) = self.by_key.get(&file_key)
+        {
+            let known = *known;
+            self.by_key.insert(key, known);
+            return known;
+        }
+        let index = self.add(&file.path.display().to_string(), file.source, dir, Some(file_key), chain, sources, diags);
+        self.by_key.insert(key, Some(index));
+        Some(index)
     }
 
     /// Parses a layer's text, registers it and loads its sublayers.
@@ -373,15 +391,20 @@ impl Layers {
     fn add(
         &mut self,
         name: &str,
-        text: String,
+        source: LayerSource,
         dir: PathBuf,
         key: Option<PathBuf>,
         chain: &mut Vec<PathBuf>,
         sources: &mut SourceMap,
         diags: &mut Diagnostics,
     ) -> usize {
-        let file = sources.add(name, text);
-        let layer = usda::parse(file, sources.text(file), &dir, diags);
+        let layer = match source {
+            LayerSource::Text(text) => {
+                let file = sources.add(name, text);
+                usda::parse(file, sources.text(file), &dir, diags)
+            }
+            LayerSource::Crate(bytes) => usdc::convert(name, &bytes, &dir, sources, diags),
+        };
         let index = self.list.len();
         let sub_layers = layer.metadata.sub_layers.clone();
         self.list.push(LoadedLayer { layer, stack: vec![index] });

@@ -19,10 +19,13 @@ pub struct AssetPath {
 }
 
 impl AssetPath {
-    /// Resolves `authored` relative to `base_dir` (absolute paths are kept as they are).
+    /// Resolves `authored` relative to `base_dir` (absolute paths are kept as they are). In a
+    /// layer read from a usdz package, `base_dir` is package-relative (`a.usdz[sub]`) and
+    /// relative paths resolve inside the package ([`crate::input::resolve_asset`]).
     pub fn new(authored: impl Into<String>, base_dir: &Path) -> AssetPath {
         let authored = authored.into();
-        let resolved = if authored.is_empty() { PathBuf::new() } else { normalize(&base_dir.join(&authored)) };
+        let resolved =
+            if authored.is_empty() { PathBuf::new() } else { crate::input::resolve_asset(base_dir, &authored) };
         AssetPath { authored, resolved }
     }
 }
@@ -305,9 +308,13 @@ fn coerce_scalar(value: Value, scalar: ScalarType) -> Result<Value, String> {
             Value::Tuple(ref t) if t.len() == n => Ok(value),
             _ => fail(&value),
         },
-        ScalarType::Matrix(n) => match matrix_from(&value, n) {
-            Some(m) => Ok(m),
-            None => fail(&value),
+        ScalarType::Matrix(n) => match (n, value) {
+            // Already a matrix (read from a binary layer): keep it if the size matches.
+            (2, v @ Value::Matrix2(_)) | (3, v @ Value::Matrix3(_)) | (4, v @ Value::Matrix(_)) => Ok(v),
+            (_, value) => match matrix_from(&value, n) {
+                Some(m) => Ok(m),
+                None => fail(&value),
+            },
         },
         ScalarType::Dictionary => match value {
             Value::Dictionary(_) => Ok(value),
@@ -351,6 +358,7 @@ fn coerce_array(value: Value, scalar: ScalarType) -> Result<Value, String> {
         (ScalarType::Float, Value::IntArray(a)) => Ok(Value::FloatArray(a.iter().map(|&i| i as f64).collect())),
         (ScalarType::Float, v @ Value::FloatArray(_)) => Ok(v),
         (ScalarType::Tuple(n), v @ Value::TupleArray { width, .. }) if width == n => Ok(v),
+        (ScalarType::Matrix(n), v @ Value::TupleArray { width, .. }) if width == n * n => Ok(v),
         (ScalarType::Matrix(n), Value::List(items)) => {
             let mut data = Vec::with_capacity(items.len() * n * n);
             for item in &items {

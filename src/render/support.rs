@@ -1,0 +1,189 @@
+//! What the renderer does not render, reported.
+//!
+//! A DCC's USD carries far more than strata draws: curves, skeletons, volumes, light filters,
+//! shaping, mesh lights. Dropping any of them in silence gives an image that looks right and
+//! is not, so every visible prim, applied API schema or authored attribute that changes what
+//! a production renderer would draw, and that strata ignores, gets a warning naming the prim
+//! and the schema. `strata check` and `strata render` both run this audit (through
+//! [`super::Scene::from_stage_with`]), so `check` lists exactly what the image will lack.
+//!
+//! Warnings are grouped per kind: the first prim is pointed at, the rest are counted, so a
+//! scene of 100 000 curves prints one warning, not 100 000.
+
+use super::light::LIGHT_TYPES;
+use super::xform::{PrimXform, value_span};
+use crate::compose::scene::RENDERABLE_TYPES;
+use crate::diag::{Diagnostic, Diagnostics, Span};
+use crate::scene::{Prim, Stage, Value};
+use std::collections::BTreeMap;
+
+/// Prim types that draw nothing by design (grouping, shading networks, render settings), so
+/// ignoring them loses nothing.
+const NON_DRAWING_TYPES: &[&str] = &[
+    "Xform",
+    "Scope",
+    "Camera",
+    "Material",
+    "Shader",
+    "NodeGraph",
+    "RenderSettings",
+    "RenderProduct",
+    "RenderVar",
+    "RenderPass",
+    "GeomSubset",
+    "SpatialAudio",
+    "CollectionAPI",
+    "PhysicsScene",
+];
+
+/// Prim types a production renderer draws that strata does not, with what is lost.
+const UNSUPPORTED_TYPES: &[(&str, &str)] = &[
+    ("BasisCurves", "curves are not rendered"),
+    ("NurbsCurves", "curves are not rendered"),
+    ("HermiteCurves", "curves are not rendered"),
+    ("NurbsPatch", "NURBS patches are not rendered"),
+    ("TetMesh", "tetrahedral meshes are not rendered"),
+    ("PointInstancer", "point instancers are not rendered: neither the instances nor the prototypes draw"),
+    ("Volume", "volumes are not rendered"),
+    ("OpenVDBAsset", "volume fields are not read"),
+    ("Field3DAsset", "volume fields are not read"),
+    ("SkelRoot", "skinning is not applied: meshes under it render in their rest pose"),
+    ("Skeleton", "skeletons are not applied"),
+    ("SkelAnimation", "skeletal animation is not applied"),
+    ("BlendShape", "blend shapes are not applied"),
+    ("PortalLight", "portal lights are ignored (the dome is sampled without the portal)"),
+    ("GeometryLight", "geometry lights do not emit"),
+    ("PluginLight", "plugin lights do not emit"),
+    ("LightFilter", "light filters are not applied"),
+    ("PluginLightFilter", "light filters are not applied"),
+    ("GenerativeProcedural", "procedurals are not expanded"),
+];
+
+/// Applied API schemas that change the image and that strata ignores.
+const UNSUPPORTED_APIS: &[(&str, &str)] = &[
+    ("MeshLightAPI", "the mesh renders but does not emit light"),
+    ("LightAPI", "the prim renders but does not emit light"),
+    ("VolumeLightAPI", "the volume does not emit light"),
+    ("ShapingAPI", "light shaping (cone, focus, IES profile) is not applied"),
+    ("ShadowAPI", "shadow controls (colour, distance, falloff) are not applied"),
+    ("SkelBindingAPI", "skinning is not applied"),
+];
+
+/// Light inputs whose non-default values strata ignores, with their defaults.
+const IGNORED_LIGHT_INPUTS: &[(&str, f64, &str)] = &[
+    ("inputs:diffuse", 1.0, "per-light diffuse multipliers are not applied"),
+    ("inputs:specular", 1.0, "per-light specular multipliers are not applied"),
+];
+
+/// Mesh attributes strata does not apply, when authored with content.
+const IGNORED_MESH_ATTRIBUTES: &[(&str, &str)] = &[
+    ("creaseIndices", "subdivision creases are not applied"),
+    ("cornerIndices", "subdivision corners are not applied"),
+];
+
+/// One kind of unsupported content: where it first occurs and how often.
+struct Finding {
+    first_prim: String,
+    span: Span,
+    count: usize,
+}
+
+/// Warns about every visible prim, API schema and attribute of `stage` that the renderer
+/// ignores. `xforms` gives visibility (hidden prims draw nothing anyway).
+pub fn report_unsupported(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagnostics) {
+    let mut findings: BTreeMap<String, Finding> = BTreeMap::new();
+    let mut note = |what: String, prim: &Prim, span: Span| {
+        findings.entry(what).and_modify(|f| f.count += 1).or_insert_with(|| Finding {
+            first_prim: prim.path.clone(),
+            span,
+            count: 1,
+        });
+    };
+    for (id, prim) in stage.depth_first() {
+        if xforms[id.0 as usize].hidden {
+            continue;
+        }
+        if let Some(ty) = prim.type_name.as_deref() {
+            if let Some((_, lost)) = UNSUPPORTED_TYPES.iter().find(|(t, _)| *t == ty) {
+                note(format!("`{ty}` prims are not supported: {lost}"), prim, prim.span);
+            } else if !RENDERABLE_TYPES.contains(&ty) && !LIGHT_TYPES.contains(&ty) && !NON_DRAWING_TYPES.contains(&ty)
+            {
+                note(format!("prim type `{ty}` is not a schema strata knows: the prim is ignored"), prim, prim.span);
+            }
+        }
+        for api in &prim.api_schemas {
+            // Multiple-apply schemas carry an instance name: `ShapingAPI` has none, but
+            // `CollectionAPI:name` does.
+            let base = api.split(':').next().unwrap_or(api);
+            if let Some((_, lost)) = UNSUPPORTED_APIS.iter().find(|(a, _)| *a == base) {
+                // LightAPI on a light prim is the light itself.
+                let is_light = prim.type_name.as_deref().is_some_and(|t| LIGHT_TYPES.contains(&t));
+                if !(base == "LightAPI" && is_light) {
+                    note(format!("API schema `{base}` is not supported: {lost}"), prim, prim.span);
+                }
+            }
+        }
+        let is_light = prim.type_name.as_deref().is_some_and(|t| LIGHT_TYPES.contains(&t));
+        if is_light {
+            light_attributes(prim, &mut note);
+        }
+        if prim.type_name.as_deref() == Some("Mesh") {
+            for (name, lost) in IGNORED_MESH_ATTRIBUTES {
+                if let Some(attr) = prim.attribute(name).filter(|a| a.get().is_some_and(|v| !is_empty_array(v))) {
+                    note(format!("mesh `{name}`: {lost}"), prim, value_span(attr));
+                }
+            }
+        }
+    }
+    for (what, f) in findings {
+        let mut d = Diagnostic::warning(format!("{what} (`{}`)", f.first_prim)).at(f.span, "first here");
+        if f.count > 1 {
+            d = d.note(format!("{} more prim(s) or attribute(s) like it", f.count - 1));
+        }
+        diags.push(d);
+    }
+}
+
+fn light_attributes(prim: &Prim, note: &mut impl FnMut(String, &Prim, Span)) {
+    for (name, default, lost) in IGNORED_LIGHT_INPUTS {
+        if let Some(attr) = prim.attribute(name)
+            && attr.get().and_then(Value::as_f64).is_some_and(|v| v != *default)
+        {
+            note(format!("light `{name}`: {lost}"), prim, value_span(attr));
+        }
+    }
+    for attr in &prim.attributes {
+        if attr.name.starts_with("inputs:shaping:") && attr.get().is_some() {
+            note("light shaping (`inputs:shaping:*`) is not applied".to_string(), prim, value_span(attr));
+        } else if attr.name.starts_with("inputs:shadow:") && attr.get().is_some() {
+            note("light shadow controls (`inputs:shadow:*`) are not applied".to_string(), prim, value_span(attr));
+        }
+    }
+    let ty = prim.type_name.as_deref().unwrap_or("");
+    if ty != "DomeLight"
+        && let Some(attr) = prim
+            .attribute("inputs:texture:file")
+            .filter(|a| a.get().and_then(Value::as_asset).is_some_and(|asset| !asset.authored.is_empty()))
+    {
+        note(
+            format!("`{ty}` `inputs:texture:file` is not applied: the light emits its colour"),
+            prim,
+            value_span(attr),
+        );
+    }
+    if ty == "DomeLight"
+        && let Some(attr) = prim.attribute("inputs:texture:format")
+        && let Some(format) = attr.get().and_then(Value::as_str)
+        && !matches!(format, "automatic" | "latlong")
+    {
+        note(
+            format!("dome texture format `{format}` is not supported: the map is read as latlong"),
+            prim,
+            value_span(attr),
+        );
+    }
+}
+
+fn is_empty_array(v: &Value) -> bool {
+    v.as_int_array().is_some_and(<[i64]>::is_empty) || v.as_float_array().is_some_and(<[f64]>::is_empty)
+}
