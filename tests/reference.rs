@@ -286,10 +286,12 @@ fn surfaceless_layers_hide_nothing() {
             layers.push("top".to_string());
         }
         let image = render_file(&plane_scene(dir.path(), &ash, &layers), LayerMode::Stochastic, 16, 16);
-        // A diffuse plane under a uniform unit dome reflects L = albedo; 3 standard errors.
+        // A diffuse plane under a uniform unit dome reflects L = albedo; 3 standard errors, plus
+        // f32 rounding: with the dome cosine-sampled every sample weighs exactly the albedo, so
+        // the spread can be 0 and a strict `< 3σ` would fail a correct image.
         for c in ["R", "G", "B"] {
             let (m, se) = mean_and_error(&image, c);
-            assert!((m - 0.5).abs() < 3.0 * se, "{name}: {c} = {m} ± {se}");
+            assert!((m - 0.5).abs() <= 3.0 * se + 1e-6, "{name}: {c} = {m} ± {se}");
         }
         assert_eq!(channel_mean(&image, "A"), 1.0, "{name}: alpha");
     }
