@@ -16,6 +16,7 @@ use crate::diag::{Diagnostics, SourceMap, Span};
 use crate::front::library::Library;
 use crate::ir::lower;
 use crate::ir::wired::{self, PassOptions};
+use crate::plot::Series;
 use crate::render::{LayerMode, RenderSettings, Scene};
 use crate::runtime::{math, noise};
 use std::fmt::Write as _;
@@ -169,6 +170,139 @@ impl MaterialCode for HandMaterial {
             2 => closure(ClosureKind::Metal, &[0.95, 0.64, 0.54, 1.0, 0.9, 0.8, 0.25]),
             _ => Closure::default(),
         };
+        Ok(())
+    }
+
+    fn displacement(&self, _g: &Globals, out: &mut [f32]) -> Result<(), ShaderError> {
+        out.fill(0.0);
+        Ok(())
+    }
+
+    fn normal(&self, g: &Globals, _layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError> {
+        *out = g.n;
+        Ok(())
+    }
+
+    fn channels(&self, _g: &Globals, _layer: usize, out: &mut [f32]) -> Result<(), ShaderError> {
+        out.fill(0.0);
+        Ok(())
+    }
+}
+
+// ---- The hand-written arithmetic material -----------------------------------------------------
+
+/// `leaf(k)` of [`arithmetic_substance`]: `P[0] * k + P[1] * (1 - k) - P[2] * 0.5`, with
+/// `1 - k` folded in f32 as the compiler folds it.
+#[inline(always)]
+fn leaf(p: [f32; 3], k: f32) -> f32 {
+    p[0] * k + p[1] * (1.0 - k) - p[2] * 0.5
+}
+
+/// [`arithmetic_substance`]`(64)` written out in Rust, node by node from the leaves (`n63`) to
+/// the root (`n0`), constants folded: the arithmetic-bound contender of `bench shade`. Written
+/// once from the generator's tree (node `i` reads `2i+1` and `2i+2`); checked against the JIT
+/// on every point before it is timed, so a change to the generator cannot go unnoticed.
+// `abs` nodes ignore their second input, which the graph's dead-code elimination removes.
+#[allow(unused_variables)]
+#[inline(never)]
+fn arithmetic_hand(p: [f32; 3]) -> f32 {
+    let n63 = leaf(p, 0.993);
+    let n62 = leaf(p, 0.982);
+    let n61 = leaf(p, 0.971);
+    let n60 = leaf(p, 0.960);
+    let n59 = leaf(p, 0.949);
+    let n58 = leaf(p, 0.938);
+    let n57 = leaf(p, 0.927);
+    let n56 = leaf(p, 0.916);
+    let n55 = leaf(p, 0.905);
+    let n54 = leaf(p, 0.894);
+    let n53 = leaf(p, 0.883);
+    let n52 = leaf(p, 0.872);
+    let n51 = leaf(p, 0.861);
+    let n50 = leaf(p, 0.850);
+    let n49 = leaf(p, 0.839);
+    let n48 = leaf(p, 0.828);
+    let n47 = leaf(p, 0.817);
+    let n46 = leaf(p, 0.806);
+    let n45 = leaf(p, 0.795);
+    let n44 = leaf(p, 0.784);
+    let n43 = leaf(p, 0.773);
+    let n42 = leaf(p, 0.762);
+    let n41 = leaf(p, 0.751);
+    let n40 = leaf(p, 0.740);
+    let n39 = leaf(p, 0.729);
+    let n38 = leaf(p, 0.718);
+    let n37 = leaf(p, 0.707);
+    let n36 = leaf(p, 0.696);
+    let n35 = leaf(p, 0.685);
+    let n34 = leaf(p, 0.674);
+    let n33 = leaf(p, 0.663);
+    let n32 = leaf(p, 0.652);
+    let n31 = n63 * 0.7;
+    let n30 = n61 + n62;
+    let n29 = n59.abs();
+    let n28 = math::min(n57, n58);
+    let n27 = n55 + (n56 - n55) * 0.3;
+    let n26 = n53 - n54;
+    let n25 = n51 * n52;
+    let n24 = n49 + n50;
+    let n23 = n47 + (n48 - n47) * 0.3;
+    let n22 = math::min(n45, n46);
+    let n21 = math::max(n43, n44);
+    let n20 = n41 - n42;
+    let n19 = n39 + (n40 - n39) * 0.3;
+    let n18 = n37 + n38;
+    let n17 = n35.abs();
+    let n16 = math::min(n33, n34);
+    let n15 = n31 + (n32 - n31) * 0.3;
+    let n14 = n29 - n30;
+    let n13 = n27 * n28;
+    let n12 = n25 + n26;
+    let n11 = n23 + (n24 - n23) * 0.3;
+    let n10 = math::min(n21, n22);
+    let n9 = math::max(n19, n20);
+    let n8 = n17 - n18;
+    let n7 = n15 + (n16 - n15) * 0.3;
+    let n6 = n13 + n14;
+    let n5 = n11.abs();
+    let n4 = math::min(n9, n10);
+    let n3 = n7 + (n8 - n7) * 0.3;
+    let n2 = n5 - n6;
+    let n1 = n3 * n4;
+    n1 + n2 // n0
+}
+
+/// The arithmetic material by hand: one layer whose mask is [`arithmetic_hand`], clamped as the
+/// `mask` node and the `masks` entry clamp it, over a constant grey diffuse surface.
+pub struct HandArithmetic {
+    info: MaterialInfo,
+}
+
+impl HandArithmetic {
+    /// The hand material with the layer metadata of the compiled one (`info`).
+    pub fn new(info: MaterialInfo) -> Self {
+        HandArithmetic { info }
+    }
+}
+
+impl MaterialCode for HandArithmetic {
+    fn info(&self) -> &MaterialInfo {
+        &self.info
+    }
+
+    fn masks(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError> {
+        if let Some(o) = out.first_mut() {
+            *o = self.mask(g, 0)?;
+        }
+        Ok(())
+    }
+
+    fn mask(&self, g: &Globals, layer: usize) -> Result<f32, ShaderError> {
+        Ok(if layer == 0 { mask_out(arithmetic_hand(g.p)) } else { 0.0 })
+    }
+
+    fn surface(&self, _g: &Globals, layer: usize, out: &mut Closure) -> Result<(), ShaderError> {
+        *out = if layer == 0 { closure(ClosureKind::Diffuse, &[0.5, 0.5, 0.5]) } else { Closure::default() };
         Ok(())
     }
 
@@ -459,32 +593,7 @@ fn shade_report(scene: Option<&Path>, prim: Option<&str>, o: &ShadeOptions) -> R
     }
     contenders.push(("JIT", jit.as_ref()));
     contenders.push(("interpreter", interp.as_ref()));
-    let mut weighted = vec![Vec::new(); contenders.len()];
-    let mut stochastic = vec![Vec::new(); contenders.len()];
-    let mut masks = vec![0.0f32; nlayers];
-    let mut checksum = 0.0f32;
-    for rep in 0..=o.reps {
-        for (k, (_, m)) in contenders.iter().enumerate() {
-            let start = Instant::now();
-            for g in &points {
-                checksum += shade_weighted(*m, black_box(g), &surfaces, &mut masks);
-            }
-            let w = start.elapsed().as_secs_f64() * 1e9 / points.len() as f64;
-            let start = Instant::now();
-            for (g, &xi) in points.iter().zip(&xis) {
-                checksum += shade_stochastic(*m, black_box(g), xi, &mut masks);
-            }
-            let s = start.elapsed().as_secs_f64() * 1e9 / points.len() as f64;
-            // Repetition 0 is the warm-up.
-            if rep > 0 {
-                weighted[k].push(w);
-                stochastic[k].push(s);
-            }
-        }
-    }
-    black_box(checksum);
-    let weighted: Vec<f64> = weighted.into_iter().map(median).collect();
-    let stochastic: Vec<f64> = stochastic.into_iter().map(median).collect();
+    let (weighted, stochastic) = time_contenders(&contenders, &points, &xis, o.reps);
 
     writeln!(out, "bench shade: {label}").unwrap();
     writeln!(
@@ -535,6 +644,44 @@ fn shade_report(scene: Option<&Path>, prim: Option<&str>, o: &ShadeOptions) -> R
     writeln!(out).unwrap();
     out += &compile_sweep(&o.sizes, o.compile_reps)?;
     Ok(out)
+}
+
+/// Median ns per point of each contender, weighted (masks + every surface) and stochastic
+/// (masks + one picked surface), measured interleaved repetition by repetition after a warm-up.
+fn time_contenders(
+    contenders: &[(&str, &dyn MaterialCode)],
+    points: &[Globals],
+    xis: &[f32],
+    reps: usize,
+) -> (Vec<f64>, Vec<f64>) {
+    let Some((_, first)) = contenders.first() else { return (Vec::new(), Vec::new()) };
+    let nlayers = first.info().layers.len();
+    let surfaces: Vec<usize> = (0..nlayers).filter(|&l| first.info().layers[l].has_surface).collect();
+    let mut weighted = vec![Vec::new(); contenders.len()];
+    let mut stochastic = vec![Vec::new(); contenders.len()];
+    let mut masks = vec![0.0f32; nlayers];
+    let mut checksum = 0.0f32;
+    for rep in 0..=reps {
+        for (k, (_, m)) in contenders.iter().enumerate() {
+            let start = Instant::now();
+            for g in points {
+                checksum += shade_weighted(*m, black_box(g), &surfaces, &mut masks);
+            }
+            let w = start.elapsed().as_secs_f64() * 1e9 / points.len() as f64;
+            let start = Instant::now();
+            for (g, &xi) in points.iter().zip(xis) {
+                checksum += shade_stochastic(*m, black_box(g), xi, &mut masks);
+            }
+            let s = start.elapsed().as_secs_f64() * 1e9 / points.len() as f64;
+            // Repetition 0 is the warm-up.
+            if rep > 0 {
+                weighted[k].push(w);
+                stochastic[k].push(s);
+            }
+        }
+    }
+    black_box(checksum);
+    (weighted.into_iter().map(median).collect(), stochastic.into_iter().map(median).collect())
 }
 
 /// Nodes of the arithmetic-only material.
@@ -613,8 +760,9 @@ fn loop_budget_report(points: &[Globals], reps: usize) -> Result<String, String>
     ))
 }
 
-/// JIT vs interpreter on [`arithmetic_substance`]: ns per mask evaluation.
-fn arithmetic_report(points: &[Globals], reps: usize) -> Result<String, String> {
+/// Hand-written Rust vs JIT vs interpreter on [`arithmetic_substance`]`(64)`: lowered
+/// instruction count and median ns per mask evaluation, after checking all three agree.
+fn arithmetic_costs(points: &[Globals], reps: usize) -> Result<(usize, [f64; 3]), String> {
     let (lib, material) = single_substance(&arithmetic_substance(ARITHMETIC_NODES), "arithmetic")?;
     let (module, _) = lower_material(&lib, &material)?;
     let insts = module.inst_count();
@@ -622,10 +770,20 @@ fn arithmetic_report(points: &[Globals], reps: usize) -> Result<String, String> 
     let interp = backend::compile_module(module, BackendKind::Interp)?;
     compare_materials(jit.as_ref(), interp.as_ref(), points, 0.0)
         .map_err(|e| format!("JIT and interpreter disagree on the arithmetic material: {e}"))?;
-    let [jit_ns, interp_ns] = time_first_mask([jit.as_ref(), interp.as_ref()], points, reps);
+    let hand = HandArithmetic::new(jit.info().clone());
+    compare_materials(&hand, jit.as_ref(), points, 1e-5)
+        .map_err(|e| format!("hand-written Rust and JIT disagree on the arithmetic material: {e}"))?;
+    Ok((insts, time_first_mask([&hand as &dyn MaterialCode, jit.as_ref(), interp.as_ref()], points, reps)))
+}
+
+/// The arithmetic lines of `bench shade`.
+fn arithmetic_report(points: &[Globals], reps: usize) -> Result<String, String> {
+    let (insts, [hand_ns, jit_ns, interp_ns]) = arithmetic_costs(points, reps)?;
     Ok(format!(
         "\n  arithmetic only ({ARITHMETIC_NODES} math/mix nodes over P, {insts} instructions, no runtime calls):\n  \
-         JIT {jit_ns:.1} ns/point, interpreter {interp_ns:.1} ns/point: interpreter / JIT {:.1}x   (target >= 20x)\n",
+         hand Rust {hand_ns:.1} ns/point, JIT {jit_ns:.1} ns/point, interpreter {interp_ns:.1} ns/point: \
+         JIT / hand Rust {:.2}x, interpreter / JIT {:.1}x   (target >= 20x)\n",
+        jit_ns / hand_ns,
         interp_ns / jit_ns
     ))
 }
@@ -678,6 +836,23 @@ pub fn generated_substance(n: usize) -> String {
 
 /// Compile time against graph size: parse + check, compose (wire + fold + lower), JIT codegen.
 fn compile_sweep(sizes: &[usize], reps: usize) -> Result<String, String> {
+    compile_sweep_rows(sizes, reps).map(|(text, _)| text)
+}
+
+/// One size of the compile sweep: nodes, lowered instructions, median parse, compose and
+/// codegen ms.
+#[derive(Clone, Copy, Debug)]
+struct CompileRow {
+    nodes: usize,
+    insts: usize,
+    parse: f64,
+    compose: f64,
+    codegen: f64,
+}
+
+/// [`compile_sweep`]'s report and its rows.
+fn compile_sweep_rows(sizes: &[usize], reps: usize) -> Result<(String, Vec<CompileRow>), String> {
+    let mut rows = Vec::new();
     let mut out = String::new();
     writeln!(out, "compile time vs graph size (tree of noise/math/mix_float nodes reading P; median of runs)").unwrap();
     writeln!(
@@ -727,6 +902,7 @@ fn compile_sweep(sizes: &[usize], reps: usize) -> Result<String, String> {
             total.push(c + j);
         }
         let (p, c, j, t) = (median(parse), median(compose), median(codegen), median(total));
+        rows.push(CompileRow { nodes: n, insts, parse: p, compose: c, codegen: j });
         if n == 50 {
             fifty = Some(t);
         }
@@ -741,7 +917,7 @@ fn compile_sweep(sizes: &[usize], reps: usize) -> Result<String, String> {
     if let Some(t) = fifty {
         writeln!(out, "  compose + JIT of the 50-node material: {t:.3} ms median (target <= 1 ms)").unwrap();
     }
-    Ok(out)
+    Ok((out, rows))
 }
 
 // ---- bench render -----------------------------------------------------------------------------
@@ -835,19 +1011,23 @@ struct Loaded {
 }
 
 fn load_scene(path: &Path) -> Result<Loaded, String> {
+    load_scene_with(Some(path), BackendKind::Jit)
+}
+
+/// Loads a scene (`None`: the embedded default scene) and compiles it with `backend`.
+fn load_scene_with(path: Option<&Path>, backend: BackendKind) -> Result<Loaded, String> {
+    let shown = path.map_or_else(|| "the default scene".to_string(), |p| p.display().to_string());
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
-    let fail = |diags: &Diagnostics, sources: &SourceMap| {
-        diag_error(&format!("cannot load {}", path.display()), diags, sources)
-    };
-    let Some(stage) = crate::cli::open_scene(Some(path), &mut sources, &mut diags) else {
+    let fail = |diags: &Diagnostics, sources: &SourceMap| diag_error(&format!("cannot load {shown}"), diags, sources);
+    let Some(stage) = crate::cli::open_scene(path, &mut sources, &mut diags) else {
         return Err(fail(&diags, &sources));
     };
     let composition = crate::compose::scene::compose_stage(&stage, &mut sources, &mut diags);
     if diags.has_errors() {
         return Err(fail(&diags, &sources));
     }
-    let mut compiler = Compiler::new(BackendKind::Jit, PassOptions::default());
+    let mut compiler = Compiler::new(backend, PassOptions::default());
     let mut materials = Vec::new();
     for m in &composition.materials {
         match compiler.compile(&composition.library, m, &mut diags) {
@@ -1300,6 +1480,876 @@ fn instancing_report(dir: &Path) -> Result<String, String> {
     Ok(out)
 }
 
+// ---- bench charts -----------------------------------------------------------------------------
+
+/// How the layers of a [`mask_stack_source`] are masked.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MaskKind {
+    /// Constant masks chosen so that every layer has the same weight `1/n` (layer `k` from the
+    /// bottom has mask `1/(k+1)`): all the noise of stochastic picking comes from the pick.
+    Constant,
+    /// Noise thresholded at 0.5 (about half coverage each), as in `bench render`.
+    Noise,
+    /// Thin high-contrast stripes: mask 1 on 3 % of the surface, 0 elsewhere, a different
+    /// direction and phase per layer.
+    Thin,
+}
+
+impl MaskKind {
+    /// All kinds, in chart order.
+    pub const ALL: [MaskKind; 3] = [MaskKind::Constant, MaskKind::Noise, MaskKind::Thin];
+
+    /// Short name for file names and labels.
+    pub fn name(self) -> &'static str {
+        match self {
+            MaskKind::Constant => "constant",
+            MaskKind::Noise => "noise",
+            MaskKind::Thin => "thin",
+        }
+    }
+}
+
+/// Coverage of one [`MaskKind::Thin`] stripe layer.
+pub const THIN_COVERAGE: f64 = 0.03;
+
+/// A `.ash` file with `n` substances `layer_0` … over a sphere (see [`layered_scene`]), masked
+/// as `kind` says; the bottom layer is opaque.
+pub fn mask_stack_source(n: usize, kind: MaskKind) -> String {
+    let mut s = String::from(
+        "shader threshold(float value = 0.0, float edge = 0.5, float softness = 0.1, output float out) {\n    \
+         out = smoothstep(edge, edge + max(softness, 1e-4), value);\n}\n\n\
+         shader stripes(float dx = 1.0, float dy = 0.0, float freq = 8.0, float phase = 0.0, float width = 0.03, output float out) {\n    \
+         float f = (P[0] * dx + P[1] * dy + P[2] * 0.3) * freq + phase;\n    \
+         out = f - floor(f) < width ? 1.0 : 0.0;\n}\n\n",
+    );
+    for k in 0..n {
+        let h = k as f32 / n.max(1) as f32 * 6.0;
+        let c = |o: f32| 0.15 + 0.7 * (((h + o) % 6.0 - 3.0).abs() - 1.0).clamp(0.0, 1.0);
+        let (r, g, b) = (c(0.0), c(4.0), c(2.0));
+        writeln!(s, "substance layer_{k} {{").unwrap();
+        if k % 2 == 0 {
+            writeln!(s, "    node s = diffuse(albedo: color({r:.3}, {g:.3}, {b:.3}));").unwrap();
+        } else {
+            writeln!(s, "    node s = glossy(albedo: color({r:.3}, {g:.3}, {b:.3}), roughness: 0.3);").unwrap();
+        }
+        s += "    surface = s.bsdf;\n";
+        if k > 0 {
+            match kind {
+                MaskKind::Constant => writeln!(s, "    node m = mask(opacity: {:.9});", 1.0 / (k + 1) as f64).unwrap(),
+                MaskKind::Noise => {
+                    writeln!(s, "    node n = noise(scale: {:.3});", 2.0 + 1.37 * k as f32).unwrap();
+                    s += "    node t = threshold(value: n.out, edge: 0.5, softness: 0.1);\n";
+                    s += "    node m = mask(opacity: t.out);\n";
+                }
+                MaskKind::Thin => {
+                    let a = k as f64 * 2.399_963;
+                    writeln!(
+                        s,
+                        "    node t = stripes(dx: {:.4}, dy: {:.4}, phase: {:.4}, width: {THIN_COVERAGE});",
+                        a.cos(),
+                        a.sin(),
+                        (k as f64 * 0.618_034).fract()
+                    )
+                    .unwrap();
+                    s += "    node m = mask(opacity: t.out);\n";
+                }
+            }
+            s += "    mask = m.out;\n";
+        }
+        s += "}\n\n";
+    }
+    s
+}
+
+/// Writes `source` and [`layered_scene`] into `dir` as `name.ash`/`name.usda` and loads them.
+fn load_generated(dir: &Path, name: &str, n: usize, source: &str, backend: BackendKind) -> Result<Loaded, String> {
+    let ash = dir.join(format!("{name}.ash"));
+    let usda = dir.join(format!("{name}.usda"));
+    std::fs::write(&ash, source).map_err(|e| format!("cannot write {}: {e}", ash.display()))?;
+    std::fs::write(&usda, layered_scene(n, &format!("{name}.ash")))
+        .map_err(|e| format!("cannot write {}: {e}", usda.display()))?;
+    load_scene_with(Some(&usda), backend)
+}
+
+/// What one `bench charts` run measures (the tests use tiny values).
+#[derive(Clone, Debug)]
+pub struct ChartOptions {
+    /// Layer counts of the layering charts.
+    pub layers: Vec<usize>,
+    /// Samples per pixel along each error-vs-time curve.
+    pub spp: Vec<u32>,
+    /// Image size of the layering charts.
+    pub res: (usize, usize),
+    /// Image size of the JIT-vs-interpreter chart (default scene).
+    pub default_res: (usize, usize),
+    /// Samples per pixel of every reference image.
+    pub reference_spp: u32,
+    /// Timed repetitions per point (median).
+    pub reps: usize,
+    /// Shading points and repetitions of the per-point cost chart.
+    pub shade_points: usize,
+    /// Graph sizes of the compile-time chart.
+    pub sizes: Vec<usize>,
+}
+
+impl Default for ChartOptions {
+    fn default() -> Self {
+        ChartOptions {
+            layers: vec![1, 4, 16, 64],
+            spp: vec![1, 2, 4, 8, 16, 32],
+            res: (56, 56),
+            default_res: (64, 48),
+            reference_spp: 1024,
+            reps: 7,
+            shade_points: 1 << 14,
+            sizes: GRAPH_SIZES.to_vec(),
+        }
+    }
+}
+
+impl ChartOptions {
+    /// Tiny images, short ladders, one repetition: every chart drawn in seconds (tests, smoke
+    /// runs); the figures are noise.
+    pub fn quick() -> Self {
+        ChartOptions {
+            layers: vec![1, 4],
+            spp: vec![1, 2, 4],
+            res: (8, 8),
+            default_res: (8, 6),
+            reference_spp: 16,
+            reps: 1,
+            shade_points: 256,
+            sizes: vec![10, 50],
+        }
+    }
+}
+
+/// Error-vs-time curves of several contenders (a scene and its settings each): per spp of the
+/// ladder, (ms per image on one thread, RMSE against `reference`). The contenders are measured
+/// interleaved, spp by spp and repetition by repetition, so that load from other processes
+/// affects them alike; the time is the fastest of `reps` (the least disturbed by that load)
+/// and the RMSE the root of the mean squared error over the repetitions, each with its own
+/// seed (one image's RMSE is itself noisy).
+fn error_curves(
+    contenders: &[(&Loaded, RenderSettings)],
+    spp: &[u32],
+    reference: &[[f32; 3]],
+    reps: usize,
+) -> Result<Vec<Vec<(f64, f64)>>, String> {
+    let mut curves = vec![Vec::new(); contenders.len()];
+    for &n in spp {
+        let mut times = vec![f64::INFINITY; contenders.len()];
+        let mut mse = vec![0.0; contenders.len()];
+        // Repetition 0 is the warm-up.
+        for rep in 0..=reps {
+            for (k, (l, base)) in contenders.iter().enumerate() {
+                let settings = RenderSettings { spp: n, seed: base.seed + rep as u64, ..base.clone() };
+                let (secs, rgb) = render_rgb(l, &settings)?;
+                if rep > 0 {
+                    times[k] = times[k].min(secs * 1e3);
+                    mse[k] += rmse(&rgb, reference).powi(2) / reps as f64;
+                }
+            }
+        }
+        for (k, curve) in curves.iter_mut().enumerate() {
+            curve.push((times[k], mse[k].sqrt()));
+        }
+    }
+    Ok(curves)
+}
+
+/// Formats a ratio pair of [`crate::plot::equal_ratios`] for a caption.
+fn ratio_text(a: &[(f64, f64)], b: &[(f64, f64)]) -> String {
+    match crate::plot::equal_ratios(a, b) {
+        Some((e, t, how)) => format!("equal-time RMSE ratio {e:.2}, equal-RMSE time ratio {t:.2} ({how})"),
+        None => "no ratio (empty curve)".into(),
+    }
+}
+
+/// `strata bench charts --plot DIR`: measures and draws every chart of README's Charts section
+/// into `dir` as SVG, and returns the printed report (the same ratios as the captions).
+/// `mitsuba_csv`, when it exists, is `tools/compare_mitsuba.py`'s CSV (optional).
+pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) -> Result<String, String> {
+    use crate::plot::{Bar, bars, loglog};
+    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    let mut out = String::new();
+    let svg = |name: &str| dir.join(name);
+    let tmp = TempDir::new()?;
+
+    // (a) Stochastic picking vs weighted evaluation per layer count and mask kind.
+    let base = RenderSettings {
+        width: o.res.0,
+        height: o.res.1,
+        spp: 1,
+        seed: 1,
+        threads: Some(1),
+        max_depth: 6,
+        mode: LayerMode::Stochastic,
+    };
+    let reference_settings = RenderSettings {
+        spp: o.reference_spp,
+        seed: 0x5eed_0001,
+        threads: None,
+        mode: LayerMode::Weighted,
+        ..base.clone()
+    };
+    let mut crossover = Vec::new();
+    for (kc, kind) in MaskKind::ALL.into_iter().enumerate() {
+        let mut cross = Vec::new();
+        let mut series = Vec::new();
+        let mut caption = vec![format!(
+            "{}x{} px, spp {:?}, 1 thread, fastest of {} interleaved, RMSE over {} seeds; reference: weighted, {} spp. Ratios stochastic / weighted:",
+            o.res.0, o.res.1, o.spp, o.reps, o.reps, o.reference_spp
+        )];
+        writeln!(out, "layering, {} masks ({}x{}; stochastic / weighted):", kind.name(), o.res.0, o.res.1).unwrap();
+        for (c, &n) in o.layers.iter().enumerate() {
+            let name = format!("{}{n}", kind.name());
+            let l = load_generated(&tmp.0, &name, n, &mask_stack_source(n, kind), BackendKind::Jit)?;
+            let (_, reference) = render_rgb(&l, &reference_settings)?;
+            let modes = [(LayerMode::Stochastic, "stochastic"), (LayerMode::Weighted, "weighted")];
+            let contenders: Vec<(&Loaded, RenderSettings)> =
+                modes.iter().map(|&(mode, _)| (&l, RenderSettings { mode, ..base.clone() })).collect();
+            let curves = error_curves(&contenders, &o.spp, &reference, o.reps)?;
+            for ((mode, label), points) in modes.iter().zip(&curves) {
+                series.push(Series {
+                    label: format!("{n} layer{}, {label}", if n == 1 { "" } else { "s" }),
+                    points: points.clone(),
+                    color: c,
+                    dashed: *mode == LayerMode::Weighted,
+                });
+            }
+            let ratios = ratio_text(&curves[0], &curves[1]);
+            if let Some((_, t, _)) = crate::plot::equal_ratios(&curves[0], &curves[1]) {
+                cross.push((n as f64, t));
+            }
+            writeln!(out, "  {n:>3} layers: {ratios}").unwrap();
+            caption.push(format!("{n} layers: {ratios}"));
+        }
+        let file = format!("layering_{}.svg", kind.name());
+        loglog(
+            &svg(&file),
+            &format!("Stochastic picking (solid) vs weighted evaluation (dashed), {} masks", kind.name()),
+            "render time per image (ms, 1 thread)",
+            "RMSE vs reference",
+            &series,
+            &caption,
+        )?;
+        crossover.push(Series { label: format!("{} masks", kind.name()), points: cross, color: kc, dashed: false });
+    }
+    let mut caption = vec![
+        "Time stochastic picking needs for the RMSE weighted evaluation reaches in the same time, over weighted's (from the charts".into(),
+        "above). Below 1 stochastic wins; above 1 weighted wins. The dashed line is 1.".into(),
+    ];
+    for s in &crossover {
+        let pts: Vec<String> = s.points.iter().map(|(n, t)| format!("{n}: {t:.2}")).collect();
+        caption.push(format!("{}: {}", s.label, pts.join(", ")));
+    }
+    let xs: Vec<f64> = crossover.iter().flat_map(|s| s.points.iter().map(|p| p.0)).collect();
+    let (lo, hi) = (xs.iter().copied().fold(f64::INFINITY, f64::min), xs.iter().copied().fold(0.0, f64::max));
+    crossover.push(Series {
+        label: "1 (break-even)".into(),
+        points: vec![(lo, 1.0), (hi, 1.0)],
+        color: 7,
+        dashed: true,
+    });
+    for line in &caption[2..] {
+        writeln!(out, "equal-RMSE time, stochastic / weighted, by layers: {line}").unwrap();
+    }
+    loglog(
+        &svg("layering_crossover.svg"),
+        "Which layering method wins: equal-RMSE time ratio, stochastic / weighted",
+        "layers",
+        "time ratio at equal RMSE (stochastic / weighted)",
+        &crossover,
+        &caption,
+    )?;
+
+    // (b) JIT vs interpreter on the default scene; strata vs Mitsuba 3 from the CSV.
+    let default_base = RenderSettings { width: o.default_res.0, height: o.default_res.1, max_depth: 8, ..base.clone() };
+    let jit = load_scene_with(None, BackendKind::Jit)?;
+    let interp = load_scene_with(None, BackendKind::Interp)?;
+    let reference_settings =
+        RenderSettings { spp: o.reference_spp, seed: 0x5eed_0001, threads: None, ..default_base.clone() };
+    let (_, reference) = render_rgb(&jit, &reference_settings)?;
+    let curves =
+        error_curves(&[(&jit, default_base.clone()), (&interp, default_base.clone())], &o.spp, &reference, o.reps)?;
+    let (jit_curve, interp_curve) = (curves[0].clone(), curves[1].clone());
+    let ratios = ratio_text(&jit_curve, &interp_curve);
+    writeln!(out, "default scene, JIT / interpreter: {ratios}").unwrap();
+    loglog(
+        &svg("backends.svg"),
+        "JIT (solid) vs interpreter (dashed), default scene",
+        "render time per image (ms, 1 thread)",
+        "RMSE vs reference",
+        &[
+            Series { label: "JIT".into(), points: jit_curve, color: 0, dashed: false },
+            Series { label: "interpreter".into(), points: interp_curve, color: 1, dashed: true },
+        ],
+        &[
+            format!(
+                "{}x{} px, spp {:?}, 1 thread, fastest of {} interleaved, RMSE over {} seeds; reference: JIT, {} spp, other seed.",
+                o.default_res.0, o.default_res.1, o.spp, o.reps, o.reps, o.reference_spp
+            ),
+            "Both backends compute the same bits, so equal spp gives equal RMSE: only time differs.".into(),
+            format!("JIT / interpreter: {ratios}"),
+        ],
+    )?;
+    match mitsuba_csv.filter(|p| p.is_file()) {
+        Some(csv) => out += &mitsuba_chart(csv, &svg("mitsuba.svg"))?,
+        None => {
+            writeln!(out, "strata vs Mitsuba 3: no CSV, chart skipped (tools/compare_mitsuba.py writes it)").unwrap()
+        }
+    }
+
+    // (c) Per-shading-point cost: hand-written Rust, JIT, interpreter.
+    let points = sample_points(o.shade_points, 0x5eed);
+    let (lib, material) = bench_material()?;
+    let (module, _) = lower_material(&lib, &material)?;
+    let bench_jit = backend::compile_module(module.clone(), BackendKind::Jit)?;
+    let bench_interp = backend::compile_module(module, BackendKind::Interp)?;
+    let hand = HandMaterial::default();
+    compare_materials(&hand, bench_jit.as_ref(), &points, 1e-5)
+        .map_err(|e| format!("hand-written Rust and JIT disagree: {e}"))?;
+    let mut rng = SplitMix(0xfeed);
+    let xis: Vec<f32> = (0..points.len()).map(|_| rng.unit()).collect();
+    let contenders: [(&str, &dyn MaterialCode); 3] =
+        [("hand Rust", &hand), ("JIT", bench_jit.as_ref()), ("interpreter", bench_interp.as_ref())];
+    let (noise_ns, _) = time_contenders(&contenders, &points, &xis, o.reps.max(3));
+    let (insts, arith_ns) = arithmetic_costs(&points, o.reps.max(3))?;
+    let mut shade_bars = Vec::new();
+    for (group, ns) in [
+        ("noise-bound: 3-layer benchmark, weighted", &noise_ns[..]),
+        ("arithmetic-bound: 64 math nodes", &arith_ns[..]),
+    ] {
+        for (k, name) in ["hand Rust", "JIT", "interpreter"].iter().enumerate() {
+            shade_bars.push(Bar { group: group.into(), label: (*name).into(), value: ns[k], color: k });
+        }
+    }
+    let cost_line = |what: &str, ns: &[f64]| {
+        format!(
+            "{what}: JIT / hand Rust {:.2}x, interpreter / JIT {:.1}x (equal-RMSE time ratios; equal-time RMSE ratio = sqrt: {:.2}, {:.2})",
+            ns[1] / ns[0],
+            ns[2] / ns[1],
+            (ns[1] / ns[0]).sqrt(),
+            (ns[2] / ns[1]).sqrt()
+        )
+    };
+    let shade_caption = vec![
+        format!(
+            "{} points, median of {}; every backend computes the same values (checked first), so cost ratios are",
+            points.len(),
+            o.reps.max(3)
+        ),
+        "the equal-RMSE time ratios of a render whose time is all shading.".into(),
+        cost_line("noise-bound", &noise_ns),
+        cost_line(&format!("arithmetic-bound ({insts} instructions)"), &arith_ns),
+    ];
+    for line in &shade_caption[2..] {
+        writeln!(out, "{line}").unwrap();
+    }
+    bars(&svg("shade_cost.svg"), "Per-shading-point cost", "ns per shading point", &shade_bars, &shade_caption)?;
+
+    // (d) Compile time vs graph size.
+    let (_, rows) = compile_sweep_rows(&o.sizes, o.reps.max(1))?;
+    let line = |f: fn(&CompileRow) -> f64| rows.iter().map(|r| (r.nodes as f64, f(r))).collect::<Vec<_>>();
+    // Between the two largest graphs, where fixed per-compile costs no longer dominate.
+    let slope = {
+        let (a, b) = (rows.len().checked_sub(2).and_then(|i| rows.get(i)), rows.last());
+        match (a, b) {
+            (Some(a), Some(b)) if b.nodes > a.nodes => {
+                let t = |r: &CompileRow| r.compose + r.codegen;
+                (t(b) / t(a)).ln() / (b.nodes as f64 / a.nodes as f64).ln()
+            }
+            _ => f64::NAN,
+        }
+    };
+    let compile_caption = vec![
+        "Tree of noise/math/mix_float nodes reading P; median of runs; compose = wire + fold + lower; codegen = Cranelift JIT.".into(),
+        format!(
+            "log-log slope of compose + codegen from {} to {} nodes: {slope:.2} (1 = linear); {} instructions at the largest size.",
+            rows.len().checked_sub(2).and_then(|i| rows.get(i)).map_or(0, |r| r.nodes),
+            rows.last().map_or(0, |r| r.nodes),
+            rows.last().map_or(0, |r| r.insts)
+        ),
+        "No accuracy axis here: compile time does not change the image, so no RMSE ratio applies.".into(),
+    ];
+    writeln!(out, "compile time: {}", compile_caption[1]).unwrap();
+    loglog(
+        &svg("compile_time.svg"),
+        "Compile time vs graph size",
+        "nodes in the material graph",
+        "milliseconds",
+        &[
+            Series { label: "parse + check".into(), points: line(|r| r.parse), color: 2, dashed: true },
+            Series { label: "compose".into(), points: line(|r| r.compose), color: 3, dashed: true },
+            Series { label: "codegen (JIT)".into(), points: line(|r| r.codegen), color: 4, dashed: true },
+            Series {
+                label: "compose + codegen".into(),
+                points: line(|r| r.compose + r.codegen),
+                color: 0,
+                dashed: false,
+            },
+        ],
+        &compile_caption,
+    )?;
+    out += &stability_charts(dir)?;
+    out += &scale_chart(dir)?;
+    writeln!(out, "charts written to {}", dir.display()).unwrap();
+    Ok(out)
+}
+
+/// strata vs Mitsuba 3 per scene from `tools/compare_mitsuba.py`'s CSV: one point per
+/// renderer at (CPU seconds, noise). The noise of one render is the relative mean absolute
+/// difference between two renders of the same renderer with different seeds, divided by √2;
+/// at equal spp both renderers converge to the same image where their models agree (README).
+fn mitsuba_chart(csv: &Path, file: &Path) -> Result<String, String> {
+    let text = std::fs::read_to_string(csv).map_err(|e| format!("cannot read {}: {e}", csv.display()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let col = |name: &str| {
+        header.iter().position(|h| *h == name).ok_or_else(|| format!("{}: no `{name}` column", csv.display()))
+    };
+    let (scene, region, s_cpu, m_cpu, ss, mm) = (
+        col("scene")?,
+        col("region")?,
+        col("strata_cpu_s")?,
+        col("mitsuba_cpu_s")?,
+        col("rel_mae_ss")?,
+        col("rel_mae_mm")?,
+    );
+    let mut series = Vec::new();
+    let mut caption =
+        vec!["Per scene (whole image): CPU seconds at 1024 spp and relative MAE between two seeds / sqrt(2). Ratios strata / Mitsuba:".into()];
+    let mut out = String::from("strata vs Mitsuba 3 (from the CSV; strata / Mitsuba):\n");
+    for (k, row) in lines.enumerate() {
+        let f: Vec<&str> = row.split(',').collect();
+        if f.get(region) != Some(&"image") {
+            continue;
+        }
+        let num = |i: usize| {
+            f.get(i)
+                .and_then(|v| v.parse::<f64>().ok())
+                .ok_or_else(|| format!("{}:{}: bad number", csv.display(), k + 2))
+        };
+        let name = f.get(scene).copied().unwrap_or_default().to_string();
+        let c = series.len() / 2;
+        let s = vec![(num(s_cpu)?, num(ss)? / 2f64.sqrt())];
+        let m = vec![(num(m_cpu)?, num(mm)? / 2f64.sqrt())];
+        let ratios = ratio_text(&s, &m);
+        writeln!(out, "  {name}: {ratios}").unwrap();
+        caption.push(format!("{name}: {ratios}"));
+        series.push(Series { label: format!("{name}, strata"), points: s, color: c, dashed: false });
+        series.push(Series { label: format!("{name}, Mitsuba 3"), points: m, color: c, dashed: true });
+    }
+    crate::plot::loglog(
+        file,
+        "strata (circles) vs Mitsuba 3 (triangles), docs/mitsuba_compare.csv",
+        "CPU seconds per render (1024 spp, 320x240)",
+        "relative noise (MAE between seeds / sqrt 2)",
+        &series,
+        &caption,
+    )?;
+    Ok(out)
+}
+
+/// Directional albedo `E(wo) = ∫ f |cos θi| dωi` of `bsdf` by sampling (`n` samples), with the
+/// radiance compression of transmission undone (× η²) so glass reads R + T.
+fn sampled_albedo(bsdf: &crate::render::bsdf::Bsdf, wo: glam::Vec3, n: usize, seed: u64) -> f64 {
+    use crate::render::bsdf::Bsdf;
+    let mut rng = SplitMix(seed);
+    let mut sum = 0.0f64;
+    for _ in 0..n {
+        let (uc, u) = (rng.unit(), glam::Vec2::new(rng.unit(), rng.unit()));
+        if let Some(s) = bsdf.sample(wo, uc, u) {
+            let compression = match *bsdf {
+                Bsdf::Glass { eta, .. } if s.wi.z * wo.z < 0.0 => {
+                    f64::from(if wo.z > 0.0 { eta } else { 1.0 / eta }).powi(2)
+                }
+                _ => 1.0,
+            };
+            sum += f64::from(s.f.max_element() * s.wi.z.abs() / s.pdf) * compression;
+        }
+    }
+    sum / n as f64
+}
+
+/// The direction at `cos_theta` from the normal, in the xz-plane.
+fn direction(cos_theta: f64) -> glam::Vec3 {
+    let sin = (1.0 - cos_theta * cos_theta).max(0.0).sqrt();
+    glam::Vec3::new(sin as f32, 0.0, cos_theta as f32)
+}
+
+/// The figures of docs/STABILITY.md that need no render: energy of the GGX lobes against
+/// incidence down to cos θo = 1e-4 around the delta switch, and of rough glass as its index
+/// approaches 1. Returns the report lines.
+pub fn stability_charts(dir: &Path) -> Result<String, String> {
+    use crate::abi::{Closure, ClosureKind};
+    use crate::render::bsdf::Bsdf;
+    let make = |kind: ClosureKind, params: &[f32]| {
+        let mut c = Closure { kind: kind as u32, params: [0.0; 8] };
+        c.params[..params.len()].copy_from_slice(params);
+        Bsdf::from_closure(&c)
+    };
+    let cosines: Vec<f64> = (0..=16).map(|i| 10f64.powf(-4.0 + i as f64 * 0.25)).collect();
+    let mut out = String::new();
+    let mut series = Vec::new();
+    let mut caption = vec![
+        "White furnace E(wo) (40k samples per point) of a white conductor and of glass (R + T, from outside), against cos θo.".into(),
+        "Roughness 0.01 is below the delta switch (α = r² < 1e-3): E is Fresnel's exactly; above it single scattering loses the".into(),
+        "light GGX reflects below the horizon, most at grazing incidence. E > 1 nowhere; no NaN anywhere (cargo test: render::bsdf stability).".into(),
+    ];
+    for (c, r) in [0.01f32, 0.032, 0.1, 0.3, 1.0].into_iter().enumerate() {
+        let metal = make(ClosureKind::Metal, &[1.0, 1.0, 1.0, 1.0, 1.0, 1.0, r]);
+        let glass = make(ClosureKind::Glass, &[1.0, 1.0, 1.0, r, 1.5]);
+        let m: Vec<(f64, f64)> =
+            cosines.iter().map(|&z| (z, sampled_albedo(&metal, direction(z), 40_000, 1))).collect();
+        let g: Vec<(f64, f64)> =
+            cosines.iter().map(|&z| (z, sampled_albedo(&glass, direction(z), 40_000, 2))).collect();
+        let low = |v: &[(f64, f64)]| v.first().map_or(f64::NAN, |p| p.1);
+        caption.push(format!(
+            "roughness {r}: E at cos θo = 1e-4: metal {:.3}, glass {:.3}; at 1: metal {:.3}, glass {:.3}",
+            low(&m),
+            low(&g),
+            m.last().map_or(f64::NAN, |p| p.1),
+            g.last().map_or(f64::NAN, |p| p.1)
+        ));
+        series.push(Series { label: format!("metal r={r}"), points: m, color: c, dashed: false });
+        series.push(Series { label: format!("glass r={r}"), points: g, color: c, dashed: true });
+    }
+    for line in &caption[3..] {
+        writeln!(out, "stability, GGX: {line}").unwrap();
+    }
+    crate::plot::loglog(
+        &dir.join("stability_ggx.svg"),
+        "GGX energy vs incidence: conductor (solid), glass (dashed)",
+        "cos θo",
+        "directional albedo E",
+        &series,
+        &caption,
+    )?;
+
+    let offsets: Vec<f64> = (0..=12).map(|i| 10f64.powf(-4.0 + i as f64 * 0.25)).collect();
+    let mut series = Vec::new();
+    let mut caption = vec![
+        "R + T of rough glass (40k samples) against η − 1. Below η − 1 = 1e-3 strata switches to a null interface (a delta".into(),
+        "pass-through, E = 1 exactly): the rough half vector ωi η + ωo vanishes as η → 1. Above it single-scattering GGX keeps".into(),
+        "losing what masking removes, most at grazing incidence, so E jumps to 1 at the switch (an inherent limit, STABILITY.md).".into(),
+    ];
+    for (c, (r, cos)) in [(0.05f32, 0.5), (0.3, 0.5), (1.0, 0.5), (0.3, 0.01)].into_iter().enumerate() {
+        let points: Vec<(f64, f64)> = offsets
+            .iter()
+            .map(|&d| {
+                (
+                    d,
+                    sampled_albedo(
+                        &make(ClosureKind::Glass, &[1.0, 1.0, 1.0, r, 1.0 + d as f32]),
+                        direction(cos),
+                        40_000,
+                        3,
+                    ),
+                )
+            })
+            .collect();
+        let at = |target: f64| {
+            points
+                .iter()
+                .min_by(|a, b| (a.0 / target).ln().abs().total_cmp(&(b.0 / target).ln().abs()))
+                .map_or(f64::NAN, |p| p.1)
+        };
+        caption.push(format!(
+            "roughness {r}, cos θo = {cos}: E = {:.4} at η − 1 = 1e-4 (null), {:.4} at 1e-3, {:.4} at 1e-2, {:.4} at 1",
+            at(1e-4),
+            at(1e-3),
+            at(1e-2),
+            at(1.0)
+        ));
+        series.push(Series { label: format!("r={r}, cos θo={cos}"), points, color: c, dashed: false });
+    }
+    for line in &caption[3..] {
+        writeln!(out, "stability, glass near index 1: {line}").unwrap();
+    }
+    crate::plot::loglog(
+        &dir.join("stability_glass.svg"),
+        "Rough glass energy as the index approaches 1",
+        "η − 1",
+        "R + T",
+        &series,
+        &caption,
+    )?;
+    Ok(out)
+}
+
+// ---- bench features ---------------------------------------------------------------------------
+
+/// Substances of [`features_scene`]: the plain materials every variant renders, and one extra
+/// substance per feature, bound only to a tiny sphere the camera never sees.
+fn features_source(texture: &Path) -> String {
+    format!(
+        "substance plain_diffuse {{\n    node d = diffuse(albedo: color(0.6, 0.5, 0.4));\n    surface = d.bsdf;\n}}\n\
+         substance plain_glossy {{\n    node g = glossy(albedo: color(0.3, 0.4, 0.6), roughness: 0.3);\n    surface = g.bsdf;\n}}\n\
+         substance extra_none {{\n    node d = diffuse();\n    surface = d.bsdf;\n}}\n\
+         substance extra_aov {{\n    node d = diffuse();\n    node c = customChannelFloat(name: \"extra\", value: 1.0);\n    surface = d.bsdf;\n}}\n\
+         substance extra_displacement {{\n    node d = diffuse();\n    node n = noise(scale: 4.0);\n    \
+         node b = bump(height: n.out, scale: 0.01, mode: \"add\");\n    surface = d.bsdf;\n    displacement = b.out;\n}}\n\
+         substance extra_texture {{\n    node t = texture(file: \"{}\");\n    node d = diffuse(albedo: t.out);\n    surface = d.bsdf;\n}}\n\
+         substance extra_transparency {{\n    node d = diffuse();\n    node m = mask(opacity: 0.5);\n    surface = d.bsdf;\n    mask = m.out;\n}}\n",
+        texture.display()
+    )
+}
+
+/// Three balls on a floor under a dome and a sun, all opaque plain materials, plus a sphere of
+/// radius 0.01 fifty units below the floor bound to `extra_<feature>`: the scene contains the
+/// feature, but nothing the camera sees uses it.
+fn features_scene(feature: &str, file: &str) -> String {
+    let mut s = String::from(
+        r#"#usda 1.0
+(
+    upAxis = "Y"
+)
+def Xform "World"
+{
+    def Camera "Camera"
+    {
+        float focalLength = 35
+        float horizontalAperture = 36
+        float verticalAperture = 24
+        float3 xformOp:translate = (0, 2, 7)
+        float3 xformOp:rotateXYZ = (-12, 0, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateXYZ"]
+    }
+    def DomeLight "Sky"
+    {
+        float inputs:intensity = 0.8
+    }
+    def DistantLight "Sun"
+    {
+        float inputs:intensity = 2
+        float inputs:angle = 3
+        float3 xformOp:rotateXYZ = (-50, 30, 0)
+        uniform token[] xformOpOrder = ["xformOp:rotateXYZ"]
+    }
+    def Mesh "Floor"
+    {
+        rel material:slotBinding:_000 = </Looks/plain_diffuse>
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points = [(-20, 0, -20), (20, 0, -20), (20, 0, 20), (-20, 0, 20)]
+    }
+"#,
+    );
+    for (i, x) in [-2.2f32, 0.0, 2.2].iter().enumerate() {
+        let look = if i == 1 { "plain_glossy" } else { "plain_diffuse" };
+        writeln!(
+            s,
+            "    def Sphere \"Ball{i}\"\n    {{\n        rel material:slotBinding:_000 = </Looks/{look}>\n        \
+             double radius = 1\n        float3 xformOp:translate = ({x}, 1, 0)\n        \
+             uniform token[] xformOpOrder = [\"xformOp:translate\"]\n    }}"
+        )
+        .unwrap();
+    }
+    writeln!(
+        s,
+        "    def Sphere \"Extra\"\n    {{\n        rel material:slotBinding:_000 = </Looks/extra_{feature}>\n        \
+         double radius = 0.01\n        float3 xformOp:translate = (0, -50, 0)\n        \
+         uniform token[] xformOpOrder = [\"xformOp:translate\"]\n    }}\n}}\n\ndef Scope \"Looks\"\n{{"
+    )
+    .unwrap();
+    for name in ["plain_diffuse", "plain_glossy", &format!("extra_{feature}")] {
+        writeln!(
+            s,
+            "    def Material \"{name}\"\n    {{\n        def Shader \"Surface\"\n        {{\n            \
+             uniform token info:implementationSource = \"sourceAsset\"\n            \
+             uniform asset info:strata:sourceAsset = @{file}@\n            \
+             uniform token info:strata:sourceAsset:subIdentifier = \"{name}\"\n        }}\n    }}"
+        )
+        .unwrap();
+    }
+    s += "}\n";
+    s
+}
+
+/// Features of `bench features`, the first being the baseline without any.
+pub const FEATURES: [&str; 5] = ["none", "aov", "displacement", "texture", "transparency"];
+
+/// `strata bench features`: what a scene pays for features it contains but does not use where
+/// the camera looks. Each variant adds one material with the feature (AOV, displacement,
+/// texture, transparency) on an invisible sphere; the time per sample and the shader calls per
+/// sample must match the baseline's within noise. Returns the printed report.
+pub fn bench_features(res: (usize, usize), spp: u32, reps: usize) -> Result<String, String> {
+    let rows = measure_features(res, spp, reps)?;
+    let mut out = String::new();
+    writeln!(
+        out,
+        "bench features: {}x{} at {spp} spp, JIT, 1 thread (median of {reps}, variants interleaved); each variant adds one \
+         material with the feature on an invisible sphere",
+        res.0, res.1
+    )
+    .unwrap();
+    writeln!(
+        out,
+        "  {:<14} {:>10} {:>9} {:>8} {:>8} {:>9} {:>8} {:>8} {:>8}",
+        "feature", "ns/sample", "vs none", "masks", "shadow", "surfaces", "displ", "normals", "AOVs"
+    )
+    .unwrap();
+    for r in &rows {
+        let e = &r.evals;
+        let per = |n: u64| n as f64 / r.samples.max(1) as f64;
+        writeln!(
+            out,
+            "  {:<14} {:>10.0} {:>8.2}x {:>8.3} {:>8.3} {:>9.3} {:>8.3} {:>8.3} {:>8.3}",
+            r.feature,
+            r.ns,
+            r.ns / rows[0].ns,
+            per(e.masks),
+            per(e.shadow_masks),
+            per(e.surfaces),
+            per(e.displacements),
+            per(e.normals),
+            per(e.channels)
+        )
+        .unwrap();
+    }
+    Ok(out)
+}
+
+/// One variant of `bench features`.
+struct FeatureRow {
+    feature: &'static str,
+    /// Median ns per camera sample.
+    ns: f64,
+    evals: crate::render::integrator::EvalCounts,
+    samples: u64,
+}
+
+fn measure_features(res: (usize, usize), spp: u32, reps: usize) -> Result<Vec<FeatureRow>, String> {
+    let dir = TempDir::new()?;
+    let texture = dir.0.join("texture.exr");
+    exr::prelude::write_rgb_file(&texture, 4, 4, |x, y| (x as f32 / 4.0, y as f32 / 4.0, 0.5))
+        .map_err(|e| format!("cannot write {}: {e}", texture.display()))?;
+    std::fs::write(dir.0.join("features.ash"), features_source(&texture))
+        .map_err(|e| format!("cannot write the benchmark substances: {e}"))?;
+    let mut scenes = Vec::new();
+    for feature in FEATURES {
+        let usda = dir.0.join(format!("{feature}.usda"));
+        std::fs::write(&usda, features_scene(feature, "features.ash"))
+            .map_err(|e| format!("cannot write {}: {e}", usda.display()))?;
+        scenes.push((feature, load_scene(&usda)?));
+    }
+    let settings = RenderSettings {
+        width: res.0,
+        height: res.1,
+        spp,
+        seed: 1,
+        threads: Some(1),
+        max_depth: 6,
+        mode: LayerMode::Stochastic,
+    };
+    let mut times = vec![Vec::new(); scenes.len()];
+    let mut evals = vec![crate::render::integrator::EvalCounts::default(); scenes.len()];
+    let mut samples = vec![0u64; scenes.len()];
+    for rep in 0..=reps {
+        for (k, (_, l)) in scenes.iter().enumerate() {
+            let materials: Vec<&dyn MaterialCode> = l.materials.iter().map(|m| m.as_ref()).collect();
+            let start = Instant::now();
+            let (_, stats) = crate::render::render(&l.scene, &materials, &settings, None).map_err(|e| e.to_string())?;
+            let ns = start.elapsed().as_secs_f64() * 1e9 / stats.samples.max(1) as f64;
+            // Repetition 0 is the warm-up.
+            if rep > 0 {
+                times[k].push(ns);
+            }
+            (evals[k], samples[k]) = (stats.evals, stats.samples);
+        }
+    }
+    Ok(scenes
+        .iter()
+        .enumerate()
+        .map(|(k, (feature, _))| FeatureRow {
+            feature,
+            ns: median(std::mem::take(&mut times[k])),
+            evals: evals[k],
+            samples: samples[k],
+        })
+        .collect())
+}
+
+/// The scene of `tests/scene_scale.rs` at scale `s`: a unit analytic sphere on a 40×40 mesh
+/// floor under a white dome, camera, clipping range and geometry all multiplied by `s`.
+pub fn scaled_scene(s: f64) -> String {
+    let v = |x: f64| format!("{:e}", x * s);
+    format!(
+        "#usda 1.0\n(\n    upAxis = \"Y\"\n)\ndef Xform \"World\"\n{{\n    def Camera \"Camera\"\n    {{\n        \
+         float focalLength = 35\n        float horizontalAperture = 36\n        float verticalAperture = 36\n        \
+         float2 clippingRange = ({}, {})\n        float3 xformOp:translate = (0, {}, {})\n        \
+         float3 xformOp:rotateXYZ = (-20, 0, 0)\n        uniform token[] xformOpOrder = [\"xformOp:translate\", \"xformOp:rotateXYZ\"]\n    }}\n    \
+         def DomeLight \"Sky\"\n    {{\n        float inputs:intensity = 1\n    }}\n    \
+         def Sphere \"Ball\"\n    {{\n        double radius = {r}\n        float3 xformOp:translate = (0, {r}, 0)\n        \
+         uniform token[] xformOpOrder = [\"xformOp:translate\"]\n    }}\n    \
+         def Mesh \"Floor\"\n    {{\n        int[] faceVertexCounts = [4]\n        int[] faceVertexIndices = [0, 1, 2, 3]\n        \
+         point3f[] points = [({m}, 0, {m}), ({p}, 0, {m}), ({p}, 0, {p}), ({m}, 0, {p})]\n    }}\n}}\n",
+        v(0.01),
+        v(1000.0),
+        v(2.0),
+        v(5.0),
+        r = v(1.0),
+        m = v(-20.0),
+        p = v(20.0),
+    )
+}
+
+/// The scale figure of docs/STABILITY.md: pixel coverage and mean radiance of [`scaled_scene`]
+/// from 1e-6 to 3e5, relative to scale 1.
+fn scale_chart(dir: &Path) -> Result<String, String> {
+    let tmp = TempDir::new()?;
+    let settings = RenderSettings {
+        width: 24,
+        height: 24,
+        spp: 16,
+        seed: 9,
+        threads: None,
+        max_depth: 6,
+        mode: LayerMode::Stochastic,
+    };
+    let measure = |s: f64| -> Result<(f64, f64), String> {
+        let usda = tmp.0.join("scale.usda");
+        std::fs::write(&usda, scaled_scene(s)).map_err(|e| format!("cannot write {}: {e}", usda.display()))?;
+        let l = load_scene(&usda)?;
+        let materials: Vec<&dyn MaterialCode> = l.materials.iter().map(|m| m.as_ref()).collect();
+        let (image, _) = crate::render::render(&l.scene, &materials, &settings, None).map_err(|e| e.to_string())?;
+        let mean = |name: &str| {
+            image.f32_channel(name).map_or(f64::NAN, |v| v.iter().map(|&x| f64::from(x)).sum::<f64>() / v.len() as f64)
+        };
+        Ok((mean("A"), mean("R")))
+    };
+    let (a1, r1) = measure(1.0)?;
+    let scales = [1e-6, 3e-6, 1e-5, 3e-5, 1e-4, 1e-3, 1e-2, 1.0, 1e2, 1e4, 1e5, 3e5];
+    let mut coverage = Vec::new();
+    let mut radiance = Vec::new();
+    for &s in &scales {
+        let (a, r) = measure(s)?;
+        coverage.push((s, a / a1));
+        radiance.push((s, r / r1));
+    }
+    let fmt = |v: &[(f64, f64)]| v.iter().map(|(s, x)| format!("{s:.0e}: {x:.3}")).collect::<Vec<_>>().join(", ");
+    let caption = vec![
+        "Sphere on a mesh floor, camera and clipping range scaled alike, 24x24 px at 16 spp; values relative to scale 1.".into(),
+        format!("coverage (mean alpha) {}", fmt(&coverage)),
+        "Holds from 1e-4 to 3e5; below 1e-4 the mesh floor loses coverage (the triangle path: the same without the sphere).".into(),
+        "Beyond 1e7 world units the scene is refused (geometry::MAX_EXTENT). tests/scene_scale.rs.".into(),
+    ];
+    crate::plot::loglog(
+        &dir.join("stability_scale.svg"),
+        "Intersection against scene scale",
+        "scene scale",
+        "relative to scale 1",
+        &[
+            Series { label: "pixel coverage".into(), points: coverage.clone(), color: 0, dashed: false },
+            Series { label: "mean radiance".into(), points: radiance, color: 1, dashed: true },
+        ],
+        &caption,
+    )?;
+    Ok(format!("stability, scene scale: coverage relative to scale 1: {}\n", fmt(&coverage)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1340,6 +2390,56 @@ mod tests {
     fn bench_render_runs_small() {
         let report = render_report(None, 1, (4, 4), &[1, 2], 1).unwrap();
         assert!(report.contains("2 layers"), "{report}");
+    }
+
+    #[test]
+    fn bench_charts_draws_every_chart() {
+        let dir = TempDir::new().unwrap();
+        let csv = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/mitsuba_compare.csv");
+        let report = bench_charts(&dir.0, Some(&csv), &ChartOptions::quick()).unwrap();
+        for name in [
+            "layering_constant",
+            "layering_noise",
+            "layering_thin",
+            "layering_crossover",
+            "backends",
+            "mitsuba",
+            "shade_cost",
+            "compile_time",
+            "stability_ggx",
+            "stability_glass",
+            "stability_scale",
+        ] {
+            let svg = std::fs::read_to_string(dir.0.join(format!("{name}.svg"))).unwrap();
+            assert!(svg.starts_with("<svg") && svg.contains("<text"), "{name}.svg");
+        }
+        assert!(report.contains("equal-time RMSE ratio"), "{report}");
+    }
+
+    #[test]
+    fn hand_arithmetic_matches_jit() {
+        let points = sample_points(4096, 3);
+        let (lib, material) = single_substance(&arithmetic_substance(ARITHMETIC_NODES), "arithmetic").unwrap();
+        let (module, _) = lower_material(&lib, &material).unwrap();
+        let jit = backend::compile_module(module, BackendKind::Jit).unwrap();
+        let hand = HandArithmetic::new(jit.info().clone());
+        compare_materials(&hand, jit.as_ref(), &points, 1e-5).unwrap();
+        // Masks are not all clamped to one value: the comparison sees the arithmetic.
+        let masks: Vec<f32> = points.iter().map(|g| hand.mask(g, 0).unwrap()).collect();
+        assert!(masks.iter().any(|&m| m > 0.0 && m < 1.0), "every mask clamped");
+    }
+
+    #[test]
+    fn unused_features_cost_no_shader_calls() {
+        let rows = measure_features((8, 8), 2, 1).unwrap();
+        assert_eq!(rows.len(), FEATURES.len());
+        // Every variant calls exactly the baseline's shader entry points: the extra material
+        // is never shaded, and opaque layers' constant masks are not shader calls.
+        for r in &rows {
+            assert_eq!((r.evals, r.samples), (rows[0].evals, rows[0].samples), "{}", r.feature);
+        }
+        assert_eq!(rows[0].evals.masks + rows[0].evals.shadow_masks, 0);
+        assert!(rows[0].evals.surfaces > 0);
     }
 
     #[test]

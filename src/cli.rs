@@ -289,6 +289,12 @@ pub struct CompiledScene {
     pub material_names: Vec<String>,
     /// The compiler, with its statistics.
     pub compiler: Compiler,
+    /// Wall time reading the scene (USD and every file it names) and composing it, ms.
+    pub parse_ms: f64,
+    /// Wall time composing slot stacks into materials, ms.
+    pub compose_ms: f64,
+    /// Wall time compiling the materials (wire, passes, lowering, codegen), ms.
+    pub compile_ms: f64,
 }
 
 /// Composes a scene and compiles every distinct material once.
@@ -299,16 +305,22 @@ pub fn compile_scene(
     sources: &mut SourceMap,
     diags: &mut Diagnostics,
 ) -> Option<CompiledScene> {
+    let start = std::time::Instant::now();
     let stage = open_scene(scene, sources, diags)?;
+    let parse_ms = start.elapsed().as_secs_f64() * 1e3;
+    let start = std::time::Instant::now();
     let composition = compose_stage(&stage, sources, diags);
+    let compose_ms = start.elapsed().as_secs_f64() * 1e3;
     if diags.has_errors() {
         return None;
     }
+    let start = std::time::Instant::now();
     let mut compiler = Compiler::new(backend, passes);
     let mut materials = Vec::with_capacity(composition.materials.len());
     for material in &composition.materials {
         materials.push(compiler.compile(&composition.library, material, diags)?);
     }
+    let compile_ms = start.elapsed().as_secs_f64() * 1e3;
     let prim_material =
         composition.stacks.iter().zip(&composition.prim_material).map(|(s, m)| (s.prim.clone(), *m)).collect();
     // Each material is named after the first prim stack composing it: identical compositions
@@ -319,7 +331,7 @@ pub fn compile_scene(
             first.and_then(|i| composition.stacks.get(i)).map_or_else(|| format!("material {m}"), material_name)
         })
         .collect();
-    Some(CompiledScene { stage, materials, prim_material, material_names, compiler })
+    Some(CompiledScene { stage, materials, prim_material, material_names, compiler, parse_ms, compose_ms, compile_ms })
 }
 
 /// The name of a composed material in ID mattes: its slot stack, bottom first, as
@@ -366,6 +378,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         &mut diags,
     );
     let mut settings = args.settings.clone();
+    let scene_start = std::time::Instant::now();
     let scene = compiled.as_ref().and_then(|c| {
         let view = crate::render::scene::choose_view(&c.stage, args.camera.as_deref(), &mut diags)?;
         if let (false, Some((w, h))) = (args.resolution_given, view.resolution) {
@@ -377,8 +390,13 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         };
         crate::render::Scene::from_stage_with(&c.stage, &|p| c.prim_material.get(p).copied(), &options, &mut diags)
     });
+    let scene_ms = scene_start.elapsed().as_secs_f64() * 1e3;
     report(&diags, &sources)?;
-    let (Some(CompiledScene { materials, compiler, material_names, .. }), Some(mut scene)) = (compiled, scene) else {
+    let (
+        Some(CompiledScene { materials, compiler, material_names, parse_ms, compose_ms, compile_ms, .. }),
+        Some(mut scene),
+    ) = (compiled, scene)
+    else {
         return Err(Failure);
     };
     scene.material_names = material_names;
@@ -430,6 +448,14 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
     );
     if args.stats || stats.invalid_samples() > 0 {
         eprintln!("{stats}");
+    }
+    if args.stats {
+        eprintln!("{}", stats.evals_line());
+        eprintln!(
+            "time: parse {parse_ms:.1} ms, compose {compose_ms:.1} ms, compile {compile_ms:.1} ms, \
+             geometry + BVH {scene_ms:.1} ms, render {:.1} ms",
+            seconds * 1e3
+        );
     }
     Ok(())
 }

@@ -32,6 +32,7 @@ pub mod fuzz;
 pub mod input;
 pub mod ir;
 pub mod layering;
+pub mod plot;
 pub mod render;
 pub mod runtime;
 pub mod scene;

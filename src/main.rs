@@ -187,6 +187,32 @@ enum BenchCommand {
         #[arg(long, default_value = "64x64", value_parser = parse_resolution)]
         res: (usize, usize),
     },
+    /// What a scene pays for features it contains but does not use where the camera looks:
+    /// time and shader calls per sample with one extra AOV, displacement, texture or
+    /// transparent material on an invisible prim, against the scene without it.
+    Features {
+        /// Samples per pixel of the timed renders.
+        #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=4096))]
+        spp: u32,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "96x64", value_parser = parse_resolution)]
+        res: (usize, usize),
+    },
+    /// Measure and draw every chart of README's Charts section and docs/STABILITY.md as SVG:
+    /// error vs time of stochastic vs weighted layering (1-64 layers; constant, noise and thin
+    /// masks), JIT vs interpreter, strata vs Mitsuba 3 (from the committed CSV), per-point
+    /// cost, compile time vs graph size, GGX and glass energy. A few minutes on 2 cores.
+    Charts {
+        /// The directory to write the SVGs into (created if missing).
+        #[arg(long, value_name = "DIR")]
+        plot: PathBuf,
+        /// `tools/compare_mitsuba.py`'s CSV; the Mitsuba chart is skipped if it does not exist.
+        #[arg(long, default_value = "docs/mitsuba_compare.csv")]
+        mitsuba_csv: PathBuf,
+        /// Tiny images and one repetition: checks that everything draws, in seconds.
+        #[arg(long)]
+        quick: bool,
+    },
 }
 
 fn main() -> ExitCode {
@@ -248,6 +274,15 @@ fn main() -> ExitCode {
                 BenchCommand::Shade { scene, prim } => strata::bench::bench_shade(scene.as_deref(), prim.as_deref()),
                 BenchCommand::Render { scene, spp, res } => strata::bench::bench_render(scene.as_deref(), spp, res),
                 BenchCommand::Scale => strata::bench::bench_scale(),
+                BenchCommand::Features { spp, res } => strata::bench::bench_features(res, spp, 7),
+                BenchCommand::Charts { plot, mitsuba_csv, quick } => {
+                    let options = if quick {
+                        strata::bench::ChartOptions::quick()
+                    } else {
+                        strata::bench::ChartOptions::default()
+                    };
+                    strata::bench::bench_charts(&plot, Some(&mitsuba_csv), &options)
+                }
             };
             match report {
                 Ok(text) => {

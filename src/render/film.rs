@@ -6,7 +6,7 @@
 //! bit-identical whatever the thread count. Rows are rendered in parallel with rayon.
 
 use super::cryptomatte;
-use super::integrator::{ChannelMap, Context, FaultSite, Invalid, LayerMode, PathParams, Scratch};
+use super::integrator::{ChannelMap, Context, EvalCounts, FaultSite, Invalid, LayerMode, PathParams, Scratch};
 use super::sampling::Rng;
 use super::scene::Scene;
 use crate::abi::{MaterialCode, ShaderError};
@@ -113,6 +113,9 @@ pub struct RenderStats {
     pub nonfinite_samples: u64,
     /// Rays absorbed after passing through too many transparent surfaces.
     pub pass_through_limit: u64,
+    /// Shader entry points the integrator called (masks, surfaces, displacement, normals,
+    /// AOVs): what the scene paid for each feature.
+    pub evals: EvalCounts,
     /// Warnings about channel layout (same name, different kinds across materials).
     pub warnings: Vec<String>,
     /// For each kind of shader fault that happened, where it first happened (in pixel order,
@@ -189,6 +192,23 @@ struct RowFault {
 }
 
 impl RenderStats {
+    /// The shader calls of the render per camera sample, one line for `strata render --stats`.
+    pub fn evals_line(&self) -> String {
+        let e = &self.evals;
+        let per = |n: u64| n as f64 / self.samples.max(1) as f64;
+        format!(
+            "evaluated per camera sample: masks {:.3} (+ {:.3} on shadow rays), surfaces {:.3}, \
+             displacement {:.3} (+ {:.3} weighting masks), normal maps {:.3}, AOV writes {:.3}",
+            per(e.masks),
+            per(e.shadow_masks),
+            per(e.surfaces),
+            per(e.displacements),
+            per(e.displacement_masks),
+            per(e.normals),
+            per(e.channels)
+        )
+    }
+
     /// Samples thrown away for any reason.
     pub fn invalid_samples(&self) -> u64 {
         self.loop_budget_errors + self.out_of_bounds_errors + self.nonfinite_closures + self.nonfinite_samples
@@ -393,6 +413,8 @@ pub fn render(
         Vec::new()
     };
     let render_row = |y: usize, scratch: &mut Scratch| -> Row {
+        // Counted per row on this thread's scratch, no atomics in the sample loop.
+        scratch.counts = EvalCounts::default();
         let mut coverage = cryptomatte::PixelCoverage::default();
         let mut material_coverage = cryptomatte::PixelCoverage::default();
         let mut row = Row {
@@ -501,6 +523,7 @@ pub fn render(
                 }
             }
         }
+        row.stats.evals = scratch.counts;
         let n = done.fetch_add(1, Ordering::Relaxed) + 1;
         if let Some(progress) = progress {
             let _guard = progress_lock.lock();
@@ -554,6 +577,7 @@ pub fn render(
         stats.nonfinite_closures += s.nonfinite_closures;
         stats.nonfinite_samples += s.nonfinite_samples;
         stats.pass_through_limit += s.pass_through_limit;
+        stats.evals.add(&s.evals);
         for x in 0..w {
             let values = [
                 row.rgba[x][0],

@@ -137,6 +137,40 @@ pub(crate) fn sample_lobes(lobes: &[Lobe], wo: Vec3, uc: f32, u: glam::Vec2) -> 
     Some(LobeSample { wi, weight: f / pdf, pdf: Some(pdf) })
 }
 
+/// Shader entry points the integrator called, counted per thread in [`Scratch::counts`] (plain
+/// integer adds, no atomics; the film sums them per row) for `strata render --stats`: what a
+/// scene pays for each feature. Mask and displacement counts are per layer evaluated.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct EvalCounts {
+    /// Layer masks evaluated at shading points (the pick, or every layer when weighted).
+    pub masks: u64,
+    /// Layer masks evaluated along shadow rays through non-opaque surfaces.
+    pub shadow_masks: u64,
+    /// Surface closures evaluated.
+    pub surfaces: u64,
+    /// Displacement entry calls (three per bumped shading point: the finite differences).
+    pub displacements: u64,
+    /// Layer masks evaluated to weight displacement (`add`/`mix` layers).
+    pub displacement_masks: u64,
+    /// Normal-map entry calls.
+    pub normals: u64,
+    /// Custom-channel (AOV) entry calls.
+    pub channels: u64,
+}
+
+impl EvalCounts {
+    /// Adds `other` field by field.
+    pub fn add(&mut self, other: &EvalCounts) {
+        self.masks += other.masks;
+        self.shadow_masks += other.shadow_masks;
+        self.surfaces += other.surfaces;
+        self.displacements += other.displacements;
+        self.displacement_masks += other.displacement_masks;
+        self.normals += other.normals;
+        self.channels += other.channels;
+    }
+}
+
 /// Per-thread buffers, allocated once outside the sample loop so shading allocates nothing.
 pub struct Scratch {
     masks: Vec<f32>,
@@ -150,6 +184,8 @@ pub struct Scratch {
     pub channels: Vec<f32>,
     /// Where the last shader ran: read after a sample fails.
     pub site: FaultSite,
+    /// Entry points called so far on this thread (the film resets and collects it per row).
+    pub counts: EvalCounts,
 }
 
 impl Scratch {
@@ -167,6 +203,7 @@ impl Scratch {
             material_channels: vec![0.0; floats],
             channels: vec![0.0; global_channels],
             site: FaultSite::default(),
+            counts: EvalCounts::default(),
         }
     }
 }
@@ -230,6 +267,11 @@ fn surface_point(accel: &Accel, scene: &Scene, o: Vec3, d: Vec3, hit: &Hit) -> S
     }
 }
 
+/// The material index of a hit's prim, without the surface geometry [`surface_point`] builds.
+fn hit_material(accel: &Accel, scene: &Scene, hit: &Hit) -> usize {
+    scene.prim_material[accel.prim_of(hit) as usize]
+}
+
 fn to_arr(v: Vec3) -> [f32; 3] {
     v.to_array()
 }
@@ -272,7 +314,17 @@ impl Context<'_> {
         // a layer is picked. Weighted: every mask, every layer.
         let picked = match self.params.mode {
             LayerMode::Stochastic => {
-                match layering::pick(&info.layers, u, |i| material.mask(&g, i)).map_err(Invalid::Shader)? {
+                let counts = &mut s.counts;
+                // A mask known at compile time (an opaque layer's 1, a constant) is not a
+                // shader call: a scene without varying masks pays nothing for transparency.
+                let mask_of = |i: usize| match info.layers[i].constant_mask {
+                    Some(m) => Ok(m),
+                    None => {
+                        counts.masks += 1;
+                        material.mask(&g, i)
+                    }
+                };
+                match layering::pick(&info.layers, u, mask_of).map_err(Invalid::Shader)? {
                     Some(i) => Some(i),
                     None => {
                         s.lobes.clear();
@@ -281,6 +333,7 @@ impl Context<'_> {
                 }
             }
             LayerMode::Weighted => {
+                s.counts.masks += nl as u64;
                 material.masks(&g, &mut s.masks[..nl]).map_err(Invalid::Shader)?;
                 let transparency = layering::pick_weights(&info.layers, &s.masks[..nl], &mut s.weights[..nl]);
                 if u >= 1.0 - transparency || transparency >= 1.0 {
@@ -291,12 +344,21 @@ impl Context<'_> {
             }
         };
         s.site.layer = None;
+        if info.layers.iter().any(|l| l.displacement.is_some()) {
+            // What `bump` calls: three displacement evaluations, each with the masks that
+            // weight displacement.
+            let weighting = info.layers.iter().filter(|l| l.displacement.is_some() && l.mask_weights_displacement());
+            s.counts.displacements += 3;
+            s.counts.displacement_masks += 3 * weighting.count() as u64;
+        }
         let bumped = bump(material, &g, &mut s.masks_du, &mut s.masks_dv, &mut s.disp)?;
         g.n = to_arr(bumped);
         s.lobes.clear();
         match picked {
             Some(i) => {
                 s.site.layer = Some(i as u32);
+                s.counts.surfaces += 1;
+                s.counts.normals += u64::from(info.layers[i].has_normal);
                 let lobe = self.lobe(material, &g, sp, d, i, 1.0)?;
                 s.lobes.push(lobe);
             }
@@ -305,6 +367,8 @@ impl Context<'_> {
                 for i in (0..nl).rev() {
                     if s.weights[i] > 0.0 {
                         s.site.layer = Some(i as u32);
+                        s.counts.surfaces += 1;
+                        s.counts.normals += u64::from(info.layers[i].has_normal);
                         let lobe = self.lobe(material, &g, sp, d, i, s.weights[i] / opaque)?;
                         s.lobes.push(lobe);
                     }
@@ -330,6 +394,7 @@ impl Context<'_> {
                 for k in 0..s.lobes.len() {
                     let (layer, weight) = (s.lobes[k].layer, s.lobes[k].weight);
                     s.site.layer = Some(layer as u32);
+                    s.counts.channels += 1;
                     material
                         .channels(&g, layer, &mut s.material_channels[..info.channel_floats])
                         .map_err(Invalid::Shader)?;
@@ -386,7 +451,14 @@ impl Context<'_> {
 
     /// Transmittance along a shadow segment: 0 behind an opaque surface, the product of
     /// transparencies across masked ones.
-    fn transmittance(&self, mut o: Vec3, d: Vec3, dist: f32, site: &mut FaultSite) -> Result<f32, Invalid> {
+    fn transmittance(
+        &self,
+        mut o: Vec3,
+        d: Vec3,
+        dist: f32,
+        site: &mut FaultSite,
+        counts: &mut EvalCounts,
+    ) -> Result<f32, Invalid> {
         let accel = &self.scene.accel;
         if self.all_opaque {
             return Ok(if accel.occluded(o, d, 0.0, dist) { 0.0 } else { 1.0 });
@@ -395,6 +467,11 @@ impl Context<'_> {
         let mut t_total = 1.0f32;
         for _ in 0..MAX_PASS_THROUGH {
             let Some(hit) = accel.intersect(o, d, 0.0, remaining) else { return Ok(t_total) };
+            // An opaque material stops the ray before any surface geometry or shader runs: a
+            // scene with one transparent prim does not make shadow rays pay at the others.
+            if is_opaque(self.materials[hit_material(accel, self.scene, &hit)]) {
+                return Ok(0.0);
+            }
             let sp = surface_point(accel, self.scene, o, d, &hit);
             let material = self.materials[sp.material];
             let nl = material.info().layers.len();
@@ -403,8 +480,15 @@ impl Context<'_> {
                 let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
                 let g = self.globals(&sp, facing, d);
                 // Π(1 − m_i) over the layers that pick, from the top (`layering`).
-                t_total *= layering::transmittance(&material.info().layers, |i| material.mask(&g, i))
-                    .map_err(Invalid::Shader)?;
+                let layers = &material.info().layers;
+                let mask_of = |i: usize| match layers[i].constant_mask {
+                    Some(m) => Ok(m),
+                    None => {
+                        counts.shadow_masks += 1;
+                        material.mask(&g, i)
+                    }
+                };
+                t_total *= layering::transmittance(layers, mask_of).map_err(Invalid::Shader)?;
             }
             if t_total <= 0.0 {
                 return Ok(0.0);
@@ -444,7 +528,7 @@ impl Context<'_> {
         let side = if ng.dot(ls.wi) > 0.0 { ng } else { -ng };
         let o = offset_ray_origin(p, p_error, side);
         let dist = if ls.dist.is_finite() { ls.dist * (1.0 - 1e-4) } else { f32::INFINITY };
-        let tr = self.transmittance(o, ls.wi, dist, &mut s.site)?;
+        let tr = self.transmittance(o, ls.wi, dist, &mut s.site, &mut s.counts)?;
         if tr <= 0.0 {
             return Ok(Vec3::ZERO);
         }

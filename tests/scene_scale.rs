@@ -1,0 +1,142 @@
+//! Intersection at scene scales 1e-3 and 1e5, through the render API only (the triangle and
+//! shape intersection code is being rewritten; this test holds whatever replaces it to the
+//! same answer). docs/STABILITY.md records the measured figures.
+//!
+//! The scene: a unit analytic sphere resting on a triangle-mesh floor, under a uniform white
+//! dome, seen by a camera; everything — camera, clipping range, geometry — is authored
+//! multiplied by `s`. Radiance is scale-free, so every scale must give the image of scale 1:
+//! self-intersection ("acne") darkens the floor and sphere, missed hits show the sky (alpha
+//! below 1), and leaks through the contact show up as light where the sphere meets the floor.
+
+use strata::abi::MaterialCode;
+use strata::backend::BackendKind;
+use strata::cli::{CompiledScene, compile_scene};
+use strata::diag::{Diagnostics, SourceMap};
+use strata::ir::wired::PassOptions;
+use strata::render::{Image, LayerMode, RenderSettings, Scene, render};
+
+fn scene_at(s: f64) -> String {
+    let v = |x: f64| format!("{:e}", x * s);
+    format!(
+        r#"#usda 1.0
+(
+    upAxis = "Y"
+)
+def Xform "World"
+{{
+    def Camera "Camera"
+    {{
+        float focalLength = 35
+        float horizontalAperture = 36
+        float verticalAperture = 36
+        float2 clippingRange = ({near}, {far})
+        float3 xformOp:translate = (0, {cy}, {cz})
+        float3 xformOp:rotateXYZ = (-20, 0, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateXYZ"]
+    }}
+    def DomeLight "Sky"
+    {{
+        float inputs:intensity = 1
+    }}
+    def Sphere "Ball"
+    {{
+        double radius = {r}
+        float3 xformOp:translate = (0, {r}, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }}
+    def Mesh "Floor"
+    {{
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points = [({m}, 0, {m}), ({p}, 0, {m}), ({p}, 0, {p}), ({m}, 0, {p})]
+    }}
+}}
+"#,
+        near = v(0.01),
+        far = v(1000.0),
+        cy = v(2.0),
+        cz = v(5.0),
+        r = v(1.0),
+        m = v(-20.0),
+        p = v(20.0),
+    )
+}
+
+fn render_scale(s: f64) -> Image {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scale.usda");
+    std::fs::write(&path, scene_at(s)).unwrap();
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let compiled = compile_scene(Some(&path), BackendKind::Jit, PassOptions::default(), &mut sources, &mut diags);
+    let CompiledScene { stage, materials, prim_material, .. } =
+        compiled.unwrap_or_else(|| panic!("{}", diags.render(&sources)));
+    let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
+    assert!(!diags.has_errors(), "{}", diags.render(&sources));
+    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    let settings = RenderSettings {
+        width: 24,
+        height: 24,
+        spp: 16,
+        seed: 9,
+        threads: Some(2),
+        max_depth: 6,
+        mode: LayerMode::Stochastic,
+    };
+    let (image, stats) = render(&scene, &refs, &settings, None).expect("renders");
+    assert_eq!(stats.invalid_samples(), 0, "scale {s}: {stats}");
+    image
+}
+
+/// Per-pixel means of R, with the standard error of the mean difference from `reference`.
+fn compare(image: &Image, reference: &Image) -> (f64, f64, f64) {
+    let (a, b) = (image.f32_channel("R").unwrap(), reference.f32_channel("R").unwrap());
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| f64::from(*x) - f64::from(*y)).collect();
+    let n = d.len() as f64;
+    let mean = d.iter().sum::<f64>() / n;
+    let var = d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0);
+    let level = b.iter().map(|&x| f64::from(x)).sum::<f64>() / n;
+    (mean, (var / n).sqrt(), level)
+}
+
+#[test]
+fn intersection_at_scene_scales_1e_minus_3_and_1e5() {
+    check_scales(&[1e-3, 1e5]);
+}
+
+/// Below 1e-4 the image falls apart today: the mesh floor vanishes (mean per-pixel alpha error
+/// 0.66 at 1e-5, 0.64 with the sphere removed, so the triangle path; a near clip of 1e-12
+/// changes nothing; 0.79 at 1e-6, all the coverage there is). docs/STABILITY.md records it; the intersection rewrite should make this pass.
+#[test]
+#[ignore = "fails today (docs/STABILITY.md): mesh coverage lost at scale 1e-5 and below"]
+fn intersection_at_scene_scales_1e_minus_6_and_1e_minus_5() {
+    check_scales(&[1e-6, 1e-5]);
+}
+
+/// Renders the scene at each scale and compares it with scale 1.
+fn check_scales(scales: &[f64]) {
+    let reference = render_scale(1.0);
+    let alpha_ref = reference.f32_channel("A").unwrap().to_vec();
+    let mut failures = Vec::new();
+    for &s in scales {
+        let image = render_scale(s);
+        let r = image.f32_channel("R").unwrap();
+        assert!(r.iter().all(|x| x.is_finite()), "scale {s}: non-finite pixels");
+        // Coverage is geometric: the same pixels see geometry at every scale (to a pixel's
+        // share of edge samples).
+        let alpha = image.f32_channel("A").unwrap();
+        let alpha_diff: f64 =
+            alpha.iter().zip(&alpha_ref).map(|(a, b)| f64::from((a - b).abs())).sum::<f64>() / alpha.len() as f64;
+        let (mean, se, level) = compare(&image, &reference);
+        eprintln!(
+            "scale {s:e}: mean R − scale 1 = {mean:+.5} ± {se:.5} (level {level:.4}); mean |ΔA| = {alpha_diff:.5}"
+        );
+        if alpha_diff > 0.01 {
+            failures.push(format!("scale {s:e}: coverage differs from scale 1 by {alpha_diff} per pixel"));
+        }
+        if mean.abs() > 3.0 * se + 1e-3 * level {
+            failures.push(format!("scale {s:e}: radiance differs from scale 1 by {mean} (3σ = {})", 3.0 * se));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
