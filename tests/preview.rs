@@ -84,14 +84,19 @@ fn cell_centres() -> impl Iterator<Item = (usize, usize)> {
     (0..4).flat_map(|cy| (0..4).map(move |cx| (cx * 8 + 3, cy * 8 + 4)))
 }
 
+/// Every fixture exists as Pixar's usd-core wrote it in both formats: text and crate.
+const FORMATS: [&str; 2] = ["usda", "usdc"];
+
 #[test]
 fn albedo_aov_is_the_srgb_decoded_texel_under_each_pixel() {
-    let image = render_fixture("textured.usda");
     let mut distinct = Vec::new();
-    for (x, y) in cell_centres() {
-        let want = texel_under(x, y);
-        assert_close(albedo(&image, x, y), want, &format!("pixel ({x}, {y})"));
-        distinct.push(want.map(f32::to_bits));
+    for ext in FORMATS {
+        let image = render_fixture(&format!("textured.{ext}"));
+        for (x, y) in cell_centres() {
+            let want = texel_under(x, y);
+            assert_close(albedo(&image, x, y), want, &format!("textured.{ext}: pixel ({x}, {y})"));
+            distinct.push(want.map(f32::to_bits));
+        }
     }
     distinct.sort();
     distinct.dedup();
@@ -102,23 +107,30 @@ fn albedo_aov_is_the_srgb_decoded_texel_under_each_pixel() {
     );
 }
 
+/// Issue 11's acceptance case: a usd-core-written asset (text and binary crate) with a
+/// textured UsdPreviewSurface bound by `material:binding`, and a slot-bound dirt layer over
+/// it: the texture shows where the dirt's mask is 0.
 #[test]
 fn the_texture_shows_under_a_slot_bound_dirt_layer() {
-    let image = render_fixture("dirt.usda");
-    // dirt.ash: diffuse (0.35, 0.25, 0.1) with mask 1 where u ≥ 0.5, else 0.
-    for (x, y) in cell_centres() {
-        let want = if x < RES / 2 { texel_under(x, y) } else { [0.35, 0.25, 0.1] };
-        assert_close(albedo(&image, x, y), want, &format!("pixel ({x}, {y})"));
+    for ext in FORMATS {
+        let image = render_fixture(&format!("dirt.{ext}"));
+        // dirt.ash: diffuse (0.35, 0.25, 0.1) with mask 1 where u ≥ 0.5, else 0.
+        for (x, y) in cell_centres() {
+            let want = if x < RES / 2 { texel_under(x, y) } else { [0.35, 0.25, 0.1] };
+            assert_close(albedo(&image, x, y), want, &format!("dirt.{ext}: pixel ({x}, {y})"));
+        }
     }
 }
 
 #[test]
 fn geom_subset_faces_show_the_subset_material() {
-    let image = render_fixture("subset.usda");
-    for y in [2, 16, 29] {
-        // The left face keeps the mesh's Blue, the right face (the subset) is Red.
-        assert_close(albedo(&image, 5, y), [0.1, 0.2, 0.8], "left face");
-        assert_close(albedo(&image, 26, y), [0.8, 0.1, 0.1], "right face (subset)");
+    for ext in FORMATS {
+        let image = render_fixture(&format!("subset.{ext}"));
+        for y in [2, 16, 29] {
+            // The left face keeps the mesh's Blue, the right face (the subset) is Red.
+            assert_close(albedo(&image, 5, y), [0.1, 0.2, 0.8], &format!("subset.{ext}: left face"));
+            assert_close(albedo(&image, 26, y), [0.8, 0.1, 0.1], &format!("subset.{ext}: right face (subset)"));
+        }
     }
 }
 
@@ -134,6 +146,7 @@ fn layers_list_material_binding_below_slots() {
     let (base, slot) = (dirt.find("material:binding").unwrap(), dirt.find("/Looks/Dirt").unwrap());
     assert!(base < slot, "bottom to top: material:binding first\n{dirt}");
     insta::assert_snapshot!("preview_dirt_layers", dirt);
+    assert_eq!(run("dirt.usdc"), dirt, "the crate composes the same stacks as the text");
     // Strength and purposes: /World/Strong's strongerThanDescendants Green beats the ball's
     // own Red, /World/Weak's does not; `full` beats `preview`.
     insta::assert_snapshot!("preview_strength_layers", run("strength.usda"));
