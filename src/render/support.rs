@@ -17,10 +17,12 @@ use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::scene::{Prim, Stage, Value};
 use std::collections::BTreeMap;
 
-/// Prim types that draw nothing by design (grouping, shading networks, render settings), so
-/// ignoring them loses nothing.
+/// Prim types that draw nothing themselves (grouping, shading networks, render settings) or
+/// draw through other prims (a PointInstancer, through its prototypes), so passing over them
+/// here loses nothing.
 const NON_DRAWING_TYPES: &[&str] = &[
     "Xform",
+    "PointInstancer",
     "Scope",
     "Camera",
     "Material",
@@ -43,7 +45,6 @@ const UNSUPPORTED_TYPES: &[(&str, &str)] = &[
     ("HermiteCurves", "curves are not rendered"),
     ("NurbsPatch", "NURBS patches are not rendered"),
     ("TetMesh", "tetrahedral meshes are not rendered"),
-    ("PointInstancer", "point instancers are not rendered: neither the instances nor the prototypes draw"),
     ("Volume", "volumes are not rendered"),
     ("OpenVDBAsset", "volume fields are not read"),
     ("Field3DAsset", "volume fields are not read"),

@@ -1199,7 +1199,7 @@ mod tests {
     fn pixar_kitchen_fixture() {
         let (stage, rendered) = open(&fixtures().join("pixar_kitchen.usda"));
         let stage = stage.unwrap_or_else(|_| panic!("{rendered}"));
-        assert!(rendered.contains("timeSamples ignored"), "{rendered}");
+        assert!(rendered.contains("is animated (timeSamples): strata renders one frame"), "{rendered}");
         let root = prim(&stage, "/Root");
         assert_eq!(root.kind.as_deref(), Some("component"));
         assert_eq!(root.value("inherited"), Some(&Value::Float(7.0)));

@@ -947,8 +947,8 @@ impl Converter<'_> {
                     // The same words as the usda parser: one model, one message.
                     self.warn(
                         span,
-                        format!("timeSamples ignored for `{name}`"),
-                        "animation is not supported; the default value is used",
+                        format!("`{name}` is animated (timeSamples): strata renders one frame"),
+                        "its default value is used, or else its earliest sample",
                         Some("strata renders a single frame"),
                     );
                 }

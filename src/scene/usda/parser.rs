@@ -719,8 +719,8 @@ impl<'a> Parser<'a, '_> {
         }
         if let Some(samples) = time_samples {
             self.diags.push(
-                Diagnostic::warning(format!("timeSamples ignored for `{name}`"))
-                    .at(span, "animation is not supported; the default value is used")
+                Diagnostic::warning(format!("`{name}` is animated (timeSamples): strata renders one frame"))
+                    .at(span, "its default value is used, or else its earliest sample")
                     .note("strata renders a single frame"),
             );
             attr.time_samples = samples;
@@ -1405,7 +1405,7 @@ doc"""
     fn time_samples_warn() {
         let (_, diags, sources) = parse_text("#usda 1.0\ndef \"A\" { float x.timeSamples = { 0: 1 } }\n");
         assert!(!diags.has_errors());
-        assert!(diags.render(&sources).contains("timeSamples ignored"));
+        assert!(diags.render(&sources).contains("is animated (timeSamples): strata renders one frame"));
     }
 
     #[test]
