@@ -1295,7 +1295,7 @@ pub fn grid_mesh_scene(n: usize) -> String {
     }
     let counts = "4, ".repeat(n * n);
     format!(
-        "#usda 1.0\ndef Mesh \"Grid\" {{\n    int[] faceVertexCounts = [{}]\n    int[] faceVertexIndices = [{}]\n    point3f[] points = [{}]\n    texCoord2f[] primvars:st = [{}] (\n        interpolation = \"vertex\"\n    )\n}}\ndef DomeLight \"Sky\" {{}}\n",
+        "#usda 1.0\ndef Mesh \"Grid\" {{\n    uniform token subdivisionScheme = \"none\"\n    int[] faceVertexCounts = [{}]\n    int[] faceVertexIndices = [{}]\n    point3f[] points = [{}]\n    texCoord2f[] primvars:st = [{}] (\n        interpolation = \"vertex\"\n    )\n}}\ndef DomeLight \"Sky\" {{}}\n",
         counts.trim_end_matches(", "),
         indices.trim_end_matches(", "),
         points.trim_end_matches(", "),
