@@ -3,44 +3,21 @@
 //! under the matrices `UsdGeom.PointInstancer.ComputeInstanceTransformsAtTime` computed
 //! (fixtures from `tools/make_instancing_fixtures.py`), and shared geometry is stored once.
 
+mod common;
+
 use std::path::Path;
 use strata::abi::MaterialCode;
-use strata::backend::BackendKind;
-use strata::cli::{CompiledScene, compile_scene};
-use strata::diag::{Diagnostics, SourceMap};
-use strata::ir::wired::PassOptions;
-use strata::render::{Image, LayerMode, RenderSettings, Scene, render};
+use strata::render::{Image, Scene};
 
 const DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/instancing");
 
 fn scene(name: &str) -> (Scene, Vec<std::sync::Arc<dyn MaterialCode>>) {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let path = Path::new(DIR).join(name);
-    let compiled =
-        compile_scene(Some(&path), BackendKind::Jit, PassOptions { optimize: true }, &mut sources, &mut diags)
-            .expect("compiles");
-    let CompiledScene { stage, materials, prim_material, .. } = compiled;
-    let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    (scene, materials)
+    common::scene_file(&Path::new(DIR).join(name))
 }
 
 fn image(name: &str) -> Image {
     let (scene, materials) = scene(name);
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
-    let settings = RenderSettings {
-        width: 96,
-        height: 72,
-        spp: 4,
-        seed: 3,
-        threads: Some(2),
-        max_depth: 3,
-        mode: LayerMode::Stochastic,
-    };
-    let (image, stats) = render(&scene, &refs, &settings, None).expect("renders");
-    assert_eq!(stats.invalid_samples(), 0, "{stats}");
-    image
+    common::render_scene(&scene, &materials, &common::settings(96, 72, 4, 3, 3))
 }
 
 /// Asserts two renders of the same scene agree: every pixel's albedo (the first hit's

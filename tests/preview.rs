@@ -9,7 +9,7 @@ mod common;
 use std::path::Path;
 use strata::abi::MaterialCode;
 use strata::backend::BackendKind;
-use strata::cli::{CompiledScene, check_file, compile_scene};
+use strata::cli::{check_file, compile_scene};
 use strata::diag::{Diagnostics, SourceMap};
 use strata::ir::wired::PassOptions;
 use strata::render::{Image, LayerMode, RenderSettings, Scene, render};
@@ -19,28 +19,7 @@ const DIR: &str = "tests/fixtures/usd/preview";
 const RES: usize = 32;
 
 fn render_fixture(name: &str) -> Image {
-    let path = format!("{DIR}/{name}");
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled =
-        compile_scene(Some(Path::new(&path)), BackendKind::Jit, PassOptions::default(), &mut sources, &mut diags)
-            .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    let CompiledScene { stage, materials, prim_material, .. } = compiled;
-    let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
-    let settings = RenderSettings {
-        width: RES,
-        height: RES,
-        spp: 4,
-        seed: 3,
-        threads: Some(2),
-        max_depth: 2,
-        mode: LayerMode::Stochastic,
-    };
-    let (image, stats) = render(&scene, &refs, &settings, None).expect("renders");
-    assert_eq!(stats.invalid_samples(), 0, "{stats}");
-    image
+    common::render_file(Path::new(&format!("{DIR}/{name}")), &common::settings(RES, RES, 4, 3, 2))
 }
 
 /// The albedo AOV at pixel (x, y), y = 0 the top row.

@@ -1,4 +1,5 @@
-//! Helpers shared by the integration tests: compiling a stack of substances from source.
+//! Helpers shared by the integration tests: compiling a stack of substances from source, and
+//! compiling and rendering a scene file.
 // Each test crate uses only some of these helpers.
 #![allow(dead_code)]
 
@@ -66,4 +67,55 @@ pub fn run_strata(args: &[&str], deadline: Duration) -> Option<Output> {
             None
         }
     }
+}
+
+/// A scene file composed, compiled (JIT, optimised) and built for rendering, with its
+/// materials; panics with the rendered diagnostics on any error.
+pub fn scene_file(path: &std::path::Path) -> (strata::render::Scene, Vec<Arc<dyn MaterialCode>>) {
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let compiled = strata::cli::compile_scene(
+        Some(path),
+        BackendKind::Jit,
+        PassOptions { optimize: true },
+        &mut sources,
+        &mut diags,
+    )
+    .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
+    let strata::cli::CompiledScene { stage, materials, prim_material, .. } = compiled;
+    let scene = strata::render::Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags)
+        .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
+    assert!(!diags.has_errors(), "{}", diags.render(&sources));
+    (scene, materials)
+}
+
+/// Settings for a small stochastic test render on two threads.
+pub fn settings(width: usize, height: usize, spp: u32, seed: u64, max_depth: u32) -> strata::render::RenderSettings {
+    strata::render::RenderSettings {
+        width,
+        height,
+        spp,
+        seed,
+        threads: Some(2),
+        max_depth,
+        mode: strata::render::LayerMode::Stochastic,
+    }
+}
+
+/// Renders `scene`, asserting that no sample was invalid.
+pub fn render_scene(
+    scene: &strata::render::Scene,
+    materials: &[Arc<dyn MaterialCode>],
+    settings: &strata::render::RenderSettings,
+) -> strata::render::Image {
+    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    let (image, stats) = strata::render::render(scene, &refs, settings, None).expect("renders");
+    assert_eq!(stats.invalid_samples(), 0, "{stats}");
+    image
+}
+
+/// [`scene_file`] rendered with `settings`.
+pub fn render_file(path: &std::path::Path, settings: &strata::render::RenderSettings) -> strata::render::Image {
+    let (scene, materials) = scene_file(path);
+    render_scene(&scene, &materials, settings)
 }
