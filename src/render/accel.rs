@@ -126,7 +126,7 @@ impl BvhSpace {
         let so = o * self.scale;
         let e = exponent(d.abs().max_element());
         let k = self.scale * pow2(e);
-        if !(so.abs().max_element() < MAX_SCALED_ORIGIN) || !k.is_normal() {
+        if !so.is_finite() || so.abs().max_element() >= MAX_SCALED_ORIGIN || !k.is_normal() {
             return None;
         }
         // obvhs picks the traversal octant from sign bits: a -0.0 component would select the
