@@ -2321,7 +2321,8 @@ fn scale_chart(dir: &Path) -> Result<String, String> {
         Ok((mean("A"), mean("R")))
     };
     let (a1, r1) = measure(1.0)?;
-    let scales = [1e-6, 3e-6, 1e-5, 3e-5, 1e-4, 1e-3, 1e-2, 1.0, 1e2, 1e4, 1e5, 3e5];
+    // Below 1e-12 the floor's triangles fall under geometry::MIN_TRIANGLE_EDGE: an error.
+    let scales = [1e-12, 1e-10, 1e-8, 1e-6, 3e-6, 1e-5, 3e-5, 1e-4, 1e-3, 1e-2, 1.0, 1e2, 1e4, 1e5, 3e5];
     let mut coverage = Vec::new();
     let mut radiance = Vec::new();
     for &s in &scales {
@@ -2333,8 +2334,9 @@ fn scale_chart(dir: &Path) -> Result<String, String> {
     let caption = vec![
         "Sphere on a mesh floor, camera and clipping range scaled alike, 24x24 px at 16 spp; values relative to scale 1.".into(),
         format!("coverage (mean alpha) {}", fmt(&coverage)),
-        "Holds from 1e-4 to 3e5; below 1e-4 the mesh floor loses coverage (the triangle path: the same without the sphere).".into(),
-        "Beyond 1e7 world units the scene is refused (geometry::MAX_EXTENT). tests/scene_scale.rs.".into(),
+        format!("mean radiance {}", fmt(&radiance)),
+        "Holds from 1e-12 to 3e5 (each BVH traversed in a power-of-two-scaled space, past obvhs' absolute 1e-4 cull).".into(),
+        "Refused with a located error: triangles under 1e-11 units (geometry::MIN_TRIANGLE_EDGE), coordinates beyond 1e7 (MAX_EXTENT). tests/scene_scale.rs.".into(),
     ];
     crate::plot::loglog(
         &dir.join("stability_scale.svg"),
@@ -2343,7 +2345,7 @@ fn scale_chart(dir: &Path) -> Result<String, String> {
         "relative to scale 1",
         &[
             Series { label: "pixel coverage".into(), points: coverage.clone(), color: 0, dashed: false },
-            Series { label: "mean radiance".into(), points: radiance, color: 1, dashed: true },
+            Series { label: "mean radiance".into(), points: radiance.clone(), color: 1, dashed: true },
         ],
         &caption,
     )?;

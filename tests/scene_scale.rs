@@ -1,6 +1,6 @@
-//! Intersection at scene scales 1e-3 and 1e5, through the render API only (the triangle and
-//! shape intersection code is being rewritten; this test holds whatever replaces it to the
-//! same answer). docs/STABILITY.md records the measured figures.
+//! Intersection at scene scales from 1e-12 to 1e5, through the render API only, and the
+//! located error below the smallest scale f32 resolves. docs/STABILITY.md records the
+//! measured figures.
 //!
 //! The scene: a unit analytic sphere resting on a triangle-mesh floor, under a uniform white
 //! dome, seen by a camera; everything — camera, clipping range, geometry — is authored
@@ -104,13 +104,46 @@ fn intersection_at_scene_scales_1e_minus_3_and_1e5() {
     check_scales(&[1e-3, 1e5]);
 }
 
-/// Below 1e-4 the image falls apart today: the mesh floor vanishes (mean per-pixel alpha error
-/// 0.66 at 1e-5, 0.64 with the sphere removed, so the triangle path; a near clip of 1e-12
-/// changes nothing; 0.79 at 1e-6, all the coverage there is). docs/STABILITY.md records it; the intersection rewrite should make this pass.
+/// Below 1e-4 the image used to fall apart: obvhs culls BVH boxes whose exit lies within an
+/// absolute 1e-4 of the ray origin, so the mesh floor vanished (mean per-pixel alpha error
+/// 0.66 at 1e-5, 0.79 at 1e-6: all the coverage there is). Each BVH now works in a space
+/// scaled by a power of two (`render::accel::BvhSpace`).
 #[test]
-#[ignore = "fails today (docs/STABILITY.md): mesh coverage lost at scale 1e-5 and below"]
 fn intersection_at_scene_scales_1e_minus_6_and_1e_minus_5() {
     check_scales(&[1e-6, 1e-5]);
+}
+
+/// Down to the smallest triangles f32 intersection resolves: at 1e-12 the floor's edges are
+/// 4e-11 units (`geometry::MIN_TRIANGLE_EDGE` is 1e-11). Its f32 cross product underflowed
+/// there (the floor was "degenerate" from 1e-13, its shading normal off from 1e-12); it is
+/// taken in f64.
+#[test]
+fn intersection_at_scene_scales_1e_minus_12_and_1e_minus_9() {
+    check_scales(&[1e-12, 1e-9]);
+}
+
+/// Below that the f32 watertight test's products underflow (measured: at 1e-14 the image is
+/// biased, at 1e-16 the floor vanishes): the scene is refused with an error at the floor's
+/// definition, never rendered wrong.
+#[test]
+fn scene_below_f32_resolution_is_a_located_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("tiny.usda");
+    let text = scene_at(1e-14);
+    std::fs::write(&path, &text).unwrap();
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let compiled = compile_scene(Some(&path), BackendKind::Jit, PassOptions::default(), &mut sources, &mut diags);
+    let CompiledScene { stage, prim_material, .. } = compiled.unwrap_or_else(|| panic!("{}", diags.render(&sources)));
+    let _ = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags);
+    assert!(diags.has_errors(), "a 1e-14 scene must be refused");
+    let report = diags.render(&sources);
+    // The floor's `def Mesh` line, 1-based, as file:line:col.
+    let line = text.lines().position(|l| l.contains("def Mesh \"Floor\"")).unwrap() + 1;
+    assert!(report.contains("/World/Floor") && report.contains("resolution"), "{report}");
+    assert!(report.contains(&format!("tiny.usda:{line}:")), "located at line {line}: {report}");
+    // The analytic sphere (intersected in f64) is not what is refused.
+    assert!(!report.contains("/World/Ball"), "{report}");
 }
 
 /// Renders the scene at each scale and compares it with scale 1.

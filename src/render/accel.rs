@@ -9,6 +9,13 @@
 //! watertight ray/triangle test (Woop, Benthin & Wald 2013), so rays through shared edges and
 //! vertices never slip between triangles, and robust ray origins so secondary rays do not
 //! re-hit their own surface.
+//!
+//! obvhs culls every box whose exit distance along the ray is below an absolute 1e-4
+//! (`cwbvh::node::EPSILON`, applied instead of the ray's `tmin`): in a scene a few 1e-4 units
+//! across every camera ray missed everything. So each BVH is built and traversed in its own
+//! space, scaled by a power of two that brings its extent to 2³⁰ ([`BvhSpace`]); the
+//! scaling is exact in f32, the primitive tests run unscaled, and the cull falls to 1e-13 of
+//! the extent, far below f32's resolution there (6e-8), at every scene scale.
 
 use super::frame::Frame;
 use super::geometry::Triangle;
@@ -72,9 +79,93 @@ pub struct SurfaceGeom {
     pub prim: u32,
 }
 
+/// The extent (largest coordinate magnitude) a BVH's space is scaled to: 2³⁰.
+const BVH_EXTENT_LOG2: i32 = 30;
+
+/// The largest scaled ray origin traversed (see [`BvhSpace::ray`]): 2¹⁰⁰.
+const MAX_SCALED_ORIGIN: f32 = 1.267_650_6e30;
+
+/// A BVH built in a space scaled by a power of two (see the module documentation): points
+/// and distances go in multiplied by `scale`, and distances come out divided by it, both
+/// exactly (a power of two changes only the exponent).
+pub(crate) struct BvhSpace {
+    bvh: CwBvh,
+    scale: f32,
+}
+
+impl BvhSpace {
+    /// The scale for boxes whose largest coordinate magnitude is `extent`: `2^(30 − e)`
+    /// with `e` the binary exponent of `extent`, kept within f32's normal exponents.
+    fn scale_for(extent: f32) -> f32 {
+        pow2(BVH_EXTENT_LOG2 - exponent(extent))
+    }
+
+    /// Builds the BVH over `boxes` (unscaled; each is scaled here).
+    fn build(mut boxes: Vec<Padded>) -> Option<BvhSpace> {
+        let extent = boxes.iter().map(|b| b.0.min.abs().max(b.0.max.abs()).max_element()).fold(0.0, f32::max);
+        let scale = BvhSpace::scale_for(extent);
+        for b in &mut boxes {
+            b.0 = Aabb::new(b.0.min * scale, b.0.max * scale);
+        }
+        (!boxes.is_empty()).then(|| BvhSpace {
+            bvh: build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut Duration::default()),
+            scale,
+        })
+    }
+
+    /// The ray `o + t d`, `t` in `(tmin, tmax)`, in the scaled space, with the factor `k`
+    /// that takes `t` to the scaled ray's parameter. The direction is brought to a length
+    /// near 1 by a power of two too: obvhs' cull is on the parameter, and object-space
+    /// directions (an instance's inverse scale) can be far from unit length. `None` (no hit)
+    /// when the scaled origin lies beyond 2¹⁰⁰, where obvhs' box tests (origin times an
+    /// inverse direction up to 2²³) and scaled hit distances could overflow f32: an origin
+    /// 2⁷⁰ times farther out than the BVH's extent, where all of its geometry is below f32's
+    /// resolution at the origin.
+    #[inline]
+    fn ray(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(Ray, f32)> {
+        let so = o * self.scale;
+        let e = exponent(d.abs().max_element());
+        let k = self.scale * pow2(e);
+        if !so.is_finite() || so.abs().max_element() >= MAX_SCALED_ORIGIN || !k.is_normal() {
+            return None;
+        }
+        // obvhs picks the traversal octant from sign bits: a -0.0 component would select the
+        // wrong one and miss everything, so negative zeros become +0.0 (-0 + 0 = +0).
+        let sd = d * pow2(-e) + Vec3::ZERO;
+        Some((Ray::new(so.into(), sd.into(), tmin * k, tmax * k), k))
+    }
+}
+
+/// The binary exponent of `x` (`x` in `[2^e, 2^(e+1))`), −126 for zero and subnormals.
+#[inline]
+fn exponent(x: f32) -> i32 {
+    if x.is_normal() { ((x.to_bits() >> 23) & 0xff) as i32 - 127 } else { -126 }
+}
+
+/// `2^k`, `k` clamped to f32's normal exponents (exact).
+#[inline]
+fn pow2(k: i32) -> f32 {
+    f32::from_bits(((k.clamp(-126, 127) + 127) as u32) << 23)
+}
+
+/// A scaled ray parameter back in the caller's units (`k` from [`BvhSpace::ray`]), never
+/// beyond `tmax` (a finite `tmax` can overflow when scaled).
+#[inline]
+fn unscale(t: f32, k: f32, tmax: f32) -> f32 {
+    (t / k).min(tmax)
+}
+
+impl BvhSpace {
+    /// Bytes held by the nodes and primitive indices.
+    fn bytes(&self) -> usize {
+        self.bvh.nodes.len() * std::mem::size_of::<obvhs::cwbvh::node::CwBvhNode>()
+            + self.bvh.primitive_indices.len() * 4
+    }
+}
+
 /// One bottom-level acceleration structure: a BVH over object-space triangles and shapes.
 pub struct Blas {
-    bvh: Option<CwBvh>,
+    bvh: Option<BvhSpace>,
     /// Triangle positions, the only triangle data the intersection loop reads.
     positions: Vec<[Vec3; 3]>,
     attrs: Vec<TriangleAttrs>,
@@ -106,7 +197,7 @@ fn padded_box(lo: Vec3, hi: Vec3) -> Option<[u32; 6]> {
 
 /// A BVH over `bounds` (`(min, max)` per primitive), grouping bit-identical boxes; returns
 /// the BVH (`None` when no box is finite) and the groups as `(group_start, group_members)`.
-fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (Option<CwBvh>, Vec<u32>, Vec<u32>) {
+fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (Option<BvhSpace>, Vec<u32>, Vec<u32>) {
     // Primitives with bit-identical boxes (copies of one mesh at one place) become one BVH
     // primitive: PLOC merges only mutually-nearest pairs, and among n equal boxes every
     // pass merges one pair, so n coincident copies cost O(n²) to build.
@@ -140,12 +231,7 @@ fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (O
             next[g as usize] += 1;
         }
     }
-    let bvh = if boxes.is_empty() {
-        None
-    } else {
-        Some(build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut Duration::default()))
-    };
-    (bvh, group_start, group_members)
+    (BvhSpace::build(boxes), group_start, group_members)
 }
 
 impl Blas {
@@ -194,10 +280,7 @@ impl Blas {
     /// Bytes held: triangles, shapes, BVH nodes and indices, groups.
     pub fn bytes(&self) -> usize {
         use std::mem::size_of;
-        let bvh = self
-            .bvh
-            .as_ref()
-            .map_or(0, |b| b.nodes.len() * size_of::<obvhs::cwbvh::node::CwBvhNode>() + b.primitive_indices.len() * 4);
+        let bvh = self.bvh.as_ref().map_or(0, BvhSpace::bytes);
         self.positions.len() * size_of::<[Vec3; 3]>()
             + self.attrs.len() * size_of::<TriangleAttrs>()
             + self.shapes.len() * size_of::<Shape>()
@@ -243,22 +326,22 @@ impl Blas {
     /// not be unit length (object-space rays are not), and `t` is in its units.
     #[inline]
     fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32, f32, f32)> {
-        let bvh = self.bvh.as_ref()?;
+        let space = self.bvh.as_ref()?;
         let pre = RayPre::new(o, d);
-        // obvhs picks the traversal octant from sign bits: a -0.0 component would select the
-        // wrong one and miss everything, so negative zeros become +0.0 (-0 + 0 = +0).
-        let ray = Ray::new(o.into(), (d + Vec3::ZERO).into(), tmin, tmax);
+        let (ray, k) = space.ray(o, d, tmin, tmax)?;
         let mut best = None;
         let mut hit = RayHit::none();
-        bvh.ray_traverse(ray, &mut hit, |r, id| {
-            let mut closest = f32::INFINITY;
-            for &index in self.group(bvh, id) {
-                if let Some((t, b1, b2)) = self.hit_primitive(&pre, o, d, index, tmin, r.tmax.min(closest)) {
+        space.bvh.ray_traverse(ray, &mut hit, |r, id| {
+            let mut closest = unscale(r.tmax, k, tmax);
+            let mut found = false;
+            for &index in self.group(&space.bvh, id) {
+                if let Some((t, b1, b2)) = self.hit_primitive(&pre, o, d, index, tmin, closest) {
                     best = Some((t, index, b1, b2));
                     closest = t;
+                    found = true;
                 }
             }
-            closest
+            if found { closest * k } else { f32::INFINITY }
         });
         best
     }
@@ -266,14 +349,16 @@ impl Blas {
     /// Whether anything lies on `o + t d` within `(tmin, tmax)`.
     #[inline]
     fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
-        let Some(bvh) = self.bvh.as_ref() else { return false };
+        let Some(space) = self.bvh.as_ref() else { return false };
         let pre = RayPre::new(o, d);
-        let ray = Ray::new(o.into(), (d + Vec3::ZERO).into(), tmin, tmax);
-        !bvh.ray_traverse_miss(ray, |r, id| {
-            self.group(bvh, id)
+        let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return false };
+        !space.bvh.ray_traverse_miss(ray, |r, id| {
+            let tmax = unscale(r.tmax, k, tmax);
+            self.group(&space.bvh, id)
                 .iter()
-                .find_map(|&index| self.hit_primitive(&pre, o, d, index, tmin, r.tmax))
-                .map_or(f32::INFINITY, |h| h.0)
+                .find_map(|&index| self.hit_primitive(&pre, o, d, index, tmin, tmax))
+                // Any hit occludes; 0 ends the traversal.
+                .map_or(f32::INFINITY, |_| 0.0)
         })
     }
 
@@ -287,7 +372,7 @@ impl Blas {
                 let b0 = 1.0 - b1 - b2;
                 let pos = p[0] * b0 + p[1] * b1 + p[2] * b2;
                 let err = (p[0] * b0).abs() + (p[1] * b1).abs() + (p[2] * b2).abs();
-                let ng = (p[1] - p[0]).cross(p[2] - p[0]).normalize();
+                let ng = winding_normal(p);
                 let ns = shading_normal(a.n[0] * b0 + a.n[1] * b1 + a.n[2] * b2, ng);
                 let uv = a.uv[0] * b0 + a.uv[1] * b1 + a.uv[2] * b2;
                 let (dpdu, dpdv) = tangents(p, a.uv, ns);
@@ -305,6 +390,15 @@ impl Blas {
             }
         }
     }
+}
+
+/// The unit normal of `p` by winding, computed in f64 (exact products of the f32 inputs)
+/// so that it does not underflow for tiny triangles as an f32 cross product does (edges below
+/// ~1e-10 units); zero when the vertices are collinear.
+#[inline]
+fn winding_normal(p: [Vec3; 3]) -> Vec3 {
+    let [a, b, c] = p.map(|v| v.as_dvec3());
+    (b - a).cross(c - a).normalize_or_zero().as_vec3()
 }
 
 /// `(dpdu, dpdv)`, or a frame around `n` when they do not span a plane (at a pole ∂P/∂u
@@ -383,7 +477,7 @@ pub struct Accel {
     /// Per-instance prim tables (see [`InstanceDesc::prims`]).
     instance_prims: Vec<u32>,
     /// The top-level BVH over the instances' world boxes; `None` without instances.
-    tlas: Option<CwBvh>,
+    tlas: Option<BvhSpace>,
     /// Instances with a singular or non-finite transform, or an empty prototype: skipped.
     pub skipped_instances: usize,
 }
@@ -431,8 +525,7 @@ impl Accel {
             let pad = wlo.abs().max(whi.abs()).max_element().max(f32::MIN_POSITIVE) * 1e-6;
             boxes.push(Padded(Aabb::new((wlo - Vec3::splat(pad)).into(), (whi + Vec3::splat(pad)).into())));
         }
-        let tlas =
-            (!boxes.is_empty()).then(|| build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut Duration::default()));
+        let tlas = BvhSpace::build(boxes);
         Accel { world, prototypes, instances: kept, instance_prims, tlas, skipped_instances: skipped }
     }
 
@@ -455,10 +548,7 @@ impl Accel {
     pub fn bytes(&self) -> (usize, usize) {
         use std::mem::size_of;
         let blas = self.world.bytes() + self.prototypes.iter().map(Blas::bytes).sum::<usize>();
-        let tlas = self
-            .tlas
-            .as_ref()
-            .map_or(0, |b| b.nodes.len() * size_of::<obvhs::cwbvh::node::CwBvhNode>() + b.primitive_indices.len() * 4);
+        let tlas = self.tlas.as_ref().map_or(0, BvhSpace::bytes);
         (blas, self.instances.len() * size_of::<Instance>() + self.instance_prims.len() * 4 + tlas)
     }
 
@@ -479,12 +569,13 @@ impl Accel {
         }
         let mut best =
             self.world.intersect(o, d, tmin, tmax).map(|(t, index, b1, b2)| Hit { t, index, instance: WORLD, b1, b2 });
-        let Some(tlas) = &self.tlas else { return best };
-        let ray = Ray::new(o.into(), (d + Vec3::ZERO).into(), tmin, best.map_or(tmax, |h| h.t));
+        let Some(space) = &self.tlas else { return best };
+        let tmax = best.map_or(tmax, |h| h.t);
+        let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return best };
         let mut hit = RayHit::none();
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
-        tlas.ray_traverse(ray, &mut hit, |r, id| {
-            let i = tlas.primitive_indices[id];
+        space.bvh.ray_traverse(ray, &mut hit, |r, id| {
+            let i = space.bvh.primitive_indices[id];
             let inst = &self.instances[i as usize];
             let oo = inst.to_object.transform_point3(od).as_vec3();
             let ob = inst.to_object.transform_vector3(dd).as_vec3();
@@ -492,10 +583,10 @@ impl Accel {
             if !oo.is_finite() || !ob.is_finite() || ob == Vec3::ZERO {
                 return f32::INFINITY;
             }
-            match self.prototypes[inst.prototype as usize].intersect(oo, ob, tmin, r.tmax) {
+            match self.prototypes[inst.prototype as usize].intersect(oo, ob, tmin, unscale(r.tmax, k, tmax)) {
                 Some((t, index, b1, b2)) => {
                     best = Some(Hit { t, index, instance: i, b1, b2 });
-                    t
+                    t * k
                 }
                 None => f32::INFINITY,
             }
@@ -511,15 +602,15 @@ impl Accel {
         if self.world.occluded(o, d, tmin, tmax) {
             return true;
         }
-        let Some(tlas) = &self.tlas else { return false };
-        let ray = Ray::new(o.into(), (d + Vec3::ZERO).into(), tmin, tmax);
+        let Some(space) = &self.tlas else { return false };
+        let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return false };
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
-        !tlas.ray_traverse_miss(ray, |r, id| {
-            let inst = &self.instances[tlas.primitive_indices[id] as usize];
+        !space.bvh.ray_traverse_miss(ray, |r, id| {
+            let inst = &self.instances[space.bvh.primitive_indices[id] as usize];
             let oo = inst.to_object.transform_point3(od).as_vec3();
             let ob = inst.to_object.transform_vector3(dd).as_vec3();
             let finite = oo.is_finite() && ob.is_finite() && ob != Vec3::ZERO;
-            if finite && self.prototypes[inst.prototype as usize].occluded(oo, ob, tmin, r.tmax) {
+            if finite && self.prototypes[inst.prototype as usize].occluded(oo, ob, tmin, unscale(r.tmax, k, tmax)) {
                 0.0
             } else {
                 f32::INFINITY
@@ -554,7 +645,7 @@ impl Accel {
             Some(v) => {
                 // The winding normal of the world-space vertices, as a flattened copy has it.
                 let w = v.map(point);
-                let ng = (w[1] - w[0]).cross(w[2] - w[0]).normalize_or_zero();
+                let ng = winding_normal(w);
                 let ng = if ng == Vec3::ZERO || !ng.is_finite() {
                     let n = normal(local.ng);
                     if inst.mirrors { -n } else { n }
@@ -740,6 +831,36 @@ mod tests {
         assert!(accel.occluded(Vec3::new(-0.5, -0.5, 0.0), Vec3::Z, 0.0, 2.0));
         assert!(!accel.occluded(Vec3::new(-0.5, -0.5, 0.0), Vec3::Z, 0.0, 0.5));
         assert!(accel.intersect(Vec3::new(-0.5, -0.5, 0.0), -Vec3::Z, 0.0, f32::INFINITY).is_none());
+    }
+
+    /// obvhs culls boxes left within 1e-4 of the ray origin (its `EPSILON`, in whatever
+    /// units the BVH is built in); each BVH's space is scaled so that this is no distance at
+    /// any scene scale. A floor hit from 1e-5 of the scene's size above, at scales 1e-9 to
+    /// 1e5, directly and through an instance (object space at unit size, the top level at `s`).
+    #[test]
+    fn hits_close_to_the_origin_at_every_scale() {
+        for s in [1e-9f32, 1e-6, 1e-3, 1.0, 1e5] {
+            let floor = |k: f32| {
+                [
+                    tri([Vec3::new(-k, -k, 0.0), Vec3::new(k, -k, 0.0), Vec3::new(k, k, 0.0)]),
+                    tri([Vec3::new(-k, -k, 0.0), Vec3::new(k, k, 0.0), Vec3::new(-k, k, 0.0)]),
+                ]
+            };
+            let direct = Accel::new(floor(s).to_vec(), vec![]);
+            let prototype = Blas::new(floor(1.0).to_vec(), vec![]);
+            let desc = InstanceDesc { to_world: DMat4::from_scale(DVec3::splat(s as f64)), prototype: 0, prims: 0 };
+            let instanced = Accel::with_instances(Blas::new(vec![], vec![]), vec![prototype], &[desc], vec![0]);
+            for (name, accel) in [("direct", &direct), ("instanced", &instanced)] {
+                for h in [1e-5f32, 0.3] {
+                    let o = Vec3::new(0.1 * s, 0.2 * s, h * s);
+                    let hit = accel.intersect(o, -Vec3::Z, 0.0, f32::INFINITY);
+                    let t = hit.map(|h| h.t).unwrap_or(f32::NAN);
+                    assert!((t / (h * s) - 1.0).abs() < 1e-5, "{name}, scale {s:e}, height {h}: t = {t}");
+                    assert!(accel.occluded(o, -Vec3::Z, 0.0, 2.0 * h * s), "{name}, scale {s:e}, height {h}");
+                    assert!(!accel.occluded(o, -Vec3::Z, 0.0, 0.5 * h * s), "{name}, scale {s:e}, height {h}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -103,7 +103,10 @@ impl Camera {
     /// `up_axis` (`"Y"` or `"Z"`) up and a 50 mm lens on a 36 mm back.
     pub fn framing(lo: Vec3, hi: Vec3, aspect: f32, up_axis: &str) -> Camera {
         let centre = (lo + hi) * 0.5;
-        let radius = ((hi - lo).length() * 0.5).max(1e-3);
+        // The box's own size at any scale (a fixed floor of 1e-3 framed a scene 1e-6 across
+        // as a speck); a single point gets a radius relative to its position.
+        let half_diagonal = (hi - lo).length() * 0.5;
+        let radius = if half_diagonal.is_normal() { half_diagonal } else { centre.abs().max_element().max(1.0) * 1e-3 };
         let tan_w = 18.0 / 50.0;
         let tan_h = tan_w / aspect.max(1e-6);
         let half = tan_w.min(tan_h).atan();
@@ -242,6 +245,21 @@ def Camera "C" {
         assert_eq!(r.o, Vec3::new(0.0, 0.0, 5.0));
         // Near clip 1 along the axis is 1/cos along an oblique ray.
         assert!((r.tmin - 2f32.sqrt()).abs() < 1e-5);
+    }
+
+    /// The framing camera scales with the scene: the same view of a box 2e-6 or 2e4 across
+    /// as of one 2 across (a fixed minimum radius of 1e-3 made the small one a speck).
+    #[test]
+    fn framing_is_scale_free() {
+        let unit = Camera::framing(Vec3::splat(-1.0), Vec3::splat(1.0), 1.5, "Y");
+        for s in [1e-6f32, 1e4] {
+            let c = Camera::framing(Vec3::splat(-s), Vec3::splat(s), 1.5, "Y");
+            assert!((c.origin / s - unit.origin).length() < 1e-5 * unit.origin.length(), "{s}: {}", c.origin);
+            assert!((c.forward - unit.forward).length() < 1e-6, "{s}");
+        }
+        // A single point still gets a camera that is finite and off the point.
+        let point = Camera::framing(Vec3::ONE, Vec3::ONE, 1.0, "Z");
+        assert!(point.origin.is_finite() && point.origin != Vec3::ONE);
     }
 
     #[test]

@@ -21,6 +21,16 @@ use std::collections::{HashMap, HashSet};
 /// the BVH builder crawl while 1e38 crashed it. A prim that reaches past it is an error.
 pub const MAX_EXTENT: f64 = 1e7;
 
+/// The shortest longest-edge a triangle may have: 1e-11 scene units (in the space its BVH
+/// tests it in: the world, or an instancing prototype's own). The f32 watertight test
+/// multiplies three coordinates (relative to the ray origin) and bounds their rounding with a
+/// further factor of 1e-7 (`accel::RayPre::intersect`); below about 1e-11 those products
+/// leave f32's normal range (1e-38), the error bounds lose their precision and then the hit
+/// itself underflows. Measured (tests/scene_scale.rs): a scene scaled by 1e-12 (floor edges
+/// 4e-11) renders exactly as at scale 1, by 1e-14 it is already biased, by 1e-16 the floor
+/// vanishes. A prim with a smaller triangle is an error, never a silently wrong image.
+pub const MIN_TRIANGLE_EDGE: f64 = 1e-11;
+
 /// The most triangles a scene may have: 2^25 (33.5 million, about 3.5 GB of triangles plus
 /// their BVH). Implicit surfaces are tessellated into 16 384 triangles each, so a 50 MB
 /// scene of 137 000 spheres asked for 2.2 billion triangles and was killed by the kernel; past
@@ -369,12 +379,19 @@ impl Builder<'_> {
         out.subdiv_level = self.subdiv_level;
         out.face_prims = face_prims;
         emit_prim(prim, &mut out, diags);
-        let (beyond, over) = (out.beyond_extent, out.over_budget);
-        self.report(prim, beyond, over, diags);
+        let (beyond, over, small) = (out.beyond_extent, out.over_budget, out.too_small);
+        self.report(prim, beyond, over, small, diags);
     }
 
-    /// Reports a prim past the extent or the budget.
-    fn report(&mut self, prim: &Prim, beyond: Option<DVec3>, over_budget: bool, diags: &mut Diagnostics) {
+    /// Reports a prim past the extent or the budget, or with triangles too small to intersect.
+    fn report(
+        &mut self,
+        prim: &Prim,
+        beyond: Option<DVec3>,
+        over_budget: bool,
+        too_small: Option<(usize, DVec3, f64)>,
+        diags: &mut Diagnostics,
+    ) {
         if over_budget && !self.over_budget {
             self.over_budget = true;
             diags.push(
@@ -388,6 +405,17 @@ impl Builder<'_> {
         }
         if let Some(p) = beyond {
             diags.push(beyond_extent(self.stage, prim, p));
+        }
+        if let Some((count, p, edge)) = too_small {
+            diags.push(
+                Diagnostic::error(format!(
+                    "`{}` has {count} triangle(s) below the f32 intersection's resolution: the first, at ({:.3e}, {:.3e}, \
+                     {:.3e}), spans only {edge:.1e} units (at least {MIN_TRIANGLE_EDGE:e} needed)",
+                    prim.path, p.x, p.y, p.z
+                ))
+                .at(prim.span, "this prim")
+                .note("scale the scene up (a scale transform on its root); radiance does not depend on scale"),
+            );
         }
     }
 
@@ -446,8 +474,8 @@ impl Builder<'_> {
             );
             out.subdiv_level = self.subdiv_level;
             emit_prim(prim, &mut out, diags);
-            let (beyond, over) = (out.beyond_extent, out.over_budget);
-            self.report(prim, beyond, over, diags);
+            let (beyond, over, small) = (out.beyond_extent, out.over_budget, out.too_small);
+            self.report(prim, beyond, over, small, diags);
         }
         proto.prims = members.len() as u32;
         proto.bounds = bounds_of(&proto.triangles, &proto.shapes);
@@ -683,6 +711,9 @@ struct Emitter<'g> {
     prim: u32,
     /// The first target-space point past [`MAX_EXTENT`] (or non-finite), if any.
     beyond_extent: Option<DVec3>,
+    /// Triangles whose longest edge is below [`MIN_TRIANGLE_EDGE`]: their count and the
+    /// first one's vertex 0 and longest edge.
+    too_small: Option<(usize, DVec3, f64)>,
     /// The most triangles `triangles` may hold (what [`MAX_TRIANGLES`] leaves).
     budget: usize,
     /// A triangle was dropped because the scene reached its budget.
@@ -711,6 +742,7 @@ impl<'g> Emitter<'g> {
             nm,
             prim,
             beyond_extent: None,
+            too_small: None,
             budget,
             over_budget: false,
             subdiv_level: DEFAULT_SUBDIV_LEVEL,
@@ -732,13 +764,24 @@ impl<'g> Emitter<'g> {
             return;
         }
         let wp = world.map(|p| p.as_vec3());
-        let cross = (wp[1] - wp[0]).cross(wp[2] - wp[0]);
+        // The normal of the f32 vertices the intersection test sees, in f64: an f32 cross
+        // product underflows for edges below ~1e-10 units (its square, below ~3e-20), which
+        // made tiny but sound triangles "degenerate". Differences and products of f32 values
+        // are exact in f64, so only truly collinear vertices give zero here.
+        let [a, b, c] = wp.map(|p| p.as_dvec3());
+        let cross = (b - a).cross(c - a);
         let len2 = cross.length_squared();
         if len2.is_nan() || len2 <= 0.0 || !len2.is_finite() {
             *self.degenerate += 1;
             return;
         }
-        let ng = cross / len2.sqrt();
+        let ng = (cross / len2.sqrt()).as_vec3();
+        let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+        if longest < MIN_TRIANGLE_EDGE {
+            let entry = self.too_small.get_or_insert((0, a, longest));
+            entry.0 += 1;
+            return;
+        }
         // Normals transform by the inverse transpose.
         let n = match n {
             Some(n) => n.map(|n| {
