@@ -379,7 +379,8 @@ impl Builder<'_> {
         out.subdiv_level = self.subdiv_level;
         out.face_prims = face_prims;
         emit_prim(prim, &mut out, diags);
-        let (beyond, over, small) = (out.beyond_extent, out.over_budget, out.too_small);
+        let small = out.too_small.map(|(n, p, e)| (n, p, e, out.emitted));
+        let (beyond, over) = (out.beyond_extent, out.over_budget);
         self.report(prim, beyond, over, small, diags);
     }
 
@@ -389,7 +390,7 @@ impl Builder<'_> {
         prim: &Prim,
         beyond: Option<DVec3>,
         over_budget: bool,
-        too_small: Option<(usize, DVec3, f64)>,
+        too_small: Option<(usize, DVec3, f64, usize)>,
         diags: &mut Diagnostics,
     ) {
         if over_budget && !self.over_budget {
@@ -406,16 +407,22 @@ impl Builder<'_> {
         if let Some(p) = beyond {
             diags.push(beyond_extent(self.stage, prim, p));
         }
-        if let Some((count, p, edge)) = too_small {
-            diags.push(
-                Diagnostic::error(format!(
-                    "`{}` has {count} triangle(s) below the f32 intersection's resolution: the first, at ({:.3e}, {:.3e}, \
-                     {:.3e}), spans only {edge:.1e} units (at least {MIN_TRIANGLE_EDGE:e} needed)",
-                    prim.path, p.x, p.y, p.z
-                ))
-                .at(prim.span, "this prim")
-                .note("scale the scene up (a scale transform on its root); radiance does not depend on scale"),
+        if let Some((count, p, edge, kept)) = too_small {
+            // A few micro-triangles in a mesh (CAD exports have them) cannot be seen at any
+            // sane camera distance: skipped with a warning. A prim made only of them would
+            // vanish: that is an error.
+            let message = format!(
+                "`{}` has {count} triangle(s) below the f32 intersection's resolution: the first, at ({:.3e}, {:.3e}, \
+                 {:.3e}), spans only {edge:.1e} units (at least {MIN_TRIANGLE_EDGE:e} needed)",
+                prim.path, p.x, p.y, p.z
             );
+            let d = if kept == 0 {
+                Diagnostic::error(message).at(prim.span, "this prim would vanish")
+            } else {
+                Diagnostic::warning(message + &format!("; they are skipped, {kept} others render"))
+                    .at(prim.span, "this prim")
+            };
+            diags.push(d.note("scale the scene up (a scale transform on its root); radiance does not depend on scale"));
         }
     }
 
@@ -474,7 +481,8 @@ impl Builder<'_> {
             );
             out.subdiv_level = self.subdiv_level;
             emit_prim(prim, &mut out, diags);
-            let (beyond, over, small) = (out.beyond_extent, out.over_budget, out.too_small);
+            let small = out.too_small.map(|(n, p, e)| (n, p, e, out.emitted));
+            let (beyond, over) = (out.beyond_extent, out.over_budget);
             self.report(prim, beyond, over, small, diags);
         }
         proto.prims = members.len() as u32;
@@ -714,6 +722,8 @@ struct Emitter<'g> {
     /// Triangles whose longest edge is below [`MIN_TRIANGLE_EDGE`]: their count and the
     /// first one's vertex 0 and longest edge.
     too_small: Option<(usize, DVec3, f64)>,
+    /// Triangles this emitter kept.
+    emitted: usize,
     /// The most triangles `triangles` may hold (what [`MAX_TRIANGLES`] leaves).
     budget: usize,
     /// A triangle was dropped because the scene reached its budget.
@@ -743,6 +753,7 @@ impl<'g> Emitter<'g> {
             prim,
             beyond_extent: None,
             too_small: None,
+            emitted: 0,
             budget,
             over_budget: false,
             subdiv_level: DEFAULT_SUBDIV_LEVEL,
@@ -793,6 +804,7 @@ impl<'g> Emitter<'g> {
         let has_uv = uv.is_some();
         let uv = uv.unwrap_or([Vec2::ZERO, Vec2::X, Vec2::Y]);
         self.triangles.push(Triangle { p: wp, n, uv, prim: self.prim, has_uv });
+        self.emitted += 1;
     }
 
     /// Adds an analytic part built around z, turned so that z is the prim's `axis`.
@@ -1729,6 +1741,31 @@ def Xform "C" (instanceable = true references = </Proto>) {
         );
         let xforms = world_transforms(&bad, &mut diags);
         build_with(&bad, &xforms, &mut diags);
+        assert!(diags.has_errors());
+    }
+
+    /// A micro-triangle below f32's resolution inside an ordinary mesh is skipped with a
+    /// warning; a prim made only of them is an error (it would vanish).
+    #[test]
+    fn micro_triangles_are_skipped_unless_they_are_the_whole_prim() {
+        let mesh = |points: &str| {
+            format!(
+                "#usda 1.0\ndef Mesh \"M\" {{ uniform token subdivisionScheme = \"none\"\n    int[] faceVertexCounts = [3, 3]\n    \
+                 int[] faceVertexIndices = [0, 1, 2, 3, 4, 5]\n    point3f[] points = [{points}] }}\n"
+            )
+        };
+        let (mixed, mut diags) =
+            stage(&mesh("(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1e-3), (1e-12, 0, 1e-3), (0, 1e-12, 1e-3)"));
+        let xforms = world_transforms(&mixed, &mut diags);
+        let g = build_with(&mixed, &xforms, &mut diags);
+        assert!(!diags.has_errors(), "{diags:?}");
+        assert_eq!(g.triangles.len(), 1);
+        assert!(diags.items().iter().any(|d| d.message.contains("they are skipped, 1 others render")), "{diags:?}");
+        let (tiny, mut diags) = stage(&mesh(
+            "(0, 0, 0), (1e-12, 0, 0), (0, 1e-12, 0), (0, 0, 0), (0, 1e-12, 0), (0, 0, 1e-12)",
+        ));
+        let xforms = world_transforms(&tiny, &mut diags);
+        build_with(&tiny, &xforms, &mut diags);
         assert!(diags.has_errors());
     }
 }
