@@ -20,7 +20,7 @@
 use super::frame::Frame;
 use super::geometry::Triangle;
 use super::shapes::Shape;
-use glam::{DAffine3, DMat3, DMat4, DVec3, Vec2, Vec3, Vec3A};
+use glam::{DAffine3, DMat3, DMat4, Vec2, Vec3, Vec3A};
 use obvhs::aabb::Aabb;
 use obvhs::cwbvh::CwBvh;
 use obvhs::cwbvh::builder::build_cwbvh;
@@ -506,7 +506,7 @@ impl Accel {
                 skipped += 1;
                 continue;
             };
-            let (wlo, whi) = transformed_box(&m, lo.as_dvec3(), hi.as_dvec3());
+            let (wlo, whi) = super::shapes::transformed_box(&m, lo.as_dvec3(), hi.as_dvec3());
             let (wlo, whi) = (wlo.as_vec3(), whi.as_vec3());
             if !wlo.is_finite() || !whi.is_finite() {
                 skipped += 1;
@@ -670,23 +670,6 @@ impl Accel {
     }
 }
 
-/// The box of the 8 transformed corners of `(lo, hi)` under `m`.
-fn transformed_box(m: &DMat4, lo: DVec3, hi: DVec3) -> (DVec3, DVec3) {
-    let mut min = DVec3::splat(f64::INFINITY);
-    let mut max = DVec3::splat(f64::NEG_INFINITY);
-    for k in 0..8 {
-        let c = DVec3::new(
-            if k & 1 == 0 { lo.x } else { hi.x },
-            if k & 2 == 0 { lo.y } else { hi.y },
-            if k & 4 == 0 { lo.z } else { hi.z },
-        );
-        let w = m.transform_point3(c);
-        min = min.min(w);
-        max = max.max(w);
-    }
-    (min, max)
-}
-
 /// A box as the BVH builder sees it.
 struct Padded(Aabb);
 
@@ -848,7 +831,8 @@ mod tests {
             };
             let direct = Accel::new(floor(s).to_vec(), vec![]);
             let prototype = Blas::new(floor(1.0).to_vec(), vec![]);
-            let desc = InstanceDesc { to_world: DMat4::from_scale(DVec3::splat(s as f64)), prototype: 0, prims: 0 };
+            let desc =
+                InstanceDesc { to_world: DMat4::from_scale(glam::DVec3::splat(s as f64)), prototype: 0, prims: 0 };
             let instanced = Accel::with_instances(Blas::new(vec![], vec![]), vec![prototype], &[desc], vec![0]);
             for (name, accel) in [("direct", &direct), ("instanced", &instanced)] {
                 for h in [1e-5f32, 0.3] {

@@ -137,7 +137,7 @@ impl Geometry {
         let world = bounds_of(&self.triangles, &self.shapes);
         let instances = self.instances.iter().filter_map(|i| {
             let (lo, hi) = self.prototypes[i.prototype as usize].bounds?;
-            Some(box_under(&i.to_world, lo, hi))
+            Some(super::shapes::transformed_box(&i.to_world, lo, hi))
         });
         let (lo, hi) = world.into_iter().chain(instances).reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))?;
         Some((lo.as_vec3(), hi.as_vec3()))
@@ -529,7 +529,7 @@ impl Builder<'_> {
         diags: &mut Diagnostics,
     ) -> bool {
         let Some((lo, hi)) = self.geometry.prototypes[prototype as usize].bounds else { return true };
-        let (wlo, whi) = box_under(&to_world, lo, hi);
+        let (wlo, whi) = super::shapes::transformed_box(&to_world, lo, hi);
         if let Some(far) = [wlo, whi].into_iter().find(|w| !w.is_finite() || w.abs().max_element() > MAX_EXTENT) {
             let mut d = beyond_extent(self.stage, prim, far);
             if let Some((i, span)) = which {
@@ -959,23 +959,6 @@ impl Builder<'_> {
             }
         }
     }
-}
-
-/// The box of the 8 transformed corners of `(lo, hi)` under `m`.
-fn box_under(m: &DMat4, lo: DVec3, hi: DVec3) -> (DVec3, DVec3) {
-    let mut min = DVec3::splat(f64::INFINITY);
-    let mut max = DVec3::splat(f64::NEG_INFINITY);
-    for k in 0..8 {
-        let c = DVec3::new(
-            if k & 1 == 0 { lo.x } else { hi.x },
-            if k & 2 == 0 { lo.y } else { hi.y },
-            if k & 4 == 0 { lo.z } else { hi.z },
-        );
-        let w = m.transform_point3(c);
-        min = min.min(w);
-        max = max.max(w);
-    }
-    (min, max)
 }
 
 /// The rotation taking z to the prim's `axis` attribute (`X`, `Y` or `Z`, default `Z`), as
@@ -1761,9 +1744,8 @@ def Xform "C" (instanceable = true references = </Proto>) {
         assert!(!diags.has_errors(), "{diags:?}");
         assert_eq!(g.triangles.len(), 1);
         assert!(diags.items().iter().any(|d| d.message.contains("they are skipped, 1 others render")), "{diags:?}");
-        let (tiny, mut diags) = stage(&mesh(
-            "(0, 0, 0), (1e-12, 0, 0), (0, 1e-12, 0), (0, 0, 0), (0, 1e-12, 0), (0, 0, 1e-12)",
-        ));
+        let (tiny, mut diags) =
+            stage(&mesh("(0, 0, 0), (1e-12, 0, 0), (0, 1e-12, 0), (0, 0, 0), (0, 1e-12, 0), (0, 0, 1e-12)"));
         let xforms = world_transforms(&tiny, &mut diags);
         build_with(&tiny, &xforms, &mut diags);
         assert!(diags.has_errors());

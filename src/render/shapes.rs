@@ -180,19 +180,7 @@ impl Part {
     /// of the object box, in f64 (so that a transform beyond f32's range shows as such).
     pub fn world_bounds(&self, m: &DMat4) -> (DVec3, DVec3) {
         let (lo, hi) = self.bounds();
-        let mut min = DVec3::splat(f64::INFINITY);
-        let mut max = DVec3::splat(f64::NEG_INFINITY);
-        for k in 0..8 {
-            let c = DVec3::new(
-                if k & 1 == 0 { lo.x } else { hi.x },
-                if k & 2 == 0 { lo.y } else { hi.y },
-                if k & 4 == 0 { lo.z } else { hi.z },
-            );
-            let w = m.transform_point3(c);
-            min = min.min(w);
-            max = max.max(w);
-        }
-        (min, max)
+        transformed_box(m, lo, hi)
     }
 
     /// Position (projected back onto the surface), outward normal, `(u, v)`, ∂P/∂u and ∂P/∂v
@@ -302,6 +290,24 @@ impl Shape {
             dpdv: self.to_world.transform_vector3(dpdv).as_vec3(),
         }
     }
+}
+
+/// The box of the 8 corners of `(lo, hi)` transformed by `m`, in f64 (so that a transform
+/// beyond f32's range shows as such). Geometry, instances and the BVH all bound this way.
+pub fn transformed_box(m: &DMat4, lo: DVec3, hi: DVec3) -> (DVec3, DVec3) {
+    let mut min = DVec3::splat(f64::INFINITY);
+    let mut max = DVec3::splat(f64::NEG_INFINITY);
+    for k in 0..8 {
+        let c = DVec3::new(
+            if k & 1 == 0 { lo.x } else { hi.x },
+            if k & 2 == 0 { lo.y } else { hi.y },
+            if k & 4 == 0 { lo.z } else { hi.z },
+        );
+        let w = m.transform_point3(c);
+        min = min.min(w);
+        max = max.max(w);
+    }
+    (min, max)
 }
 
 #[cfg(test)]
