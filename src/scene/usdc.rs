@@ -19,9 +19,9 @@
 //! sorted by key, as USD writes them.
 //!
 //! **Hostile input.** openusd indexes its tables with values read from the file and has
-//! `todo!()`s for old crate versions, so it can panic on a malformed file; and it allocates
-//! as many elements as a count read from the file says before reading them, where a failed
-//! allocation aborts. The header, sections and compressed blocks are checked here first
+//! unimplemented paths (panicking macros) for old crate versions, so it can panic on a
+//! malformed file; and it allocates as many elements as a count read from the file says
+//! before reading them, where a failed allocation aborts. The header, sections and compressed blocks are checked here first
 //! ([`precheck`]), then the framing of every value (`Probe`): no count may claim more than
 //! the bytes after it hold. Every call into openusd runs under `catch_unwind`: a panic
 //! becomes a "malformed usdc" diagnostic, and a panic hook keeps its message off the
@@ -180,7 +180,7 @@ fn u64_at(bytes: &[u8], at: u64) -> Option<u64> {
 /// corrupt, and would otherwise make openusd allocate (and fill) a table of that size.
 const MAX_ENTRIES_PER_BYTE: u64 = 1024;
 
-/// Checks what openusd trusts without checking: the version (older files reach `todo!()`),
+/// Checks what openusd trusts without checking: the version (older files reach its unimplemented paths),
 /// the table of contents and every section inside the file, and table counts the sections
 /// can hold. Returns the version.
 pub fn precheck(bytes: &[u8]) -> Result<(u8, u8, u8), String> {
@@ -597,6 +597,18 @@ impl Converter<'_> {
         });
     }
 
+    /// Queues a diagnostic built elsewhere (shared with the text reader) as a warning.
+    fn warn_as(&mut self, d: Diagnostic) {
+        let label = d.labels.first();
+        self.pending.push(Pending {
+            error: false,
+            message: d.message,
+            at: label.map_or((0, 0), |l| (l.span.start, l.span.end)),
+            label: label.map_or_else(String::new, |l| l.message.clone()),
+            note: d.notes.into_iter().next(),
+        });
+    }
+
     fn error(&mut self, span: Span, message: String, label: &str) {
         self.pending.push(Pending {
             error: true,
@@ -909,23 +921,8 @@ impl Converter<'_> {
             if uniform { "uniform " } else { "" }
         );
         let span = self.line(depth, &text);
-        let (base, array) = match type_name.strip_suffix("[]") {
-            Some(base) => (base, true),
-            None => (type_name.as_str(), false),
-        };
-        let value_type = ValueType::parse(base, array);
-        let mut attr = AttributeSpec {
-            name: name.to_string(),
-            span,
-            type_name: type_name.clone(),
-            value_type,
-            custom,
-            uniform,
-            default: None,
-            time_samples: Vec::new(),
-            connections: ListOp::default(),
-            metadata: Vec::new(),
-        };
+        let mut attr = AttributeSpec::declared(name, span, type_name.clone(), custom, uniform);
+        let value_type = attr.value_type;
         for field in self.fields(path) {
             let field = field.as_str();
             if matches!(field, "typeName" | "variability" | "custom") {
@@ -944,13 +941,8 @@ impl Converter<'_> {
                             attr.time_samples.push((time, v));
                         }
                     }
-                    // The same words as the usda parser: one model, one message.
-                    self.warn(
-                        span,
-                        format!("`{name}` is animated (timeSamples): strata renders one frame"),
-                        "its default value is used, or else its earliest sample",
-                        Some("strata renders a single frame"),
-                    );
+                    // The same diagnostic as the usda parser: one model, one message.
+                    self.warn_as(AttributeSpec::animated_warning(name, span));
                 }
                 ("connectionPaths", sdf::Value::PathListOp(op)) => {
                     attr.connections = self.targets(op, depth + 1, "connect")

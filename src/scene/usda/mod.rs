@@ -11,7 +11,7 @@ pub mod parser;
 
 pub use parser::parse;
 
-use crate::diag::{FileId, Span};
+use crate::diag::{Diagnostic, FileId, Span};
 use crate::scene::value::{AssetPath, Value, ValueType};
 use std::collections::HashMap;
 use std::sync::OnceLock;
@@ -422,6 +422,35 @@ pub struct AttributeSpec {
 }
 
 impl AttributeSpec {
+    /// A declared attribute with no value, connection or metadata yet: what both readers
+    /// (text and crate) start from before filling in the opinions they find.
+    pub fn declared(name: &str, span: Span, type_name: String, custom: bool, uniform: bool) -> AttributeSpec {
+        let (base, array) = match type_name.strip_suffix("[]") {
+            Some(base) => (base, true),
+            None => (type_name.as_str(), false),
+        };
+        AttributeSpec {
+            name: name.to_string(),
+            span,
+            value_type: ValueType::parse(base, array),
+            type_name,
+            custom,
+            uniform,
+            default: None,
+            time_samples: Vec::new(),
+            connections: ListOp::default(),
+            metadata: Vec::new(),
+        }
+    }
+
+    /// The warning for an animated attribute (`timeSamples`): strata renders one frame from
+    /// the authored default, else the earliest sample. One text for both readers.
+    pub fn animated_warning(name: &str, span: Span) -> Diagnostic {
+        Diagnostic::warning(format!("`{name}` is animated (timeSamples): strata renders one frame"))
+            .at(span, "its default value is used, or else its earliest sample")
+            .note("strata renders a single frame")
+    }
+
     /// A metadata value by key.
     pub fn meta(&self, key: &str) -> Option<&Value> {
         self.metadata.iter().find(|m| m.key == key).map(|m| &m.value)

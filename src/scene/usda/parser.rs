@@ -664,18 +664,13 @@ impl<'a> Parser<'a, '_> {
             Some(&i) => i,
             None => {
                 index.insert(name.to_string(), prim.properties.len());
-                prim.properties.push(PropertySpec::Attribute(Box::new(AttributeSpec {
-                    name: name.to_string(),
+                prim.properties.push(PropertySpec::Attribute(Box::new(AttributeSpec::declared(
+                    name,
                     span,
-                    type_name: type_name.clone(),
-                    value_type,
+                    type_name.clone(),
                     custom,
                     uniform,
-                    default: None,
-                    time_samples: Vec::new(),
-                    connections: ListOp::default(),
-                    metadata: Vec::new(),
-                })));
+                ))));
                 prim.properties.len() - 1
             }
         };
@@ -718,11 +713,7 @@ impl<'a> Parser<'a, '_> {
             attr.default = Some(d);
         }
         if let Some(samples) = time_samples {
-            self.diags.push(
-                Diagnostic::warning(format!("`{name}` is animated (timeSamples): strata renders one frame"))
-                    .at(span, "its default value is used, or else its earliest sample")
-                    .note("strata renders a single frame"),
-            );
+            self.diags.push(AttributeSpec::animated_warning(name, span));
             attr.time_samples = samples;
         }
         if let Some(c) = connections {
