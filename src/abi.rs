@@ -116,6 +116,10 @@ pub struct LayerInfo {
     pub has_surface: bool,
     /// Displacement combination mode, if the layer displaces.
     pub displacement: Option<DisplacementMode>,
+    /// `Some(bound)` when the layer's displacement moves geometry (its driving node has a
+    /// `bound` input, as the built-in `displacement` does): heights are clamped to `±bound`
+    /// when meshes are diced. `None` when it only bends the shading normal (`bump`).
+    pub displacement_bound: Option<f32>,
     /// Whether the layer has a normal product.
     pub has_normal: bool,
     /// The layer's mask when it is known at compile time (clamped; absent mask: 1).

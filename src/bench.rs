@@ -85,6 +85,7 @@ impl Default for HandMaterial {
             slot: slot.into(),
             has_surface: true,
             displacement: None,
+            displacement_bound: None,
             has_normal: false,
             constant_mask,
         };

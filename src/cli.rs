@@ -272,6 +272,8 @@ pub struct RenderArgs {
     pub camera: Option<String>,
     /// Subdivision levels for subdivision-surface meshes (`--subdiv-level`).
     pub subdiv_level: u32,
+    /// Micro-triangle edge length in pixels for displaced surfaces (`--dicing-rate`).
+    pub dicing_rate: f32,
     /// Whether `settings.width`/`height` were given (`--res`); if not, a UsdRender
     /// `RenderSettings` prim's `resolution` replaces them.
     pub resolution_given: bool,
@@ -387,8 +389,14 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         let options = crate::render::scene::SceneOptions {
             camera: view.camera,
             geometry: crate::render::geometry::GeometryOptions { subdiv_level: args.subdiv_level },
+            dicing: crate::render::displace::DicingOptions {
+                rate: args.dicing_rate,
+                resolution: (settings.width, settings.height),
+                ..Default::default()
+            },
         };
-        crate::render::Scene::from_stage_with(&c.stage, &|p| c.prim_material.get(p).copied(), &options, &mut diags)
+        let refs: Vec<&dyn MaterialCode> = c.materials.iter().map(|m| m.as_ref()).collect();
+        crate::render::Scene::build(&c.stage, &|p| c.prim_material.get(p).copied(), &refs, &options, &mut diags)
     });
     let scene_ms = scene_start.elapsed().as_secs_f64() * 1e3;
     report(&diags, &sources)?;
@@ -405,6 +413,10 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
     refuse_to_overwrite_inputs(&[outputs.exr_path(), outputs.png_path()])?;
     if args.stats {
         eprintln!("compile ({}): {}", args.backend, compiler.stats);
+        if let Some(displacement) = &scene.displacement {
+            let (world, _) = scene.accel.bytes();
+            eprintln!("{displacement}; BVHs and triangles {:.1} MiB", world as f64 / (1024.0 * 1024.0));
+        }
     }
     let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
     let bar = progress_bar(settings.height as u64);

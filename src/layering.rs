@@ -104,9 +104,39 @@ pub fn transmittance<E>(layers: &[LayerInfo], mut mask_of: impl FnMut(usize) -> 
 
 /// The combined displacement of rule 6 from each layer's height and mask.
 pub fn combine_displacement(layers: &[LayerInfo], heights: &[f32], masks: &[f32]) -> f32 {
+    combine_relief(layers, heights, masks, Relief::All)
+}
+
+/// Which layers' heights a combination reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Relief {
+    /// Every layer's: the whole displacement.
+    All,
+    /// Only the layers whose displacement moves geometry (`displacement_bound` set).
+    Geometry,
+    /// Only the bump layers'.
+    Bump,
+}
+
+impl Relief {
+    /// Whether the combination reads `layer`'s height.
+    pub fn reads(self, layer: &LayerInfo) -> bool {
+        match self {
+            Relief::All => true,
+            Relief::Geometry => layer.displacement_bound.is_some(),
+            Relief::Bump => layer.displacement_bound.is_none(),
+        }
+    }
+}
+
+/// Rule 6 over the layers `part` reads, the others' heights taken as 0 (their masks still
+/// apply: a `mix` layer hides what is below it whatever kind it is). Rule 6 is linear in the
+/// heights, so `Geometry + Bump = All`: dicing moves the surface by the first and the shading
+/// normal bends by the second.
+pub fn combine_relief(layers: &[LayerInfo], heights: &[f32], masks: &[f32], part: Relief) -> f32 {
     let mut d = 0.0f32;
     for (i, layer) in layers.iter().enumerate() {
-        let h = heights[i];
+        let h = if part.reads(layer) { heights[i] } else { 0.0 };
         match layer.displacement {
             Some(DisplacementMode::None) => d += h,
             Some(DisplacementMode::Add) => {
@@ -189,7 +219,14 @@ mod tests {
     use DisplacementMode as D;
 
     fn layer(has_surface: bool, displacement: Option<DisplacementMode>, constant_mask: Option<f32>) -> LayerInfo {
-        LayerInfo { slot: String::new(), has_surface, displacement, has_normal: false, constant_mask }
+        LayerInfo {
+            slot: String::new(),
+            has_surface,
+            displacement,
+            displacement_bound: None,
+            has_normal: false,
+            constant_mask,
+        }
     }
 
     #[test]
@@ -232,6 +269,31 @@ mod tests {
             // Stratified u: the frequency is exact up to one stratum per boundary.
             assert!((got - expected).abs() < 1e-4, "layer {i}: {got} vs {expected}");
         }
+    }
+
+    #[test]
+    fn geometry_and_bump_parts_add_up_to_the_whole() {
+        let moving = |mode, bound| LayerInfo { displacement_bound: bound, ..layer(true, Some(mode), None) };
+        let layers = [
+            moving(D::None, Some(1.0)),
+            moving(D::Add, None),
+            moving(D::Mix, Some(0.5)),
+            moving(D::Add, Some(2.0)),
+            moving(D::Mix, None),
+        ];
+        let heights = [0.3, -0.7, 0.2, 0.9, 0.05];
+        for masks in [[0.0, 0.5, 0.25, 0.6, 0.3], [1.0, 1.0, 1.0, 0.0, 1.0], [0.2, 0.0, 0.0, 1.0, 0.0]] {
+            let all = combine_relief(&layers, &heights, &masks, Relief::All);
+            let geometry = combine_relief(&layers, &heights, &masks, Relief::Geometry);
+            let bump = combine_relief(&layers, &heights, &masks, Relief::Bump);
+            assert!((geometry + bump - all).abs() < 1e-6, "{geometry} + {bump} != {all} at {masks:?}");
+        }
+        // By hand, masks [0, .5, .25, .6, .3]: geometry ((0.3·0.75 + 0.25·0.2) + 0.6·0.9)·0.7.
+        let masks = [0.0, 0.5, 0.25, 0.6, 0.3];
+        let geometry = combine_relief(&layers, &heights, &masks, Relief::Geometry);
+        assert!((geometry - ((0.3 * 0.75 + 0.25 * 0.2) + 0.6 * 0.9) * 0.7).abs() < 1e-6, "{geometry}");
+        // A mix bump layer of mask 1 on top leaves no geometric relief.
+        assert_eq!(combine_relief(&layers, &heights, &[1.0, 1.0, 1.0, 1.0, 1.0], Relief::Geometry), 0.0);
     }
 
     #[test]

@@ -77,6 +77,10 @@ enum Command {
         #[arg(long, default_value_t = strata::render::geometry::DEFAULT_SUBDIV_LEVEL,
               value_parser = clap::value_parser!(u32).range(0..=6))]
         subdiv_level: u32,
+        /// Displaced surfaces are diced into micro-triangles about this many pixels long (a
+        /// scene past 4 194 304 micro-triangles is diced coarser, with a warning).
+        #[arg(long, default_value_t = strata::render::displace::DEFAULT_DICING_RATE, value_parser = parse_dicing_rate)]
+        dicing_rate: f32,
         /// Store RGBA and colour AOVs (albedo, N, colour channels) as 16-bit half floats;
         /// Z, P, scalar and integer channels stay 32-bit.
         #[arg(long)]
@@ -240,6 +244,7 @@ fn main() -> ExitCode {
             res,
             camera,
             subdiv_level,
+            dicing_rate,
             half,
             seed,
             threads,
@@ -266,6 +271,7 @@ fn main() -> ExitCode {
             half,
             camera,
             subdiv_level,
+            dicing_rate,
             resolution_given: res.is_some(),
         }),
         Command::Compile { file, output } => cli::compile(&file, &output),
@@ -327,6 +333,14 @@ fn main() -> ExitCode {
 }
 
 /// Parses `WIDTHxHEIGHT` (each 1 to 16384).
+fn parse_dicing_rate(text: &str) -> Result<f32, String> {
+    match text.trim().parse::<f32>() {
+        Ok(rate) if rate.is_finite() && (0.05..=1e4).contains(&rate) => Ok(rate),
+        Ok(_) => Err("the dicing rate must be between 0.05 and 10000 pixels".into()),
+        Err(_) => Err(format!("`{text}` is not a number")),
+    }
+}
+
 fn parse_resolution(text: &str) -> Result<(usize, usize), String> {
     let (w, h) = text.split_once(['x', 'X']).ok_or("expected WIDTHxHEIGHT, e.g. 640x480")?;
     let parse = |s: &str| -> Result<usize, String> {

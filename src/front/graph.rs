@@ -121,6 +121,9 @@ pub struct ProductBinding {
     pub source: Source,
     /// For displacement: the combination mode read from the driving node.
     pub mode: Option<DisplacementMode>,
+    /// For displacement that moves geometry: the driving node's `bound` (a literal or an
+    /// exposed input). `None`: the node has no `bound` input, so it only bumps.
+    pub bound: Option<Source>,
     /// Where it is bound.
     pub span: Span,
 }
@@ -484,18 +487,20 @@ pub fn resolve_graph(
                     );
                     continue;
                 }
-                let mode = if *product == Product::Displacement {
-                    match displacement_mode(&graph, &source, functions) {
-                        Ok(mode) => Some(mode),
+                let (mode, bound) = if *product == Product::Displacement {
+                    match displacement_mode(&graph, &source, functions)
+                        .and_then(|mode| Ok((Some(mode), displacement_bound(&graph, &source, functions)?)))
+                    {
+                        Ok(found) => found,
                         Err(message) => {
                             diags.push(Diagnostic::error(message).at(value.span, "displacement source"));
                             continue;
                         }
                     }
                 } else {
-                    None
+                    (None, None)
                 };
-                graph.products.push(ProductBinding { product: *product, source, mode, span: *span });
+                graph.products.push(ProductBinding { product: *product, source, mode, bound, span: *span });
             }
             _ => {}
         }
@@ -561,6 +566,29 @@ fn displacement_mode(graph: &Graph, source: &Source, functions: &[Function]) -> 
         "add" => Ok(DisplacementMode::Add),
         "mix" => Ok(DisplacementMode::Mix),
         other => Err(format!("unknown displacement mode \"{other}\" (expected \"none\", \"add\" or \"mix\")")),
+    }
+}
+
+/// The `bound` of the node that drives a displacement product: `None` when it has no float
+/// `bound` input (a `bump`), else its literal, default or exposed input. A bound computed by
+/// another node is refused: dicing needs it before any shading point exists.
+fn displacement_bound(graph: &Graph, source: &Source, functions: &[Function]) -> Result<Option<Source>, String> {
+    let Source::Node { node, .. } = source else { return Ok(None) };
+    let func = &functions[graph.nodes[*node].func.0 as usize];
+    let Some((param, p)) = func.param("bound").filter(|(_, p)| !p.output) else { return Ok(None) };
+    if !p.ty.converts_to(Type::FLOAT) {
+        return Err(format!("the displacement `bound` of `{}` must be a float", func.name));
+    }
+    match (&graph.nodes[*node].args[param], &p.default) {
+        (Some(bound @ (Source::Const(..) | Source::Input(_))), _) => Ok(Some(bound.clone())),
+        (None, Some(default)) => match default.as_const() {
+            Some(v) => Ok(Some(Source::Const(v.clone(), p.ty))),
+            None => Err("the displacement `bound` default must be a literal".into()),
+        },
+        (None, None) => Err(format!("`{}` needs a `bound` value: its input has no default", func.name)),
+        _ => Err("the displacement `bound` must be a literal or a substance input, not a connection: \
+                  dicing needs it before shading"
+            .into()),
     }
 }
 

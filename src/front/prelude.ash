@@ -31,8 +31,10 @@ shader mask(float opacity = 1.0, output float out) {
     out = clamp(opacity, 0.0, 1.0);
 }
 
-// Height along the normal in scene units. `mode` is "none", "add" or "mix" (see DESIGN.md rule 6).
-shader displacement(float height = 0.0, float scale = 1.0, string mode = "add", output float out) {
+// Height along the normal in scene units: the surface moves (meshes and quadrics are diced, see
+// docs/DESIGN.md rule 6). `mode` is "none", "add" or "mix"; `bound` is the largest |height| the
+// layer may reach (a literal or a substance input): heights beyond it are clamped and reported.
+shader displacement(float height = 0.0, float scale = 1.0, string mode = "add", float bound = 1.0, output float out) {
     out = height * scale;
 }
 

@@ -80,6 +80,9 @@ pub struct Layer {
     pub surface: Option<Operand>,
     /// Height and combination mode.
     pub displacement: Option<(Operand, DisplacementMode)>,
+    /// The bound of a displacement that moves geometry; `None` for a bump (see
+    /// [`LayerInfo::displacement_bound`]).
+    pub displacement_bound: Option<f32>,
     /// Shading normal.
     pub normal: Option<Operand>,
     /// Opacity (absent: 1).
@@ -97,6 +100,7 @@ impl Layer {
             slot: self.slot.clone(),
             has_surface: self.surface.is_some(),
             displacement: self.displacement.as_ref().map(|(_, mode)| *mode),
+            displacement_bound: self.displacement.as_ref().and(self.displacement_bound),
             has_normal: self.normal.is_some(),
             constant_mask: self.constant_mask(),
         }
@@ -308,6 +312,31 @@ impl Builder<'_> {
         let mut sub_channels = self.channels(graph, &instance);
         sub_channels.append(&mut channels);
         let product = |p: Product| graph.products.iter().find(|b| b.product == p);
+        let displacement_bound = product(Product::Displacement).and_then(|b| {
+            let bound = b.bound.as_ref()?;
+            match operand(&instance, bound) {
+                Operand::Const(v, _) if v.as_f32().is_some_and(|x| x >= 0.0) => v.as_f32(),
+                Operand::Const(v, _) => {
+                    self.diags.push(
+                        Diagnostic::error(format!(
+                            "layer `{slot}`: the displacement bound must be a number ≥ 0, found {v}"
+                        ))
+                        .at(b.span, "displacement bound here"),
+                    );
+                    None
+                }
+                _ => {
+                    self.diags.push(
+                        Diagnostic::error(format!(
+                            "layer `{slot}`: an override drives the displacement bound with a node; \
+                             it must be a constant (dicing needs it before shading)"
+                        ))
+                        .at(b.span, "displacement bound here"),
+                    );
+                    None
+                }
+            }
+        });
         Layer {
             slot: slot.to_string(),
             substance: graph.name.clone(),
@@ -316,6 +345,7 @@ impl Builder<'_> {
             surface: product(Product::Surface).map(|b| operand(&instance, &b.source)),
             displacement: product(Product::Displacement)
                 .map(|b| (operand(&instance, &b.source), b.mode.unwrap_or(DisplacementMode::Add))),
+            displacement_bound,
             normal: product(Product::Normal).map(|b| operand(&instance, &b.source)),
             mask: product(Product::Mask).map(|b| operand(&instance, &b.source)),
             channels: sub_channels,
@@ -673,7 +703,14 @@ impl WiredMaterial {
                 let _ = writeln!(out, "  surface = {}", op(s));
             }
             if let Some((d, mode)) = &layer.displacement {
-                let _ = writeln!(out, "  displacement({}) = {}", mode.name(), op(d));
+                match layer.displacement_bound {
+                    Some(bound) => {
+                        let _ = writeln!(out, "  displacement({}, bound {bound}) = {}", mode.name(), op(d));
+                    }
+                    None => {
+                        let _ = writeln!(out, "  bump({}) = {}", mode.name(), op(d));
+                    }
+                }
             }
             if let Some(n) = &layer.normal {
                 let _ = writeln!(out, "  normal = {}", op(n));

@@ -272,6 +272,11 @@ impl Blas {
         self.shapes.len()
     }
 
+    /// The triangles' vertex positions, as intersected.
+    pub fn triangle_positions(&self) -> &[[Vec3; 3]] {
+        &self.positions
+    }
+
     /// Object-space bounds of the finite primitives.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
         self.bounds
@@ -427,7 +432,7 @@ fn shading_normal(n: Vec3, ng: Vec3) -> Vec3 {
 
 /// dP/du and dP/dv from the triangle's texture coordinates, or a frame around `n` when
 /// they are degenerate.
-fn tangents(p: [Vec3; 3], uv: [Vec2; 3], n: Vec3) -> (Vec3, Vec3) {
+pub(crate) fn tangents(p: [Vec3; 3], uv: [Vec2; 3], n: Vec3) -> (Vec3, Vec3) {
     let d1 = uv[1] - uv[0];
     let d2 = uv[2] - uv[0];
     let det = d1.x * d2.y - d1.y * d2.x;
@@ -550,6 +555,11 @@ impl Accel {
         let blas = self.world.bytes() + self.prototypes.iter().map(Blas::bytes).sum::<usize>();
         let tlas = self.tlas.as_ref().map_or(0, BvhSpace::bytes);
         (blas, self.instances.len() * size_of::<Instance>() + self.instance_prims.len() * 4 + tlas)
+    }
+
+    /// The world (not instanced) triangles' vertex positions, as intersected.
+    pub fn world_triangles(&self) -> &[[Vec3; 3]] {
+        self.world.triangle_positions()
     }
 
     /// The renderable prim a hit belongs to.

@@ -144,6 +144,12 @@ impl Camera {
         c
     }
 
+    /// The angle (radians, small-angle) one pixel spans across an image `width` pixels wide:
+    /// a length `l` at distance `d` from the camera covers about `l / (d · pixel_angle)` pixels.
+    pub fn pixel_angle(&self, width: usize) -> f32 {
+        2.0 * self.tan_half.x / width.max(1) as f32
+    }
+
     /// The camera position.
     pub fn origin(&self) -> Vec3 {
         self.origin

@@ -17,7 +17,7 @@ use super::light::{Light, LightSelection};
 use super::sampling::{Rng, power_heuristic};
 use super::scene::Scene;
 use crate::abi::{Closure, ClosureKind, Globals, MaterialCode, ShaderError};
-use crate::layering;
+use crate::layering::{self, Relief};
 use glam::{Vec2, Vec3};
 
 /// How layers are evaluated at a path vertex.
@@ -344,14 +344,17 @@ impl Context<'_> {
             }
         };
         s.site.layer = None;
-        if info.layers.iter().any(|l| l.displacement.is_some()) {
+        // A diced prim's surface already carries the displacement that moves geometry; the
+        // shading normal bends by the rest (rule 6 is linear in the heights).
+        let relief = if self.scene.prim_displaced(sp.prim) { Relief::Bump } else { Relief::All };
+        if bumps(&info.layers, relief) {
             // What `bump` calls: three displacement evaluations, each with the masks that
             // weight displacement.
             let weighting = info.layers.iter().filter(|l| l.displacement.is_some() && l.mask_weights_displacement());
             s.counts.displacements += 3;
             s.counts.displacement_masks += 3 * weighting.count() as u64;
         }
-        let bumped = bump(material, &g, &mut s.masks_du, &mut s.masks_dv, &mut s.disp)?;
+        let bumped = bump(material, &g, relief, &mut s.masks_du, &mut s.masks_dv, &mut s.disp)?;
         g.n = to_arr(bumped);
         s.lobes.clear();
         match picked {
@@ -667,20 +670,27 @@ impl Context<'_> {
     }
 }
 
+/// Whether `bump` with `relief` reads any layer's displacement.
+fn bumps(layers: &[crate::abi::LayerInfo], relief: Relief) -> bool {
+    layers.iter().any(|l| l.displacement.is_some() && relief.reads(l))
+}
+
 /// The bumped shading normal of rule 6: `g.n` tilted by the slope of the combined
-/// displacement, by finite differences along `g.dpdu` and `g.dpdv` (masks and heights are
-/// evaluated at the undisplaced points). `masks_a`, `masks_b` and `heights` are scratch, one
-/// float per layer.
+/// displacement of the layers `relief` reads (all of them on a surface that was not diced;
+/// the bump layers only on one that was), by finite differences along `g.dpdu` and `g.dpdv`
+/// (masks and heights are evaluated at the points given, undisplaced by the bump).
+/// `masks_a`, `masks_b` and `heights` are scratch, one float per layer.
 pub(crate) fn bump(
     material: &dyn MaterialCode,
     g: &Globals,
+    relief: Relief,
     masks_a: &mut [f32],
     masks_b: &mut [f32],
     heights: &mut [f32],
 ) -> Result<Vec3, Invalid> {
     let layers = &material.info().layers;
     let n = Vec3::from_array(g.n);
-    if !layers.iter().any(|l| l.displacement.is_some()) {
+    if !bumps(layers, relief) {
         return Ok(n);
     }
     let nl = layers.len();
@@ -701,7 +711,7 @@ pub(crate) fn bump(
                 if layer.mask_weights_displacement() { material.mask(&gg, i).map_err(Invalid::Shader)? } else { 0.0 };
         }
         material.displacement(&gg, heights).map_err(Invalid::Shader)?;
-        Ok(layering::combine_displacement(layers, heights, masks))
+        Ok(layering::combine_relief(layers, heights, masks, relief))
     };
     let d0 = eval(0.0, 0.0, &mut masks_a[..nl], &mut heights[..nl])?;
     let du = eval(h / lu, 0.0, &mut masks_a[..nl], &mut heights[..nl])?;
@@ -768,7 +778,7 @@ pub fn shading_state(material: &dyn MaterialCode, g: &Globals) -> Result<Shading
     material.displacement(g, &mut heights).map_err(Invalid::Shader)?;
     let displacement = layering::combine_displacement(&info.layers, &heights, &masks);
     let (mut a, mut b) = (vec![0.0; nl], vec![0.0; nl]);
-    let normal = bump(material, g, &mut a, &mut b, &mut heights)?;
+    let normal = bump(material, g, Relief::All, &mut a, &mut b, &mut heights)?;
     let mut bumped = *g;
     bumped.n = to_arr(normal);
     let mut picked = Vec::new();

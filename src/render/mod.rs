@@ -16,6 +16,7 @@ pub mod camera;
 #[cfg(test)]
 pub(crate) mod chi2;
 pub mod cryptomatte;
+pub mod displace;
 pub mod film;
 pub mod frame;
 pub mod geometry;

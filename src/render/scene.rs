@@ -3,9 +3,11 @@
 
 use super::accel::{Accel, Blas};
 use super::camera::Camera;
+use super::displace::{DicingOptions, DisplacementStats};
 use super::geometry::{self, GeomPrim};
 use super::light::{Light, lights_from_stage};
 use super::xform::world_transforms;
+use crate::abi::MaterialCode;
 use crate::diag::{Diagnostic, Diagnostics};
 use crate::scene::Stage;
 use glam::Vec3;
@@ -33,6 +35,11 @@ pub struct Scene {
     pub bounds: (Vec3, Vec3),
     /// Zero-area triangles that were skipped.
     pub degenerate_triangles: usize,
+    /// Per renderable prim: whether its surface was diced and displaced (its material's
+    /// geometric displacement is in the triangles; only bump layers bend its normal).
+    pub displaced: Vec<bool>,
+    /// What displacement cost, when anything was displaced.
+    pub displacement: Option<DisplacementStats>,
 }
 
 /// Choices about how a stage is rendered that do not come from the stage alone.
@@ -43,6 +50,8 @@ pub struct SceneOptions {
     pub camera: Option<String>,
     /// How geometry is built (subdivision level).
     pub geometry: geometry::GeometryOptions,
+    /// How displaced surfaces are diced (rate, budget, the image size it is measured in).
+    pub dicing: DicingOptions,
 }
 
 /// The camera and resolution a render uses, from the command line and the stage's UsdRender
@@ -127,6 +136,12 @@ pub fn choose_view(stage: &Stage, requested: Option<&str>, diags: &mut Diagnosti
 }
 
 impl Scene {
+    /// Whether renderable prim `prim`'s surface was diced and displaced.
+    #[inline]
+    pub fn prim_displaced(&self, prim: u32) -> bool {
+        self.displaced.get(prim as usize).copied().unwrap_or(false)
+    }
+
     /// Builds the render scene. `material_of_prim` maps a renderable prim's path to an index
     /// into the materials slice later given to `render`. Problems go to `diags`; `None` when
     /// any error was found (so a broken scene is never rendered as if it were fine).
@@ -138,16 +153,30 @@ impl Scene {
         Scene::from_stage_with(stage, material_of_prim, &SceneOptions::default(), diags)
     }
 
-    /// [`Scene::from_stage`] with the camera chosen by `options`.
+    /// [`Scene::from_stage`] with the camera chosen by `options`. Without the materials,
+    /// nothing is diced: displacement bends shading normals only (see [`Scene::build`]).
     pub fn from_stage_with(
         stage: &Stage,
         material_of_prim: &dyn Fn(&str) -> Option<usize>,
         options: &SceneOptions,
         diags: &mut Diagnostics,
     ) -> Option<Scene> {
+        Scene::build(stage, material_of_prim, &[], options, diags)
+    }
+
+    /// Builds the render scene with the compiled `materials` (indexed as `material_of_prim`
+    /// returns), so that surfaces whose material moves geometry are diced and displaced
+    /// ([`super::displace`]).
+    pub fn build(
+        stage: &Stage,
+        material_of_prim: &dyn Fn(&str) -> Option<usize>,
+        materials: &[&dyn MaterialCode],
+        options: &SceneOptions,
+        diags: &mut Diagnostics,
+    ) -> Option<Scene> {
         let errors = diags.error_count();
         let xforms = world_transforms(stage, diags);
-        let geometry = geometry::build_with_options(stage, &xforms, options.geometry, diags);
+        let mut geometry = geometry::build_with_options(stage, &xforms, options.geometry, diags);
         let mut prim_material = Vec::with_capacity(geometry.prims.len());
         for prim in &geometry.prims {
             match material_of_prim(&prim.path) {
@@ -178,7 +207,13 @@ impl Scene {
         if diags.error_count() > errors {
             return None;
         }
+        let displaced =
+            super::displace::displace(&mut geometry, &prim_material, materials, &camera, &options.dicing, diags);
+        // Displaced surfaces may reach past the undisplaced bounds (the camera stays framed on those).
+        let bounds = geometry.bounds().unwrap_or(bounds);
         Some(Scene {
+            displaced: displaced.prims,
+            displacement: displaced.stats,
             degenerate_triangles: geometry.degenerate,
             accel: Accel::with_instances(
                 Blas::new(geometry.triangles, geometry.shapes),

@@ -185,7 +185,7 @@ impl Part {
 
     /// Position (projected back onto the surface), outward normal, `(u, v)`, ∂P/∂u and ∂P/∂v
     /// at an object-space point on the part.
-    fn local_geometry(&self, p: DVec3) -> (DVec3, DVec3, (f64, f64), DVec3, DVec3) {
+    pub(crate) fn local_geometry(&self, p: DVec3) -> (DVec3, DVec3, (f64, f64), DVec3, DVec3) {
         let phi_of = |p: DVec3| {
             let phi = p.y.atan2(p.x);
             if phi < 0.0 { phi + TAU } else { phi }
@@ -289,6 +289,77 @@ impl Shape {
             dpdu: self.to_world.transform_vector3(dpdu).as_vec3(),
             dpdv: self.to_world.transform_vector3(dpdv).as_vec3(),
         }
+    }
+}
+
+/// Segments around the axis of a part's base mesh (see [`Part::base_mesh`]).
+pub const BASE_SEGMENTS: usize = 32;
+
+impl Part {
+    /// A coarse triangle mesh of the part in object space, for dicing (displacement is the
+    /// only reason a part becomes triangles): `(position, uv)` per corner, winding not
+    /// oriented. Every ring point is computed from one table of `(cos, sin)` and an exact
+    /// `(radius, z)`, so the rims parts of one prim share (a capsule's equators, a cylinder's
+    /// caps) have bit-identical points and weld.
+    pub fn base_mesh(&self) -> Vec<[(DVec3, Vec2); 3]> {
+        let n = BASE_SEGMENTS;
+        let ring: Vec<(f64, f64)> =
+            (0..n).map(|j| (TAU * j as f64 / n as f64).sin_cos()).map(|(s, c)| (c, s)).collect();
+        let at = |j: usize, radius: f64, z: f64| {
+            let (c, s) = ring[j % n];
+            DVec3::new(radius * c, radius * s, z)
+        };
+        // Rings `(radius, z, v)` from one end to the other; a radius of 0 is a pole.
+        let rings: Vec<(f64, f64, f64)> = match *self {
+            Part::Sphere { r, cz, zmin, zmax } => {
+                // A whole sphere is cut at ±infinity.
+                let (zmin, zmax) = (zmin.max(cz - r), zmax.min(cz + r));
+                let (top, bottom) =
+                    (((zmax - cz) / r).clamp(-1.0, 1.0).acos(), ((zmin - cz) / r).clamp(-1.0, 1.0).acos());
+                let rows = ((16.0 * (bottom - top) / PI).ceil() as usize).max(1);
+                (0..=rows)
+                    .map(|i| {
+                        // The end rings at the exact cut heights, so they meet a neighbour's rim.
+                        let z = match i {
+                            0 => zmax,
+                            i if i == rows => zmin,
+                            _ => cz + r * (top + (bottom - top) * i as f64 / rows as f64).cos(),
+                        };
+                        let radius = (r * r - (z - cz) * (z - cz)).max(0.0).sqrt();
+                        (radius, z, 1.0 - ((z - cz) / r).clamp(-1.0, 1.0).acos() / PI)
+                    })
+                    .collect()
+            }
+            Part::Cylinder { r, z0, z1 } => vec![(r, z0, 0.0), (r, z1, 1.0)],
+            Part::Cone { r, z0, z1 } => vec![(r, z0, 0.0), (0.0, z1, 1.0)],
+            Part::Disk { r, z, .. } => vec![(r, z, 0.0), (0.0, z, 1.0)],
+        };
+        let uv = |j: usize, v: f64, p: DVec3| match self {
+            Part::Disk { .. } => {
+                let (_, _, (u, v), _, _) = self.local_geometry(p);
+                Vec2::new(u as f32, v as f32)
+            }
+            _ => Vec2::new(j as f32 / n as f32, v as f32),
+        };
+        let mut out = Vec::new();
+        for pair in rings.windows(2) {
+            let ((ra, za, va), (rb, zb, vb)) = (pair[0], pair[1]);
+            for j in 0..n {
+                let corner = |k: usize, radius: f64, z: f64, v: f64| {
+                    let p = at(k, radius, z);
+                    (p, uv(k, v, p))
+                };
+                let (a0, a1) = (corner(j, ra, za, va), corner(j + 1, ra, za, va));
+                let (b0, b1) = (corner(j, rb, zb, vb), corner(j + 1, rb, zb, vb));
+                if ra > 0.0 {
+                    out.push([a0, a1, b1]);
+                }
+                if rb > 0.0 {
+                    out.push([a0, b1, b0]);
+                }
+            }
+        }
+        out
     }
 }
 

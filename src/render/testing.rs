@@ -66,6 +66,7 @@ impl ConstMaterial {
                     slot: format!("{:03}", i * 10),
                     has_surface: true,
                     displacement: None,
+                    displacement_bound: None,
                     has_normal: l.normal.is_some(),
                     constant_mask: None,
                 })

@@ -69,21 +69,31 @@ pub fn run_strata(args: &[&str], deadline: Duration) -> Option<Output> {
     }
 }
 
-/// A scene file composed, compiled (JIT, optimised) and built for rendering, with its
-/// materials; panics with the rendered diagnostics on any error.
+/// A scene file composed, compiled (JIT, optimised) and built for rendering as `strata
+/// render` builds it (displaced surfaces diced for a 640x480 image), with its materials;
+/// panics with the rendered diagnostics on any error.
 pub fn scene_file(path: &std::path::Path) -> (strata::render::Scene, Vec<Arc<dyn MaterialCode>>) {
+    scene_file_with(path, BackendKind::Jit, true, (640, 480))
+}
+
+/// [`scene_file`] with a backend, optimisation and the image size dicing measures against.
+pub fn scene_file_with(
+    path: &std::path::Path,
+    backend: BackendKind,
+    optimize: bool,
+    resolution: (usize, usize),
+) -> (strata::render::Scene, Vec<Arc<dyn MaterialCode>>) {
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
-    let compiled = strata::cli::compile_scene(
-        Some(path),
-        BackendKind::Jit,
-        PassOptions { optimize: true },
-        &mut sources,
-        &mut diags,
-    )
-    .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
+    let compiled = strata::cli::compile_scene(Some(path), backend, PassOptions { optimize }, &mut sources, &mut diags)
+        .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
     let strata::cli::CompiledScene { stage, materials, prim_material, .. } = compiled;
-    let scene = strata::render::Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags)
+    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    let options = strata::render::scene::SceneOptions {
+        dicing: strata::render::displace::DicingOptions { resolution, ..Default::default() },
+        ..Default::default()
+    };
+    let scene = strata::render::Scene::build(&stage, &|p| prim_material.get(p).copied(), &refs, &options, &mut diags)
         .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
     assert!(!diags.has_errors(), "{}", diags.render(&sources));
     (scene, materials)
@@ -116,6 +126,6 @@ pub fn render_scene(
 
 /// [`scene_file`] rendered with `settings`.
 pub fn render_file(path: &std::path::Path, settings: &strata::render::RenderSettings) -> strata::render::Image {
-    let (scene, materials) = scene_file(path);
+    let (scene, materials) = scene_file_with(path, BackendKind::Jit, true, (settings.width, settings.height));
     render_scene(&scene, &materials, settings)
 }

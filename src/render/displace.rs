@@ -1,0 +1,635 @@
+//! True displacement (docs/DESIGN.md rule 6): the surfaces of prims whose composed material
+//! has a displacement that moves geometry are diced into micro-triangles about a pixel long
+//! and each micro-vertex is moved along the surface normal by the rule-6 combination of the
+//! layers' heights, evaluated (masks included) at the undisplaced point.
+//!
+//! - **Which prims.** Those whose material has a layer with a `displacement_bound` (the
+//!   built-in `displacement` node, or any node with a `bound` input). `bump` layers never move
+//!   geometry; the integrator bends the shading normal by them (and by everything, on prims
+//!   that were not diced). Nothing else is re-tessellated, so a scene without displacement
+//!   pays nothing. Quadrics become meshes only here ([`Part::base_mesh`]).
+//! - **Dicing.** Every edge is split at its midpoint while it spans more than `rate` pixels
+//!   (its length over its distance to the camera, against one pixel's angle) and is longer
+//!   than a scene-relative floor. The decision depends on the edge's two end points only, so
+//!   the two triangles sharing an edge split it identically: no T-junctions. A triangle with
+//!   one, two or three split edges becomes two, three or four and is diced again. Midpoints of
+//!   quadric edges are projected back onto the exact surface. When the micro-triangles would
+//!   pass the budget, the rate doubles until they fit (reported).
+//! - **Watertight.** Vertices are welded by exact position across every displaced prim; each
+//!   welded vertex has one normal (the mean of its corners' normals, so hard edges open no
+//!   crack) and one height, so shared edges stay shared after displacement.
+//! - **Bound.** Each layer's height is clamped to `±bound`; clamped and non-finite samples
+//!   are counted and reported per layer.
+//! - **Shading.** Micro-triangles carry smooth normals of the displaced mesh and the source's
+//!   texture coordinates; detail finer than the dicing rate is not bumped back.
+//!
+//! Geometry inside instances is not diced (its prototype is shared by instances at different
+//! distances); a warning says so and those prims are bumped.
+
+use super::camera::Camera;
+use super::geometry::{Geometry, Triangle};
+use super::shapes::Shape;
+use crate::abi::{Globals, MaterialCode};
+use crate::diag::{Diagnostic, Diagnostics};
+use crate::layering::{self, Relief};
+use glam::{DVec3, Vec2, Vec3};
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::fmt;
+use std::time::Instant;
+
+/// The default `--dicing-rate`: micro-triangle edges of about one pixel.
+pub const DEFAULT_DICING_RATE: f32 = 1.0;
+
+/// The default micro-triangle budget of a scene: 2^22 (about a gigabyte of triangles and
+/// BVH). Past it the dicing rate is coarsened until the scene fits.
+pub const DEFAULT_MICRO_TRIANGLE_BUDGET: usize = 1 << 22;
+
+/// Splits per edge at most, whatever the rate (a guard against a camera inside a surface;
+/// the scene-relative edge floor normally stops dicing first).
+const MAX_DEPTH: u32 = 24;
+
+/// How displaced surfaces are diced.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DicingOptions {
+    /// Target micro-triangle edge length in pixels (`--dicing-rate`).
+    pub rate: f32,
+    /// The most micro-triangles the scene may have.
+    pub budget: usize,
+    /// Image width and height in pixels (dicing measures edges against one pixel).
+    pub resolution: (usize, usize),
+}
+
+impl Default for DicingOptions {
+    fn default() -> DicingOptions {
+        DicingOptions { rate: DEFAULT_DICING_RATE, budget: DEFAULT_MICRO_TRIANGLE_BUDGET, resolution: (640, 480) }
+    }
+}
+
+/// What displacement cost, for `--stats` and benchmarks.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DisplacementStats {
+    /// Prims diced.
+    pub prims: usize,
+    /// Triangles (and quadric base-mesh triangles) they had before dicing.
+    pub source_triangles: usize,
+    /// Micro-triangles they became.
+    pub micro_triangles: usize,
+    /// Displaced vertices (each evaluated once).
+    pub vertices: usize,
+    /// The dicing rate used, in pixels (above the requested one when the budget bound).
+    pub rate: f32,
+    /// Height samples clamped to their layer's bound.
+    pub clamped: u64,
+    /// Height samples that were NaN or infinite (taken as 0).
+    pub non_finite: u64,
+    /// Bytes of the micro-triangles (before the BVH).
+    pub bytes: usize,
+    /// Dicing and evaluation time in milliseconds.
+    pub ms: f64,
+}
+
+impl fmt::Display for DisplacementStats {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "displacement: {} prims, {} source triangles → {} micro-triangles at {} px ({} vertices, {:.1} MiB) \
+             in {:.1} ms; {} samples clamped, {} non-finite",
+            self.prims,
+            self.source_triangles,
+            self.micro_triangles,
+            self.rate,
+            self.vertices,
+            self.bytes as f64 / (1024.0 * 1024.0),
+            self.ms,
+            self.clamped,
+            self.non_finite
+        )
+    }
+}
+
+/// The result of [`displace`]: which prims were diced, and what it cost.
+#[derive(Clone, Debug, Default)]
+pub struct Displaced {
+    /// Per renderable prim: whether its surface was diced and moved.
+    pub prims: Vec<bool>,
+    /// `None` when nothing was displaced.
+    pub stats: Option<DisplacementStats>,
+}
+
+/// Whether a material has a layer whose displacement moves geometry.
+pub fn moves_geometry(material: &dyn MaterialCode) -> bool {
+    material.info().layers.iter().any(|l| l.displacement.is_some() && l.displacement_bound.is_some())
+}
+
+/// A welded vertex of the surface being diced.
+#[derive(Clone, Copy, Debug)]
+struct Vertex {
+    /// Undisplaced world position.
+    p: DVec3,
+    /// Unit displacement direction (the outward surface normal, averaged where corners meet).
+    n: DVec3,
+    /// Where the displacement is evaluated in texture space (the first corner's).
+    uv: Vec2,
+    /// Tangents for the shading globals.
+    dpdu: Vec3,
+    dpdv: Vec3,
+    /// The renderable prim whose material displaces it.
+    prim: u32,
+}
+
+/// A triangle corner: a welded vertex and its (face-varying) texture coordinate.
+#[derive(Clone, Copy, Debug)]
+struct Corner {
+    v: u32,
+    uv: Vec2,
+}
+
+/// A triangle being diced, with the index of the source it came from.
+#[derive(Clone, Copy, Debug)]
+struct Face {
+    c: [Corner; 3],
+    source: u32,
+}
+
+/// What a source triangle contributes to its micro-triangles.
+#[derive(Clone, Copy, Debug)]
+struct Source {
+    prim: u32,
+    has_uv: bool,
+    /// The quadric part it was cut from (midpoints are projected onto it), if any.
+    shape: Option<u32>,
+    /// Flat tangents (triangles); quadric tangents come from the projection.
+    dpdu: Vec3,
+    dpdv: Vec3,
+}
+
+/// The welded base mesh of every displaced prim.
+struct Base {
+    vertices: Vec<Vertex>,
+    faces: Vec<Face>,
+    sources: Vec<Source>,
+    shapes: Vec<Shape>,
+}
+
+/// The key two positions weld on: their exact bits, with −0 as +0.
+fn weld_key(p: DVec3) -> [u64; 3] {
+    p.to_array().map(|x| (x + 0.0).to_bits())
+}
+
+impl Base {
+    fn build(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Base {
+        let mut base = Base { vertices: Vec::new(), faces: Vec::new(), sources: Vec::new(), shapes };
+        let mut index: HashMap<[u64; 3], u32> = HashMap::new();
+        let mut normal_sums: Vec<DVec3> = Vec::new();
+        let mut corner = |base: &mut Base, p: DVec3, n: DVec3, uv: Vec2, source: &Source| -> Corner {
+            let v = *index.entry(weld_key(p)).or_insert_with(|| {
+                base.vertices.push(Vertex { p, n, uv, dpdu: source.dpdu, dpdv: source.dpdv, prim: source.prim });
+                normal_sums.push(DVec3::ZERO);
+                base.vertices.len() as u32 - 1
+            });
+            normal_sums[v as usize] += n;
+            Corner { v, uv }
+        };
+        for t in &triangles {
+            let (dpdu, dpdv) = super::accel::tangents(t.p, t.uv, t.cross().normalize_or_zero());
+            let source = Source { prim: t.prim, has_uv: t.has_uv, shape: None, dpdu, dpdv };
+            let c = [0, 1, 2].map(|k| corner(&mut base, t.p[k].as_dvec3(), t.n[k].as_dvec3(), t.uv[k], &source));
+            base.faces.push(Face { c, source: base.sources.len() as u32 });
+            base.sources.push(source);
+        }
+        for s in 0..base.shapes.len() {
+            let shape = base.shapes[s].clone();
+            for tri in shape.part.base_mesh() {
+                let geometry = tri.map(|(local, _)| shape.part.local_geometry(local));
+                let world = geometry.map(|(p, ..)| shape.to_world.transform_point3(p));
+                let normals = geometry.map(|(_, n, ..)| (shape.normal_to_world * n).normalize_or_zero());
+                let cross = (world[1] - world[0]).cross(world[2] - world[0]);
+                if cross.length_squared() == 0.0 || !cross.is_finite() {
+                    continue;
+                }
+                // Wind outward: the analytic normal decides.
+                let order = if cross.dot(normals[0] + normals[1] + normals[2]) < 0.0 { [0, 2, 1] } else { [0, 1, 2] };
+                let (_, _, _, dpdu, dpdv) = geometry[0];
+                let source = Source {
+                    prim: shape.prim,
+                    has_uv: true,
+                    shape: Some(s as u32),
+                    dpdu: shape.to_world.transform_vector3(dpdu).as_vec3(),
+                    dpdv: shape.to_world.transform_vector3(dpdv).as_vec3(),
+                };
+                let c = order.map(|k| corner(&mut base, world[k], normals[k], tri[k].1, &source));
+                base.faces.push(Face { c, source: base.sources.len() as u32 });
+                base.sources.push(source);
+            }
+        }
+        for (v, sum) in base.vertices.iter_mut().zip(&normal_sums) {
+            let n = sum.normalize_or_zero();
+            if n != DVec3::ZERO && n.is_finite() {
+                v.n = n;
+            }
+        }
+        base
+    }
+}
+
+/// The edge test of one dicing pass.
+struct Dicer<'a> {
+    base: &'a Base,
+    vertices: Vec<Vertex>,
+    midpoints: HashMap<(u32, u32), u32>,
+    faces: Vec<Face>,
+    eye: DVec3,
+    /// `rate` pixels at unit distance, in radians (small-angle).
+    angle: f64,
+    /// Edges shorter than this are never split.
+    floor: f64,
+    budget: usize,
+}
+
+impl Dicer<'_> {
+    fn splits(&self, a: u32, b: u32) -> bool {
+        let (pa, pb) = (self.vertices[a as usize].p, self.vertices[b as usize].p);
+        let len = pa.distance(pb);
+        let distance = ((pa + pb) * 0.5).distance(self.eye).max(self.floor);
+        len > self.floor && len > self.angle * distance
+    }
+
+    /// The vertex halfway along edge `(a, b)` of a face from `source`, created once per edge.
+    fn midpoint(&mut self, a: Corner, b: Corner, source: &Source) -> Corner {
+        let uv = (a.uv + b.uv) * 0.5;
+        let key = (a.v.min(b.v), a.v.max(b.v));
+        if let Some(&v) = self.midpoints.get(&key) {
+            return Corner { v, uv };
+        }
+        let (va, vb) = (self.vertices[a.v as usize], self.vertices[b.v as usize]);
+        let mid = (va.p + vb.p) * 0.5;
+        let mut vertex = Vertex {
+            p: mid,
+            n: (va.n + vb.n).try_normalize().unwrap_or(va.n),
+            uv,
+            dpdu: source.dpdu,
+            dpdv: source.dpdv,
+            prim: source.prim,
+        };
+        if let Some(s) = source.shape {
+            let shape = &self.base.shapes[s as usize];
+            let (p, n, _, dpdu, dpdv) = shape.part.local_geometry(shape.to_object.transform_point3(mid));
+            let n = (shape.normal_to_world * n).normalize_or_zero();
+            let p = shape.to_world.transform_point3(p);
+            if p.is_finite() && n != DVec3::ZERO {
+                vertex.p = p;
+                // Keep a rim's averaged direction (both sides' normals) where the ends have one.
+                if va.n.dot(n) > 0.999 && vb.n.dot(n) > 0.999 {
+                    vertex.n = n;
+                }
+                vertex.dpdu = shape.to_world.transform_vector3(dpdu).as_vec3();
+                vertex.dpdv = shape.to_world.transform_vector3(dpdv).as_vec3();
+            }
+        }
+        let v = self.vertices.len() as u32;
+        self.vertices.push(vertex);
+        self.midpoints.insert(key, v);
+        Corner { v, uv }
+    }
+
+    /// Dices `face` into `self.faces`; `Err` when the budget is passed.
+    fn dice(&mut self, face: Face, depth: u32) -> Result<(), ()> {
+        let c = face.c;
+        let split = [self.splits(c[0].v, c[1].v), self.splits(c[1].v, c[2].v), self.splits(c[2].v, c[0].v)];
+        let count = split.iter().filter(|&&s| s).count();
+        if count == 0 || depth >= MAX_DEPTH {
+            if self.faces.len() >= self.budget {
+                return Err(());
+            }
+            self.faces.push(face);
+            return Ok(());
+        }
+        let source = self.base.sources[face.source as usize];
+        let face_of = |c: [Corner; 3]| Face { c, source: face.source };
+        // Rotate so the split edges come first: edge k joins corners k and k + 1.
+        let first = match count {
+            1 => split.iter().position(|&s| s).unwrap_or(0),
+            2 => (split.iter().position(|&s| !s).unwrap_or(0) + 1) % 3,
+            _ => 0,
+        };
+        let [a, b, cc] = [c[first], c[(first + 1) % 3], c[(first + 2) % 3]];
+        match count {
+            1 => {
+                let m = self.midpoint(a, b, &source);
+                self.dice(face_of([a, m, cc]), depth + 1)?;
+                self.dice(face_of([m, b, cc]), depth + 1)
+            }
+            2 => {
+                // Edges (a, b) and (b, cc) split; the quad left is cut on its shorter diagonal.
+                let mab = self.midpoint(a, b, &source);
+                let mbc = self.midpoint(b, cc, &source);
+                self.dice(face_of([mab, b, mbc]), depth + 1)?;
+                let p = |c: Corner| self.vertices[c.v as usize].p;
+                if p(a).distance_squared(p(mbc)) <= p(mab).distance_squared(p(cc)) {
+                    self.dice(face_of([a, mab, mbc]), depth + 1)?;
+                    self.dice(face_of([a, mbc, cc]), depth + 1)
+                } else {
+                    self.dice(face_of([a, mab, cc]), depth + 1)?;
+                    self.dice(face_of([mab, mbc, cc]), depth + 1)
+                }
+            }
+            _ => {
+                let mab = self.midpoint(a, b, &source);
+                let mbc = self.midpoint(b, cc, &source);
+                let mca = self.midpoint(cc, a, &source);
+                self.dice(face_of([a, mab, mca]), depth + 1)?;
+                self.dice(face_of([mab, b, mbc]), depth + 1)?;
+                self.dice(face_of([mca, mbc, cc]), depth + 1)?;
+                self.dice(face_of([mab, mbc, mca]), depth + 1)
+            }
+        }
+    }
+}
+
+/// Heights outside the bound, per (material, layer): count and the largest |height|.
+type Excess = HashMap<(usize, usize), (u64, f32)>;
+
+/// What evaluating the displacement of a run of vertices found.
+#[derive(Default)]
+struct Evaluated {
+    clamped: Excess,
+    non_finite: Excess,
+    /// The first shader fault: (prim, message).
+    fault: Option<(u32, String)>,
+    faults: u64,
+}
+
+impl Evaluated {
+    fn merge(mut self, other: Evaluated) -> Evaluated {
+        for (map, from) in [(&mut self.clamped, other.clamped), (&mut self.non_finite, other.non_finite)] {
+            for (key, (count, largest)) in from {
+                let entry = map.entry(key).or_insert((0, 0.0));
+                entry.0 += count;
+                entry.1 = entry.1.max(largest);
+            }
+        }
+        self.fault = self.fault.or(other.fault);
+        self.faults += other.faults;
+        self
+    }
+}
+
+/// Per-thread scratch of [`height`]: one float per layer.
+struct Scratch {
+    masks: Vec<f32>,
+    heights: Vec<f32>,
+}
+
+/// The rule-6 height of the layers that move geometry at vertex `v` (masks and heights at
+/// the undisplaced point), each layer's height clamped to its bound. Every mask that weights
+/// a displacement is read, a bump layer's too: a `mix` bump layer hides the relief below it.
+fn height(material: &dyn MaterialCode, m: usize, v: &Vertex, scratch: &mut Scratch, out: &mut Evaluated) -> f32 {
+    let layers = &material.info().layers;
+    let nl = layers.len();
+    scratch.masks.resize(nl, 0.0);
+    scratch.heights.resize(nl, 0.0);
+    let (masks, heights) = (&mut scratch.masks[..nl], &mut scratch.heights[..nl]);
+    let n = v.n.as_vec3().to_array();
+    let g = Globals {
+        p: v.p.as_vec3().to_array(),
+        n,
+        ng: n,
+        i: (-v.n.as_vec3()).to_array(),
+        dpdu: v.dpdu.to_array(),
+        dpdv: v.dpdv.to_array(),
+        u: v.uv.x,
+        v: v.uv.y,
+    };
+    let run = |masks: &mut [f32], heights: &mut [f32]| -> Result<(), crate::abi::ShaderError> {
+        for (i, layer) in layers.iter().enumerate() {
+            masks[i] = match (layer.mask_weights_displacement(), layer.constant_mask) {
+                (false, _) => 0.0,
+                (true, Some(m)) => m,
+                (true, None) => material.mask(&g, i)?,
+            };
+        }
+        material.displacement(&g, heights)
+    };
+    if let Err(e) = run(masks, heights) {
+        out.faults += 1;
+        out.fault.get_or_insert((v.prim, e.to_string()));
+        return 0.0;
+    }
+    for (i, layer) in layers.iter().enumerate() {
+        let Some(bound) = layer.displacement_bound else { continue };
+        let h = heights[i];
+        if !h.is_finite() {
+            out.non_finite.entry((m, i)).or_insert((0, 0.0)).0 += 1;
+            heights[i] = 0.0;
+        } else if h.abs() > bound {
+            let entry = out.clamped.entry((m, i)).or_insert((0, 0.0));
+            entry.0 += 1;
+            entry.1 = entry.1.max(h.abs());
+            heights[i] = h.clamp(-bound, bound);
+        }
+    }
+    layering::combine_relief(layers, heights, masks, Relief::Geometry)
+}
+
+/// Dices and displaces, in place, every world prim of `geometry` whose material (by
+/// `prim_material`, into `materials`) moves geometry. `camera` must have the image's aspect.
+pub fn displace(
+    geometry: &mut Geometry,
+    prim_material: &[usize],
+    materials: &[&dyn MaterialCode],
+    camera: &Camera,
+    options: &DicingOptions,
+    diags: &mut Diagnostics,
+) -> Displaced {
+    let start = Instant::now();
+    let nprims = geometry.prims.len();
+    let mut moves: Vec<bool> = (0..nprims)
+        .map(|p| prim_material.get(p).and_then(|&m| materials.get(m)).is_some_and(|m| moves_geometry(*m)))
+        .collect();
+    if !moves.iter().any(|&m| m) {
+        return Displaced { prims: vec![false; nprims], stats: None };
+    }
+    let mut instanced: Vec<u32> = geometry.instance_prims.iter().copied().filter(|&p| moves[p as usize]).collect();
+    instanced.sort_unstable();
+    instanced.dedup();
+    if let Some(&first) = instanced.first() {
+        let more = if instanced.len() > 1 { format!(" (and {} more)", instanced.len() - 1) } else { String::new() };
+        diags.push(
+            Diagnostic::warning(format!(
+                "displacement inside instances is not diced: `{}`{more} renders with its displacement as a bump",
+                geometry.prims[first as usize].path
+            ))
+            .at(geometry.prims[first as usize].span, "instanced here")
+            .note("the prototype is shared by instances at different distances; make the prim not instanceable to displace it"),
+        );
+        for p in instanced {
+            moves[p as usize] = false;
+        }
+    }
+    let (diced, kept): (Vec<Triangle>, Vec<Triangle>) =
+        std::mem::take(&mut geometry.triangles).into_iter().partition(|t| moves[t.prim as usize]);
+    let (diced_shapes, kept_shapes): (Vec<Shape>, Vec<Shape>) =
+        std::mem::take(&mut geometry.shapes).into_iter().partition(|s| moves[s.prim as usize]);
+    geometry.triangles = kept;
+    geometry.shapes = kept_shapes;
+    let mut displaced = vec![false; nprims];
+    for t in &diced {
+        displaced[t.prim as usize] = true;
+    }
+    for s in &diced_shapes {
+        displaced[s.prim as usize] = true;
+    }
+    let base = Base::build(diced, diced_shapes);
+    let (lo, hi) =
+        base.vertices.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), v| (lo.min(v.p), hi.max(v.p)));
+    let extent = if base.vertices.is_empty() { 1.0 } else { (hi - lo).length().max(f64::MIN_POSITIVE) };
+    let (width, height_px) = options.resolution;
+    let camera = camera.with_aspect(width as f32 / height_px.max(1) as f32);
+    let pixel = camera.pixel_angle(width.max(1)) as f64;
+    let requested = if options.rate.is_finite() && options.rate > 0.0 { options.rate } else { DEFAULT_DICING_RATE };
+    let mut rate = requested;
+    // Dice; past the budget, coarsen and dice again (each doubling roughly quarters the count).
+    let dicer = loop {
+        let mut dicer = Dicer {
+            base: &base,
+            vertices: base.vertices.clone(),
+            midpoints: HashMap::new(),
+            faces: Vec::with_capacity(base.faces.len()),
+            eye: camera.origin().as_dvec3(),
+            angle: pixel * rate as f64,
+            floor: extent * 1e-6,
+            budget: options.budget.max(base.faces.len()),
+        };
+        if base.faces.iter().try_for_each(|&f| dicer.dice(f, 0)).is_ok() {
+            break dicer;
+        }
+        rate *= 2.0;
+    };
+    if rate != requested {
+        diags.push(Diagnostic::warning(format!(
+            "displacement: dicing at {requested} px would pass the budget of {} micro-triangles; diced at {rate} px",
+            options.budget
+        )));
+    }
+    let Dicer { vertices, faces, .. } = dicer;
+    // One height per welded vertex, in parallel.
+    let material_of = |v: &Vertex| prim_material.get(v.prim as usize).copied().unwrap_or(0);
+    let (heights, evaluated): (Vec<f32>, Evaluated) = vertices
+        .par_chunks(4096)
+        .map(|chunk| {
+            let mut found = Evaluated::default();
+            let mut scratch = Scratch { masks: Vec::new(), heights: Vec::new() };
+            let heights: Vec<f32> = chunk
+                .iter()
+                .map(|v| {
+                    let m = material_of(v);
+                    materials.get(m).map_or(0.0, |material| height(*material, m, v, &mut scratch, &mut found))
+                })
+                .collect();
+            (heights, found)
+        })
+        .reduce(
+            || (Vec::new(), Evaluated::default()),
+            |(mut a, fa), (b, fb)| {
+                a.extend(b);
+                (a, fa.merge(fb))
+            },
+        );
+    let moved: Vec<Vec3> = vertices.iter().zip(&heights).map(|(v, &h)| (v.p + v.n * h as f64).as_vec3()).collect();
+    // Smooth normals of the displaced mesh: area-weighted face normals per welded vertex.
+    let mut normals = vec![Vec3::ZERO; vertices.len()];
+    for f in &faces {
+        let [a, b, c] = f.c.map(|c| moved[c.v as usize]);
+        let cross = (b - a).cross(c - a);
+        for corner in f.c {
+            normals[corner.v as usize] += cross;
+        }
+    }
+    let normals: Vec<Vec3> = normals
+        .iter()
+        .zip(&vertices)
+        .map(|(n, v)| n.try_normalize().filter(|n| n.is_finite()).unwrap_or(v.n.as_vec3()))
+        .collect();
+    let before = geometry.triangles.len();
+    geometry.triangles.extend(faces.iter().map(|f| {
+        let source = &base.sources[f.source as usize];
+        Triangle {
+            p: f.c.map(|c| moved[c.v as usize]),
+            n: f.c.map(|c| normals[c.v as usize]),
+            uv: f.c.map(|c| c.uv),
+            prim: source.prim,
+            has_uv: source.has_uv,
+        }
+    }));
+    let micro = geometry.triangles.len() - before;
+    report(&evaluated, geometry, prim_material, materials, &vertices, diags);
+    let stats = DisplacementStats {
+        prims: displaced.iter().filter(|&&d| d).count(),
+        source_triangles: base.faces.len(),
+        micro_triangles: micro,
+        vertices: vertices.len(),
+        rate,
+        clamped: evaluated.clamped.values().map(|(c, _)| c).sum(),
+        non_finite: evaluated.non_finite.values().map(|(c, _)| c).sum(),
+        bytes: micro * std::mem::size_of::<Triangle>(),
+        ms: start.elapsed().as_secs_f64() * 1e3,
+    };
+    Displaced { prims: displaced, stats: Some(stats) }
+}
+
+/// Warnings for clamped and non-finite heights (one per material layer) and shader faults.
+fn report(
+    evaluated: &Evaluated,
+    geometry: &Geometry,
+    prim_material: &[usize],
+    materials: &[&dyn MaterialCode],
+    vertices: &[Vertex],
+    diags: &mut Diagnostics,
+) {
+    // A prim of each material, to point at.
+    let prim_of = |m: usize| {
+        let p = vertices.iter().find(|v| prim_material.get(v.prim as usize) == Some(&m)).map_or(0, |v| v.prim);
+        &geometry.prims[p as usize]
+    };
+    let mut keys: Vec<_> = evaluated.clamped.keys().chain(evaluated.non_finite.keys()).copied().collect();
+    keys.sort_unstable();
+    keys.dedup();
+    for (m, layer) in keys {
+        let info = &materials[m].info().layers[layer];
+        let prim = prim_of(m);
+        if let Some(&(count, largest)) = evaluated.clamped.get(&(m, layer)) {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "displacement of layer `{}` on `{}`: {count} of {} heights passed its bound {} (largest |height| \
+                     {largest}) and were clamped",
+                    info.slot,
+                    prim.path,
+                    vertices.len(),
+                    info.displacement_bound.unwrap_or(f32::INFINITY)
+                ))
+                .at(prim.span, "displaced here")
+                .note("raise the displacement node's `bound` to at least the largest height"),
+            );
+        }
+        if let Some(&(count, _)) = evaluated.non_finite.get(&(m, layer)) {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "displacement of layer `{}` on `{}`: {count} heights were NaN or infinite and were taken as 0",
+                    info.slot, prim.path
+                ))
+                .at(prim.span, "displaced here"),
+            );
+        }
+    }
+    if let Some((prim, message)) = &evaluated.fault {
+        let prim = &geometry.prims[*prim as usize];
+        diags.push(
+            Diagnostic::warning(format!(
+                "displacement on `{}`: {message} at {} vertices; they were not moved",
+                prim.path, evaluated.faults
+            ))
+            .at(prim.span, "displaced here"),
+        );
+    }
+}

@@ -1,0 +1,457 @@
+//! True displacement (docs/DESIGN.md rule 6) against answers known without strata:
+//!
+//! - a sphere of radius r with constant displacement d has the silhouette, depth and shadow
+//!   of a sphere of radius r + d (closed-form disc and ellipse areas, distances);
+//! - `none`/`add`/`mix` layers with masks varying over the surface move a plane to the
+//!   height rule 6 gives at each point (evaluated by hand, not by strata);
+//! - heights beyond a layer's bound are clamped to it and reported;
+//! - displaced closed surfaces stay closed: every micro-edge is shared by exactly two
+//!   micro-triangles with bit-identical end points, and rays from inside all hit;
+//! - JIT = interpreter and optimised = unoptimised, bit for bit, on a displaced layered image.
+
+mod common;
+
+use glam::Vec3;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use strata::backend::BackendKind;
+use strata::render::Scene;
+
+/// Node types the test substances share: an affine function of the texture coordinates.
+const PATTERNS: &str = r#"
+shader uv_affine(float c = 0.0, float gu = 0.0, float gv = 0.0, output float out) {
+    out = c + gu * u + gv * v;
+}
+"#;
+
+/// Writes `ash` and a stage of `prims` (USD text) whose `material:slotBinding` targets
+/// `/Looks/<name>` for each substance in `substances`, with a camera and a light.
+fn stage(dir: &Path, ash: &str, substances: &[&str], prims: &str, extra: &str) -> PathBuf {
+    std::fs::write(dir.join("d.ash"), format!("{PATTERNS}{ash}")).unwrap();
+    let looks: String = substances
+        .iter()
+        .map(|name| {
+            format!(
+                r#"    def Material "{name}" {{
+        def Shader "S" {{
+            uniform token info:implementationSource = "sourceAsset"
+            uniform asset info:strata:sourceAsset = @d.ash@
+            uniform token info:strata:sourceAsset:subIdentifier = "{name}"
+        }}
+    }}
+"#
+            )
+        })
+        .collect();
+    let usda = format!("#usda 1.0\n(\n    upAxis = \"Y\"\n)\n{prims}\n{extra}\ndef Scope \"Looks\" {{\n{looks}}}\n");
+    let path = dir.join("d.usda");
+    std::fs::write(&path, usda).unwrap();
+    path
+}
+
+/// `material:slotBinding` lines binding `names` bottom to top in slots 000, 010, …
+fn bindings(names: &[&str]) -> String {
+    names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| format!("    rel material:slotBinding:_{:03} = </Looks/{n}>\n", i * 10))
+        .collect()
+}
+
+/// A camera at `at` looking along −z after `rotate` (degrees XYZ), 50 mm over a 20.955 mm
+/// aperture: `tan(half fov) = 0.20955`.
+fn camera(name: &str, at: [f64; 3], rotate: [f64; 3]) -> String {
+    format!(
+        r#"def Camera "{name}" {{
+    float focalLength = 50
+    float horizontalAperture = 20.955
+    float2 clippingRange = (0.01, 1000)
+    double3 xformOp:translate = ({}, {}, {})
+    double3 xformOp:rotateXYZ = ({}, {}, {})
+    uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateXYZ"]
+}}
+"#,
+        at[0], at[1], at[2], rotate[0], rotate[1], rotate[2]
+    )
+}
+
+const TAN_HALF: f64 = 20.955 / 100.0;
+
+fn channel<'a>(image: &'a strata::render::Image, name: &str) -> &'a [f32] {
+    image.f32_channel(name).unwrap_or_else(|| panic!("no channel {name}"))
+}
+
+fn render(path: &Path, camera: Option<&str>, res: (usize, usize), spp: u32, depth: u32) -> strata::render::Image {
+    let (scene, materials) = built(path, camera, res, BackendKind::Jit, true);
+    common::render_scene(&scene, &materials, &common::settings(res.0, res.1, spp, 1, depth))
+}
+
+/// The scene as `strata render` builds it, through `camera`.
+fn built(
+    path: &Path,
+    camera: Option<&str>,
+    res: (usize, usize),
+    backend: BackendKind,
+    optimize: bool,
+) -> (Scene, Vec<std::sync::Arc<dyn strata::abi::MaterialCode>>) {
+    let mut sources = strata::diag::SourceMap::new();
+    let mut diags = strata::diag::Diagnostics::new();
+    let compiled = strata::cli::compile_scene(
+        Some(path),
+        backend,
+        strata::ir::wired::PassOptions { optimize },
+        &mut sources,
+        &mut diags,
+    )
+    .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
+    let refs: Vec<&dyn strata::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
+    let options = strata::render::scene::SceneOptions {
+        camera: camera.map(str::to_string),
+        dicing: strata::render::displace::DicingOptions { resolution: res, ..Default::default() },
+        ..Default::default()
+    };
+    let scene = Scene::build(&compiled.stage, &|p| compiled.prim_material.get(p).copied(), &refs, &options, &mut diags)
+        .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
+    assert!(!diags.has_errors(), "{}", diags.render(&sources));
+    (scene, compiled.materials)
+}
+
+const GROWN: &str = r#"
+substance Grown {
+    input float amount = 0.25;
+    node bsdf = diffuse(albedo: color(0.7, 0.7, 0.7));
+    node d = displacement(height: amount, mode: "none");
+    surface = bsdf.bsdf;
+    displacement = d.out;
+}
+substance Floor {
+    node bsdf = diffuse(albedo: color(0.5, 0.5, 0.5));
+    surface = bsdf.bsdf;
+}
+"#;
+
+/// A unit sphere displaced by 0.25 is a sphere of radius 1.25: its silhouette covers the
+/// disc of angular radius asin(1.25 / 10), its nearest point is 8.75 away, and its shadow
+/// under a 45° sun is the ellipse of semi-axes 1.25 and 1.25·√2.
+#[test]
+fn sphere_with_constant_displacement_is_the_larger_sphere() {
+    let dir = tempfile::tempdir().unwrap();
+    let ball = format!("def Sphere \"Ball\" {{\n{}}}\n", bindings(&["Grown"]));
+    let floor = format!(
+        "def Mesh \"Floor\" {{\n{}    uniform token subdivisionScheme = \"none\"\n    int[] faceVertexCounts = [4]\n    \
+         int[] faceVertexIndices = [0, 1, 2, 3]\n    point3f[] points = [(-30, -4, 30), (30, -4, 30), (30, -4, -30), (-30, -4, -30)]\n}}\n",
+        bindings(&["Floor"])
+    );
+    // The sun shines down and towards −z at 45°: the ball's shadow centre is 4 units along −z.
+    let sun = "def DistantLight \"Sun\" {\n    float inputs:intensity = 3\n    float inputs:angle = 0\n    \
+               double3 xformOp:rotateXYZ = (-45, 0, 0)\n    uniform token[] xformOpOrder = [\"xformOp:rotateXYZ\"]\n}\n";
+
+    // Silhouette and depth from the front, the ball alone.
+    let prims = format!("{}{ball}", camera("Front", [0.0, 0.0, 10.0], [0.0, 0.0, 0.0]));
+    let path = stage(dir.path(), GROWN, &["Grown"], &prims, sun);
+    let (w, h) = (240, 180);
+    let front = render(&path, None, (w, h), 16, 1);
+    let pixel = 2.0 * TAN_HALF / w as f64;
+    let disc = |r: f64| std::f64::consts::PI * ((r / 10.0f64).asin().tan() / pixel).powi(2);
+    let coverage: f64 = channel(&front, "A").iter().map(|&a| a as f64).sum();
+    assert!((coverage / disc(1.25) - 1.0).abs() < 0.005, "coverage {coverage} px, r + d disc {} px", disc(1.25));
+    let z = channel(&front, "Z");
+    let centre = z[(h / 2) * w + w / 2].min(z[(h / 2 - 1) * w + w / 2 - 1]);
+    assert!((centre - 8.75).abs() < 2e-3, "depth at the centre {centre}, expected 8.75");
+
+    // Shadow from above: floor pixels (depth ≈ 54) that the sun does not reach.
+    let prims = format!("{}{ball}{floor}", camera("Top", [0.0, 50.0, 0.0], [-90.0, 0.0, 0.0]));
+    let path = stage(dir.path(), GROWN, &["Grown", "Floor"], &prims, sun);
+    let (w, h) = (300, 300);
+    let top = render(&path, None, (w, h), 16, 1);
+    let (r, z) = (channel(&top, "R"), channel(&top, "Z"));
+    // The lit floor's radiance: the median floor pixel (most of the floor is lit).
+    let mut floor: Vec<f32> = (0..r.len()).filter(|&i| (z[i] - 54.0).abs() < 0.5).map(|i| r[i]).collect();
+    floor.sort_by(f32::total_cmp);
+    let lit = floor[floor.len() / 2];
+    let shadow: f64 =
+        (0..r.len()).filter(|&i| (z[i] - 54.0).abs() < 0.5).map(|i| 1.0 - (r[i] / lit).clamp(0.0, 1.0) as f64).sum();
+    let floor_pixel = 2.0 * TAN_HALF * 54.0 / w as f64;
+    let ellipse = |radius: f64| std::f64::consts::PI * radius * radius * std::f64::consts::SQRT_2;
+    let area = shadow * floor_pixel * floor_pixel;
+    eprintln!(
+        "coverage / (r + d) disc {:.4}; shadow / (r + d) ellipse {:.4}",
+        coverage / disc(1.25),
+        area / ellipse(1.25)
+    );
+    assert!(
+        (area / ellipse(1.25) - 1.0).abs() < 0.005,
+        "shadow {area:.3} units², r + d ellipse {:.3}, r ellipse {:.3}",
+        ellipse(1.25),
+        ellipse(1.0)
+    );
+}
+
+/// Rule 6's height at texture coordinates `(u, v)` for the layer stacks below, by hand.
+fn expected_height(case: &str, u: f64, v: f64) -> f64 {
+    let base = 0.1;
+    let added = base + 0.2 * u; // add, mask u
+    match case {
+        "none+add+mix" => added * (1.0 - v) + 0.05 * v, // mix 0.05, mask v
+        // A bump layer mixed on top with mask v hides the relief below by v, and its own
+        // height bends normals only.
+        "none+add+bump mix" => added * (1.0 - v),
+        _ => unreachable!(),
+    }
+}
+
+const LAYERS: &str = r#"
+substance Base {
+    node bsdf = diffuse(albedo: 0.5);
+    node d = displacement(height: 0.1, mode: "none");
+    surface = bsdf.bsdf;
+    displacement = d.out;
+}
+substance Added {
+    node bsdf = diffuse(albedo: 0.3);
+    node m = uv_affine(gu: 1.0);
+    node opacity = mask(opacity: m.out);
+    node d = displacement(height: 0.2, mode: "add");
+    surface = bsdf.bsdf;
+    mask = opacity.out;
+    displacement = d.out;
+}
+substance Mixed {
+    node bsdf = diffuse(albedo: 0.9);
+    node m = uv_affine(gv: 1.0);
+    node opacity = mask(opacity: m.out);
+    node d = displacement(height: 0.05, mode: "mix");
+    surface = bsdf.bsdf;
+    mask = opacity.out;
+    displacement = d.out;
+}
+substance BumpMixed {
+    node bsdf = diffuse(albedo: 0.9);
+    node m = uv_affine(gv: 1.0);
+    node opacity = mask(opacity: m.out);
+    node d = bump(height: 0.5, scale: 1.0, mode: "mix");
+    surface = bsdf.bsdf;
+    mask = opacity.out;
+    displacement = d.out;
+}
+"#;
+
+/// A 2×2 quad in the xz plane facing +y with `st = ((x + 1) / 2, (z + 1) / 2)`.
+fn quad(binding: &str) -> String {
+    format!(
+        "def Mesh \"Quad\" {{\n{binding}    uniform token subdivisionScheme = \"none\"\n    int[] faceVertexCounts = [4]\n    \
+         int[] faceVertexIndices = [0, 1, 2, 3]\n    \
+         point3f[] points = [(-1, 0, 1), (1, 0, 1), (1, 0, -1), (-1, 0, -1)]\n    \
+         texCoord2f[] primvars:st = [(0, 1), (1, 1), (1, 0), (0, 0)] (interpolation = \"vertex\")\n}}\n"
+    )
+}
+
+/// Heights of the displaced quad under rays cast straight down on a grid of points.
+fn heights_on_grid(scene: &Scene) -> Vec<(f64, f64, f64)> {
+    let mut out = Vec::new();
+    for i in 1..8 {
+        for j in 1..8 {
+            let (x, z) = (-1.0 + 2.0 * i as f32 / 8.0 + 0.013, -1.0 + 2.0 * j as f32 / 8.0 - 0.007);
+            let o = Vec3::new(x, 10.0, z);
+            let hit = scene.accel.intersect(o, -Vec3::Y, 0.0, f32::INFINITY).expect("the quad is below");
+            out.push((((x + 1.0) / 2.0) as f64, ((z + 1.0) / 2.0) as f64, (10.0 - hit.t) as f64));
+        }
+    }
+    out
+}
+
+#[test]
+fn layer_modes_with_varying_masks_move_the_surface_by_rule_6() {
+    for (case, stack) in
+        [("none+add+mix", ["Base", "Added", "Mixed"]), ("none+add+bump mix", ["Base", "Added", "BumpMixed"])]
+    {
+        let dir = tempfile::tempdir().unwrap();
+        let prims = format!("{}{}", camera("Top", [0.0, 6.0, 0.0], [-90.0, 0.0, 0.0]), quad(&bindings(&stack)));
+        let light = "def DomeLight \"Sky\" {}\n";
+        let path = stage(dir.path(), LAYERS, &stack, &prims, light);
+        let (scene, _) = built(&path, None, (128, 128), BackendKind::Jit, true);
+        let stats = scene.displacement.as_ref().expect("the quad is displaced");
+        assert!(stats.micro_triangles > 1000, "{case}: diced to {stats}");
+        for (u, v, height) in heights_on_grid(&scene) {
+            let expected = expected_height(case, u, v);
+            // Micro-triangles interpolate the bilinear height linearly: well under 1e-3 at
+            // about a pixel each.
+            assert!(
+                (height - expected).abs() < 1e-3,
+                "{case}: height {height:.5} at uv ({u:.3}, {v:.3}), rule 6 gives {expected:.5}"
+            );
+        }
+    }
+}
+
+#[test]
+fn heights_beyond_the_bound_are_clamped_and_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let ash = r#"
+substance Tall {
+    node bsdf = diffuse(albedo: 0.5);
+    node h = uv_affine(c: 0.1, gu: 2.0);
+    node d = displacement(height: h.out, mode: "none", bound: 0.5);
+    surface = bsdf.bsdf;
+    displacement = d.out;
+}
+"#;
+    let prims = format!("{}{}", camera("Top", [0.0, 6.0, 0.0], [-90.0, 0.0, 0.0]), quad(&bindings(&["Tall"])));
+    let path = stage(dir.path(), ash, &["Tall"], &prims, "def DomeLight \"Sky\" {}\n");
+    let mut sources = strata::diag::SourceMap::new();
+    let mut diags = strata::diag::Diagnostics::new();
+    let compiled = strata::cli::compile_scene(
+        Some(&path),
+        BackendKind::Jit,
+        strata::ir::wired::PassOptions::default(),
+        &mut sources,
+        &mut diags,
+    )
+    .expect("compiles");
+    let refs: Vec<&dyn strata::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
+    let options = strata::render::scene::SceneOptions {
+        dicing: strata::render::displace::DicingOptions { resolution: (64, 64), ..Default::default() },
+        ..Default::default()
+    };
+    let scene = Scene::build(&compiled.stage, &|p| compiled.prim_material.get(p).copied(), &refs, &options, &mut diags)
+        .expect("builds");
+    // Height 0.1 + 2u passes 0.5 at u = 0.2: clamped there, exact below.
+    for (u, v, height) in heights_on_grid(&scene) {
+        let expected = (0.1 + 2.0 * u).min(0.5);
+        assert!((height - expected).abs() < 2e-3, "height {height} at ({u}, {v}), expected {expected}");
+    }
+    let stats = scene.displacement.expect("displaced");
+    assert!(stats.clamped > 0 && (stats.clamped as usize) < stats.vertices, "{stats}");
+    let text = diags.render(&sources);
+    let warning =
+        diags.items().iter().find(|d| d.message.contains("passed its bound")).unwrap_or_else(|| panic!("{text}"));
+    assert!(warning.message.contains("bound 0.5") && warning.message.contains("largest |height| 2.1"), "{text}");
+    assert!(warning.message.contains(&format!("{} of {}", stats.clamped, stats.vertices)), "{text}");
+}
+
+const ROUGH: &str = r#"
+substance Rough {
+    node bsdf = diffuse(albedo: 0.6);
+    node n = fbm(scale: 3.0);
+    node h = math(a: n.out, b: 0.15, op: "mul");
+    node d = displacement(height: h.out, mode: "none");
+    surface = bsdf.bsdf;
+    displacement = d.out;
+}
+"#;
+
+/// Micro-triangles of the displaced prims (the world BVH's triangles) of `path`.
+fn micro_triangles(path: &Path) -> (Vec<[Vec3; 3]>, Scene) {
+    let (scene, _) = built(path, Some("/Cam"), (200, 150), BackendKind::Jit, true);
+    let triangles = scene.accel.world_triangles().to_vec();
+    (triangles, scene)
+}
+
+/// Every edge of a closed mesh is shared by exactly two triangles, end points bit-identical.
+fn open_edges(triangles: &[[Vec3; 3]]) -> usize {
+    let key = |p: Vec3| p.to_array().map(f32::to_bits);
+    let mut edges: HashMap<([u32; 3], [u32; 3]), u32> = HashMap::new();
+    for t in triangles {
+        for k in 0..3 {
+            let (a, b) = (key(t[k]), key(t[(k + 1) % 3]));
+            *edges.entry(if a < b { (a, b) } else { (b, a) }).or_default() += 1;
+        }
+    }
+    edges.values().filter(|&&n| n != 2).count()
+}
+
+/// Unit directions spread over the sphere (a Fibonacci lattice).
+fn directions(n: usize) -> impl Iterator<Item = Vec3> {
+    let golden = std::f32::consts::PI * (3.0 - 5.0f32.sqrt());
+    (0..n).map(move |i| {
+        let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+        let r = (1.0 - y * y).sqrt();
+        let phi = golden * i as f32;
+        Vec3::new(r * phi.cos(), y, r * phi.sin())
+    })
+}
+
+#[test]
+fn displaced_closed_surfaces_have_no_cracks() {
+    // A faceted cube mesh (hard edges: each face's own normal) and a quadric sphere (a seam,
+    // two poles), both with noise relief.
+    let cube = "def Mesh \"Cube\" {\n    rel material:slotBinding:_000 = </Looks/Rough>\n    \
+                uniform token subdivisionScheme = \"none\"\n    int[] faceVertexCounts = [4, 4, 4, 4, 4, 4]\n    \
+                int[] faceVertexIndices = [0, 1, 3, 2, 2, 3, 5, 4, 4, 5, 7, 6, 6, 7, 1, 0, 1, 7, 5, 3, 6, 0, 2, 4]\n    \
+                point3f[] points = [(-1, -1, 1), (1, -1, 1), (-1, 1, 1), (1, 1, 1), (-1, 1, -1), (1, 1, -1), (-1, -1, -1), (1, -1, -1)]\n}\n";
+    let sphere = "def Sphere \"Ball\" {\n    rel material:slotBinding:_000 = </Looks/Rough>\n}\n";
+    for (name, prim) in [("cube", cube), ("sphere", sphere)] {
+        let dir = tempfile::tempdir().unwrap();
+        let prims = format!("{}{prim}", camera("Cam", [0.0, 1.0, 6.0], [-10.0, 0.0, 0.0]));
+        let path = stage(dir.path(), ROUGH, &["Rough"], &prims, "def DomeLight \"Sky\" {}\n");
+        let (triangles, scene) = micro_triangles(&path);
+        let stats = scene.displacement.as_ref().expect("displaced");
+        assert!(triangles.len() > 10_000, "{name}: {stats}");
+        assert_eq!(open_edges(&triangles), 0, "{name}: edges not shared by exactly two micro-triangles");
+        // Rays from the centre: a crack anywhere would let some escape.
+        let escaped =
+            directions(20_000).filter(|&d| scene.accel.intersect(Vec3::ZERO, d, 0.0, f32::INFINITY).is_none()).count();
+        assert_eq!(escaped, 0, "{name}: rays from inside escaped");
+    }
+}
+
+/// The crack check can fail: the same micro-triangles with one interior vertex moved off
+/// its neighbours' copy open its edges.
+#[test]
+fn the_crack_check_sees_a_moved_vertex() {
+    let dir = tempfile::tempdir().unwrap();
+    let prims = format!(
+        "{}def Sphere \"Ball\" {{\n    rel material:slotBinding:_000 = </Looks/Rough>\n}}\n",
+        camera("Cam", [0.0, 1.0, 6.0], [-10.0, 0.0, 0.0])
+    );
+    let path = stage(dir.path(), ROUGH, &["Rough"], &prims, "def DomeLight \"Sky\" {}\n");
+    let (mut triangles, _) = micro_triangles(&path);
+    triangles[100][0] += Vec3::splat(1e-4);
+    assert!(open_edges(&triangles) >= 2);
+}
+
+#[test]
+fn a_scene_without_displacement_is_not_diced() {
+    let dir = tempfile::tempdir().unwrap();
+    let ash = r#"
+substance Bumpy {
+    node bsdf = diffuse(albedo: 0.6);
+    node n = noise(scale: 4.0);
+    node d = bump(height: n.out, mode: "add");
+    surface = bsdf.bsdf;
+    displacement = d.out;
+}
+"#;
+    let prims = format!(
+        "{}def Sphere \"Ball\" {{\n    rel material:slotBinding:_000 = </Looks/Bumpy>\n}}\n",
+        camera("Cam", [0.0, 0.0, 6.0], [0.0, 0.0, 0.0])
+    );
+    let path = stage(dir.path(), ash, &["Bumpy"], &prims, "def DomeLight \"Sky\" {}\n");
+    let (scene, _) = built(&path, None, (64, 64), BackendKind::Jit, true);
+    assert!(scene.displacement.is_none());
+    assert_eq!(scene.accel.triangle_count(), 0, "the sphere stays analytic");
+    assert!(!scene.prim_displaced(0));
+}
+
+/// Displacement heights come from the compiled material: both backends and both
+/// optimisation levels must dice and move the surface identically.
+#[test]
+fn displaced_layers_render_identically_across_backends_and_optimisation() {
+    let dir = tempfile::tempdir().unwrap();
+    let prims = format!(
+        "{}def Sphere \"Ball\" {{\n{}}}\n",
+        camera("Cam", [0.0, 0.0, 6.0], [0.0, 0.0, 0.0]),
+        bindings(&["Base", "Added", "Mixed"])
+    );
+    let ash = format!("{LAYERS}{ROUGH}");
+    let path = stage(dir.path(), &ash, &["Base", "Added", "Mixed"], &prims, "def DomeLight \"Sky\" {}\n");
+    let image = |backend, optimize| {
+        let (scene, materials) = built(&path, None, (48, 48), backend, optimize);
+        common::render_scene(&scene, &materials, &common::settings(48, 48, 4, 7, 3))
+    };
+    let reference = image(BackendKind::Jit, true);
+    assert!(reference.f32_channel("A").unwrap().iter().any(|&a| a > 0.0));
+    for (backend, optimize) in [(BackendKind::Interp, true), (BackendKind::Jit, false), (BackendKind::Interp, false)] {
+        assert!(image(backend, optimize) == reference, "{backend:?}, optimise {optimize}");
+    }
+}
