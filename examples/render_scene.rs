@@ -10,6 +10,8 @@ use strata::backend::BackendKind;
 use strata::cli::{CompiledScene, compile_scene};
 use strata::diag::{Diagnostics, SourceMap};
 use strata::ir::wired::PassOptions;
+use strata::render::displace::DicingOptions;
+use strata::render::scene::SceneOptions;
 use strata::render::{RenderSettings, Scene, render, write_outputs};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -22,9 +24,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut diags = Diagnostics::new();
     let compiled =
         compile_scene(scene_path.as_deref(), BackendKind::Jit, PassOptions::default(), &mut sources, &mut diags);
-    let scene = compiled
-        .as_ref()
-        .and_then(|c| Scene::from_stage(&c.stage, &|prim| c.prim_material.get(prim).copied(), &mut diags));
+    let settings = RenderSettings { width: 320, height: 240, spp: 16, ..RenderSettings::default() };
+    // The scene is built with the compiled materials, so that displaced surfaces are diced for
+    // this image size.
+    let options = SceneOptions {
+        dicing: DicingOptions { resolution: (settings.width, settings.height), ..DicingOptions::default() },
+        ..SceneOptions::default()
+    };
+    let scene = compiled.as_ref().and_then(|c| {
+        let materials: Vec<&dyn MaterialCode> = c.materials.iter().map(|m| m.as_ref()).collect();
+        Scene::build(&c.stage, &|prim| c.prim_material.get(prim).copied(), &materials, &options, &mut diags)
+    });
     eprint!("{}", diags.render(&sources));
     let (Some(CompiledScene { materials, compiler, .. }), Some(scene)) = (compiled, scene) else {
         return Err("the scene has errors".into());
@@ -33,7 +43,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     // The renderer sees only `MaterialCode`: compiled entry points and closure values.
     let materials: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
-    let settings = RenderSettings { width: 320, height: 240, spp: 16, ..RenderSettings::default() };
     let (image, stats) = render(&scene, &materials, &settings, None)?;
     let png = write_outputs(&image, &output)?;
     eprintln!("{stats}\nwrote {} and {}", output.display(), png.display());

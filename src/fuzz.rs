@@ -297,12 +297,21 @@ fn render_tiny(scene: &Path) {
     else {
         return;
     };
-    let Some(scene) =
-        crate::render::Scene::from_stage(&compiled.stage, &|p| compiled.prim_material.get(p).copied(), &mut diags)
-    else {
+    let materials: Vec<&dyn crate::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
+    // Displaced surfaces are diced as for a 4x4 image, under a small budget.
+    let options = crate::render::scene::SceneOptions {
+        dicing: crate::render::displace::DicingOptions { resolution: (4, 4), budget: 1 << 16, ..Default::default() },
+        ..Default::default()
+    };
+    let Some(scene) = crate::render::Scene::build(
+        &compiled.stage,
+        &|p| compiled.prim_material.get(p).copied(),
+        &materials,
+        &options,
+        &mut diags,
+    ) else {
         return;
     };
-    let materials: Vec<&dyn crate::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
     let settings = crate::render::RenderSettings {
         width: 4,
         height: 4,

@@ -179,6 +179,16 @@ enum BenchCommand {
     /// Scene file to first pixel and peak memory for 200 to 20 000 analytic spheres, and BVH
     /// build time and memory for a large triangle mesh.
     Scale,
+    /// What one displaced object costs (setup, micro-triangles, memory, render time) and what
+    /// the dicing rate buys (image error against fine dicing), against the undisplaced scene.
+    Displacement {
+        /// Samples per pixel of the renders.
+        #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=4096))]
+        spp: u32,
+        /// Image size, WIDTHxHEIGHT (dicing is measured against its pixels).
+        #[arg(long, default_value = "320x240", value_parser = parse_resolution)]
+        res: (usize, usize),
+    },
     /// Time per sample and error against a high-spp reference for 1 to 16 layers, stochastic
     /// vs weighted evaluation.
     Render {
@@ -280,6 +290,7 @@ fn main() -> ExitCode {
                 BenchCommand::Shade { scene, prim } => strata::bench::bench_shade(scene.as_deref(), prim.as_deref()),
                 BenchCommand::Render { scene, spp, res } => strata::bench::bench_render(scene.as_deref(), spp, res),
                 BenchCommand::Scale => strata::bench::bench_scale(),
+                BenchCommand::Displacement { spp, res } => strata::bench::bench_displacement(res, spp),
                 BenchCommand::Features { spp, res } => strata::bench::bench_features(res, spp, 7),
                 BenchCommand::Charts { plot, mitsuba_csv, quick } => {
                     let options = if quick {

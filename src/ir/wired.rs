@@ -315,11 +315,11 @@ impl Builder<'_> {
         let displacement_bound = product(Product::Displacement).and_then(|b| {
             let bound = b.bound.as_ref()?;
             match operand(&instance, bound) {
-                Operand::Const(v, _) if v.as_f32().is_some_and(|x| x >= 0.0) => v.as_f32(),
+                Operand::Const(v, _) if v.as_f32().is_some_and(|x| x >= 0.0 && x.is_finite()) => v.as_f32(),
                 Operand::Const(v, _) => {
                     self.diags.push(
                         Diagnostic::error(format!(
-                            "layer `{slot}`: the displacement bound must be a number ≥ 0, found {v}"
+                            "layer `{slot}`: the displacement bound must be a finite number ≥ 0, found {v}"
                         ))
                         .at(b.span, "displacement bound here"),
                     );

@@ -85,6 +85,9 @@ pub struct DisplacementStats {
     pub non_finite: u64,
     /// Bytes of the micro-triangles (before the BVH).
     pub bytes: usize,
+    /// Bytes of scratch held at the peak of dicing (welded vertices, faces, the midpoint
+    /// table, per-vertex heights and normals; counted from capacities), all freed after.
+    pub scratch_bytes: usize,
     /// Dicing and evaluation time in milliseconds.
     pub ms: f64,
 }
@@ -94,7 +97,7 @@ impl fmt::Display for DisplacementStats {
         write!(
             f,
             "displacement: {} prims, {} source triangles → {} micro-triangles at {} px ({} vertices, {:.1} MiB) \
-             in {:.1} ms; {} samples clamped, {} non-finite",
+             in {:.1} ms (scratch peak {:.1} MiB); {} samples clamped, {} non-finite",
             self.prims,
             self.source_triangles,
             self.micro_triangles,
@@ -102,6 +105,7 @@ impl fmt::Display for DisplacementStats {
             self.vertices,
             self.bytes as f64 / (1024.0 * 1024.0),
             self.ms,
+            self.scratch_bytes as f64 / (1024.0 * 1024.0),
             self.clamped,
             self.non_finite
         )
@@ -122,20 +126,18 @@ pub fn moves_geometry(material: &dyn MaterialCode) -> bool {
     material.info().layers.iter().any(|l| l.displacement.is_some() && l.displacement_bound.is_some())
 }
 
-/// A welded vertex of the surface being diced.
+/// A welded vertex of the surface being diced (f32 like the triangles it becomes: the
+/// midpoint of two vertices is computed once per edge, so neighbours agree bit for bit).
 #[derive(Clone, Copy, Debug)]
 struct Vertex {
-    /// Undisplaced world position.
-    p: DVec3,
+    /// Undisplaced world position; displaced in place once its height is known.
+    p: Vec3,
     /// Unit displacement direction (the outward surface normal, averaged where corners meet).
-    n: DVec3,
-    /// Where the displacement is evaluated in texture space (the first corner's).
+    n: Vec3,
+    /// Where the displacement is evaluated in texture space (the creating corner's).
     uv: Vec2,
-    /// Tangents for the shading globals.
-    dpdu: Vec3,
-    dpdv: Vec3,
-    /// The renderable prim whose material displaces it.
-    prim: u32,
+    /// The source face that created it (its prim, tangents, quadric).
+    source: u32,
 }
 
 /// A triangle corner: a welded vertex and its (face-varying) texture coordinate.
@@ -159,7 +161,7 @@ struct Source {
     has_uv: bool,
     /// The quadric part it was cut from (midpoints are projected onto it), if any.
     shape: Option<u32>,
-    /// Flat tangents (triangles); quadric tangents come from the projection.
+    /// Flat tangents (triangles); a quadric's come from its surface at each vertex.
     dpdu: Vec3,
     dpdv: Vec3,
 }
@@ -173,18 +175,19 @@ struct Base {
 }
 
 /// The key two positions weld on: their exact bits, with −0 as +0.
-fn weld_key(p: DVec3) -> [u64; 3] {
+fn weld_key(p: Vec3) -> [u32; 3] {
     p.to_array().map(|x| (x + 0.0).to_bits())
 }
 
 impl Base {
     fn build(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Base {
         let mut base = Base { vertices: Vec::new(), faces: Vec::new(), sources: Vec::new(), shapes };
-        let mut index: HashMap<[u64; 3], u32> = HashMap::new();
+        let mut index: HashMap<[u32; 3], u32> = HashMap::new();
         let mut normal_sums: Vec<DVec3> = Vec::new();
-        let mut corner = |base: &mut Base, p: DVec3, n: DVec3, uv: Vec2, source: &Source| -> Corner {
+        let mut corner = |base: &mut Base, p: Vec3, n: DVec3, uv: Vec2| -> Corner {
+            let source = base.sources.len() as u32;
             let v = *index.entry(weld_key(p)).or_insert_with(|| {
-                base.vertices.push(Vertex { p, n, uv, dpdu: source.dpdu, dpdv: source.dpdv, prim: source.prim });
+                base.vertices.push(Vertex { p, n: n.as_vec3(), uv, source });
                 normal_sums.push(DVec3::ZERO);
                 base.vertices.len() as u32 - 1
             });
@@ -193,98 +196,128 @@ impl Base {
         };
         for t in &triangles {
             let (dpdu, dpdv) = super::accel::tangents(t.p, t.uv, t.cross().normalize_or_zero());
-            let source = Source { prim: t.prim, has_uv: t.has_uv, shape: None, dpdu, dpdv };
-            let c = [0, 1, 2].map(|k| corner(&mut base, t.p[k].as_dvec3(), t.n[k].as_dvec3(), t.uv[k], &source));
+            let c = [0, 1, 2].map(|k| corner(&mut base, t.p[k], t.n[k].as_dvec3(), t.uv[k]));
             base.faces.push(Face { c, source: base.sources.len() as u32 });
-            base.sources.push(source);
+            base.sources.push(Source { prim: t.prim, has_uv: t.has_uv, shape: None, dpdu, dpdv });
         }
+        drop(triangles);
         for s in 0..base.shapes.len() {
             let shape = base.shapes[s].clone();
             for tri in shape.part.base_mesh() {
                 let geometry = tri.map(|(local, _)| shape.part.local_geometry(local));
-                let world = geometry.map(|(p, ..)| shape.to_world.transform_point3(p));
+                let world = geometry.map(|(p, ..)| shape.to_world.transform_point3(p).as_vec3());
                 let normals = geometry.map(|(_, n, ..)| (shape.normal_to_world * n).normalize_or_zero());
-                let cross = (world[1] - world[0]).cross(world[2] - world[0]);
+                let cross = (world[1] - world[0]).cross(world[2] - world[0]).as_dvec3();
                 if cross.length_squared() == 0.0 || !cross.is_finite() {
                     continue;
                 }
                 // Wind outward: the analytic normal decides.
                 let order = if cross.dot(normals[0] + normals[1] + normals[2]) < 0.0 { [0, 2, 1] } else { [0, 1, 2] };
-                let (_, _, _, dpdu, dpdv) = geometry[0];
-                let source = Source {
+                let c = order.map(|k| corner(&mut base, world[k], normals[k], tri[k].1));
+                base.faces.push(Face { c, source: base.sources.len() as u32 });
+                base.sources.push(Source {
                     prim: shape.prim,
                     has_uv: true,
                     shape: Some(s as u32),
-                    dpdu: shape.to_world.transform_vector3(dpdu).as_vec3(),
-                    dpdv: shape.to_world.transform_vector3(dpdv).as_vec3(),
-                };
-                let c = order.map(|k| corner(&mut base, world[k], normals[k], tri[k].1, &source));
-                base.faces.push(Face { c, source: base.sources.len() as u32 });
-                base.sources.push(source);
+                    dpdu: Vec3::ZERO,
+                    dpdv: Vec3::ZERO,
+                });
             }
         }
         for (v, sum) in base.vertices.iter_mut().zip(&normal_sums) {
             let n = sum.normalize_or_zero();
             if n != DVec3::ZERO && n.is_finite() {
-                v.n = n;
+                v.n = n.as_vec3();
             }
         }
         base
     }
+
+    /// The shading globals at vertex `v` before displacement: its position, normal, texture
+    /// coordinates and tangents (a quadric's from its exact surface, a mesh's from its face).
+    fn globals(&self, v: &Vertex) -> Globals {
+        let source = &self.sources[v.source as usize];
+        let (dpdu, dpdv) = match source.shape {
+            Some(s) => {
+                let shape = &self.shapes[s as usize];
+                let (.., dpdu, dpdv) = shape.part.local_geometry(shape.to_object.transform_point3(v.p.as_dvec3()));
+                (shape.to_world.transform_vector3(dpdu).as_vec3(), shape.to_world.transform_vector3(dpdv).as_vec3())
+            }
+            None => (source.dpdu, source.dpdv),
+        };
+        Globals {
+            p: v.p.to_array(),
+            n: v.n.to_array(),
+            ng: v.n.to_array(),
+            i: (-v.n).to_array(),
+            dpdu: dpdu.to_array(),
+            dpdv: dpdv.to_array(),
+            u: v.uv.x,
+            v: v.uv.y,
+        }
+    }
 }
 
-/// The edge test of one dicing pass.
+/// Edges whose midpoint is outside the view (by this margin, in NDC) are diced this many
+/// times coarser: they are seen only in shadows and reflections.
+const OFFSCREEN_SCALE: f32 = 4.0;
+const VIEW_MARGIN: f32 = 1.2;
+
+/// One dicing pass: the edge test, the vertices it creates and the faces it emits.
 struct Dicer<'a> {
     base: &'a Base,
     vertices: Vec<Vertex>,
     midpoints: HashMap<(u32, u32), u32>,
     faces: Vec<Face>,
-    eye: DVec3,
-    /// `rate` pixels at unit distance, in radians (small-angle).
-    angle: f64,
+    eye: Vec3,
+    /// World to clip space, for the on-screen test.
+    to_clip: glam::Mat4,
+    /// The split threshold at unit distance, in radians (small-angle): √2 · rate pixels,
+    /// so that diced edges end between 0.7 and 1.4 times the rate.
+    angle: f32,
     /// Edges shorter than this are never split.
-    floor: f64,
+    floor: f32,
     budget: usize,
 }
 
 impl Dicer<'_> {
+    /// Whether edge `(a, b)` is split: a function of its two end points only, so every face
+    /// sharing the edge decides alike.
     fn splits(&self, a: u32, b: u32) -> bool {
         let (pa, pb) = (self.vertices[a as usize].p, self.vertices[b as usize].p);
         let len = pa.distance(pb);
-        let distance = ((pa + pb) * 0.5).distance(self.eye).max(self.floor);
-        len > self.floor && len > self.angle * distance
+        if len <= self.floor {
+            return false;
+        }
+        let mid = (pa + pb) * 0.5;
+        let clip = self.to_clip * mid.extend(1.0);
+        let on_screen = clip.w > 0.0 && clip.x.abs() <= VIEW_MARGIN * clip.w && clip.y.abs() <= VIEW_MARGIN * clip.w;
+        let angle = if on_screen { self.angle } else { self.angle * OFFSCREEN_SCALE };
+        len > angle * mid.distance(self.eye).max(self.floor)
     }
 
     /// The vertex halfway along edge `(a, b)` of a face from `source`, created once per edge.
-    fn midpoint(&mut self, a: Corner, b: Corner, source: &Source) -> Corner {
+    fn midpoint(&mut self, a: Corner, b: Corner, source: u32) -> Corner {
         let uv = (a.uv + b.uv) * 0.5;
         let key = (a.v.min(b.v), a.v.max(b.v));
         if let Some(&v) = self.midpoints.get(&key) {
             return Corner { v, uv };
         }
         let (va, vb) = (self.vertices[a.v as usize], self.vertices[b.v as usize]);
-        let mid = (va.p + vb.p) * 0.5;
-        let mut vertex = Vertex {
-            p: mid,
-            n: (va.n + vb.n).try_normalize().unwrap_or(va.n),
-            uv,
-            dpdu: source.dpdu,
-            dpdv: source.dpdv,
-            prim: source.prim,
-        };
-        if let Some(s) = source.shape {
+        let mut vertex =
+            Vertex { p: (va.p + vb.p) * 0.5, n: (va.n + vb.n).try_normalize().unwrap_or(va.n), uv, source };
+        if let Some(s) = self.base.sources[source as usize].shape {
+            // On a quadric, the midpoint goes back onto the exact surface.
             let shape = &self.base.shapes[s as usize];
-            let (p, n, _, dpdu, dpdv) = shape.part.local_geometry(shape.to_object.transform_point3(mid));
-            let n = (shape.normal_to_world * n).normalize_or_zero();
-            let p = shape.to_world.transform_point3(p);
-            if p.is_finite() && n != DVec3::ZERO {
+            let (p, n, ..) = shape.part.local_geometry(shape.to_object.transform_point3(vertex.p.as_dvec3()));
+            let n = (shape.normal_to_world * n).normalize_or_zero().as_vec3();
+            let p = shape.to_world.transform_point3(p).as_vec3();
+            if p.is_finite() && n != Vec3::ZERO {
                 vertex.p = p;
-                // Keep a rim's averaged direction (both sides' normals) where the ends have one.
+                // Keep a rim's averaged direction (both parts' normals) where the ends have one.
                 if va.n.dot(n) > 0.999 && vb.n.dot(n) > 0.999 {
                     vertex.n = n;
                 }
-                vertex.dpdu = shape.to_world.transform_vector3(dpdu).as_vec3();
-                vertex.dpdv = shape.to_world.transform_vector3(dpdv).as_vec3();
             }
         }
         let v = self.vertices.len() as u32;
@@ -305,8 +338,8 @@ impl Dicer<'_> {
             self.faces.push(face);
             return Ok(());
         }
-        let source = self.base.sources[face.source as usize];
-        let face_of = |c: [Corner; 3]| Face { c, source: face.source };
+        let source = face.source;
+        let face_of = |c: [Corner; 3]| Face { c, source };
         // Rotate so the split edges come first: edge k joins corners k and k + 1.
         let first = match count {
             1 => split.iter().position(|&s| s).unwrap_or(0),
@@ -316,14 +349,14 @@ impl Dicer<'_> {
         let [a, b, cc] = [c[first], c[(first + 1) % 3], c[(first + 2) % 3]];
         match count {
             1 => {
-                let m = self.midpoint(a, b, &source);
+                let m = self.midpoint(a, b, source);
                 self.dice(face_of([a, m, cc]), depth + 1)?;
                 self.dice(face_of([m, b, cc]), depth + 1)
             }
             2 => {
                 // Edges (a, b) and (b, cc) split; the quad left is cut on its shorter diagonal.
-                let mab = self.midpoint(a, b, &source);
-                let mbc = self.midpoint(b, cc, &source);
+                let mab = self.midpoint(a, b, source);
+                let mbc = self.midpoint(b, cc, source);
                 self.dice(face_of([mab, b, mbc]), depth + 1)?;
                 let p = |c: Corner| self.vertices[c.v as usize].p;
                 if p(a).distance_squared(p(mbc)) <= p(mab).distance_squared(p(cc)) {
@@ -335,9 +368,9 @@ impl Dicer<'_> {
                 }
             }
             _ => {
-                let mab = self.midpoint(a, b, &source);
-                let mbc = self.midpoint(b, cc, &source);
-                let mca = self.midpoint(cc, a, &source);
+                let mab = self.midpoint(a, b, source);
+                let mbc = self.midpoint(b, cc, source);
+                let mca = self.midpoint(cc, a, source);
                 self.dice(face_of([a, mab, mca]), depth + 1)?;
                 self.dice(face_of([mab, b, mbc]), depth + 1)?;
                 self.dice(face_of([mca, mbc, cc]), depth + 1)?;
@@ -381,39 +414,35 @@ struct Scratch {
     heights: Vec<f32>,
 }
 
-/// The rule-6 height of the layers that move geometry at vertex `v` (masks and heights at
-/// the undisplaced point), each layer's height clamped to its bound. Every mask that weights
-/// a displacement is read, a bump layer's too: a `mix` bump layer hides the relief below it.
-fn height(material: &dyn MaterialCode, m: usize, v: &Vertex, scratch: &mut Scratch, out: &mut Evaluated) -> f32 {
+/// The rule-6 height of the layers that move geometry at `g` (masks and heights at the
+/// undisplaced point), each layer's height clamped to its bound. Every mask that weights a
+/// displacement is read, a bump layer's too: a `mix` bump layer hides the relief below it.
+fn height(
+    material: &dyn MaterialCode,
+    m: usize,
+    g: &Globals,
+    prim: u32,
+    scratch: &mut Scratch,
+    out: &mut Evaluated,
+) -> f32 {
     let layers = &material.info().layers;
     let nl = layers.len();
     scratch.masks.resize(nl, 0.0);
     scratch.heights.resize(nl, 0.0);
     let (masks, heights) = (&mut scratch.masks[..nl], &mut scratch.heights[..nl]);
-    let n = v.n.as_vec3().to_array();
-    let g = Globals {
-        p: v.p.as_vec3().to_array(),
-        n,
-        ng: n,
-        i: (-v.n.as_vec3()).to_array(),
-        dpdu: v.dpdu.to_array(),
-        dpdv: v.dpdv.to_array(),
-        u: v.uv.x,
-        v: v.uv.y,
-    };
     let run = |masks: &mut [f32], heights: &mut [f32]| -> Result<(), crate::abi::ShaderError> {
         for (i, layer) in layers.iter().enumerate() {
             masks[i] = match (layer.mask_weights_displacement(), layer.constant_mask) {
                 (false, _) => 0.0,
                 (true, Some(m)) => m,
-                (true, None) => material.mask(&g, i)?,
+                (true, None) => material.mask(g, i)?,
             };
         }
-        material.displacement(&g, heights)
+        material.displacement(g, heights)
     };
     if let Err(e) = run(masks, heights) {
         out.faults += 1;
-        out.fault.get_or_insert((v.prim, e.to_string()));
+        out.fault.get_or_insert((prim, e.to_string()));
         return 0.0;
     }
     for (i, layer) in layers.iter().enumerate() {
@@ -474,36 +503,41 @@ pub fn displace(
     geometry.triangles = kept;
     geometry.shapes = kept_shapes;
     let mut displaced = vec![false; nprims];
-    for t in &diced {
-        displaced[t.prim as usize] = true;
+    for prim in diced.iter().map(|t| t.prim).chain(diced_shapes.iter().map(|s| s.prim)) {
+        displaced[prim as usize] = true;
     }
-    for s in &diced_shapes {
-        displaced[s.prim as usize] = true;
-    }
-    let base = Base::build(diced, diced_shapes);
+    let mut base = Base::build(diced, diced_shapes);
     let (lo, hi) =
-        base.vertices.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), v| (lo.min(v.p), hi.max(v.p)));
-    let extent = if base.vertices.is_empty() { 1.0 } else { (hi - lo).length().max(f64::MIN_POSITIVE) };
+        base.vertices.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| (lo.min(v.p), hi.max(v.p)));
+    let extent = if base.vertices.is_empty() { 1.0 } else { (hi - lo).length().max(f32::MIN_POSITIVE) };
     let (width, height_px) = options.resolution;
     let camera = camera.with_aspect(width as f32 / height_px.max(1) as f32);
-    let pixel = camera.pixel_angle(width.max(1)) as f64;
+    let pixel = camera.pixel_angle(width.max(1));
     let requested = if options.rate.is_finite() && options.rate > 0.0 { options.rate } else { DEFAULT_DICING_RATE };
     let mut rate = requested;
+    let base_vertices = std::mem::take(&mut base.vertices);
+    let base_count = base_vertices.len();
+    let mut vertices = base_vertices;
     // Dice; past the budget, coarsen and dice again (each doubling roughly quarters the count).
-    let dicer = loop {
+    let (mut vertices, faces) = loop {
+        vertices.truncate(base_count);
         let mut dicer = Dicer {
             base: &base,
-            vertices: base.vertices.clone(),
+            vertices,
             midpoints: HashMap::new(),
             faces: Vec::with_capacity(base.faces.len()),
-            eye: camera.origin().as_dvec3(),
-            angle: pixel * rate as f64,
+            eye: camera.origin(),
+            to_clip: camera.camera_to_ndc() * camera.world_to_camera(),
+            angle: pixel * rate * std::f32::consts::SQRT_2,
             floor: extent * 1e-6,
             budget: options.budget.max(base.faces.len()),
         };
-        if base.faces.iter().try_for_each(|&f| dicer.dice(f, 0)).is_ok() {
-            break dicer;
+        let fits = base.faces.iter().try_for_each(|&f| dicer.dice(f, 0)).is_ok();
+        let Dicer { vertices: diced_vertices, faces, .. } = dicer;
+        if fits {
+            break (diced_vertices, faces);
         }
+        vertices = diced_vertices;
         rate *= 2.0;
     };
     if rate != requested {
@@ -512,9 +546,9 @@ pub fn displace(
             options.budget
         )));
     }
-    let Dicer { vertices, faces, .. } = dicer;
-    // One height per welded vertex, in parallel.
-    let material_of = |v: &Vertex| prim_material.get(v.prim as usize).copied().unwrap_or(0);
+    // One height per welded vertex, in parallel; then each vertex moves along its normal.
+    let material_of =
+        |v: &Vertex| prim_material.get(base.sources[v.source as usize].prim as usize).copied().unwrap_or(0);
     let (heights, evaluated): (Vec<f32>, Evaluated) = vertices
         .par_chunks(4096)
         .map(|chunk| {
@@ -524,7 +558,10 @@ pub fn displace(
                 .iter()
                 .map(|v| {
                     let m = material_of(v);
-                    materials.get(m).map_or(0.0, |material| height(*material, m, v, &mut scratch, &mut found))
+                    let prim = base.sources[v.source as usize].prim;
+                    materials
+                        .get(m)
+                        .map_or(0.0, |material| height(*material, m, &base.globals(v), prim, &mut scratch, &mut found))
                 })
                 .collect();
             (heights, found)
@@ -536,26 +573,34 @@ pub fn displace(
                 (a, fa.merge(fb))
             },
         );
-    let moved: Vec<Vec3> = vertices.iter().zip(&heights).map(|(v, &h)| (v.p + v.n * h as f64).as_vec3()).collect();
+    for (v, &h) in vertices.iter_mut().zip(&heights) {
+        v.p += v.n * h;
+    }
     // Smooth normals of the displaced mesh: area-weighted face normals per welded vertex.
     let mut normals = vec![Vec3::ZERO; vertices.len()];
     for f in &faces {
-        let [a, b, c] = f.c.map(|c| moved[c.v as usize]);
+        let [a, b, c] = f.c.map(|c| vertices[c.v as usize].p);
         let cross = (b - a).cross(c - a);
         for corner in f.c {
             normals[corner.v as usize] += cross;
         }
     }
-    let normals: Vec<Vec3> = normals
-        .iter()
-        .zip(&vertices)
-        .map(|(n, v)| n.try_normalize().filter(|n| n.is_finite()).unwrap_or(v.n.as_vec3()))
-        .collect();
+    for (n, v) in normals.iter_mut().zip(&vertices) {
+        *n = n.try_normalize().filter(|n| n.is_finite()).unwrap_or(v.n);
+    }
+    let scratch_bytes = {
+        use std::mem::size_of;
+        base.faces.capacity() * size_of::<Face>()
+            + base.sources.capacity() * size_of::<Source>()
+            + vertices.capacity() * (size_of::<Vertex>() + size_of::<f32>() + size_of::<Vec3>())
+            + faces.capacity() * size_of::<Face>()
+    };
     let before = geometry.triangles.len();
+    geometry.triangles.reserve_exact(faces.len());
     geometry.triangles.extend(faces.iter().map(|f| {
         let source = &base.sources[f.source as usize];
         Triangle {
-            p: f.c.map(|c| moved[c.v as usize]),
+            p: f.c.map(|c| vertices[c.v as usize].p),
             n: f.c.map(|c| normals[c.v as usize]),
             uv: f.c.map(|c| c.uv),
             prim: source.prim,
@@ -563,7 +608,7 @@ pub fn displace(
         }
     }));
     let micro = geometry.triangles.len() - before;
-    report(&evaluated, geometry, prim_material, materials, &vertices, diags);
+    report(&evaluated, geometry, prim_material, materials, &base, &vertices, diags);
     let stats = DisplacementStats {
         prims: displaced.iter().filter(|&&d| d).count(),
         source_triangles: base.faces.len(),
@@ -573,6 +618,7 @@ pub fn displace(
         clamped: evaluated.clamped.values().map(|(c, _)| c).sum(),
         non_finite: evaluated.non_finite.values().map(|(c, _)| c).sum(),
         bytes: micro * std::mem::size_of::<Triangle>(),
+        scratch_bytes,
         ms: start.elapsed().as_secs_f64() * 1e3,
     };
     Displaced { prims: displaced, stats: Some(stats) }
@@ -584,12 +630,13 @@ fn report(
     geometry: &Geometry,
     prim_material: &[usize],
     materials: &[&dyn MaterialCode],
+    base: &Base,
     vertices: &[Vertex],
     diags: &mut Diagnostics,
 ) {
     // A prim of each material, to point at.
     let prim_of = |m: usize| {
-        let p = vertices.iter().find(|v| prim_material.get(v.prim as usize) == Some(&m)).map_or(0, |v| v.prim);
+        let p = base.sources.iter().map(|s| s.prim).find(|&p| prim_material.get(p as usize) == Some(&m)).unwrap_or(0);
         &geometry.prims[p as usize]
     };
     let mut keys: Vec<_> = evaluated.clamped.keys().chain(evaluated.non_finite.keys()).copied().collect();
