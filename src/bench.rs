@@ -2356,111 +2356,6 @@ fn scale_chart(dir: &Path) -> Result<String, String> {
     Ok(format!("stability, scene scale: coverage relative to scale 1: {}\n", fmt(&coverage)))
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn hand_material_matches_jit_and_interpreter() {
-        let (lib, material) = bench_material().unwrap();
-        let (module, _) = lower_material(&lib, &material).unwrap();
-        let jit = backend::compile_module(module.clone(), BackendKind::Jit).unwrap();
-        let interp = backend::compile_module(module, BackendKind::Interp).unwrap();
-        let hand = HandMaterial::default();
-        let points = sample_points(400, 7);
-        compare_materials(&hand, jit.as_ref(), &points, 1e-5).unwrap();
-        compare_materials(&hand, interp.as_ref(), &points, 1e-5).unwrap();
-        // The masks are not trivially constant: both mask layers take 0, 1 and in-between values.
-        let mut m = [0.0; 3];
-        let (mut lo, mut hi, mut mid) = ([false; 3], [false; 3], [false; 3]);
-        for g in &points {
-            hand.masks(g, &mut m).unwrap();
-            for l in 1..3 {
-                lo[l] |= m[l] == 0.0;
-                hi[l] |= m[l] == 1.0;
-                mid[l] |= m[l] > 0.0 && m[l] < 1.0;
-            }
-        }
-        assert!(lo[1..].iter().chain(&hi[1..]).chain(&mid[1..]).all(|&b| b), "{lo:?} {hi:?} {mid:?}");
-    }
-
-    #[test]
-    fn bench_shade_runs_small() {
-        let options = ShadeOptions { points: 64, reps: 1, sizes: vec![3, 10], compile_reps: 1 };
-        let report = shade_report(None, None, &options).unwrap();
-        assert!(report.contains("hand Rust") && report.contains("interpreter / JIT"), "{report}");
-        assert!(report.contains("compile time vs graph size"), "{report}");
-    }
-
-    #[test]
-    fn bench_render_runs_small() {
-        let report = render_report(None, 1, (4, 4), &[1, 2], 1).unwrap();
-        assert!(report.contains("2 layers"), "{report}");
-    }
-
-    #[test]
-    fn bench_charts_draws_every_chart() {
-        let dir = TempDir::new().unwrap();
-        let csv = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/mitsuba_compare.csv");
-        let report = bench_charts(&dir.0, Some(&csv), &ChartOptions::quick()).unwrap();
-        for name in [
-            "layering_constant",
-            "layering_noise",
-            "layering_thin",
-            "layering_crossover",
-            "backends",
-            "mitsuba",
-            "shade_cost",
-            "compile_time",
-            "stability_ggx",
-            "stability_glass",
-            "stability_scale",
-        ] {
-            let svg = std::fs::read_to_string(dir.0.join(format!("{name}.svg"))).unwrap();
-            assert!(svg.starts_with("<svg") && svg.contains("<text"), "{name}.svg");
-        }
-        assert!(report.contains("equal-time RMSE ratio"), "{report}");
-    }
-
-    #[test]
-    fn hand_arithmetic_matches_jit() {
-        let points = sample_points(4096, 3);
-        let (lib, material) = single_substance(&arithmetic_substance(ARITHMETIC_NODES), "arithmetic").unwrap();
-        let (module, _) = lower_material(&lib, &material).unwrap();
-        let jit = backend::compile_module(module, BackendKind::Jit).unwrap();
-        let hand = HandArithmetic::new(jit.info().clone());
-        compare_materials(&hand, jit.as_ref(), &points, 1e-5).unwrap();
-        // Masks are not all clamped to one value: the comparison sees the arithmetic.
-        let masks: Vec<f32> = points.iter().map(|g| hand.mask(g, 0).unwrap()).collect();
-        assert!(masks.iter().any(|&m| m > 0.0 && m < 1.0), "every mask clamped");
-    }
-
-    #[test]
-    fn unused_features_cost_no_shader_calls() {
-        let rows = measure_features((8, 8), 2, 1).unwrap();
-        assert_eq!(rows.len(), FEATURES.len());
-        // Every variant calls exactly the baseline's shader entry points: the extra material
-        // is never shaded, and opaque layers' constant masks are not shader calls.
-        for r in &rows {
-            assert_eq!((r.evals, r.samples), (rows[0].evals, rows[0].samples), "{}", r.feature);
-        }
-        assert_eq!(rows[0].evals.masks + rows[0].evals.shadow_masks, 0);
-        assert!(rows[0].evals.surfaces > 0);
-    }
-
-    #[test]
-    fn generated_sources_compile() {
-        for n in [1, 2, 7] {
-            let mut sources = SourceMap::new();
-            let mut diags = Diagnostics::new();
-            Library::from_text("g.ash", &generated_substance(n), &mut sources, &mut diags);
-            assert!(!diags.has_errors(), "{}", diags.render(&sources));
-            Library::from_text("l.ash", &layered_source(n), &mut sources, &mut diags);
-            assert!(!diags.has_errors(), "{}", diags.render(&sources));
-        }
-    }
-}
-
 /// The scene of `bench displacement`: a unit sphere over a ground plane under a dome and a
 /// sun, its material `ball` (`Plain` or `Rough`: fbm relief of ±0.12 moving the surface).
 fn displacement_scene(ball: &str) -> String {
@@ -2660,4 +2555,109 @@ pub fn bench_displacement(res: (usize, usize), spp: u32) -> Result<String, Strin
         with.rgb == without.rgb
     );
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hand_material_matches_jit_and_interpreter() {
+        let (lib, material) = bench_material().unwrap();
+        let (module, _) = lower_material(&lib, &material).unwrap();
+        let jit = backend::compile_module(module.clone(), BackendKind::Jit).unwrap();
+        let interp = backend::compile_module(module, BackendKind::Interp).unwrap();
+        let hand = HandMaterial::default();
+        let points = sample_points(400, 7);
+        compare_materials(&hand, jit.as_ref(), &points, 1e-5).unwrap();
+        compare_materials(&hand, interp.as_ref(), &points, 1e-5).unwrap();
+        // The masks are not trivially constant: both mask layers take 0, 1 and in-between values.
+        let mut m = [0.0; 3];
+        let (mut lo, mut hi, mut mid) = ([false; 3], [false; 3], [false; 3]);
+        for g in &points {
+            hand.masks(g, &mut m).unwrap();
+            for l in 1..3 {
+                lo[l] |= m[l] == 0.0;
+                hi[l] |= m[l] == 1.0;
+                mid[l] |= m[l] > 0.0 && m[l] < 1.0;
+            }
+        }
+        assert!(lo[1..].iter().chain(&hi[1..]).chain(&mid[1..]).all(|&b| b), "{lo:?} {hi:?} {mid:?}");
+    }
+
+    #[test]
+    fn bench_shade_runs_small() {
+        let options = ShadeOptions { points: 64, reps: 1, sizes: vec![3, 10], compile_reps: 1 };
+        let report = shade_report(None, None, &options).unwrap();
+        assert!(report.contains("hand Rust") && report.contains("interpreter / JIT"), "{report}");
+        assert!(report.contains("compile time vs graph size"), "{report}");
+    }
+
+    #[test]
+    fn bench_render_runs_small() {
+        let report = render_report(None, 1, (4, 4), &[1, 2], 1).unwrap();
+        assert!(report.contains("2 layers"), "{report}");
+    }
+
+    #[test]
+    fn bench_charts_draws_every_chart() {
+        let dir = TempDir::new().unwrap();
+        let csv = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/mitsuba_compare.csv");
+        let report = bench_charts(&dir.0, Some(&csv), &ChartOptions::quick()).unwrap();
+        for name in [
+            "layering_constant",
+            "layering_noise",
+            "layering_thin",
+            "layering_crossover",
+            "backends",
+            "mitsuba",
+            "shade_cost",
+            "compile_time",
+            "stability_ggx",
+            "stability_glass",
+            "stability_scale",
+        ] {
+            let svg = std::fs::read_to_string(dir.0.join(format!("{name}.svg"))).unwrap();
+            assert!(svg.starts_with("<svg") && svg.contains("<text"), "{name}.svg");
+        }
+        assert!(report.contains("equal-time RMSE ratio"), "{report}");
+    }
+
+    #[test]
+    fn hand_arithmetic_matches_jit() {
+        let points = sample_points(4096, 3);
+        let (lib, material) = single_substance(&arithmetic_substance(ARITHMETIC_NODES), "arithmetic").unwrap();
+        let (module, _) = lower_material(&lib, &material).unwrap();
+        let jit = backend::compile_module(module, BackendKind::Jit).unwrap();
+        let hand = HandArithmetic::new(jit.info().clone());
+        compare_materials(&hand, jit.as_ref(), &points, 1e-5).unwrap();
+        // Masks are not all clamped to one value: the comparison sees the arithmetic.
+        let masks: Vec<f32> = points.iter().map(|g| hand.mask(g, 0).unwrap()).collect();
+        assert!(masks.iter().any(|&m| m > 0.0 && m < 1.0), "every mask clamped");
+    }
+
+    #[test]
+    fn unused_features_cost_no_shader_calls() {
+        let rows = measure_features((8, 8), 2, 1).unwrap();
+        assert_eq!(rows.len(), FEATURES.len());
+        // Every variant calls exactly the baseline's shader entry points: the extra material
+        // is never shaded, and opaque layers' constant masks are not shader calls.
+        for r in &rows {
+            assert_eq!((r.evals, r.samples), (rows[0].evals, rows[0].samples), "{}", r.feature);
+        }
+        assert_eq!(rows[0].evals.masks + rows[0].evals.shadow_masks, 0);
+        assert!(rows[0].evals.surfaces > 0);
+    }
+
+    #[test]
+    fn generated_sources_compile() {
+        for n in [1, 2, 7] {
+            let mut sources = SourceMap::new();
+            let mut diags = Diagnostics::new();
+            Library::from_text("g.ash", &generated_substance(n), &mut sources, &mut diags);
+            assert!(!diags.has_errors(), "{}", diags.render(&sources));
+            Library::from_text("l.ash", &layered_source(n), &mut sources, &mut diags);
+            assert!(!diags.has_errors(), "{}", diags.render(&sources));
+        }
+    }
 }
