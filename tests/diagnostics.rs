@@ -35,6 +35,8 @@ error_snapshots! {
     usda_connections => "tests/in/errors/connections.usda",
     usda_geometry => "tests/in/errors/geometry.usda",
     ash_typos => "tests/in/errors/typos.ash",
+    ash_displacement => "tests/in/errors/displacement.ash",
+    usda_displacement => "tests/in/errors/displacement.usda",
 }
 
 fn strata(args: &[&str]) -> std::process::Output {

@@ -455,3 +455,74 @@ fn displaced_layers_render_identically_across_backends_and_optimisation() {
         assert!(image(backend, optimize) == reference, "{backend:?}, optimise {optimize}");
     }
 }
+
+/// Build `path` with a micro-triangle budget, returning the scene and rendered diagnostics.
+fn built_with_budget(path: &Path, budget: usize) -> (Scene, strata::diag::Diagnostics, String) {
+    let mut sources = strata::diag::SourceMap::new();
+    let mut diags = strata::diag::Diagnostics::new();
+    let compiled = strata::cli::compile_scene(
+        Some(path),
+        BackendKind::Jit,
+        strata::ir::wired::PassOptions::default(),
+        &mut sources,
+        &mut diags,
+    )
+    .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
+    let refs: Vec<&dyn strata::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
+    let options = strata::render::scene::SceneOptions {
+        dicing: strata::render::displace::DicingOptions { resolution: (128, 128), budget, ..Default::default() },
+        ..Default::default()
+    };
+    let scene = Scene::build(&compiled.stage, &|p| compiled.prim_material.get(p).copied(), &refs, &options, &mut diags)
+        .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
+    let text = diags.render(&sources);
+    (scene, diags, text)
+}
+
+#[test]
+fn non_finite_heights_over_budget_and_instances_are_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let ash = r#"
+shader broken_height(output float out) {
+    out = u > 0.5 ? sqrt(u - 2.0) : 0.1;
+}
+substance Broken {
+    node s = diffuse(albedo: 0.5);
+    node h = broken_height();
+    node d = displacement(height: h.out, mode: "none");
+    surface = s.bsdf;
+    displacement = d.out;
+}
+"#;
+    let prims = format!("{}{}", camera("Top", [0.0, 6.0, 0.0], [-90.0, 0.0, 0.0]), quad(&bindings(&["Broken"])));
+    let path = stage(dir.path(), ash, &["Broken"], &prims, "def DomeLight \"Sky\" {}\n");
+    let (scene, diags, text) = built_with_budget(&path, strata::render::displace::DEFAULT_MICRO_TRIANGLE_BUDGET);
+    let warning =
+        diags.items().iter().find(|d| d.message.contains("NaN or infinite")).unwrap_or_else(|| panic!("{text}"));
+    assert!(warning.message.contains("`/Quad`"), "{text}");
+    // NaN heights are 0, the others 0.1: no non-finite position reaches the BVH.
+    for (u, _, height) in heights_on_grid(&scene) {
+        let expected = if u > 0.5 { 0.0 } else { 0.1 };
+        assert!((height - expected).abs() < 1e-4 || (u - 0.5).abs() < 0.1, "height {height} at u {u}");
+    }
+    assert!(scene.accel.world_triangles().iter().flatten().all(|p| p.is_finite()));
+
+    // A budget smaller than the dicing wants: coarser, reported, within the budget.
+    let (scene, diags, text) = built_with_budget(&path, 3000);
+    let stats = scene.displacement.as_ref().expect("displaced");
+    assert!(stats.micro_triangles <= 3000 && stats.rate > 1.0, "{stats}");
+    assert!(diags.items().iter().any(|d| d.message.contains("would pass the budget of 3000")), "{text}");
+
+    // Inside instances the prototype is shared: not diced, said so, bumped.
+    let prims = format!(
+        "{}def Xform \"Proto\" {{\n{}}}\ndef Xform \"Copy\" (\n    instanceable = true\n    references = </Proto>\n) {{}}\n\
+         def Xform \"Copy2\" (\n    instanceable = true\n    references = </Proto>\n) {{}}\n",
+        camera("Top", [0.0, 6.0, 0.0], [-90.0, 0.0, 0.0]),
+        quad(&bindings(&["Broken"]))
+    );
+    let path = stage(dir.path(), ash, &["Broken"], &prims, "def DomeLight \"Sky\" {}\n");
+    let (scene, diags, text) = built_with_budget(&path, 1 << 20);
+    assert!(diags.items().iter().any(|d| d.message.contains("displacement inside instances is not diced")), "{text}");
+    // The un-instanced original is diced.
+    assert!(scene.displacement.is_some_and(|s| s.prims == 1), "{text}");
+}

@@ -77,6 +77,18 @@ fn default_scene() {
 }
 
 #[test]
+fn displacement_example() {
+    let (table, _, ir, warnings) = run("scenes/displacement/relief.usda");
+    assert_eq!(warnings, "");
+    // Every prop has the three layers, each moving the surface (a bound in the IR).
+    assert_eq!(ir.matches("displacement(none, bound 0.1)").count(), 3, "{ir}");
+    assert_eq!(ir.matches("displacement(mix, bound 0.1)").count(), 3, "{ir}");
+    assert_eq!(ir.matches("displacement(add, bound 0.05)").count(), 3, "{ir}");
+    insta::assert_snapshot!("relief_layers", table);
+    insta::assert_snapshot!("relief_ir", ir);
+}
+
+#[test]
 fn embedded_default_scene_matches_the_file() {
     let (name, text) = strata::scenes::DEFAULT_SCENE;
     assert!(name.ends_with("default.usda"));

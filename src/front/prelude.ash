@@ -38,7 +38,7 @@ shader displacement(float height = 0.0, float scale = 1.0, string mode = "add", 
     out = height * scale;
 }
 
-// Bump: like displacement, but only the shading normal changes.
+// Bump: like displacement, but only the shading normal changes (no `bound`: nothing is diced).
 shader bump(float height = 0.0, float scale = 0.01, string mode = "add", output float out) {
     out = height * scale;
 }
@@ -203,7 +203,8 @@ shader UsdPreviewSurface_normal(color normal_ts = color(0.0, 0.0, 1.0), output n
 // `normal_ts`: `normal` is a type name here). emissiveColor and occlusion are accepted and
 // unused: strata surfaces do not emit (composition warns when emission is authored), and
 // occlusion is a real-time approximation a path tracer computes. `displacement` is a bump
-// (the shading normal moves, the surface does not). A composed instance drops the normal and
+// (the shading normal moves, the surface does not: preview assets author it for real-time
+// viewers, without the bound dicing needs). A composed instance drops the normal and
 // displacement products when nothing sets them.
 substance UsdPreviewSurface {
     input color diffuseColor = color(0.18, 0.18, 0.18);

@@ -319,17 +319,20 @@ impl Builder<'_> {
                 Operand::Const(v, _) => {
                     self.diags.push(
                         Diagnostic::error(format!(
-                            "layer `{slot}`: the displacement bound must be a finite number ≥ 0, found {v}"
+                            "layer `{slot}` (`{}`): the displacement bound must be a finite number ≥ 0, found {v}",
+                            substance.path
                         ))
-                        .at(b.span, "displacement bound here"),
+                        .at(b.span, "displacement bound here")
+                        .note("the bound is the largest |height| the layer may reach; dicing clamps heights to it"),
                     );
                     None
                 }
                 _ => {
                     self.diags.push(
                         Diagnostic::error(format!(
-                            "layer `{slot}`: an override drives the displacement bound with a node; \
-                             it must be a constant (dicing needs it before shading)"
+                            "layer `{slot}` (`{}`): an override drives the displacement bound with a node; \
+                             it must be a constant (dicing needs it before shading)",
+                            substance.path
                         ))
                         .at(b.span, "displacement bound here"),
                     );
