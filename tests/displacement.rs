@@ -457,7 +457,10 @@ fn displaced_layers_render_identically_across_backends_and_optimisation() {
 }
 
 /// Build `path` with a micro-triangle budget, returning the scene and rendered diagnostics.
-fn built_with_budget(path: &Path, budget: usize) -> (Scene, strata::diag::Diagnostics, String) {
+fn built_with_budget(
+    path: &Path,
+    budget: usize,
+) -> (Scene, Vec<std::sync::Arc<dyn strata::abi::MaterialCode>>, strata::diag::Diagnostics, String) {
     let mut sources = strata::diag::SourceMap::new();
     let mut diags = strata::diag::Diagnostics::new();
     let compiled = strata::cli::compile_scene(
@@ -476,7 +479,7 @@ fn built_with_budget(path: &Path, budget: usize) -> (Scene, strata::diag::Diagno
     let scene = Scene::build(&compiled.stage, &|p| compiled.prim_material.get(p).copied(), &refs, &options, &mut diags)
         .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
     let text = diags.render(&sources);
-    (scene, diags, text)
+    (scene, compiled.materials, diags, text)
 }
 
 #[test]
@@ -496,7 +499,7 @@ substance Broken {
 "#;
     let prims = format!("{}{}", camera("Top", [0.0, 6.0, 0.0], [-90.0, 0.0, 0.0]), quad(&bindings(&["Broken"])));
     let path = stage(dir.path(), ash, &["Broken"], &prims, "def DomeLight \"Sky\" {}\n");
-    let (scene, diags, text) = built_with_budget(&path, strata::render::displace::DEFAULT_MICRO_TRIANGLE_BUDGET);
+    let (scene, _, diags, text) = built_with_budget(&path, strata::render::displace::DEFAULT_MICRO_TRIANGLE_BUDGET);
     let warning =
         diags.items().iter().find(|d| d.message.contains("NaN or infinite")).unwrap_or_else(|| panic!("{text}"));
     assert!(warning.message.contains("`/Quad`"), "{text}");
@@ -508,7 +511,7 @@ substance Broken {
     assert!(scene.accel.world_triangles().iter().flatten().all(|p| p.is_finite()));
 
     // A budget smaller than the dicing wants: coarser, reported, within the budget.
-    let (scene, diags, text) = built_with_budget(&path, 3000);
+    let (scene, _, diags, text) = built_with_budget(&path, 3000);
     let stats = scene.displacement.as_ref().expect("displaced");
     assert!(stats.micro_triangles <= 3000 && stats.rate > 1.0, "{stats}");
     assert!(diags.items().iter().any(|d| d.message.contains("would pass the budget of 3000")), "{text}");
@@ -521,8 +524,56 @@ substance Broken {
         quad(&bindings(&["Broken"]))
     );
     let path = stage(dir.path(), ash, &["Broken"], &prims, "def DomeLight \"Sky\" {}\n");
-    let (scene, diags, text) = built_with_budget(&path, 1 << 20);
+    let (scene, _, diags, text) = built_with_budget(&path, 1 << 20);
     assert!(diags.items().iter().any(|d| d.message.contains("displacement inside instances is not diced")), "{text}");
     // The un-instanced original is diced.
     assert!(scene.displacement.is_some_and(|s| s.prims == 1), "{text}");
+}
+
+/// Dicing measures edges against pixels and the scene's own size, never absolute lengths:
+/// the displaced sphere's silhouette is the r + d disc at any scene scale.
+#[test]
+fn displacement_holds_at_any_scene_scale() {
+    for scale in [1e-3f64, 1e3] {
+        let dir = tempfile::tempdir().unwrap();
+        let ash = format!(
+            "substance Grown {{\n    node bsdf = diffuse(albedo: 0.7);\n    \
+             node d = displacement(height: {}, mode: \"none\", bound: {});\n    surface = bsdf.bsdf;\n    displacement = d.out;\n}}\n",
+            0.25 * scale,
+            scale
+        );
+        let prims = format!(
+            "def Camera \"Cam\" {{\n    float focalLength = 50\n    float horizontalAperture = 20.955\n    \
+             float2 clippingRange = ({}, {})\n    double3 xformOp:translate = (0, 0, {})\n    \
+             uniform token[] xformOpOrder = [\"xformOp:translate\"]\n}}\n\
+             def Sphere \"Ball\" {{\n    double radius = {scale}\n{}}}\n",
+            0.01 * scale,
+            1000.0 * scale,
+            10.0 * scale,
+            bindings(&["Grown"])
+        );
+        let path = stage(dir.path(), &ash, &["Grown"], &prims, "def DomeLight \"Sky\" {}\n");
+        let (w, h) = (160, 120);
+        let image = render(&path, None, (w, h), 4, 1);
+        let pixel = 2.0 * TAN_HALF / w as f64;
+        let disc = std::f64::consts::PI * ((1.25f64 / 10.0).asin().tan() / pixel).powi(2);
+        let coverage: f64 = channel(&image, "A").iter().map(|&a| a as f64).sum();
+        assert!((coverage / disc - 1.0).abs() < 0.01, "scale {scale}: coverage {coverage}, r + d disc {disc}");
+    }
+}
+
+/// A camera inside a displaced surface would dice without end near it: the scene-relative
+/// edge floor and the budget stop it, and the image is still valid.
+#[test]
+fn a_camera_inside_a_displaced_sphere_is_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let prims =
+        format!("{}def Sphere \"Ball\" {{\n{}}}\n", camera("Cam", [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]), bindings(&["Rough"]));
+    let path = stage(dir.path(), ROUGH, &["Rough"], &prims, "def DomeLight \"Sky\" {}\n");
+    let (scene, materials, diags, text) = built_with_budget(&path, 200_000);
+    let stats = scene.displacement.as_ref().expect("displaced");
+    assert!(stats.micro_triangles <= 200_000, "{stats}");
+    assert!(!diags.has_errors(), "{text}");
+    let image = common::render_scene(&scene, &materials, &common::settings(16, 16, 1, 1, 2));
+    assert!(channel(&image, "A").iter().all(|&a| a == 1.0), "every ray from inside hits the sphere");
 }
