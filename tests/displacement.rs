@@ -381,18 +381,41 @@ fn displaced_closed_surfaces_have_no_cracks() {
                 point3f[] points = [(-1, -1, 1), (1, -1, 1), (-1, 1, 1), (1, 1, 1), (-1, 1, -1), (1, 1, -1), (-1, -1, -1), (1, -1, -1)]\n}\n";
     let sphere = "def Sphere \"Ball\" {\n    rel material:slotBinding:_000 = </Looks/Rough>\n}\n";
     for (name, prim) in [("cube", cube), ("sphere", sphere)] {
-        let dir = tempfile::tempdir().unwrap();
         let prims = format!("{}{prim}", camera("Cam", [0.0, 1.0, 6.0], [-10.0, 0.0, 0.0]));
-        let path = stage(dir.path(), ROUGH, &["Rough"], &prims, "def DomeLight \"Sky\" {}\n");
-        let (triangles, scene) = micro_triangles(&path);
-        let stats = scene.displacement.as_ref().expect("displaced");
-        assert!(triangles.len() > 10_000, "{name}: {stats}");
-        assert_eq!(open_edges(&triangles), 0, "{name}: edges not shared by exactly two micro-triangles");
-        // Rays from the centre: a crack anywhere would let some escape.
-        let escaped =
-            directions(20_000).filter(|&d| scene.accel.intersect(Vec3::ZERO, d, 0.0, f32::INFINITY).is_none()).count();
-        assert_eq!(escaped, 0, "{name}: rays from inside escaped");
+        let triangles = check_closed(name, &prims, Vec3::ZERO);
+        assert!(triangles > 10_000, "{name}: {triangles} micro-triangles");
     }
+}
+
+/// Far from the origin f32 steps are coarse (1/128 at 1e5, 1/16 at 1e6): dicing stops at
+/// about eight steps instead of splitting edges whose midpoints round onto their ends, and
+/// the surface stays closed.
+#[test]
+fn displaced_surfaces_far_from_the_origin_stay_closed_and_bounded() {
+    for x in [1e5f32, 1e6] {
+        let prims = format!(
+            "{}def Sphere \"Ball\" {{\n    rel material:slotBinding:_000 = </Looks/Rough>\n    \
+             double3 xformOp:translate = ({x}, 0, 0)\n    uniform token[] xformOpOrder = [\"xformOp:translate\"]\n}}\n",
+            camera("Cam", [x as f64, 1.0, 6.0], [-10.0, 0.0, 0.0])
+        );
+        check_closed(&format!("sphere at x = {x}"), &prims, Vec3::new(x, 0.0, 0.0));
+    }
+}
+
+/// Builds `prims` with the `Rough` substance and checks the micro-mesh is closed: every edge
+/// shared by exactly two micro-triangles, no ray from `centre` escaping. Returns the number
+/// of micro-triangles.
+fn check_closed(name: &str, prims: &str, centre: Vec3) -> usize {
+    let dir = tempfile::tempdir().unwrap();
+    let path = stage(dir.path(), ROUGH, &["Rough"], prims, "def DomeLight \"Sky\" {}\n");
+    let (triangles, scene) = micro_triangles(&path);
+    assert!(scene.displacement.is_some(), "{name}: not displaced");
+    assert_eq!(open_edges(&triangles), 0, "{name}: edges not shared by exactly two micro-triangles");
+    // Rays from the centre: a crack anywhere would let some escape.
+    let escaped =
+        directions(20_000).filter(|&d| scene.accel.intersect(centre, d, 0.0, f32::INFINITY).is_none()).count();
+    assert_eq!(escaped, 0, "{name}: rays from inside escaped");
+    triangles.len()
 }
 
 /// The crack check can fail: the same micro-triangles with one interior vertex moved off
@@ -567,8 +590,11 @@ fn displacement_holds_at_any_scene_scale() {
 #[test]
 fn a_camera_inside_a_displaced_sphere_is_bounded() {
     let dir = tempfile::tempdir().unwrap();
-    let prims =
-        format!("{}def Sphere \"Ball\" {{\n{}}}\n", camera("Cam", [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]), bindings(&["Rough"]));
+    let prims = format!(
+        "{}def Sphere \"Ball\" {{\n{}}}\n",
+        camera("Cam", [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]),
+        bindings(&["Rough"])
+    );
     let path = stage(dir.path(), ROUGH, &["Rough"], &prims, "def DomeLight \"Sky\" {}\n");
     let (scene, materials, diags, text) = built_with_budget(&path, 200_000);
     let stats = scene.displacement.as_ref().expect("displaced");

@@ -510,6 +510,11 @@ pub fn displace(
     let (lo, hi) =
         base.vertices.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| (lo.min(v.p), hi.max(v.p)));
     let extent = if base.vertices.is_empty() { 1.0 } else { (hi - lo).length().max(f32::MIN_POSITIVE) };
+    // Edges are never split below a millionth of the diced geometry's size, nor below about
+    // eight f32 steps of its coordinates (far from the origin a midpoint would round onto an
+    // end point and the split would never shorten the edge).
+    let magnitude = lo.abs().max(hi.abs()).max_element();
+    let floor = (extent * 1e-6).max(magnitude * 1e-6);
     let (width, height_px) = options.resolution;
     let camera = camera.with_aspect(width as f32 / height_px.max(1) as f32);
     let pixel = camera.pixel_angle(width.max(1));
@@ -529,7 +534,7 @@ pub fn displace(
             eye: camera.origin(),
             to_clip: camera.camera_to_ndc() * camera.world_to_camera(),
             angle: pixel * rate * std::f32::consts::SQRT_2,
-            floor: extent * 1e-6,
+            floor,
             budget: options.budget.max(base.faces.len()),
         };
         let fits = base.faces.iter().try_for_each(|&f| dicer.dice(f, 0)).is_ok();
