@@ -373,14 +373,18 @@ fn directions(n: usize) -> impl Iterator<Item = Vec3> {
 
 #[test]
 fn displaced_closed_surfaces_have_no_cracks() {
-    // A faceted cube mesh (hard edges: each face's own normal) and a quadric sphere (a seam,
-    // two poles), both with noise relief.
+    // A faceted cube mesh (hard edges: each face's own normal) and quadrics (a sphere's seam
+    // and poles, rims, an apex), all with noise relief.
     let cube = "def Mesh \"Cube\" {\n    rel material:slotBinding:_000 = </Looks/Rough>\n    \
                 uniform token subdivisionScheme = \"none\"\n    int[] faceVertexCounts = [4, 4, 4, 4, 4, 4]\n    \
                 int[] faceVertexIndices = [0, 1, 3, 2, 2, 3, 5, 4, 4, 5, 7, 6, 6, 7, 1, 0, 1, 7, 5, 3, 6, 0, 2, 4]\n    \
                 point3f[] points = [(-1, -1, 1), (1, -1, 1), (-1, 1, 1), (1, 1, 1), (-1, 1, -1), (1, 1, -1), (-1, -1, -1), (1, -1, -1)]\n}\n";
     let sphere = "def Sphere \"Ball\" {\n    rel material:slotBinding:_000 = </Looks/Rough>\n}\n";
-    for (name, prim) in [("cube", cube), ("sphere", sphere)] {
+    // Quadrics of several parts: rims where a side meets a cap, an apex, capsule equators.
+    let can = "def Cylinder \"Can\" {\n    rel material:slotBinding:_000 = </Looks/Rough>\n}\n";
+    let cone = "def Cone \"Cone\" {\n    rel material:slotBinding:_000 = </Looks/Rough>\n}\n";
+    let capsule = "def Capsule \"Pill\" {\n    rel material:slotBinding:_000 = </Looks/Rough>\n}\n";
+    for (name, prim) in [("cube", cube), ("sphere", sphere), ("cylinder", can), ("cone", cone), ("capsule", capsule)] {
         let prims = format!("{}{prim}", camera("Cam", [0.0, 1.0, 6.0], [-10.0, 0.0, 0.0]));
         let triangles = check_closed(name, &prims, Vec3::ZERO);
         assert!(triangles > 10_000, "{name}: {triangles} micro-triangles");
@@ -602,4 +606,118 @@ fn a_camera_inside_a_displaced_sphere_is_bounded() {
     assert!(!diags.has_errors(), "{text}");
     let image = common::render_scene(&scene, &materials, &common::settings(16, 16, 1, 1, 2));
     assert!(channel(&image, "A").iter().all(|&a| a == 1.0), "every ray from inside hits the sphere");
+}
+
+/// A diced prim's shading normal is its displaced surface's, bent only by bump layers: a
+/// slope of 0.1 (height 0.2u over a quad 2 wide) tilts the normal to (−0.1, 1, 0)/|·| — not
+/// twice that, as it would be if its displacement were bumped again.
+#[test]
+fn a_diced_prim_is_not_bumped_by_its_own_displacement() {
+    let dir = tempfile::tempdir().unwrap();
+    let ash = r#"
+substance Slope {
+    node bsdf = diffuse(albedo: 0.5);
+    node h = uv_affine(gu: 0.2);
+    node d = displacement(height: h.out, mode: "none");
+    surface = bsdf.bsdf;
+    displacement = d.out;
+}
+"#;
+    let prims = format!("{}{}", camera("Top", [0.0, 6.0, 0.0], [-90.0, 0.0, 0.0]), quad(&bindings(&["Slope"])));
+    let path = stage(dir.path(), ash, &["Slope"], &prims, "def DomeLight \"Sky\" {}\n");
+    let (w, h) = (32, 32);
+    let image = render(&path, None, (w, h), 1, 1);
+    let centre = (h / 2) * w + w / 2;
+    let n = Vec3::new(channel(&image, "N.R")[centre], channel(&image, "N.G")[centre], channel(&image, "N.B")[centre]);
+    let expected = Vec3::new(-0.1, 1.0, 0.0).normalize();
+    assert!((n - expected).length() < 5e-3, "shading normal {n}, the displaced surface's {expected}");
+}
+
+/// Whether a prim is diced follows rule 6's liveness, not the optimiser: a moving layer that
+/// an opaque `mix` layer hides moves nothing either way.
+#[test]
+fn dicing_does_not_depend_on_the_optimiser() {
+    let dir = tempfile::tempdir().unwrap();
+    let ash = format!(
+        "{GROWN}\nsubstance Flatten {{\n    node bsdf = diffuse(albedo: 0.3);\n    \
+         node b = bump(height: 0.0, mode: \"mix\");\n    surface = bsdf.bsdf;\n    displacement = b.out;\n}}\n"
+    );
+    let prims = format!(
+        "{}def Sphere \"Ball\" {{\n{}}}\n",
+        camera("Cam", [0.0, 0.0, 6.0], [0.0, 0.0, 0.0]),
+        bindings(&["Grown", "Flatten"])
+    );
+    let path = stage(dir.path(), &ash, &["Grown", "Flatten"], &prims, "def DomeLight \"Sky\" {}\n");
+    let image = |optimize| {
+        let (scene, materials) = built(&path, None, (48, 48), BackendKind::Jit, optimize);
+        assert!(scene.displacement.is_none(), "optimise {optimize}: the hidden relief was diced");
+        common::render_scene(&scene, &materials, &common::settings(48, 48, 4, 7, 3))
+    };
+    assert!(image(true) == image(false));
+}
+
+/// A bound large enough to throw the surface past the scene extent is an error naming the
+/// prim, never an empty image.
+#[test]
+fn displacement_beyond_the_scene_extent_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let ash = r#"
+substance Huge {
+    node bsdf = diffuse(albedo: 0.5);
+    node d = displacement(height: 1e20, mode: "none", bound: 1e20);
+    surface = bsdf.bsdf;
+    displacement = d.out;
+}
+"#;
+    let prims = format!(
+        "{}def Sphere \"Ball\" {{\n{}}}\n",
+        camera("Cam", [0.0, 0.0, 6.0], [0.0, 0.0, 0.0]),
+        bindings(&["Huge"])
+    );
+    let path = stage(dir.path(), ash, &["Huge"], &prims, "def DomeLight \"Sky\" {}\n");
+    let mut sources = strata::diag::SourceMap::new();
+    let mut diags = strata::diag::Diagnostics::new();
+    let compiled = strata::cli::compile_scene(
+        Some(&path),
+        BackendKind::Jit,
+        strata::ir::wired::PassOptions::default(),
+        &mut sources,
+        &mut diags,
+    )
+    .expect("compiles");
+    let refs: Vec<&dyn strata::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
+    let scene = Scene::build(
+        &compiled.stage,
+        &|p| compiled.prim_material.get(p).copied(),
+        &refs,
+        &Default::default(),
+        &mut diags,
+    );
+    assert!(scene.is_none());
+    let text = diags.render(&sources);
+    assert!(text.contains("the displaced surface of `/Ball` reaches"), "{text}");
+}
+
+/// Constant displacement moves flat faces flat: a faceted cube's top face and a cylinder's
+/// cap rise by exactly d everywhere but the one-micro-triangle band along their hard edges,
+/// where the two sides meet (the direction there averages the faces', so nothing opens).
+#[test]
+fn flat_faces_next_to_hard_edges_stay_flat() {
+    let cube = "def Mesh \"Cube\" {\n    rel material:slotBinding:_000 = </Looks/Grown>\n    \
+                uniform token subdivisionScheme = \"none\"\n    int[] faceVertexCounts = [4, 4, 4, 4, 4, 4]\n    \
+                int[] faceVertexIndices = [0, 1, 3, 2, 2, 3, 5, 4, 4, 5, 7, 6, 6, 7, 1, 0, 1, 7, 5, 3, 6, 0, 2, 4]\n    \
+                point3f[] points = [(-1, -1, 1), (1, -1, 1), (-1, 1, 1), (1, 1, 1), (-1, 1, -1), (1, 1, -1), (-1, -1, -1), (1, -1, -1)]\n}\n";
+    let can = "def Cylinder \"Can\" {\n    rel material:slotBinding:_000 = </Looks/Grown>\n    double radius = 1\n    \
+               double height = 2\n    uniform token axis = \"Y\"\n}\n";
+    for (name, prim) in [("cube", cube), ("cylinder", can)] {
+        let dir = tempfile::tempdir().unwrap();
+        let prims = format!("{}{prim}", camera("Top", [0.0, 6.0, 0.0], [-90.0, 0.0, 0.0]));
+        let path = stage(dir.path(), GROWN, &["Grown"], &prims, "def DomeLight \"Sky\" {}\n");
+        let (scene, _) = built(&path, None, (128, 128), BackendKind::Jit, true);
+        for (x, z) in [(0.0f32, 0.0f32), (0.5, 0.3), (0.62, -0.2), (-0.6, 0.1), (0.1, 0.65)] {
+            let hit = scene.accel.intersect(Vec3::new(x, 10.0, z), -Vec3::Y, 0.0, f32::INFINITY).expect("hit");
+            let y = 10.0 - hit.t;
+            assert!((y - 1.25).abs() < 1e-4, "{name}: top at ({x}, {z}) is {y}, expected 1.25");
+        }
+    }
 }

@@ -34,7 +34,7 @@ use crate::diag::{Diagnostic, Diagnostics};
 use crate::layering::{self, Relief};
 use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::fmt;
 use std::time::Instant;
 
@@ -122,8 +122,15 @@ pub struct Displaced {
 }
 
 /// Whether a material has a layer whose displacement moves geometry.
+/// A layer counts only where rule 6 lets its displacement be seen (`layering::liveness`), so
+/// optimised and unoptimised compilations of one stack dice alike.
 pub fn moves_geometry(material: &dyn MaterialCode) -> bool {
-    material.info().layers.iter().any(|l| l.displacement.is_some() && l.displacement_bound.is_some())
+    let layers = &material.info().layers;
+    let live = layering::liveness(layers);
+    layers
+        .iter()
+        .zip(&live)
+        .any(|(l, live)| l.displacement.is_some() && l.displacement_bound.is_some() && live.displacement)
 }
 
 /// A welded vertex of the surface being diced (f32 like the triangles it becomes: the
@@ -140,11 +147,13 @@ struct Vertex {
     source: u32,
 }
 
-/// A triangle corner: a welded vertex and its (face-varying) texture coordinate.
+/// A triangle corner: a welded vertex and where it lies in its source triangle
+/// (barycentric weights of the source's corners 1 and 2), which gives its face-varying
+/// texture coordinate and the source face's own normal there.
 #[derive(Clone, Copy, Debug)]
 struct Corner {
     v: u32,
-    uv: Vec2,
+    b: Vec2,
 }
 
 /// A triangle being diced, with the index of the source it came from.
@@ -164,6 +173,27 @@ struct Source {
     /// Flat tangents (triangles); a quadric's come from its surface at each vertex.
     dpdu: Vec3,
     dpdv: Vec3,
+    /// Its corners' texture coordinates and normals.
+    uv: [Vec2; 3],
+    n: [Vec3; 3],
+}
+
+impl Source {
+    fn uv_at(&self, b: Vec2) -> Vec2 {
+        self.uv[0] * (1.0 - b.x - b.y) + self.uv[1] * b.x + self.uv[2] * b.y
+    }
+
+    fn n_at(&self, b: Vec2) -> Vec3 {
+        (self.n[0] * (1.0 - b.x - b.y) + self.n[1] * b.x + self.n[2] * b.y).normalize_or_zero()
+    }
+}
+
+/// The corners of a source triangle, as barycentric weights.
+const SOURCE_CORNERS: [Vec2; 3] = [Vec2::ZERO, Vec2::X, Vec2::Y];
+
+/// The key of an undirected edge.
+fn edge(a: u32, b: u32) -> (u32, u32) {
+    (a.min(b), a.max(b))
 }
 
 /// The welded base mesh of every displaced prim.
@@ -172,6 +202,10 @@ struct Base {
     faces: Vec<Face>,
     sources: Vec<Source>,
     shapes: Vec<Shape>,
+    /// Hard edges: edges whose faces have different normals at an end (a cube's edges, a
+    /// cylinder's rims). Only along them does the displacement direction average the faces';
+    /// elsewhere it is the face's own normal, so flat faces stay flat.
+    creases: HashSet<(u32, u32)>,
 }
 
 /// The key two positions weld on: their exact bits, with −0 as +0.
@@ -181,10 +215,11 @@ fn weld_key(p: Vec3) -> [u32; 3] {
 
 impl Base {
     fn build(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Base {
-        let mut base = Base { vertices: Vec::new(), faces: Vec::new(), sources: Vec::new(), shapes };
+        let mut base =
+            Base { vertices: Vec::new(), faces: Vec::new(), sources: Vec::new(), shapes, creases: HashSet::new() };
         let mut index: HashMap<[u32; 3], u32> = HashMap::new();
         let mut normal_sums: Vec<DVec3> = Vec::new();
-        let mut corner = |base: &mut Base, p: Vec3, n: DVec3, uv: Vec2| -> Corner {
+        let mut corner = |base: &mut Base, p: Vec3, n: DVec3, uv: Vec2, k: usize| -> Corner {
             let source = base.sources.len() as u32;
             let v = *index.entry(weld_key(p)).or_insert_with(|| {
                 base.vertices.push(Vertex { p, n: n.as_vec3(), uv, source });
@@ -192,13 +227,13 @@ impl Base {
                 base.vertices.len() as u32 - 1
             });
             normal_sums[v as usize] += n;
-            Corner { v, uv }
+            Corner { v, b: SOURCE_CORNERS[k] }
         };
         for t in &triangles {
             let (dpdu, dpdv) = super::accel::tangents(t.p, t.uv, t.cross().normalize_or_zero());
-            let c = [0, 1, 2].map(|k| corner(&mut base, t.p[k], t.n[k].as_dvec3(), t.uv[k]));
+            let c = [0, 1, 2].map(|k| corner(&mut base, t.p[k], t.n[k].as_dvec3(), t.uv[k], k));
             base.faces.push(Face { c, source: base.sources.len() as u32 });
-            base.sources.push(Source { prim: t.prim, has_uv: t.has_uv, shape: None, dpdu, dpdv });
+            base.sources.push(Source { prim: t.prim, has_uv: t.has_uv, shape: None, dpdu, dpdv, uv: t.uv, n: t.n });
         }
         drop(triangles);
         for s in 0..base.shapes.len() {
@@ -213,7 +248,7 @@ impl Base {
                 }
                 // Wind outward: the analytic normal decides.
                 let order = if cross.dot(normals[0] + normals[1] + normals[2]) < 0.0 { [0, 2, 1] } else { [0, 1, 2] };
-                let c = order.map(|k| corner(&mut base, world[k], normals[k], tri[k].1));
+                let c = [0, 1, 2].map(|j| corner(&mut base, world[order[j]], normals[order[j]], tri[order[j]].1, j));
                 base.faces.push(Face { c, source: base.sources.len() as u32 });
                 base.sources.push(Source {
                     prim: shape.prim,
@@ -221,6 +256,8 @@ impl Base {
                     shape: Some(s as u32),
                     dpdu: Vec3::ZERO,
                     dpdv: Vec3::ZERO,
+                    uv: order.map(|k| tri[k].1),
+                    n: order.map(|k| normals[k].as_vec3()),
                 });
             }
         }
@@ -228,6 +265,27 @@ impl Base {
             let n = sum.normalize_or_zero();
             if n != DVec3::ZERO && n.is_finite() {
                 v.n = n.as_vec3();
+            }
+        }
+        // An edge is hard where the faces sharing it disagree on the normal at either end.
+        let mut first: HashMap<(u32, u32), [Vec3; 2]> = HashMap::new();
+        for f in &base.faces {
+            let source = &base.sources[f.source as usize];
+            for k in 0..3 {
+                let (a, b) = (f.c[k], f.c[(k + 1) % 3]);
+                let key = edge(a.v, b.v);
+                let (na, nb) = (source.n_at(a.b), source.n_at(b.b));
+                let ends = if a.v < b.v { [na, nb] } else { [nb, na] };
+                match first.get(&key) {
+                    None => {
+                        first.insert(key, ends);
+                    }
+                    Some(seen) => {
+                        if seen[0].dot(ends[0]) < 1.0 - 1e-5 || seen[1].dot(ends[1]) < 1.0 - 1e-5 {
+                            base.creases.insert(key);
+                        }
+                    }
+                }
             }
         }
         base
@@ -268,6 +326,8 @@ struct Dicer<'a> {
     base: &'a Base,
     vertices: Vec<Vertex>,
     midpoints: HashMap<(u32, u32), u32>,
+    /// Hard edges, the base's and their halves.
+    creases: HashSet<(u32, u32)>,
     faces: Vec<Face>,
     eye: Vec3,
     /// World to clip space, for the on-screen test.
@@ -286,7 +346,11 @@ impl Dicer<'_> {
     fn splits(&self, a: u32, b: u32) -> bool {
         let (pa, pb) = (self.vertices[a as usize].p, self.vertices[b as usize].p);
         let len = pa.distance(pb);
-        if len <= self.floor {
+        // About eight f32 steps of the edge's own coordinates (far from the origin a midpoint
+        // would round onto an end point), and an absolute floor; both per edge, so one large
+        // or distant prim does not coarsen the others.
+        let floor = (pa.abs().max(pb.abs()).max_element() * 1e-6).max(self.floor);
+        if len <= floor {
             return false;
         }
         let mid = (pa + pb) * 0.5;
@@ -298,15 +362,21 @@ impl Dicer<'_> {
 
     /// The vertex halfway along edge `(a, b)` of a face from `source`, created once per edge.
     fn midpoint(&mut self, a: Corner, b: Corner, source: u32) -> Corner {
-        let uv = (a.uv + b.uv) * 0.5;
-        let key = (a.v.min(b.v), a.v.max(b.v));
+        let bary = (a.b + b.b) * 0.5;
+        let key = edge(a.v, b.v);
         if let Some(&v) = self.midpoints.get(&key) {
-            return Corner { v, uv };
+            return Corner { v, b: bary };
         }
+        let src = &self.base.sources[source as usize];
         let (va, vb) = (self.vertices[a.v as usize], self.vertices[b.v as usize]);
-        let mut vertex =
-            Vertex { p: (va.p + vb.p) * 0.5, n: (va.n + vb.n).try_normalize().unwrap_or(va.n), uv, source };
-        if let Some(s) = self.base.sources[source as usize].shape {
+        // Along a hard edge the direction averages the faces' (as its ends do), so both sides
+        // move together; elsewhere it is the face's own normal, so flat faces stay flat.
+        let crease = self.creases.contains(&key);
+        let face_normal = src.n_at(bary);
+        let averaged = (va.n + vb.n).try_normalize().unwrap_or(va.n);
+        let n = if crease || face_normal == Vec3::ZERO { averaged } else { face_normal };
+        let mut vertex = Vertex { p: (va.p + vb.p) * 0.5, n, uv: src.uv_at(bary), source };
+        if let Some(s) = src.shape {
             // On a quadric, the midpoint goes back onto the exact surface.
             let shape = &self.base.shapes[s as usize];
             let (p, n, ..) = shape.part.local_geometry(shape.to_object.transform_point3(vertex.p.as_dvec3()));
@@ -314,8 +384,7 @@ impl Dicer<'_> {
             let p = shape.to_world.transform_point3(p).as_vec3();
             if p.is_finite() && n != Vec3::ZERO {
                 vertex.p = p;
-                // Keep a rim's averaged direction (both parts' normals) where the ends have one.
-                if va.n.dot(n) > 0.999 && vb.n.dot(n) > 0.999 {
+                if !crease {
                     vertex.n = n;
                 }
             }
@@ -323,7 +392,11 @@ impl Dicer<'_> {
         let v = self.vertices.len() as u32;
         self.vertices.push(vertex);
         self.midpoints.insert(key, v);
-        Corner { v, uv }
+        if crease {
+            self.creases.insert(edge(a.v, v));
+            self.creases.insert(edge(v, b.v));
+        }
+        Corner { v, b: bary }
     }
 
     /// Dices `face` into `self.faces`; `Err` when the budget is passed.
@@ -510,11 +583,9 @@ pub fn displace(
     let (lo, hi) =
         base.vertices.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| (lo.min(v.p), hi.max(v.p)));
     let extent = if base.vertices.is_empty() { 1.0 } else { (hi - lo).length().max(f32::MIN_POSITIVE) };
-    // Edges are never split below a millionth of the diced geometry's size, nor below about
-    // eight f32 steps of its coordinates (far from the origin a midpoint would round onto an
-    // end point and the split would never shorten the edge).
-    let magnitude = lo.abs().max(hi.abs()).max_element();
-    let floor = (extent * 1e-6).max(magnitude * 1e-6);
+    // Edges are never split below a billionth of the diced geometry's size (a camera inside
+    // a surface); `Dicer::splits` adds each edge's own f32 floor.
+    let floor = (extent * 1e-9).max(f32::MIN_POSITIVE);
     let (width, height_px) = options.resolution;
     let camera = camera.with_aspect(width as f32 / height_px.max(1) as f32);
     let pixel = camera.pixel_angle(width.max(1));
@@ -530,6 +601,7 @@ pub fn displace(
             base: &base,
             vertices,
             midpoints: HashMap::new(),
+            creases: base.creases.clone(),
             faces: Vec::with_capacity(base.faces.len()),
             eye: camera.origin(),
             to_clip: camera.camera_to_ndc() * camera.world_to_camera(),
@@ -581,6 +653,22 @@ pub fn displace(
     for (v, &h) in vertices.iter_mut().zip(&heights) {
         v.p += v.n * h;
     }
+    // Displaced geometry is held to the extent every other prim is (a huge bound allows it).
+    if let Some(v) =
+        vertices.iter().find(|v| !v.p.is_finite() || v.p.abs().max_element() as f64 > super::geometry::MAX_EXTENT)
+    {
+        let prim = &geometry.prims[base.sources[v.source as usize].prim as usize];
+        diags.push(
+            Diagnostic::error(format!(
+                "the displaced surface of `{}` reaches {}, beyond ±{:e} scene units",
+                prim.path,
+                v.p,
+                super::geometry::MAX_EXTENT
+            ))
+            .at(prim.span, "displaced here")
+            .note("lower the displacement node's `bound` (heights are clamped to it)"),
+        );
+    }
     // Smooth normals of the displaced mesh: area-weighted face normals per welded vertex.
     let mut normals = vec![Vec3::ZERO; vertices.len()];
     for f in &faces {
@@ -607,7 +695,7 @@ pub fn displace(
         Triangle {
             p: f.c.map(|c| vertices[c.v as usize].p),
             n: f.c.map(|c| normals[c.v as usize]),
-            uv: f.c.map(|c| c.uv),
+            uv: f.c.map(|c| source.uv_at(c.b)),
             prim: source.prim,
             has_uv: source.has_uv,
         }

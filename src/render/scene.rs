@@ -209,6 +209,9 @@ impl Scene {
         }
         let displaced =
             super::displace::displace(&mut geometry, &prim_material, materials, &camera, &options.dicing, diags);
+        if diags.error_count() > errors {
+            return None;
+        }
         // Displaced surfaces may reach past the undisplaced bounds (the camera stays framed on those).
         let bounds = geometry.bounds().unwrap_or(bounds);
         Some(Scene {
