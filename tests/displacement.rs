@@ -86,14 +86,21 @@ fn render(path: &Path, camera: Option<&str>, res: (usize, usize), spp: u32, dept
     common::render_scene(&scene, &materials, &common::settings(res.0, res.1, spp, 1, depth))
 }
 
-/// The scene as `strata render` builds it, through `camera`.
-fn built(
+/// A compiled scene built as `strata render` builds it, with `options`: the scene (`None`
+/// when building reported an error), its materials, the diagnostics and their rendering.
+struct Built {
+    scene: Option<Scene>,
+    materials: Vec<std::sync::Arc<dyn strata::abi::MaterialCode>>,
+    diags: strata::diag::Diagnostics,
+    text: String,
+}
+
+fn build_with(
     path: &Path,
-    camera: Option<&str>,
-    res: (usize, usize),
     backend: BackendKind,
     optimize: bool,
-) -> (Scene, Vec<std::sync::Arc<dyn strata::abi::MaterialCode>>) {
+    options: &strata::render::scene::SceneOptions,
+) -> Built {
     let mut sources = strata::diag::SourceMap::new();
     let mut diags = strata::diag::Diagnostics::new();
     let compiled = strata::cli::compile_scene(
@@ -105,15 +112,34 @@ fn built(
     )
     .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
     let refs: Vec<&dyn strata::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
+    let scene = Scene::build(&compiled.stage, &|p| compiled.prim_material.get(p).copied(), &refs, options, &mut diags);
+    let text = diags.render(&sources);
+    Built { scene, materials: compiled.materials, diags, text }
+}
+
+/// Dicing options for an image of `resolution` with a micro-triangle `budget`.
+fn dicing(resolution: (usize, usize), budget: usize) -> strata::render::scene::SceneOptions {
+    strata::render::scene::SceneOptions {
+        dicing: strata::render::displace::DicingOptions { resolution, budget, ..Default::default() },
+        ..Default::default()
+    }
+}
+
+/// The scene as `strata render` builds it, through `camera`; panics on any error.
+fn built(
+    path: &Path,
+    camera: Option<&str>,
+    res: (usize, usize),
+    backend: BackendKind,
+    optimize: bool,
+) -> (Scene, Vec<std::sync::Arc<dyn strata::abi::MaterialCode>>) {
     let options = strata::render::scene::SceneOptions {
         camera: camera.map(str::to_string),
-        dicing: strata::render::displace::DicingOptions { resolution: res, ..Default::default() },
-        ..Default::default()
+        ..dicing(res, strata::render::displace::DEFAULT_MICRO_TRIANGLE_BUDGET)
     };
-    let scene = Scene::build(&compiled.stage, &|p| compiled.prim_material.get(p).copied(), &refs, &options, &mut diags)
-        .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    (scene, compiled.materials)
+    let b = build_with(path, backend, optimize, &options);
+    assert!(!b.diags.has_errors(), "{}", b.text);
+    (b.scene.unwrap_or_else(|| panic!("{}", b.text)), b.materials)
 }
 
 const GROWN: &str = r#"
@@ -298,23 +324,13 @@ substance Tall {
 "#;
     let prims = format!("{}{}", camera("Top", [0.0, 6.0, 0.0], [-90.0, 0.0, 0.0]), quad(&bindings(&["Tall"])));
     let path = stage(dir.path(), ash, &["Tall"], &prims, "def DomeLight \"Sky\" {}\n");
-    let mut sources = strata::diag::SourceMap::new();
-    let mut diags = strata::diag::Diagnostics::new();
-    let compiled = strata::cli::compile_scene(
-        Some(&path),
+    let Built { scene, diags, text, .. } = build_with(
+        &path,
         BackendKind::Jit,
-        strata::ir::wired::PassOptions::default(),
-        &mut sources,
-        &mut diags,
-    )
-    .expect("compiles");
-    let refs: Vec<&dyn strata::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
-    let options = strata::render::scene::SceneOptions {
-        dicing: strata::render::displace::DicingOptions { resolution: (64, 64), ..Default::default() },
-        ..Default::default()
-    };
-    let scene = Scene::build(&compiled.stage, &|p| compiled.prim_material.get(p).copied(), &refs, &options, &mut diags)
-        .expect("builds");
+        true,
+        &dicing((64, 64), strata::render::displace::DEFAULT_MICRO_TRIANGLE_BUDGET),
+    );
+    let scene = scene.expect("builds");
     // Height 0.1 + 2u passes 0.5 at u = 0.2: clamped there, exact below.
     for (u, v, height) in heights_on_grid(&scene) {
         let expected = (0.1 + 2.0 * u).min(0.5);
@@ -322,7 +338,6 @@ substance Tall {
     }
     let stats = scene.displacement.expect("displaced");
     assert!(stats.clamped > 0 && (stats.clamped as usize) < stats.vertices, "{stats}");
-    let text = diags.render(&sources);
     let warning =
         diags.items().iter().find(|d| d.message.contains("passed its bound")).unwrap_or_else(|| panic!("{text}"));
     assert!(warning.message.contains("bound 0.5") && warning.message.contains("largest |height| 2.1"), "{text}");
@@ -483,30 +498,13 @@ fn displaced_layers_render_identically_across_backends_and_optimisation() {
     }
 }
 
-/// Build `path` with a micro-triangle budget, returning the scene and rendered diagnostics.
+/// Builds `path` for a 128x128 image with a micro-triangle budget; panics on any error.
 fn built_with_budget(
     path: &Path,
     budget: usize,
 ) -> (Scene, Vec<std::sync::Arc<dyn strata::abi::MaterialCode>>, strata::diag::Diagnostics, String) {
-    let mut sources = strata::diag::SourceMap::new();
-    let mut diags = strata::diag::Diagnostics::new();
-    let compiled = strata::cli::compile_scene(
-        Some(path),
-        BackendKind::Jit,
-        strata::ir::wired::PassOptions::default(),
-        &mut sources,
-        &mut diags,
-    )
-    .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    let refs: Vec<&dyn strata::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
-    let options = strata::render::scene::SceneOptions {
-        dicing: strata::render::displace::DicingOptions { resolution: (128, 128), budget, ..Default::default() },
-        ..Default::default()
-    };
-    let scene = Scene::build(&compiled.stage, &|p| compiled.prim_material.get(p).copied(), &refs, &options, &mut diags)
-        .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    let text = diags.render(&sources);
-    (scene, compiled.materials, diags, text)
+    let Built { scene, materials, diags, text } = build_with(path, BackendKind::Jit, true, &dicing((128, 128), budget));
+    (scene.unwrap_or_else(|| panic!("{text}")), materials, diags, text)
 }
 
 #[test]
@@ -675,26 +673,8 @@ substance Huge {
         bindings(&["Huge"])
     );
     let path = stage(dir.path(), ash, &["Huge"], &prims, "def DomeLight \"Sky\" {}\n");
-    let mut sources = strata::diag::SourceMap::new();
-    let mut diags = strata::diag::Diagnostics::new();
-    let compiled = strata::cli::compile_scene(
-        Some(&path),
-        BackendKind::Jit,
-        strata::ir::wired::PassOptions::default(),
-        &mut sources,
-        &mut diags,
-    )
-    .expect("compiles");
-    let refs: Vec<&dyn strata::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
-    let scene = Scene::build(
-        &compiled.stage,
-        &|p| compiled.prim_material.get(p).copied(),
-        &refs,
-        &Default::default(),
-        &mut diags,
-    );
+    let Built { scene, text, .. } = build_with(&path, BackendKind::Jit, true, &Default::default());
     assert!(scene.is_none());
-    let text = diags.render(&sources);
     assert!(text.contains("the displaced surface of `/Ball` reaches"), "{text}");
 }
 

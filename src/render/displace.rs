@@ -546,8 +546,10 @@ pub fn displace(
 ) -> Displaced {
     let start = Instant::now();
     let nprims = geometry.prims.len();
+    // Once per material (liveness allocates), then per prim.
+    let material_moves: Vec<bool> = materials.iter().map(|m| moves_geometry(*m)).collect();
     let mut moves: Vec<bool> = (0..nprims)
-        .map(|p| prim_material.get(p).and_then(|&m| materials.get(m)).is_some_and(|m| moves_geometry(*m)))
+        .map(|p| prim_material.get(p).and_then(|&m| material_moves.get(m)).copied().unwrap_or(false))
         .collect();
     if !moves.iter().any(|&m| m) {
         return Displaced { prims: vec![false; nprims], stats: None };
