@@ -517,7 +517,6 @@ fn exr_options(
     warnings: usize,
 ) -> ExrOptions {
     let camera = scene.camera.with_aspect(settings.width as f32 / settings.height as f32);
-    let world_to_camera = camera.world_to_camera();
     let mode = match settings.mode {
         crate::render::LayerMode::Stochastic => "stochastic",
         crate::render::LayerMode::Weighted => "weighted",
@@ -525,8 +524,8 @@ fn exr_options(
     let scene_name = args.scene.as_ref().map_or("(embedded default scene)".to_string(), |p| p.display().to_string());
     ExrOptions {
         half: args.half,
-        world_to_camera: Some(world_to_camera),
-        world_to_ndc: Some(camera.camera_to_ndc() * world_to_camera),
+        world_to_camera: Some(camera.world_to_camera_exr()),
+        world_to_ndc: Some(camera.world_to_ndc_exr()),
         clipping: Some(camera.clipping_range()),
         strings: vec![
             ("strata/scene".into(), scene_name),

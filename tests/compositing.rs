@@ -153,14 +153,49 @@ fn default_render_exr_has_the_compositing_channels_and_header() {
     // worldToCamera (Imath row vectors: translation in the last row) puts the camera, at
     // (0, 1.4, 6.5), at the origin.
     let m = attrs.world_to_camera.expect("worldToCamera");
-    let eye = [0.0f32, 1.4, 6.5, 1.0];
-    let mapped: Vec<f32> = (0..4).map(|col| (0..4).map(|row| eye[row] * m[row * 4 + col]).sum()).collect();
-    assert!(mapped[..3].iter().all(|v| v.abs() < 1e-4), "{mapped:?}");
-    // worldToNDC sends a point straight ahead to the image centre.
+    let row_vector = |m: &[f32; 16], p: [f32; 3]| -> [f32; 4] {
+        let v = [p[0], p[1], p[2], 1.0];
+        std::array::from_fn(|col| (0..4).map(|row| v[row] * m[row * 4 + col]).sum())
+    };
+    let eye = row_vector(&m, [0.0, 1.4, 6.5]);
+    assert!(eye[..3].iter().all(|v| v.abs() < 1e-4), "{eye:?}");
+    // OpenEXR's standard conventions (ImfStandardAttributes): camera space is left-handed
+    // with +Z the viewing direction, so a hit point's camera z is its depth (`Z`); NDC runs
+    // from (0, 0) at the top-left of the display window to (1, 1) at its bottom-right. Every
+    // pixel's position `P`, projected back, lands on that pixel.
     let ndc = attrs.world_to_normalized_device.expect("worldToNDC");
-    let ahead = [0.0f32, 1.4 - 10.0 * 9f32.to_radians().sin(), 6.5 - 10.0 * 9f32.to_radians().cos(), 1.0];
-    let clip: Vec<f32> = (0..4).map(|col| (0..4).map(|row| ahead[row] * ndc[row * 4 + col]).sum()).collect();
-    assert!((clip[0] / clip[3]).abs() < 1e-3 && (clip[1] / clip[3]).abs() < 1e-3, "{clip:?}");
+    let (w, h) = (48, 32);
+    let (mut checked, mut depth_matches) = (0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            if a[i] < 1.0 {
+                continue; // an edge pixel averages positions of several surfaces
+            }
+            let world = [p[0][i], p[1][i], p[2][i]];
+            let camera = row_vector(&m, world);
+            // `Z` is the nearest sample's depth, `P` the samples' mean position: never nearer.
+            assert!(camera[2] > 0.999 * z[i], "pixel ({x}, {y}): camera z {} vs Z {}", camera[2], z[i]);
+            depth_matches += usize::from((camera[2] - z[i]).abs() < 0.05 * z[i]);
+            let clip = row_vector(&ndc, world);
+            let (u, v) = (clip[0] / clip[3], clip[1] / clip[3]);
+            let (px, py) = (u * w as f32, v * h as f32);
+            assert!(
+                (px - (x as f32 + 0.5)).abs() < 1.0 && (py - (y as f32 + 0.5)).abs() < 1.0,
+                "pixel ({x}, {y}): P projects to ({px}, {py})"
+            );
+            // Camera x grows to the right of the image, y upwards.
+            if (u - 0.5).abs() > 0.05 {
+                assert_eq!(camera[0] > 0.0, u > 0.5, "pixel ({x}, {y}): camera x {}", camera[0]);
+            }
+            if (v - 0.5).abs() > 0.05 {
+                assert_eq!(camera[1] > 0.0, v < 0.5, "pixel ({x}, {y}): camera y {}", camera[1]);
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked > w * h / 3, "{checked} pixels checked");
+    assert!(depth_matches > checked * 8 / 10, "camera z is Z in {depth_matches} of {checked} pixels");
 }
 
 #[test]

@@ -221,6 +221,33 @@ impl Camera {
         )
     }
 
+    /// OpenEXR's standard `worldToCamera` (column vectors; ImfStandardAttributes): camera
+    /// space left-handed, +X right, +Y up and +Z the viewing direction, so a point in view
+    /// has a positive z equal to its depth (the `Z` channel).
+    pub fn world_to_camera_exr(&self) -> Mat4 {
+        let camera_to_world = Mat4::from_cols(
+            self.right.extend(0.0),
+            self.up.extend(0.0),
+            self.forward.extend(0.0),
+            self.origin.extend(1.0),
+        );
+        camera_to_world.inverse()
+    }
+
+    /// OpenEXR's standard `worldToNDC` (column vectors): after the divide by `w`, (0, 0) is
+    /// the display window's top-left corner and (1, 1) its bottom-right, y down, whatever the
+    /// aspect; z runs from 0 at the near clipping plane to 1 at the far one.
+    pub fn world_to_ndc_exr(&self) -> Mat4 {
+        // From OpenGL clip space (x right and y up over −1..1): x' = (x + w)/2, y' = (w − y)/2.
+        let to_exr = Mat4::from_cols(
+            glam::Vec4::new(0.5, 0.0, 0.0, 0.0),
+            glam::Vec4::new(0.0, -0.5, 0.0, 0.0),
+            glam::Vec4::new(0.0, 0.0, 0.5, 0.0),
+            glam::Vec4::new(0.5, 0.5, 0.5, 1.0),
+        );
+        to_exr * self.camera_to_ndc() * self.world_to_camera()
+    }
+
     /// The near and far clipping distances along the viewing axis (far may be infinite).
     pub fn clipping_range(&self) -> (f32, f32) {
         (self.near, self.far)

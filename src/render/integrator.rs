@@ -208,8 +208,21 @@ impl Scratch {
     }
 }
 
-/// Where each material's channels go in the image: `(material offset, image offset, width)`.
-pub type ChannelMap = Vec<Vec<(usize, usize, usize)>>;
+/// Where one of a material's channels goes in the image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MappedChannel {
+    /// Offset in the material's channel output.
+    pub from: usize,
+    /// Offset in the image's channels.
+    pub to: usize,
+    /// Floats.
+    pub width: usize,
+    /// An integer channel: never blended (DESIGN.md rule 7), one layer's value.
+    pub integer: bool,
+}
+
+/// Per material, where its channels go in the image.
+pub type ChannelMap = Vec<Vec<MappedChannel>>;
 
 /// The scene and materials a path is traced through.
 pub struct Context<'a> {
@@ -394,6 +407,23 @@ impl Context<'_> {
             s.channels.iter_mut().for_each(|c| *c = 0.0);
             let map = &self.channel_map[sp.material];
             if !map.is_empty() {
+                // Integer channels are never blended (rule 7): weighted evaluation takes them
+                // from one layer, chosen by its weight with the pick's own number (which lies
+                // in the opaque part, [0, Σw), here), so each id keeps its layer's share.
+                let integer_lobe = match picked {
+                    Some(_) => 0,
+                    None => {
+                        let opaque: f32 = s.weights[..nl].iter().sum();
+                        let mut rest = u / opaque.max(f32::MIN_POSITIVE);
+                        let last = s.lobes.len().saturating_sub(1);
+                        (0..s.lobes.len())
+                            .find(|&k| {
+                                rest -= s.lobes[k].weight;
+                                rest < 0.0
+                            })
+                            .unwrap_or(last)
+                    }
+                };
                 for k in 0..s.lobes.len() {
                     let (layer, weight) = (s.lobes[k].layer, s.lobes[k].weight);
                     s.site.layer = Some(layer as u32);
@@ -401,9 +431,14 @@ impl Context<'_> {
                     material
                         .channels(&g, layer, &mut s.material_channels[..info.channel_floats])
                         .map_err(Invalid::Shader)?;
-                    for &(from, to, width) in map {
-                        for c in 0..width {
-                            s.channels[to + c] += weight * s.material_channels[from + c];
+                    for m in map {
+                        for c in 0..m.width {
+                            let value = s.material_channels[m.from + c];
+                            if !m.integer {
+                                s.channels[m.to + c] += weight * value;
+                            } else if k == integer_lobe {
+                                s.channels[m.to + c] = value;
+                            }
                         }
                     }
                 }

@@ -173,11 +173,11 @@ fn error(path: &Path, message: impl ToString) -> OutputError {
 pub struct ExrOptions {
     /// Store beauty and colour-like channels as 16-bit half floats (see [`is_half_channel`]).
     pub half: bool,
-    /// The render camera's `worldToCamera` (column vectors; written in OpenEXR's row-vector
-    /// layout).
+    /// The render camera's `worldToCamera` in OpenEXR's convention (column vectors; written
+    /// in OpenEXR's row-vector layout): see [`super::camera::Camera::world_to_camera_exr`].
     pub world_to_camera: Option<glam::Mat4>,
-    /// The render camera's `worldToNDC` (column vectors, NDC as in
-    /// [`super::camera::Camera::camera_to_ndc`]).
+    /// The render camera's `worldToNDC` in OpenEXR's convention (column vectors): see
+    /// [`super::camera::Camera::world_to_ndc_exr`].
     pub world_to_ndc: Option<glam::Mat4>,
     /// Near and far clipping planes (a non-finite far plane is not written).
     pub clipping: Option<(f32, f32)>,

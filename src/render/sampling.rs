@@ -100,12 +100,17 @@ pub fn power_heuristic(pdf_a: f32, pdf_b: f32) -> f32 {
 pub struct Distribution1D {
     func: Vec<f32>,
     cdf: Vec<f32>,
+    /// The function's integral over [0, 1): 0 for an all-zero function.
     integral: f32,
+    /// An all-zero function, sampled uniformly so that sampling never fails.
+    uniform: bool,
 }
 
 impl Distribution1D {
     /// Builds from non-negative function values (non-finite or negative entries count as 0).
-    /// An all-zero function becomes uniform, so sampling never fails.
+    /// An all-zero function is sampled uniformly, so sampling never fails, but keeps its
+    /// integral of 0: as a row of a [`Distribution2D`] (a black band of an environment map)
+    /// its marginal probability is 0, and no sample is spent there.
     pub fn new(values: &[f32]) -> Distribution1D {
         let n = values.len().max(1);
         let mut func: Vec<f32> = values.iter().map(|&v| if v.is_finite() && v > 0.0 { v } else { 0.0 }).collect();
@@ -114,18 +119,17 @@ impl Distribution1D {
         for i in 0..n {
             cdf[i + 1] = cdf[i] + func[i] / n as f32;
         }
-        let mut integral = cdf[n];
-        if integral <= 0.0 {
-            func.iter_mut().for_each(|f| *f = 1.0);
+        let integral = cdf[n];
+        let uniform = integral <= 0.0;
+        if uniform {
             for (i, c) in cdf.iter_mut().enumerate() {
                 *c = i as f32 / n as f32;
             }
-            integral = 1.0;
         } else {
             cdf.iter_mut().for_each(|c| *c /= integral);
         }
         cdf[n] = 1.0;
-        Distribution1D { func, cdf, integral }
+        Distribution1D { func, cdf, integral: if uniform { 0.0 } else { integral }, uniform }
     }
 
     /// Number of pieces.
@@ -138,7 +142,7 @@ impl Distribution1D {
         self.func.is_empty()
     }
 
-    /// The integral of the function over [0, 1).
+    /// The integral of the function over [0, 1) (0 for an all-zero function).
     pub fn integral(&self) -> f32 {
         self.integral
     }
@@ -149,7 +153,7 @@ impl Distribution1D {
         let du = u - self.cdf[i];
         let width = self.cdf[i + 1] - self.cdf[i];
         let du = if width > 0.0 { du / width } else { 0.0 };
-        let pdf = self.func[i] / self.integral;
+        let pdf = if self.uniform { 1.0 } else { self.func[i] / self.integral };
         let x = ((i as f32 + du) / self.len() as f32).min(1.0 - f32::EPSILON);
         (x, pdf, i)
     }
@@ -162,11 +166,18 @@ impl Distribution1D {
 
     /// Probability of picking piece `i` with [`Distribution1D::sample_discrete`].
     pub fn discrete_pdf(&self, i: usize) -> f32 {
-        self.func.get(i).map_or(0.0, |f| f / (self.integral * self.len() as f32))
+        match self.func.get(i) {
+            None => 0.0,
+            Some(_) if self.uniform => 1.0 / self.len() as f32,
+            Some(f) => f / (self.integral * self.len() as f32),
+        }
     }
 
     /// Density of [`Distribution1D::sample_continuous`] at `x`.
     pub fn pdf(&self, x: f32) -> f32 {
+        if self.uniform {
+            return 1.0;
+        }
         let i = ((x * self.len() as f32) as usize).min(self.len() - 1);
         self.func[i] / self.integral
     }
@@ -207,6 +218,10 @@ impl Distribution2D {
 
     /// Density at `(u, v)`.
     pub fn pdf(&self, p: Vec2) -> f32 {
+        if self.marginal.uniform {
+            // An all-black map, sampled uniformly.
+            return 1.0;
+        }
         let row = ((p.y * self.rows.len() as f32) as usize).min(self.rows.len() - 1);
         let r = &self.rows[row];
         let col = ((p.x * r.len() as f32) as usize).min(r.len() - 1);
@@ -234,6 +249,28 @@ mod tests {
         }
         assert!(differs);
         assert!((sum / 10000.0 - 0.5).abs() < 0.01);
+    }
+
+    #[test]
+    fn black_rows_of_a_map_are_never_sampled() {
+        // A sky whose lower half is black (rows 2 and 3 of 4): before, each black row was
+        // made uniform with integral 1 and outweighed the sky, taking most of the samples.
+        let (w, h) = (4, 4);
+        let values: Vec<f32> = (0..w * h).map(|i| if i / w < 2 { 0.01 } else { 0.0 }).collect();
+        let d = Distribution2D::new(&values, w, h);
+        let mut rng = Rng::new(0, 0, 1);
+        let n = 20000;
+        let below = (0..n).filter(|_| d.sample(rng.uniform2()).0.y >= 0.5).count();
+        assert_eq!(below, 0, "{below} of {n} samples in black rows");
+        assert_eq!(d.pdf(Vec2::new(0.3, 0.8)), 0.0);
+        assert!((d.pdf(Vec2::new(0.3, 0.2)) - 2.0).abs() < 1e-5, "half the square holds all the density");
+        // An all-black map is sampled uniformly (density 1), never NaN.
+        let black = Distribution2D::new(&[0.0; 6], 3, 2);
+        let (p, pdf) = black.sample(Vec2::new(0.4, 0.7));
+        assert!(pdf == 1.0 && black.pdf(p) == 1.0 && p.is_finite());
+        // A single all-zero 1D distribution still samples every piece uniformly.
+        let flat = Distribution1D::new(&[0.0, 0.0]);
+        assert_eq!((flat.integral(), flat.discrete_pdf(1), flat.pdf(0.7)), (0.0, 0.5, 1.0));
     }
 
     #[test]

@@ -156,10 +156,45 @@ fn custom_channels_average_to_their_layer_coverage() {
     assert!((mean(&image, "wear") - 0.5).abs() < 0.03, "{}", mean(&image, "wear"));
     assert!((mean(&image, "tint.B") - 0.5).abs() < 0.03);
     assert!((mean(&image, "tint.R") - 0.125).abs() < 0.02);
-    // Integer channels are not averaged: each pixel keeps its first sample (0 or 7).
+    // Integer channels are not averaged: each pixel keeps one sample's id (0 or 7).
     let ids = image.u32_channel("id").unwrap();
     assert!(ids.iter().all(|&v| v == 0 || v == 7));
     assert!(ids.contains(&7));
+}
+
+/// Rule 7 for integer channels: a pixel holds an id one of its samples hit, never a blend,
+/// and over many pixels each id's share is its layer's weight, at any sample count and in
+/// weighted evaluation too. (Sample 0's id, as before, showed the top layer in every pixel:
+/// its pick lies in the first stratum.)
+#[test]
+fn integer_channels_keep_an_id_a_sample_hit_with_each_layers_share() {
+    let scene = plane_scene(DOME);
+    let channels = [("layerid", ChannelKind::Integer)];
+    let layer = |mask: f32, id: f32| {
+        let mut l = ConstLayer::diffuse(mask, [0.5, 0.5, 0.5]);
+        l.channels = vec![id];
+        l
+    };
+    for top_mask in [0.5f32, 0.3] {
+        let material = ConstMaterial::new(vec![layer(1.0, 3.0), layer(top_mask, 7.0)], &channels);
+        for (spp, mode) in [
+            (1, LayerMode::Stochastic),
+            (16, LayerMode::Stochastic),
+            (64, LayerMode::Stochastic),
+            (16, LayerMode::Weighted),
+        ] {
+            let s = RenderSettings { width: 32, height: 32, spp, mode, ..settings(spp) };
+            let (image, _) = run(&scene, &material, &s);
+            let ids = image.u32_channel("layerid").unwrap();
+            assert!(ids.iter().all(|&v| v == 3 || v == 7), "{spp} spp {mode:?}: an id no layer has");
+            let share = ids.iter().filter(|&&v| v == 7).count() as f32 / ids.len() as f32;
+            // 1024 pixels: the binomial spread of the share is at most 0.016.
+            assert!(
+                (share - top_mask).abs() < 0.05,
+                "mask {top_mask}, {spp} spp, {mode:?}: the top id holds {share} of the pixels"
+            );
+        }
+    }
 }
 
 #[test]
