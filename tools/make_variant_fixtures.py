@@ -12,6 +12,8 @@ tests/fixtures/variants/       variant cases (issue 19, item 6)
   strength        selections through a reference, an inherit and two sublayers: the
                   stronger layer's selection wins, the referencing layer's beats the asset's
   missing         a selection naming a variant no arc offers (strata must still warn)
+  through_arcs    a variant adding a reference whose asset's set it selects, a class's set
+                  selected by the inheriting prim, a set on a prim inside a variant
 
 tests/fixtures/compose_around/ what USD composes around (issue 19, item 1)
   missing_sublayer     a sublayer that does not resolve
@@ -397,6 +399,80 @@ def variants():
              warnings=["variant `purple` selected for `look` on `/Thing` does not exist"])
 
 
+def variants_through_arcs():
+    """Variants reached through other arcs: a variant that adds a reference to an asset with
+    its own variants (selected from inside the variant), a class's variant set selected by
+    the inheriting prim, a child prim with its own set inside a variant."""
+    d = os.path.join(ROOT, "variants")
+    write(d, "through_arcs.usda", '''
+        #usda 1.0
+
+        class "_shaded" (
+            prepend variantSets = "shade"
+        )
+        {
+            variantSet "shade" = {
+                "matte" {
+                    float roughness = 1
+                }
+                "gloss" {
+                    float roughness = 0.1
+                }
+            }
+        }
+
+        def Xform "Shelf" (
+            prepend variantSets = "contents"
+            variants = {
+                string contents = "pot"
+            }
+        )
+        {
+            variantSet "contents" = {
+                "empty" {
+                }
+                "pot" (
+                    prepend references = @./look_asset.usda@
+                    variants = {
+                        string look = "green"
+                    }
+                ) {
+                    def Xform "Lid" (
+                        prepend variantSets = "knob"
+                        variants = {
+                            string knob = "round"
+                        }
+                    )
+                    {
+                        variantSet "knob" = {
+                            "round" {
+                                def Sphere "Knob"
+                                {
+                                }
+                            }
+                            "square" {
+                                def Cube "Knob"
+                                {
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+
+        def Sphere "Ball" (
+            prepend inherits = </_shaded>
+            variants = {
+                string shade = "gloss"
+            }
+        )
+        {
+        }
+    ''')
+    expected(d, "through_arcs", values=["/Shelf.tint", "/Ball.roughness"])
+
+
 def compose_around():
     d = os.path.join(ROOT, "compose_around")
     # A camera, a light and a material every case can use.
@@ -670,4 +746,5 @@ def compose_around():
 
 if __name__ == "__main__":
     variants()
+    variants_through_arcs()
     compose_around()
