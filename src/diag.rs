@@ -555,6 +555,72 @@ pub fn did_you_mean<'c>(name: &str, candidates: impl IntoIterator<Item = &'c str
     closest_name(name, candidates).map(|c| format!("did you mean `{c}`?"))
 }
 
+/// Diagnostics of one kind reported once: the first keeps its location, the others are
+/// counted in a note that names a few of them. An asset with 40 missing layers, or 400 prims
+/// bound to one missing material, gets one warning per kind, not hundreds.
+#[derive(Default, Debug)]
+pub struct OncePerKind {
+    groups: Vec<KindGroup>,
+}
+
+#[derive(Debug)]
+struct KindGroup {
+    kind: &'static str,
+    first: Diagnostic,
+    /// Subjects (file or prim names) of the diagnostics after the first, distinct.
+    others: Vec<String>,
+    /// How many diagnostics after the first.
+    count: usize,
+}
+
+/// How many further subjects [`OncePerKind`]'s note names before it only counts.
+const NAMED_OTHERS: usize = 3;
+
+impl OncePerKind {
+    /// An empty set of groups.
+    pub fn new() -> OncePerKind {
+        OncePerKind::default()
+    }
+
+    /// Records `diagnostic` of `kind`, about `subject` (a file or prim path, for the note).
+    pub fn push(&mut self, kind: &'static str, subject: &str, diagnostic: Diagnostic) {
+        match self.groups.iter_mut().find(|g| g.kind == kind) {
+            Some(group) => {
+                if group.first == diagnostic {
+                    return;
+                }
+                group.count += 1;
+                if !group.others.iter().any(|o| o == subject) && group.others.len() < NAMED_OTHERS {
+                    group.others.push(subject.to_string());
+                }
+            }
+            None => self.groups.push(KindGroup { kind, first: diagnostic, others: Vec::new(), count: 0 }),
+        }
+    }
+
+    /// How many diagnostics of `kind` were recorded (the first included).
+    pub fn count(&self, kind: &str) -> usize {
+        self.groups.iter().find(|g| g.kind == kind).map_or(0, |g| g.count + 1)
+    }
+
+    /// Moves one diagnostic per kind into `diags`, in the order the kinds first appeared.
+    pub fn report(self, diags: &mut Diagnostics) {
+        for group in self.groups {
+            let mut d = group.first;
+            if group.count > 0 {
+                let named: Vec<String> = group.others.iter().map(|o| format!("`{o}`")).collect();
+                let rest = group.count - named.len().min(group.count);
+                let mut list = named.join(", ");
+                if rest > 0 {
+                    list += &format!("{}{rest} more", if list.is_empty() { "" } else { " and " });
+                }
+                d = d.note(format!("{} more like it: {list}", group.count));
+            }
+            diags.push(d);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -604,5 +670,21 @@ mod tests {
         all.make_warnings_errors();
         assert_eq!(all.error_count(), 2);
         assert!(all.items().iter().any(|d| d.severity == Severity::Note));
+    }
+
+    #[test]
+    fn once_per_kind_keeps_the_first_and_counts_the_rest() {
+        let mut groups = OncePerKind::new();
+        for name in ["a", "b", "b", "c", "d", "e"] {
+            groups.push("missing", name, Diagnostic::warning(format!("`{name}` is missing")));
+        }
+        groups.push("other", "x", Diagnostic::warning("other kind"));
+        assert_eq!(groups.count("missing"), 6);
+        let mut d = Diagnostics::new();
+        groups.report(&mut d);
+        assert_eq!(d.items().len(), 2);
+        assert_eq!(d.items()[0].message, "`a` is missing");
+        assert_eq!(d.items()[0].notes, vec!["5 more like it: `b`, `c`, `d` and 2 more".to_string()]);
+        assert!(d.items()[1].notes.is_empty());
     }
 }

@@ -39,7 +39,7 @@ fn assert_located(file: &Path, location: &str, message: &str) {
 }
 
 /// Asserts `message`, located at `location`, is a warning of `check` and an error of
-/// `check --strict` (what USD composes around: an unreadable texture or dome map).
+/// `check --strict` (what USD composes around: an unreadable layer, texture or dome map).
 fn assert_located_warning(file: &Path, location: &str, message: &str) {
     let (code, stderr) = check(file);
     assert_eq!(code, Some(0), "{}: {stderr}", file.display());
@@ -76,8 +76,8 @@ fn write_small_exr(path: &Path) {
 }
 
 #[test]
-fn devices_and_directories_named_as_inputs_are_located_errors() {
-    assert_located(
+fn devices_and_directories_named_as_inputs_are_located_diagnostics() {
+    assert_located_warning(
         &hostile("sublayer_dev_zero.usda"),
         "sublayer_dev_zero.usda:3:18",
         "cannot read layer `/dev/zero`: it is a device, not a regular file",
@@ -87,7 +87,7 @@ fn devices_and_directories_named_as_inputs_are_located_errors() {
         "source_dev_zero.usda:13:53",
         "cannot read substance file `/dev/zero`: it is a device, not a regular file",
     );
-    assert_located(&hostile("sublayer_directory.usda"), "sublayer_directory.usda:3:18", "it is a directory");
+    assert_located_warning(&hostile("sublayer_directory.usda"), "sublayer_directory.usda:3:18", "it is a directory");
     // The scene itself: no location to point at but the path, and no read.
     let (code, stderr) = check(Path::new("/dev/zero"));
     assert_eq!(code, Some(1));
@@ -106,11 +106,11 @@ fn fifos_named_as_inputs_never_block() {
 
     let sublayer = d.join("sublayer.usda");
     std::fs::write(&sublayer, "#usda 1.0\n(\n    subLayers = [@pipe.usda@]\n)\n").unwrap();
-    assert_located(&sublayer, "sublayer.usda:3:18", "cannot read layer");
+    assert_located_warning(&sublayer, "sublayer.usda:3:18", "cannot read layer");
 
     let reference = d.join("reference.usda");
     std::fs::write(&reference, "#usda 1.0\ndef Xform \"A\" (\n    references = @pipe.usda@</P>\n) {}\n").unwrap();
-    assert_located(&reference, "reference.usda:3:18", "it is a FIFO");
+    assert_located_warning(&reference, "reference.usda:3:18", "it is a FIFO");
 
     let ash = d.join("pipe.ash");
     mkfifo(&ash);

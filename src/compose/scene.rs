@@ -8,7 +8,7 @@ use super::slots::{
     Binding, BindingPrim, BindingTree, PrimStack, SLOT_BINDING_PREFIX, Slot, decode_slot, resolve_stacks,
 };
 use super::{ComposedLayer, ComposedMaterial, MaterialRef, preview};
-use crate::diag::{Diagnostic, Diagnostics, SourceMap, Span, did_you_mean};
+use crate::diag::{Diagnostic, Diagnostics, OncePerKind, SourceMap, Span, did_you_mean};
 use crate::front::ast::{BaseType, GraphKind};
 use crate::front::library::Library;
 use crate::front::types::{Type, Value};
@@ -147,7 +147,8 @@ impl Collection {
 /// A collection-based binding: `material:binding:collection:NAME = [<collection>, <material>]`.
 struct CollectionBinding {
     collection: Collection,
-    material: String,
+    /// `None` when the material prim does not exist.
+    material: Option<String>,
     span: Span,
     stronger: bool,
 }
@@ -155,7 +156,12 @@ struct CollectionBinding {
 /// The collection-based bindings authored on a prim, in property order (the first whose
 /// collection holds a prim binds it). Only the all-purpose form is read; bindings with a
 /// purpose, or whose collection is missing, warn.
-fn collection_bindings(stage: &Stage, prim: &Prim, diags: &mut Diagnostics) -> Vec<CollectionBinding> {
+fn collection_bindings(
+    stage: &Stage,
+    prim: &Prim,
+    missing: &mut OncePerKind,
+    diags: &mut Diagnostics,
+) -> Vec<CollectionBinding> {
     let mut out = Vec::new();
     for rel in prim.relationships_with_prefix("material:binding:") {
         let rest = &rel.name["material:binding:".len()..];
@@ -200,6 +206,17 @@ fn collection_bindings(stage: &Stage, prim: &Prim, diags: &mut Diagnostics) -> V
             continue;
         };
         let collection = Collection::read(owner, name);
+        if stage.find(material).is_none() {
+            missing.push(
+                "missing material binding target",
+                material,
+                Diagnostic::warning(format!(
+                    "`{}` on `{}` binds `{material}`, which does not exist: its members render as if unbound",
+                    rel.name, prim.path
+                ))
+                .at(*span, "no such prim"),
+            );
+        }
         if let Some(nested) =
             collection.includes.iter().chain(&collection.excludes).find(|p| p.contains(".collection:"))
         {
@@ -213,7 +230,8 @@ fn collection_bindings(stage: &Stage, prim: &Prim, diags: &mut Diagnostics) -> V
         }
         out.push(CollectionBinding {
             collection,
-            material: material.clone(),
+            // A binding to nothing still wins over weaker ones, and binds nothing (UsdShade).
+            material: stage.find(material).map(|_| material.clone()),
             span: *span,
             stronger: binding_strength(prim, rel, diags),
         });
@@ -241,7 +259,7 @@ fn resolve_with_collections(
             .find(|c| c.collection.contains(path))
             .map(|c| Binding {
                 slot: Slot::material_binding(),
-                material: Some(c.material.clone()),
+                material: c.material.clone(),
                 span: c.span,
                 stronger: c.stronger,
                 authored_at: None,
@@ -268,6 +286,9 @@ pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
     let mut direct: Vec<Option<Binding>> = Vec::new();
     let mut collections: Vec<Vec<CollectionBinding>> = Vec::new();
     let mut under_collections: Vec<bool> = Vec::new();
+    // Bindings to prims that do not exist: UsdShade resolves them to no material, so the
+    // binding is empty (the prim renders as if unbound); one warning per kind.
+    let mut missing = OncePerKind::new();
     for (id, prim) in stage.depth_first() {
         let mut bindings = Vec::new();
         for rel in prim.relationships_with_prefix(SLOT_BINDING_PREFIX) {
@@ -287,6 +308,18 @@ pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
             };
             let (material, span) = match rel.targets.as_slice() {
                 [] => (None, authored),
+                [(path, span)] if stage.find(path).is_none() => {
+                    missing.push(
+                        "missing slot binding target",
+                        path,
+                        Diagnostic::warning(format!(
+                            "slot binding `{}` on `{}` targets `{path}`, which does not exist: the slot is not bound",
+                            rel.name, prim.path
+                        ))
+                        .at(*span, "no such prim"),
+                    );
+                    (None, *span)
+                }
                 [(path, span)] => (Some(path.clone()), *span),
                 targets => {
                     let mut d = Diagnostic::error(format!(
@@ -308,8 +341,23 @@ pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
         let here = tree.prims.len();
         index.insert(id, here);
         let renderable = is_renderable(prim) || is_bound_subset(stage, prim);
-        let own = material_binding(prim, diags);
-        collections.push(collection_bindings(stage, prim, diags));
+        let mut own = material_binding(prim, diags);
+        if let Some(binding) = &mut own
+            && let Some(path) = binding.material.as_deref()
+            && stage.find(path).is_none()
+        {
+            missing.push(
+                "missing material binding target",
+                path,
+                Diagnostic::warning(format!(
+                    "`material:binding` on `{}` targets `{path}`, which does not exist: the prim renders as if unbound",
+                    prim.path
+                ))
+                .at(binding.span, "no such prim"),
+            );
+            binding.material = None;
+        }
+        collections.push(collection_bindings(stage, prim, &mut missing, diags));
         under_collections.push(!collections[here].is_empty() || parent.is_some_and(|p| under_collections[p]));
         direct.push(own.clone());
         let resolve = renderable && under_collections[here];
@@ -333,6 +381,7 @@ pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
             tree.prims[here].bindings.push(resolved);
         }
     }
+    missing.report(diags);
     tree
 }
 
@@ -845,8 +894,26 @@ mod tests {
     }
 
     /// Each renderable prim's stack as `prim: slot=material@bound_at ...`, and the diagnostics.
+    /// Unless the scene defines `/M`, the materials it binds are defined there (empty
+    /// Materials named `A`..`Z` and every `</M/Name>` the text targets): a binding to a prim
+    /// that does not exist binds nothing.
     fn stacks(text: &str, dir: &Path) -> (Vec<String>, String, bool) {
-        let (stage, sources, mut diags) = stage(text, dir);
+        let mut text = text.to_string();
+        if !text.contains("def Scope \"M\"") {
+            let mut names: Vec<String> = ('A'..='Z').map(String::from).collect();
+            for target in text.split("</M/").skip(1) {
+                let name: String = target.chars().take_while(|c| *c != '>' && *c != '/').collect();
+                if !names.contains(&name) {
+                    names.push(name);
+                }
+            }
+            text += "\ndef Scope \"M\" {\n";
+            for name in names {
+                text += &format!("    def Material \"{name}\" {{}}\n");
+            }
+            text += "}\n";
+        }
+        let (stage, sources, mut diags) = stage(&text, dir);
         let tree = binding_tree(&stage, &mut diags);
         let stacks = resolve_stacks(&tree, &mut diags);
         let lines = stacks

@@ -16,11 +16,11 @@
 //! Referenced layers are loaded lazily: a composition pass records the layers it is missing,
 //! they are loaded, and the pass is redone, so layers in unselected variants are never read.
 
-use crate::diag::{Diagnostic, Diagnostics, Failed, FileId, SourceMap, Span};
+use crate::diag::{Diagnostic, Diagnostics, Failed, FileId, OncePerKind, Severity, SourceMap, Span};
 use crate::scene::usda::{
     self, Layer, LayerMetadata, ListOp, MetadataEntry, PrimSpec, PropertySpec, Reference, Specifier, Target,
 };
-use crate::scene::usdc::{self, LayerSource};
+use crate::scene::usdc::{self, LayerReadError, LayerSource};
 use crate::scene::value::{AssetPath, Value, ValueType, normalize};
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -206,13 +206,16 @@ impl Stage {
     ) -> Result<Stage, Failed> {
         let mut layers = Layers::default();
         let mut chain = Vec::new();
-        let root = layers.add(name, source, dir, key, &mut chain, sources, diags);
+        // The root layer is never dropped: its own errors are the stage's errors.
+        let root = layers.add(name, source, dir, key, None, &mut chain, sources, diags).unwrap_or_default();
         // Redo the pass until it needs no layer that is not loaded yet.
+        let arc_warnings;
         let stage = loop {
             let mut pass = Pass::new(&layers, root);
             pass.run();
             if pass.needs.is_empty() {
                 diags.extend(pass.diags);
+                arc_warnings = pass.warnings;
                 break Stage {
                     prims: pass.prims,
                     roots: pass.roots,
@@ -223,10 +226,12 @@ impl Stage {
             }
             let needs = std::mem::take(&mut pass.needs);
             drop(pass);
-            for (path, span) in needs {
-                layers.load(&path, span, &mut chain, sources, diags);
+            for (path, authored, span) in needs {
+                layers.load(&path, &authored, span, &mut chain, sources, diags);
             }
         };
+        layers.warnings.report(diags);
+        arc_warnings.report(diags);
         if diags.error_count() > errors_before { Err(Failed) } else { Ok(stage) }
     }
 
@@ -325,6 +330,9 @@ struct Layers {
     /// Sublayer cycles already reported, each as its sorted set of files: a cycle is one
     /// error however many paths lead into it (5 000 self-sublayers printed 563 MB).
     reported_cycles: HashSet<Vec<PathBuf>>,
+    /// Layers the stage is composed without (missing, unreadable, MaterialX, malformed): USD
+    /// composes around them, so they are warnings, one per kind.
+    warnings: OncePerKind,
 }
 
 impl Layers {
@@ -336,10 +344,13 @@ impl Layers {
         crate::input::canonicalize(path).unwrap_or_else(|_| normalize(path))
     }
 
-    /// Loads the layer at `path` (and its sublayers) unless known; errors point at `span`.
+    /// Loads the layer at `path` (and its sublayers) unless known; diagnostics point at
+    /// `span`, where the asset path `authored` names it. A layer that cannot be read or parsed
+    /// is a warning, and the stage is composed without it, as USD does.
     fn load(
         &mut self,
         path: &Path,
+        authored: &str,
         span: Span,
         chain: &mut Vec<PathBuf>,
         sources: &mut SourceMap,
@@ -362,10 +373,26 @@ impl Layers {
         }
         let file = match usdc::read_layer_file(path) {
             Ok(file) => file,
-            Err(e) => {
-                diags.push(
-                    Diagnostic::error(format!("cannot read layer `{}`: {e}", path.display()))
-                        .at(span, "referenced here"),
+            Err(LayerReadError::MaterialX) => {
+                self.warnings.push(
+                    "materialx layer",
+                    authored,
+                    Diagnostic::warning(format!(
+                        "`{authored}` is a MaterialX document; strata does not read MaterialX yet: its materials are absent"
+                    ))
+                    .at(span, "referenced here"),
+                );
+                self.by_key.insert(key, None);
+                return None;
+            }
+            Err(LayerReadError::Unreadable(why)) => {
+                self.warnings.push(
+                    "unreadable layer",
+                    authored,
+                    Diagnostic::warning(format!(
+                        "cannot read layer `{authored}`: {why}; the stage is composed without it"
+                    ))
+                    .at(span, "referenced here"),
                 );
                 self.by_key.insert(key, None);
                 return None;
@@ -381,12 +408,19 @@ impl Layers {
             self.by_key.insert(key, known);
             return known;
         }
-        let index = self.add(&file.path.display().to_string(), file.source, dir, Some(file_key), chain, sources, diags);
-        self.by_key.insert(key, Some(index));
-        Some(index)
+        let name = file.path.display().to_string();
+        let index =
+            self.add(&name, file.source, dir, Some(file_key.clone()), Some((authored, span)), chain, sources, diags);
+        if index.is_none() {
+            self.by_key.insert(file_key, None);
+        }
+        self.by_key.insert(key, index);
+        index
     }
 
-    /// Parses a layer's text, registers it and loads its sublayers.
+    /// Parses a layer's text, registers it and loads its sublayers. `from` is the asset path
+    /// and span that name the layer, `None` for the root layer: a root layer with syntax
+    /// errors fails the stage, any other is left out with a warning (`None`), as USD does.
     #[allow(clippy::too_many_arguments)]
     fn add(
         &mut self,
@@ -394,17 +428,34 @@ impl Layers {
         source: LayerSource,
         dir: PathBuf,
         key: Option<PathBuf>,
+        from: Option<(&str, Span)>,
         chain: &mut Vec<PathBuf>,
         sources: &mut SourceMap,
         diags: &mut Diagnostics,
-    ) -> usize {
+    ) -> Option<usize> {
+        let mut parsed = Diagnostics::new();
         let layer = match source {
             LayerSource::Text(text) => {
                 let file = sources.add(name, text);
-                usda::parse(file, sources.text(file), &dir, diags)
+                usda::parse(file, sources.text(file), &dir, &mut parsed)
             }
-            LayerSource::Crate(bytes) => usdc::convert(name, &bytes, &dir, sources, diags),
+            LayerSource::Crate(bytes) => usdc::convert(name, &bytes, &dir, sources, &mut parsed),
         };
+        if let Some((authored, span)) = from
+            && let Some(first) = parsed.items().iter().find(|d| d.severity == Severity::Error)
+        {
+            let mut warning = Diagnostic::warning(format!(
+                "layer `{authored}` is not valid USD: {}; the stage is composed without it",
+                first.message
+            ))
+            .at(span, "referenced here");
+            if let Some(label) = first.labels.iter().find(|l| l.primary).or(first.labels.first()) {
+                warning = warning.note(format!("first error at {}", sources.location(label.span)));
+            }
+            self.warnings.push("malformed layer", authored, warning);
+            return None;
+        }
+        diags.extend(parsed);
         let index = self.list.len();
         let sub_layers = layer.metadata.sub_layers.clone();
         self.list.push(LoadedLayer { layer, stack: vec![index] });
@@ -428,7 +479,7 @@ impl Layers {
                 repeats += 1;
                 continue;
             }
-            if let Some(sub) = self.load(&asset.resolved, span, chain, sources, diags)
+            if let Some(sub) = self.load(&asset.resolved, &asset.authored, span, chain, sources, diags)
                 && let Some(sub_stack) = self.list.get(sub).map(|l| l.stack.clone())
             {
                 for i in sub_stack {
@@ -444,7 +495,7 @@ impl Layers {
         if let Some(loaded) = self.list.get_mut(index) {
             loaded.stack = stack;
         }
-        index
+        Some(index)
     }
 }
 
@@ -586,8 +637,11 @@ struct Pass<'l> {
     layers: &'l Layers,
     root: usize,
     diags: Diagnostics,
-    /// Layers this pass wanted but that are not loaded yet.
-    needs: Vec<(PathBuf, Span)>,
+    /// Layers this pass wanted but that are not loaded yet: resolved path, authored asset
+    /// path, and where it is named.
+    needs: Vec<(PathBuf, String, Span)>,
+    /// Arcs composed around (a target prim that does not exist), one warning per kind.
+    warnings: OncePerKind,
     prims: Vec<Prim>,
     roots: Vec<PrimId>,
     by_path: HashMap<String, PrimId>,
@@ -603,6 +657,7 @@ impl<'l> Pass<'l> {
             root,
             diags: Diagnostics::new(),
             needs: Vec::new(),
+            warnings: OncePerKind::new(),
             prims: Vec::new(),
             roots: Vec::new(),
             by_path: HashMap::new(),
@@ -785,9 +840,14 @@ impl<'l> Pass<'l> {
                 match &layer.metadata.default_prim {
                     Some((name, _)) => format!("/{name}"),
                     None => {
-                        self.diags.push(
-                            Diagnostic::error("the referenced layer has no `defaultPrim`")
-                                .at(reference.span, "name the prim: `@file.usda@</Prim>`"),
+                        let authored = reference.asset.as_ref().map_or("", |a| a.authored.as_str());
+                        self.warnings.push(
+                            "missing default prim",
+                            authored,
+                            Diagnostic::warning(format!(
+                                "`{authored}` has no `defaultPrim` and the arc names no prim: it adds nothing"
+                            ))
+                            .at(reference.span, "name the prim: `@file.usda@</Prim>`"),
                         );
                         return None;
                     }
@@ -803,8 +863,8 @@ impl<'l> Pass<'l> {
         match self.layers.by_key.get(&key) {
             Some(known) => *known,
             None => {
-                if !self.needs.iter().any(|(p, _)| Layers::key(p) == key) {
-                    self.needs.push((asset.resolved.clone(), span));
+                if !self.needs.iter().any(|(p, _, _)| Layers::key(p) == key) {
+                    self.needs.push((asset.resolved.clone(), asset.authored.clone(), span));
                 }
                 None
             }
@@ -839,10 +899,20 @@ impl<'l> Pass<'l> {
             return None;
         }
         let specs = self.specs_at(stack, &site);
+        // An inherit of a class nobody defines is ordinary USD (the class is an extension
+        // point); a reference or payload to nothing is composed around, as USD does.
         if specs.is_empty() && arc != Arc::Inherit {
-            self.diags.push(
-                Diagnostic::error(format!("the referenced prim `{site}` does not exist")).at(span, "referenced here"),
-            );
+            let what = if arc == Arc::Payload { "payload" } else { "reference" };
+            if self.reported_arcs.insert(span) {
+                self.warnings.push(
+                    "missing arc target",
+                    &site,
+                    Diagnostic::warning(format!(
+                        "the prim `{site}` that this {what} targets does not exist: the {what} adds nothing"
+                    ))
+                    .at(span, format!("{what} here")),
+                );
+            }
             return None;
         }
         let mut map = Vec::with_capacity(from.map.len() + 1);
@@ -861,77 +931,130 @@ impl<'l> Pass<'l> {
         })
     }
 
-    /// Applies selected variants everywhere in the tree until no new variant appears.
+    /// Applies variant selections as USD's prim indexing does: one variant set at a time,
+    /// the strongest node's first, each selected by the strongest opinion in the index as it
+    /// stands then. A selection authored inside a variant is an opinion like any other once
+    /// that variant is applied, so nested selections apply to any depth; a set that has no
+    /// selection yet waits until every other set is applied, as a later variant may select
+    /// it. A set defined on several arcs gets the selected variant from each arc that has it.
     fn apply_variants(&mut self, tree: &mut Node<'l>, path: &str) {
-        for _ in 0..16 {
+        let mut pending = VariantReport::default();
+        for _ in 0..MAX_NODES {
             let chosen = {
                 let mut opinions = Vec::new();
                 tree.flatten(&mut opinions);
                 selections(&opinions)
             };
-            if !self.add_variants(tree, &chosen, path) {
-                return;
+            if !self.apply_next_variant(tree, &chosen, &mut pending) {
+                break;
             }
             self.expand(tree, &mut Vec::new());
         }
+        // What is left: sets nobody selects, and selections no arc offers.
+        let mut unselected: Vec<(&'l str, Span)> = Vec::new();
+        tree.unapplied_sets(&mut unselected);
+        let mut warned: Vec<&str> = Vec::new();
+        for (set_name, span) in unselected {
+            if !warned.contains(&set_name) {
+                warned.push(set_name);
+                self.diags.push(
+                    Diagnostic::warning(format!("no variant selected for variant set `{set_name}` on `{path}`"))
+                        .at(span, "no variant of this set is applied"),
+                );
+            }
+        }
+        for (set_name, selection, span) in pending.missing {
+            if !pending.found.iter().any(|(s, v)| *s == set_name && *v == selection) {
+                self.diags.push(
+                    Diagnostic::warning(format!(
+                        "variant `{selection}` selected for `{set_name}` on `{path}` does not exist"
+                    ))
+                    .at(span, "this set has no such variant"),
+                );
+            }
+        }
     }
 
-    fn add_variants(&mut self, node: &mut Node<'l>, chosen: &[(String, String)], path: &str) -> bool {
-        let mut added = false;
-        let mut sets: Vec<&'l str> = Vec::new();
-        for spec in &node.specs {
+    /// Applies the first variant set, in strength order, that is not applied yet and has a
+    /// selection in `chosen`. Returns whether one was.
+    fn apply_next_variant(
+        &mut self,
+        node: &mut Node<'l>,
+        chosen: &[(String, String)],
+        report: &mut VariantReport<'l>,
+    ) -> bool {
+        let mut next: Option<(&'l str, &str)> = None;
+        'specs: for spec in &node.specs {
             for set in &spec.variant_sets {
-                if !sets.contains(&set.name.as_str()) && !node.variants_done.contains(&set.name) {
-                    sets.push(&set.name);
+                if node.variants_done.contains(&set.name) {
+                    continue;
+                }
+                if let Some((_, selection)) = chosen.iter().find(|(s, _)| *s == set.name) {
+                    next = Some((&set.name, selection));
+                    break 'specs;
                 }
             }
         }
-        for set_name in sets {
+        if let Some((set_name, selection)) = next {
             node.variants_done.push(set_name.to_string());
-            let Some((_, selection)) = chosen.iter().find(|(s, _)| s == set_name) else {
-                let span = node.specs.iter().find_map(|s| s.variant_sets.iter().find(|v| v.name == set_name));
-                if let Some(set) = span {
-                    self.diags.push(
-                        Diagnostic::warning(format!("no variant selected for variant set `{set_name}` on `{path}`"))
-                            .at(set.span, "no variant of this set is applied"),
-                    );
-                }
-                continue;
-            };
-            let bodies: Vec<&'l PrimSpec> = node
-                .specs
-                .iter()
-                .filter_map(|s| s.variant_sets.iter().find(|v| v.name == set_name))
-                .filter_map(|set| set.variants.iter().find(|v| v.name == *selection))
-                .collect();
-            if bodies.is_empty() {
-                if let Some(set) = node.specs.iter().find_map(|s| s.variant_sets.iter().find(|v| v.name == set_name)) {
-                    self.diags.push(
-                        Diagnostic::warning(format!(
-                            "variant `{selection}` selected for `{set_name}` on `{path}` does not exist"
-                        ))
-                        .at(set.span, "this set has no such variant"),
-                    );
-                }
-                continue;
+            let sets = node.specs.iter().filter_map(|s| s.variant_sets.iter().find(|v| v.name == set_name));
+            let mut bodies: Vec<&'l PrimSpec> = Vec::new();
+            let mut first_set = None;
+            for set in sets {
+                first_set.get_or_insert(set.span);
+                bodies.extend(set.variants.iter().find(|v| v.name == *selection));
             }
-            node.insert_child(Node {
-                arc: Arc::Variant,
-                stack: node.stack,
-                site: node.site.clone(),
-                specs: bodies,
-                map: node.map.clone(),
-                children: Vec::new(),
-                direct: true,
-                expanded: false,
-                variants_done: Vec::new(),
-            });
-            added = true;
+            if bodies.is_empty() {
+                if let Some(span) = first_set
+                    && !report.missing.iter().any(|(s, v, _)| *s == set_name && v == selection)
+                {
+                    report.missing.push((set_name, selection.to_string(), span));
+                }
+            } else {
+                if !report.found.iter().any(|(s, v)| *s == set_name && v == selection) {
+                    report.found.push((set_name, selection.to_string()));
+                }
+                node.insert_child(Node {
+                    arc: Arc::Variant,
+                    stack: node.stack,
+                    site: node.site.clone(),
+                    specs: bodies,
+                    map: node.map.clone(),
+                    children: Vec::new(),
+                    direct: true,
+                    expanded: false,
+                    variants_done: Vec::new(),
+                });
+            }
+            return true;
         }
-        for child in &mut node.children {
-            added |= self.add_variants(child, chosen, path);
+        node.children.iter_mut().any(|child| self.apply_next_variant(child, chosen, report))
+    }
+}
+
+/// Variant selections seen while composing one prim: which (set, variant) pairs some arc
+/// offered, and which selections an arc's set lacked, with that set's span. A selection is
+/// reported missing only when no arc offers it: a set may be split across arcs.
+#[derive(Default)]
+struct VariantReport<'l> {
+    found: Vec<(&'l str, String)>,
+    missing: Vec<(&'l str, String, Span)>,
+}
+
+impl<'l> Node<'l> {
+    /// Variant sets of this node and its descendants that no selection applied, with the
+    /// span of their first `variantSet` statement.
+    fn unapplied_sets(&self, out: &mut Vec<(&'l str, Span)>) {
+        for spec in &self.specs {
+            for set in &spec.variant_sets {
+                if !self.variants_done.contains(&set.name) && !out.iter().any(|(s, _)| *s == set.name) {
+                    out.push((&set.name, set.span));
+                }
+            }
         }
-        added
+        for child in &self.children {
+            child.unapplied_sets(out);
+        }
     }
 }
 
@@ -1274,7 +1397,7 @@ mod tests {
     }
 
     #[test]
-    fn cycles_and_missing_files_are_errors() {
+    fn cycles_are_errors_and_missing_files_warnings() {
         let dir = temp_dir("strata-cycle");
         let d = dir.path();
         write(d, "a.usda", "#usda 1.0\n(subLayers = [@b.usda@])\n");
@@ -1289,9 +1412,11 @@ mod tests {
         assert!(stage.is_err());
         assert!(rendered.contains("reference cycle"), "{rendered}");
 
+        // A layer that does not resolve is composed around, with a located warning.
         let missing = write(d, "m.usda", "#usda 1.0\ndef \"P\" (\n    references = @gone.usda@\n) {}\n");
         let (stage, rendered) = open(&missing);
-        assert!(stage.is_err());
+        assert!(stage.is_ok_and(|s| s.find("/P").is_some()), "{rendered}");
+        assert!(rendered.starts_with("warning: cannot read layer `gone.usda`"), "{rendered}");
         assert!(rendered.contains("m.usda:3:18") && rendered.contains("@gone.usda@"), "{rendered}");
 
         let (stage, rendered) = text("#usda 1.0\ndef \"A\" (references = </A>) {}\n");

@@ -93,8 +93,55 @@ pub struct LayerFile {
 
 /// Reads the layer at `path` through [`crate::input`], whatever its format. The error says
 /// what the file is and why it cannot be a layer.
-pub fn read_layer_file(path: &Path) -> Result<LayerFile, String> {
-    let bytes = crate::input::read_bytes(path).map_err(|e| e.to_string())?;
+pub fn read_layer_file(path: &Path) -> Result<LayerFile, LayerReadError> {
+    let bytes = crate::input::read_bytes(path).map_err(|e| match e {
+        // What USD says of an asset path that does not resolve, without the OS's error code.
+        crate::input::InputError::Io(io) if io.kind() == std::io::ErrorKind::NotFound => {
+            LayerReadError::Unreadable("the file does not exist".into())
+        }
+        e => LayerReadError::Unreadable(e.to_string()),
+    })?;
+    if is_materialx(path, &bytes) {
+        return Err(LayerReadError::MaterialX);
+    }
+    read_layer_bytes(path, bytes).map_err(LayerReadError::Unreadable)
+}
+
+/// Why [`read_layer_file`] could not give a layer.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum LayerReadError {
+    /// A MaterialX document (`.mtlx`, or XML content): USD reads it through its MaterialX
+    /// file-format plugin; strata does not read MaterialX yet.
+    MaterialX,
+    /// Missing, unreadable, or not a USD file; the text says which.
+    Unreadable(String),
+}
+
+impl std::fmt::Display for LayerReadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LayerReadError::MaterialX => f.write_str("a MaterialX document; strata does not read MaterialX yet"),
+            LayerReadError::Unreadable(why) => f.write_str(why),
+        }
+    }
+}
+
+/// Whether a file is a MaterialX document: named `.mtlx`, or XML (`<?xml`, `<materialx`)
+/// after any byte-order mark and white space — what USD's MaterialX plugin would read.
+pub fn is_materialx(path: &Path, bytes: &[u8]) -> bool {
+    let named = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .map(|n| n.trim_end_matches(']'))
+        .is_some_and(|n| n.to_ascii_lowercase().ends_with(".mtlx"));
+    let body = bytes.strip_prefix(b"\xEF\xBB\xBF".as_slice()).unwrap_or(bytes);
+    let start = body.iter().position(|b| !b.is_ascii_whitespace()).unwrap_or(body.len());
+    let head = &body[start..body.len().min(start + 16)];
+    named || head.starts_with(b"<?xml") || head.to_ascii_lowercase().starts_with(b"<materialx")
+}
+
+/// [`read_layer_file`] once the bytes are read and known not to be MaterialX.
+fn read_layer_bytes(path: &Path, bytes: Vec<u8>) -> Result<LayerFile, String> {
     match detect(&bytes) {
         Format::Crate => Ok(LayerFile { path: path.to_path_buf(), source: LayerSource::Crate(bytes) }),
         Format::Text => text_layer(path, bytes),
@@ -1325,6 +1372,17 @@ mod tests {
         assert_eq!(detect(b"PK\x03\x04rest"), Format::Package);
         assert_eq!(detect(b"#usda 1.0\n"), Format::Text);
         assert_eq!(detect(b""), Format::Text);
+    }
+
+    #[test]
+    fn materialx_documents_are_told_by_name_or_content() {
+        let usda = Path::new("look.usda");
+        assert!(is_materialx(Path::new("X_mat.mtlx"), b"anything"));
+        assert!(is_materialx(Path::new("pkg.usdz[mat/X.MTLX]"), b""));
+        assert!(is_materialx(usda, b"\xEF\xBB\xBF  <?xml version=\"1.0\"?>"));
+        assert!(is_materialx(usda, b"\n<materialx version=\"1.38\">"));
+        assert!(!is_materialx(usda, b"#usda 1.0\n"));
+        assert!(!is_materialx(usda, b"<"));
     }
 
     #[test]
