@@ -34,7 +34,10 @@ enum Command {
         scene: Option<PathBuf>,
         /// Print JSON instead of a table.
         #[arg(long)]
-        json: bool,
+        json: bool,        /// The time code to read animated attributes at: a number or `default` (default: the
+        /// stage's startTimeCode when it has time samples, else the default time).
+        #[arg(long, value_name = "TIME")]
+        time: Option<strata::scene::TimeCode>,
     },
     /// Print the wired IR of one prim's composed material.
     Ir {
@@ -106,6 +109,10 @@ enum Command {
         /// Print compile and render statistics.
         #[arg(long)]
         stats: bool,
+        /// The time code to read animated attributes at: a number or `default` (default: the
+        /// stage's startTimeCode when it has time samples, else the default time).
+        #[arg(long, value_name = "TIME")]
+        time: Option<strata::scene::TimeCode>,
     },
     /// Measure shading and rendering cost: JIT vs interpreter vs hand-written Rust, compile
     /// time vs graph size, render time and error vs layer count.
@@ -125,6 +132,10 @@ enum Command {
     Check {
         /// A `.ash` substance file or a USD scene (`.usda`, `.usdc`, `.usd`, `.usdz`).
         file: PathBuf,
+        /// The time code to read animated attributes at: a number or `default` (default: the
+        /// stage's startTimeCode when it has time samples, else the default time).
+        #[arg(long, value_name = "TIME")]
+        time: Option<strata::scene::TimeCode>,
     },
     /// Mutation-fuzz both front ends and the check pipeline; exit 1 if any input crashes,
     /// hangs or passes the memory budget (it is saved under `--crashes`).
@@ -243,7 +254,7 @@ fn main() -> ExitCode {
         max_texture_pixels: args.max_texture_pixels.unwrap_or(defaults.max_texture_pixels),
     });
     let result = match args.command {
-        Command::Layers { scene, json } => cli::layers(scene.as_deref(), json),
+        Command::Layers { scene, json, time } => cli::layers(scene.as_deref(), json, time),
         Command::Ir { scene, prim, no_optimize, stats, lowered } => {
             cli::ir(&scene, &prim, !no_optimize, stats, lowered)
         }
@@ -263,6 +274,7 @@ fn main() -> ExitCode {
             weighted,
             no_optimize,
             stats,
+            time,
         } => cli::render(&cli::RenderArgs {
             scene,
             output,
@@ -283,6 +295,7 @@ fn main() -> ExitCode {
             subdiv_level,
             dicing_rate,
             resolution_given: res.is_some(),
+            time,
         }),
         Command::Compile { file, output } => cli::compile(&file, &output),
         Command::Bench { what } => {
@@ -312,7 +325,7 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Check { file } => cli::check(&file),
+        Command::Check { file, time } => cli::check(&file, time),
         Command::Fuzz { secs, seed, jobs, root, crashes, timeout, max_rss_mib, worker, stage, first, stride } => {
             if worker {
                 let stage = stage.unwrap_or_else(std::env::temp_dir);

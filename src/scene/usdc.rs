@@ -597,18 +597,6 @@ impl Converter<'_> {
         });
     }
 
-    /// Queues a diagnostic built elsewhere (shared with the text reader) as a warning.
-    fn warn_as(&mut self, d: Diagnostic) {
-        let label = d.labels.first();
-        self.pending.push(Pending {
-            error: false,
-            message: d.message,
-            at: label.map_or((0, 0), |l| (l.span.start, l.span.end)),
-            label: label.map_or_else(String::new, |l| l.message.clone()),
-            note: d.notes.into_iter().next(),
-        });
-    }
-
     fn error(&mut self, span: Span, message: String, label: &str) {
         self.pending.push(Pending {
             error: true,
@@ -941,8 +929,6 @@ impl Converter<'_> {
                             attr.time_samples.push((time, v));
                         }
                     }
-                    // The same diagnostic as the usda parser: one model, one message.
-                    self.warn_as(AttributeSpec::animated_warning(name, span));
                 }
                 ("connectionPaths", sdf::Value::PathListOp(op)) => {
                     attr.connections = self.targets(op, depth + 1, "connect")

@@ -11,7 +11,7 @@ pub mod parser;
 
 pub use parser::parse;
 
-use crate::diag::{Diagnostic, FileId, Span};
+use crate::diag::{FileId, Span};
 use crate::scene::value::{AssetPath, Value, ValueType};
 use std::collections::HashMap;
 use std::sync::OnceLock;
@@ -413,7 +413,7 @@ pub struct AttributeSpec {
     pub uniform: bool,
     /// The default value with its span; `Value::None` for an authored block (`= None`).
     pub default: Option<(Value, Span)>,
-    /// `name.timeSamples = { time: value }` (read, not used for rendering).
+    /// `name.timeSamples = { time: value }`, as written.
     pub time_samples: Vec<(f64, Value)>,
     /// `name.connect = ...` statements.
     pub connections: ListOp<Target>,
@@ -441,14 +441,6 @@ impl AttributeSpec {
             connections: ListOp::default(),
             metadata: Vec::new(),
         }
-    }
-
-    /// The warning for an animated attribute (`timeSamples`): strata renders one frame from
-    /// the authored default, else the earliest sample. One text for both readers.
-    pub fn animated_warning(name: &str, span: Span) -> Diagnostic {
-        Diagnostic::warning(format!("`{name}` is animated (timeSamples): strata renders one frame"))
-            .at(span, "its default value is used, or else its earliest sample")
-            .note("strata renders a single frame")
     }
 
     /// A metadata value by key.

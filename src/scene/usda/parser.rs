@@ -713,7 +713,6 @@ impl<'a> Parser<'a, '_> {
             attr.default = Some(d);
         }
         if let Some(samples) = time_samples {
-            self.diags.push(AttributeSpec::animated_warning(name, span));
             attr.time_samples = samples;
         }
         if let Some(c) = connections {
@@ -1393,10 +1392,10 @@ doc"""
     }
 
     #[test]
-    fn time_samples_warn() {
+    fn time_samples_are_read_quietly() {
         let (_, diags, sources) = parse_text("#usda 1.0\ndef \"A\" { float x.timeSamples = { 0: 1 } }\n");
         assert!(!diags.has_errors());
-        assert!(diags.render(&sources).contains("is animated (timeSamples): strata renders one frame"));
+        assert_eq!(diags.render(&sources), "");
     }
 
     #[test]
