@@ -36,6 +36,11 @@ const NON_DRAWING_TYPES: &[&str] = &[
     "SpatialAudio",
     "CollectionAPI",
     "PhysicsScene",
+    // UsdSkel: they pose the meshes bound to them (`skel`) and draw nothing themselves.
+    "SkelRoot",
+    "Skeleton",
+    "SkelAnimation",
+    "BlendShape",
 ];
 
 /// Prim types a production renderer draws that strata does not, with what is lost.
@@ -48,10 +53,6 @@ const UNSUPPORTED_TYPES: &[(&str, &str)] = &[
     ("Volume", "volumes are not rendered"),
     ("OpenVDBAsset", "volume fields are not read"),
     ("Field3DAsset", "volume fields are not read"),
-    ("SkelRoot", "skinning is not applied: meshes under it render in their rest pose"),
-    ("Skeleton", "skeletons are not applied"),
-    ("SkelAnimation", "skeletal animation is not applied"),
-    ("BlendShape", "blend shapes are not applied"),
     ("PortalLight", "portal lights are ignored (the dome is sampled without the portal)"),
     ("GeometryLight", "geometry lights do not emit"),
     ("PluginLight", "plugin lights do not emit"),
@@ -67,7 +68,6 @@ const UNSUPPORTED_APIS: &[(&str, &str)] = &[
     ("VolumeLightAPI", "the volume does not emit light"),
     ("ShapingAPI", "light shaping (cone, focus, IES profile) is not applied"),
     ("ShadowAPI", "shadow controls (colour, distance, falloff) are not applied"),
-    ("SkelBindingAPI", "skinning is not applied"),
 ];
 
 /// Light inputs whose non-default values strata ignores, with their defaults.

@@ -75,13 +75,7 @@ impl Attribute {
 
     /// The value at `time`, as USD's `UsdAttribute::Get(time)` (see [`time::value_at`]).
     pub fn value_at(&self, time: TimeCode) -> Option<Value> {
-        time::value_at(self.default_value.as_ref().map(|(v, _)| v), &self.time_samples, self.is_quaternion(), time)
-    }
-
-    /// Whether the values are quaternions (`quatf`, `quatf[]`, ...), which interpolate
-    /// spherically.
-    pub fn is_quaternion(&self) -> bool {
-        self.type_name.starts_with("quat")
+        time::value_at(self.default_value.as_ref().map(|(v, _)| v), &self.time_samples, &self.type_name, time)
     }
 }
 

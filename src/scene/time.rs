@@ -46,11 +46,12 @@ impl fmt::Display for TimeCode {
     }
 }
 
-/// The value at `time` of an attribute whose default is `default` and whose samples are
-/// `samples` (sorted by time, as [`sort_samples`] leaves them). `quaternion`: the values are
-/// quaternions (`quatf`, `quath`, `quatd`, or arrays of them), interpolated spherically.
+/// The value at `time` of an attribute of type `type_name` (`quatf[]`, `half3`, ...) whose
+/// default is `default` and whose samples are `samples` (sorted by time, as [`sort_samples`]
+/// leaves them). Quaternions interpolate spherically; half-precision types are rounded to
+/// half precision, as USD stores the interpolated value in the attribute's type.
 /// `None`: no value at that time (nothing authored, or a blocked sample).
-pub fn value_at(default: Option<&Value>, samples: &[(f64, Value)], quaternion: bool, time: TimeCode) -> Option<Value> {
+pub fn value_at(default: Option<&Value>, samples: &[(f64, Value)], type_name: &str, time: TimeCode) -> Option<Value> {
     let t = match time {
         TimeCode::At(t) if !samples.is_empty() => t,
         _ => return default.cloned(),
@@ -66,7 +67,43 @@ pub fn value_at(default: Option<&Value>, samples: &[(f64, Value)], quaternion: b
     }
     let ((t0, v0), (t1, v1)) = (&samples[upper - 1], &samples[upper]);
     let alpha = (t - t0) / (t1 - t0);
-    interpolate(v0, v1, alpha, quaternion).or_else(|| held(upper - 1))
+    let base = type_name.trim_end_matches("[]");
+    let quaternion = base.starts_with("quat");
+    let Some(mut value) = interpolate(v0, v1, alpha, quaternion) else { return held(upper - 1) };
+    if is_half(base) {
+        value = map_numbers(value, to_half_precision);
+    }
+    Some(value)
+}
+
+/// `value` with `f` applied to each of its floating-point numbers.
+fn map_numbers(value: Value, f: fn(f64) -> f64) -> Value {
+    let all = |v: Vec<f64>| v.into_iter().map(f).collect();
+    match value {
+        Value::Float(x) => Value::Float(f(x)),
+        Value::Tuple(v) => Value::Tuple(all(v)),
+        Value::FloatArray(v) => Value::FloatArray(all(v)),
+        Value::TupleArray { width, data } => Value::TupleArray { width, data: all(data) },
+        other => other,
+    }
+}
+
+/// `half`, `half3`, `quath`, `color3h`, `point3h`, ...: types stored as 16-bit floats.
+fn is_half(base: &str) -> bool {
+    let mut tail = base.chars().rev();
+    base.starts_with("half") || (tail.next() == Some('h') && tail.next().is_some_and(|c| c.is_ascii_digit() || c == 't'))
+}
+
+/// `x` rounded to the nearest IEEE half (ties to even), as `f64`.
+fn to_half_precision(x: f64) -> f64 {
+    if !x.is_finite() || x == 0.0 {
+        return x;
+    }
+    // The exponent of `x`, clamped to half's smallest normal one (subnormals share its step).
+    let exponent = (((x.abs().to_bits() >> 52) & 0x7ff) as i64 - 1023).max(-14);
+    let step = 2f64.powi((exponent - 10) as i32);
+    let rounded = (x / step).round_ties_even() * step;
+    if rounded.abs() > 65504.0 { f64::INFINITY.copysign(x) } else { rounded }
 }
 
 /// Sorts samples by time; of samples authored at the same time the last one written is kept.
@@ -144,25 +181,25 @@ mod tests {
     fn held_outside_interpolated_between_default_at_default() {
         let s = samples();
         let d = Value::Float(-1.0);
-        let at = |t| value_at(Some(&d), &s, false, TimeCode::At(t));
+        let at = |t| value_at(Some(&d), &s, "float", TimeCode::At(t));
         assert_eq!(at(0.0), Some(Value::Float(1.0)));
         assert_eq!(at(15.0), Some(Value::Float(2.0)));
         assert_eq!(at(20.0), Some(Value::Float(3.0)));
         assert_eq!(at(99.0), Some(Value::Float(3.0)));
-        assert_eq!(value_at(Some(&d), &s, false, TimeCode::Default), Some(d.clone()));
-        assert_eq!(value_at(None, &s, false, TimeCode::Default), None);
-        assert_eq!(value_at(Some(&d), &[], false, TimeCode::At(5.0)), Some(d));
+        assert_eq!(value_at(Some(&d), &s, "float", TimeCode::Default), Some(d.clone()));
+        assert_eq!(value_at(None, &s, "float", TimeCode::Default), None);
+        assert_eq!(value_at(Some(&d), &[], "float", TimeCode::At(5.0)), Some(d));
     }
 
     #[test]
     fn non_interpolating_values_are_held() {
         let s = vec![(0.0, Value::Int(1)), (10.0, Value::Int(5))];
-        assert_eq!(value_at(None, &s, false, TimeCode::At(9.0)), Some(Value::Int(1)));
+        assert_eq!(value_at(None, &s, "int", TimeCode::At(9.0)), Some(Value::Int(1)));
         let a = vec![
             (0.0, Value::FloatArray(vec![0.0])),
             (10.0, Value::FloatArray(vec![1.0, 2.0])),
         ];
-        assert_eq!(value_at(None, &a, false, TimeCode::At(5.0)), Some(Value::FloatArray(vec![0.0])));
+        assert_eq!(value_at(None, &a, "float[]", TimeCode::At(5.0)), Some(Value::FloatArray(vec![0.0])));
     }
 
     #[test]
@@ -170,9 +207,21 @@ mod tests {
         // Identity to 90° about z, the latter written negated: halfway is 45° about z.
         let (c, s) = (std::f64::consts::FRAC_PI_4.cos(), std::f64::consts::FRAC_PI_4.sin());
         let samples = vec![(0.0, Value::Tuple(vec![1.0, 0.0, 0.0, 0.0])), (1.0, Value::Tuple(vec![-c, 0.0, 0.0, -s]))];
-        let Some(Value::Tuple(q)) = value_at(None, &samples, true, TimeCode::At(0.5)) else { panic!() };
+        let Some(Value::Tuple(q)) = value_at(None, &samples, "quatd", TimeCode::At(0.5)) else { panic!() };
         let (c, s) = ((std::f64::consts::PI / 8.0).cos(), (std::f64::consts::PI / 8.0).sin());
         assert!((q[0] - c).abs() < 1e-12 && (q[3] - s).abs() < 1e-12, "{q:?}");
+    }
+
+    #[test]
+    fn half_types_round_to_half_precision() {
+        // 1 + 0.3 · 0.25 = 1.075 is 1.0751953125 in half precision (steps of 2^-10 near 1).
+        let s = vec![(0.0, Value::Tuple(vec![1.0, 1.0, 1.0])), (10.0, Value::Tuple(vec![1.25, 1.0, 1.0]))];
+        let Some(Value::Tuple(v)) = value_at(None, &s, "half3", TimeCode::At(3.0)) else { panic!() };
+        assert_eq!(v[0], 1.0751953125);
+        let Some(Value::Tuple(v)) = value_at(None, &s, "float3", TimeCode::At(3.0)) else { panic!() };
+        assert!((v[0] - 1.075).abs() < 1e-15);
+        assert!(is_half("quath") && is_half("color3h") && is_half("half") && !is_half("quatf") && !is_half("path"));
+        assert_eq!(to_half_precision(70000.0), f64::INFINITY);
     }
 
     #[test]
