@@ -18,7 +18,8 @@
 
 use crate::diag::{Diagnostic, Diagnostics, Failed, FileId, SourceMap, Span};
 use crate::scene::usda::{
-    self, Layer, LayerMetadata, ListOp, MetadataEntry, PrimSpec, PropertySpec, Reference, Specifier, Target,
+    self, Layer, LayerMetadata, LayerOffset, ListOp, MetadataEntry, PrimSpec, PropertySpec, Reference, Specifier,
+    Target,
 };
 use crate::scene::usdc::{self, LayerSource};
 use crate::scene::time::{self, TimeCode};
@@ -359,6 +360,8 @@ struct LoadedLayer {
     layer: Layer,
     /// This layer and its sublayers, recursively, strongest first.
     stack: Vec<usize>,
+    /// For each layer of `stack`, how its times map to this layer's (sublayer offsets).
+    offsets: Vec<LayerOffset>,
 }
 
 #[derive(Default)]
@@ -451,17 +454,20 @@ impl Layers {
         };
         let index = self.list.len();
         let sub_layers = layer.metadata.sub_layers.clone();
-        self.list.push(LoadedLayer { layer, stack: vec![index] });
+        let sub_offsets = layer.metadata.sub_layer_offsets.clone();
+        self.list.push(LoadedLayer { layer, stack: vec![index], offsets: vec![LayerOffset::default()] });
         if let Some(key) = &key {
             self.by_key.insert(key.clone(), Some(index));
             chain.push(key.clone());
         }
         let mut stack = vec![index];
+        let mut offsets = vec![LayerOffset::default()];
         // Each sublayer once per layer: listing one again adds no opinions, and reading it
         // again would repeat its diagnostics.
         let mut listed: HashSet<PathBuf> = HashSet::new();
         let mut repeats = 0usize;
-        for (asset, span) in sub_layers {
+        for (i, (asset, span)) in sub_layers.into_iter().enumerate() {
+            let sub_offset = sub_offsets.get(i).copied().unwrap_or_default();
             if !listed.insert(Layers::key(&asset.resolved)) {
                 if repeats == 0 {
                     diags.push(
@@ -473,11 +479,12 @@ impl Layers {
                 continue;
             }
             if let Some(sub) = self.load(&asset.resolved, span, chain, sources, diags)
-                && let Some(sub_stack) = self.list.get(sub).map(|l| l.stack.clone())
+                && let Some((sub_stack, inner)) = self.list.get(sub).map(|l| (l.stack.clone(), l.offsets.clone()))
             {
-                for i in sub_stack {
+                for (i, inner) in sub_stack.into_iter().zip(inner) {
                     if !stack.contains(&i) {
                         stack.push(i);
+                        offsets.push(sub_offset.then(inner));
                     }
                 }
             }
@@ -487,6 +494,7 @@ impl Layers {
         }
         if let Some(loaded) = self.list.get_mut(index) {
             loaded.stack = stack;
+            loaded.offsets = offsets;
         }
         index
     }
@@ -517,6 +525,10 @@ struct Node<'l> {
     site: String,
     /// Specs at the site, strongest first.
     specs: Vec<&'l PrimSpec>,
+    /// For each of `specs`, how its layer's times map to the stage's.
+    offsets: Vec<LayerOffset>,
+    /// How times in the root layer of `stack` map to the stage's (the arcs' layer offsets).
+    time: LayerOffset,
     map: MapChain,
     children: Vec<Node<'l>>,
     /// Added for this prim (not inherited from an ancestor's index).
@@ -529,7 +541,8 @@ struct Node<'l> {
 impl<'l> Node<'l> {
     /// The node for the same arc one level down, at child `name`; `None` if nothing is there.
     fn child(&self, name: &str) -> Option<Node<'l>> {
-        let specs: Vec<&PrimSpec> = self.specs.iter().filter_map(|s| s.child(name)).collect();
+        let (specs, offsets): (Vec<&PrimSpec>, Vec<LayerOffset>) =
+            self.specs.iter().zip(&self.offsets).filter_map(|(s, o)| Some((s.child(name)?, *o))).unzip();
         let children: Vec<Node> = self.children.iter().filter_map(|c| c.child(name)).collect();
         if specs.is_empty() && children.is_empty() {
             return None;
@@ -539,6 +552,8 @@ impl<'l> Node<'l> {
             stack: self.stack,
             site: join_path(&self.site, name),
             specs,
+            offsets,
+            time: self.time,
             map: self.map.clone(),
             children,
             direct: false,
@@ -559,6 +574,15 @@ impl<'l> Node<'l> {
             .position(|c| c.arc > node.arc || (c.arc == node.arc && !c.direct))
             .unwrap_or(self.children.len());
         self.children.insert(at, node);
+    }
+
+    /// How the times of `attr`, an attribute of one of this node's specs, map to the stage's.
+    fn offset_of(&self, attr: &usda::AttributeSpec) -> LayerOffset {
+        let owns = |spec: &&PrimSpec| {
+            spec.properties.iter().any(|p| matches!(p, PropertySpec::Attribute(a) if std::ptr::eq(&**a, attr)))
+        };
+        let at = self.specs.iter().position(|s| owns(&s));
+        at.and_then(|i| self.offsets.get(i)).copied().unwrap_or(self.time)
     }
 
     /// Every `(spec, node)` pair in strength order.
@@ -658,10 +682,17 @@ impl<'l> Pass<'l> {
         self.layers.get(layer).map(|l| l.stack.as_slice()).unwrap_or(&[])
     }
 
-    /// Specs at `path` in every layer of `stack`, strongest first.
-    fn specs_at(&self, stack: usize, path: &str) -> Vec<&'l PrimSpec> {
+    /// Specs at `path` in every layer of `stack`, strongest first, each with how its times
+    /// map to the stage's when the stack's root layer's map through `time`.
+    fn specs_at(&self, stack: usize, path: &str, time: LayerOffset) -> (Vec<&'l PrimSpec>, Vec<LayerOffset>) {
         let layers = self.layers;
-        self.stack(stack).iter().filter_map(|&i| layers.get(i).and_then(|l| l.layer.prim_at(path))).collect()
+        let Some(loaded) = layers.get(stack) else { return (Vec::new(), Vec::new()) };
+        loaded
+            .stack
+            .iter()
+            .zip(&loaded.offsets)
+            .filter_map(|(&i, o)| Some((layers.get(i)?.layer.prim_at(path)?, time.then(*o))))
+            .unzip()
     }
 
     fn run(&mut self) {
@@ -680,10 +711,13 @@ impl<'l> Pass<'l> {
         }
         for name in names {
             let site = format!("/{name}");
+            let (specs, offsets) = self.specs_at(self.root, &site, LayerOffset::default());
             let node = Node {
                 arc: Arc::Root,
                 stack: self.root,
-                specs: self.specs_at(self.root, &site),
+                specs,
+                offsets,
+                time: LayerOffset::default(),
                 site,
                 map: Vec::new(),
                 children: Vec::new(),
@@ -799,7 +833,7 @@ impl<'l> Pass<'l> {
         let mut arcs = Vec::new();
         for (path, span) in inherits {
             let target = anchor(&node.site, &path);
-            if let Some(n) = self.arc_node(node, Arc::Inherit, node.stack, target, span, ancestors) {
+            if let Some(n) = self.arc_node(node, Arc::Inherit, node.stack, target, node.time, span, ancestors) {
                 arcs.push(n);
             }
         }
@@ -808,7 +842,10 @@ impl<'l> Pass<'l> {
                 let Some((stack, target)) = self.reference_target(node, &reference) else {
                     continue;
                 };
-                if let Some(n) = self.arc_node(node, arc, stack, target, reference.span, ancestors) {
+                // The reference's offset applies within the referencing layer stack (the
+                // sublayer offset of the layer that authored it is not composed in).
+                let time = node.time.then(reference.offset);
+                if let Some(n) = self.arc_node(node, arc, stack, target, time, reference.span, ancestors) {
                     arcs.push(n);
                 }
             }
@@ -855,12 +892,16 @@ impl<'l> Pass<'l> {
         }
     }
 
+    /// The node of an arc from `from` to `site` in `stack`, whose root layer's times map to
+    /// the stage's through `time`.
+    #[allow(clippy::too_many_arguments)]
     fn arc_node(
         &mut self,
         from: &Node<'l>,
         arc: Arc,
         stack: usize,
         site: String,
+        time: LayerOffset,
         span: Span,
         ancestors: &[(usize, String)],
     ) -> Option<Node<'l>> {
@@ -882,7 +923,7 @@ impl<'l> Pass<'l> {
             }
             return None;
         }
-        let specs = self.specs_at(stack, &site);
+        let (specs, offsets) = self.specs_at(stack, &site, time);
         if specs.is_empty() && arc != Arc::Inherit {
             self.diags.push(
                 Diagnostic::error(format!("the referenced prim `{site}` does not exist")).at(span, "referenced here"),
@@ -897,6 +938,8 @@ impl<'l> Pass<'l> {
             stack,
             site,
             specs,
+            offsets,
+            time,
             map,
             children: Vec::new(),
             direct: true,
@@ -942,12 +985,13 @@ impl<'l> Pass<'l> {
                 }
                 continue;
             };
-            let bodies: Vec<&'l PrimSpec> = node
+            let (bodies, offsets): (Vec<&'l PrimSpec>, Vec<LayerOffset>) = node
                 .specs
                 .iter()
-                .filter_map(|s| s.variant_sets.iter().find(|v| v.name == set_name))
-                .filter_map(|set| set.variants.iter().find(|v| v.name == *selection))
-                .collect();
+                .zip(&node.offsets)
+                .filter_map(|(s, o)| Some((s.variant_sets.iter().find(|v| v.name == set_name)?, *o)))
+                .filter_map(|(set, o)| Some((set.variants.iter().find(|v| v.name == *selection)?, o)))
+                .unzip();
             if bodies.is_empty() {
                 if let Some(set) = node.specs.iter().find_map(|s| s.variant_sets.iter().find(|v| v.name == set_name)) {
                     self.diags.push(
@@ -964,6 +1008,8 @@ impl<'l> Pass<'l> {
                 stack: node.stack,
                 site: node.site.clone(),
                 specs: bodies,
+                offsets,
+                time: node.time,
                 map: node.map.clone(),
                 children: Vec::new(),
                 direct: true,
@@ -1081,10 +1127,14 @@ fn compose_attribute(specs: &[(&usda::AttributeSpec, &Node)]) -> Attribute {
     }
     // At a numeric time the strongest opinion with a value decides: its samples if it has
     // any (they beat its own default), else its default or block.
+    // Sample times are the authoring layer's, mapped to the stage's by the layer offsets.
     let mut time_samples = specs
         .iter()
         .find(|(a, _)| !a.time_samples.is_empty() || a.default.is_some())
-        .map(|(a, _)| a.time_samples.clone())
+        .map(|(a, node)| {
+            let offset = if a.time_samples.is_empty() { LayerOffset::default() } else { node.offset_of(a) };
+            a.time_samples.iter().map(|(t, v)| (offset.apply(*t), v.clone())).collect()
+        })
         .unwrap_or_default();
     time::sort_samples(&mut time_samples);
     let mut connections = Vec::new();

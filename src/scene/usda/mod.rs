@@ -108,6 +108,8 @@ pub struct LayerMetadata {
     pub meters_per_unit: Option<f64>,
     /// `subLayers = [@a.usda@, ...]`, strongest first, with the span of each asset path.
     pub sub_layers: Vec<(AssetPath, Span)>,
+    /// The layer offset of each entry of `sub_layers` (identity where missing).
+    pub sub_layer_offsets: Vec<LayerOffset>,
     /// Every other entry (`customLayerData`, `startTimeCode`, ...), kept as written.
     pub other: Vec<MetadataEntry>,
 }
@@ -277,6 +279,36 @@ pub struct Reference {
     pub prim_path: Option<String>,
     /// The whole item's text.
     pub span: Span,
+    /// `(offset = 5; scale = 2)`: how the referenced layer's times map to this one's.
+    pub offset: LayerOffset,
+}
+
+/// A layer offset: time `t` in a referenced layer or sublayer is `offset + scale · t` in the
+/// layer that names it (`SdfLayerOffset`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LayerOffset {
+    /// Added after scaling.
+    pub offset: f64,
+    /// Multiplies the inner layer's times.
+    pub scale: f64,
+}
+
+impl Default for LayerOffset {
+    fn default() -> LayerOffset {
+        LayerOffset { offset: 0.0, scale: 1.0 }
+    }
+}
+
+impl LayerOffset {
+    /// The time in the outer layer of time `t` in the inner one.
+    pub fn apply(self, t: f64) -> f64 {
+        self.offset + self.scale * t
+    }
+
+    /// `self` after `inner`: maps the innermost layer's times through `inner`, then `self`.
+    pub fn then(self, inner: LayerOffset) -> LayerOffset {
+        LayerOffset { offset: self.apply(inner.offset), scale: self.scale * inner.scale }
+    }
 }
 
 /// Prim metadata that composition understands, plus everything else as written.
