@@ -34,7 +34,8 @@ enum Command {
         scene: Option<PathBuf>,
         /// Print JSON instead of a table.
         #[arg(long)]
-        json: bool,        /// The time code to read animated attributes at: a number or `default` (default: the
+        json: bool,
+        /// The time code to read animated attributes at: a number or `default` (default: the
         /// stage's startTimeCode when it has time samples, else the default time).
         #[arg(long, value_name = "TIME")]
         time: Option<strata::scene::TimeCode>,

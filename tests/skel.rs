@@ -49,7 +49,8 @@ fn close(a: f64, b: f64, tolerance: f64) -> bool {
 fn same(got: &Json, want: &Json, tolerance: f64) -> bool {
     match (got, want) {
         (Json::Array(g), Json::Array(w)) => {
-            g.len() == w.len() && g.iter().zip(w).all(|(g, w)| close(g.as_f64().unwrap(), w.as_f64().unwrap(), tolerance))
+            g.len() == w.len()
+                && g.iter().zip(w).all(|(g, w)| close(g.as_f64().unwrap(), w.as_f64().unwrap(), tolerance))
         }
         _ => got == want,
     }
@@ -149,8 +150,8 @@ fn skinned_points_match_usd_bake_skinning() {
         for mesh in want["meshes"].as_array().unwrap() {
             let path = mesh["prim"].as_str().unwrap();
             let id = stage.find(path).unwrap();
-            let (got, normals) = skinned_world_points(&stage, &xforms, id, &mut diags)
-                .unwrap_or_else(|| panic!("{path} is skinned"));
+            let (got, normals) =
+                skinned_world_points(&stage, &xforms, id, &mut diags).unwrap_or_else(|| panic!("{path} is skinned"));
             let key = format!("{t}");
             let expect = points(&mesh["points"][&key]);
             assert_eq!(got.len(), expect.len(), "{path}");

@@ -42,9 +42,7 @@ pub fn posed_prim(
     world: DMat4,
     diags: &mut Diagnostics,
 ) -> Option<Prim> {
-    if prim.attribute("points").is_none() {
-        return None;
-    }
+    prim.attribute("points")?;
     let id = stage.find(&prim.path)?;
     let posed = pose(stage, xforms, id, diags)?;
     // Skeleton space → the prim's local space (its own transform is ignored by skinning).
@@ -488,7 +486,8 @@ fn apply_blend_shapes(
     }
     for (name, (target, target_span)) in names.iter().zip(targets) {
         let weight = weight_of.get(name.as_str()).copied().unwrap_or(0.0);
-        let Some(shape) = stage.find(target).map(|s| stage.prim(s)).filter(|s| s.type_name.as_deref() == Some("BlendShape"))
+        let Some(shape) =
+            stage.find(target).map(|s| stage.prim(s)).filter(|s| s.type_name.as_deref() == Some("BlendShape"))
         else {
             warn(diags, prim, *target_span, format!("blend shape target `{target}` is not a BlendShape prim"));
             return None;
@@ -513,7 +512,12 @@ fn apply_blend_shapes(
             };
             if !fits {
                 let span = shape.attribute("offsets").map_or(shape.span, |a| a.span);
-                warn(diags, shape, span, format!("the offsets do not fit the {} points of `{}`", points.len(), prim.path));
+                warn(
+                    diags,
+                    shape,
+                    span,
+                    format!("the offsets do not fit the {} points of `{}`", points.len(), prim.path),
+                );
                 return None;
             }
             for (k, o) in offsets.iter().enumerate() {

@@ -128,6 +128,17 @@ pub fn report_unsupported(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagn
         if is_light {
             light_attributes(prim, &mut note);
         }
+        // UsdSkel poses point-based prims (`skel`); other gprims would move rigidly.
+        if let Some(ty) =
+            prim.type_name.as_deref().filter(|t| RENDERABLE_TYPES.contains(t) && !matches!(*t, "Mesh" | "Points"))
+            && let Some(attr) = prim.attribute("primvars:skel:jointIndices")
+        {
+            note(
+                format!("skinning `{ty}` prims is not supported: only meshes and points follow their skeleton"),
+                prim,
+                value_span(attr),
+            );
+        }
         if prim.type_name.as_deref() == Some("Mesh") {
             for (name, lost) in IGNORED_MESH_ATTRIBUTES {
                 if let Some(attr) = prim.attribute(name).filter(|a| a.get().is_some_and(|v| !is_empty_array(v))) {

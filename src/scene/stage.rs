@@ -17,12 +17,12 @@
 //! they are loaded, and the pass is redone, so layers in unselected variants are never read.
 
 use crate::diag::{Diagnostic, Diagnostics, Failed, FileId, SourceMap, Span};
+use crate::scene::time::{self, TimeCode};
 use crate::scene::usda::{
     self, Layer, LayerMetadata, LayerOffset, ListOp, MetadataEntry, PrimSpec, PropertySpec, Reference, Specifier,
     Target,
 };
 use crate::scene::usdc::{self, LayerSource};
-use crate::scene::time::{self, TimeCode};
 use crate::scene::value::{AssetPath, Value, ValueType, normalize};
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -578,10 +578,10 @@ impl<'l> Node<'l> {
 
     /// How the times of `attr`, an attribute of one of this node's specs, map to the stage's.
     fn offset_of(&self, attr: &usda::AttributeSpec) -> LayerOffset {
-        let owns = |spec: &&PrimSpec| {
+        let owns = |spec: &PrimSpec| {
             spec.properties.iter().any(|p| matches!(p, PropertySpec::Attribute(a) if std::ptr::eq(&**a, attr)))
         };
-        let at = self.specs.iter().position(|s| owns(&s));
+        let at = self.specs.iter().position(|s| owns(s));
         at.and_then(|i| self.offsets.get(i)).copied().unwrap_or(self.time)
     }
 

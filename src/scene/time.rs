@@ -91,7 +91,9 @@ fn map_numbers(value: Value, f: fn(f64) -> f64) -> Value {
 /// `half`, `half3`, `quath`, `color3h`, `point3h`, ...: types stored as 16-bit floats.
 fn is_half(base: &str) -> bool {
     let mut tail = base.chars().rev();
-    base.starts_with("half") || (tail.next() == Some('h') && tail.next().is_some_and(|c| c.is_ascii_digit() || c == 't'))
+    base.starts_with("half")
+        || base == "quath"
+        || (tail.next() == Some('h') && tail.next().is_some_and(|c| c.is_ascii_digit()))
 }
 
 /// `x` rounded to the nearest IEEE half (ties to even), as `f64`.
@@ -195,10 +197,7 @@ mod tests {
     fn non_interpolating_values_are_held() {
         let s = vec![(0.0, Value::Int(1)), (10.0, Value::Int(5))];
         assert_eq!(value_at(None, &s, "int", TimeCode::At(9.0)), Some(Value::Int(1)));
-        let a = vec![
-            (0.0, Value::FloatArray(vec![0.0])),
-            (10.0, Value::FloatArray(vec![1.0, 2.0])),
-        ];
+        let a = vec![(0.0, Value::FloatArray(vec![0.0])), (10.0, Value::FloatArray(vec![1.0, 2.0]))];
         assert_eq!(value_at(None, &a, "float[]", TimeCode::At(5.0)), Some(Value::FloatArray(vec![0.0])));
     }
 

@@ -29,8 +29,8 @@
 
 use crate::diag::{Diagnostic, Diagnostics, FileId, SourceMap, Span};
 use crate::scene::usda::{
-    AttributeSpec, Layer, LayerMetadata, LayerOffset, ListOp, MetadataEntry, PrimMetadata, PrimSpec, PropertySpec, Reference,
-    RelationshipSpec, Specifier, Target, VariantSetSpec,
+    AttributeSpec, Layer, LayerMetadata, LayerOffset, ListOp, MetadataEntry, PrimMetadata, PrimSpec, PropertySpec,
+    Reference, RelationshipSpec, Specifier, Target, VariantSetSpec,
 };
 use crate::scene::value::{AssetPath, Value, ValueType};
 use openusd::sdf::{self, AbstractData};
@@ -777,14 +777,19 @@ impl Converter<'_> {
             let Some(value) = self.field(path, field, span) else { continue };
             match (field, value) {
                 ("references", sdf::Value::ReferenceListOp(op)) => {
-                    meta.references = self.references(op, depth, "references", |r| (r.asset_path, r.prim_path, r.layer_offset))
+                    meta.references =
+                        self.references(op, depth, "references", |r| (r.asset_path, r.prim_path, r.layer_offset))
                 }
                 ("payload", sdf::Value::PayloadListOp(op)) => {
-                    meta.payloads = self.references(op, depth, "payload", |r| (r.asset_path, r.prim_path, r.layer_offset.unwrap_or_default()))
+                    meta.payloads = self.references(op, depth, "payload", |r| {
+                        (r.asset_path, r.prim_path, r.layer_offset.unwrap_or_default())
+                    })
                 }
                 ("payload", sdf::Value::Payload(p)) => {
                     let op = sdf::ListOp { explicit: true, explicit_items: vec![p], ..Default::default() };
-                    meta.payloads = self.references(op, depth, "payload", |r| (r.asset_path, r.prim_path, r.layer_offset.unwrap_or_default()));
+                    meta.payloads = self.references(op, depth, "payload", |r| {
+                        (r.asset_path, r.prim_path, r.layer_offset.unwrap_or_default())
+                    });
                 }
                 ("inheritPaths", sdf::Value::PathListOp(op)) => meta.inherits = self.targets(op, depth, "inherits"),
                 ("specializes", sdf::Value::PathListOp(op)) => {
@@ -1302,7 +1307,6 @@ fn retarget_prim(prim: &mut PrimSpec, file: FileId) {
         }
     }
 }
-
 
 /// A crate file's layer offset; non-finite parts are the identity's.
 fn layer_offset(o: &sdf::LayerOffset) -> LayerOffset {

@@ -6,8 +6,8 @@
 
 use super::lexer::{Token, TokenKind, lex};
 use super::{
-    AttributeSpec, Layer, LayerMetadata, LayerOffset, ListOp, ListOpKind, MetadataEntry, PrimMetadata, PrimSpec, PropertySpec,
-    Reference, RelationshipSpec, Specifier, Target, VariantSetSpec,
+    AttributeSpec, Layer, LayerMetadata, LayerOffset, ListOp, ListOpKind, MetadataEntry, PrimMetadata, PrimSpec,
+    PropertySpec, Reference, RelationshipSpec, Specifier, Target, VariantSetSpec,
 };
 use crate::diag::{Diagnostic, Diagnostics, FileId, Span};
 use crate::scene::value::{AssetPath, Value, ValueType};
@@ -1286,6 +1286,8 @@ line"""
         assert_eq!(m.up_axis.as_deref(), Some("Z"));
         assert_eq!(m.meters_per_unit, Some(1.0));
         let subs: Vec<_> = m.sub_layers.iter().map(|(a, _)| a.resolved.clone()).collect();
+        assert_eq!(m.sub_layer_offsets[0], LayerOffset::default());
+        assert_eq!(m.sub_layer_offsets[1], LayerOffset { offset: 10.0, scale: 2.0 });
         assert_eq!(subs, vec![PathBuf::from("/scenes/a.usda"), PathBuf::from("/scenes/b.usda")]);
         assert_eq!(m.other.len(), 2);
         let custom = m.other[0].value.as_dictionary().unwrap();
