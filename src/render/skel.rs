@@ -185,6 +185,10 @@ fn pose(stage: &Stage, xforms: &[PrimXform], id: PrimId, diags: &mut Diagnostics
         apply_blend_shapes(stage, prim, anim.map(|a| stage.prim(a)), &mut points, diags)?;
     }
     let (Some(indices_attr), Some(weights_attr)) = (indices_attr, weights_attr) else {
+        if let Some(one) = indices_attr.or(weights_attr) {
+            let message = "`primvars:skel:jointIndices` and `jointWeights` go together: joints are not applied";
+            warn(diags, prim, one.span, message.into());
+        }
         // Blend shapes only: the points stay in the prim's own space.
         return Some(Posed { points, normals: None, to_world: xforms[id.0 as usize].world });
     };
@@ -547,12 +551,62 @@ fn sub_shape_weights(sorted: &[(f64, Option<Vec<DVec3>>)], w: f64) -> Vec<(f64, 
         return Vec::new();
     }
     let alpha = (w - sorted[lo].0) / delta;
+    // The rest shape (no offsets) adds nothing.
     let mut out = Vec::new();
-    if (alpha - 1.0).abs() > EPS {
-        out.push((1.0 - alpha, sorted[lo].1.as_ref()));
+    if let Some(offsets) = sorted[lo].1.as_ref().filter(|_| (alpha - 1.0).abs() > EPS) {
+        out.push((1.0 - alpha, Some(offsets)));
     }
-    if alpha.abs() > EPS {
-        out.push((alpha, sorted[hi].1.as_ref()));
+    if let Some(offsets) = sorted[hi].1.as_ref().filter(|_| alpha.abs() > EPS) {
+        out.push((alpha, Some(offsets)));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::xform::{tests::stage, world_transforms};
+
+    #[test]
+    fn sub_shape_weights_match_usd() {
+        // usd-core's `ComputeSubShapeWeights` for an in-between at 0.5: 0.24 → 0.48 of the
+        // in-between; 0.8 → 0.4 of it and 0.6 of the primary; 1.5 extrapolates the last pair.
+        let shapes = vec![(0.0, None), (0.5, Some(vec![DVec3::X])), (1.0, Some(vec![DVec3::Y]))];
+        let weights = |w: f64| -> Vec<(f64, DVec3)> {
+            sub_shape_weights(&shapes, w).into_iter().map(|(w, o)| (w, o.map_or(DVec3::ZERO, |o| o[0]))).collect()
+        };
+        let close = |got: Vec<(f64, DVec3)>, want: &[(f64, DVec3)]| {
+            got.len() == want.len() && got.iter().zip(want).all(|(g, w)| (g.0 - w.0).abs() < 1e-12 && g.1 == w.1)
+        };
+        assert!(close(weights(0.24), &[(0.48, DVec3::X)]), "{:?}", weights(0.24));
+        assert!(close(weights(0.8), &[(0.4, DVec3::X), (0.6, DVec3::Y)]), "{:?}", weights(0.8));
+        assert!(close(weights(1.5), &[(-1.0, DVec3::X), (2.0, DVec3::Y)]), "{:?}", weights(1.5));
+        assert!(close(weights(0.0), &[]), "{:?}", weights(0.0));
+    }
+
+    #[test]
+    fn half_a_binding_is_reported_and_the_mesh_keeps_its_points() {
+        let (stage, _) = stage(
+            r#"#usda 1.0
+def SkelRoot "R" {
+    rel skel:skeleton = </R/S>
+    def Skeleton "S" {
+        uniform token[] joints = ["a"]
+        uniform matrix4d[] bindTransforms = [((1,0,0,0),(0,1,0,0),(0,0,1,0),(0,0,0,1))]
+    }
+    def Mesh "M" {
+        point3f[] points = [(0,0,0), (1,0,0), (0,1,0)]
+        int[] primvars:skel:jointIndices = [0, 0, 0] (interpolation = "vertex")
+    }
+}
+"#,
+        );
+        let mut diags = Diagnostics::new();
+        let xforms = world_transforms(&stage, &mut diags);
+        let id = stage.find("/R/M").unwrap();
+        let posed = skinned_world_points(&stage, &xforms, id, &mut diags).unwrap();
+        assert_eq!(posed.0, vec![DVec3::ZERO, DVec3::X, DVec3::Y]);
+        let messages: Vec<&str> = diags.items().iter().map(|d| d.message.as_str()).collect();
+        assert!(messages.iter().any(|m| m.contains("go together")), "{messages:?}");
+    }
 }
