@@ -10,7 +10,7 @@ use crate::front::library::Library;
 use crate::ir::ssa::EntryKind;
 use crate::ir::wired::{self, PassOptions};
 use crate::render::ExrOptions;
-use crate::scene::Stage;
+use crate::scene::{Stage, TimeCode};
 use crate::scenes;
 use serde::Serialize;
 use std::collections::HashMap;
@@ -39,13 +39,27 @@ fn report(diags: &Diagnostics, sources: &SourceMap) -> Result<(), Failure> {
 
 /// Opens a scene file, or the embedded default scene when `path` is `None`.
 pub fn open_scene(path: Option<&Path>, sources: &mut SourceMap, diags: &mut Diagnostics) -> Option<Stage> {
-    match path {
+    open_scene_at(path, None, sources, diags)
+}
+
+/// As [`open_scene`], read at `time` (`--time`; `None`: [`Stage::opening_time`]).
+pub fn open_scene_at(
+    path: Option<&Path>,
+    time: Option<TimeCode>,
+    sources: &mut SourceMap,
+    diags: &mut Diagnostics,
+) -> Option<Stage> {
+    let mut stage = match path {
         Some(p) => Stage::open(p, sources, diags).ok(),
         None => {
             let (name, text) = scenes::DEFAULT_SCENE;
             Stage::from_text(name, text, Path::new(scenes::EMBEDDED_DIR), sources, diags).ok()
         }
+    }?;
+    if let Some(time) = time {
+        stage.set_time(time);
     }
+    Some(stage)
 }
 
 #[derive(Serialize)]
@@ -138,10 +152,10 @@ pub fn layers_table(stacks: &[PrimStack]) -> String {
 }
 
 /// `strata layers [SCENE] [--json]`
-pub fn layers(scene: Option<&Path>, json: bool) -> Result<(), Failure> {
+pub fn layers(scene: Option<&Path>, json: bool, time: Option<TimeCode>) -> Result<(), Failure> {
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
-    let stage = open_scene(scene, &mut sources, &mut diags);
+    let stage = open_scene_at(scene, time, &mut sources, &mut diags);
     let stacks = match &stage {
         Some(stage) => {
             let tree = crate::compose::scene::binding_tree(stage, &mut diags);
@@ -211,6 +225,11 @@ pub fn ir(scene: &Path, prim: &str, optimize: bool, stats: bool, lowered: bool) 
 
 /// Checks a substance file or scene: every diagnostic, and a one-line summary when it is clean.
 pub fn check_file(file: &Path) -> (Diagnostics, SourceMap, String) {
+    check_file_at(file, None)
+}
+
+/// As [`check_file`], with a scene read at `time` (`None`: [`Stage::opening_time`]).
+pub fn check_file_at(file: &Path, time: Option<TimeCode>) -> (Diagnostics, SourceMap, String) {
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
     let is_substance = file.extension().is_some_and(|e| e == "ash");
@@ -221,7 +240,7 @@ pub fn check_file(file: &Path) -> (Diagnostics, SourceMap, String) {
     } else {
         // Everything `render` would reject: composition, lowering (textures), geometry,
         // lights and camera — all without generating code or tracing a ray.
-        match open_scene(Some(file), &mut sources, &mut diags) {
+        match open_scene_at(Some(file), time, &mut sources, &mut diags) {
             Some(stage) => {
                 let c = compose_stage(&stage, &mut sources, &mut diags);
                 let mut compiler = Compiler::new(BackendKind::Jit, PassOptions::default());
@@ -243,9 +262,9 @@ pub fn check_file(file: &Path) -> (Diagnostics, SourceMap, String) {
     (diags, sources, summary)
 }
 
-/// `strata check FILE [--strict]`
-pub fn check(file: &Path, strict: bool) -> Result<(), Failure> {
-    let (mut diags, sources, summary) = check_file(file);
+/// `strata check FILE [--time T] [--strict]`
+pub fn check(file: &Path, time: Option<TimeCode>, strict: bool) -> Result<(), Failure> {
+    let (mut diags, sources, summary) = check_file_at(file, time);
     if strict {
         diags.make_warnings_errors();
     }
@@ -285,6 +304,8 @@ pub struct RenderArgs {
     /// Every warning is an error (`--strict`): nothing is rendered from a stage USD had to
     /// compose around.
     pub strict: bool,
+    /// The time code to render (`--time`; `None`: [`Stage::opening_time`]).
+    pub time: Option<TimeCode>,
 }
 
 /// A scene with every distinct material compiled.
@@ -315,8 +336,20 @@ pub fn compile_scene(
     sources: &mut SourceMap,
     diags: &mut Diagnostics,
 ) -> Option<CompiledScene> {
+    compile_scene_at(scene, None, backend, passes, sources, diags)
+}
+
+/// As [`compile_scene`], with the scene read at `time` (`None`: [`Stage::opening_time`]).
+pub fn compile_scene_at(
+    scene: Option<&Path>,
+    time: Option<TimeCode>,
+    backend: BackendKind,
+    passes: PassOptions,
+    sources: &mut SourceMap,
+    diags: &mut Diagnostics,
+) -> Option<CompiledScene> {
     let start = std::time::Instant::now();
-    let stage = open_scene(scene, sources, diags)?;
+    let stage = open_scene_at(scene, time, sources, diags)?;
     let parse_ms = start.elapsed().as_secs_f64() * 1e3;
     let start = std::time::Instant::now();
     let composition = compose_stage(&stage, sources, diags);
@@ -380,8 +413,9 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
     let compile_start = std::time::Instant::now();
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
-    let compiled = compile_scene(
+    let compiled = compile_scene_at(
         args.scene.as_deref(),
+        args.time,
         args.backend,
         PassOptions { optimize: args.optimize },
         &mut sources,
@@ -411,6 +445,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
     if args.strict {
         diags.make_warnings_errors();
     }
+    let time = compiled.as_ref().map_or(TimeCode::Default, |c| c.stage.time());
     report(&diags, &sources)?;
     let warnings = diags.warning_count();
     let (
@@ -450,7 +485,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         bar.finish_and_clear();
     }
     let seconds = start.elapsed().as_secs_f64();
-    let exr_options = exr_options(args, &settings, &scene, warnings);
+    let exr_options = exr_options(args, &settings, &scene, warnings, time);
     let png = match outputs.write_with(&image, &exr_options) {
         Ok(png) => png,
         Err(e) => {
@@ -515,6 +550,7 @@ fn exr_options(
     settings: &crate::render::RenderSettings,
     scene: &crate::render::Scene,
     warnings: usize,
+    time: TimeCode,
 ) -> ExrOptions {
     let camera = scene.camera.with_aspect(settings.width as f32 / settings.height as f32);
     let mode = match settings.mode {
@@ -541,6 +577,7 @@ fn exr_options(
                 "strata/defaultLights".into(),
                 if scene.default_lights { "camera light + dome (the stage has no lights)" } else { "none" }.into(),
             ),
+            ("strata/time".into(), time.to_string()),
         ]
         .into_iter()
         .chain(crate::render::cryptomatte::header_attributes(

@@ -35,6 +35,10 @@ enum Command {
         /// Print JSON instead of a table.
         #[arg(long)]
         json: bool,
+        /// The time code to read animated attributes at: a number or `default` (default: the
+        /// stage's startTimeCode when it has time samples, else the default time).
+        #[arg(long, value_name = "TIME")]
+        time: Option<strata::scene::TimeCode>,
     },
     /// Print the wired IR of one prim's composed material.
     Ir {
@@ -113,6 +117,10 @@ enum Command {
         /// Make every warning an error (exit 1, nothing written): for farms and CI.
         #[arg(long)]
         strict: bool,
+        /// The time code to read animated attributes at: a number or `default` (default: the
+        /// stage's startTimeCode when it has time samples, else the default time).
+        #[arg(long, value_name = "TIME")]
+        time: Option<strata::scene::TimeCode>,
     },
     /// Measure shading and rendering cost: JIT vs interpreter vs hand-written Rust, compile
     /// time vs graph size, render time and error vs layer count.
@@ -135,6 +143,10 @@ enum Command {
         /// Make every warning an error (exit 1): for farms and CI.
         #[arg(long)]
         strict: bool,
+        /// The time code to read animated attributes at: a number or `default` (default: the
+        /// stage's startTimeCode when it has time samples, else the default time).
+        #[arg(long, value_name = "TIME")]
+        time: Option<strata::scene::TimeCode>,
     },
     /// Mutation-fuzz both front ends and the check pipeline; exit 1 if any input crashes,
     /// hangs or passes the memory budget (it is saved under `--crashes`).
@@ -253,7 +265,7 @@ fn main() -> ExitCode {
         max_texture_pixels: args.max_texture_pixels.unwrap_or(defaults.max_texture_pixels),
     });
     let result = match args.command {
-        Command::Layers { scene, json } => cli::layers(scene.as_deref(), json),
+        Command::Layers { scene, json, time } => cli::layers(scene.as_deref(), json, time),
         Command::Ir { scene, prim, no_optimize, stats, lowered } => {
             cli::ir(&scene, &prim, !no_optimize, stats, lowered)
         }
@@ -275,6 +287,7 @@ fn main() -> ExitCode {
             stats,
             no_default_lights,
             strict,
+            time,
         } => cli::render(&cli::RenderArgs {
             scene,
             output,
@@ -301,6 +314,7 @@ fn main() -> ExitCode {
                 strata::render::scene::DefaultLights::WhenUnlit
             },
             strict,
+            time,
         }),
         Command::Compile { file, output } => cli::compile(&file, &output),
         Command::Bench { what } => {
@@ -330,7 +344,7 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Check { file, strict } => cli::check(&file, strict),
+        Command::Check { file, time, strict } => cli::check(&file, time, strict),
         Command::Fuzz { secs, seed, jobs, root, crashes, timeout, max_rss_mib, worker, stage, first, stride } => {
             if worker {
                 let stage = stage.unwrap_or_else(std::env::temp_dir);

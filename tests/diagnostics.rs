@@ -95,7 +95,7 @@ fn unsupported_content_is_reported_not_dropped() {
     let text = diags.render(&sources);
     for expected in [
         "`BasisCurves` prims are not supported",
-        "`SkelRoot` prims are not supported",
+        "skinning `Sphere` prims is not supported",
         "`PortalLight` prims are not supported",
         "prim type `Frobnicator` is not a schema strata knows",
         "API schema `MeshLightAPI` is not supported",

@@ -357,6 +357,9 @@ impl Builder<'_> {
         if !is_renderable(prim) {
             return;
         }
+        // UsdSkel: a skinned prim is emitted from its posed copy.
+        let posed = super::skel::posed_prim(self.stage, self.xforms, prim, world, diags);
+        let prim = posed.as_ref().unwrap_or(prim);
         let index = self.prim_index(prim);
         // GeomSubset material bindings: their faces are renderable prims of their own, so
         // each gets its composed material.

@@ -3,7 +3,7 @@
 //!
 //! - [`xform`]: xformOps and imageability; [`geometry`]: world-space triangles;
 //!   [`accel`]: BVH and ray queries; [`camera`]; [`light`]: UsdLux lights;
-//!   [`shapes`]: analytic quadrics; [`scene`]: the render scene; [`support`]: what is not
+//!   [`shapes`]: analytic quadrics; [`skel`]: UsdSkel skinning and blend shapes; [`scene`]: the render scene; [`support`]: what is not
 //!   rendered, reported.
 //! - [`bsdf`]: BSDF evaluation and sampling ([`microfacet`]: GGX and Fresnel; [`frame`]: shading frames); [`sampling`]: RNG and warps.
 //! - [`integrator`]: path tracing with NEE + MIS and layer picking (DESIGN.md rules 5–7);
@@ -27,6 +27,7 @@ pub mod output;
 pub mod sampling;
 pub mod scene;
 pub mod shapes;
+pub mod skel;
 pub mod subdiv;
 pub mod support;
 pub mod testing;

@@ -36,6 +36,11 @@ const NON_DRAWING_TYPES: &[&str] = &[
     "SpatialAudio",
     "CollectionAPI",
     "PhysicsScene",
+    // UsdSkel: they pose the meshes bound to them (`skel`) and draw nothing themselves.
+    "SkelRoot",
+    "Skeleton",
+    "SkelAnimation",
+    "BlendShape",
 ];
 
 /// Prim types a production renderer draws that strata does not, with what is lost.
@@ -48,10 +53,6 @@ const UNSUPPORTED_TYPES: &[(&str, &str)] = &[
     ("Volume", "volumes are not rendered"),
     ("OpenVDBAsset", "volume fields are not read"),
     ("Field3DAsset", "volume fields are not read"),
-    ("SkelRoot", "skinning is not applied: meshes under it render in their rest pose"),
-    ("Skeleton", "skeletons are not applied"),
-    ("SkelAnimation", "skeletal animation is not applied"),
-    ("BlendShape", "blend shapes are not applied"),
     ("PortalLight", "portal lights are ignored (the dome is sampled without the portal)"),
     ("GeometryLight", "geometry lights do not emit"),
     ("PluginLight", "plugin lights do not emit"),
@@ -65,7 +66,6 @@ const UNSUPPORTED_APIS: &[(&str, &str)] = &[
     ("MeshLightAPI", "the mesh renders but does not emit light"),
     ("LightAPI", "the prim renders but does not emit light"),
     ("VolumeLightAPI", "the volume does not emit light"),
-    ("SkelBindingAPI", "skinning is not applied"),
 ];
 
 /// UsdLux ShapingAPI and ShadowAPI inputs at their schema defaults, which change nothing: an
@@ -144,6 +144,17 @@ pub fn report_unsupported(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagn
         let is_light = prim.type_name.as_deref().is_some_and(|t| LIGHT_TYPES.contains(&t));
         if is_light {
             light_attributes(prim, &mut note);
+        }
+        // UsdSkel poses point-based prims (`skel`); other gprims would move rigidly.
+        if let Some(ty) =
+            prim.type_name.as_deref().filter(|t| RENDERABLE_TYPES.contains(t) && !matches!(*t, "Mesh" | "Points"))
+            && let Some(attr) = prim.attribute("primvars:skel:jointIndices")
+        {
+            note(
+                format!("skinning `{ty}` prims is not supported: only meshes and points follow their skeleton"),
+                prim,
+                value_span(attr),
+            );
         }
         if prim.type_name.as_deref() == Some("Mesh") {
             for (name, lost) in IGNORED_MESH_ATTRIBUTES {

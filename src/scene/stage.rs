@@ -17,8 +17,10 @@
 //! they are loaded, and the pass is redone, so layers in unselected variants are never read.
 
 use crate::diag::{Diagnostic, Diagnostics, Failed, FileId, OncePerKind, Severity, SourceMap, Span};
+use crate::scene::time::{self, TimeCode};
 use crate::scene::usda::{
-    self, Layer, LayerMetadata, ListOp, MetadataEntry, PrimSpec, PropertySpec, Reference, Specifier, Target,
+    self, Layer, LayerMetadata, LayerOffset, ListOp, MetadataEntry, PrimSpec, PropertySpec, Reference, Specifier,
+    Target,
 };
 use crate::scene::usdc::{self, LayerReadError, LayerSource};
 use crate::scene::value::{AssetPath, Value, ValueType, normalize};
@@ -38,8 +40,12 @@ pub struct Attribute {
     pub type_name: String,
     /// The classified type.
     pub value_type: ValueType,
-    /// The strongest value with its span; `None` when declared only or blocked.
+    /// The value at the stage's time ([`Stage::time`]) with its span; `None` when declared
+    /// only, blocked, or without a value at that time.
     pub value: Option<(Value, Span)>,
+    /// The strongest default value (`None` when declared only, blocked or only animated):
+    /// what [`TimeCode::Default`] reads.
+    pub default_value: Option<(Value, Span)>,
     /// Whether the strongest value opinion is a block (`= None`).
     pub blocked: bool,
     /// The span of the strongest opinion's statement.
@@ -50,7 +56,8 @@ pub struct Attribute {
     pub uniform: bool,
     /// Composed connection targets (`name.connect`), mapped to stage paths.
     pub connections: Vec<Target>,
-    /// Time samples of the strongest opinion that has them (not used for rendering).
+    /// Time samples in stage time, sorted: those of the strongest opinion that authors a
+    /// value, when it authors samples (a stronger default or block hides weaker samples).
     pub time_samples: Vec<(f64, Value)>,
     /// Metadata, strongest opinion per key.
     pub metadata: Vec<MetadataEntry>,
@@ -65,6 +72,11 @@ impl Attribute {
     /// A metadata value such as `interpolation`.
     pub fn meta(&self, key: &str) -> Option<&Value> {
         self.metadata.iter().find(|m| m.key == key).map(|m| &m.value)
+    }
+
+    /// The value at `time`, as USD's `UsdAttribute::Get(time)` (see [`time::value_at`]).
+    pub fn value_at(&self, time: TimeCode) -> Option<Value> {
+        time::value_at(self.default_value.as_ref().map(|(v, _)| v), &self.time_samples, &self.type_name, time)
     }
 }
 
@@ -162,6 +174,7 @@ pub struct Stage {
     by_path: HashMap<String, PrimId>,
     metadata: LayerMetadata,
     root_file: FileId,
+    time: TimeCode,
 }
 
 impl Stage {
@@ -210,7 +223,7 @@ impl Stage {
         let root = layers.add(name, source, dir, key, None, &mut chain, sources, diags).unwrap_or_default();
         // Redo the pass until it needs no layer that is not loaded yet.
         let arc_warnings;
-        let stage = loop {
+        let mut stage = loop {
             let mut pass = Pass::new(&layers, root);
             pass.run();
             if pass.needs.is_empty() {
@@ -222,6 +235,7 @@ impl Stage {
                     by_path: pass.by_path,
                     metadata: layers.get(root).map(|l| l.layer.metadata.clone()).unwrap_or_default(),
                     root_file: layers.get(root).map(|l| l.layer.file).unwrap_or_default(),
+                    time: TimeCode::Default,
                 };
             }
             let needs = std::mem::take(&mut pass.needs);
@@ -232,7 +246,38 @@ impl Stage {
         };
         layers.warnings.report(diags);
         arc_warnings.report(diags);
+        stage.set_time(stage.opening_time());
         if diags.error_count() > errors_before { Err(Failed) } else { Ok(stage) }
+    }
+
+    /// The time every attribute's [`Attribute::value`] is read at.
+    pub fn time(&self) -> TimeCode {
+        self.time
+    }
+
+    /// Reads every attribute's [`Attribute::value`] at `time` (a stage opens at
+    /// [`Stage::opening_time`]). Readers of the stage see values at that time without
+    /// knowing about samples.
+    pub fn set_time(&mut self, time: TimeCode) {
+        self.time = time;
+        for prim in &mut self.prims {
+            for attr in prim.attributes.iter_mut().filter(|a| !a.time_samples.is_empty()) {
+                attr.value = attr.value_at(time).map(|v| (v, attr.span));
+            }
+        }
+    }
+
+    /// What usdview opens at: the root layer's `startTimeCode` (0 when not authored, as
+    /// `UsdStage::GetStartTimeCode`) when any attribute is animated, else the default time.
+    pub fn opening_time(&self) -> TimeCode {
+        let animated = self.prims.iter().any(|p| p.attributes.iter().any(|a| !a.time_samples.is_empty()));
+        if animated { TimeCode::At(self.start_time_code()) } else { TimeCode::Default }
+    }
+
+    /// The root layer's `startTimeCode` (0 when not authored).
+    pub fn start_time_code(&self) -> f64 {
+        let start = self.metadata.other.iter().find(|m| m.key == "startTimeCode").and_then(|m| m.value.as_f64());
+        start.filter(|t| t.is_finite()).unwrap_or(0.0)
     }
 
     /// Root prims in order.
@@ -320,6 +365,8 @@ struct LoadedLayer {
     layer: Layer,
     /// This layer and its sublayers, recursively, strongest first.
     stack: Vec<usize>,
+    /// For each layer of `stack`, how its times map to this layer's (sublayer offsets).
+    offsets: Vec<LayerOffset>,
 }
 
 #[derive(Default)]
@@ -458,17 +505,20 @@ impl Layers {
         diags.extend(parsed);
         let index = self.list.len();
         let sub_layers = layer.metadata.sub_layers.clone();
-        self.list.push(LoadedLayer { layer, stack: vec![index] });
+        let sub_offsets = layer.metadata.sub_layer_offsets.clone();
+        self.list.push(LoadedLayer { layer, stack: vec![index], offsets: vec![LayerOffset::default()] });
         if let Some(key) = &key {
             self.by_key.insert(key.clone(), Some(index));
             chain.push(key.clone());
         }
         let mut stack = vec![index];
+        let mut offsets = vec![LayerOffset::default()];
         // Each sublayer once per layer: listing one again adds no opinions, and reading it
         // again would repeat its diagnostics.
         let mut listed: HashSet<PathBuf> = HashSet::new();
         let mut repeats = 0usize;
-        for (asset, span) in sub_layers {
+        for (i, (asset, span)) in sub_layers.into_iter().enumerate() {
+            let sub_offset = sub_offsets.get(i).copied().unwrap_or_default();
             if !listed.insert(Layers::key(&asset.resolved)) {
                 if repeats == 0 {
                     diags.push(
@@ -480,11 +530,12 @@ impl Layers {
                 continue;
             }
             if let Some(sub) = self.load(&asset.resolved, &asset.authored, span, chain, sources, diags)
-                && let Some(sub_stack) = self.list.get(sub).map(|l| l.stack.clone())
+                && let Some((sub_stack, inner)) = self.list.get(sub).map(|l| (l.stack.clone(), l.offsets.clone()))
             {
-                for i in sub_stack {
+                for (i, inner) in sub_stack.into_iter().zip(inner) {
                     if !stack.contains(&i) {
                         stack.push(i);
+                        offsets.push(sub_offset.then(inner));
                     }
                 }
             }
@@ -494,6 +545,7 @@ impl Layers {
         }
         if let Some(loaded) = self.list.get_mut(index) {
             loaded.stack = stack;
+            loaded.offsets = offsets;
         }
         Some(index)
     }
@@ -524,6 +576,10 @@ struct Node<'l> {
     site: String,
     /// Specs at the site, strongest first.
     specs: Vec<&'l PrimSpec>,
+    /// For each of `specs`, how its layer's times map to the stage's.
+    offsets: Vec<LayerOffset>,
+    /// How times in the root layer of `stack` map to the stage's (the arcs' layer offsets).
+    time: LayerOffset,
     map: MapChain,
     children: Vec<Node<'l>>,
     /// Added for this prim (not inherited from an ancestor's index).
@@ -536,7 +592,8 @@ struct Node<'l> {
 impl<'l> Node<'l> {
     /// The node for the same arc one level down, at child `name`; `None` if nothing is there.
     fn child(&self, name: &str) -> Option<Node<'l>> {
-        let specs: Vec<&PrimSpec> = self.specs.iter().filter_map(|s| s.child(name)).collect();
+        let (specs, offsets): (Vec<&PrimSpec>, Vec<LayerOffset>) =
+            self.specs.iter().zip(&self.offsets).filter_map(|(s, o)| Some((s.child(name)?, *o))).unzip();
         let children: Vec<Node> = self.children.iter().filter_map(|c| c.child(name)).collect();
         if specs.is_empty() && children.is_empty() {
             return None;
@@ -546,6 +603,8 @@ impl<'l> Node<'l> {
             stack: self.stack,
             site: join_path(&self.site, name),
             specs,
+            offsets,
+            time: self.time,
             map: self.map.clone(),
             children,
             direct: false,
@@ -566,6 +625,15 @@ impl<'l> Node<'l> {
             .position(|c| c.arc > node.arc || (c.arc == node.arc && !c.direct))
             .unwrap_or(self.children.len());
         self.children.insert(at, node);
+    }
+
+    /// How the times of `attr`, an attribute of one of this node's specs, map to the stage's.
+    fn offset_of(&self, attr: &usda::AttributeSpec) -> LayerOffset {
+        let owns = |spec: &PrimSpec| {
+            spec.properties.iter().any(|p| matches!(p, PropertySpec::Attribute(a) if std::ptr::eq(&**a, attr)))
+        };
+        let at = self.specs.iter().position(|s| owns(s));
+        at.and_then(|i| self.offsets.get(i)).copied().unwrap_or(self.time)
     }
 
     /// Every `(spec, node)` pair in strength order.
@@ -669,10 +737,17 @@ impl<'l> Pass<'l> {
         self.layers.get(layer).map(|l| l.stack.as_slice()).unwrap_or(&[])
     }
 
-    /// Specs at `path` in every layer of `stack`, strongest first.
-    fn specs_at(&self, stack: usize, path: &str) -> Vec<&'l PrimSpec> {
+    /// Specs at `path` in every layer of `stack`, strongest first, each with how its times
+    /// map to the stage's when the stack's root layer's map through `time`.
+    fn specs_at(&self, stack: usize, path: &str, time: LayerOffset) -> (Vec<&'l PrimSpec>, Vec<LayerOffset>) {
         let layers = self.layers;
-        self.stack(stack).iter().filter_map(|&i| layers.get(i).and_then(|l| l.layer.prim_at(path))).collect()
+        let Some(loaded) = layers.get(stack) else { return (Vec::new(), Vec::new()) };
+        loaded
+            .stack
+            .iter()
+            .zip(&loaded.offsets)
+            .filter_map(|(&i, o)| Some((layers.get(i)?.layer.prim_at(path)?, time.then(*o))))
+            .unzip()
     }
 
     fn run(&mut self) {
@@ -691,10 +766,13 @@ impl<'l> Pass<'l> {
         }
         for name in names {
             let site = format!("/{name}");
+            let (specs, offsets) = self.specs_at(self.root, &site, LayerOffset::default());
             let node = Node {
                 arc: Arc::Root,
                 stack: self.root,
-                specs: self.specs_at(self.root, &site),
+                specs,
+                offsets,
+                time: LayerOffset::default(),
                 site,
                 map: Vec::new(),
                 children: Vec::new(),
@@ -810,7 +888,7 @@ impl<'l> Pass<'l> {
         let mut arcs = Vec::new();
         for (path, span) in inherits {
             let target = anchor(&node.site, &path);
-            if let Some(n) = self.arc_node(node, Arc::Inherit, node.stack, target, span, ancestors) {
+            if let Some(n) = self.arc_node(node, Arc::Inherit, node.stack, target, node.time, span, ancestors) {
                 arcs.push(n);
             }
         }
@@ -819,7 +897,10 @@ impl<'l> Pass<'l> {
                 let Some((stack, target)) = self.reference_target(node, &reference) else {
                     continue;
                 };
-                if let Some(n) = self.arc_node(node, arc, stack, target, reference.span, ancestors) {
+                // The reference's offset applies within the referencing layer stack (the
+                // sublayer offset of the layer that authored it is not composed in).
+                let time = node.time.then(reference.offset);
+                if let Some(n) = self.arc_node(node, arc, stack, target, time, reference.span, ancestors) {
                     arcs.push(n);
                 }
             }
@@ -871,12 +952,16 @@ impl<'l> Pass<'l> {
         }
     }
 
+    /// The node of an arc from `from` to `site` in `stack`, whose root layer's times map to
+    /// the stage's through `time`.
+    #[allow(clippy::too_many_arguments)]
     fn arc_node(
         &mut self,
         from: &Node<'l>,
         arc: Arc,
         stack: usize,
         site: String,
+        time: LayerOffset,
         span: Span,
         ancestors: &[(usize, String)],
     ) -> Option<Node<'l>> {
@@ -898,7 +983,7 @@ impl<'l> Pass<'l> {
             }
             return None;
         }
-        let specs = self.specs_at(stack, &site);
+        let (specs, offsets) = self.specs_at(stack, &site, time);
         // An inherit of a class nobody defines is ordinary USD (the class is an extension
         // point); a reference or payload to nothing is composed around, as USD does.
         if specs.is_empty() && arc != Arc::Inherit {
@@ -923,6 +1008,8 @@ impl<'l> Pass<'l> {
             stack,
             site,
             specs,
+            offsets,
+            time,
             map,
             children: Vec::new(),
             direct: true,
@@ -997,12 +1084,20 @@ impl<'l> Pass<'l> {
         }
         if let Some((set_name, selection)) = next {
             node.variants_done.push(set_name.to_string());
-            let sets = node.specs.iter().filter_map(|s| s.variant_sets.iter().find(|v| v.name == set_name));
+            let sets = node
+                .specs
+                .iter()
+                .zip(&node.offsets)
+                .filter_map(|(s, o)| Some((s.variant_sets.iter().find(|v| v.name == set_name)?, *o)));
             let mut bodies: Vec<&'l PrimSpec> = Vec::new();
+            let mut offsets: Vec<LayerOffset> = Vec::new();
             let mut first_set = None;
-            for set in sets {
+            for (set, offset) in sets {
                 first_set.get_or_insert(set.span);
-                bodies.extend(set.variants.iter().find(|v| v.name == *selection));
+                if let Some(body) = set.variants.iter().find(|v| v.name == *selection) {
+                    bodies.push(body);
+                    offsets.push(offset);
+                }
             }
             if bodies.is_empty() {
                 if let Some(span) = first_set
@@ -1019,6 +1114,8 @@ impl<'l> Pass<'l> {
                     stack: node.stack,
                     site: node.site.clone(),
                     specs: bodies,
+                    offsets,
+                    time: node.time,
                     map: node.map.clone(),
                     children: Vec::new(),
                     direct: true,
@@ -1148,25 +1245,28 @@ fn merge_metadata(out: &mut Vec<MetadataEntry>, entries: &[MetadataEntry]) {
 
 fn compose_attribute(specs: &[(&usda::AttributeSpec, &Node)]) -> Attribute {
     let (strongest, _) = specs[0];
-    let mut value = None;
+    let mut default_value = None;
     let mut blocked = false;
     // The strongest default wins; a block (`= None`) hides every weaker value.
     if let Some((v, span)) = specs.iter().find_map(|(a, _)| a.default.as_ref()) {
         if v.is_none() {
             blocked = true;
         } else {
-            value = Some((v.clone(), *span));
+            default_value = Some((v.clone(), *span));
         }
     }
-    let time_samples =
-        specs.iter().find(|(a, _)| !a.time_samples.is_empty()).map(|(a, _)| a.time_samples.clone()).unwrap_or_default();
-    if value.is_none()
-        && !blocked
-        && let Some((_, v)) = time_samples.first()
-    {
-        // No default anywhere: the first sample is the best single-frame value.
-        value = Some((v.clone(), strongest.span));
-    }
+    // At a numeric time the strongest opinion with a value decides: its samples if it has
+    // any (they beat its own default), else its default or block.
+    // Sample times are the authoring layer's, mapped to the stage's by the layer offsets.
+    let mut time_samples = specs
+        .iter()
+        .find(|(a, _)| !a.time_samples.is_empty() || a.default.is_some())
+        .map(|(a, node)| {
+            let offset = if a.time_samples.is_empty() { LayerOffset::default() } else { node.offset_of(a) };
+            a.time_samples.iter().map(|(t, v)| (offset.apply(*t), v.clone())).collect()
+        })
+        .unwrap_or_default();
+    time::sort_samples(&mut time_samples);
     let mut connections = Vec::new();
     let mut metadata = Vec::new();
     for (a, node) in specs.iter().rev() {
@@ -1179,7 +1279,9 @@ fn compose_attribute(specs: &[(&usda::AttributeSpec, &Node)]) -> Attribute {
         name: strongest.name.clone(),
         type_name: strongest.type_name.clone(),
         value_type: strongest.value_type,
-        value,
+        // Read at the stage's time once the stage is composed (`Stage::set_time`).
+        value: default_value.clone(),
+        default_value,
         blocked,
         span: strongest.span,
         custom: specs.iter().any(|(a, _)| a.custom),
@@ -1322,7 +1424,7 @@ mod tests {
     fn pixar_kitchen_fixture() {
         let (stage, rendered) = open(&fixtures().join("pixar_kitchen.usda"));
         let stage = stage.unwrap_or_else(|_| panic!("{rendered}"));
-        assert!(rendered.contains("is animated (timeSamples): strata renders one frame"), "{rendered}");
+        assert!(!rendered.contains("timeSamples"), "{rendered}");
         let root = prim(&stage, "/Root");
         assert_eq!(root.kind.as_deref(), Some("component"));
         assert_eq!(root.value("inherited"), Some(&Value::Float(7.0)));
@@ -1331,7 +1433,9 @@ mod tests {
         assert!(stage.find("/Root/Off").is_none());
         assert!(stage.find("/_class_Base").is_none());
         assert!(stage.find("/OverOnly").is_none());
-        assert_eq!(root.value("anim"), Some(&Value::Float(1.0)));
+        // usd-core: `anim.Get(stage.GetStartTimeCode())` is 2 (samples beat the default), `Get()` 1.
+        assert_eq!(root.value("anim"), Some(&Value::Float(2.0)));
+        assert_eq!(root.attribute("anim").and_then(|a| a.value_at(TimeCode::Default)), Some(Value::Float(1.0)));
         assert_eq!(root.value("only_ts").and_then(Value::as_vec3), Some([1.0, 1.0, 1.0]));
         assert!(root.attribute("blocked").unwrap().blocked);
         assert_eq!(root.value("f"), Some(&Value::Float(f64::INFINITY)));

@@ -29,8 +29,8 @@
 
 use crate::diag::{Diagnostic, Diagnostics, FileId, SourceMap, Span};
 use crate::scene::usda::{
-    AttributeSpec, Layer, LayerMetadata, ListOp, MetadataEntry, PrimMetadata, PrimSpec, PropertySpec, Reference,
-    RelationshipSpec, Specifier, Target, VariantSetSpec,
+    AttributeSpec, Layer, LayerMetadata, LayerOffset, ListOp, MetadataEntry, PrimMetadata, PrimSpec, PropertySpec,
+    Reference, RelationshipSpec, Specifier, Target, VariantSetSpec,
 };
 use crate::scene::value::{AssetPath, Value, ValueType};
 use openusd::sdf::{self, AbstractData};
@@ -644,18 +644,6 @@ impl Converter<'_> {
         });
     }
 
-    /// Queues a diagnostic built elsewhere (shared with the text reader) as a warning.
-    fn warn_as(&mut self, d: Diagnostic) {
-        let label = d.labels.first();
-        self.pending.push(Pending {
-            error: false,
-            message: d.message,
-            at: label.map_or((0, 0), |l| (l.span.start, l.span.end)),
-            label: label.map_or_else(String::new, |l| l.message.clone()),
-            note: d.notes.into_iter().next(),
-        });
-    }
-
     fn error(&mut self, span: Span, message: String, label: &str) {
         self.pending.push(Pending {
             error: true,
@@ -714,7 +702,9 @@ impl Converter<'_> {
             match (field.as_str(), value) {
                 ("primChildren", _) => {}
                 ("subLayers", sdf::Value::StringVec(v)) => sub_paths = v,
-                // Layer offsets only retime animation: read, not used (as in usda layers).
+                ("subLayerOffsets", sdf::Value::LayerOffsetVec(v)) => {
+                    meta.sub_layer_offsets = v.iter().map(layer_offset).collect();
+                }
                 ("subLayerOffsets", _) => {}
                 ("defaultPrim", sdf::Value::Token(t)) => {
                     let s = self.line(1, &format!("defaultPrim = \"{}\"", t.as_str()));
@@ -834,14 +824,19 @@ impl Converter<'_> {
             let Some(value) = self.field(path, field, span) else { continue };
             match (field, value) {
                 ("references", sdf::Value::ReferenceListOp(op)) => {
-                    meta.references = self.references(op, depth, "references", |r| (r.asset_path, r.prim_path))
+                    meta.references =
+                        self.references(op, depth, "references", |r| (r.asset_path, r.prim_path, r.layer_offset))
                 }
                 ("payload", sdf::Value::PayloadListOp(op)) => {
-                    meta.payloads = self.references(op, depth, "payload", |r| (r.asset_path, r.prim_path))
+                    meta.payloads = self.references(op, depth, "payload", |r| {
+                        (r.asset_path, r.prim_path, r.layer_offset.unwrap_or_default())
+                    })
                 }
                 ("payload", sdf::Value::Payload(p)) => {
                     let op = sdf::ListOp { explicit: true, explicit_items: vec![p], ..Default::default() };
-                    meta.payloads = self.references(op, depth, "payload", |r| (r.asset_path, r.prim_path));
+                    meta.payloads = self.references(op, depth, "payload", |r| {
+                        (r.asset_path, r.prim_path, r.layer_offset.unwrap_or_default())
+                    });
                 }
                 ("inheritPaths", sdf::Value::PathListOp(op)) => meta.inherits = self.targets(op, depth, "inherits"),
                 ("specializes", sdf::Value::PathListOp(op)) => {
@@ -887,13 +882,13 @@ impl Converter<'_> {
         op: sdf::ListOp<T>,
         depth: usize,
         what: &str,
-        parts: impl Fn(T) -> (String, sdf::Path),
+        parts: impl Fn(T) -> (String, sdf::Path, sdf::LayerOffset),
     ) -> ListOp<Reference> {
         let mut convert = |items: Vec<T>| -> Vec<Reference> {
             items
                 .into_iter()
                 .map(|item| {
-                    let (asset, prim) = parts(item);
+                    let (asset, prim, offset) = parts(item);
                     let prim = (!prim.is_empty()).then(|| prim.as_str().to_string());
                     let text = format!(
                         "{what} {}{}",
@@ -902,7 +897,7 @@ impl Converter<'_> {
                     );
                     let span = self.line(depth, &text);
                     let asset = (!asset.is_empty()).then(|| AssetPath::new(asset, self.base_dir));
-                    Reference { asset, prim_path: prim, span }
+                    Reference { asset, prim_path: prim, span, offset: layer_offset(&offset) }
                 })
                 .collect()
         };
@@ -988,8 +983,6 @@ impl Converter<'_> {
                             attr.time_samples.push((time, v));
                         }
                     }
-                    // The same diagnostic as the usda parser: one model, one message.
-                    self.warn_as(AttributeSpec::animated_warning(name, span));
                 }
                 ("connectionPaths", sdf::Value::PathListOp(op)) => {
                     attr.connections = self.targets(op, depth + 1, "connect")
@@ -1359,6 +1352,15 @@ fn retarget_prim(prim: &mut PrimSpec, file: FileId) {
         for variant in &mut set.variants {
             retarget_prim(variant, file);
         }
+    }
+}
+
+/// A crate file's layer offset; non-finite parts are the identity's.
+fn layer_offset(o: &sdf::LayerOffset) -> LayerOffset {
+    let identity = LayerOffset::default();
+    LayerOffset {
+        offset: if o.offset.is_finite() { o.offset } else { identity.offset },
+        scale: if o.scale.is_finite() { o.scale } else { identity.scale },
     }
 }
 

@@ -11,7 +11,7 @@ pub mod parser;
 
 pub use parser::parse;
 
-use crate::diag::{Diagnostic, FileId, Span};
+use crate::diag::{FileId, Span};
 use crate::scene::value::{AssetPath, Value, ValueType};
 use std::collections::HashMap;
 use std::sync::OnceLock;
@@ -108,6 +108,8 @@ pub struct LayerMetadata {
     pub meters_per_unit: Option<f64>,
     /// `subLayers = [@a.usda@, ...]`, strongest first, with the span of each asset path.
     pub sub_layers: Vec<(AssetPath, Span)>,
+    /// The layer offset of each entry of `sub_layers` (identity where missing).
+    pub sub_layer_offsets: Vec<LayerOffset>,
     /// Every other entry (`customLayerData`, `startTimeCode`, ...), kept as written.
     pub other: Vec<MetadataEntry>,
 }
@@ -277,6 +279,36 @@ pub struct Reference {
     pub prim_path: Option<String>,
     /// The whole item's text.
     pub span: Span,
+    /// `(offset = 5; scale = 2)`: how the referenced layer's times map to this one's.
+    pub offset: LayerOffset,
+}
+
+/// A layer offset: time `t` in a referenced layer or sublayer is `offset + scale · t` in the
+/// layer that names it (`SdfLayerOffset`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LayerOffset {
+    /// Added after scaling.
+    pub offset: f64,
+    /// Multiplies the inner layer's times.
+    pub scale: f64,
+}
+
+impl Default for LayerOffset {
+    fn default() -> LayerOffset {
+        LayerOffset { offset: 0.0, scale: 1.0 }
+    }
+}
+
+impl LayerOffset {
+    /// The time in the outer layer of time `t` in the inner one.
+    pub fn apply(self, t: f64) -> f64 {
+        self.offset + self.scale * t
+    }
+
+    /// `self` after `inner`: maps the innermost layer's times through `inner`, then `self`.
+    pub fn then(self, inner: LayerOffset) -> LayerOffset {
+        LayerOffset { offset: self.apply(inner.offset), scale: self.scale * inner.scale }
+    }
 }
 
 /// Prim metadata that composition understands, plus everything else as written.
@@ -413,7 +445,7 @@ pub struct AttributeSpec {
     pub uniform: bool,
     /// The default value with its span; `Value::None` for an authored block (`= None`).
     pub default: Option<(Value, Span)>,
-    /// `name.timeSamples = { time: value }` (read, not used for rendering).
+    /// `name.timeSamples = { time: value }`, as written.
     pub time_samples: Vec<(f64, Value)>,
     /// `name.connect = ...` statements.
     pub connections: ListOp<Target>,
@@ -441,14 +473,6 @@ impl AttributeSpec {
             connections: ListOp::default(),
             metadata: Vec::new(),
         }
-    }
-
-    /// The warning for an animated attribute (`timeSamples`): strata renders one frame from
-    /// the authored default, else the earliest sample. One text for both readers.
-    pub fn animated_warning(name: &str, span: Span) -> Diagnostic {
-        Diagnostic::warning(format!("`{name}` is animated (timeSamples): strata renders one frame"))
-            .at(span, "its default value is used, or else its earliest sample")
-            .note("strata renders a single frame")
     }
 
     /// A metadata value by key.

@@ -6,8 +6,8 @@
 
 use super::lexer::{Token, TokenKind, lex};
 use super::{
-    AttributeSpec, Layer, LayerMetadata, ListOp, ListOpKind, MetadataEntry, PrimMetadata, PrimSpec, PropertySpec,
-    Reference, RelationshipSpec, Specifier, Target, VariantSetSpec,
+    AttributeSpec, Layer, LayerMetadata, LayerOffset, ListOp, ListOpKind, MetadataEntry, PrimMetadata, PrimSpec,
+    PropertySpec, Reference, RelationshipSpec, Specifier, Target, VariantSetSpec,
 };
 use crate::diag::{Diagnostic, Diagnostics, FileId, Span};
 use crate::scene::value::{AssetPath, Value, ValueType};
@@ -42,8 +42,8 @@ enum MetaValue {
     Plain(Value),
     /// `references` / `payload`; empty for `None`.
     References(Vec<Reference>),
-    /// `subLayers`.
-    SubLayers(Vec<(AssetPath, Span)>),
+    /// `subLayers`, each with its layer offset.
+    SubLayers(Vec<(AssetPath, Span, LayerOffset)>),
     /// `inherits` / `specializes`; empty for `None`.
     Paths(Vec<Target>),
 }
@@ -279,7 +279,10 @@ impl<'a> Parser<'a, '_> {
                 MetaEntry::Item(item) => item,
             };
             match (item.key.as_str(), item.value) {
-                ("subLayers", MetaValue::SubLayers(layers)) => meta.sub_layers = layers,
+                ("subLayers", MetaValue::SubLayers(layers)) => {
+                    (meta.sub_layers, meta.sub_layer_offsets) =
+                        layers.into_iter().map(|(asset, span, offset)| ((asset, span), offset)).unzip();
+                }
                 ("doc", MetaValue::Plain(v)) if v.as_str().is_some() => meta.doc = v.as_str().map(String::from),
                 ("defaultPrim", MetaValue::Plain(v)) if v.as_str().is_some() => {
                     meta.default_prim = v.as_str().map(|s| (s.to_string(), item.value_span));
@@ -395,15 +398,36 @@ impl<'a> Parser<'a, '_> {
             return self.expected("an asset path `@...@` or a prim path `</...>`");
         }
         let span = start.to(self.prev_span());
-        // Layer offsets and custom data only retime animation: parsed, not used.
+        let mut offset = LayerOffset::default();
         if self.peek_kind() == Some(TokenKind::LParen) {
-            self.metadata_block()?;
+            offset = self.layer_offset()?;
         }
-        Ok(Reference { asset, prim_path, span })
+        Ok(Reference { asset, prim_path, span, offset })
+    }
+
+    /// `(offset = 1; scale = 2)` after a reference or sublayer (other entries, such as
+    /// `customData`, are read and not used).
+    fn layer_offset(&mut self) -> PResult<LayerOffset> {
+        let mut out = LayerOffset::default();
+        for entry in self.metadata_block()? {
+            if let MetaEntry::Item(MetaItem { key, value: MetaValue::Plain(value), value_span, .. }) = entry {
+                let number = value.as_f64().filter(|x| x.is_finite());
+                match (key.as_str(), number) {
+                    ("offset", Some(x)) => out.offset = x,
+                    ("scale", Some(x)) => out.scale = x,
+                    ("offset" | "scale", None) => self.error(
+                        Diagnostic::error(format!("layer offset `{key}` must be a finite number"))
+                            .at(value_span, "not a finite number"),
+                    ),
+                    _ => {}
+                }
+            }
+        }
+        Ok(out)
     }
 
     /// `[ @a@ (offset = 1), @b@ ]` or a single asset.
-    fn sub_layers(&mut self) -> PResult<Vec<(AssetPath, Span)>> {
+    fn sub_layers(&mut self) -> PResult<Vec<(AssetPath, Span, LayerOffset)>> {
         let bracketed = self.eat(TokenKind::LBracket).is_some();
         let mut layers = Vec::new();
         loop {
@@ -415,10 +439,11 @@ impl<'a> Parser<'a, '_> {
                 self.error(Diagnostic::error("expected an asset path in `subLayers`").at(span, "not an asset path"));
                 return Err(Reported);
             };
-            layers.push((asset, span));
+            let mut offset = LayerOffset::default();
             if self.peek_kind() == Some(TokenKind::LParen) {
-                self.metadata_block()?;
+                offset = self.layer_offset()?;
             }
+            layers.push((asset, span, offset));
             if !bracketed {
                 break;
             }
@@ -713,7 +738,6 @@ impl<'a> Parser<'a, '_> {
             attr.default = Some(d);
         }
         if let Some(samples) = time_samples {
-            self.diags.push(AttributeSpec::animated_warning(name, span));
             attr.time_samples = samples;
         }
         if let Some(c) = connections {
@@ -1262,6 +1286,8 @@ line"""
         assert_eq!(m.up_axis.as_deref(), Some("Z"));
         assert_eq!(m.meters_per_unit, Some(1.0));
         let subs: Vec<_> = m.sub_layers.iter().map(|(a, _)| a.resolved.clone()).collect();
+        assert_eq!(m.sub_layer_offsets[0], LayerOffset::default());
+        assert_eq!(m.sub_layer_offsets[1], LayerOffset { offset: 10.0, scale: 2.0 });
         assert_eq!(subs, vec![PathBuf::from("/scenes/a.usda"), PathBuf::from("/scenes/b.usda")]);
         assert_eq!(m.other.len(), 2);
         let custom = m.other[0].value.as_dictionary().unwrap();
@@ -1393,10 +1419,10 @@ doc"""
     }
 
     #[test]
-    fn time_samples_warn() {
+    fn time_samples_are_read_quietly() {
         let (_, diags, sources) = parse_text("#usda 1.0\ndef \"A\" { float x.timeSamples = { 0: 1 } }\n");
         assert!(!diags.has_errors());
-        assert!(diags.render(&sources).contains("is animated (timeSamples): strata renders one frame"));
+        assert_eq!(diags.render(&sources), "");
     }
 
     #[test]
