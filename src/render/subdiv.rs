@@ -998,4 +998,245 @@ mod tests {
             }
         }
     }
+
+    /// (1) A cube whose twelve edges are infinitely sharp is the cube: every limit point lies
+    /// on a face of the cage, and the corners stay.
+    #[test]
+    fn a_cube_with_all_edges_infinitely_sharp_is_the_cube() {
+        let mut c = cube();
+        c.tags.creases = CUBE_EDGES.iter().map(|&e| (e, SHARPNESS_INFINITE)).collect();
+        for level in 1..=3 {
+            let q = catmull_clark(&c, level);
+            for p in &q.points {
+                assert!((p.abs().max_element() - 1.0).abs() < 1e-12, "level {level}: {p} is off the cube");
+            }
+            assert_eq!(&q.points[..8], &c.points[..], "level {level}");
+        }
+    }
+
+    /// The uniform cubic B-spline of control points `p[i - 1..=i + 2]` at `u` in [0, 1].
+    fn b_spline(p: [DVec3; 4], u: f64) -> DVec3 {
+        let w = [
+            (1.0 - u).powi(3),
+            3.0 * u.powi(3) - 6.0 * u * u + 4.0,
+            -3.0 * u.powi(3) + 3.0 * u * u + 3.0 * u + 1.0,
+            u.powi(3),
+        ];
+        (p[0] * w[0] + p[1] * w[1] + p[2] * w[2] + p[3] * w[3]) / 6.0
+    }
+
+    /// (2) The limit points along an infinitely sharp crease are the uniform cubic B-spline of
+    /// the crease's cage points, at parameters `k / 2^level`: a closed loop (the cube's top
+    /// face), and an open chain across a bumpy grid, whose ends are corners (three sharp edges
+    /// with the boundary) that leave the spans between its inner points a plain B-spline.
+    #[test]
+    fn infinitely_sharp_creases_are_cubic_b_splines_of_their_cage_points() {
+        let level = 3;
+        let steps = 1 << level;
+        let loop_cube = cube_with_top_loop(SHARPNESS_INFINITE);
+        let q = catmull_clark(&loop_cube, level);
+        let ring = [4, 5, 7, 6].map(|i| loop_cube.points[i]);
+        for span in 0..4 {
+            let controls = [0, 1, 2, 3].map(|k| ring[(span + 3 + k) % 4]);
+            for k in 0..steps {
+                let expected = b_spline(controls, k as f64 / steps as f64);
+                assert!(nearest(expected, &q.points) < 1e-12, "loop span {span} at {k}: {expected}");
+            }
+        }
+
+        let mut grid = PolyMesh::default();
+        for j in 0..3 {
+            for i in 0..5 {
+                grid.points.push(DVec3::new(i as f64, j as f64, (1.3 * i as f64 + 0.7 * j as f64).sin()));
+            }
+        }
+        for j in 0..2u32 {
+            for i in 0..4u32 {
+                let v = 5 * j + i;
+                grid.counts.push(4);
+                grid.indices.extend([v, v + 1, v + 6, v + 5]);
+            }
+        }
+        grid.tags.creases = (5..9).map(|v| ([v, v + 1], SHARPNESS_INFINITE)).collect();
+        let q = catmull_clark(&grid, level);
+        let chain: Vec<DVec3> = (5..10).map(|v| grid.points[v]).collect();
+        for span in 1..=2 {
+            let controls = [chain[span - 1], chain[span], chain[span + 1], chain[span + 2]];
+            for k in 0..=steps {
+                let expected = b_spline(controls, k as f64 / steps as f64);
+                assert!(nearest(expected, &q.points) < 1e-12, "chain span {span} at {k}: {expected}");
+            }
+        }
+        // The test can fail: the smooth surface does not pass through the crease's curve.
+        let smooth = catmull_clark(&PolyMesh { tags: SubdivTags::default(), ..grid.clone() }, level);
+        let mid = b_spline([chain[0], chain[1], chain[2], chain[3]], 0.5);
+        assert!(nearest(mid, &smooth.points) > 1e-3);
+    }
+
+    /// (3) An infinitely sharp corner stays exactly where the cage has it, at every level; a
+    /// smooth cube's corner does not.
+    #[test]
+    fn an_infinitely_sharp_corner_stays_at_its_cage_position() {
+        let mut c = cube();
+        c.tags.corners = vec![(0, SHARPNESS_INFINITE)];
+        for level in 1..=3 {
+            assert_eq!(catmull_clark(&c, level).points[0], c.points[0], "level {level}");
+        }
+        assert_ne!(catmull_clark(&cube(), 2).points[0], c.points[0]);
+    }
+
+    /// (4) Sharpness 0 is smooth, bit for bit.
+    #[test]
+    fn sharpness_zero_is_the_smooth_surface_bit_for_bit() {
+        let mut c = cube_with_top_loop(0.0);
+        c.tags.corners = vec![(0, 0.0), (3, -2.0)];
+        for level in 1..=3 {
+            let (creased, smooth) = (catmull_clark(&c, level), catmull_clark(&cube(), level));
+            assert_eq!(creased.points, smooth.points, "level {level}");
+            assert_eq!(creased.normals, smooth.normals, "level {level}");
+        }
+    }
+
+    /// (5) Sharper creases hold the surface closer to the cage: the limit of a vertex on the
+    /// creased loop moves monotonically from the smooth limit towards its cage position.
+    #[test]
+    fn sharper_creases_hold_the_surface_closer_to_the_cage() {
+        let sharpness = [0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0, SHARPNESS_INFINITE];
+        let distances: Vec<f64> = sharpness
+            .iter()
+            .map(|&s| (catmull_clark(&cube_with_top_loop(s), 2).points[4] - cube().points[4]).length())
+            .collect();
+        for (w, s) in distances.windows(2).zip(sharpness.windows(2)) {
+            assert!(w[1] < w[0], "sharpness {} → {}: {} → {}", s[0], s[1], w[0], w[1]);
+        }
+    }
+
+    /// (5) One refinement by DeRose et al.'s rules, by hand, for vertex 4 = (-1, -1, 1) of the
+    /// cube and its edge to vertex 5 = (1, -1, 1) on a top loop of sharpness 1 and 0.5.
+    /// Sharpness 1: the crease rule `(a + 6p + b) / 8` (its edges decay to 0, so the rule
+    /// blends with weight 1) and the edge's midpoint. Sharpness 0.5: half that and half the
+    /// smooth rules, whose values are: vertex `(F + 2R + (n - 3) p) / n` with n = 3, face
+    /// centroids (0,0,1), (0,-1,0), (-1,0,0) and edge midpoints (0,-1,1), (-1,0,1), (-1,-1,0),
+    /// so (-5, -5, 5) / 9; edge `(a + b + f₁ + f₂) / 4` = (0, -3, 3) / 4.
+    #[test]
+    fn one_level_of_semi_sharp_refinement_matches_the_rules_by_hand() {
+        let edge_45 = 8 + Topology::new(&cube()).edges.iter().position(|&e| e == (4, 5)).unwrap();
+        let sharp = refine_once(&cube_with_top_loop(1.0));
+        assert_eq!(sharp.points[4], DVec3::new(-0.75, -0.75, 1.0));
+        assert_eq!(sharp.points[edge_45], DVec3::new(0.0, -1.0, 1.0));
+        let half = refine_once(&cube_with_top_loop(0.5));
+        let vertex = (DVec3::new(-0.75, -0.75, 1.0) + DVec3::new(-5.0, -5.0, 5.0) / 9.0) / 2.0;
+        assert!((half.points[4] - vertex).length() < 1e-15, "{}", half.points[4]);
+        let edge = (DVec3::new(0.0, -1.0, 1.0) + DVec3::new(0.0, -3.0, 3.0) / 4.0) / 2.0;
+        assert!((half.points[edge_45] - edge).length() < 1e-15, "{}", half.points[edge_45]);
+        // The smooth rules themselves, for the sharpness-0 reference.
+        let smooth = refine_once(&cube());
+        assert!((smooth.points[4] - DVec3::new(-5.0, -5.0, 5.0) / 9.0).length() < 1e-15);
+    }
+
+    /// Sharpness beyond the rendered level is not treated as infinite: the limit does not
+    /// depend on the level (cage vertices keep their index, and their limit, at every level).
+    #[test]
+    fn semi_sharp_limits_do_not_depend_on_the_level() {
+        let c = cube_with_top_loop(3.5);
+        let coarse = catmull_clark(&c, 1);
+        let fine = catmull_clark(&c, 4);
+        for v in 0..8 {
+            assert!((coarse.points[v] - fine.points[v]).length() < 1e-12, "vertex {v}");
+        }
+        let infinite = catmull_clark(&cube_with_top_loop(SHARPNESS_INFINITE), 1);
+        assert!((coarse.points[4] - infinite.points[4]).length() > 1e-3);
+    }
+
+    /// (6) `interpolateBoundary`: `edgeAndCorner` pins a single face's corner, `edgeOnly` puts
+    /// it on the boundary's B-spline `(a + 4p + b) / 6`, `none` drops every face touching the
+    /// boundary (of a 3×3 grid only the centre face is left).
+    #[test]
+    fn boundary_interpolation_rules() {
+        let mut grid = PolyMesh::default();
+        for j in 0..4 {
+            for i in 0..4 {
+                grid.points.push(DVec3::new(i as f64, j as f64, (1.3 * i as f64 + 0.7 * j as f64).sin()));
+            }
+        }
+        for j in 0..3u32 {
+            for i in 0..3u32 {
+                let v = 4 * j + i;
+                grid.counts.push(4);
+                grid.indices.extend([v, v + 1, v + 5, v + 4]);
+                grid.origin.push(3 * j + i);
+            }
+        }
+        let with = |boundary| PolyMesh { tags: SubdivTags { boundary, ..SubdivTags::default() }, ..grid.clone() };
+        let corner = catmull_clark(&with(BoundaryInterpolation::EdgeAndCorner), 2);
+        assert_eq!(corner.points[0], grid.points[0]);
+        let edge = catmull_clark(&with(BoundaryInterpolation::EdgeOnly), 2);
+        let curve = (grid.points[1] + grid.points[0] * 4.0 + grid.points[4]) / 6.0;
+        assert!((edge.points[0] - curve).length() < 1e-12, "{} {curve}", edge.points[0]);
+        let none = catmull_clark(&with(BoundaryInterpolation::None), 2);
+        let kept: Vec<u32> = none.holes.iter().zip(&none.origin).filter(|(h, _)| !**h).map(|(_, &o)| o).collect();
+        assert_eq!(kept, vec![4; 16]);
+    }
+
+    fn tags_of(attributes: &str) -> (SubdivTags, Vec<String>) {
+        let text = format!(
+            "#usda 1.0\ndef Mesh \"M\" {{\n    int[] faceVertexCounts = [4, 4, 4, 4, 4, 4]\n    \
+             int[] faceVertexIndices = [0, 2, 3, 1, 4, 5, 7, 6, 0, 1, 5, 4, 2, 6, 7, 3, 0, 4, 6, 2, 1, 3, 7, 5]\n    \
+             {attributes}\n}}\n"
+        );
+        let (stage, mut diags) = crate::render::xform::tests::stage(&text);
+        let prim = stage.prim(stage.find("/M").unwrap());
+        let c = cube();
+        let indices: Vec<i64> = c.indices.iter().map(|&i| i as i64).collect();
+        let tags = read_tags(prim, 8, &[4; 6], &indices, &mut diags);
+        (tags, diags.items().iter().map(|d| d.message.clone()).collect())
+    }
+
+    /// UsdGeom's crease encoding: chains of vertices, a sharpness per chain or per chain edge;
+    /// what does not fit is a warning and leaves the rest.
+    #[test]
+    fn usd_creases_and_corners_are_read_per_crease_or_per_edge() {
+        let (tags, warnings) = tags_of(
+            "int[] creaseIndices = [0, 1, 3, 2, 4, 6]\n int[] creaseLengths = [4, 2]\n float[] creaseSharpnesses = [2, 10]\n \
+             int[] cornerIndices = [7]\n float[] cornerSharpnesses = [3.5]\n uniform token interpolateBoundary = \"edgeOnly\"",
+        );
+        assert!(warnings.is_empty(), "{warnings:?}");
+        assert_eq!(tags.creases, vec![([0, 1], 2.0), ([1, 3], 2.0), ([3, 2], 2.0), ([4, 6], 10.0)]);
+        assert_eq!(tags.corners, vec![(7, 3.5)]);
+        assert_eq!(tags.boundary, BoundaryInterpolation::EdgeOnly);
+
+        let (tags, warnings) = tags_of(
+            "int[] creaseIndices = [0, 1, 3, 2]\n int[] creaseLengths = [4]\n float[] creaseSharpnesses = [1, -2, 30]",
+        );
+        assert!(warnings.is_empty(), "{warnings:?}");
+        assert_eq!(tags.creases, vec![([0, 1], 1.0), ([1, 3], 0.0), ([3, 2], SHARPNESS_INFINITE)]);
+        assert_eq!(tags.boundary, BoundaryInterpolation::EdgeAndCorner);
+
+        for (attributes, warning) in [
+            (
+                "int[] creaseIndices = [0, 1, 3]\n int[] creaseLengths = [2]\n float[] creaseSharpnesses = [1]",
+                "do not fit",
+            ),
+            (
+                "int[] creaseIndices = [0, 1, 3]\n int[] creaseLengths = [3]\n float[] creaseSharpnesses = [1, 2, 3]",
+                "neither",
+            ),
+            (
+                "int[] creaseIndices = [0, 9]\n int[] creaseLengths = [2]\n float[] creaseSharpnesses = [1]",
+                "out of range",
+            ),
+            ("int[] cornerIndices = [0, 1]\n float[] cornerSharpnesses = [1]", "cornerSharpnesses for"),
+            ("int[] cornerIndices = [-1]\n float[] cornerSharpnesses = [1]", "out of range"),
+            ("uniform token interpolateBoundary = \"sometimes\"", "unknown interpolateBoundary"),
+        ] {
+            let (tags, warnings) = tags_of(attributes);
+            assert!(tags.creases.is_empty() && tags.corners.is_empty(), "{attributes}");
+            assert!(warnings.len() == 1 && warnings[0].contains(warning), "{attributes}: {warnings:?}");
+        }
+        // A diagonal (0-7) is no edge of the cube: reported, the rest kept.
+        let (tags, warnings) =
+            tags_of("int[] creaseIndices = [0, 1, 7]\n int[] creaseLengths = [3]\n float[] creaseSharpnesses = [5]");
+        assert_eq!(tags.creases, vec![([0, 1], 5.0)]);
+        assert!(warnings.len() == 1 && warnings[0].contains("not edges of the mesh"), "{warnings:?}");
+    }
 }
