@@ -132,8 +132,7 @@ pub fn read_tags(prim: &Prim, npoints: usize, counts: &[i64], indices: &[i64], d
     };
     // OpenSubdiv's factory clamps negative sharpness to smooth; NaN is no sharpness either.
     let sharpness = |s: f64| if s > 0.0 { s.min(f64::from(SHARPNESS_INFINITE)) as f32 } else { 0.0 };
-    let mut tags = SubdivTags::default();
-    tags.boundary = match prim.value("interpolateBoundary").and_then(Value::as_str) {
+    let boundary = match prim.value("interpolateBoundary").and_then(Value::as_str) {
         None | Some("edgeAndCorner") => BoundaryInterpolation::EdgeAndCorner,
         Some("edgeOnly") => BoundaryInterpolation::EdgeOnly,
         Some("none") => BoundaryInterpolation::None,
@@ -146,6 +145,7 @@ pub fn read_tags(prim: &Prim, npoints: usize, counts: &[i64], indices: &[i64], d
             BoundaryInterpolation::EdgeAndCorner
         }
     };
+    let mut tags = SubdivTags { boundary, ..SubdivTags::default() };
 
     let (crease_indices, lengths, crease_sharpness) =
         (ints("creaseIndices"), ints("creaseLengths"), floats("creaseSharpnesses"));
@@ -499,7 +499,7 @@ fn base_sharpness(mesh: &mut PolyMesh, topo: &Topology) -> Sharpness {
             *slot = s;
         }
     }
-    for v in 0..mesh.points.len() {
+    for (v, sharpness) in vertices.iter_mut().enumerate() {
         let (vertex_edges, vertex_faces) = (&topo.vertex_edges[v], &topo.vertex_faces[v]);
         let face_counts = || vertex_edges.iter().map(|&e| topo.edge_faces[e as usize].len());
         let boundary_edges = face_counts().filter(|&c| c < 2).count();
@@ -522,13 +522,12 @@ fn base_sharpness(mesh: &mut PolyMesh, topo: &Topology) -> Sharpness {
             }
         }
         let topological_corner = vertex_faces.len() == 1 && vertex_edges.len() == 2;
-        if topological_corner && mesh.tags.boundary == BoundaryInterpolation::EdgeAndCorner {
-            vertices[v] = SHARPNESS_INFINITE;
-        } else if non_manifold
-            // An interior non-manifold crease (two edges with extra "fins") stays a crease.
-            && !(non_manifold_edges == 2 && boundary_edges == 0 && vertex_faces.len() > vertex_edges.len())
+        // An interior non-manifold crease (two edges with extra "fins") stays a crease.
+        let fin_crease = non_manifold_edges == 2 && boundary_edges == 0 && vertex_faces.len() > vertex_edges.len();
+        if (topological_corner && mesh.tags.boundary == BoundaryInterpolation::EdgeAndCorner)
+            || (non_manifold && !topological_corner && !fin_crease)
         {
-            vertices[v] = SHARPNESS_INFINITE;
+            *sharpness = SHARPNESS_INFINITE;
         }
     }
     Sharpness { edges, vertices }
