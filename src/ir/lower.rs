@@ -1452,7 +1452,12 @@ impl FnLower<'_> {
             (Some(f), Some(space)) => match texture::register_file_as(Path::new(&f), space) {
                 Ok(id) => id,
                 Err(msg) => {
-                    self.diags.push(Diagnostic::error(msg).at(args[0].span, "texture file named here"));
+                    self.diags.push(
+                        Diagnostic::warning(msg)
+                            .at(args[0].span, "texture file named here")
+                            .note("the texture reads as black")
+                            .kind("unreadable texture"),
+                    );
                     -1
                 }
             },
@@ -1481,7 +1486,12 @@ impl FnLower<'_> {
             Some(f) => match texture::register_file(Path::new(&f)) {
                 Ok(id) => id,
                 Err(msg) => {
-                    self.diags.push(Diagnostic::error(msg).at(args[0].span, "texture file named here"));
+                    self.diags.push(
+                        Diagnostic::warning(msg)
+                            .at(args[0].span, "texture file named here")
+                            .note("the texture reads as black")
+                            .kind("unreadable texture"),
+                    );
                     -1
                 }
             },
