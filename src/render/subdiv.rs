@@ -24,9 +24,10 @@
 //! - Limit positions are exact even where a semi-sharp feature has not decayed at the
 //!   rendered level: each vertex's one-ring is refined on its own (a one-ring refines into a
 //!   one-ring) until its sharpness is spent, and then projected by the limit mask of its rule
-//!   (smooth, crease `(a + 4p + b) / 6`, corner). The surface thus does not depend on
-//!   `--subdiv-level`, where OpenSubdiv's uniform `PrimvarRefiner::Limit` would treat the
-//!   sharpness left at the last level as infinite.
+//!   (smooth, crease `(a + 4p + b) / 6`, corner); at a dart, whose smooth limit mask is only
+//!   an estimate, until the estimate settles. The surface thus does not depend on
+//!   `--subdiv-level`, where OpenSubdiv's uniform `PrimvarRefiner::Limit` applies the rule of
+//!   the last level (sharpness left there counts as sharp, darts get the estimate).
 //!
 //! Face-varying data (`st`) is refined linearly within each face (USD's
 //! `faceVaryingLinearInterpolation = "all"`; other values are reported by [`super::support`]).
