@@ -101,7 +101,7 @@ fn unsupported_content_is_reported_not_dropped() {
         "API schema `MeshLightAPI` is not supported",
         "light shaping (`inputs:shaping:*` away from its defaults) is not applied",
         "light `inputs:diffuse`",
-        "mesh `creaseIndices`",
+        "mesh `faceVaryingLinearInterpolation` `cornersPlus1`",
     ] {
         assert_eq!(text.matches(expected).count(), 1, "`{expected}` reported once in:\n{text}");
     }

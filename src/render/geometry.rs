@@ -7,7 +7,7 @@
 
 use super::accel::InstanceDesc;
 use super::shapes::{Part, Shape};
-use super::subdiv::{PolyMesh, catmull_clark, refined_faces};
+use super::subdiv::{PolyMesh, catmull_clark, read_tags, refined_faces};
 use super::xform::{PrimXform, local_transform, value_span, world_transforms};
 use crate::compose::scene::{is_bound_subset, is_renderable};
 use crate::diag::{Diagnostic, Diagnostics, Span};
@@ -1106,7 +1106,8 @@ fn mesh(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
                     .at(scheme_attr.map_or(prim.span, value_span), "here"),
                 );
             }
-            let poly = poly_mesh(points, counts, indices, st.as_ref(), &holes);
+            let mut poly = poly_mesh(points, counts, indices, st.as_ref(), &holes);
+            poly.tags = read_tags(prim, npoints, counts, indices, diags);
             // Normals are not authored on subdivision surfaces (UsdGeom): the limit's are used.
             subdivided(&poly, left, flip, out);
             return;

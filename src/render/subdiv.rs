@@ -1,18 +1,69 @@
 //! Catmull-Clark subdivision of polygon meshes (UsdGeom `subdivisionScheme`, whose default is
-//! `catmullClark`: a mesh without the attribute is a subdivision surface, not its cage).
+//! `catmullClark`: a mesh without the attribute is a subdivision surface, not its cage), with
+//! the sharp features of UsdGeom's subdivision tags applied by OpenSubdiv's rules.
 //!
 //! Uniform refinement to a fixed level, then every vertex is moved to its limit position, so
 //! the result lies on the limit surface whatever the level; shading normals are the
-//! area-weighted normals of the refined mesh. Boundaries follow USD's default
-//! `interpolateBoundary = "edgeAndCorner"`: boundary edges are cubic B-spline curves, and
-//! vertices with a single incident face are corners that stay where they are. Non-manifold
-//! edges (three or more faces) are treated as boundaries. Face-varying data (`st`) is
-//! refined linearly within each face (USD's `faceVaryingLinearInterpolation = "all"`).
+//! area-weighted normals of the refined mesh.
 //!
-//! Not applied (reported by [`super::support`]): creases and corners with sharpness.
+//! Sharp features follow OpenSubdiv (`Sdc`, `Vtr`), with USD's options:
+//! - **Creases** (`creaseIndices` / `creaseLengths` / `creaseSharpnesses`) give edges a
+//!   sharpness, **corners** (`cornerIndices` / `cornerSharpnesses`) give vertices one.
+//!   Sharpness ≥ 10 ([`SHARPNESS_INFINITE`]) is infinitely sharp. Semi-sharp features follow
+//!   DeRose et al. 1998 with OpenSubdiv's uniform creasing (`Sdc::Options::CREASE_UNIFORM`,
+//!   OpenSubdiv's default; UsdGeom has no attribute to choose Chaikin): the sharp rule while
+//!   sharpness ≥ 1, sharp and smooth blended by a fractional sharpness, and each child edge
+//!   (or vertex) one less sharp than its parent.
+//! - A vertex's rule comes from its sharpness and how many sharp edges meet there: smooth
+//!   (none), dart (one: the smooth rule), crease (two: `(a + 6p + b) / 8`, the cubic B-spline
+//!   of the crease curve) and corner (more, or a sharp vertex: it stays).
+//! - Boundary and non-manifold edges are infinitely sharp. `interpolateBoundary`:
+//!   `edgeAndCorner` (USD's default) also pins vertices with a single face; `edgeOnly` lets
+//!   them follow the boundary curve; `none` drops, as holes, every face that touches a
+//!   boundary vertex with a boundary edge not authored infinitely sharp (OpenSubdiv's rule).
+//! - Limit positions are exact even where a semi-sharp feature has not decayed at the
+//!   rendered level: each vertex's one-ring is refined on its own (a one-ring refines into a
+//!   one-ring) until its sharpness is spent, and then projected by the limit mask of its rule
+//!   (smooth, crease `(a + 4p + b) / 6`, corner); at a dart, whose smooth limit mask is only
+//!   an estimate, until the estimate settles. The surface thus does not depend on
+//!   `--subdiv-level`, where OpenSubdiv's uniform `PrimvarRefiner::Limit` applies the rule of
+//!   the last level (sharpness left there counts as sharp, darts get the estimate).
+//!
+//! Face-varying data (`st`) is refined linearly within each face (USD's
+//! `faceVaryingLinearInterpolation = "all"`; other values are reported by [`super::support`]).
 
+use crate::diag::{Diagnostic, Diagnostics};
+use crate::scene::{Prim, Value};
 use glam::{DVec3, Vec2};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
+
+/// UsdGeom's `SHARPNESS_INFINITE` (OpenSubdiv's `Sdc::Crease::SHARPNESS_INFINITE`): edges and
+/// vertices at least this sharp never soften.
+pub const SHARPNESS_INFINITE: f32 = 10.0;
+
+/// UsdGeom `interpolateBoundary`: how boundary edges and corners are subdivided.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BoundaryInterpolation {
+    /// `none`: faces touching a boundary that is not authored infinitely sharp are dropped.
+    None,
+    /// `edgeOnly`: boundary edges are sharp curves; corner vertices follow them.
+    EdgeOnly,
+    /// `edgeAndCorner` (the default): boundary edges are sharp and corners stay put.
+    #[default]
+    EdgeAndCorner,
+}
+
+/// Sharp features of a subdivision surface (UsdGeom's subdivision tags).
+#[derive(Clone, Debug, Default)]
+pub struct SubdivTags {
+    /// Sharp edges, by their endpoints, with their sharpness (≥ 0); a later entry for the same
+    /// edge replaces an earlier one, as OpenSubdiv's factory assigns them.
+    pub creases: Vec<([u32; 2], f32)>,
+    /// Sharp vertices with their sharpness (≥ 0).
+    pub corners: Vec<(u32, f32)>,
+    /// Boundary rule.
+    pub boundary: BoundaryInterpolation,
+}
 
 /// A polygon mesh: points and faces (`counts` vertices each, from `indices`), optional
 /// per-face-vertex texture coordinates and per-face hole flags.
@@ -30,6 +81,8 @@ pub struct PolyMesh {
     pub holes: Vec<bool>,
     /// Per face, the authored face it comes from (GeomSubsets name authored faces).
     pub origin: Vec<u32>,
+    /// Creases, corners and the boundary rule.
+    pub tags: SubdivTags,
 }
 
 /// A refined quad mesh on the limit surface.
@@ -43,7 +96,7 @@ pub struct QuadMesh {
     pub quads: Vec<[u32; 4]>,
     /// Texture coordinates per quad corner.
     pub uv: Option<Vec<[Vec2; 4]>>,
-    /// Whether each quad lies in a hole.
+    /// Whether each quad lies in a hole (authored, or dropped by `interpolateBoundary = none`).
     pub holes: Vec<bool>,
     /// Per quad, the authored face it refines.
     pub origin: Vec<u32>,
@@ -59,104 +112,482 @@ pub fn refined_faces(counts: &[u32], level: u32) -> u64 {
     first.saturating_mul(4u64.saturating_pow(level - 1))
 }
 
-/// One uniform Catmull-Clark step: every face becomes quads.
-fn refine(mesh: &PolyMesh) -> PolyMesh {
-    let faces = mesh.counts.len();
-    let mut offsets = Vec::with_capacity(faces);
-    let mut start = 0usize;
-    for &c in &mesh.counts {
-        offsets.push(start);
-        start += c as usize;
-    }
-    let face = |f: usize| &mesh.indices[offsets[f]..offsets[f] + mesh.counts[f] as usize];
+/// Reads a mesh's subdivision tags (`interpolateBoundary`, creases, corners), validated
+/// against its `npoints` points and its faces (`counts`, `indices`, already validated):
+/// what does not fit is reported and left out, and the mesh still renders.
+pub fn read_tags(prim: &Prim, npoints: usize, counts: &[i64], indices: &[i64], diags: &mut Diagnostics) -> SubdivTags {
+    let warn = |diags: &mut Diagnostics, name: &str, message: String| {
+        let span = prim.attribute(name).map_or(prim.span, super::xform::value_span);
+        diags.push(Diagnostic::warning(format!("mesh `{}`: {message}", prim.path)).at(span, "here"));
+    };
+    let ints = |name: &str| prim.value(name).and_then(Value::as_int_array).unwrap_or(&[]);
+    let floats = |name: &str| -> Vec<f64> {
+        match prim.value(name) {
+            Some(v) => v
+                .as_float_array()
+                .map(<[f64]>::to_vec)
+                .or_else(|| v.as_int_array().map(|a| a.iter().map(|&i| i as f64).collect()))
+                .unwrap_or_default(),
+            None => Vec::new(),
+        }
+    };
+    // OpenSubdiv's factory clamps negative sharpness to smooth; NaN is no sharpness either.
+    let sharpness = |s: f64| if s > 0.0 { s.min(f64::from(SHARPNESS_INFINITE)) as f32 } else { 0.0 };
+    let boundary = match prim.value("interpolateBoundary").and_then(Value::as_str) {
+        None | Some("edgeAndCorner") => BoundaryInterpolation::EdgeAndCorner,
+        Some("edgeOnly") => BoundaryInterpolation::EdgeOnly,
+        Some("none") => BoundaryInterpolation::None,
+        Some(other) => {
+            warn(
+                diags,
+                "interpolateBoundary",
+                format!("unknown interpolateBoundary `{other}`; `edgeAndCorner` is used"),
+            );
+            BoundaryInterpolation::EdgeAndCorner
+        }
+    };
+    let mut tags = SubdivTags { boundary, ..SubdivTags::default() };
 
-    // Edges, keyed by their sorted endpoints, with the faces that use them.
-    let mut edge_id: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.indices.len());
-    let mut edges: Vec<(u32, u32)> = Vec::new();
-    let mut edge_faces: Vec<Vec<u32>> = Vec::new();
-    let mut face_edges: Vec<u32> = Vec::with_capacity(mesh.indices.len());
-    for f in 0..faces {
-        let vs = face(f);
-        for k in 0..vs.len() {
-            let (a, b) = (vs[k], vs[(k + 1) % vs.len()]);
-            let key = (a.min(b), a.max(b));
-            let id = *edge_id.entry(key).or_insert_with(|| {
-                edges.push(key);
-                edge_faces.push(Vec::new());
-                edges.len() as u32 - 1
-            });
-            edge_faces[id as usize].push(f as u32);
-            face_edges.push(id);
+    let (crease_indices, lengths, crease_sharpness) =
+        (ints("creaseIndices"), ints("creaseLengths"), floats("creaseSharpnesses"));
+    if !crease_indices.is_empty() || !lengths.is_empty() {
+        let edges_in_chains: i64 = lengths.iter().map(|&l| (l - 1).max(0)).sum();
+        let per_crease = crease_sharpness.len() == lengths.len();
+        if lengths.iter().any(|&l| l < 2) || lengths.iter().sum::<i64>() != crease_indices.len() as i64 {
+            warn(
+                diags,
+                "creaseLengths",
+                format!(
+                    "creaseLengths (each at least 2, summing to {}) do not fit creaseIndices; the creases are ignored",
+                    crease_indices.len()
+                ),
+            );
+        } else if !per_crease && crease_sharpness.len() as i64 != edges_in_chains {
+            warn(
+                diags,
+                "creaseSharpnesses",
+                format!(
+                    "creaseSharpnesses has {} values, neither one per crease ({}) nor one per crease edge ({edges_in_chains}); the creases are ignored",
+                    crease_sharpness.len(),
+                    lengths.len()
+                ),
+            );
+        } else if let Some(bad) = crease_indices.iter().find(|&&i| i < 0 || i as usize >= npoints) {
+            warn(
+                diags,
+                "creaseIndices",
+                format!("crease vertex {bad} is out of range (the mesh has {npoints} points); the creases are ignored"),
+            );
+        } else {
+            let mesh_edges = mesh_edges(counts, indices);
+            let (mut start, mut edge) = (0usize, 0usize);
+            let mut missing = Vec::new();
+            for (crease, &length) in lengths.iter().enumerate() {
+                let chain = &crease_indices[start..start + length as usize];
+                for pair in chain.windows(2) {
+                    let s = sharpness(if per_crease { crease_sharpness[crease] } else { crease_sharpness[edge] });
+                    let (a, b) = (pair[0] as u32, pair[1] as u32);
+                    if mesh_edges.contains(&(a.min(b), a.max(b))) {
+                        tags.creases.push(([a, b], s));
+                    } else {
+                        missing.push((a, b));
+                    }
+                    edge += 1;
+                }
+                start += length as usize;
+            }
+            if let Some(&(a, b)) = missing.first() {
+                warn(
+                    diags,
+                    "creaseIndices",
+                    format!(
+                        "{} crease edge(s) are not edges of the mesh (the first: {a}-{b}); they are ignored",
+                        missing.len()
+                    ),
+                );
+            }
         }
     }
 
+    let (corner_indices, corner_sharpness) = (ints("cornerIndices"), floats("cornerSharpnesses"));
+    if !corner_indices.is_empty() || !corner_sharpness.is_empty() {
+        if corner_indices.len() != corner_sharpness.len() {
+            warn(
+                diags,
+                "cornerSharpnesses",
+                format!(
+                    "{} cornerSharpnesses for {} cornerIndices; the corners are ignored",
+                    corner_sharpness.len(),
+                    corner_indices.len()
+                ),
+            );
+        } else if let Some(bad) = corner_indices.iter().find(|&&i| i < 0 || i as usize >= npoints) {
+            warn(
+                diags,
+                "cornerIndices",
+                format!("corner vertex {bad} is out of range (the mesh has {npoints} points); the corners are ignored"),
+            );
+        } else {
+            tags.corners =
+                corner_indices.iter().zip(&corner_sharpness).map(|(&v, &s)| (v as u32, sharpness(s))).collect();
+        }
+    }
+    tags
+}
+
+/// The edges of faces with three or more vertices, as sorted endpoint pairs.
+fn mesh_edges(counts: &[i64], indices: &[i64]) -> HashSet<(u32, u32)> {
+    let mut edges = HashSet::with_capacity(indices.len());
+    let mut start = 0usize;
+    for &count in counts {
+        let count = count.max(0) as usize;
+        if count >= 3 {
+            let face = &indices[start..start + count];
+            for k in 0..count {
+                let (a, b) = (face[k] as u32, face[(k + 1) % count] as u32);
+                edges.insert((a.min(b), a.max(b)));
+            }
+        }
+        start += count;
+    }
+    edges
+}
+
+/// OpenSubdiv's uniform creasing: one less sharp per level; infinite stays infinite.
+fn decrement(s: f32) -> f32 {
+    if s >= SHARPNESS_INFINITE {
+        SHARPNESS_INFINITE
+    } else if s > 1.0 {
+        s - 1.0
+    } else {
+        0.0
+    }
+}
+
+fn is_semi_sharp(s: f32) -> bool {
+    s > 0.0 && s < SHARPNESS_INFINITE
+}
+
+/// A vertex's subdivision rule (`Sdc::Crease::Rule`); a dart uses the smooth masks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Rule {
+    Smooth,
+    Crease,
+    Corner,
+}
+
+/// The rule of a vertex of sharpness `vertex` whose incident edges have `edges` sharpnesses.
+fn rule(vertex: f32, edges: &[f32]) -> Rule {
+    if vertex > 0.0 {
+        return Rule::Corner;
+    }
+    match edges.iter().filter(|&&s| s > 0.0).count() {
+        0 | 1 => Rule::Smooth,
+        2 => Rule::Crease,
+        _ => Rule::Corner,
+    }
+}
+
+/// A vertex's neighbourhood for the vertex-vertex and limit masks: its position, its edge
+/// neighbours with their edges' sharpness, and the centroids of its faces.
+struct Neighbourhood<'a> {
+    p: DVec3,
+    sharpness: f32,
+    neighbours: &'a [DVec3],
+    edge_sharpness: &'a [f32],
+    face_centroids: DVec3,
+    faces: usize,
+}
+
+impl Neighbourhood<'_> {
+    /// The mask of `rule` (`crease_edges`: the edge sharpnesses that pick a crease's ends).
+    fn vertex_mask(&self, rule: Rule, crease_edges: &[f32]) -> DVec3 {
+        let p = self.p;
+        match rule {
+            Rule::Smooth => {
+                let valence = self.neighbours.len() as f64;
+                let f = self.face_centroids / self.faces as f64;
+                let r = self.neighbours.iter().map(|&e| (p + e) / 2.0).sum::<DVec3>() / valence;
+                (f + r * 2.0 + p * (valence - 3.0)) / valence
+            }
+            Rule::Crease => {
+                let mut ends = self.neighbours.iter().zip(crease_edges).filter(|(_, s)| **s > 0.0).map(|(&e, _)| e);
+                match (ends.next(), ends.next()) {
+                    (Some(a), Some(b)) => (a + p * 6.0 + b) / 8.0,
+                    _ => p,
+                }
+            }
+            Rule::Corner => p,
+        }
+    }
+
+    /// The vertex-vertex point (`Sdc::Scheme::ComputeVertexVertexMask`): the parent rule's
+    /// mask, blended with the child rule's where sharpness decays to smooth this level.
+    fn vertex_point(&self, child_edges: &mut Vec<f32>) -> DVec3 {
+        if self.neighbours.is_empty() || (self.sharpness <= 0.0 && self.faces == 0) {
+            return self.p;
+        }
+        let parent = rule(self.sharpness, self.edge_sharpness);
+        if parent == Rule::Smooth {
+            return self.vertex_mask(Rule::Smooth, self.edge_sharpness);
+        }
+        let mask = self.vertex_mask(parent, self.edge_sharpness);
+        child_edges.clear();
+        child_edges.extend(self.edge_sharpness.iter().map(|&s| decrement(s)));
+        let child_vertex = decrement(self.sharpness);
+        let child = rule(child_vertex, child_edges);
+        if child == parent {
+            return mask;
+        }
+        // `Sdc::Crease::ComputeFractionalWeightAtVertex`, uniform creasing: the mean of the
+        // sharpness of what becomes smooth this level, at most 1.
+        let (mut sum, mut count) = (0.0f32, 0u32);
+        if self.sharpness > 0.0 && child_vertex <= 0.0 {
+            sum += self.sharpness;
+            count += 1;
+        }
+        for &s in self.edge_sharpness {
+            if s > 0.0 && s <= 1.0 {
+                sum += s;
+                count += 1;
+            }
+        }
+        let weight = if count == 0 { 0.0 } else { f64::from((sum / count as f32).min(1.0)) };
+        mask * weight + self.vertex_mask(child, child_edges) * (1.0 - weight)
+    }
+
+    /// The limit position by the rule of the vertex's (spent) sharpness, with `diagonals`
+    /// the far corners of its quads (OpenSubdiv's Catmark limit masks).
+    fn limit(&self, diagonals: DVec3) -> DVec3 {
+        let p = self.p;
+        match rule(self.sharpness, self.edge_sharpness) {
+            Rule::Smooth if self.faces > 2 && self.faces == self.neighbours.len() => {
+                let k = self.faces as f64;
+                (p * k * k + self.neighbours.iter().sum::<DVec3>() * 4.0 + diagonals) / (k * (k + 5.0))
+            }
+            Rule::Crease => {
+                let mut ends =
+                    self.neighbours.iter().zip(self.edge_sharpness).filter(|(_, s)| **s > 0.0).map(|(&e, _)| e);
+                match (ends.next(), ends.next()) {
+                    (Some(a), Some(b)) => (a + p * 4.0 + b) / 6.0,
+                    _ => p,
+                }
+            }
+            _ => p,
+        }
+    }
+}
+
+/// The edge-vertex point (`Sdc::Scheme::ComputeEdgeVertexMask`) of edge `a`-`b` of
+/// sharpness `s` between faces with centroids summing to `centroids` (`faces` of them): the
+/// midpoint on a sharp edge, the smooth point on a smooth one, blended below sharpness 1.
+fn edge_point(a: DVec3, b: DVec3, s: f32, centroids: DVec3, faces: usize) -> DVec3 {
+    let mid = (a + b) / 2.0;
+    if s >= 1.0 || faces != 2 {
+        return mid;
+    }
+    let smooth = (mid * 2.0 + centroids) / 4.0;
+    if s > 0.0 {
+        let s = f64::from(s);
+        mid * s + smooth * (1.0 - s)
+    } else {
+        smooth
+    }
+}
+
+/// Edges and incidence of a polygon mesh.
+struct Topology {
+    offsets: Vec<usize>,
+    /// Edges by sorted endpoints.
+    edges: Vec<(u32, u32)>,
+    edge_faces: Vec<Vec<u32>>,
+    /// Per face-vertex, the edge from it to the next vertex of its face.
+    face_edges: Vec<u32>,
+    vertex_edges: Vec<Vec<u32>>,
+    vertex_faces: Vec<Vec<u32>>,
+}
+
+impl Topology {
+    fn new(mesh: &PolyMesh) -> Topology {
+        let faces = mesh.counts.len();
+        let mut offsets = Vec::with_capacity(faces);
+        let mut start = 0usize;
+        for &c in &mesh.counts {
+            offsets.push(start);
+            start += c as usize;
+        }
+        let mut edge_id: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.indices.len());
+        let mut edges: Vec<(u32, u32)> = Vec::new();
+        let mut edge_faces: Vec<Vec<u32>> = Vec::new();
+        let mut face_edges: Vec<u32> = Vec::with_capacity(mesh.indices.len());
+        for (f, &o) in offsets.iter().enumerate() {
+            let vs = &mesh.indices[o..o + mesh.counts[f] as usize];
+            for k in 0..vs.len() {
+                let (a, b) = (vs[k], vs[(k + 1) % vs.len()]);
+                let key = (a.min(b), a.max(b));
+                let id = *edge_id.entry(key).or_insert_with(|| {
+                    edges.push(key);
+                    edge_faces.push(Vec::new());
+                    edges.len() as u32 - 1
+                });
+                edge_faces[id as usize].push(f as u32);
+                face_edges.push(id);
+            }
+        }
+        let n = mesh.points.len();
+        let mut vertex_edges: Vec<Vec<u32>> = vec![Vec::new(); n];
+        for (e, &(a, b)) in edges.iter().enumerate() {
+            vertex_edges[a as usize].push(e as u32);
+            if b != a {
+                vertex_edges[b as usize].push(e as u32);
+            }
+        }
+        let mut vertex_faces: Vec<Vec<u32>> = vec![Vec::new(); n];
+        for (f, &o) in offsets.iter().enumerate() {
+            for &v in &mesh.indices[o..o + mesh.counts[f] as usize] {
+                vertex_faces[v as usize].push(f as u32);
+            }
+        }
+        Topology { offsets, edges, edge_faces, face_edges, vertex_edges, vertex_faces }
+    }
+
+    fn face<'m>(&self, mesh: &'m PolyMesh, f: usize) -> &'m [u32] {
+        &mesh.indices[self.offsets[f]..self.offsets[f] + mesh.counts[f] as usize]
+    }
+
+    fn other(&self, e: u32, v: usize) -> u32 {
+        let (a, b) = self.edges[e as usize];
+        if a as usize == v { b } else { a }
+    }
+
+    /// Each edge's sharpness: boundary and non-manifold edges are infinitely sharp (OpenSubdiv
+    /// sharpens them whatever `interpolateBoundary` says), others as `sharp` has them.
+    fn edge_sharpness(&self, sharp: &HashMap<(u32, u32), f32>) -> Vec<f32> {
+        self.edges
+            .iter()
+            .zip(&self.edge_faces)
+            .map(
+                |(key, faces)| {
+                    if faces.len() != 2 { SHARPNESS_INFINITE } else { sharp.get(key).copied().unwrap_or(0.0) }
+                },
+            )
+            .collect()
+    }
+}
+
+/// Sharpness of a level's edges (nonzero only, by sorted endpoints) and vertices.
+struct Sharpness {
+    edges: HashMap<(u32, u32), f32>,
+    vertices: Vec<f32>,
+}
+
+/// The cage's sharpness with OpenSubdiv's boundary tagging
+/// (`Far::TopologyRefinerFactoryBase::applyComponentTagsAndBoundarySharpness`); marks the
+/// faces `interpolateBoundary = none` drops as holes.
+fn base_sharpness(mesh: &mut PolyMesh, topo: &Topology) -> Sharpness {
+    let mut edges: HashMap<(u32, u32), f32> = HashMap::new();
+    for &([a, b], s) in &mesh.tags.creases {
+        let key = (a.min(b), a.max(b));
+        if s > 0.0 {
+            edges.insert(key, s);
+        } else {
+            edges.remove(&key);
+        }
+    }
+    let mut vertices = vec![0.0f32; mesh.points.len()];
+    for &(v, s) in &mesh.tags.corners {
+        if let Some(slot) = vertices.get_mut(v as usize) {
+            *slot = s;
+        }
+    }
+    for (v, sharpness) in vertices.iter_mut().enumerate() {
+        let (vertex_edges, vertex_faces) = (&topo.vertex_edges[v], &topo.vertex_faces[v]);
+        let face_counts = || vertex_edges.iter().map(|&e| topo.edge_faces[e as usize].len());
+        let boundary_edges = face_counts().filter(|&c| c < 2).count();
+        let non_manifold_edges = face_counts().filter(|&c| c > 2).count();
+        let non_manifold = non_manifold_edges > 0
+            || if boundary_edges == 0 {
+                vertex_faces.len() != vertex_edges.len()
+            } else {
+                boundary_edges != 2 || vertex_faces.len() + 1 != vertex_edges.len()
+            };
+        if mesh.tags.boundary == BoundaryInterpolation::None
+            && (boundary_edges > 0 || non_manifold)
+            && vertex_edges.iter().any(|&e| {
+                let key = topo.edges[e as usize];
+                topo.edge_faces[e as usize].len() == 1 && edges.get(&key).is_none_or(|&s| s < SHARPNESS_INFINITE)
+            })
+        {
+            for &f in vertex_faces {
+                mesh.holes[f as usize] = true;
+            }
+        }
+        let topological_corner = vertex_faces.len() == 1 && vertex_edges.len() == 2;
+        // An interior non-manifold crease (two edges with extra "fins") stays a crease.
+        let fin_crease = non_manifold_edges == 2 && boundary_edges == 0 && vertex_faces.len() > vertex_edges.len();
+        if (topological_corner && mesh.tags.boundary == BoundaryInterpolation::EdgeAndCorner)
+            || (non_manifold && !topological_corner && !fin_crease)
+        {
+            *sharpness = SHARPNESS_INFINITE;
+        }
+    }
+    Sharpness { edges, vertices }
+}
+
+/// One uniform Catmull-Clark step: every face becomes quads; sharpness decays by one.
+fn refine(mesh: &PolyMesh, topo: &Topology, sharp: &Sharpness) -> (PolyMesh, Sharpness) {
+    let faces = mesh.counts.len();
     let face_points: Vec<DVec3> = (0..faces)
-        .map(|f| face(f).iter().map(|&v| mesh.points[v as usize]).sum::<DVec3>() / mesh.counts[f] as f64)
+        .map(|f| topo.face(mesh, f).iter().map(|&v| mesh.points[v as usize]).sum::<DVec3>() / mesh.counts[f] as f64)
         .collect();
-    let is_boundary = |e: usize| edge_faces[e].len() != 2;
-    let edge_points: Vec<DVec3> = edges
+    let edge_sharpness = topo.edge_sharpness(&sharp.edges);
+    let edge_points: Vec<DVec3> = topo
+        .edges
         .iter()
         .enumerate()
         .map(|(e, &(a, b))| {
-            let mid = (mesh.points[a as usize] + mesh.points[b as usize]) / 2.0;
-            if is_boundary(e) {
-                mid
-            } else {
-                let f = &edge_faces[e];
-                (mid * 2.0 + face_points[f[0] as usize] + face_points[f[1] as usize]) / 4.0
-            }
+            let f = &topo.edge_faces[e];
+            let centroids = f.iter().map(|&f| face_points[f as usize]).sum::<DVec3>();
+            edge_point(mesh.points[a as usize], mesh.points[b as usize], edge_sharpness[e], centroids, f.len())
         })
         .collect();
 
-    // Per vertex: incident edges and faces.
     let n = mesh.points.len();
-    let mut vertex_edges: Vec<Vec<u32>> = vec![Vec::new(); n];
-    for (e, &(a, b)) in edges.iter().enumerate() {
-        vertex_edges[a as usize].push(e as u32);
-        vertex_edges[b as usize].push(e as u32);
-    }
-    let mut vertex_faces: Vec<Vec<u32>> = vec![Vec::new(); n];
-    for f in 0..faces {
-        for &v in face(f) {
-            vertex_faces[v as usize].push(f as u32);
-        }
-    }
-    let other = |e: u32, v: usize| {
-        let (a, b) = edges[e as usize];
-        if a as usize == v { b } else { a }
-    };
+    let (mut neighbours, mut incident_sharpness, mut child_edges) = (Vec::new(), Vec::new(), Vec::new());
     let vertex_points: Vec<DVec3> = (0..n)
         .map(|v| {
-            let p = mesh.points[v];
-            let incident = &vertex_edges[v];
-            if incident.is_empty() {
-                return p;
+            neighbours.clear();
+            incident_sharpness.clear();
+            for &e in &topo.vertex_edges[v] {
+                neighbours.push(mesh.points[topo.other(e, v) as usize]);
+                incident_sharpness.push(edge_sharpness[e as usize]);
             }
-            let boundary: Vec<u32> = incident.iter().copied().filter(|&e| is_boundary(e as usize)).collect();
-            match boundary.len() {
-                0 => {
-                    let valence = incident.len() as f64;
-                    let f = vertex_faces[v].iter().map(|&f| face_points[f as usize]).sum::<DVec3>()
-                        / vertex_faces[v].len() as f64;
-                    let r = incident.iter().map(|&e| (p + mesh.points[other(e, v) as usize]) / 2.0).sum::<DVec3>()
-                        / valence;
-                    (f + r * 2.0 + p * (valence - 3.0)) / valence
-                }
-                // A corner (one incident face) is interpolated; other boundary vertices
-                // follow the cubic B-spline of their boundary curve.
-                2 if vertex_faces[v].len() > 1 => {
-                    let (a, b) =
-                        (mesh.points[other(boundary[0], v) as usize], mesh.points[other(boundary[1], v) as usize]);
-                    (a + p * 6.0 + b) / 8.0
-                }
-                _ => p,
-            }
+            let hood = Neighbourhood {
+                p: mesh.points[v],
+                sharpness: sharp.vertices[v],
+                neighbours: &neighbours,
+                edge_sharpness: &incident_sharpness,
+                face_centroids: topo.vertex_faces[v].iter().map(|&f| face_points[f as usize]).sum(),
+                faces: topo.vertex_faces[v].len(),
+            };
+            hood.vertex_point(&mut child_edges)
         })
         .collect();
 
     // New points: vertices, then edges, then faces.
     let edge_base = n as u32;
-    let face_base = edge_base + edges.len() as u32;
+    let face_base = edge_base + topo.edges.len() as u32;
+    let mut child_edge_sharpness = HashMap::new();
+    for (e, &(a, b)) in topo.edges.iter().enumerate() {
+        let s = decrement(edge_sharpness[e]);
+        if s > 0.0 {
+            let mid = edge_base + e as u32;
+            child_edge_sharpness.insert((a.min(mid), a.max(mid)), s);
+            child_edge_sharpness.insert((b.min(mid), b.max(mid)), s);
+        }
+    }
+    let mut vertices: Vec<f32> = sharp.vertices.iter().map(|&s| decrement(s)).collect();
+    vertices.resize(face_base as usize + faces, 0.0);
     let mut points = vertex_points;
     points.extend(edge_points);
     points.extend(face_points);
@@ -167,8 +598,8 @@ fn refine(mesh: &PolyMesh) -> PolyMesh {
     let mut uv = mesh.uv.as_ref().map(|_| Vec::with_capacity(quads * 4));
     let mut holes = Vec::with_capacity(quads);
     let mut origin = Vec::with_capacity(quads);
-    for (f, &o) in offsets.iter().enumerate() {
-        let vs = face(f);
+    for (f, &o) in topo.offsets.iter().enumerate() {
+        let vs = topo.face(mesh, f);
         let m = vs.len();
         let centre_uv = mesh.uv.as_ref().map(|t| t[o..o + m].iter().copied().sum::<Vec2>() / m as f32);
         for k in 0..m {
@@ -176,9 +607,9 @@ fn refine(mesh: &PolyMesh) -> PolyMesh {
             counts.push(4);
             indices.extend([
                 vs[k],
-                edge_base + face_edges[o + k],
+                edge_base + topo.face_edges[o + k],
                 face_base + f as u32,
-                edge_base + face_edges[o + prev],
+                edge_base + topo.face_edges[o + prev],
             ]);
             if let (Some(out), Some(t), Some(c)) = (uv.as_mut(), mesh.uv.as_ref(), centre_uv) {
                 let (here, next, before) = (t[o + k], t[o + (k + 1) % m], t[o + prev]);
@@ -188,69 +619,149 @@ fn refine(mesh: &PolyMesh) -> PolyMesh {
             origin.push(mesh.origin.get(f).copied().unwrap_or(f as u32));
         }
     }
-    PolyMesh { points, counts, indices, uv, holes, origin }
+    let child = PolyMesh { points, counts, indices, uv, holes, origin, tags: SubdivTags::default() };
+    (child, Sharpness { edges: child_edge_sharpness, vertices })
 }
 
-/// Limit positions of a quad mesh's vertices (valid after at least one refinement, when
-/// every face is a quad): interior vertices by the Catmull-Clark limit stencil
-/// `(n² p + 4 Σ eᵢ + Σ fᵢ) / (n (n + 5))` over edge neighbours `eᵢ` and diagonal neighbours
-/// `fᵢ`; boundary vertices by the B-spline curve's `(a + 4 p + b) / 6`; corners stay.
-fn limit_points(mesh: &PolyMesh) -> Vec<DVec3> {
-    let n = mesh.points.len();
-    let mut edge_count: HashMap<(u32, u32), u32> = HashMap::with_capacity(mesh.indices.len());
-    for q in mesh.indices.chunks_exact(4) {
-        for k in 0..4 {
-            let (a, b) = (q[k], q[(k + 1) % 4]);
-            *edge_count.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+/// A vertex's one-ring on a quad mesh, refined on its own: edge neighbours with their
+/// edges' sharpness and face counts, and quads as (edge slot, edge slot, far corner).
+#[derive(Default)]
+struct Ring {
+    p: DVec3,
+    sharpness: f32,
+    neighbours: Vec<DVec3>,
+    edge_sharpness: Vec<f32>,
+    edge_faces: Vec<u32>,
+    quads: Vec<(usize, usize, DVec3)>,
+    // Scratch space, reused.
+    centroid_sums: Vec<DVec3>,
+    next_neighbours: Vec<DVec3>,
+    child_edges: Vec<f32>,
+}
+
+impl Ring {
+    fn hood(&self) -> Neighbourhood<'_> {
+        let centroids =
+            self.quads.iter().map(|&(a, b, d)| (self.p + self.neighbours[a] + d + self.neighbours[b]) / 4.0);
+        Neighbourhood {
+            p: self.p,
+            sharpness: self.sharpness,
+            neighbours: &self.neighbours,
+            edge_sharpness: &self.edge_sharpness,
+            face_centroids: centroids.sum(),
+            faces: self.quads.len(),
         }
     }
-    let mut edge_sum = vec![DVec3::ZERO; n];
-    let mut diagonal_sum = vec![DVec3::ZERO; n];
-    let mut valence = vec![0u32; n];
-    let mut faces = vec![0u32; n];
-    let mut boundary_sum = vec![DVec3::ZERO; n];
-    let mut boundary_edges = vec![0u32; n];
-    for (&(a, b), &count) in &edge_count {
-        let (pa, pb) = (mesh.points[a as usize], mesh.points[b as usize]);
-        valence[a as usize] += 1;
-        valence[b as usize] += 1;
-        edge_sum[a as usize] += pb;
-        edge_sum[b as usize] += pa;
-        if count != 2 {
-            boundary_edges[a as usize] += 1;
-            boundary_edges[b as usize] += 1;
-            boundary_sum[a as usize] += pb;
-            boundary_sum[b as usize] += pa;
-        }
+
+    fn limit(&self) -> DVec3 {
+        self.hood().limit(self.quads.iter().map(|q| q.2).sum())
     }
-    for q in mesh.indices.chunks_exact(4) {
-        for k in 0..4 {
-            faces[q[k] as usize] += 1;
-            diagonal_sum[q[k] as usize] += mesh.points[q[(k + 2) % 4] as usize];
-        }
+
+    fn semi_sharp(&self) -> bool {
+        is_semi_sharp(self.sharpness) || self.edge_sharpness.iter().any(|&s| is_semi_sharp(s))
     }
-    (0..n)
+
+    /// One refinement of the ring: the vertex point, the edge points and the face points of
+    /// its quads, which form the child vertex's ring.
+    fn refine(&mut self) {
+        let mut child_edges = std::mem::take(&mut self.child_edges);
+        let centre = self.hood().vertex_point(&mut child_edges);
+        self.child_edges = child_edges;
+        self.centroid_sums.clear();
+        self.centroid_sums.resize(self.neighbours.len(), DVec3::ZERO);
+        for q in &mut self.quads {
+            let centroid = (self.p + self.neighbours[q.0] + q.2 + self.neighbours[q.1]) / 4.0;
+            self.centroid_sums[q.0] += centroid;
+            self.centroid_sums[q.1] += centroid;
+            q.2 = centroid;
+        }
+        self.next_neighbours.clear();
+        for (i, &e) in self.neighbours.iter().enumerate() {
+            let point =
+                edge_point(self.p, e, self.edge_sharpness[i], self.centroid_sums[i], self.edge_faces[i] as usize);
+            self.next_neighbours.push(point);
+        }
+        std::mem::swap(&mut self.neighbours, &mut self.next_neighbours);
+        for s in &mut self.edge_sharpness {
+            *s = decrement(*s);
+        }
+        self.sharpness = decrement(self.sharpness);
+        self.p = centre;
+    }
+}
+
+/// Most refinements of a dart's ring: its limit estimate gains about a factor of two per
+/// level, so this reaches f64 precision from any cage.
+const DART_REFINEMENTS: usize = 64;
+
+/// Limit positions of a quad mesh's vertices (after at least one refinement, when every face
+/// is a quad). Where semi-sharp sharpness is left, the vertex's ring is refined until it is
+/// spent (at most nine times, since sharpness below 10 loses one per level).
+fn limit_points(mesh: &PolyMesh, topo: &Topology, sharp: &Sharpness) -> Vec<DVec3> {
+    let edge_sharpness = topo.edge_sharpness(&sharp.edges);
+    let mut ring = Ring::default();
+    (0..mesh.points.len())
         .map(|v| {
-            let p = mesh.points[v];
-            match boundary_edges[v] {
-                0 if valence[v] >= 3 && faces[v] == valence[v] => {
-                    let k = valence[v] as f64;
-                    (p * k * k + edge_sum[v] * 4.0 + diagonal_sum[v]) / (k * (k + 5.0))
-                }
-                2 if faces[v] > 1 => (boundary_sum[v] + p * 4.0) / 6.0,
-                _ => p,
+            ring.p = mesh.points[v];
+            ring.sharpness = sharp.vertices[v];
+            ring.neighbours.clear();
+            ring.edge_sharpness.clear();
+            ring.edge_faces.clear();
+            ring.quads.clear();
+            let incident = &topo.vertex_edges[v];
+            for &e in incident {
+                ring.neighbours.push(mesh.points[topo.other(e, v) as usize]);
+                ring.edge_sharpness.push(edge_sharpness[e as usize]);
+                ring.edge_faces.push(topo.edge_faces[e as usize].len() as u32);
             }
+            for &f in &topo.vertex_faces[v] {
+                let o = topo.offsets[f as usize];
+                let q = &mesh.indices[o..o + 4];
+                let Some(k) = q.iter().position(|&i| i as usize == v) else { continue };
+                let slot = |e: u32| incident.iter().position(|&i| i == e);
+                if let (Some(a), Some(b)) = (slot(topo.face_edges[o + k]), slot(topo.face_edges[o + (k + 3) % 4])) {
+                    ring.quads.push((a, b, mesh.points[q[(k + 2) % 4] as usize]));
+                }
+            }
+            for _ in 0..SHARPNESS_INFINITE as usize {
+                if !ring.semi_sharp() {
+                    break;
+                }
+                ring.refine();
+            }
+            let mut limit = ring.limit();
+            // At a dart the smooth limit mask is only an estimate (its subdivision matrix is
+            // not the smooth one), closer at every level: refine until it settles, so the
+            // limit does not depend on the level (OpenSubdiv applies the mask at the last level).
+            if ring.sharpness <= 0.0 && ring.edge_sharpness.iter().filter(|&&s| s > 0.0).count() == 1 {
+                for _ in 0..DART_REFINEMENTS {
+                    ring.refine();
+                    let next = ring.limit();
+                    let settled = (next - limit).length() <= 1e-14 * (1.0 + next.length());
+                    limit = next;
+                    if settled {
+                        break;
+                    }
+                }
+            }
+            limit
         })
         .collect()
 }
 
 /// Refines `mesh` `level` times (at least once) and projects it to the limit surface.
 pub fn catmull_clark(mesh: &PolyMesh, level: u32) -> QuadMesh {
-    let mut refined = refine(mesh);
+    let mut cage = mesh.clone();
+    cage.holes.resize(cage.counts.len(), false);
+    let topo = Topology::new(&cage);
+    let sharp = base_sharpness(&mut cage, &topo);
+    let (mut refined, mut sharp) = refine(&cage, &topo, &sharp);
+    let mut topo = Topology::new(&refined);
     for _ in 1..level.max(1) {
-        refined = refine(&refined);
+        (refined, sharp) = refine(&refined, &topo, &sharp);
+        topo = Topology::new(&refined);
     }
-    let points = limit_points(&refined);
+    let points = limit_points(&refined, &topo, &sharp);
     let quads: Vec<[u32; 4]> = refined.indices.chunks_exact(4).map(|q| [q[0], q[1], q[2], q[3]]).collect();
     let mut normals = vec![DVec3::ZERO; points.len()];
     for q in &quads {
@@ -282,10 +793,29 @@ mod tests {
             points,
             counts: vec![4; 6],
             indices: faces.iter().flatten().copied().collect(),
-            uv: None,
             holes: vec![false; 6],
             origin: (0..6).collect(),
+            ..PolyMesh::default()
         }
+    }
+
+    /// The cube's twelve edges.
+    const CUBE_EDGES: [[u32; 2]; 12] =
+        [[0, 1], [2, 3], [4, 5], [6, 7], [0, 2], [1, 3], [4, 6], [5, 7], [0, 4], [1, 5], [2, 6], [3, 7]];
+
+    /// The cube with its top face's edges (a closed loop 4-5-7-6) of sharpness `s`.
+    fn cube_with_top_loop(s: f32) -> PolyMesh {
+        let mut c = cube();
+        c.tags.creases = vec![([4, 5], s), ([5, 7], s), ([7, 6], s), ([6, 4], s)];
+        c
+    }
+
+    /// One refinement with the cage's sharpness, as `catmull_clark` starts.
+    fn refine_once(mesh: &PolyMesh) -> PolyMesh {
+        let mut cage = mesh.clone();
+        let topo = Topology::new(&cage);
+        let sharp = base_sharpness(&mut cage, &topo);
+        refine(&cage, &topo, &sharp).0
     }
 
     /// The limit stencil is checked against its definition: the limit is where repeated
@@ -297,7 +827,7 @@ mod tests {
         let mut m = cube();
         let mut errors = Vec::new();
         for _ in 0..7 {
-            m = refine(&m);
+            m = refine_once(&m);
             // Vertex points keep their index: vertex 0 is the same corner at every level.
             errors.push((m.points[0] - limit).length());
         }
@@ -332,6 +862,7 @@ mod tests {
             uv: Some(vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)]),
             holes: vec![false],
             origin: vec![0],
+            ..PolyMesh::default()
         };
         let q = catmull_clark(&mesh, 2);
         assert_eq!(q.quads.len(), 16);
@@ -364,5 +895,348 @@ mod tests {
         c.holes[2] = true;
         let q = catmull_clark(&c, 2);
         assert_eq!(q.holes.iter().filter(|&&h| h).count(), 16);
+    }
+
+    /// A case of `tests/fixtures/subdiv/opensubdiv_limits.txt` (written by
+    /// `tools/make_subdiv_fixtures.sh` with OpenSubdiv): a cage, and the limit points of its
+    /// vertices at `level` as OpenSubdiv computes them refining past every semi-sharp
+    /// feature, good to `tolerance` (at darts OpenSubdiv's limit is an estimate).
+    struct Reference {
+        name: String,
+        mesh: PolyMesh,
+        level: u32,
+        limit: Vec<DVec3>,
+        tolerance: f64,
+        visible_faces: usize,
+    }
+
+    fn references() -> Vec<Reference> {
+        let text = include_str!("../../tests/fixtures/subdiv/opensubdiv_limits.txt");
+        let lines: Vec<&str> = text.lines().collect();
+        let mut at = 0usize;
+        let mut next = || {
+            at += 1;
+            lines[at - 1]
+        };
+        let count = |line: &str, key: &str| -> usize {
+            let rest = line.strip_prefix(key).unwrap_or_else(|| panic!("expected `{key}`, got `{line}`"));
+            rest.trim().parse().expect("count")
+        };
+        let numbers =
+            |line: &str| -> Vec<f64> { line.split_whitespace().map(|x| x.parse().expect("number")).collect() };
+        let point = |line: &str| {
+            let v = numbers(line);
+            DVec3::new(v[0], v[1], v[2])
+        };
+        let mut cases = Vec::new();
+        for _ in 0..lines.iter().filter(|l| l.starts_with("case ")).count() {
+            let name = next().strip_prefix("case ").expect("case").to_string();
+            let boundary = match next().strip_prefix("boundary ").expect("boundary") {
+                "none" => BoundaryInterpolation::None,
+                "edgeOnly" => BoundaryInterpolation::EdgeOnly,
+                _ => BoundaryInterpolation::EdgeAndCorner,
+            };
+            let level = count(next(), "level ") as u32;
+            let mut mesh = PolyMesh::default();
+            for _ in 0..count(next(), "points ") {
+                mesh.points.push(point(next()));
+            }
+            for f in 0..count(next(), "faces ") {
+                let v = numbers(next());
+                mesh.counts.push(v[0] as u32);
+                mesh.indices.extend(v[1..].iter().map(|&i| i as u32));
+                mesh.holes.push(false);
+                mesh.origin.push(f as u32);
+            }
+            mesh.tags.boundary = boundary;
+            for _ in 0..count(next(), "creases ") {
+                let v = numbers(next());
+                mesh.tags.creases.push(([v[0] as u32, v[1] as u32], v[2] as f32));
+            }
+            for _ in 0..count(next(), "corners ") {
+                let v = numbers(next());
+                mesh.tags.corners.push((v[0] as u32, v[1] as f32));
+            }
+            let limit = (0..count(next(), "limit ")).map(|_| point(next())).collect();
+            let tolerance = next().strip_prefix("tolerance ").expect("tolerance").parse().expect("tolerance");
+            let visible_faces = count(next(), "visible_faces ");
+            assert_eq!(next(), "end");
+            cases.push(Reference { name, mesh, level, limit, tolerance, visible_faces });
+        }
+        assert!(cases.len() >= 10, "{} cases", cases.len());
+        cases
+    }
+
+    /// The distance from `p` to the nearest of `points`.
+    fn nearest(p: DVec3, points: &[DVec3]) -> f64 {
+        points.iter().map(|q| (*q - p).length()).fold(f64::INFINITY, f64::min)
+    }
+
+    /// OpenSubdiv is the reference: at the fixture's level the limit points are the same set
+    /// and the same faces are dropped; at coarser levels every limit point is one of
+    /// OpenSubdiv's (a coarse vertex persists through refinement and keeps its limit), even
+    /// where semi-sharp sharpness has not decayed at that level. Darts are held to the
+    /// distance OpenSubdiv's own estimate still moves (twice it: it shrinks geometrically).
+    #[test]
+    fn limit_points_match_opensubdiv() {
+        for r in references() {
+            let tolerance = if r.tolerance > 1e-9 { 2.0 * r.tolerance } else { 1e-9 };
+            for level in 1..=r.level {
+                let q = catmull_clark(&r.mesh, level);
+                let worst = q.points.iter().map(|&p| nearest(p, &r.limit)).fold(0.0, f64::max);
+                assert!(worst < tolerance, "{} at level {level}: a limit point {worst} from OpenSubdiv's", r.name);
+                let visible = q.holes.iter().filter(|&&h| !h).count();
+                assert_eq!(visible * 4usize.pow(r.level - level), r.visible_faces, "{} at level {level}", r.name);
+                if level == r.level {
+                    assert_eq!(q.points.len(), r.limit.len(), "{}", r.name);
+                    let worst = r.limit.iter().map(|&p| nearest(p, &q.points)).fold(0.0, f64::max);
+                    assert!(worst < tolerance, "{}: OpenSubdiv's limit point {worst} from ours", r.name);
+                }
+                if std::env::var("SUBDIV_DEBUG").is_ok() {
+                    eprintln!("{} level {level}: worst {worst:e} (tolerance {tolerance:e})", r.name);
+                }
+            }
+        }
+    }
+
+    /// (1) A cube whose twelve edges are infinitely sharp is the cube: every limit point lies
+    /// on a face of the cage, and the corners stay.
+    #[test]
+    fn a_cube_with_all_edges_infinitely_sharp_is_the_cube() {
+        let mut c = cube();
+        c.tags.creases = CUBE_EDGES.iter().map(|&e| (e, SHARPNESS_INFINITE)).collect();
+        for level in 1..=3 {
+            let q = catmull_clark(&c, level);
+            for p in &q.points {
+                assert!((p.abs().max_element() - 1.0).abs() < 1e-12, "level {level}: {p} is off the cube");
+            }
+            assert_eq!(&q.points[..8], &c.points[..], "level {level}");
+        }
+    }
+
+    /// The uniform cubic B-spline of control points `p[i - 1..=i + 2]` at `u` in [0, 1].
+    fn b_spline(p: [DVec3; 4], u: f64) -> DVec3 {
+        let w = [
+            (1.0 - u).powi(3),
+            3.0 * u.powi(3) - 6.0 * u * u + 4.0,
+            -3.0 * u.powi(3) + 3.0 * u * u + 3.0 * u + 1.0,
+            u.powi(3),
+        ];
+        (p[0] * w[0] + p[1] * w[1] + p[2] * w[2] + p[3] * w[3]) / 6.0
+    }
+
+    /// (2) The limit points along an infinitely sharp crease are the uniform cubic B-spline of
+    /// the crease's cage points, at parameters `k / 2^level`: a closed loop (the cube's top
+    /// face), and an open chain across a bumpy grid, whose ends are corners (three sharp edges
+    /// with the boundary) that leave the spans between its inner points a plain B-spline.
+    #[test]
+    fn infinitely_sharp_creases_are_cubic_b_splines_of_their_cage_points() {
+        let level = 3;
+        let steps = 1 << level;
+        let loop_cube = cube_with_top_loop(SHARPNESS_INFINITE);
+        let q = catmull_clark(&loop_cube, level);
+        let ring = [4, 5, 7, 6].map(|i| loop_cube.points[i]);
+        for span in 0..4 {
+            let controls = [0, 1, 2, 3].map(|k| ring[(span + 3 + k) % 4]);
+            for k in 0..steps {
+                let expected = b_spline(controls, k as f64 / steps as f64);
+                assert!(nearest(expected, &q.points) < 1e-12, "loop span {span} at {k}: {expected}");
+            }
+        }
+
+        let mut grid = PolyMesh::default();
+        for j in 0..3 {
+            for i in 0..5 {
+                grid.points.push(DVec3::new(i as f64, j as f64, (1.3 * i as f64 + 0.7 * j as f64).sin()));
+            }
+        }
+        for j in 0..2u32 {
+            for i in 0..4u32 {
+                let v = 5 * j + i;
+                grid.counts.push(4);
+                grid.indices.extend([v, v + 1, v + 6, v + 5]);
+            }
+        }
+        grid.tags.creases = (5..9).map(|v| ([v, v + 1], SHARPNESS_INFINITE)).collect();
+        let q = catmull_clark(&grid, level);
+        let chain: Vec<DVec3> = (5..10).map(|v| grid.points[v]).collect();
+        for span in 1..=2 {
+            let controls = [chain[span - 1], chain[span], chain[span + 1], chain[span + 2]];
+            for k in 0..=steps {
+                let expected = b_spline(controls, k as f64 / steps as f64);
+                assert!(nearest(expected, &q.points) < 1e-12, "chain span {span} at {k}: {expected}");
+            }
+        }
+        // The test can fail: the smooth surface does not pass through the crease's curve.
+        let smooth = catmull_clark(&PolyMesh { tags: SubdivTags::default(), ..grid.clone() }, level);
+        let mid = b_spline([chain[0], chain[1], chain[2], chain[3]], 0.5);
+        assert!(nearest(mid, &smooth.points) > 1e-3);
+    }
+
+    /// (3) An infinitely sharp corner stays exactly where the cage has it, at every level; a
+    /// smooth cube's corner does not.
+    #[test]
+    fn an_infinitely_sharp_corner_stays_at_its_cage_position() {
+        let mut c = cube();
+        c.tags.corners = vec![(0, SHARPNESS_INFINITE)];
+        for level in 1..=3 {
+            assert_eq!(catmull_clark(&c, level).points[0], c.points[0], "level {level}");
+        }
+        assert_ne!(catmull_clark(&cube(), 2).points[0], c.points[0]);
+    }
+
+    /// (4) Sharpness 0 is smooth, bit for bit.
+    #[test]
+    fn sharpness_zero_is_the_smooth_surface_bit_for_bit() {
+        let mut c = cube_with_top_loop(0.0);
+        c.tags.corners = vec![(0, 0.0), (3, -2.0)];
+        for level in 1..=3 {
+            let (creased, smooth) = (catmull_clark(&c, level), catmull_clark(&cube(), level));
+            assert_eq!(creased.points, smooth.points, "level {level}");
+            assert_eq!(creased.normals, smooth.normals, "level {level}");
+        }
+    }
+
+    /// (5) Sharper creases hold the surface closer to the cage: the limit of a vertex on the
+    /// creased loop moves monotonically from the smooth limit towards its cage position.
+    #[test]
+    fn sharper_creases_hold_the_surface_closer_to_the_cage() {
+        let sharpness = [0.0, 0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0, SHARPNESS_INFINITE];
+        let distances: Vec<f64> = sharpness
+            .iter()
+            .map(|&s| (catmull_clark(&cube_with_top_loop(s), 2).points[4] - cube().points[4]).length())
+            .collect();
+        for (w, s) in distances.windows(2).zip(sharpness.windows(2)) {
+            assert!(w[1] < w[0], "sharpness {} → {}: {} → {}", s[0], s[1], w[0], w[1]);
+        }
+    }
+
+    /// (5) One refinement by DeRose et al.'s rules, by hand, for vertex 4 = (-1, -1, 1) of the
+    /// cube and its edge to vertex 5 = (1, -1, 1) on a top loop of sharpness 1 and 0.5.
+    /// Sharpness 1: the crease rule `(a + 6p + b) / 8` (its edges decay to 0, so the rule
+    /// blends with weight 1) and the edge's midpoint. Sharpness 0.5: half that and half the
+    /// smooth rules, whose values are: vertex `(F + 2R + (n - 3) p) / n` with n = 3, face
+    /// centroids (0,0,1), (0,-1,0), (-1,0,0) and edge midpoints (0,-1,1), (-1,0,1), (-1,-1,0),
+    /// so (-5, -5, 5) / 9; edge `(a + b + f₁ + f₂) / 4` = (0, -3, 3) / 4.
+    #[test]
+    fn one_level_of_semi_sharp_refinement_matches_the_rules_by_hand() {
+        let edge_45 = 8 + Topology::new(&cube()).edges.iter().position(|&e| e == (4, 5)).unwrap();
+        let sharp = refine_once(&cube_with_top_loop(1.0));
+        assert_eq!(sharp.points[4], DVec3::new(-0.75, -0.75, 1.0));
+        assert_eq!(sharp.points[edge_45], DVec3::new(0.0, -1.0, 1.0));
+        let half = refine_once(&cube_with_top_loop(0.5));
+        let vertex = (DVec3::new(-0.75, -0.75, 1.0) + DVec3::new(-5.0, -5.0, 5.0) / 9.0) / 2.0;
+        assert!((half.points[4] - vertex).length() < 1e-15, "{}", half.points[4]);
+        let edge = (DVec3::new(0.0, -1.0, 1.0) + DVec3::new(0.0, -3.0, 3.0) / 4.0) / 2.0;
+        assert!((half.points[edge_45] - edge).length() < 1e-15, "{}", half.points[edge_45]);
+        // The smooth rules themselves, for the sharpness-0 reference.
+        let smooth = refine_once(&cube());
+        assert!((smooth.points[4] - DVec3::new(-5.0, -5.0, 5.0) / 9.0).length() < 1e-15);
+    }
+
+    /// Sharpness beyond the rendered level is not treated as infinite: the limit does not
+    /// depend on the level (cage vertices keep their index, and their limit, at every level).
+    #[test]
+    fn semi_sharp_limits_do_not_depend_on_the_level() {
+        let c = cube_with_top_loop(3.5);
+        let coarse = catmull_clark(&c, 1);
+        let fine = catmull_clark(&c, 4);
+        for v in 0..8 {
+            assert!((coarse.points[v] - fine.points[v]).length() < 1e-12, "vertex {v}");
+        }
+        let infinite = catmull_clark(&cube_with_top_loop(SHARPNESS_INFINITE), 1);
+        assert!((coarse.points[4] - infinite.points[4]).length() > 1e-3);
+    }
+
+    /// (6) `interpolateBoundary`: `edgeAndCorner` pins a single face's corner, `edgeOnly` puts
+    /// it on the boundary's B-spline `(a + 4p + b) / 6`, `none` drops every face touching the
+    /// boundary (of a 3×3 grid only the centre face is left).
+    #[test]
+    fn boundary_interpolation_rules() {
+        let mut grid = PolyMesh::default();
+        for j in 0..4 {
+            for i in 0..4 {
+                grid.points.push(DVec3::new(i as f64, j as f64, (1.3 * i as f64 + 0.7 * j as f64).sin()));
+            }
+        }
+        for j in 0..3u32 {
+            for i in 0..3u32 {
+                let v = 4 * j + i;
+                grid.counts.push(4);
+                grid.indices.extend([v, v + 1, v + 5, v + 4]);
+                grid.origin.push(3 * j + i);
+            }
+        }
+        let with = |boundary| PolyMesh { tags: SubdivTags { boundary, ..SubdivTags::default() }, ..grid.clone() };
+        let corner = catmull_clark(&with(BoundaryInterpolation::EdgeAndCorner), 2);
+        assert_eq!(corner.points[0], grid.points[0]);
+        let edge = catmull_clark(&with(BoundaryInterpolation::EdgeOnly), 2);
+        let curve = (grid.points[1] + grid.points[0] * 4.0 + grid.points[4]) / 6.0;
+        assert!((edge.points[0] - curve).length() < 1e-12, "{} {curve}", edge.points[0]);
+        let none = catmull_clark(&with(BoundaryInterpolation::None), 2);
+        let kept: Vec<u32> = none.holes.iter().zip(&none.origin).filter(|(h, _)| !**h).map(|(_, &o)| o).collect();
+        assert_eq!(kept, vec![4; 16]);
+    }
+
+    fn tags_of(attributes: &str) -> (SubdivTags, Vec<String>) {
+        let text = format!(
+            "#usda 1.0\ndef Mesh \"M\" {{\n    int[] faceVertexCounts = [4, 4, 4, 4, 4, 4]\n    \
+             int[] faceVertexIndices = [0, 2, 3, 1, 4, 5, 7, 6, 0, 1, 5, 4, 2, 6, 7, 3, 0, 4, 6, 2, 1, 3, 7, 5]\n    \
+             {attributes}\n}}\n"
+        );
+        let (stage, mut diags) = crate::render::xform::tests::stage(&text);
+        let prim = stage.prim(stage.find("/M").unwrap());
+        let c = cube();
+        let indices: Vec<i64> = c.indices.iter().map(|&i| i as i64).collect();
+        let tags = read_tags(prim, 8, &[4; 6], &indices, &mut diags);
+        (tags, diags.items().iter().map(|d| d.message.clone()).collect())
+    }
+
+    /// UsdGeom's crease encoding: chains of vertices, a sharpness per chain or per chain edge;
+    /// what does not fit is a warning and leaves the rest.
+    #[test]
+    fn usd_creases_and_corners_are_read_per_crease_or_per_edge() {
+        let (tags, warnings) = tags_of(
+            "int[] creaseIndices = [0, 1, 3, 2, 4, 6]\n int[] creaseLengths = [4, 2]\n float[] creaseSharpnesses = [2, 10]\n \
+             int[] cornerIndices = [7]\n float[] cornerSharpnesses = [3.5]\n uniform token interpolateBoundary = \"edgeOnly\"",
+        );
+        assert!(warnings.is_empty(), "{warnings:?}");
+        assert_eq!(tags.creases, vec![([0, 1], 2.0), ([1, 3], 2.0), ([3, 2], 2.0), ([4, 6], 10.0)]);
+        assert_eq!(tags.corners, vec![(7, 3.5)]);
+        assert_eq!(tags.boundary, BoundaryInterpolation::EdgeOnly);
+
+        let (tags, warnings) = tags_of(
+            "int[] creaseIndices = [0, 1, 3, 2]\n int[] creaseLengths = [4]\n float[] creaseSharpnesses = [1, -2, 30]",
+        );
+        assert!(warnings.is_empty(), "{warnings:?}");
+        assert_eq!(tags.creases, vec![([0, 1], 1.0), ([1, 3], 0.0), ([3, 2], SHARPNESS_INFINITE)]);
+        assert_eq!(tags.boundary, BoundaryInterpolation::EdgeAndCorner);
+
+        for (attributes, warning) in [
+            (
+                "int[] creaseIndices = [0, 1, 3]\n int[] creaseLengths = [2]\n float[] creaseSharpnesses = [1]",
+                "do not fit",
+            ),
+            (
+                "int[] creaseIndices = [0, 1, 3]\n int[] creaseLengths = [3]\n float[] creaseSharpnesses = [1, 2, 3]",
+                "neither",
+            ),
+            (
+                "int[] creaseIndices = [0, 9]\n int[] creaseLengths = [2]\n float[] creaseSharpnesses = [1]",
+                "out of range",
+            ),
+            ("int[] cornerIndices = [0, 1]\n float[] cornerSharpnesses = [1]", "cornerSharpnesses for"),
+            ("int[] cornerIndices = [-1]\n float[] cornerSharpnesses = [1]", "out of range"),
+            ("uniform token interpolateBoundary = \"sometimes\"", "unknown interpolateBoundary"),
+        ] {
+            let (tags, warnings) = tags_of(attributes);
+            assert!(tags.creases.is_empty() && tags.corners.is_empty(), "{attributes}");
+            assert!(warnings.len() == 1 && warnings[0].contains(warning), "{attributes}: {warnings:?}");
+        }
+        // A diagonal (0-7) is no edge of the cube: reported, the rest kept.
+        let (tags, warnings) =
+            tags_of("int[] creaseIndices = [0, 1, 7]\n int[] creaseLengths = [3]\n float[] creaseSharpnesses = [5]");
+        assert_eq!(tags.creases, vec![([0, 1], 5.0)]);
+        assert!(warnings.len() == 1 && warnings[0].contains("not edges of the mesh"), "{warnings:?}");
     }
 }

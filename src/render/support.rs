@@ -93,12 +93,6 @@ const IGNORED_LIGHT_INPUTS: &[(&str, f64, &str)] = &[
     ("inputs:specular", 1.0, "per-light specular multipliers are not applied"),
 ];
 
-/// Mesh attributes strata does not apply, when authored with content.
-const IGNORED_MESH_ATTRIBUTES: &[(&str, &str)] = &[
-    ("creaseIndices", "subdivision creases are not applied"),
-    ("cornerIndices", "subdivision corners are not applied"),
-];
-
 /// One kind of unsupported content: where it first occurs and how often.
 struct Finding {
     first_prim: String,
@@ -157,11 +151,7 @@ pub fn report_unsupported(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagn
             );
         }
         if prim.type_name.as_deref() == Some("Mesh") {
-            for (name, lost) in IGNORED_MESH_ATTRIBUTES {
-                if let Some(attr) = prim.attribute(name).filter(|a| a.get().is_some_and(|v| !is_empty_array(v))) {
-                    note(format!("mesh `{name}`: {lost}"), prim, value_span(attr));
-                }
-            }
+            face_varying_interpolation(prim, &mut note);
         }
     }
     for (what, f) in findings {
@@ -170,6 +160,33 @@ pub fn report_unsupported(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagn
             d = d.note(format!("{} more prim(s) or attribute(s) like it", f.count - 1));
         }
         diags.push(d);
+    }
+}
+
+/// Subdivision surfaces refine face-varying `st` linearly (`faceVaryingLinearInterpolation =
+/// "all"`); the other rules, USD's default `cornersPlus1` among them, smooth it where faces
+/// share values. Unindexed values belong each to one face, so OpenSubdiv's face-varying
+/// patches are single faces, pinned at their corners by every rule but `none`: on quads that is
+/// bilinear, what strata does, so only shared (indexed) values or `none` are reported.
+fn face_varying_interpolation(prim: &Prim, note: &mut impl FnMut(String, &Prim, Span)) {
+    let scheme = prim.value("subdivisionScheme").and_then(Value::as_str).unwrap_or("catmullClark");
+    let Some(st) = prim.attribute("primvars:st").filter(|a| a.get().is_some()) else { return };
+    let face_varying = st.meta("interpolation").and_then(Value::as_str).unwrap_or("faceVarying") == "faceVarying";
+    if !matches!(scheme, "catmullClark" | "loop") || !face_varying {
+        return;
+    }
+    let attr = prim.attribute("faceVaryingLinearInterpolation").filter(|a| a.get().is_some());
+    let mode = attr.and_then(|a| a.get()).and_then(Value::as_str).unwrap_or("cornersPlus1");
+    let indexed = prim.value("primvars:st:indices").is_some_and(|v| !is_empty_array(v));
+    if mode != "all" && (indexed || mode == "none") {
+        note(
+            format!(
+                "mesh `faceVaryingLinearInterpolation` `{mode}`: face-varying `primvars:st` on subdivision surfaces is \
+                 interpolated linearly (as `all`), not smoothed"
+            ),
+            prim,
+            value_span(attr.unwrap_or(st)),
+        );
     }
 }
 
