@@ -476,6 +476,7 @@ pub fn resolve_graph(
                     Product::Surface => Type::CLOSURE,
                     Product::Displacement | Product::Mask => Type::FLOAT,
                     Product::Normal => Type::NORMAL,
+                    Product::Emission => Type::COLOR,
                 };
                 if !ty.converts_to(expected) {
                     diags.push(
