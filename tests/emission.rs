@@ -117,8 +117,10 @@ fn an_emissive_quad_lights_a_floor_as_a_rect_light_of_the_same_size_and_radiance
     let rect = "def RectLight \"Panel\" {\n    float inputs:width = 1\n    float inputs:height = 1\n    \
                 float inputs:intensity = 10\n    double3 xformOp:translate = (0, 0, 2)\n    \
                 uniform token[] xformOpOrder = [\"xformOp:translate\"]\n}";
-    let emitter =
-        format!("def Mesh \"Panel\" {{\n    {}\n    rel material:binding = </Looks/Glow>\n}}", quad(Vec3::new(0.0, 0.0, 2.0), 0.5, -Vec3::Z));
+    let emitter = format!(
+        "def Mesh \"Panel\" {{\n    {}\n    rel material:binding = </Looks/Glow>\n}}",
+        quad(Vec3::new(0.0, 0.0, 2.0), 0.5, -Vec3::Z)
+    );
     let size = 64;
     let s = settings(size, size, 64, 7, 8);
     let (scene_a, materials_a) = build("rect", &[("scene.usda", floor_scene(rect))], size);
@@ -162,7 +164,10 @@ fn an_emissive_quad_lights_a_floor_as_a_rect_light_of_the_same_size_and_radiance
     assert!(worst.0.abs() < 4.5, "region {} differs by {} (z = {}) at level {}", worst.1, worst.2, worst.0, worst.3);
     let (mean, se) = mean_se(&total);
     let level = ra.iter().map(|c| c.y as f64).sum::<f64>() / ra.len() as f64;
-    eprintln!("rect vs emissive quad: worst region z = {:.2}; whole floor {mean:.2e} ± {se:.2e} at {level:.4}", worst.0);
+    eprintln!(
+        "rect vs emissive quad: worst region z = {:.2}; whole floor {mean:.2e} ± {se:.2e} at {level:.4}",
+        worst.0
+    );
     assert!(level > 0.02, "the floor is lit: {level}");
     assert!(mean.abs() < 4.5 * se, "floor radiance differs by {mean} ± {se} (level {level})");
 }
@@ -338,4 +343,22 @@ fn black_emission_costs_no_call_and_no_light() {
     let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
     let (_, stats) = strata::render::render(&scene, &refs, &settings(8, 8, 4, 1, 4), None).unwrap();
     assert_eq!(stats.evals.emissions, 0);
+}
+
+#[test]
+fn emission_without_a_surface_is_reported_and_must_be_a_colour() {
+    use strata::diag::{Diagnostics, SourceMap};
+    let load = |text: &str| {
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        strata::front::library::Library::from_text("t.ash", text, &mut sources, &mut diags);
+        diags.render(&sources)
+    };
+    let rendered = load("substance lamp {\n    emission = color(1.0);\n}\n");
+    assert!(rendered.contains("emits but has no `surface`: its emission is never seen"), "{rendered}");
+    let rendered =
+        load("substance lamp {\n    node d = diffuse();\n    surface = d.bsdf;\n    emission = d.bsdf;\n}\n");
+    assert!(rendered.contains("wrong product type: `emission` must be color"), "{rendered}");
+    let clean = load("substance lamp {\n    node d = diffuse();\n    surface = d.bsdf;\n    emission = 2.0;\n}\n");
+    assert!(!clean.contains("warning") && !clean.contains("error"), "{clean}");
 }

@@ -851,7 +851,12 @@ pub(crate) fn bump(
 }
 
 /// Layer `layer`'s emitted radiance, clamped at 0 (negative light is no light).
-fn layer_emission(material: &dyn MaterialCode, g: &Globals, layer: usize, counts: &mut EvalCounts) -> Result<Vec3, Invalid> {
+fn layer_emission(
+    material: &dyn MaterialCode,
+    g: &Globals,
+    layer: usize,
+    counts: &mut EvalCounts,
+) -> Result<Vec3, Invalid> {
     counts.emissions += 1;
     let mut out = [0.0f32; 3];
     material.emission(g, layer, &mut out).map_err(Invalid::Shader)?;
