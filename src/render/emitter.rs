@@ -142,8 +142,7 @@ impl Emitters {
             return Emitters::default();
         }
         let positions = accel.world_triangles();
-        // Per emissive prim: (triangles, areas, power weights).
-        let mut found: Vec<Option<(Vec<u32>, Vec<f32>, Vec<f32>)>> = vec![None; prim_count];
+        let mut found: Vec<Option<Found>> = vec![None; prim_count];
         let layers = materials.iter().map(|m| m.info().layers.len()).max().unwrap_or(0);
         let (mut masks, mut weights) = (vec![0.0f32; layers], vec![0.0f32; layers]);
         for (index, tri) in positions.iter().enumerate() {
@@ -174,14 +173,14 @@ impl Emitters {
                 sum += expected_emission(material, &g, &mut masks, &mut weights);
             }
             let radiance = luminance(sum / ESTIMATE_POINTS.len() as f32);
-            let entry = found[prim].get_or_insert_with(Default::default);
-            entry.0.push(index as u32);
-            entry.1.push(area);
-            entry.2.push(radiance * area);
+            let entry = found[prim].get_or_insert_with(Found::default);
+            entry.triangles.push(index as u32);
+            entry.areas.push(area);
+            entry.power.push(radiance * area);
         }
         let mut list = Vec::new();
         for (prim, entry) in found.into_iter().enumerate() {
-            let Some((triangles, areas, power)) = entry else { continue };
+            let Some(Found { triangles, areas, power }) = entry else { continue };
             let total: f32 = power.iter().sum::<f32>() * PI;
             if total > 0.0 && total.is_finite() {
                 let choice = Distribution1D::new(&power);
@@ -196,6 +195,15 @@ impl Emitters {
         }
         Emitters { list, of_prim }
     }
+}
+
+/// One emissive prim's triangles while they are collected.
+#[derive(Clone, Default)]
+struct Found {
+    triangles: Vec<u32>,
+    areas: Vec<f32>,
+    /// Estimated luminance × area per triangle.
+    power: Vec<f32>,
 }
 
 /// The expected emitted radiance of `material` at `g` over the rule-5 pick: `Σ w_i L_i` over
