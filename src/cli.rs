@@ -243,9 +243,12 @@ pub fn check_file(file: &Path) -> (Diagnostics, SourceMap, String) {
     (diags, sources, summary)
 }
 
-/// `strata check FILE`
-pub fn check(file: &Path) -> Result<(), Failure> {
-    let (diags, sources, summary) = check_file(file);
+/// `strata check FILE [--strict]`
+pub fn check(file: &Path, strict: bool) -> Result<(), Failure> {
+    let (mut diags, sources, summary) = check_file(file);
+    if strict {
+        diags.make_warnings_errors();
+    }
     report(&diags, &sources)?;
     print_out(&(summary + "\n"))
 }
@@ -277,6 +280,11 @@ pub struct RenderArgs {
     /// Whether `settings.width`/`height` were given (`--res`); if not, a UsdRender
     /// `RenderSettings` prim's `resolution` replaces them.
     pub resolution_given: bool,
+    /// Whether a stage without lights gets the default lights (`--no-default-lights`: never).
+    pub default_lights: crate::render::scene::DefaultLights,
+    /// Every warning is an error (`--strict`): nothing is rendered from a stage USD had to
+    /// compose around.
+    pub strict: bool,
 }
 
 /// A scene with every distinct material compiled.
@@ -394,12 +402,17 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
                 resolution: (settings.width, settings.height),
                 ..Default::default()
             },
+            default_lights: args.default_lights,
         };
         let refs: Vec<&dyn MaterialCode> = c.materials.iter().map(|m| m.as_ref()).collect();
         crate::render::Scene::build(&c.stage, &|p| c.prim_material.get(p).copied(), &refs, &options, &mut diags)
     });
     let scene_ms = scene_start.elapsed().as_secs_f64() * 1e3;
+    if args.strict {
+        diags.make_warnings_errors();
+    }
     report(&diags, &sources)?;
+    let warnings = diags.warning_count();
     let (
         Some(CompiledScene { materials, compiler, material_names, parse_ms, compose_ms, compile_ms, .. }),
         Some(mut scene),
@@ -437,7 +450,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         bar.finish_and_clear();
     }
     let seconds = start.elapsed().as_secs_f64();
-    let exr_options = exr_options(args, &settings, &scene);
+    let exr_options = exr_options(args, &settings, &scene, warnings);
     let png = match outputs.write_with(&image, &exr_options) {
         Ok(png) => png,
         Err(e) => {
@@ -495,11 +508,13 @@ fn samples_per_second(samples: u64, seconds: f64) -> String {
 }
 
 /// The EXR header of a render: the camera's matrices and the settings that made the image,
-/// so a compositor (or a person reading `exrheader`) can tell how it was made.
+/// so a compositor (or a person reading `exrheader`) can tell how it was made, and how many
+/// warnings the run reported (a farm can reject an image made from a stage with problems).
 fn exr_options(
     args: &RenderArgs,
     settings: &crate::render::RenderSettings,
     scene: &crate::render::Scene,
+    warnings: usize,
 ) -> ExrOptions {
     let camera = scene.camera.with_aspect(settings.width as f32 / settings.height as f32);
     let world_to_camera = camera.world_to_camera();
@@ -522,6 +537,11 @@ fn exr_options(
             ("strata/backend".into(), args.backend.to_string()),
             ("strata/layerMode".into(), mode.into()),
             ("strata/optimize".into(), args.optimize.to_string()),
+            ("strata/warnings".into(), warnings.to_string()),
+            (
+                "strata/defaultLights".into(),
+                if scene.default_lights { "camera light + dome (the stage has no lights)" } else { "none" }.into(),
+            ),
         ]
         .into_iter()
         .chain(crate::render::cryptomatte::header_attributes(

@@ -149,16 +149,26 @@ pub struct Diagnostic {
     pub labels: Vec<Label>,
     /// Extra lines of explanation or help.
     pub notes: Vec<String>,
+    /// For warnings: what kind of problem this is. A run reports each kind once, at its first
+    /// location, with a count of the others ([`Diagnostics::push`]), so a missing texture
+    /// named by 400 shaders is one warning, not 400.
+    pub kind: Option<&'static str>,
 }
 
 impl Diagnostic {
     fn new(severity: Severity, message: impl Into<String>) -> Diagnostic {
-        Diagnostic { severity, message: message.into(), labels: Vec::new(), notes: Vec::new() }
+        Diagnostic { severity, message: message.into(), labels: Vec::new(), notes: Vec::new(), kind: None }
     }
 
     /// An error.
     pub fn error(message: impl Into<String>) -> Diagnostic {
         Diagnostic::new(Severity::Error, message)
+    }
+
+    /// Information a user should see once, that is not a problem (never fails a run, not
+    /// even with `--strict`).
+    pub fn info(message: impl Into<String>) -> Diagnostic {
+        Diagnostic::new(Severity::Note, message)
     }
 
     /// A warning.
@@ -181,6 +191,12 @@ impl Diagnostic {
     /// Adds a note line.
     pub fn note(mut self, note: impl Into<String>) -> Diagnostic {
         self.notes.push(note.into());
+        self
+    }
+
+    /// Names the kind of a warning: later warnings of the same kind are counted, not shown.
+    pub fn kind(mut self, kind: &'static str) -> Diagnostic {
+        self.kind = Some(kind);
         self
     }
 
@@ -379,6 +395,8 @@ pub struct Diagnostics {
     /// Hashes of the recorded diagnostics: the same finding reached twice (one override wired
     /// into several compositions, one material on many prims) is reported once.
     seen: std::collections::HashSet<u64>,
+    /// Per warning kind, the index of its first warning in `items` and how many more came.
+    kinds: std::collections::HashMap<&'static str, (usize, usize)>,
 }
 
 impl Diagnostics {
@@ -390,8 +408,37 @@ impl Diagnostics {
     /// Records one diagnostic.
     pub fn push(&mut self, diagnostic: Diagnostic) {
         use std::hash::{BuildHasher, BuildHasherDefault, DefaultHasher};
-        if self.seen.insert(BuildHasherDefault::<DefaultHasher>::default().hash_one(&diagnostic)) {
-            self.items.push(diagnostic);
+        if !self.seen.insert(BuildHasherDefault::<DefaultHasher>::default().hash_one(&diagnostic)) {
+            return;
+        }
+        if let (Some(kind), Severity::Warning) = (diagnostic.kind, diagnostic.severity) {
+            match self.kinds.entry(kind) {
+                std::collections::hash_map::Entry::Occupied(mut first) => {
+                    first.get_mut().1 += 1;
+                    return;
+                }
+                std::collections::hash_map::Entry::Vacant(slot) => {
+                    slot.insert((self.items.len(), 0));
+                }
+            }
+        }
+        self.items.push(diagnostic);
+    }
+
+    /// Number of warnings found, each of a kind counted (shown once or not).
+    pub fn warning_count(&self) -> usize {
+        let shown = self.items.iter().filter(|d| d.severity == Severity::Warning).count();
+        shown + self.kinds.values().map(|(_, more)| more).sum::<usize>()
+    }
+
+    /// Makes every warning an error (`--strict`: farms and CI fail on what a person would
+    /// otherwise read past).
+    pub fn make_warnings_errors(&mut self) {
+        for d in &mut self.items {
+            if d.severity == Severity::Warning {
+                d.severity = Severity::Error;
+                d.notes.push("an error because of --strict".into());
+            }
         }
     }
 
@@ -415,6 +462,12 @@ impl Diagnostics {
         for d in other.items {
             self.push(d);
         }
+        // The warnings `other` counted but did not keep.
+        for (kind, (_, more)) in other.kinds {
+            if let Some(entry) = self.kinds.get_mut(kind) {
+                entry.1 += more;
+            }
+        }
     }
 
     /// Renders the diagnostics in order, at most [`MAX_SHOWN_PER_FILE`] per file (the file of
@@ -426,12 +479,20 @@ impl Diagnostics {
         let mut shown: std::collections::HashMap<Option<FileId>, usize> = std::collections::HashMap::new();
         let mut hidden: Vec<(Option<FileId>, usize, usize)> = Vec::new();
         let mut out = String::new();
-        for d in &self.items {
+        let more_of_kind: std::collections::HashMap<usize, usize> =
+            self.kinds.values().filter(|(_, more)| *more > 0).copied().collect();
+        for (i, d) in self.items.iter().enumerate() {
             let file = d.labels.iter().find(|l| l.primary).or(d.labels.first()).map(|l| l.span.file);
             let count = shown.entry(file).or_default();
             if *count < MAX_SHOWN_PER_FILE {
                 *count += 1;
-                out += &d.render(sources);
+                match more_of_kind.get(&i) {
+                    Some(&more) => {
+                        let s = if more == 1 { "" } else { "s" };
+                        out += &d.clone().note(format!("and {more} more warning{s} of this kind")).render(sources);
+                    }
+                    None => out += &d.render(sources),
+                }
                 continue;
             }
             let i = match hidden.iter().position(|h| h.0 == file) {
@@ -516,5 +577,32 @@ mod tests {
         d.push(Diagnostic::warning("w"));
         d.push(Diagnostic::warning("v"));
         assert_eq!(d.items().len(), 2);
+    }
+
+    #[test]
+    fn warnings_of_one_kind_are_shown_once_and_counted() {
+        let mut sources = SourceMap::new();
+        let file = sources.add("a.usda", "one\ntwo\nthree\n");
+        let mut d = Diagnostics::new();
+        for (i, start) in [0, 4, 8].into_iter().enumerate() {
+            let message = format!("cannot open texture `{i}.png`");
+            d.push(Diagnostic::warning(message).at(Span::new(file, start, start + 3), "here").kind("texture"));
+        }
+        d.push(Diagnostic::warning("another kind").kind("other"));
+        assert_eq!((d.items().len(), d.warning_count()), (2, 4));
+        let text = d.render(&sources);
+        assert!(text.contains("`0.png`") && !text.contains("`1.png`"), "the first is shown: {text}");
+        assert!(text.contains("a.usda:1:1") && text.contains("and 2 more warnings of this kind"), "{text}");
+        assert!(!text.contains("and 0 more"), "{text}");
+        // Moved into another sink, the count goes along.
+        let mut all = Diagnostics::new();
+        all.push(Diagnostic::warning("cannot open texture `x.png`").kind("texture"));
+        all.extend(d);
+        assert_eq!((all.items().len(), all.warning_count()), (2, 5));
+        // --strict: every warning an error; notes are never promoted.
+        all.push(Diagnostic::info("the stage has no lights"));
+        all.make_warnings_errors();
+        assert_eq!(all.error_count(), 2);
+        assert!(all.items().iter().any(|d| d.severity == Severity::Note));
     }
 }

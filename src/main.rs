@@ -106,6 +106,13 @@ enum Command {
         /// Print compile and render statistics.
         #[arg(long)]
         stats: bool,
+        /// Never light a stage that has no lights (by default it gets a light travelling with
+        /// the camera and a dim dome, as usdview shows it).
+        #[arg(long)]
+        no_default_lights: bool,
+        /// Make every warning an error (exit 1, nothing written): for farms and CI.
+        #[arg(long)]
+        strict: bool,
     },
     /// Measure shading and rendering cost: JIT vs interpreter vs hand-written Rust, compile
     /// time vs graph size, render time and error vs layer count.
@@ -125,6 +132,9 @@ enum Command {
     Check {
         /// A `.ash` substance file or a USD scene (`.usda`, `.usdc`, `.usd`, `.usdz`).
         file: PathBuf,
+        /// Make every warning an error (exit 1): for farms and CI.
+        #[arg(long)]
+        strict: bool,
     },
     /// Mutation-fuzz both front ends and the check pipeline; exit 1 if any input crashes,
     /// hangs or passes the memory budget (it is saved under `--crashes`).
@@ -263,6 +273,8 @@ fn main() -> ExitCode {
             weighted,
             no_optimize,
             stats,
+            no_default_lights,
+            strict,
         } => cli::render(&cli::RenderArgs {
             scene,
             output,
@@ -283,6 +295,12 @@ fn main() -> ExitCode {
             subdiv_level,
             dicing_rate,
             resolution_given: res.is_some(),
+            default_lights: if no_default_lights {
+                strata::render::scene::DefaultLights::Never
+            } else {
+                strata::render::scene::DefaultLights::WhenUnlit
+            },
+            strict,
         }),
         Command::Compile { file, output } => cli::compile(&file, &output),
         Command::Bench { what } => {
@@ -312,7 +330,7 @@ fn main() -> ExitCode {
                 }
             }
         }
-        Command::Check { file } => cli::check(&file),
+        Command::Check { file, strict } => cli::check(&file, strict),
         Command::Fuzz { secs, seed, jobs, root, crashes, timeout, max_rss_mib, worker, stage, first, stride } => {
             if worker {
                 let stage = stage.unwrap_or_else(std::env::temp_dir);

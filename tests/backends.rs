@@ -340,12 +340,16 @@ fn texture_lookups_read_the_file_in_both_backends() {
         assert_eq!(out, want, "bilinear lookup at u = {u}");
     }
 
-    // A file that is not there is a compile-time error, not a black texture.
+    // A file that is not there is a located warning (an error under --strict) and a black
+    // texture: a render composes around it, as USD does around a missing asset.
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
     let missing = source.replace("two_texels.exr", "missing.exr");
     let (lib, _) = Library::from_text("test.ash", &missing, &mut sources, &mut diags);
     let mut compiler = Compiler::new(BackendKind::Jit, PassOptions::default());
-    assert!(compiler.compile(&lib, &single_layer(&lib, "t"), &mut diags).is_none());
-    assert!(diags.render(&sources).contains("cannot open texture"), "{}", diags.render(&sources));
+    let black = compiler.compile(&lib, &single_layer(&lib, "t"), &mut diags).expect("compiles");
+    assert!(!diags.has_errors() && diags.warning_count() == 1, "{}", diags.render(&sources));
+    assert!(diags.render(&sources).contains("warning: cannot open texture"), "{}", diags.render(&sources));
+    black.channels(&Globals { u: 0.25, v: 0.5, ..Globals::default() }, 0, &mut out).unwrap();
+    assert_eq!(out, [0.0; 3]);
 }

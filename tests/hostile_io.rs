@@ -26,9 +26,28 @@ fn check(file: &Path) -> (Option<i32>, String) {
     (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
 }
 
+/// `strata check --strict FILE`: what USD composes around (an unreadable texture or dome
+/// map) is a warning, so only `--strict` fails on it.
+fn check_strict(file: &Path) -> (Option<i32>, String) {
+    let out = strata(&["check", "--strict", file.to_str().expect("utf-8 path")]);
+    (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
 /// Asserts `check` fails with `message` located at `location` (`file:line:col`).
 fn assert_located(file: &Path, location: &str, message: &str) {
+    assert_located_with(check(file), file, location, message);
+}
+
+/// Asserts `message`, located at `location`, is a warning of `check` and an error of
+/// `check --strict` (what USD composes around: an unreadable texture or dome map).
+fn assert_located_warning(file: &Path, location: &str, message: &str) {
     let (code, stderr) = check(file);
+    assert_eq!(code, Some(0), "{}: {stderr}", file.display());
+    assert!(stderr.contains("warning: ") && stderr.contains(message) && stderr.contains(location), "{stderr}");
+    assert_located_with(check_strict(file), file, location, message);
+}
+
+fn assert_located_with((code, stderr): (Option<i32>, String), file: &Path, location: &str, message: &str) {
     assert_eq!(code, Some(1), "{}: {stderr}", file.display());
     assert!(stderr.contains(message), "{}: expected `{message}` in\n{stderr}", file.display());
     assert!(stderr.contains(location), "{}: expected at `{location}`:\n{stderr}", file.display());
@@ -108,7 +127,13 @@ fn fifos_named_as_inputs_never_block() {
     let dome = d.join("dome.usda");
     std::fs::write(&dome, "#usda 1.0\ndef DomeLight \"Sky\" {\n    asset inputs:texture:file = @pipe.exr@\n}\n")
         .unwrap();
-    assert_located(&dome, "dome.usda:3:33", "cannot read dome texture");
+    // A warning (the dome lights with its colour), an error under --strict.
+    let (code, stderr) = check(&dome);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(stderr.contains("warning: cannot read dome texture") && stderr.contains("dome.usda:3:33"), "{stderr}");
+    let (code, stderr) = check_strict(&dome);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("error: cannot read dome texture") && stderr.contains("--strict"), "{stderr}");
 
     // A texture a shader names.
     let ash_source = format!(
@@ -126,6 +151,9 @@ fn fifos_named_as_inputs_never_block() {
     )
     .unwrap();
     let (code, stderr) = check(&textured);
+    assert_eq!(code, Some(0), "a warning: the texture reads as black: {stderr}");
+    assert!(stderr.contains("warning: cannot read texture") && stderr.contains("it is a FIFO"), "{stderr}");
+    let (code, stderr) = check_strict(&textured);
     assert_eq!(code, Some(1), "{stderr}");
     assert!(stderr.contains("cannot read texture") && stderr.contains("it is a FIFO"), "{stderr}");
     // Located where the texture node reads its file (in the built-in node library: the
@@ -156,7 +184,7 @@ fn input_size_limit_is_enforced_and_raised_by_the_flag() {
 fn huge_texture_headers_are_refused_before_allocating() {
     // The header claims 2e6 x 2e6 pixels: a 48 TB allocation before this check.
     let limit = "more than the texture limit of 134217728 pixels (raise it with --max-texture-pixels)";
-    assert_located(&hostile("huge_dome_texture.usda"), "huge_dome_texture.usda:5:33", limit);
+    assert_located_warning(&hostile("huge_dome_texture.usda"), "huge_dome_texture.usda:5:33", limit);
     // The same file as a shader's texture.
     let dir = tempfile::tempdir().unwrap();
     let exr = std::fs::canonicalize(hostile("huge_texture.exr")).unwrap();
@@ -174,14 +202,14 @@ fn huge_texture_headers_are_refused_before_allocating() {
             .replace("\"zero\"", "\"t\""),
     )
     .unwrap();
-    assert_located(&scene, "texture file named here", limit);
+    assert_located_warning(&scene, "texture file named here", limit);
     // A lower limit refuses an ordinary texture, with the flag named.
     let small = dir.path().join("small.exr");
     write_small_exr(&small);
     let dome = dir.path().join("dome.usda");
     std::fs::write(&dome, "#usda 1.0\ndef DomeLight \"Sky\" {\n    asset inputs:texture:file = @small.exr@\n}\n")
         .unwrap();
-    let refused = strata(&["check", dome.to_str().unwrap(), "--max-texture-pixels", "7"]);
+    let refused = strata(&["check", "--strict", dome.to_str().unwrap(), "--max-texture-pixels", "7"]);
     assert_eq!(refused.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&refused.stderr).contains("4 x 2 = 8 pixels, more than the texture limit of 7"));
     let allowed = strata(&["check", dome.to_str().unwrap(), "--max-texture-pixels", "8"]);
@@ -369,7 +397,7 @@ fn shader_faults_are_counted_and_located_never_fatal() {
         assert!(stderr.contains("discarded: a shader indexed an array out of bounds"), "{stderr}");
         assert!(
             stderr.contains(
-                "first array index out of bounds: prim `/Bad`, material 1, slot `010`, pixel (11, 5) sample 1"
+                "first array index out of bounds: prim `/Bad`, material 1, slot `010`, pixel (6, 5) sample 0"
             ),
             "the same first occurrence from either backend, whatever the threads: {stderr}"
         );

@@ -191,7 +191,7 @@ fn jit_and_interpreter_agree_on_a_preview_network() {
 }
 
 #[test]
-fn a_missing_or_broken_texture_is_one_error_at_the_usd_attribute() {
+fn a_missing_or_broken_texture_is_one_warning_at_the_usd_attribute() {
     let dir = tempfile::tempdir().unwrap();
     let text = std::fs::read_to_string(format!("{DIR}/textured.usda")).unwrap();
     std::fs::write(dir.path().join("missing.usda"), text.replace("@checker.png@", "@missing.png@")).unwrap();
@@ -202,8 +202,10 @@ fn a_missing_or_broken_texture_is_one_error_at_the_usd_attribute() {
         let path = dir.path().join(file);
         let (diags, sources, _) = check_file(&path);
         let text = diags.render(&sources);
-        assert_eq!(diags.error_count(), 1, "{text}");
-        assert!(text.contains(message), "{text}");
+        // USD composes around it: the reader's fallback, and one warning.
+        assert_eq!(diags.error_count(), 0, "{text}");
+        assert_eq!(diags.items().iter().filter(|d| d.message.contains(message)).count(), 1, "{text}");
+        assert!(text.contains(&format!("warning: {message}")), "{text}");
         assert!(text.contains(&format!("{file}:{line}:")), "located at the asset path: {text}");
     }
 }

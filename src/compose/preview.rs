@@ -94,13 +94,10 @@ pub fn instantiate(
         let Some(usd_name) = attr.name.strip_prefix("inputs:") else { continue };
         let name = if usd_name == "normal" { "normal_ts" } else { usd_name };
         let Some((index, input)) = graph.input(name) else {
-            builder.diags.push(
-                Diagnostic::warning(format!(
-                    "UsdPreviewSurface has no input `{usd_name}`; `{}` is ignored",
-                    attribute_path(surface, attr)
-                ))
-                .at(attr.span, "unknown input"),
-            );
+            let known = graph.inputs.iter().map(|i| if i.name == "normal_ts" { "normal" } else { i.name.as_str() });
+            if let Some(d) = unknown_input("UsdPreviewSurface", usd_name, known, surface, attr) {
+                builder.diags.push(d);
+            }
             continue;
         };
         let ty = input.ty;
@@ -293,13 +290,11 @@ impl<'s> Builder<'_, 's> {
             let name = if usd_name == "in" { "in_" } else { usd_name };
             let func = self.lib.function(func_id);
             let Some((index, param)) = func.param(name).filter(|(_, p)| !p.output) else {
-                self.diags.push(
-                    Diagnostic::warning(format!(
-                        "{id} has no input `{usd_name}`; `{}` is ignored",
-                        attribute_path(prim, attr)
-                    ))
-                    .at(attr.span, "unknown input"),
-                );
+                let known = func.params.iter().filter(|p| !p.output).map(|p| p.name.as_str());
+                let known = known.map(|n| if n == "in_" { "in" } else { n });
+                if let Some(d) = unknown_input(id, usd_name, known, prim, attr) {
+                    self.diags.push(d);
+                }
                 continue;
             };
             let ty = param.ty;
@@ -377,7 +372,13 @@ impl<'s> Builder<'_, 's> {
         let Some(space) = space else { return }; // reported by `check_token`
         if let Err(message) = texture::register_file_as(std::path::Path::new(file), space) {
             let span = prim.attribute("inputs:file").map_or(prim.span, |a| a.value.as_ref().map_or(a.span, |v| v.1));
-            self.diags.push(Diagnostic::error(message).at(span, "texture file named here"));
+            // USD composes around an unreadable texture: the reader's fallback, as usdview shows it.
+            self.diags.push(
+                Diagnostic::warning(message)
+                    .at(span, "texture file named here")
+                    .note("the texture reads its `fallback` value")
+                    .kind("unreadable texture"),
+            );
             args[file_index] = Some(Source::Const(Value::Str(String::new()), Type::STRING));
         }
     }
@@ -416,6 +417,31 @@ impl<'s> Builder<'_, 's> {
             _ => {}
         }
     }
+}
+
+/// Inputs of the UsdPreviewSurface specification that strata reads no value from: authored,
+/// they change what other renderers show, so they are worth a warning.
+const UNSUPPORTED_SPEC_INPUTS: &[(&str, &str)] =
+    &[("opacityMode", "opacity always acts as presence (opacityMode `presence`), never as transmission")];
+
+/// What to say of an input a preview shader does not have. UsdShade's readers ignore inputs
+/// outside a shader's definition, and exporters author plenty (`isSRGB`, `rgba`, ...), so
+/// they raise nothing; a name one edit from a real input is likely a typo, and a spec input
+/// strata does not implement changes the image: those are warnings, each kind once per run.
+fn unknown_input<'a>(
+    id: &str,
+    usd_name: &str,
+    known: impl IntoIterator<Item = &'a str>,
+    prim: &Prim,
+    attr: &Attribute,
+) -> Option<Diagnostic> {
+    if let Some((_, what)) = UNSUPPORTED_SPEC_INPUTS.iter().find(|(name, _)| *name == usd_name) {
+        let message = format!("`{}` is not implemented: {what}", attribute_path(prim, attr));
+        return Some(Diagnostic::warning(message).at(attr.span, "ignored input").kind("unsupported preview input"));
+    }
+    let suggestion = crate::diag::did_you_mean(usd_name, known)?;
+    let message = format!("{id} has no input `{usd_name}`; `{}` is ignored", attribute_path(prim, attr));
+    Some(Diagnostic::warning(message).at(attr.span, "unknown input").note(suggestion))
 }
 
 #[cfg(test)]

@@ -1460,7 +1460,12 @@ impl FnLower<'_> {
             (Some(f), Some(space)) => match texture::register_file_as(Path::new(&f), space) {
                 Ok(id) => id,
                 Err(msg) => {
-                    self.diags.push(Diagnostic::error(msg).at(args[0].span, "texture file named here"));
+                    self.diags.push(
+                        Diagnostic::warning(msg)
+                            .at(args[0].span, "texture file named here")
+                            .note("the texture reads as black")
+                            .kind("unreadable texture"),
+                    );
                     -1
                 }
             },
@@ -1489,7 +1494,12 @@ impl FnLower<'_> {
             Some(f) => match texture::register_file(Path::new(&f)) {
                 Ok(id) => id,
                 Err(msg) => {
-                    self.diags.push(Diagnostic::error(msg).at(args[0].span, "texture file named here"));
+                    self.diags.push(
+                        Diagnostic::warning(msg)
+                            .at(args[0].span, "texture file named here")
+                            .note("the texture reads as black")
+                            .kind("unreadable texture"),
+                    );
                     -1
                 }
             },

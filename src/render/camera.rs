@@ -99,8 +99,11 @@ impl Camera {
         }
     }
 
-    /// A camera that frames the box `(lo, hi)` from the front and slightly above, with
-    /// `up_axis` (`"Y"` or `"Z"`) up and a 50 mm lens on a 36 mm back.
+    /// A camera that frames the box `(lo, hi)` in a three-quarter view from the front right
+    /// and above (30° azimuth, 25° elevation: the view a product shot or a DCC's default
+    /// perspective shows), with `up_axis` (`"Y"` or `"Z"`) up and a 50 mm lens on a 36 mm
+    /// back. A flat box (a decal, a ground plane, a card) is seen mostly face on instead of
+    /// edge on: along its thin axis, tilted by the same three-quarter offset.
     pub fn framing(lo: Vec3, hi: Vec3, aspect: f32, up_axis: &str) -> Camera {
         let centre = (lo + hi) * 0.5;
         // The box's own size at any scale (a fixed floor of 1e-3 framed a scene 1e-6 across
@@ -111,10 +114,25 @@ impl Camera {
         let tan_h = tan_w / aspect.max(1e-6);
         let half = tan_w.min(tan_h).atan();
         let distance = radius / half.sin();
-        let (up_world, back) = if up_axis == "Z" { (Vec3::Z, -Vec3::Y) } else { (Vec3::Y, Vec3::Z) };
-        let elevation = 20f32.to_radians();
-        let back = (back * elevation.cos() + up_world * elevation.sin()).normalize();
+        // USD's front is +Z for a Y-up stage and −Y for a Z-up one; right is +X in both.
+        let (up_world, front) = if up_axis == "Z" { (Vec3::Z, -Vec3::Y) } else { (Vec3::Y, Vec3::Z) };
+        let (azimuth, elevation) = (30f32.to_radians(), 25f32.to_radians());
+        let horizontal = front * azimuth.cos() + Vec3::X * azimuth.sin();
+        let three_quarter = (horizontal * elevation.cos() + up_world * elevation.sin()).normalize();
+        let extent = hi - lo;
+        let thin = extent.min_element() <= 0.05 * extent.max_element() && extent.max_element() > 0.0;
+        let back = if thin {
+            // The thin axis, on the side the three-quarter view is on (the top of a ground
+            // plane, the front of a card), with the three-quarter tilt kept.
+            let axis = Vec3::AXES[extent.min_position()];
+            let axis = if axis.dot(three_quarter) < 0.0 { -axis } else { axis };
+            (axis * 2.0 + three_quarter).normalize()
+        } else {
+            three_quarter
+        };
         let forward = -back;
+        // Looking straight down the up axis (a ground plane): any right vector will do.
+        let up_world = if forward.cross(up_world).length_squared() < 1e-6 { front } else { up_world };
         let right = forward.cross(up_world).normalize();
         let up = right.cross(forward);
         Camera {
@@ -158,6 +176,16 @@ impl Camera {
     /// The viewing direction.
     pub fn forward(&self) -> Vec3 {
         self.forward
+    }
+
+    /// The image's up direction in the world.
+    pub fn up(&self) -> Vec3 {
+        self.up
+    }
+
+    /// The image's right direction in the world.
+    pub fn right(&self) -> Vec3 {
+        self.right
     }
 
     /// The world-to-camera transform (column vectors), camera space as in USD and OpenEXR:
@@ -225,6 +253,53 @@ impl Camera {
 mod tests {
     use super::*;
     use crate::render::xform::{tests::stage, world_transforms};
+
+    /// Whether `p` projects inside the image of `camera`.
+    fn in_view(camera: &Camera, p: Vec3) -> bool {
+        let q = camera.world_to_camera().transform_point3(p);
+        q.z < 0.0
+            && (q.x / -q.z).abs() <= camera.tan_half.x * 1.0001
+            && (q.y / -q.z).abs() <= camera.tan_half.y * 1.0001
+    }
+
+    #[test]
+    fn framing_camera_shows_a_three_quarter_view_from_above_with_the_stage_up() {
+        let (lo, hi) = (Vec3::new(-1.0, 0.0, -2.0), Vec3::new(3.0, 2.0, 1.0));
+        let centre = (lo + hi) * 0.5;
+        for aspect in [0.5, 1.0, 16.0 / 9.0] {
+            // Y up: the eye is right of, above and in front of (+Z) the box.
+            let y_up = Camera::framing(lo, hi, aspect, "Y").with_aspect(aspect);
+            let eye = y_up.origin() - centre;
+            assert!(eye.x > 0.0 && eye.y > 0.0 && eye.z > 0.0, "{eye}");
+            assert!(eye.z > eye.x, "more from the front than the side: {eye}");
+            assert!(y_up.up().y > 0.8, "the image's up is the stage's: {}", y_up.up());
+            // Z up: front is −Y.
+            let z_up = Camera::framing(lo, hi, aspect, "Z").with_aspect(aspect);
+            let eye = z_up.origin() - centre;
+            assert!(eye.x > 0.0 && eye.z > 0.0 && eye.y < 0.0, "{eye}");
+            assert!(z_up.up().z > 0.8, "{}", z_up.up());
+            for camera in [y_up, z_up] {
+                for corner in 0..8 {
+                    let p = Vec3::select(glam::BVec3::new(corner & 1 != 0, corner & 2 != 0, corner & 4 != 0), hi, lo);
+                    assert!(in_view(&camera, p), "corner {p} out of view at aspect {aspect}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn flat_boxes_are_framed_face_on_not_edge_on() {
+        // A card in the XY plane (a decal): seen along Z, from the front.
+        let card = Camera::framing(Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, 1.0, 0.001), 1.0, "Y");
+        assert!(card.forward().z < -0.8, "{}", card.forward());
+        // A ground plane: seen from above, with a well-defined frame.
+        let ground = Camera::framing(Vec3::new(-5.0, 0.0, -5.0), Vec3::new(5.0, 0.0, 5.0), 1.0, "Y");
+        assert!(ground.forward().y < -0.8, "{}", ground.forward());
+        assert!(ground.right().is_finite() && ground.up().is_finite());
+        // A Z-up ground plane likewise.
+        let ground = Camera::framing(Vec3::new(-5.0, -5.0, 0.0), Vec3::new(5.0, 5.0, 0.0), 1.0, "Z");
+        assert!(ground.forward().z < -0.8 && ground.up().is_finite(), "{}", ground.forward());
+    }
 
     #[test]
     fn fov_follows_focal_length_over_aperture_and_horizontal_fit() {

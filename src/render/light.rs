@@ -48,16 +48,21 @@ impl EnvMap {
         EnvMap { width, height, texels, distribution }
     }
 
-    /// Reads the first RGB(A) layer of an EXR file (a bounded read, the header checked
-    /// against the texture pixel limit before decoding: see [`crate::input`]).
+    /// Reads a lat-long image: OpenEXR or any format textures may use (a bounded read, the
+    /// header checked against the texture pixel limit before decoding: see [`crate::input`]).
+    /// 8-bit colour images are sRGB-decoded, as Hydra reads them; float images are linear.
     pub fn load(path: &std::path::Path) -> Result<EnvMap, String> {
-        let (w, h, texels) = crate::runtime::texture::read_rgb_exr(path)?;
-        let texels = texels
+        use crate::runtime::texture::{ColorSpace, decode_texture_named};
+        let bytes = crate::input::read_bytes(path).map_err(|e| e.to_string())?;
+        let image =
+            decode_texture_named(&bytes, Some(path), ColorSpace::Auto, crate::input::limits().max_texture_pixels)?;
+        let texels = image
+            .texels
             .into_iter()
-            .map(|[r, g, b]| Vec3::new(r, g, b))
+            .map(|[r, g, b, _]| Vec3::new(r, g, b))
             .map(|t| if t.is_finite() { t.max(Vec3::ZERO) } else { Vec3::ZERO })
             .collect();
-        Ok(EnvMap::new(w, h, texels))
+        Ok(EnvMap::new(image.width, image.height, texels))
     }
 
     fn uv(d: Vec3) -> Vec2 {
@@ -634,11 +639,18 @@ fn light_kind(prim: &Prim, ty: &str, xf: PrimXform, diags: &mut Diagnostics) -> 
                 Some((attr, asset)) if !asset.authored.is_empty() => match EnvMap::load(&asset.resolved) {
                     Ok(map) => Some(Arc::new(map)),
                     Err(e) => {
+                        // USD composes around an unreadable asset: the dome lights with its
+                        // colour alone, as usdview shows it.
                         diags.push(
-                            Diagnostic::error(format!("cannot read dome texture `{}`: {e}", asset.resolved.display()))
-                                .at(value_span(attr), "here"),
+                            Diagnostic::warning(format!(
+                                "cannot read dome texture `{}`: {e}",
+                                asset.resolved.display()
+                            ))
+                            .at(value_span(attr), "here")
+                            .note("the dome lights the scene with its colour and intensity alone")
+                            .kind("unreadable dome texture"),
                         );
-                        return None;
+                        None
                     }
                 },
                 _ => None,

@@ -6,7 +6,7 @@ use super::camera::Camera;
 use super::displace::{DicingOptions, DisplacementStats};
 use super::emitter::Emitters;
 use super::geometry::{self, GeomPrim};
-use super::light::{Light, lights_from_stage};
+use super::light::{Light, LightKind, lights_from_stage};
 use super::xform::world_transforms;
 use crate::abi::MaterialCode;
 use crate::diag::{Diagnostic, Diagnostics};
@@ -43,6 +43,57 @@ pub struct Scene {
     pub displaced: Vec<bool>,
     /// What displacement cost, when anything was displaced.
     pub displacement: Option<DisplacementStats>,
+    /// Whether the stage had no light and [`default_lights`] light it.
+    pub default_lights: bool,
+}
+
+/// Whether a stage without lights gets [`default_lights`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DefaultLights {
+    /// Light a stage that has no light, as usdview does (the default).
+    #[default]
+    WhenUnlit,
+    /// Never add lights (`--no-default-lights`): an unlit stage renders black, with a warning.
+    Never,
+}
+
+/// Irradiance of the default camera light on a surface facing it: a white diffuse surface
+/// facing the camera shows 0.7 from it (E / π), 0.9 with the dome.
+pub const DEFAULT_CAMERA_LIGHT_IRRADIANCE: f32 = 0.7 * std::f32::consts::PI;
+
+/// Radiance of the default dome: enough that no surface is pitch black, little enough that
+/// the camera light models the shapes.
+pub const DEFAULT_DOME_RADIANCE: f32 = 0.2;
+
+/// The lights usdview gives a stage that has none: a light that travels with the camera (a
+/// distant light from just above and left of the eye, so faces turned away from the view
+/// darken and shapes read) and a dim uniform dome, so that nothing is pitch black. The dome
+/// is hidden from camera rays: the background stays `RGB = 0, A = 0`, as an asset's
+/// thumbnail shows it.
+pub fn default_lights(camera: &Camera) -> Vec<Light> {
+    let (forward, up, right) = (camera.forward(), camera.up(), camera.right());
+    let towards_light = (-forward + up * 0.35 - right * 0.25).normalize_or(-forward);
+    vec![
+        Light {
+            path: "(default camera light)".into(),
+            kind: LightKind::Distant {
+                dir: towards_light,
+                cos_max: 1.0,
+                radiance: Vec3::splat(DEFAULT_CAMERA_LIGHT_IRRADIANCE),
+            },
+            visible_to_camera: false,
+        },
+        Light {
+            path: "(default dome)".into(),
+            kind: LightKind::Dome {
+                radiance: Vec3::splat(DEFAULT_DOME_RADIANCE),
+                map: None,
+                to_local: glam::Mat3::IDENTITY,
+                to_world: glam::Mat3::IDENTITY,
+            },
+            visible_to_camera: false,
+        },
+    ]
 }
 
 /// Choices about how a stage is rendered that do not come from the stage alone.
@@ -55,6 +106,8 @@ pub struct SceneOptions {
     pub geometry: geometry::GeometryOptions,
     /// How displaced surfaces are diced (rate, budget, the image size it is measured in).
     pub dicing: DicingOptions,
+    /// Whether a stage without lights is lit by [`default_lights`].
+    pub default_lights: DefaultLights,
 }
 
 /// The camera and resolution a render uses, from the command line and the stage's UsdRender
@@ -194,10 +247,7 @@ impl Scene {
             }
         }
         super::support::report_unsupported(stage, &xforms, diags);
-        let lights = lights_from_stage(stage, &xforms, diags);
-        if lights.is_empty() {
-            diags.push(Diagnostic::warning("the scene has no lights: the image will be black"));
-        }
+        let mut lights = lights_from_stage(stage, &xforms, diags);
         let bounds = geometry.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
         let chosen = match &options.camera {
             Some(path) => stage.find(path).map(|id| (id, stage.prim(id))),
@@ -207,6 +257,16 @@ impl Scene {
         let camera = chosen
             .map(|(id, prim)| Camera::from_prim(prim, xforms[id.0 as usize].world, 1.0, diags))
             .unwrap_or_else(|| Camera::framing(bounds.0, bounds.1, 1.0, stage.up_axis()));
+        let default_lit = lights.is_empty() && options.default_lights == DefaultLights::WhenUnlit;
+        if default_lit {
+            lights = default_lights(&camera);
+            diags.push(Diagnostic::info(
+                "the stage has no lights: it is lit by a light that travels with the camera and a dim dome, \
+                 as usdview shows it (--no-default-lights turns them off)",
+            ));
+        } else if lights.is_empty() {
+            diags.push(Diagnostic::warning("the scene has no lights: the image will be black"));
+        }
         if diags.error_count() > errors {
             return None;
         }
@@ -229,6 +289,7 @@ impl Scene {
         Some(Scene {
             displaced: displaced.prims,
             displacement: displaced.stats,
+            default_lights: default_lit,
             degenerate_triangles: geometry.degenerate,
             accel,
             prims: geometry.prims,

@@ -65,10 +65,27 @@ const UNSUPPORTED_APIS: &[(&str, &str)] = &[
     ("MeshLightAPI", "the mesh renders but does not emit light"),
     ("LightAPI", "the prim renders but does not emit light"),
     ("VolumeLightAPI", "the volume does not emit light"),
-    ("ShapingAPI", "light shaping (cone, focus, IES profile) is not applied"),
-    ("ShadowAPI", "shadow controls (colour, distance, falloff) are not applied"),
     ("SkelBindingAPI", "skinning is not applied"),
 ];
+
+/// UsdLux ShapingAPI and ShadowAPI inputs at their schema defaults, which change nothing: an
+/// exporter that applies the schemas to every light (most do) authors these, and a warning
+/// for them would be noise. Only a value away from its default is reported.
+fn is_default_shaping_or_shadow(name: &str, value: &Value) -> bool {
+    let number = |default: f64| value.as_f64().is_some_and(|v| v == default);
+    let black = || value.as_vec3().is_some_and(|c| c == [0.0; 3]);
+    match name {
+        "inputs:shaping:focus" | "inputs:shaping:cone:softness" | "inputs:shaping:ies:angleScale" => number(0.0),
+        "inputs:shaping:cone:angle" => value.as_f64().is_some_and(|v| v >= 90.0),
+        "inputs:shaping:focusTint" | "inputs:shadow:color" => black(),
+        "inputs:shaping:ies:file" => value.as_asset().is_some_and(|a| a.authored.is_empty()),
+        "inputs:shaping:ies:normalize" => value.as_bool() == Some(false),
+        "inputs:shadow:enable" => value.as_bool() == Some(true),
+        "inputs:shadow:distance" | "inputs:shadow:falloff" => value.as_f64().is_some_and(|v| v <= 0.0),
+        "inputs:shadow:falloffGamma" => number(1.0),
+        _ => false,
+    }
+}
 
 /// Light inputs whose non-default values strata ignores, with their defaults.
 const IGNORED_LIGHT_INPUTS: &[(&str, f64, &str)] = &[
@@ -154,10 +171,15 @@ fn light_attributes(prim: &Prim, note: &mut impl FnMut(String, &Prim, Span)) {
         }
     }
     for attr in &prim.attributes {
-        if attr.name.starts_with("inputs:shaping:") && attr.get().is_some() {
-            note("light shaping (`inputs:shaping:*`) is not applied".to_string(), prim, value_span(attr));
-        } else if attr.name.starts_with("inputs:shadow:") && attr.get().is_some() {
-            note("light shadow controls (`inputs:shadow:*`) are not applied".to_string(), prim, value_span(attr));
+        if attr.get().is_none_or(|v| is_default_shaping_or_shadow(&attr.name, v)) {
+            continue;
+        }
+        if attr.name.starts_with("inputs:shaping:") {
+            let message = "light shaping (`inputs:shaping:*` away from its defaults) is not applied";
+            note(message.to_string(), prim, value_span(attr));
+        } else if attr.name.starts_with("inputs:shadow:") {
+            let message = "light shadow controls (`inputs:shadow:*` away from their defaults) are not applied";
+            note(message.to_string(), prim, value_span(attr));
         }
     }
     let ty = prim.type_name.as_deref().unwrap_or("");

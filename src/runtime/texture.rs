@@ -67,13 +67,6 @@ pub fn decode_rgb_exr(bytes: &[u8], max_pixels: u64) -> Result<RgbImage, String>
     Ok((w, h, texels))
 }
 
-/// Reads the first RGB(A) layer of an EXR file: a bounded read ([`input::read_bytes`]), the
-/// header checked against [`input::limits`], then decoded.
-pub fn read_rgb_exr(path: &Path) -> Result<RgbImage, String> {
-    let bytes = input::read_bytes(path).map_err(|e| e.to_string())?;
-    decode_rgb_exr(&bytes, input::limits().max_texture_pixels)
-}
-
 /// How 8-bit and 16-bit texels are turned into linear values (UsdUVTexture's
 /// `sourceColorSpace`). Float images (EXR, HDR) are linear in every mode.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -116,26 +109,54 @@ fn is_exr(bytes: &[u8]) -> bool {
     bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01])
 }
 
-/// The width and height a PNG, JPEG or Radiance HDR header claims, read without decoding
-/// (the `image` crate reads only the header for this).
-pub fn image_dimensions(bytes: &[u8]) -> Result<(u32, u32), String> {
-    let reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| e.to_string())?;
-    use image::ImageFormat::{Hdr, Jpeg, Png};
-    if !matches!(reader.format(), Some(Png | Jpeg | Hdr)) {
-        return Err("not a supported image format (expected OpenEXR, PNG, JPEG or Radiance HDR)".into());
+/// The image formats textures and dome maps may use besides OpenEXR, as the `image` crate
+/// names them: what production assets carry (PNG, JPEG, HDR; TGA and BMP from game exporters;
+/// TIFF from DCCs and scanners).
+const IMAGE_FORMATS: &[image::ImageFormat] = {
+    use image::ImageFormat::{Bmp, Hdr, Jpeg, Png, Tga, Tiff};
+    &[Png, Jpeg, Hdr, Tga, Bmp, Tiff]
+};
+
+/// A reader for `bytes`, its format told by content, else (TGA has no signature) by the
+/// extension of `name`; an error when it is none of [`IMAGE_FORMATS`].
+fn image_reader<'a>(bytes: &'a [u8], name: Option<&Path>) -> Result<image::ImageReader<Cursor<&'a [u8]>>, String> {
+    let mut reader = image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| e.to_string())?;
+    if reader.format().is_none()
+        && let Some(format) = name.and_then(|n| image::ImageFormat::from_path(n).ok())
+    {
+        reader.set_format(format);
     }
-    reader.into_dimensions().map_err(|e| e.to_string())
+    match reader.format() {
+        Some(format) if IMAGE_FORMATS.contains(&format) => Ok(reader),
+        _ => Err("not a supported image format (expected OpenEXR, PNG, JPEG, Radiance HDR, TGA, BMP or TIFF)".into()),
+    }
 }
 
-/// Decodes an image held in memory (OpenEXR, PNG, JPEG or Radiance HDR, told apart by their
+/// The width and height an image header claims, read without decoding (the `image` crate
+/// reads only the header for this). `name` tells formats without a signature (TGA).
+pub fn image_dimensions(bytes: &[u8], name: Option<&Path>) -> Result<(u32, u32), String> {
+    image_reader(bytes, name)?.into_dimensions().map_err(|e| e.to_string())
+}
+
+/// Decodes an image held in memory (OpenEXR or one of [`IMAGE_FORMATS`], told apart by their
 /// first bytes) into linear RGBA, after checking the header's size against `max_pixels`.
 /// Non-finite texels become 0.
 pub fn decode_texture(bytes: &[u8], space: ColorSpace, max_pixels: u64) -> Result<Texture, String> {
+    decode_texture_named(bytes, None, space, max_pixels)
+}
+
+/// [`decode_texture`] for the file `name`, whose extension tells formats without a signature.
+pub fn decode_texture_named(
+    bytes: &[u8],
+    name: Option<&Path>,
+    space: ColorSpace,
+    max_pixels: u64,
+) -> Result<Texture, String> {
     let (width, height, mut texels) = if is_exr(bytes) {
         let (w, h, rgb) = decode_rgb_exr(bytes, max_pixels)?;
         (w, h, rgb.into_iter().map(|[r, g, b]| [r, g, b, 1.0]).collect::<Vec<_>>())
     } else {
-        let (w, h) = image_dimensions(bytes)?;
+        let (w, h) = image_dimensions(bytes, name)?;
         let pixels = u64::from(w) * u64::from(h);
         if pixels > max_pixels {
             return Err(format!(
@@ -146,8 +167,7 @@ pub fn decode_texture(bytes: &[u8], space: ColorSpace, max_pixels: u64) -> Resul
         if pixels == 0 {
             return Err("the image is empty".into());
         }
-        let mut reader =
-            image::ImageReader::new(Cursor::new(bytes)).with_guessed_format().map_err(|e| e.to_string())?;
+        let mut reader = image_reader(bytes, name)?;
         // A second guard inside the decoder: nothing it allocates may exceed RGBA f32 pixels.
         let mut limits = image::Limits::default();
         limits.max_alloc = Some(max_pixels.saturating_mul(16).max(1 << 20));
@@ -202,7 +222,7 @@ pub fn register_file_as(path: &Path, space: ColorSpace) -> Result<i32, String> {
     }
     let texture = input::read_bytes(&canonical)
         .map_err(|e| e.to_string())
-        .and_then(|bytes| decode_texture(&bytes, space, input::limits().max_texture_pixels))
+        .and_then(|bytes| decode_texture_named(&bytes, Some(path), space, input::limits().max_texture_pixels))
         .map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
     register(key, texture)
 }
