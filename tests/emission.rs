@@ -20,6 +20,10 @@ use strata::abi::MaterialCode;
 use strata::backend::BackendKind;
 use strata::render::{Image, LayerMode, Scene};
 
+/// A light that emits nothing: every scene here has a light, so none gets the default lights
+/// that light a stage without any (emissive surfaces are not UsdLux lights, as in Hydra).
+const OFF: &str = "def DistantLight \"Off\" {\n    float inputs:intensity = 0\n}\n";
+
 /// A fresh directory for this test's files.
 fn dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("strata-emission-{name}-{}", std::process::id()));
@@ -100,7 +104,7 @@ fn mean_se(values: &[f64]) -> (f64, f64) {
 /// A floor of albedo 0.5 at z = 0, seen from z = 5, lit by `light` (USDA prims).
 fn floor_scene(light: &str) -> String {
     format!(
-        "#usda 1.0\n(\n    upAxis = \"Z\"\n)\n{camera}def Mesh \"Floor\" {{\n    {floor}\n    \
+        "#usda 1.0\n(\n    upAxis = \"Z\"\n)\n{OFF}{camera}def Mesh \"Floor\" {{\n    {floor}\n    \
          rel material:binding = </Looks/Floor>\n}}\n{light}\ndef Scope \"Looks\" {{\n{floor_look}{glow}}}\n",
         camera = camera(5.0),
         floor = quad(Vec3::ZERO, 6.0, Vec3::Z),
@@ -187,7 +191,7 @@ fn inside_a_closed_emissive_box_radiance_is_le_over_one_minus_albedo() {
         );
     }
     let scene = format!(
-        "#usda 1.0\n(\n    upAxis = \"Z\"\n)\n{camera}{walls}def Scope \"Looks\" {{\n    def Material \"Wall\" {{\n        \
+        "#usda 1.0\n(\n    upAxis = \"Z\"\n)\n{OFF}{camera}{walls}def Scope \"Looks\" {{\n    def Material \"Wall\" {{\n        \
          def Shader \"S\" {{\n            uniform token info:implementationSource = \"sourceAsset\"\n            \
          uniform asset info:strata:sourceAsset = @glow.ash@\n            \
          uniform token info:strata:sourceAsset:subIdentifier = \"glow\"\n            \
@@ -229,7 +233,7 @@ fn layered_quads(name: &str, slots: &[(&str, &str)], ash: &str, size: usize) -> 
         );
     }
     let scene = format!(
-        "#usda 1.0\n(\n    upAxis = \"Z\"\n)\n{camera}def Mesh \"Front\" {{\n    {front}\n{bindings}}}\n\
+        "#usda 1.0\n(\n    upAxis = \"Z\"\n)\n{OFF}{camera}def Mesh \"Front\" {{\n    {front}\n{bindings}}}\n\
          def Scope \"Looks\" {{\n{looks}}}\n",
         camera = camera(5.0),
         front = quad(Vec3::ZERO, 2.0, Vec3::Z),
@@ -271,7 +275,7 @@ fn a_glowing_layer_under_half_dirt_emits_half_its_radiance() {
 fn the_camera_sees_the_authored_emissive_color_from_the_front_only() {
     let size = 20;
     let text = format!(
-        "#usda 1.0\n(\n    upAxis = \"Z\"\n)\n{camera}def Mesh \"Front\" {{\n    {front}\n    \
+        "#usda 1.0\n(\n    upAxis = \"Z\"\n)\n{OFF}{camera}def Mesh \"Front\" {{\n    {front}\n    \
          rel material:binding = </Looks/Screen>\n}}\ndef Mesh \"Back\" {{\n    {back}\n    \
          rel material:binding = </Looks/Screen>\n}}\ndef Scope \"Looks\" {{\n{look}}}\n",
         camera = camera(5.0),
