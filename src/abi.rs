@@ -124,6 +124,9 @@ pub struct LayerInfo {
     pub has_normal: bool,
     /// The layer's mask when it is known at compile time (clamped; absent mask: 1).
     pub constant_mask: Option<f32>,
+    /// Whether the layer may emit light (it has an emission product that is not constant
+    /// black): the renderer calls [`MaterialCode::emission`] only for such layers.
+    pub has_emission: bool,
 }
 
 /// A custom channel of a material: its name, kind and offset in the channel output array.
@@ -173,6 +176,9 @@ pub trait MaterialCode: Send + Sync {
     fn displacement(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError>;
     /// Writes one layer's shading normal (`g.n` without a normal product).
     fn normal(&self, g: &Globals, layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError>;
+    /// Writes one layer's emitted radiance (unclamped, as the shader computed it; black without
+    /// an emission product). The renderer asks only layers with [`LayerInfo::has_emission`].
+    fn emission(&self, g: &Globals, layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError>;
     /// Writes one layer's custom channels at their offsets (0 for channels the layer lacks).
     /// `out.len()` is `info().channel_floats`.
     fn channels(&self, g: &Globals, layer: usize, out: &mut [f32]) -> Result<(), ShaderError>;

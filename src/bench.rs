@@ -88,6 +88,7 @@ impl Default for HandMaterial {
             displacement_bound: None,
             has_normal: false,
             constant_mask,
+            has_emission: false,
         };
         HandMaterial {
             info: MaterialInfo {
@@ -181,6 +182,11 @@ impl MaterialCode for HandMaterial {
 
     fn normal(&self, g: &Globals, _layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError> {
         *out = g.n;
+        Ok(())
+    }
+
+    fn emission(&self, _g: &Globals, _layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError> {
+        *out = [0.0; 3];
         Ok(())
     }
 
@@ -314,6 +320,11 @@ impl MaterialCode for HandArithmetic {
 
     fn normal(&self, g: &Globals, _layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError> {
         *out = g.n;
+        Ok(())
+    }
+
+    fn emission(&self, _g: &Globals, _layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError> {
+        *out = [0.0; 3];
         Ok(())
     }
 

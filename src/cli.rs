@@ -710,6 +710,7 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
                 EntryKind::Displacement => ("displacement", "float *out /* 1 */"),
                 EntryKind::Normal(_) => ("normal", "float out[3]"),
                 EntryKind::Channels(_) => ("channels", "float *out"),
+                EntryKind::Emission(_) => ("emission", "float out[3]"),
             };
             if let EntryKind::Channels(_) = f.kind {
                 let names: Vec<String> =

@@ -226,6 +226,7 @@ mod tests {
             displacement_bound: None,
             has_normal: false,
             constant_mask,
+            has_emission: false,
         }
     }
 

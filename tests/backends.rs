@@ -72,6 +72,9 @@ fn outputs(code: &dyn MaterialCode, g: &Globals) -> Vec<u32> {
         let mut channels = vec![0.0f32; info.channel_floats];
         out.push(status(code.channels(g, layer, &mut channels)));
         out.extend(channels.iter().map(|p| p.to_bits()));
+        let mut emission = [0.0f32; 3];
+        out.push(status(code.emission(g, layer, &mut emission)));
+        out.extend(emission.iter().map(|p| p.to_bits()));
     }
     out
 }
@@ -163,6 +166,10 @@ fn every_builtin_node_agrees() {
         let args: Vec<String> =
             func.inputs().filter_map(|(k, p)| source_for(p.ty, k).map(|s| format!("{}: {s}", p.name))).collect();
         let mut body = format!("    node s = src();\n    node n = {}({});\n", func.name, args.join(", "));
+        // The first colour output also drives the emission entry.
+        if let Some((_, p)) = func.outputs().find(|(_, p)| p.ty == Type::COLOR) {
+            body += &format!("    emission = n.{};\n", p.name);
+        }
         for (_, p) in func.outputs() {
             body += &match p.ty {
                 t if t == Type::CLOSURE => format!("    surface = n.{};\n", p.name),

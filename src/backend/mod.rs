@@ -62,6 +62,7 @@ pub struct Entries<E> {
     surface: Vec<Option<E>>,
     normal: Vec<Option<E>>,
     channels: Vec<Option<E>>,
+    emission: Vec<Option<E>>,
 }
 
 impl<E: Copy> Entries<E> {
@@ -74,6 +75,7 @@ impl<E: Copy> Entries<E> {
             surface: vec![None; n],
             normal: vec![None; n],
             channels: vec![None; n],
+            emission: vec![None; n],
         };
         for (i, f) in module.functions.iter().enumerate() {
             let h = Some(handle(i));
@@ -83,6 +85,7 @@ impl<E: Copy> Entries<E> {
                 EntryKind::Surface(l) => e.surface[l] = h,
                 EntryKind::Normal(l) => e.normal[l] = h,
                 EntryKind::Channels(l) => e.channels[l] = h,
+                EntryKind::Emission(l) => e.emission[l] = h,
             }
         }
         e
@@ -164,6 +167,16 @@ impl<R: Runner> MaterialCode for Material<R> {
             Some(e) => ShaderError::check(self.runner.run(e, g, words(out))),
             None => {
                 *out = g.n;
+                Ok(())
+            }
+        }
+    }
+
+    fn emission(&self, g: &Globals, layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError> {
+        match self.entries.emission.get(layer).copied().flatten() {
+            Some(e) => ShaderError::check(self.runner.run(e, g, words(out))),
+            None => {
+                *out = [0.0; 3];
                 Ok(())
             }
         }

@@ -108,9 +108,6 @@ pub fn instantiate(
                 let Some((value, span)) = &value_attr.value else { continue };
                 match node_value(value, &value_attr.type_name, ty) {
                     Ok(v) => {
-                        if name == "emissiveColor" && v != Value::Triple([0.0; 3]) {
-                            builder.warn_emission(surface, *span);
-                        }
                         values.push((index, v));
                         set.push(name.to_string());
                     }
@@ -131,9 +128,6 @@ pub fn instantiate(
                         .at(attr.span, "connected here"),
                     );
                     continue;
-                }
-                if name == "emissiveColor" {
-                    builder.warn_emission(surface, attr.span);
                 }
                 driven.push((index, source));
                 set.push(name.to_string());
@@ -163,6 +157,7 @@ pub fn instantiate(
     let keep = |p: Product| match p {
         Product::Normal => set.iter().any(|s| s == "normal_ts"),
         Product::Displacement => set.iter().any(|s| s == "displacement"),
+        Product::Emission => set.iter().any(|s| s == "emissiveColor"),
         _ => true,
     };
     graph.products.retain(|p| keep(p.product));
@@ -226,17 +221,6 @@ struct Builder<'a, 's> {
 }
 
 impl<'s> Builder<'_, 's> {
-    fn warn_emission(&mut self, surface: &Prim, span: Span) {
-        self.diags.push(
-            Diagnostic::warning(format!(
-                "`{}`: strata surfaces do not emit light; emissiveColor is ignored",
-                surface.path
-            ))
-            .at(span, "emission set here")
-            .note("use a UsdLux light (e.g. a RectLight or SphereLight) for emitters"),
-        );
-    }
-
     /// The source for output `output` of shader `prim`, and its type.
     fn output(&mut self, prim: &'s Prim, output: &Attribute, at: Span) -> Option<(Source, Type)> {
         let name = output.name.strip_prefix("outputs:").unwrap_or(&output.name);
@@ -636,8 +620,28 @@ mod tests {
         // Clearcoat 1 moves the coat roughness to clearcoatRoughness.
         let (c, _) = closure_of("        float inputs:clearcoat = 1\n        float inputs:clearcoatRoughness = 0.1");
         assert!((c.params[6] - 0.1).abs() < 1e-6, "{c:?}");
-        // Emission is reported, never silently dropped.
-        let (_, rendered) = closure_of("        color3f inputs:emissiveColor = (1, 1, 1)");
-        assert!(rendered.contains("strata surfaces do not emit light; emissiveColor is ignored"), "{rendered}");
+    }
+
+    #[test]
+    fn emissive_color_drives_the_emission_product_and_black_costs_nothing() {
+        let g = Globals { n: [0.0, 0.0, 1.0], ng: [0.0, 0.0, 1.0], ..Globals::default() };
+        let (code, rendered) = compiled("        color3f inputs:emissiveColor = (1.5, 0.25, 0)", "");
+        assert!(!rendered.contains("emissiveColor"), "emission is read, not warned about: {rendered}");
+        assert!(code.info().layers[0].has_emission);
+        let mut e = [0.0; 3];
+        code.emission(&g, 0, &mut e).unwrap();
+        assert_eq!(e, [1.5, 0.25, 0.0]);
+        // Black, authored or not, leaves no emission entry: the integrator never asks.
+        for inputs in ["", "        color3f inputs:emissiveColor = (0, 0, 0)"] {
+            assert!(!compiled(inputs, "").0.info().layers[0].has_emission, "{inputs:?}");
+        }
+        // A texture drives it through the network like any input.
+        let texture = "        color3f inputs:emissiveColor.connect = </M/T.outputs:rgb>";
+        let shaders = "    def Shader \"T\" {\n        uniform token info:id = \"UsdUVTexture\"\n        \
+                       float4 inputs:fallback = (0.5, 0.75, 1, 1)\n        float3 outputs:rgb\n    }";
+        let (code, rendered) = compiled(texture, shaders);
+        assert!(code.info().layers[0].has_emission, "{rendered}");
+        code.emission(&g, 0, &mut e).unwrap();
+        assert_eq!(e, [0.5, 0.75, 1.0], "{rendered}");
     }
 }

@@ -366,11 +366,14 @@ pub enum Product {
     Normal,
     /// Opacity in [0, 1].
     Mask,
+    /// Emitted radiance (a colour), one-sided, where the layer is picked (DESIGN.md rule 5).
+    Emission,
 }
 
 impl Product {
     /// All products in canonical order.
-    pub const ALL: [Product; 4] = [Product::Surface, Product::Displacement, Product::Normal, Product::Mask];
+    pub const ALL: [Product; 5] =
+        [Product::Surface, Product::Displacement, Product::Normal, Product::Mask, Product::Emission];
 
     /// The keyword.
     pub fn name(self) -> &'static str {
@@ -379,6 +382,7 @@ impl Product {
             Product::Displacement => "displacement",
             Product::Normal => "normal",
             Product::Mask => "mask",
+            Product::Emission => "emission",
         }
     }
 

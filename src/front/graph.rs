@@ -476,6 +476,7 @@ pub fn resolve_graph(
                     Product::Surface => Type::CLOSURE,
                     Product::Displacement | Product::Mask => Type::FLOAT,
                     Product::Normal => Type::NORMAL,
+                    Product::Emission => Type::COLOR,
                 };
                 if !ty.converts_to(expected) {
                     diags.push(
@@ -537,6 +538,19 @@ pub fn resolve_graph(
         graph.channels.push((index, kind, name));
     }
 
+    // Rule 5: emission shows where its layer is picked, and a layer without a surface never is.
+    if let Some(emission) = graph.products.iter().find(|b| b.product == Product::Emission)
+        && !graph.products.iter().any(|b| b.product == Product::Surface)
+    {
+        diags.push(
+            Diagnostic::warning(format!(
+                "substance `{}` emits but has no `surface`: its emission is never seen",
+                graph.name
+            ))
+            .at(emission.span, "emission here")
+            .note("a layer without a surface takes no part in the layer pick (DESIGN.md rule 5)"),
+        );
+    }
     check_acyclic(&graph, diags);
     graph
 }

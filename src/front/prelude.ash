@@ -199,10 +199,15 @@ shader UsdPreviewSurface_normal(color normal_ts = color(0.0, 0.0, 1.0), output n
     out = length(n) > 1e-8 ? normalize(n) : N;
 }
 
+// UsdPreviewSurface's `emissiveColor`: emitted radiance, as the spec's "emissive component".
+shader UsdPreviewSurface_emission(color emissiveColor = color(0.0, 0.0, 0.0), output color out) {
+    out = emissiveColor;
+}
+
 // The built-in UsdPreviewSurface substance, with the spec's inputs and defaults (`normal` is
-// `normal_ts`: `normal` is a type name here). emissiveColor and occlusion are accepted and
-// unused: strata surfaces do not emit (composition warns when emission is authored), and
-// occlusion is a real-time approximation a path tracer computes. `displacement` is a bump
+// `normal_ts`: `normal` is a type name here). emissiveColor drives the `emission` product
+// (radiance from the front face). occlusion is accepted and unused: it is a real-time
+// approximation a path tracer computes. `displacement` is a bump
 // (the shading normal moves, the surface does not: preview assets author it for real-time
 // viewers, without the bound dicing needs). A composed instance drops the normal and
 // displacement products when nothing sets them.
@@ -227,10 +232,12 @@ substance UsdPreviewSurface {
     node presence = UsdPreviewSurface_opacity(opacity: opacity, opacityThreshold: opacityThreshold);
     node normals = UsdPreviewSurface_normal(normal_ts: normal_ts);
     node height = bump(height: displacement, scale: 1.0, mode: "add");
+    node glow = UsdPreviewSurface_emission(emissiveColor: emissiveColor);
     surface = bsdf.bsdf;
     mask = presence.out;
     normal = normals.out;
     displacement = height.out;
+    emission = glow.out;
 }
 
 // Wrap tokens to the runtime's codes (strata_rt::texture::WRAP_*); `useMetadata` (and anything

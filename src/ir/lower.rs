@@ -132,6 +132,14 @@ fn lower_here(lib: &Library, wired: &WiredMaterial, options: LowerOptions, diags
         }
     }
     for (l, layer) in wired.layers.iter().enumerate() {
+        if let Some(emission) = &layer.emission {
+            functions.push(cx.entry(EntryKind::Emission(l), 3, |f| {
+                let e = f.operand(emission, Type::COLOR);
+                f.out_words(0, &e.scalars());
+            }));
+        }
+    }
+    for (l, layer) in wired.layers.iter().enumerate() {
         if layer.channels.is_empty() {
             continue;
         }

@@ -209,6 +209,8 @@ pub enum EntryKind {
     Normal(usize),
     /// `MaterialInfo::channel_floats` f32: one layer's custom channels.
     Channels(usize),
+    /// Three f32: one layer's emitted radiance.
+    Emission(usize),
 }
 
 impl EntryKind {
@@ -220,6 +222,7 @@ impl EntryKind {
             EntryKind::Displacement => "displacement".into(),
             EntryKind::Normal(l) => format!("normal_{l}"),
             EntryKind::Channels(l) => format!("channels_{l}"),
+            EntryKind::Emission(l) => format!("emission_{l}"),
         }
     }
 }

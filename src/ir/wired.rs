@@ -87,6 +87,8 @@ pub struct Layer {
     pub normal: Option<Operand>,
     /// Opacity (absent: 1).
     pub mask: Option<Operand>,
+    /// Emitted radiance; `None` when absent or constant black (the common case costs nothing).
+    pub emission: Option<Operand>,
     /// Custom channels of the layer (its substance's and its overrides').
     pub channels: Vec<Channel>,
     /// Why the layer's shading was removed, if it was (`hidden under slot 050`).
@@ -103,6 +105,7 @@ impl Layer {
             displacement_bound: self.displacement.as_ref().and(self.displacement_bound),
             has_normal: self.normal.is_some(),
             constant_mask: self.constant_mask(),
+            has_emission: self.emission.is_some(),
         }
     }
 
@@ -190,12 +193,14 @@ fn build_here(
     let nodes = b.nodes;
     let mut wired = WiredMaterial { layers, nodes: Vec::new(), channels: Vec::new(), stats: Stats::default() };
     let mut live: Vec<Option<Node>> = nodes.into_iter().map(Some).collect();
+    drop_black_emission(&mut wired.layers);
     wired.stats.nodes.push(("wired", live.len()));
     // Every declared channel is an image channel, even where pruning removes the only layer
     // that writes it (it then reads 0 everywhere, as it would unoptimised).
     wired.channels = collect_channels(&wired.layers, b.diags);
     if options.optimize {
         fold_constants(lib, &mut live, &mut wired.layers);
+        drop_black_emission(&mut wired.layers);
         wired.stats.nodes.push(("fold", count_used(&live, &wired.layers)));
         wired.stats.layers_pruned = prune_hidden_layers(&mut wired.layers);
     }
@@ -351,6 +356,7 @@ impl Builder<'_> {
             displacement_bound,
             normal: product(Product::Normal).map(|b| operand(&instance, &b.source)),
             mask: product(Product::Mask).map(|b| operand(&instance, &b.source)),
+            emission: product(Product::Emission).map(|b| operand(&instance, &b.source)),
             channels: sub_channels,
             pruned: None,
         }
@@ -382,7 +388,7 @@ fn operand(instance: &Instance, source: &Source) -> Operand {
 /// Calls `f` on every root operand of the layers.
 fn for_each_root(layers: &mut [Layer], mut f: impl FnMut(&mut Operand)) {
     for layer in layers {
-        for op in [&mut layer.surface, &mut layer.normal, &mut layer.mask].into_iter().flatten() {
+        for op in [&mut layer.surface, &mut layer.normal, &mut layer.mask, &mut layer.emission].into_iter().flatten() {
             f(op);
         }
         if let Some((op, _)) = &mut layer.displacement {
@@ -490,6 +496,24 @@ fn count_used(nodes: &[Option<Node>], layers: &[Layer]) -> usize {
     eliminate_dead_nodes(live, &mut layers).len()
 }
 
+/// Removes emission that is a constant no brighter than black (the renderer clamps emission
+/// at 0): such a layer has no emission entry and the integrator never asks it, so a material
+/// that does not glow costs nothing. Literal black goes in every mode, folded black only
+/// after folding; both render alike.
+fn drop_black_emission(layers: &mut [Layer]) {
+    for layer in layers {
+        if let Some(Operand::Const(v, t)) = &layer.emission {
+            let black = match v.convert(*t, Type::COLOR) {
+                Value::Triple(c) => c.iter().all(|&x| x <= 0.0),
+                _ => false,
+            };
+            if black {
+                layer.emission = None;
+            }
+        }
+    }
+}
+
 /// Removes what no rule can observe ([`layering::liveness`]): the surface, normal and channels
 /// of layers that can never be picked (no surface, a constant zero mask, hidden under a
 /// constant-opaque surface), displacement replaced by a constant-opaque `mix` layer above or
@@ -513,6 +537,7 @@ fn prune_hidden_layers(layers: &mut [Layer]) -> usize {
             pruned += 1;
             layer.surface = None;
             layer.normal = None;
+            layer.emission = None;
             layer.channels.clear();
             layer.pruned = Some(why);
         }
@@ -646,6 +671,7 @@ impl WiredMaterial {
                 (&layer.surface, Type::CLOSURE, "surface"),
                 (&layer.normal, Type::NORMAL, "normal"),
                 (&layer.mask, Type::FLOAT, "mask"),
+                (&layer.emission, Type::COLOR, "emission"),
             ];
             for (op, ty, what) in roots {
                 if let Some(op) = op {
@@ -720,6 +746,9 @@ impl WiredMaterial {
             }
             if let Some(m) = &layer.mask {
                 let _ = writeln!(out, "  mask = {}", op(m));
+            }
+            if let Some(e) = &layer.emission {
+                let _ = writeln!(out, "  emission = {}", op(e));
             }
             for c in &layer.channels {
                 let _ = writeln!(out, "  channel {} = {}", c.name, op(&c.value));

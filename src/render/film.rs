@@ -200,14 +200,15 @@ impl RenderStats {
         let per = |n: u64| n as f64 / self.samples.max(1) as f64;
         format!(
             "evaluated per camera sample: masks {:.3} (+ {:.3} on shadow rays), surfaces {:.3}, \
-             displacement {:.3} (+ {:.3} weighting masks), normal maps {:.3}, AOV writes {:.3}",
+             displacement {:.3} (+ {:.3} weighting masks), normal maps {:.3}, AOV writes {:.3}, emission {:.3}",
             per(e.masks),
             per(e.shadow_masks),
             per(e.surfaces),
             per(e.displacements),
             per(e.displacement_masks),
             per(e.normals),
-            per(e.channels)
+            per(e.channels),
+            per(e.emissions)
         )
     }
 
@@ -402,8 +403,9 @@ pub fn render(
         channel_map: &channel_map,
         params: PathParams { max_depth: settings.max_depth, rr_depth: 3, mode: settings.mode },
         all_opaque: materials.iter().all(|m| super::integrator::is_opaque(*m)),
-        light_selection: super::light::LightSelection::new(
+        light_selection: super::light::LightSelection::with_emitters(
             &scene.lights,
+            &scene.emitters.list.iter().map(|e| e.power).collect::<Vec<_>>(),
             (scene.bounds.1 - scene.bounds.0).length() / 2.0,
         ),
     };

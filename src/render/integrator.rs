@@ -11,9 +11,10 @@
 //! against. Shadow rays account for transparency by its expected value (the product of
 //! `w_T` at the surfaces they cross), which matches the stochastic pass-through on average.
 
-use super::accel::{Accel, Hit, offset_ray_origin};
+use super::accel::{Accel, Hit, WORLD, offset_ray_origin};
 use super::bsdf::{Bsdf, Frame};
-use super::light::{Light, LightSelection};
+use super::emitter::Emitter;
+use super::light::{Light, LightSample, LightSelection};
 use super::sampling::{Rng, power_heuristic};
 use super::scene::Scene;
 use crate::abi::{Closure, ClosureKind, Globals, MaterialCode, ShaderError};
@@ -156,6 +157,8 @@ pub struct EvalCounts {
     pub normals: u64,
     /// Custom-channel (AOV) entry calls.
     pub channels: u64,
+    /// Emission entry calls (at hits on emitting layers, and at emitter light samples).
+    pub emissions: u64,
 }
 
 impl EvalCounts {
@@ -168,6 +171,7 @@ impl EvalCounts {
         self.displacement_masks += other.displacement_masks;
         self.normals += other.normals;
         self.channels += other.channels;
+        self.emissions += other.emissions;
     }
 }
 
@@ -182,6 +186,9 @@ pub struct Scratch {
     material_channels: Vec<f32>,
     /// The sample's custom channels in the image's global layout.
     pub channels: Vec<f32>,
+    /// Radiance the last [`Context::shade`] found emitted towards the ray (zero unless the
+    /// picked layer emits and the ray hit the front).
+    emitted: Vec3,
     /// Where the last shader ran: read after a sample fails.
     pub site: FaultSite,
     /// Entry points called so far on this thread (the film resets and collects it per row).
@@ -202,6 +209,7 @@ impl Scratch {
             lobes: Vec::with_capacity(layers),
             material_channels: vec![0.0; floats],
             channels: vec![0.0; global_channels],
+            emitted: Vec3::ZERO,
             site: FaultSite::default(),
             counts: EvalCounts::default(),
         }
@@ -319,10 +327,14 @@ impl Context<'_> {
         s.site = FaultSite { prim: sp.prim, layer: None };
         let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
         let mut g = self.globals(sp, facing, d);
+        s.emitted = Vec3::ZERO;
         if nl == 0 {
             s.lobes.clear();
             return Ok(None);
         }
+        // Emission is one-sided: only a ray arriving at the front (against the outward
+        // winding normal) sees it.
+        let front = sp.ng.dot(d) < 0.0;
         // Rule 5 (`layering`). Stochastic: walk down from the top, evaluating masks only until
         // a layer is picked. Weighted: every mask, every layer.
         let picked = match self.params.mode {
@@ -338,7 +350,13 @@ impl Context<'_> {
                     }
                 };
                 match layering::pick(&info.layers, u, mask_of).map_err(Invalid::Shader)? {
-                    Some(i) => Some(i),
+                    Some(i) => {
+                        if front && info.layers[i].has_emission {
+                            s.site.layer = Some(i as u32);
+                            s.emitted = layer_emission(material, &g, i, &mut s.counts)?;
+                        }
+                        Some(i)
+                    }
                     None => {
                         s.lobes.clear();
                         return Ok(None);
@@ -352,6 +370,14 @@ impl Context<'_> {
                 if u >= 1.0 - transparency || transparency >= 1.0 {
                     s.lobes.clear();
                     return Ok(None);
+                }
+                if front {
+                    // The emission of every layer, weighted as the lobes are below.
+                    let opaque = 1.0 - transparency;
+                    for i in (0..nl).filter(|&i| info.layers[i].has_emission && s.weights[i] > 0.0) {
+                        s.site.layer = Some(i as u32);
+                        s.emitted += layer_emission(material, &g, i, &mut s.counts)? * (s.weights[i] / opaque);
+                    }
                 }
                 None
             }
@@ -556,9 +582,17 @@ impl Context<'_> {
         let choice = self.light_selection.sample(rng.uniform());
         let u = rng.uniform2();
         let Some((pick, select_pdf)) = choice else { return Ok(Vec3::ZERO) };
-        let light = &self.scene.lights[pick];
-        let n = facing(ng, wo);
-        let Some(ls) = light.sample_li(p, n, u) else { return Ok(Vec3::ZERO) };
+        let ls = match self.scene.lights.get(pick) {
+            Some(light) => light.sample_li(p, facing(ng, wo), u),
+            None => {
+                let Some(emitter) = self.scene.emitters.list.get(pick - self.scene.lights.len()) else {
+                    return Ok(Vec3::ZERO);
+                };
+                let (u_triangle, u_pick) = (rng.uniform(), rng.uniform());
+                self.sample_emitter(emitter, p, u_triangle, u, u_pick, s)?
+            }
+        };
+        let Some(ls) = ls else { return Ok(Vec3::ZERO) };
         let (f, bsdf_pdf) = Self::eval_lobes(&s.lobes, wo, ls.wi);
         if f == Vec3::ZERO || ls.li == Vec3::ZERO {
             return Ok(Vec3::ZERO);
@@ -573,6 +607,83 @@ impl Context<'_> {
         let light_pdf = ls.pdf * select_pdf;
         let weight = if ls.delta { 1.0 } else { power_heuristic(light_pdf, bsdf_pdf) };
         Ok(f * ls.li * (tr * weight / light_pdf))
+    }
+
+    /// Samples a point on `emitter` as seen from `p` (`u_triangle` chooses the triangle, `u`
+    /// the point, `u_pick` the layer there): the incident radiance, its direction and
+    /// solid-angle density (the emitter's choice within the light selection excluded).
+    fn sample_emitter(
+        &self,
+        emitter: &Emitter,
+        p: Vec3,
+        u_triangle: f32,
+        u: Vec2,
+        u_pick: f32,
+        s: &mut Scratch,
+    ) -> Result<Option<LightSample>, Invalid> {
+        let Some(es) = emitter.sample(u_triangle, u) else { return Ok(None) };
+        let accel = &self.scene.accel;
+        let Some(tri) = accel.world_triangles().get(es.triangle as usize) else { return Ok(None) };
+        let q = tri[0] * (1.0 - es.b1 - es.b2) + tri[1] * es.b1 + tri[2] * es.b2;
+        let to = q - p;
+        let dist2 = to.length_squared();
+        let dist = dist2.sqrt();
+        if !(dist > 0.0 && dist.is_finite()) {
+            return Ok(None);
+        }
+        let wi = to / dist;
+        let hit = Hit { t: dist, index: es.triangle, instance: WORLD, b1: es.b1, b2: es.b2 };
+        let sp = surface_point(accel, self.scene, p, wi, &hit);
+        // One-sided: the point must face `p`.
+        let cos = -sp.ng.dot(wi);
+        if cos <= 0.0 {
+            return Ok(None);
+        }
+        let li = self.emitted_at(&sp, wi, u_pick, s)?;
+        let pdf = es.pdf_area * dist2 / cos;
+        if li == Vec3::ZERO || !(pdf > 0.0 && pdf.is_finite()) {
+            return Ok(None);
+        }
+        Ok(Some(LightSample { wi, li, pdf, dist, delta: false }))
+    }
+
+    /// The radiance emitted towards a ray in direction `d` that hit the front of `sp`, with
+    /// the layer picked by `u` (rule 5; a transparent pick emits nothing), as [`Context::shade`]
+    /// finds it.
+    fn emitted_at(&self, sp: &SurfacePoint, d: Vec3, u: f32, s: &mut Scratch) -> Result<Vec3, Invalid> {
+        let material = self.materials[sp.material];
+        let layers = &material.info().layers;
+        s.site = FaultSite { prim: sp.prim, layer: None };
+        let g = self.globals(sp, sp.ns, d);
+        let counts = &mut s.counts;
+        let mask_of = |i: usize| match layers[i].constant_mask {
+            Some(m) => Ok(m),
+            None => {
+                counts.masks += 1;
+                material.mask(&g, i)
+            }
+        };
+        match layering::pick(layers, u, mask_of).map_err(Invalid::Shader)? {
+            Some(i) if layers[i].has_emission => {
+                s.site.layer = Some(i as u32);
+                layer_emission(material, &g, i, &mut s.counts)
+            }
+            _ => Ok(Vec3::ZERO),
+        }
+    }
+
+    /// The solid-angle density with which [`Context::direct`] at `from` would have sampled
+    /// the point `sp` where the ray in direction `d` made `hit` (0 where the surface is not
+    /// sampled as a light).
+    fn emitter_pdf(&self, from: Vec3, sp: &SurfacePoint, d: Vec3, hit: &Hit) -> f32 {
+        if hit.instance != WORLD {
+            return 0.0;
+        }
+        let Some((k, emitter)) = self.scene.emitters.of_prim(sp.prim) else { return 0.0 };
+        let cos = sp.ng.dot(d).abs();
+        let select = self.light_selection.pmf(self.scene.lights.len() + k);
+        let pdf = select * emitter.pdf_area(hit.index) * (sp.p - from).length_squared() / cos;
+        if pdf.is_finite() { pdf } else { 0.0 }
     }
 
     /// Emission of area lights crossed by the segment `o + t d`, `t < tmax`, MIS-weighted
@@ -641,6 +752,13 @@ impl Context<'_> {
             let sp = surface_point(accel, self.scene, o, d, &hit);
             let u_layer = if bounces == 0 && passes == 0 { u_first_pick } else { rng.uniform() };
             let shaded = self.shade(&sp, d, u_layer, s, first)?;
+            if s.emitted != Vec3::ZERO {
+                let weight = match from.pdf {
+                    None => 1.0,
+                    Some(pdf) => power_heuristic(pdf, self.emitter_pdf(from.p, &sp, d, &hit)),
+                };
+                out.radiance += throughput * s.emitted * weight;
+            }
             let Some((albedo, normal)) = shaded else {
                 // Transparent: continue straight on, not a bounce. Only the ray moves: MIS and
                 // light pdfs stay with `from`, the vertex that chose `d` (DESIGN.md rule 5).
@@ -765,6 +883,23 @@ pub(crate) fn bump(
         return Ok(n);
     }
     Ok(if nb.dot(n) < 0.0 { -nb } else { nb })
+}
+
+/// Layer `layer`'s emitted radiance, clamped at 0 (negative light is no light).
+fn layer_emission(
+    material: &dyn MaterialCode,
+    g: &Globals,
+    layer: usize,
+    counts: &mut EvalCounts,
+) -> Result<Vec3, Invalid> {
+    counts.emissions += 1;
+    let mut out = [0.0f32; 3];
+    material.emission(g, layer, &mut out).map_err(Invalid::Shader)?;
+    let e = Vec3::from_array(out);
+    if !e.is_finite() {
+        return Err(Invalid::NonFiniteClosure);
+    }
+    Ok(e.max(Vec3::ZERO))
 }
 
 /// Layer `layer`'s shading normal: its normal product (rule 6: after bump, which `g.n`

@@ -423,27 +423,34 @@ const UNIFORM_SHARE: f32 = 0.1;
 impl LightSelection {
     /// The selection for `lights` in a scene of bounding radius `scene_radius`.
     pub fn new(lights: &[Light], scene_radius: f32) -> LightSelection {
-        if lights.is_empty() {
+        LightSelection::with_emitters(lights, &[], scene_radius)
+    }
+
+    /// The selection for `lights` followed by emissive surfaces of power `emitters`
+    /// (bounded lights: [`super::emitter::Emitter::power`]); index `lights.len() + k` is
+    /// emitter `k`.
+    pub fn with_emitters(lights: &[Light], emitters: &[f32], scene_radius: f32) -> LightSelection {
+        // (at infinity, power) of every entry.
+        let entries: Vec<(bool, f32)> = lights
+            .iter()
+            .map(|l| (l.is_infinite(), if l.is_infinite() { 0.0 } else { l.power(scene_radius) }))
+            .chain(emitters.iter().map(|&p| (false, p)))
+            .collect();
+        if entries.is_empty() {
             return LightSelection { distribution: None };
         }
-        let infinite = lights.iter().filter(|l| l.is_infinite()).count();
-        let bounded = lights.len() - infinite;
+        let infinite = entries.iter().filter(|(inf, _)| *inf).count();
+        let bounded = entries.len() - infinite;
         let groups = infinite + usize::from(bounded > 0);
-        let bounded_power: f32 = lights
+        let usable = |p: f32| p.is_finite() && p > 0.0;
+        let bounded_power: f32 = entries.iter().filter(|(inf, p)| !inf && usable(*p)).map(|(_, p)| p).sum();
+        let weights: Vec<f32> = entries
             .iter()
-            .filter(|l| !l.is_infinite())
-            .map(|l| l.power(scene_radius))
-            .filter(|p| p.is_finite() && *p > 0.0)
-            .sum();
-        let weights: Vec<f32> = lights
-            .iter()
-            .map(|l| {
-                if l.is_infinite() {
+            .map(|&(inf, power)| {
+                if inf {
                     return 1.0 / groups as f32;
                 }
-                let power = l.power(scene_radius);
-                let by_power =
-                    if bounded_power > 0.0 && power.is_finite() && power > 0.0 { power / bounded_power } else { 0.0 };
+                let by_power = if bounded_power > 0.0 && usable(power) { power / bounded_power } else { 0.0 };
                 let uniform = 1.0 / bounded as f32;
                 let share = if bounded_power > 0.0 {
                     (1.0 - UNIFORM_SHARE) * by_power + UNIFORM_SHARE * uniform

@@ -17,6 +17,7 @@ pub mod camera;
 pub(crate) mod chi2;
 pub mod cryptomatte;
 pub mod displace;
+pub mod emitter;
 pub mod film;
 pub mod frame;
 pub mod geometry;

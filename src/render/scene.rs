@@ -4,6 +4,7 @@
 use super::accel::{Accel, Blas};
 use super::camera::Camera;
 use super::displace::{DicingOptions, DisplacementStats};
+use super::emitter::Emitters;
 use super::geometry::{self, GeomPrim};
 use super::light::{Light, LightKind, lights_from_stage};
 use super::xform::world_transforms;
@@ -23,6 +24,8 @@ pub struct Scene {
     pub prim_material: Vec<usize>,
     /// Visible lights.
     pub lights: Vec<Light>,
+    /// Emissive surfaces sampled as lights (after `lights` in the light selection).
+    pub emitters: Emitters,
     /// The camera (its aspect is set per render from the resolution).
     pub camera: Camera,
     /// The Camera prim it was read from (`None`: a camera framing the scene).
@@ -274,20 +277,25 @@ impl Scene {
         }
         // Displaced surfaces may reach past the undisplaced bounds (the camera stays framed on those).
         let bounds = geometry.bounds().unwrap_or(bounds);
+        let accel = Accel::with_instances(
+            Blas::new(geometry.triangles, geometry.shapes),
+            geometry.prototypes.into_iter().map(|p| Blas::new(p.triangles, p.shapes)).collect(),
+            &geometry.instances,
+            geometry.instance_prims,
+        );
+        let scene_radius = (bounds.1 - bounds.0).length() / 2.0;
+        let light_power: f32 = lights.iter().filter(|l| !l.is_infinite()).map(|l| l.power(scene_radius)).sum();
+        let emitters = Emitters::build(&accel, geometry.prims.len(), &prim_material, materials, light_power);
         Some(Scene {
             displaced: displaced.prims,
             displacement: displaced.stats,
             default_lights: default_lit,
             degenerate_triangles: geometry.degenerate,
-            accel: Accel::with_instances(
-                Blas::new(geometry.triangles, geometry.shapes),
-                geometry.prototypes.into_iter().map(|p| Blas::new(p.triangles, p.shapes)).collect(),
-                &geometry.instances,
-                geometry.instance_prims,
-            ),
+            accel,
             prims: geometry.prims,
             prim_material,
             lights,
+            emitters,
             camera,
             camera_path,
             material_names: Vec::new(),

@@ -17,6 +17,8 @@ pub struct ConstLayer {
     pub displacement: f32,
     /// Normal output (`None`: no normal product).
     pub normal: Option<[f32; 3]>,
+    /// Emitted radiance (`None`: no emission product).
+    pub emission: Option<[f32; 3]>,
 }
 
 impl ConstLayer {
@@ -30,6 +32,7 @@ impl ConstLayer {
             channels: Vec::new(),
             displacement: 0.0,
             normal: None,
+            emission: None,
         }
     }
 }
@@ -69,6 +72,7 @@ impl ConstMaterial {
                     displacement_bound: None,
                     has_normal: l.normal.is_some(),
                     constant_mask: None,
+                    has_emission: l.emission.is_some(),
                 })
                 .collect(),
             channels,
@@ -122,6 +126,12 @@ impl MaterialCode for ConstMaterial {
     fn normal(&self, g: &Globals, layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError> {
         self.check()?;
         *out = self.layers[layer].normal.unwrap_or(g.n);
+        Ok(())
+    }
+
+    fn emission(&self, _g: &Globals, layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError> {
+        self.check()?;
+        *out = self.layers[layer].emission.unwrap_or([0.0; 3]);
         Ok(())
     }
 
