@@ -38,6 +38,7 @@ fn single_layer(lib: &Library, name: &str) -> ComposedMaterial {
             },
             overrides: Vec::new(),
         }],
+        ..Default::default()
     }
 }
 
@@ -81,7 +82,7 @@ const SPECIAL: [f32; 12] =
     [0.0, -0.0, 1.0, -1.0, 0.5, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e-40, -1e-40, 3.0e38, -7.5e37];
 
 /// Deterministic shading points: a grid of ordinary values, then special values per field.
-fn points(count: usize) -> Vec<Globals> {
+fn points(count: usize) -> Vec<Globals<'static>> {
     let mut state = 0x2545_f491_4f6c_dd1du64;
     let mut next = move || {
         state ^= state << 13;
@@ -109,6 +110,7 @@ fn points(count: usize) -> Vec<Globals> {
             dpdv: v3(&mut f),
             u: f(),
             v: f(),
+            primvars: Default::default(),
         });
     }
     pts

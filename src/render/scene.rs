@@ -6,6 +6,7 @@ use super::camera::Camera;
 use super::displace::{DicingOptions, DisplacementStats};
 use super::geometry::{self, GeomPrim};
 use super::light::{Light, lights_from_stage};
+use super::primvars::PrimvarTable;
 use super::xform::world_transforms;
 use crate::abi::MaterialCode;
 use crate::diag::{Diagnostic, Diagnostics};
@@ -40,6 +41,9 @@ pub struct Scene {
     pub displaced: Vec<bool>,
     /// What displacement cost, when anything was displaced.
     pub displacement: Option<DisplacementStats>,
+    /// The primvars the materials read, per triangle and shape that has them (empty when the
+    /// scene was built without its materials: every primvar then reads its fallback).
+    pub primvars: PrimvarTable,
 }
 
 /// Choices about how a stage is rendered that do not come from the stage alone.
@@ -154,7 +158,8 @@ impl Scene {
     }
 
     /// [`Scene::from_stage`] with the camera chosen by `options`. Without the materials,
-    /// nothing is diced: displacement bends shading normals only (see [`Scene::build`]).
+    /// nothing is diced (displacement bends shading normals only) and no primvar is stored
+    /// (see [`Scene::build`]).
     pub fn from_stage_with(
         stage: &Stage,
         material_of_prim: &dyn Fn(&str) -> Option<usize>,
@@ -166,7 +171,7 @@ impl Scene {
 
     /// Builds the render scene with the compiled `materials` (indexed as `material_of_prim`
     /// returns), so that surfaces whose material moves geometry are diced and displaced
-    /// ([`super::displace`]).
+    /// ([`super::displace`]) and the primvars they read are stored ([`super::primvars`]).
     pub fn build(
         stage: &Stage,
         material_of_prim: &dyn Fn(&str) -> Option<usize>,
@@ -176,7 +181,11 @@ impl Scene {
     ) -> Option<Scene> {
         let errors = diags.error_count();
         let xforms = world_transforms(stage, diags);
-        let mut geometry = geometry::build_with_options(stage, &xforms, options.geometry, diags);
+        let mut read: Vec<String> =
+            materials.iter().flat_map(|m| m.info().primvars.iter().map(|p| p.name.clone())).collect();
+        read.sort();
+        read.dedup();
+        let mut geometry = geometry::build_with_primvars(stage, &xforms, options.geometry, &read, diags);
         let mut prim_material = Vec::with_capacity(geometry.prims.len());
         for prim in &geometry.prims {
             match material_of_prim(&prim.path) {
@@ -225,6 +234,7 @@ impl Scene {
                 geometry.instance_prims,
             ),
             prims: geometry.prims,
+            primvars: geometry.primvars,
             prim_material,
             lights,
             camera,

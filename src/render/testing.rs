@@ -73,6 +73,7 @@ impl ConstMaterial {
                 .collect(),
             channels,
             channel_floats: offset,
+            ..MaterialInfo::default()
         };
         ConstMaterial { info, layers, fail: None }
     }
