@@ -646,6 +646,19 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
     let mut functions = Vec::new();
     for (name, module) in &modules {
         header += &format!("\n/* substance {name} */\n");
+        if !module.info.primvars.is_empty() {
+            let read: Vec<String> = module
+                .info
+                .primvars
+                .iter()
+                .map(|p| format!("{} ({} float(s)) flag at {}", p.name, p.width, p.offset))
+                .collect();
+            header += &format!(
+                "/* primvars (g->primvars, {} floats; flag 1 = present, components follow): {} */\n",
+                module.info.primvar_floats,
+                read.join(", ")
+            );
+        }
         if let Some(m) = module.info.layers.first().and_then(|l| l.constant_mask) {
             // A mask known at compile time needs no code: define it in the header.
             header += &format!(
