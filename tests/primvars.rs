@@ -6,7 +6,7 @@
 mod common;
 
 use std::path::Path;
-use strata::abi::{Globals, MaterialCode, PrimvarInfo, PrimvarValues};
+use strata::abi::{Globals, PrimvarInfo, PrimvarValues};
 use strata::backend::BackendKind;
 use strata::diag::{Diagnostics, SourceMap};
 use strata::render::Image;
