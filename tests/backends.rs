@@ -126,6 +126,9 @@ fn assert_same(a: &dyn MaterialCode, b: &dyn MaterialCode, what: &str, count: us
 
 /// A node type that turns the shading globals into inputs of every type, so nothing folds.
 const SOURCES: &str = r#"
+shader spatial_to_color(vector x = vector(0.0, 0.0, 0.0), output color out) {
+    out = color(x);
+}
 shader src(output float x = 0.0, output float y = 0.0, output int i = 0, output color c = 0.0,
            output point p = 0.0, output vector d = 0.0, output normal n = 0.0) {
     x = P[0] * 0.37 + u;
@@ -172,6 +175,11 @@ fn every_builtin_node_agrees() {
                 t if t == Type::COLOR => {
                     format!("    node c_{0} = customChannelColor(name: \"{0}\", value: n.{0});\n", p.name)
                 }
+                // Vector and point outputs (`primvar_vector`) reach a colour channel through a shader.
+                t if t == Type::VECTOR || t == Type::POINT => format!(
+                    "    node v_{0} = spatial_to_color(x: n.{0});\n    node c_{0} = customChannelColor(name: \"{0}\", value: v_{0}.out);\n",
+                    p.name
+                ),
                 _ => format!("    node c_{0} = customChannelFloat(name: \"{0}\", value: n.{0});\n", p.name),
             };
         }
