@@ -11,7 +11,7 @@ use std::fmt;
 /// Inputs of one shading point, in world space. Field order is the C ABI.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Globals {
+pub struct Globals<'a> {
     /// Shading position `P`.
     pub p: [f32; 3],
     /// Shading normal `N` (unit, facing the incoming ray's side as the renderer decides).
@@ -28,6 +28,69 @@ pub struct Globals {
     pub u: f32,
     /// Texture coordinate `v` (t).
     pub v: f32,
+    /// The primvars the material reads, interpolated at this point, laid out as
+    /// [`MaterialInfo::primvars`] says (empty: every primvar reads its fallback).
+    pub primvars: PrimvarValues<'a>,
+}
+
+/// A borrowed `[f32]` in C layout (`const float *values; uint32_t len;`): the primvar values
+/// of one shading point. Compiled code reads word `i` only when `i < len` (0 otherwise), so
+/// any length is safe, the empty default included.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PrimvarValues<'a> {
+    values: *const f32,
+    len: u32,
+    _borrow: std::marker::PhantomData<&'a [f32]>,
+}
+
+// SAFETY: a `PrimvarValues` is a shared borrow of `[f32]` (only ever built from one, read-only),
+// which is `Send` and `Sync`.
+unsafe impl Send for PrimvarValues<'_> {}
+unsafe impl Sync for PrimvarValues<'_> {}
+
+impl Default for PrimvarValues<'_> {
+    fn default() -> Self {
+        PrimvarValues::new(&[])
+    }
+}
+
+impl<'a> PrimvarValues<'a> {
+    /// Borrows `values` (at most `u32::MAX` of them are visible).
+    pub fn new(values: &'a [f32]) -> PrimvarValues<'a> {
+        let len = values.len().min(u32::MAX as usize) as u32;
+        PrimvarValues { values: values.as_ptr(), len, _borrow: std::marker::PhantomData }
+    }
+
+    /// The values.
+    pub fn as_slice(&self) -> &'a [f32] {
+        // SAFETY: built from a `&'a [f32]` of at least `len` elements.
+        unsafe { std::slice::from_raw_parts(self.values, self.len as usize) }
+    }
+
+    /// Word `index`, or 0 past the end: what compiled code reads.
+    #[inline]
+    pub fn get(&self, index: u32) -> f32 {
+        self.as_slice().get(index as usize).copied().unwrap_or(0.0)
+    }
+}
+
+/// Byte offsets of [`Globals::primvars`]' pointer and length, for code generation.
+pub const PRIMVARS_PTR_OFFSET: usize = std::mem::offset_of!(Globals<'static>, primvars);
+/// See [`PRIMVARS_PTR_OFFSET`].
+pub const PRIMVARS_LEN_OFFSET: usize = PRIMVARS_PTR_OFFSET + std::mem::offset_of!(PrimvarValues<'static>, len);
+
+/// A primvar a material reads: the renderer writes, at `offset` of [`Globals::primvars`], 1
+/// when the shaded prim has it (0 when not: the reader's fallback is used), then `width`
+/// components interpolated at the shading point (components the primvar lacks are 0).
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct PrimvarInfo {
+    /// The primvar's name without `primvars:` (`displayColor`, `st`).
+    pub name: String,
+    /// Components read: 1 (float) or 3 (triples).
+    pub width: usize,
+    /// Index of its presence flag; the components follow.
+    pub offset: usize,
 }
 
 /// Which BSDF a [`Closure`] describes.
@@ -156,6 +219,10 @@ pub struct MaterialInfo {
     pub channels: Vec<ChannelInfo>,
     /// Total floats of the `channels` output.
     pub channel_floats: usize,
+    /// The primvars the material reads, in the order they were first read.
+    pub primvars: Vec<PrimvarInfo>,
+    /// Floats of [`Globals::primvars`] the material reads (flags and components).
+    pub primvar_floats: usize,
 }
 
 /// The entry points of one compiled material. The JIT and the interpreter both implement it;

@@ -95,6 +95,7 @@ impl Default for HandMaterial {
                 layers: vec![layer("000", Some(1.0)), layer("010", None), layer("020", None)],
                 channels: Vec::new(),
                 channel_floats: 0,
+                ..MaterialInfo::default()
             },
         }
     }
@@ -355,7 +356,7 @@ impl SplitMix {
 }
 
 /// `n` pseudo-random shading points: `P` in [-2, 2]³, unit `N`, `u, v` in [0, 1].
-pub fn sample_points(n: usize, seed: u64) -> Vec<Globals> {
+pub fn sample_points(n: usize, seed: u64) -> Vec<Globals<'static>> {
     let mut rng = SplitMix(seed);
     (0..n)
         .map(|_| {
@@ -378,6 +379,7 @@ pub fn sample_points(n: usize, seed: u64) -> Vec<Globals> {
                 dpdv: [n[1] * t[2] - n[2] * t[1], n[2] * t[0] - n[0] * t[2], n[0] * t[1] - n[1] * t[0]],
                 u: rng.unit(),
                 v: rng.unit(),
+                primvars: Default::default(),
             }
         })
         .collect()
@@ -497,7 +499,7 @@ fn single_layer_stack(lib: &Library, names: &[&str]) -> Result<ComposedMaterial,
             })
         })
         .collect::<Result<Vec<_>, String>>()?;
-    Ok(ComposedMaterial { layers })
+    Ok(ComposedMaterial { layers, ..Default::default() })
 }
 
 /// Wires, optimises and lowers a composed material.

@@ -113,8 +113,9 @@ pub fn layers_json(stacks: &[PrimStack]) -> String {
 }
 
 /// The `strata layers` table: per prim, layers bottom to top, `*` marking bindings authored
-/// on the prim itself (the paper's bright icons) rather than inherited.
-pub fn layers_table(stacks: &[PrimStack]) -> String {
+/// on the prim itself (the paper's bright icons) rather than inherited. With the `stage`, a
+/// prim with no layers says which display primvars its default substance reads.
+pub fn layers_table(stacks: &[PrimStack], stage: Option<&crate::scene::Stage>) -> String {
     let mut out = String::new();
     // Slot names are padded to 12 columns, or to the longest (`material:binding`) when wider.
     let width = stacks
@@ -127,7 +128,8 @@ pub fn layers_table(stacks: &[PrimStack]) -> String {
     for stack in stacks {
         out += &format!("{}\n", stack.prim);
         if stack.layers.is_empty() {
-            out += "  (default substance: white diffuse)\n";
+            let display = stage.map(|s| crate::compose::scene::display_primvars(s, &stack.prim)).unwrap_or_default();
+            out += &format!("  (default substance: {})\n", display.describe());
         }
         for layer in &stack.layers {
             let mark = if layer.applied.bound_at == stack.prim { '*' } else { ' ' };
@@ -164,7 +166,7 @@ pub fn layers(scene: Option<&Path>, json: bool, time: Option<TimeCode>) -> Resul
         None => Vec::new(),
     };
     report(&diags, &sources)?;
-    let text = if json { layers_json(&stacks) + "\n" } else { layers_table(&stacks) };
+    let text = if json { layers_json(&stacks) + "\n" } else { layers_table(&stacks, stage.as_ref()) };
     print_out(&text)
 }
 
@@ -639,6 +641,9 @@ const C_HEADER_PRELUDE: &str = "\
 typedef struct StrataGlobals {
     float p[3], n[3], ng[3], i[3], dpdu[3], dpdv[3];
     float u, v;
+    /* The primvars the material reads (see the material's primvar table); NULL, 0: none. */
+    const float *primvars;
+    uint32_t primvar_len;
 } StrataGlobals;
 
 /* A BSDF closure (abi::Closure): kind 0 none, 1 diffuse, 2 glossy, 3 metal, 4 glass. */
@@ -688,6 +693,7 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
                 },
                 overrides: Vec::new(),
             }],
+            ..Default::default()
         };
         modules.push((name.clone(), compiler.lower(&lib, &material, &mut diags)));
     }
@@ -696,6 +702,19 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
     let mut functions = Vec::new();
     for (name, module) in &modules {
         header += &format!("\n/* substance {name} */\n");
+        if !module.info.primvars.is_empty() {
+            let read: Vec<String> = module
+                .info
+                .primvars
+                .iter()
+                .map(|p| format!("{} ({} float(s)) flag at {}", p.name, p.width, p.offset))
+                .collect();
+            header += &format!(
+                "/* primvars (g->primvars, {} floats; flag 1 = present, components follow): {} */\n",
+                module.info.primvar_floats,
+                read.join(", ")
+            );
+        }
         if let Some(m) = module.info.layers.first().and_then(|l| l.constant_mask) {
             // A mask known at compile time needs no code: define it in the header.
             header += &format!(

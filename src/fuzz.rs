@@ -276,7 +276,7 @@ fn run_substances(text: &[u8], interp: bool) {
                 .map(|o| (Slot::parse("000::001").expect("valid"), o))
                 .collect(),
         };
-        let material = ComposedMaterial { layers: vec![layer] };
+        let material = ComposedMaterial { layers: vec![layer], ..Default::default() };
         for &backend in backends {
             let mut diags = Diagnostics::new();
             let Some(code) = Compiler::new(backend, PassOptions::default()).compile(&lib, &material, &mut diags) else {

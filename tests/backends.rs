@@ -38,6 +38,7 @@ fn single_layer(lib: &Library, name: &str) -> ComposedMaterial {
             },
             overrides: Vec::new(),
         }],
+        ..Default::default()
     }
 }
 
@@ -84,7 +85,7 @@ const SPECIAL: [f32; 12] =
     [0.0, -0.0, 1.0, -1.0, 0.5, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 1e-40, -1e-40, 3.0e38, -7.5e37];
 
 /// Deterministic shading points: a grid of ordinary values, then special values per field.
-fn points(count: usize) -> Vec<Globals> {
+fn points(count: usize) -> Vec<Globals<'static>> {
     let mut state = 0x2545_f491_4f6c_dd1du64;
     let mut next = move || {
         state ^= state << 13;
@@ -112,6 +113,7 @@ fn points(count: usize) -> Vec<Globals> {
             dpdv: v3(&mut f),
             u: f(),
             v: f(),
+            primvars: Default::default(),
         });
     }
     pts
@@ -127,6 +129,9 @@ fn assert_same(a: &dyn MaterialCode, b: &dyn MaterialCode, what: &str, count: us
 
 /// A node type that turns the shading globals into inputs of every type, so nothing folds.
 const SOURCES: &str = r#"
+shader spatial_to_color(vector x = vector(0.0, 0.0, 0.0), output color out) {
+    out = color(x);
+}
 shader src(output float x = 0.0, output float y = 0.0, output int i = 0, output color c = 0.0,
            output point p = 0.0, output vector d = 0.0, output normal n = 0.0) {
     x = P[0] * 0.37 + u;
@@ -177,6 +182,11 @@ fn every_builtin_node_agrees() {
                 t if t == Type::COLOR => {
                     format!("    node c_{0} = customChannelColor(name: \"{0}\", value: n.{0});\n", p.name)
                 }
+                // Vector and point outputs (`primvar_vector`) reach a colour channel through a shader.
+                t if t == Type::VECTOR || t == Type::POINT => format!(
+                    "    node v_{0} = spatial_to_color(x: n.{0});\n    node c_{0} = customChannelColor(name: \"{0}\", value: v_{0}.out);\n",
+                    p.name
+                ),
                 _ => format!("    node c_{0} = customChannelFloat(name: \"{0}\", value: n.{0});\n", p.name),
             };
         }

@@ -27,7 +27,7 @@ fn runtime_staticlib() -> PathBuf {
 }
 
 /// The shading point both sides evaluate for index `i`.
-fn point(i: usize) -> Globals {
+fn point(i: usize) -> Globals<'static> {
     let t = i as f32;
     Globals {
         p: [t * 0.37 - 3.0, (t * 0.11).sin() * 2.0, t * 0.05 - 1.0],
@@ -38,6 +38,7 @@ fn point(i: usize) -> Globals {
         dpdv: [0.0, 0.0, 1.0],
         u: (t * 0.013) % 1.0,
         v: (t * 0.029) % 1.0,
+        primvars: Default::default(),
     }
 }
 
@@ -90,6 +91,7 @@ fn jit_lines(points: &[Globals]) -> String {
                     },
                     overrides: Vec::new(),
                 }],
+                ..Default::default()
             };
             compiler.compile(&lib, &material, &mut diags).expect("compiles")
         })

@@ -402,6 +402,7 @@ fn every_optional_part_of_for() {
                 },
                 overrides: Vec::new(),
             }],
+            ..Default::default()
         };
         for backend in [BackendKind::Jit, BackendKind::Interp] {
             let code = Compiler::new(backend, PassOptions::default()).compile(&lib, &material, &mut diags);

@@ -51,6 +51,7 @@ fn compile(name: &str, text: &str, substance: &str) -> Outcome {
                 substance: MaterialRef { path: "/Looks/A".into(), graph, values: Vec::new(), span: Default::default() },
                 overrides: Vec::new(),
             }],
+            ..Default::default()
         };
         let module = Compiler::new(BackendKind::Jit, PassOptions::default()).lower(&lib, &material, &mut diags);
         instructions = module.inst_count();
@@ -78,7 +79,7 @@ fn seed(name: &str) -> (String, String) {
 }
 
 /// Shading points with ordinary and awkward `u`, `v` and `P`.
-fn points() -> Vec<Globals> {
+fn points() -> Vec<Globals<'static>> {
     [0.0, 0.3, 0.99, -2.5, 1e-30, 7.0]
         .iter()
         .map(|&u| Globals { p: [u, 1.0 - u, 0.5], n: [0.0, 0.0, 1.0], u, v: 1.0 - u, ..Default::default() })

@@ -110,7 +110,7 @@ fn compile(lib: &Library, n: usize, backend: BackendKind, optimize: bool) -> Arc
 }
 
 /// Deterministic shading points with unit normals and tangents that span the surface.
-fn points(count: usize, seed: u64) -> Vec<Globals> {
+fn points(count: usize, seed: u64) -> Vec<Globals<'static>> {
     let mut state = seed | 1;
     let mut next = move || {
         state ^= state << 13;
@@ -133,6 +133,7 @@ fn points(count: usize, seed: u64) -> Vec<Globals> {
                 dpdv: b.to_array(),
                 u: next() * 0.5 + 0.5,
                 v: next() * 0.5 + 0.5,
+                primvars: Default::default(),
             }
         })
         .collect()

@@ -159,6 +159,7 @@ fn displacement_rules_give_the_analytic_normal() {
                 dpdv: [0.0, 0.0, 1.0],
                 u: 0.5,
                 v: 0.5,
+                primvars: Default::default(),
             };
             let state = shading_state(code.as_ref(), &g).expect("shades");
             let want = Vec3::new(-case.gradient.0, 1.0, -case.gradient.1).normalize();

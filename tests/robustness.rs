@@ -39,7 +39,7 @@ fn run_everything(text: &str) {
             substance: MaterialRef { path: "/s".into(), graph: id, values: vec![], span: Span::default() },
             overrides: overrides.iter().cloned().map(|o| (Slot::parse("000::001").unwrap(), o)).collect(),
         };
-        let material = ComposedMaterial { layers: vec![layer] };
+        let material = ComposedMaterial { layers: vec![layer], ..Default::default() };
         let mut diags = Diagnostics::new();
         let wired = wired::build(&lib, &material, PassOptions::default(), &mut diags);
         let _ = wired.to_text(&lib);
@@ -176,6 +176,7 @@ fn pathological_programs_are_diagnosed() {
                 substance: MaterialRef { path: "/a".into(), graph, values: vec![], span: Span::default() },
                 overrides: vec![],
             }],
+            ..Default::default()
         };
         for backend in [BackendKind::Jit, BackendKind::Interp] {
             for optimize in [true, false] {

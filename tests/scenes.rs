@@ -20,7 +20,7 @@ fn run(path: &str) -> (String, String, String, String) {
         ir += &format!("# {}  [{}]\n{}\n", stack.prim, wired.stats_line(), wired.to_text(&composition.library));
     }
     assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    let table = cli::layers_table(&composition.stacks);
+    let table = cli::layers_table(&composition.stacks, Some(&stage));
     let json = cli::layers_json(&composition.stacks);
     (table, json, ir, diags.render(&sources))
 }

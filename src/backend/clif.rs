@@ -3,6 +3,7 @@
 //! it. Every lowered instruction maps to the Cranelift sequence that computes exactly the
 //! semantics [`crate::ir::ssa::Inst`] documents (the interpreter's), so results agree bit for bit.
 
+use crate::abi;
 use crate::ir::ssa::{self, BinOp, CmpOp, Inst, Terminator, Ty, UnOp};
 use crate::runtime::rt::RtFn;
 use cranelift_codegen::ir::condcodes::{FloatCC, IntCC};
@@ -149,6 +150,19 @@ fn translate(fb: &mut FunctionBuilder, func: &ssa::Function, calls: &HashMap<RtF
                 Inst::FConst(x) => Some(fb.ins().f32const(*x)),
                 Inst::IConst(i) => Some(fb.ins().iconst(types::I32, *i as i64)),
                 Inst::Global(o) => Some(fb.ins().load(types::F32, flags, globals, (*o * 4) as i32)),
+                Inst::Primvar(i) => {
+                    // Branch-free: past the end, load from the globals themselves (always
+                    // readable) and select 0, as the interpreter's `PrimvarValues::get` does.
+                    let len = fb.ins().load(types::I32, flags, globals, abi::PRIMVARS_LEN_OFFSET as i32);
+                    let base = fb.ins().load(ptr, flags, globals, abi::PRIMVARS_PTR_OFFSET as i32);
+                    let index = fb.ins().iconst(types::I32, *i as i64);
+                    let inside = fb.ins().icmp(IntCC::UnsignedLessThan, index, len);
+                    let at = fb.ins().iadd_imm_u(base, i64::from(*i) * 4);
+                    let at = fb.ins().select(inside, at, globals);
+                    let word = fb.ins().load(types::F32, flags, at, 0);
+                    let zero = fb.ins().f32const(0.0);
+                    Some(fb.ins().select(inside, word, zero))
+                }
                 Inst::Unary(op, a) => {
                     let a = v(a);
                     Some(match op {

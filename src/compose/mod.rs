@@ -39,11 +39,45 @@ pub struct ComposedLayer {
 }
 
 /// The material of one renderable prim: layers bottom to top. No layers means the default
-/// substance (white diffuse).
+/// substance (white diffuse, or the prim's display primvars: DESIGN.md rule 4).
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct ComposedMaterial {
     /// Layers, bottom first.
     pub layers: Vec<ComposedLayer>,
+    /// With no layers: the display primvars the prim authors, which the default substance reads.
+    pub display: DisplayPrimvars,
+}
+
+/// Which of Hydra's display primvars a prim authors (`primvars:displayColor`,
+/// `primvars:displayOpacity`; a GeomSubset's are its mesh's). The default substance reads
+/// only those, so unbound prims without them stay plain white diffuse and opaque at no cost.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Hash)]
+pub struct DisplayPrimvars {
+    /// `primvars:displayColor` is authored.
+    pub color: bool,
+    /// `primvars:displayOpacity` is authored.
+    pub opacity: bool,
+}
+
+impl DisplayPrimvars {
+    /// The built-in graph that shades a prim with no layers.
+    pub fn default_substance(self) -> &'static str {
+        match (self.color, self.opacity) {
+            (false, false) => "default_substance",
+            (true, false) => "default_substance_display_color",
+            (_, true) => "default_substance_display",
+        }
+    }
+
+    /// How `strata layers` describes the default substance.
+    pub fn describe(self) -> &'static str {
+        match (self.color, self.opacity) {
+            (false, false) => "white diffuse",
+            (true, false) => "displayColor",
+            (false, true) => "white, displayOpacity",
+            (true, true) => "displayColor, displayOpacity",
+        }
+    }
 }
 
 impl ComposedMaterial {
@@ -52,6 +86,9 @@ impl ComposedMaterial {
     /// does not change the material.
     pub fn identity_key(&self) -> String {
         let mut key = String::new();
+        if self.layers.is_empty() {
+            key += self.display.default_substance();
+        }
         for layer in &self.layers {
             for m in std::iter::once(&layer.substance).chain(layer.overrides.iter().map(|(_, o)| o)) {
                 key += &format!("{}{:?};", m.graph.0, m.values);

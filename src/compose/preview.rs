@@ -384,7 +384,7 @@ impl<'s> Builder<'_, 's> {
     }
 
     /// Checks the tokens whose meaning strata must know: colour spaces (an error: the texture
-    /// would decode wrongly), wrap modes and primvar names (warnings: a documented fallback).
+    /// would decode wrongly) and wrap modes (a warning: a documented fallback).
     fn check_token(&mut self, id: &str, input: &str, value: &Value, span: Span) {
         let Value::Str(token) = value else { return };
         match (id, input) {
@@ -405,14 +405,6 @@ impl<'s> Builder<'_, 's> {
             }
             ("UsdUVTexture", "file") if token.contains("<UDIM>") => {
                 self.diags.push(Diagnostic::error("UDIM texture sets are not supported").at(span, "a `<UDIM>` path"));
-            }
-            (reader, "varname") if reader.starts_with("UsdPrimvarReader_") && token != "st" => {
-                self.diags.push(
-                    Diagnostic::warning(format!(
-                        "strata's shading points carry only the `st` primvar; `{token}` reads the reader's fallback"
-                    ))
-                    .at(span, "this primvar"),
-                );
             }
             _ => {}
         }

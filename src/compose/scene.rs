@@ -7,7 +7,7 @@
 use super::slots::{
     Binding, BindingPrim, BindingTree, PrimStack, SLOT_BINDING_PREFIX, Slot, decode_slot, resolve_stacks,
 };
-use super::{ComposedLayer, ComposedMaterial, MaterialRef, preview};
+use super::{ComposedLayer, ComposedMaterial, DisplayPrimvars, MaterialRef, preview};
 use crate::diag::{Diagnostic, Diagnostics, OncePerKind, SourceMap, Span, did_you_mean};
 use crate::front::ast::{BaseType, GraphKind};
 use crate::front::library::Library;
@@ -516,6 +516,9 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
                 overrides,
             });
         }
+        if composed.layers.is_empty() {
+            composed.display = display_primvars(stage, &stack.prim);
+        }
         let index = *by_key.entry(composed.identity_key()).or_insert_with(|| {
             materials.push(composed);
             materials.len() - 1
@@ -523,6 +526,19 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
         prim_material.push(index);
     }
     SceneComposition { stacks, library, materials, prim_material }
+}
+
+/// The display primvars renderable prim `path` authors (a GeomSubset: its mesh's).
+pub fn display_primvars(stage: &Stage, path: &str) -> DisplayPrimvars {
+    let Some(mut id) = stage.find(path) else { return DisplayPrimvars::default() };
+    if stage.prim(id).type_name.as_deref() == Some("GeomSubset")
+        && let Some(parent) = stage.prim(id).parent
+    {
+        id = parent;
+    }
+    let prim = stage.prim(id);
+    let authored = |name: &str| prim.attribute(name).is_some_and(|a| a.value.is_some());
+    DisplayPrimvars { color: authored("primvars:displayColor"), opacity: authored("primvars:displayOpacity") }
 }
 
 /// Finds the strata shader of a Material prim: a Shader (the prim itself or a descendant)

@@ -101,6 +101,11 @@ intrinsics! {
     // texture_channel(file, colour space, s, t, mode): one channel (mode % 16: r, g, b, a) with
     // wrap modes (mode / 16 % 16 along s, mode / 256 along t; see `strata_rt::texture`).
     TextureChannel = "texture_channel": Fixed(&[S, S, F, F, I], F),
+    // primvar*(name, fallback): the shaded prim's primvar `name` at the shading point, or the
+    // fallback where the prim has none; `name` must be known when compiling.
+    Primvar = "primvar": Fixed(&[S, C], C),
+    PrimvarFloat = "primvar_float": Fixed(&[S, F], F),
+    PrimvarVector = "primvar_vector": Fixed(&[S, V], V),
     DiffuseBsdf = "diffuse_bsdf": Fixed(&[C], CL),
     GlossyBsdf = "glossy_bsdf": Fixed(&[C, C, F, F], CL),
     MetalBsdf = "metal_bsdf": Fixed(&[C, C, F], CL),
@@ -113,10 +118,17 @@ impl Intrinsic {
         Intrinsic::ALL.iter().copied().find(|i| i.name() == name)
     }
 
-    /// Whether the result depends on something other than the arguments (files on disk), so
-    /// it must not be folded at compile time.
+    /// Whether the result depends on something other than the arguments (files on disk, the
+    /// shaded prim's primvars), so it must not be folded at compile time.
     pub fn is_varying(self) -> bool {
-        matches!(self, Intrinsic::Texture | Intrinsic::TextureChannel)
+        matches!(
+            self,
+            Intrinsic::Texture
+                | Intrinsic::TextureChannel
+                | Intrinsic::Primvar
+                | Intrinsic::PrimvarFloat
+                | Intrinsic::PrimvarVector
+        )
     }
 
     /// Whether this builds a BSDF closure.

@@ -126,6 +126,20 @@ shader texture(string file = "", float s = u, float t = v, output color out) {
     out = texture(file, s, t);
 }
 
+// Primvars: the shaded prim's `primvars:NAME`, interpolated at the shading point as USD
+// defines (constant, uniform, vertex, varying, faceVarying; indexed or not); `fallback` where
+// the prim has none. Components a primvar lacks read 0 (a float2 is (x, y, 0)); a float read
+// of a vector primvar is its first component.
+shader primvar(string name = "", color fallback = 0.0, output color out) {
+    out = primvar(name, fallback);
+}
+shader primvar_float(string name = "", float fallback = 0.0, output float out) {
+    out = primvar_float(name, fallback);
+}
+shader primvar_vector(string name = "", vector fallback = vector(0.0, 0.0, 0.0), output vector out) {
+    out = primvar_vector(name, fallback);
+}
+
 shader float_to_color(float value = 0.0, output color out) {
     out = color(value);
 }
@@ -272,19 +286,28 @@ shader UsdUVTexture(string file = "", color st = color(0.0, 0.0, 0.0), string wr
     b = rgb.b;
 }
 
-// UsdPrimvarReader_*: strata's shading points carry one primvar, the mesh's `st` (as u, v);
-// `varname` "st" reads it, every other name gives the fallback (composition warns).
+// UsdPrimvarReader_*: the shaded prim's primvar `varname` (any interpolation, indexed or not),
+// or the fallback where the prim has none. float2 values read (x, y, 0). `st` is the shading
+// point's texture coordinates (u, v): the mesh's `st`, or an analytic prim's parameterisation.
 shader UsdPrimvarReader_float2(string varname = "", color fallback = color(0.0, 0.0, 0.0), output color result) {
-    result = varname == "st" ? color(u, v, 0.0) : fallback;
+    if (varname == "st") {
+        result = color(u, v, 0.0);
+    } else {
+        result = primvar(varname, fallback);
+    }
 }
 shader UsdPrimvarReader_float3(string varname = "", color fallback = color(0.0, 0.0, 0.0), output color result) {
-    result = varname == "st" ? color(u, v, 0.0) : fallback;
+    if (varname == "st") {
+        result = color(u, v, 0.0);
+    } else {
+        result = primvar(varname, fallback);
+    }
 }
 shader UsdPrimvarReader_float(string varname = "", float fallback = 0.0, output float result) {
-    result = fallback;
+    result = primvar_float(varname, fallback);
 }
 shader UsdPrimvarReader_int(string varname = "", int fallback = 0, output int result) {
-    result = fallback;
+    result = int(primvar_float(varname, float(fallback)));
 }
 
 // UsdTransform2d: in · scale, rotated by `rotation` degrees (counter-clockwise), + translation.
@@ -302,4 +325,21 @@ shader UsdTransform2d(color in_ = color(0.0, 0.0, 0.0), float rotation = 0.0, co
 substance default_substance {
     node white = diffuse(albedo: color(1.0, 1.0, 1.0));
     surface = white.bsdf;
+}
+
+// As Hydra draws unbound geometry with display primvars (composition picks these for prims that
+// author them, so the others pay nothing): displayColor, and displayOpacity as presence.
+substance default_substance_display_color {
+    node display = primvar(name: "displayColor", fallback: color(1.0, 1.0, 1.0));
+    node base = diffuse(albedo: display.out);
+    surface = base.bsdf;
+}
+
+substance default_substance_display {
+    node display = primvar(name: "displayColor", fallback: color(1.0, 1.0, 1.0));
+    node opacity = primvar_float(name: "displayOpacity", fallback: 1.0);
+    node base = diffuse(albedo: display.out);
+    node presence = mask(opacity: opacity.out);
+    surface = base.bsdf;
+    mask = presence.out;
 }

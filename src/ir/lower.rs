@@ -11,7 +11,7 @@
 
 use super::ssa::{self, BinOp, Block, Builder, CmpOp, EntryKind, Inst, Module, Slot, Terminator, Ty, UnOp, Var};
 use super::wired::{Operand, WiredMaterial};
-use crate::abi::{self, ChannelInfo, MaterialInfo};
+use crate::abi::{self, ChannelInfo, MaterialInfo, PrimvarInfo};
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::front::ast::{BaseType, BinaryOp};
 use crate::front::hir::{Expr, ExprKind, Function, Global, LocalId, Place, Stmt, UnaryOp};
@@ -88,11 +88,12 @@ fn lower_here(lib: &Library, wired: &WiredMaterial, options: LowerOptions, diags
     if let Err(e) = wired.validate(lib) {
         diags.push(Diagnostic::error(format!("internal compiler error: invalid wired IR: {e}")));
     }
-    let info = material_info(wired);
+    let mut info = material_info(wired);
     let mut strings = Vec::new();
+    let mut primvars = Vec::new();
     let mut functions = Vec::new();
     let nlayers = wired.layers.len() as u32;
-    let mut cx = Context { lib, wired, strings: &mut strings, diags, options };
+    let mut cx = Context { lib, wired, strings: &mut strings, primvars: &mut primvars, diags, options };
 
     // Masks known at compile time live in `info`; the others get one entry each, which
     // `masks` (all layers) and stochastic picking (top-down, stopping early) both call.
@@ -157,6 +158,8 @@ fn lower_here(lib: &Library, wired: &WiredMaterial, options: LowerOptions, diags
             }
         }));
     }
+    info.primvar_floats = primvars.iter().map(|p: &PrimvarInfo| p.offset + 1 + p.width).max().unwrap_or(0);
+    info.primvars = primvars;
     Module { info, functions, strings }
 }
 
@@ -173,13 +176,15 @@ pub fn material_info(wired: &WiredMaterial) -> MaterialInfo {
             info
         })
         .collect();
-    MaterialInfo { layers, channels, channel_floats: offset }
+    MaterialInfo { layers, channels, channel_floats: offset, ..MaterialInfo::default() }
 }
 
 struct Context<'a> {
     lib: &'a Library,
     wired: &'a WiredMaterial,
     strings: &'a mut Vec<String>,
+    /// The primvars read so far (by every entry: one table per material).
+    primvars: &'a mut Vec<PrimvarInfo>,
     diags: &'a mut Diagnostics,
     options: LowerOptions,
 }
@@ -196,6 +201,7 @@ impl Context<'_> {
             lib: self.lib,
             wired: self.wired,
             strings: self.strings,
+            primvars: self.primvars,
             diags: self.diags,
             b,
             node_out: HashMap::new(),
@@ -290,6 +296,7 @@ struct FnLower<'a> {
     lib: &'a Library,
     wired: &'a WiredMaterial,
     strings: &'a mut Vec<String>,
+    primvars: &'a mut Vec<PrimvarInfo>,
     diags: &'a mut Diagnostics,
     b: Builder,
     /// Lowered outputs of the nodes evaluated so far: (node, param) → value.
@@ -1257,6 +1264,9 @@ impl FnLower<'_> {
         if i == TextureChannel {
             return self.texture_channel(args, frame);
         }
+        if matches!(i, Primvar | PrimvarFloat | PrimvarVector) {
+            return self.primvar(args, frame);
+        }
         let a: Vec<Vec<ssa::Value>> = args.iter().map(|x| self.expr(x, frame).scalars()).collect();
         let rt1 = |f: RtFn| move |s: &mut Self, l: &[ssa::Value]| s.b.call(f, vec![l[0]]);
         let un = |op: UnOp| move |s: &mut Self, l: &[ssa::Value]| s.b.unary(op, l[0]);
@@ -1389,7 +1399,7 @@ impl FnLower<'_> {
                 }
                 Lv::Scalars(scalars)
             }
-            Texture | TextureChannel => unreachable!("handled above"),
+            Texture | TextureChannel | Primvar | PrimvarFloat | PrimvarVector => unreachable!("handled above"),
         }
     }
 
@@ -1473,6 +1483,37 @@ impl FnLower<'_> {
         };
         let id = self.b.iconst(id);
         Lv::Scalars(vec![self.b.call(RtFn::Texture, vec![id, s, t, mode])])
+    }
+
+    /// `primvar*(name, fallback)`: the name must be known when compiling; it gets a place in
+    /// the material's primvar table (`abi::MaterialInfo::primvars`, one per name and width,
+    /// shared by every entry) and the call reads `present ? value : fallback` per component.
+    fn primvar(&mut self, args: &[Expr], frame: &mut Frame) -> Lv {
+        let name = self.constant_string(&args[0], frame, "the primvar name");
+        let fallback = self.expr(&args[1], frame).scalars();
+        let width = fallback.len();
+        let Some(name) = name.filter(|n| !n.is_empty()) else { return Lv::Scalars(fallback) };
+        let offset = match self.primvars.iter().find(|p| p.name == name && p.width == width) {
+            Some(p) => p.offset,
+            None => {
+                let offset = self.primvars.iter().map(|p| p.offset + 1 + p.width).max().unwrap_or(0);
+                self.primvars.push(PrimvarInfo { name, width, offset });
+                offset
+            }
+        } as u32;
+        let present = self.b.value(Inst::Primvar(offset), Ty::F32);
+        let zero = self.b.fconst(0.0);
+        let present = self.b.cmp(CmpOp::Ne, present, zero);
+        Lv::Scalars(
+            fallback
+                .iter()
+                .enumerate()
+                .map(|(k, &otherwise)| {
+                    let value = self.b.value(Inst::Primvar(offset + 1 + k as u32), Ty::F32);
+                    self.b.select(present, value, otherwise)
+                })
+                .collect(),
+        )
     }
 
     /// `texture(file, s, t)`: the file must be known when compiling (a literal or an input

@@ -145,6 +145,9 @@ pub enum Inst {
     IConst(i32),
     /// Reads the f32 at word `offset` of the shading globals.
     Global(u32),
+    /// Reads word `index` of the shading point's primvar values (`abi::Globals::primvars`),
+    /// 0 past their end.
+    Primvar(u32),
     /// A unary operation.
     Unary(UnOp, Value),
     /// A binary operation.
@@ -331,6 +334,7 @@ impl fmt::Display for Inst {
             Inst::FConst(x) => write!(f, "fconst {}", crate::front::types::format_f32(*x)),
             Inst::IConst(i) => write!(f, "iconst {i}"),
             Inst::Global(o) => write!(f, "global {}", global_name(*o)),
+            Inst::Primvar(i) => write!(f, "primvar {i}"),
             Inst::Unary(op, a) => write!(f, "{} v{}", format!("{op:?}").to_lowercase(), a.0),
             Inst::Binary(op, a, b) => write!(f, "{} v{}, v{}", format!("{op:?}").to_lowercase(), a.0, b.0),
             Inst::Cmp(op, a, b) => write!(f, "cmp.{} v{}, v{}", format!("{op:?}").to_lowercase(), a.0, b.0),
@@ -430,6 +434,7 @@ pub fn validate(f: &Function) -> Result<(), Invalid> {
                         }
                         Some(Ty::F32)
                     }
+                    Inst::Primvar(_) => Some(Ty::F32),
                     Inst::Unary(op, a) => {
                         let (from, to) = match op {
                             UnOp::FNeg | UnOp::FAbs | UnOp::Sqrt | UnOp::Floor | UnOp::Ceil => (Ty::F32, Ty::F32),
@@ -1023,7 +1028,7 @@ fn rename(inst: &mut Inst, mut map: impl FnMut(Value) -> Value) {
             *b = map(*b);
         }
         Inst::Call(_, args) => args.iter_mut().for_each(|a| *a = map(*a)),
-        Inst::FConst(_) | Inst::IConst(_) | Inst::Global(_) | Inst::Get(_) => {}
+        Inst::FConst(_) | Inst::IConst(_) | Inst::Global(_) | Inst::Primvar(_) | Inst::Get(_) => {}
     }
 }
 
@@ -1041,7 +1046,7 @@ fn for_each_operand(inst: &Inst, mut f: impl FnMut(Value)) {
             f(*b);
         }
         Inst::Call(_, args) => args.iter().copied().for_each(f),
-        Inst::FConst(_) | Inst::IConst(_) | Inst::Global(_) | Inst::Get(_) => {}
+        Inst::FConst(_) | Inst::IConst(_) | Inst::Global(_) | Inst::Primvar(_) | Inst::Get(_) => {}
     }
 }
 

@@ -176,7 +176,7 @@ fn build_here(
     if material.layers.is_empty() {
         // The prelude's own graph, by its file: a user graph of the same name is rejected when
         // the library loads, and could not be picked here anyway.
-        match lib.builtin_graph("default_substance") {
+        match lib.builtin_graph(material.display.default_substance()) {
             Some(graph) => {
                 let substance = MaterialRef { path: String::new(), graph, values: Vec::new(), span: Span::default() };
                 layers.push(b.layer(0, "default", &substance, &[]));
@@ -840,6 +840,7 @@ mod tests {
         let (lib, _) = setup();
         let material = ComposedMaterial {
             layers: vec![layer(&lib, "000", "plastic", &[("000::010", "red"), ("000::020", "rough")])],
+            ..Default::default()
         };
         let mut diags = Diagnostics::new();
         let wired = build(&lib, &material, PassOptions::default(), &mut diags);
@@ -856,7 +857,10 @@ mod tests {
     #[test]
     fn incompatible_override_is_an_error() {
         let (lib, _) = setup();
-        let material = ComposedMaterial { layers: vec![layer(&lib, "000", "plastic", &[("000::010", "wrong")])] };
+        let material = ComposedMaterial {
+            layers: vec![layer(&lib, "000", "plastic", &[("000::010", "wrong")])],
+            ..Default::default()
+        };
         let mut diags = Diagnostics::new();
         build(&lib, &material, PassOptions::default(), &mut diags);
         assert_eq!(diags.error_count(), 1, "int → float converts; string → color does not");
@@ -871,6 +875,7 @@ mod tests {
                 layer(&lib, "010", "opaque", &[]),
                 layer(&lib, "050", "dirt", &[]),
             ],
+            ..Default::default()
         };
         let mut diags = Diagnostics::new();
         let wired = build(&lib, &material, PassOptions::default(), &mut diags);
@@ -885,7 +890,7 @@ mod tests {
     #[test]
     fn validator_rejects_broken_wiring() {
         let (lib, _) = setup();
-        let material = ComposedMaterial { layers: vec![layer(&lib, "050", "dirt", &[])] };
+        let material = ComposedMaterial { layers: vec![layer(&lib, "050", "dirt", &[])], ..Default::default() };
         let mut diags = Diagnostics::new();
         let wired = build(&lib, &material, PassOptions::default(), &mut diags);
         assert_eq!(wired.validate(&lib), Ok(()));

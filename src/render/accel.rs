@@ -19,6 +19,7 @@
 
 use super::frame::Frame;
 use super::geometry::Triangle;
+use super::primvars::PrimvarRef;
 use super::shapes::Shape;
 use glam::{DAffine3, DMat3, DMat4, Vec2, Vec3, Vec3A};
 use obvhs::aabb::Aabb;
@@ -55,6 +56,7 @@ struct TriangleAttrs {
     uv: [Vec2; 3],
     /// The prim: a global prim index in the world BLAS, a prototype-local one in a prototype's.
     prim: u32,
+    primvars: PrimvarRef,
 }
 
 /// Surface geometry at a hit, in world space.
@@ -77,6 +79,10 @@ pub struct SurfaceGeom {
     pub uv: Vec2,
     /// The renderable prim (index into `Scene::prims`).
     pub prim: u32,
+    /// Where the primitive's primvar values are.
+    pub primvars: PrimvarRef,
+    /// Barycentric weights of the triangle's corners at the hit (`[1, 0, 0]` on shapes).
+    pub bary: [f32; 3],
 }
 
 /// The extent (largest coordinate magnitude) a BVH's space is scaled to: 2³⁰.
@@ -257,6 +263,7 @@ impl Blas {
                 // Parametric coordinates when the prim has none: (0,0), (1,0), (0,1).
                 uv: if t.has_uv { t.uv } else { [Vec2::ZERO, Vec2::X, Vec2::Y] },
                 prim: t.prim,
+                primvars: t.primvars,
             })
             .collect();
         Blas { bvh, positions, attrs, shapes, group_start, group_members, bounds }
@@ -381,7 +388,18 @@ impl Blas {
                 let ns = shading_normal(a.n[0] * b0 + a.n[1] * b1 + a.n[2] * b2, ng);
                 let uv = a.uv[0] * b0 + a.uv[1] * b1 + a.uv[2] * b2;
                 let (dpdu, dpdv) = tangents(p, a.uv, ns);
-                let geom = SurfaceGeom { p: pos, p_error: err * gamma(7), ng, ns, dpdu, dpdv, uv, prim: a.prim };
+                let geom = SurfaceGeom {
+                    p: pos,
+                    p_error: err * gamma(7),
+                    ng,
+                    ns,
+                    dpdu,
+                    dpdv,
+                    uv,
+                    prim: a.prim,
+                    primvars: a.primvars,
+                    bary: [b0, b1, b2],
+                };
                 (geom, Some(p))
             }
             None => {
@@ -389,8 +407,18 @@ impl Blas {
                 let h = shape.surface(o, d, t);
                 let n = if h.n == Vec3::ZERO || !h.n.is_finite() { -d.normalize_or_zero() } else { h.n };
                 let (dpdu, dpdv) = frame_or(h.dpdu, h.dpdv, n);
-                let geom =
-                    SurfaceGeom { p: h.p, p_error: h.p_error, ng: n, ns: n, dpdu, dpdv, uv: h.uv, prim: shape.prim };
+                let geom = SurfaceGeom {
+                    p: h.p,
+                    p_error: h.p_error,
+                    ng: n,
+                    ns: n,
+                    dpdu,
+                    dpdv,
+                    uv: h.uv,
+                    prim: shape.prim,
+                    primvars: shape.primvars,
+                    bary: [1.0, 0.0, 0.0],
+                };
                 (geom, None)
             }
         }
@@ -666,13 +694,13 @@ impl Accel {
                 let b0 = 1.0 - hit.b1 - hit.b2;
                 let ns = shading_normal(normal(a.n[0] * b0 + a.n[1] * hit.b1 + a.n[2] * hit.b2), ng);
                 let (dpdu, dpdv) = tangents(w, a.uv, ns);
-                SurfaceGeom { p, p_error, ng, ns, dpdu, dpdv, uv: local.uv, prim: local.prim }
+                SurfaceGeom { p, p_error, ng, ns, dpdu, dpdv, ..local }
             }
             None => {
                 let n = normal(local.ng);
                 let n = if n == Vec3::ZERO || !n.is_finite() { -d } else { n };
                 let (dpdu, dpdv) = frame_or(vector(local.dpdu), vector(local.dpdv), n);
-                SurfaceGeom { p, p_error, ng: n, ns: n, dpdu, dpdv, uv: local.uv, prim: local.prim }
+                SurfaceGeom { p, p_error, ng: n, ns: n, dpdu, dpdv, ..local }
             }
         };
         geom.prim = self.instance_prims[(inst.prims + local.prim) as usize];
@@ -809,7 +837,7 @@ mod tests {
     use glam::Vec2;
 
     fn tri(p: [Vec3; 3]) -> Triangle {
-        Triangle { p, n: [Vec3::Z; 3], uv: [Vec2::ZERO; 3], prim: 0, has_uv: false }
+        Triangle { p, n: [Vec3::Z; 3], uv: [Vec2::ZERO; 3], prim: 0, has_uv: false, primvars: Default::default() }
     }
 
     #[test]

@@ -28,6 +28,7 @@
 
 use super::camera::Camera;
 use super::geometry::{Geometry, Triangle};
+use super::primvars::PrimvarRef;
 use super::shapes::Shape;
 use crate::abi::{Globals, MaterialCode};
 use crate::diag::{Diagnostic, Diagnostics};
@@ -176,6 +177,8 @@ struct Source {
     /// Its corners' texture coordinates and normals.
     uv: [Vec2; 3],
     n: [Vec3; 3],
+    /// Its primvar values (re-sampled for each micro-triangle).
+    primvars: PrimvarRef,
 }
 
 impl Source {
@@ -233,7 +236,16 @@ impl Base {
             let (dpdu, dpdv) = super::accel::tangents(t.p, t.uv, t.cross().normalize_or_zero());
             let c = [0, 1, 2].map(|k| corner(&mut base, t.p[k], t.n[k].as_dvec3(), t.uv[k], k));
             base.faces.push(Face { c, source: base.sources.len() as u32 });
-            base.sources.push(Source { prim: t.prim, has_uv: t.has_uv, shape: None, dpdu, dpdv, uv: t.uv, n: t.n });
+            base.sources.push(Source {
+                prim: t.prim,
+                has_uv: t.has_uv,
+                shape: None,
+                dpdu,
+                dpdv,
+                uv: t.uv,
+                n: t.n,
+                primvars: t.primvars,
+            });
         }
         drop(triangles);
         for s in 0..base.shapes.len() {
@@ -258,6 +270,7 @@ impl Base {
                     dpdv: Vec3::ZERO,
                     uv: order.map(|k| tri[k].1),
                     n: order.map(|k| normals[k].as_vec3()),
+                    primvars: shape.primvars,
                 });
             }
         }
@@ -293,7 +306,7 @@ impl Base {
 
     /// The shading globals at vertex `v` before displacement: its position, normal, texture
     /// coordinates and tangents (a quadric's from its exact surface, a mesh's from its face).
-    fn globals(&self, v: &Vertex) -> Globals {
+    fn globals(&self, v: &Vertex) -> Globals<'static> {
         let source = &self.sources[v.source as usize];
         let (dpdu, dpdv) = match source.shape {
             Some(s) => {
@@ -312,6 +325,7 @@ impl Base {
             dpdv: dpdv.to_array(),
             u: v.uv.x,
             v: v.uv.y,
+            primvars: Default::default(),
         }
     }
 }
@@ -692,6 +706,7 @@ pub fn displace(
     };
     let before = geometry.triangles.len();
     geometry.triangles.reserve_exact(faces.len());
+    let table = &mut geometry.primvars;
     geometry.triangles.extend(faces.iter().map(|f| {
         let source = &base.sources[f.source as usize];
         Triangle {
@@ -700,6 +715,7 @@ pub fn displace(
             uv: f.c.map(|c| source.uv_at(c.b)),
             prim: source.prim,
             has_uv: source.has_uv,
+            primvars: table.resample(source.primvars, f.c.map(|c| [1.0 - c.b.x - c.b.y, c.b.x, c.b.y])),
         }
     }));
     let micro = geometry.triangles.len() - before;

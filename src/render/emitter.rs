@@ -169,6 +169,8 @@ impl Emitters {
                     dpdv: geom.dpdv.to_array(),
                     u: geom.uv.x,
                     v: geom.uv.y,
+                    // The power estimate reads primvars at their fallbacks.
+                    primvars: crate::abi::PrimvarValues::new(&[]),
                 };
                 sum += expected_emission(material, &g, &mut masks, &mut weights);
             }

@@ -397,6 +397,7 @@ pub fn render(
     let mut warnings = Vec::new();
     let (channels, channel_floats, channel_map) = channel_layout(materials, &mut warnings);
     let camera = scene.camera.with_aspect(w as f32 / h as f32);
+    let primvar_slots = super::integrator::primvar_slots(scene, materials);
     let ctx = Context {
         scene,
         materials,
@@ -408,6 +409,7 @@ pub fn render(
             &scene.emitters.list.iter().map(|e| e.power).collect::<Vec<_>>(),
             (scene.bounds.1 - scene.bounds.0).length() / 2.0,
         ),
+        primvar_slots: &primvar_slots,
     };
     let done = AtomicUsize::new(0);
     let progress_lock = Mutex::new(());

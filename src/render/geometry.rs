@@ -6,12 +6,13 @@
 //! Malformed meshes are diagnosed (never a panic); zero-area triangles are skipped and counted.
 
 use super::accel::InstanceDesc;
+use super::primvars::{MAX_COMPONENTS, Primvar, PrimvarLayout, PrimvarRef, PrimvarTable};
 use super::shapes::{Part, Shape};
 use super::subdiv::{PolyMesh, catmull_clark, read_tags, refined_faces};
 use super::xform::{PrimXform, local_transform, value_span, world_transforms};
 use crate::compose::scene::{is_bound_subset, is_renderable};
 use crate::diag::{Diagnostic, Diagnostics, Span};
-use crate::scene::{Attribute, Prim, PrimId, Stage, Value};
+use crate::scene::{Prim, PrimId, Stage, Value};
 use glam::{DMat3, DMat4, DQuat, DVec3, Vec2, Vec3};
 use std::collections::{HashMap, HashSet};
 
@@ -79,6 +80,8 @@ pub struct Triangle {
     pub prim: u32,
     /// Whether `uv` came from the prim (`primvars:st` or an implicit surface's parameterisation).
     pub has_uv: bool,
+    /// Its primvar values (the three corners') in [`Geometry::primvars`].
+    pub primvars: PrimvarRef,
 }
 
 impl Triangle {
@@ -129,6 +132,9 @@ pub struct Geometry {
     /// Per-instance prim tables: prototype-local prim `j` of an instance is the renderable
     /// prim `instance_prims[instance.prims + j]`.
     pub instance_prims: Vec<u32>,
+    /// The primvars materials read, for every triangle and shape that has them (world and
+    /// prototypes alike).
+    pub primvars: PrimvarTable,
 }
 
 impl Geometry {
@@ -152,7 +158,7 @@ pub fn build(stage: &Stage, diags: &mut Diagnostics) -> Geometry {
 
 /// As [`build`], with transforms already computed.
 pub fn build_with(stage: &Stage, xforms: &[PrimXform], diags: &mut Diagnostics) -> Geometry {
-    build_within(stage, xforms, GeometryOptions::default(), MAX_TRIANGLES, diags)
+    build_within(stage, xforms, GeometryOptions::default(), MAX_TRIANGLES, &[], diags)
 }
 
 /// As [`build_with`], with options.
@@ -162,7 +168,19 @@ pub fn build_with_options(
     options: GeometryOptions,
     diags: &mut Diagnostics,
 ) -> Geometry {
-    build_within(stage, xforms, options, MAX_TRIANGLES, diags)
+    build_within(stage, xforms, options, MAX_TRIANGLES, &[], diags)
+}
+
+/// As [`build_with_options`], storing the primvars named in `primvars` (without
+/// `primvars:`) for shading: those the scene's materials read.
+pub fn build_with_primvars(
+    stage: &Stage,
+    xforms: &[PrimXform],
+    options: GeometryOptions,
+    primvars: &[String],
+    diags: &mut Diagnostics,
+) -> Geometry {
+    build_within(stage, xforms, options, MAX_TRIANGLES, primvars, diags)
 }
 
 /// What a prim is to instancing.
@@ -202,6 +220,7 @@ fn build_within(
     xforms: &[PrimXform],
     options: GeometryOptions,
     budget: usize,
+    primvars: &[String],
     diags: &mut Diagnostics,
 ) -> Geometry {
     // Roles: an `instanceable` prim inside another instance is part of that instance's
@@ -230,10 +249,12 @@ fn build_within(
             key_of.insert(id.0, key);
         }
     }
+    let mut geometry = Geometry::default();
+    geometry.primvars.names = primvars.to_vec();
     let mut b = Builder {
         stage,
         xforms,
-        geometry: Geometry::default(),
+        geometry,
         budget,
         prim_index: HashMap::new(),
         prototype_of: HashMap::new(),
@@ -375,6 +396,7 @@ impl Builder<'_> {
             &mut g.triangles,
             &mut g.shapes,
             &mut g.degenerate,
+            &mut g.primvars,
             world,
             index,
             self.budget - others.min(self.budget),
@@ -478,6 +500,7 @@ impl Builder<'_> {
                 &mut proto.triangles,
                 &mut proto.shapes,
                 &mut self.geometry.degenerate,
+                &mut self.geometry.primvars,
                 m,
                 local,
                 self.budget - others.min(self.budget),
@@ -698,6 +721,11 @@ fn material_subsets(
 
 /// Emits the geometry of one renderable prim.
 fn emit_prim(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
+    out.corner_layout = u32::MAX;
+    out.constant = PrimvarRef::NONE;
+    if !matches!(prim.type_name.as_deref(), Some("Mesh" | "Points")) {
+        out.constant = element_primvars(prim, 1, out.table, diags).first().copied().unwrap_or(PrimvarRef::NONE);
+    }
     match prim.type_name.as_deref() {
         Some("Mesh") => mesh(prim, out, diags),
         Some("Sphere") => sphere(prim, out, diags),
@@ -735,6 +763,12 @@ struct Emitter<'g> {
     subdiv_level: u32,
     /// For meshes with GeomSubset bindings: the prim index of each face (empty: all `prim`).
     face_prims: Vec<u32>,
+    /// Where primvar values go.
+    table: &'g mut PrimvarTable,
+    /// The current mesh's per-corner layout (`u32::MAX`: none), for [`Emitter::emit_with`].
+    corner_layout: u32,
+    /// One set of values for every primitive of the current prim (analytic prims, Points).
+    constant: PrimvarRef,
 }
 
 impl<'g> Emitter<'g> {
@@ -742,6 +776,7 @@ impl<'g> Emitter<'g> {
         triangles: &'g mut Vec<Triangle>,
         shapes: &'g mut Vec<Shape>,
         degenerate: &'g mut usize,
+        table: &'g mut PrimvarTable,
         m: DMat4,
         prim: u32,
         budget: usize,
@@ -761,11 +796,21 @@ impl<'g> Emitter<'g> {
             over_budget: false,
             subdiv_level: DEFAULT_SUBDIV_LEVEL,
             face_prims: Vec::new(),
+            table,
+            corner_layout: u32::MAX,
+            constant: PrimvarRef::NONE,
         }
     }
 
-    /// Emits one triangle given in local space (`n` in local space, not necessarily unit).
+    /// Emits one triangle given in local space (`n` in local space, not necessarily unit),
+    /// with the prim's constant primvars.
     fn emit(&mut self, p: [DVec3; 3], n: Option<[DVec3; 3]>, uv: Option<[Vec2; 3]>) {
+        self.emit_with(p, n, uv, None);
+    }
+
+    /// As [`Emitter::emit`], with the three corners' primvar values (`corner_layout`'s stride
+    /// each, in the order of `p`).
+    fn emit_with(&mut self, p: [DVec3; 3], n: Option<[DVec3; 3]>, uv: Option<[Vec2; 3]>, corners: Option<&[f32]>) {
         let world = p.map(|p| self.m.transform_point3(p));
         // Non-finite points (NaN included) are beyond any extent too.
         if let Some(far) = world.iter().find(|w| !w.is_finite() || w.abs().max_element() > MAX_EXTENT) {
@@ -806,7 +851,11 @@ impl<'g> Emitter<'g> {
         };
         let has_uv = uv.is_some();
         let uv = uv.unwrap_or([Vec2::ZERO, Vec2::X, Vec2::Y]);
-        self.triangles.push(Triangle { p: wp, n, uv, prim: self.prim, has_uv });
+        let primvars = match corners {
+            Some(values) if self.corner_layout != u32::MAX => self.table.push(self.corner_layout, values),
+            _ => self.constant,
+        };
+        self.triangles.push(Triangle { p: wp, n, uv, prim: self.prim, has_uv, primvars });
         self.emitted += 1;
     }
 
@@ -820,7 +869,10 @@ impl<'g> Emitter<'g> {
             return;
         }
         match Shape::new(part, m, self.prim) {
-            Some(shape) => self.shapes.push(shape),
+            Some(mut shape) => {
+                shape.primvars = self.constant;
+                self.shapes.push(shape)
+            }
             None => *self.degenerate += 1,
         }
     }
@@ -979,53 +1031,6 @@ fn span_of(prim: &Prim, name: &str) -> Span {
 }
 
 /// A primvar resolved per face-vertex: its data, width, interpolation and optional indices.
-struct Primvar<'a> {
-    data: &'a [f64],
-    width: usize,
-    interpolation: &'a str,
-    indices: Option<&'a [i64]>,
-    attr: &'a Attribute,
-}
-
-impl<'a> Primvar<'a> {
-    fn get(prim: &'a Prim, name: &str, width: usize, default_interp: &'a str) -> Option<Primvar<'a>> {
-        let attr = prim.attribute(name)?;
-        let (w, data) = attr.get()?.as_tuple_array()?;
-        if w != width {
-            return None;
-        }
-        let interpolation = attr.meta("interpolation").and_then(Value::as_str).unwrap_or(default_interp);
-        let indices = prim.value(&format!("{name}:indices")).and_then(Value::as_int_array);
-        Some(Primvar { data, width, interpolation, indices, attr })
-    }
-
-    /// Number of elements the interpolation needs, given the mesh's counts.
-    fn expected(&self, points: usize, faces: usize, face_vertices: usize) -> Option<usize> {
-        match self.interpolation {
-            "vertex" | "varying" => Some(points),
-            "faceVarying" => Some(face_vertices),
-            "uniform" => Some(faces),
-            "constant" => Some(1),
-            _ => None,
-        }
-    }
-
-    /// The element for (face, face-vertex ordinal, point index).
-    fn at(&self, face: usize, corner: usize, point: usize) -> Option<&'a [f64]> {
-        let slot = match self.interpolation {
-            "vertex" | "varying" => point,
-            "faceVarying" => corner,
-            "uniform" => face,
-            _ => 0,
-        };
-        let element = match self.indices {
-            Some(ix) => usize::try_from(*ix.get(slot)?).ok()?,
-            None => slot,
-        };
-        self.data.get(element * self.width..(element + 1) * self.width)
-    }
-}
-
 fn mesh(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
     let error = |diags: &mut Diagnostics, name: &str, message: String| {
         diags.push(Diagnostic::error(message).at(span_of(prim, name), "here"));
@@ -1074,6 +1079,8 @@ fn mesh(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
     let normals = normals.filter(|pv| check_primvar(prim, pv, npoints, faces, indices.len(), diags));
     let st = Primvar::get(prim, "primvars:st", 2, "faceVarying");
     let st = st.filter(|pv| check_primvar(prim, pv, npoints, faces, indices.len(), diags));
+    let shading = MeshPrimvars::new(prim, out.table, (npoints, faces, indices.len()), diags);
+    out.corner_layout = shading.as_ref().map_or(u32::MAX, |m| m.layout);
 
     let holes: std::collections::HashSet<i64> = prim
         .value("holeIndices")
@@ -1106,7 +1113,7 @@ fn mesh(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
                     .at(scheme_attr.map_or(prim.span, value_span), "here"),
                 );
             }
-            let mut poly = poly_mesh(points, counts, indices, st.as_ref(), &holes);
+            let mut poly = poly_mesh(points, counts, indices, st.as_ref(), shading.as_ref(), &holes);
             poly.tags = read_tags(prim, npoints, counts, indices, diags);
             // Normals are not authored on subdivision surfaces (UsdGeom): the limit's are used.
             subdivided(&poly, left, flip, out);
@@ -1125,6 +1132,7 @@ fn mesh(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
     let point = |i: usize| DVec3::new(points[3 * i], points[3 * i + 1], points[3 * i + 2]);
     let mut start = 0usize;
     let base = out.prim;
+    let mut corner_values = Vec::new();
     for (face, &count) in counts.iter().enumerate() {
         out.prim = out.face_prims.get(face).copied().unwrap_or(base);
         let count = count as usize;
@@ -1132,12 +1140,12 @@ fn mesh(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
             start += count;
             continue;
         }
-        let corner = |k: usize| -> (DVec3, Option<DVec3>, Option<Vec2>) {
+        let corner = |k: usize| -> (DVec3, Option<DVec3>, Option<Vec2>, (usize, usize)) {
             let c = start + k;
             let pi = indices[c] as usize;
             let n = normals.as_ref().and_then(|pv| pv.at(face, c, pi)).map(|n| DVec3::new(n[0], n[1], n[2]));
             let uv = st.as_ref().and_then(|pv| pv.at(face, c, pi)).map(|t| Vec2::new(t[0] as f32, t[1] as f32));
-            (point(pi), n, uv)
+            (point(pi), n, uv, (c, pi))
         };
         for k in 1..count - 1 {
             let mut c = [corner(0), corner(k), corner(k + 1)];
@@ -1153,19 +1161,27 @@ fn mesh(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
                 (Some(a), Some(b), Some(d)) => Some([a, b, d]),
                 _ => None,
             };
-            out.emit(p, n, uv);
+            let values = shading.as_ref().map(|m| {
+                corner_values.clear();
+                for (_, _, _, (fv, pi)) in &c {
+                    m.corner(face, *fv, *pi, &mut corner_values);
+                }
+                corner_values.as_slice()
+            });
+            out.emit_with(p, n, uv, values);
         }
         start += count;
     }
 }
 
 /// The faces of a validated mesh with three or more vertices, as a [`PolyMesh`], with `st`
-/// per face-vertex when every corner has one.
+/// per face-vertex when every corner has one, and the shading primvars per face-vertex.
 fn poly_mesh(
     points: &[f64],
     counts: &[i64],
     indices: &[i64],
     st: Option<&Primvar>,
+    shading: Option<&MeshPrimvars>,
     holes: &std::collections::HashSet<i64>,
 ) -> PolyMesh {
     let mut mesh = PolyMesh {
@@ -1189,11 +1205,15 @@ fn poly_mesh(
                         None => uv = None,
                     }
                 }
+                if let Some(m) = shading {
+                    m.corner(face, c, pi, &mut mesh.varying);
+                }
             }
         }
         start += count;
     }
     mesh.uv = uv;
+    mesh.varying_width = shading.map_or(0, |m| m.stride);
     mesh
 }
 
@@ -1212,6 +1232,7 @@ fn subdivided(poly: &PolyMesh, left_handed: bool, flip: bool, out: &mut Emitter)
     }
     let q = catmull_clark(poly, level);
     let base = out.prim;
+    let mut corner_values = Vec::new();
     // Limit normals follow the right-hand rule of the faces' winding; a left-handed mesh
     // faces the other way.
     let sign = if left_handed { -1.0 } else { 1.0 };
@@ -1227,17 +1248,23 @@ fn subdivided(poly: &PolyMesh, left_handed: bool, flip: bool, out: &mut Emitter)
             let p = corners.map(|k| q.points[quad[k] as usize]);
             let n = corners.map(|k| q.normals[quad[k] as usize] * sign);
             let uv = q.uv.as_ref().map(|uv| corners.map(|k| uv[i][k]));
-            out.emit(p, Some(n), uv);
+            let w = q.varying_width;
+            let values = (w > 0).then(|| {
+                corner_values.clear();
+                for k in corners {
+                    corner_values.extend_from_slice(&q.varying[(4 * i + k) * w..(4 * i + k + 1) * w]);
+                }
+                corner_values.as_slice()
+            });
+            out.emit_with(p, Some(n), uv, values);
         }
     }
 }
 
 /// Whether a primvar's length fits its interpolation; warns and drops it when not.
 fn check_primvar(prim: &Prim, pv: &Primvar, points: usize, faces: usize, fv: usize, diags: &mut Diagnostics) -> bool {
-    let elements = pv.indices.map_or(pv.data.len() / pv.width, <[i64]>::len);
-    let ok = pv.expected(points, faces, fv).is_some_and(|e| e == elements)
-        && pv.indices.is_none_or(|ix| ix.iter().all(|&i| i >= 0 && (i as usize) < pv.data.len() / pv.width))
-        && pv.data.iter().all(|c| c.is_finite());
+    let elements = pv.elements();
+    let ok = pv.expected(points, faces, fv).is_some_and(|e| e == elements) && pv.sound();
     if !ok {
         diags.push(
             Diagnostic::warning(format!(
@@ -1248,6 +1275,117 @@ fn check_primvar(prim: &Prim, pv: &Primvar, points: usize, faces: usize, fv: usi
         );
     }
     ok
+}
+
+/// The primvars (of [`PrimvarTable::names`]) a mesh has, checked against its counts, with
+/// their place in a corner of its layout (registered in the table).
+struct MeshPrimvars<'a> {
+    /// (offset in a corner, components stored, the primvar).
+    vars: Vec<(usize, usize, Primvar<'a>)>,
+    stride: usize,
+    layout: u32,
+}
+
+impl<'a> MeshPrimvars<'a> {
+    fn new(
+        prim: &'a Prim,
+        table: &mut PrimvarTable,
+        counts: (usize, usize, usize),
+        diags: &mut Diagnostics,
+    ) -> Option<MeshPrimvars<'a>> {
+        let (points, faces, fv) = counts;
+        let mut fields = vec![(0u32, 0u32); table.names.len()];
+        let mut vars = Vec::new();
+        let mut stride = 0;
+        for (i, name) in table.names.iter().enumerate() {
+            // `st` keeps the default its texture coordinates have always had here.
+            let default = if name == "st" { "faceVarying" } else { "constant" };
+            let Some(pv) = Primvar::any(prim, &format!("primvars:{name}"), default) else { continue };
+            if !check_primvar(prim, &pv, points, faces, fv, diags) {
+                continue;
+            }
+            let width = pv.width.min(MAX_COMPONENTS);
+            fields[i] = (stride as u32, width as u32);
+            vars.push((stride, width, pv));
+            stride += width;
+        }
+        if vars.is_empty() || table.layouts.len() >= u32::MAX as usize {
+            return None;
+        }
+        table.layouts.push(PrimvarLayout { fields, stride: stride as u32, corners: 3 });
+        Some(MeshPrimvars { vars, stride, layout: table.layouts.len() as u32 - 1 })
+    }
+
+    /// Appends the values of face `face`'s corner at face-vertex `corner`, point `point`.
+    fn corner(&self, face: usize, corner: usize, point: usize, out: &mut Vec<f32>) {
+        for (_, width, pv) in &self.vars {
+            match pv.at(face, corner, point) {
+                Some(v) => out.extend(v[..*width].iter().map(|&x| x as f32)),
+                None => out.extend(std::iter::repeat_n(0.0, *width)),
+            }
+        }
+    }
+}
+
+/// The primvars (of [`PrimvarTable::names`]) of a prim drawn as `count` primitives with one
+/// value set each: an analytic prim (1) or Points (one sphere per point). A primvar with one
+/// element applies to all; on Points, a vertex or varying one gives each point its own; any
+/// other is reported and ignored. Returns each primitive's values (empty: none).
+fn element_primvars(prim: &Prim, count: usize, table: &mut PrimvarTable, diags: &mut Diagnostics) -> Vec<PrimvarRef> {
+    if table.names.is_empty() || count == 0 {
+        return Vec::new();
+    }
+    let mut fields = vec![(0u32, 0u32); table.names.len()];
+    let mut vars = Vec::new();
+    let mut stride = 0;
+    for (i, name) in table.names.iter().enumerate() {
+        let Some(pv) = Primvar::any(prim, &format!("primvars:{name}"), "constant") else { continue };
+        let elements = pv.elements();
+        let per_point = count > 1 && elements == count && matches!(pv.interpolation, "vertex" | "varying");
+        if !(pv.sound() && (elements == 1 || per_point)) {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "`{}`: `{}` ({} interpolation, {elements} elements) does not fit a {} (one value{}); ignored",
+                    prim.path,
+                    pv.attr.name,
+                    pv.interpolation,
+                    prim.type_name.as_deref().unwrap_or("prim"),
+                    if count > 1 { ", or one per point" } else { "" }
+                ))
+                .at(value_span(pv.attr), "here"),
+            );
+            continue;
+        }
+        let width = pv.width.min(MAX_COMPONENTS);
+        fields[i] = (stride as u32, width as u32);
+        vars.push((width, per_point, pv));
+        stride += width;
+    }
+    if vars.is_empty() || table.layouts.len() >= u32::MAX as usize {
+        return Vec::new();
+    }
+    table.layouts.push(PrimvarLayout { fields, stride: stride as u32, corners: 1 });
+    let layout = table.layouts.len() as u32 - 1;
+    let varies = vars.iter().any(|(_, per_point, _)| *per_point);
+    let mut values = Vec::with_capacity(stride);
+    (0..if varies { count } else { 1 })
+        .map(|e| {
+            values.clear();
+            for (width, per_point, pv) in &vars {
+                // Element lookup through indices: `at` takes the point index for vertex data.
+                let element = if *per_point { pv.at(0, 0, e) } else { pv.at(0, 0, 0).or_else(|| pv.at(0, 0, e)) };
+                match element {
+                    Some(v) => values.extend(v[..*width].iter().map(|&x| x as f32)),
+                    None => values.extend(std::iter::repeat_n(0.0, *width)),
+                }
+            }
+            table.push(layout, &values)
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .cycle()
+        .take(count)
+        .collect()
 }
 
 fn positive(prim: &Prim, name: &str, default: f64, diags: &mut Diagnostics) -> Option<f64> {
@@ -1294,7 +1432,9 @@ fn points(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
         );
         return;
     }
+    let primvars = element_primvars(prim, count, out.table, diags);
     for (i, p) in points.chunks_exact(3).enumerate() {
+        out.constant = primvars.get(i).copied().unwrap_or(PrimvarRef::NONE);
         let width = widths[if widths.len() == 1 { 0 } else { i }];
         let centre = DVec3::new(p[0], p[1], p[2]);
         if !(width.is_finite() && width > 0.0 && centre.is_finite()) {
@@ -1443,8 +1583,8 @@ def Xform "Far" {{
         let (stage, mut diags) = stage(&text);
         let xforms = world_transforms(&stage, &mut diags);
         let per_sphere =
-            build_within(&stage, &xforms, GeometryOptions::default(), usize::MAX, &mut diags).triangles.len() / 5;
-        let g = build_within(&stage, &xforms, GeometryOptions::default(), 2 * per_sphere + 10, &mut diags);
+            build_within(&stage, &xforms, GeometryOptions::default(), usize::MAX, &[], &mut diags).triangles.len() / 5;
+        let g = build_within(&stage, &xforms, GeometryOptions::default(), 2 * per_sphere + 10, &[], &mut diags);
         assert_eq!(g.triangles.len(), 2 * per_sphere + 10, "bounded by the budget");
         let errors: Vec<&Diagnostic> =
             diags.items().iter().filter(|d| d.severity == crate::diag::Severity::Error).collect();

@@ -15,9 +15,10 @@ use super::accel::{Accel, Hit, WORLD, offset_ray_origin};
 use super::bsdf::{Bsdf, Frame};
 use super::emitter::Emitter;
 use super::light::{Light, LightSample, LightSelection};
+use super::primvars::{PrimvarRef, PrimvarSlot};
 use super::sampling::{Rng, power_heuristic};
 use super::scene::Scene;
-use crate::abi::{Closure, ClosureKind, Globals, MaterialCode, ShaderError};
+use crate::abi::{Closure, ClosureKind, Globals, MaterialCode, PrimvarValues, ShaderError};
 use crate::layering::{self, Relief};
 use glam::{Vec2, Vec3};
 
@@ -184,6 +185,8 @@ pub struct Scratch {
     weights: Vec<f32>,
     lobes: Vec<Lobe>,
     material_channels: Vec<f32>,
+    /// The shading point's primvar values (`abi::Globals::primvars`).
+    primvars: Vec<f32>,
     /// The sample's custom channels in the image's global layout.
     pub channels: Vec<f32>,
     /// Radiance the last [`Context::shade`] found emitted towards the ray (zero unless the
@@ -200,6 +203,7 @@ impl Scratch {
     pub fn new(materials: &[&dyn MaterialCode], global_channels: usize) -> Scratch {
         let layers = materials.iter().map(|m| m.info().layers.len()).max().unwrap_or(0).max(1);
         let floats = materials.iter().map(|m| m.info().channel_floats).max().unwrap_or(0);
+        let primvar_floats = materials.iter().map(|m| m.info().primvar_floats).max().unwrap_or(0);
         Scratch {
             masks: vec![0.0; layers],
             masks_du: vec![0.0; layers],
@@ -208,6 +212,7 @@ impl Scratch {
             weights: vec![0.0; layers],
             lobes: Vec::with_capacity(layers),
             material_channels: vec![0.0; floats],
+            primvars: vec![0.0; primvar_floats],
             channels: vec![0.0; global_channels],
             emitted: Vec3::ZERO,
             site: FaultSite::default(),
@@ -247,6 +252,14 @@ pub struct Context<'a> {
     pub all_opaque: bool,
     /// How next-event estimation chooses a light (by power; see [`LightSelection`]).
     pub light_selection: LightSelection,
+    /// Per material, its primvar reads resolved against [`Scene::primvars`]
+    /// (see [`primvar_slots`]).
+    pub primvar_slots: &'a [Vec<PrimvarSlot>],
+}
+
+/// Each material's primvar reads resolved against the scene's stored primvars.
+pub fn primvar_slots(scene: &Scene, materials: &[&dyn MaterialCode]) -> Vec<Vec<PrimvarSlot>> {
+    materials.iter().map(|m| scene.primvars.slots(&m.info().primvars)).collect()
 }
 
 /// Whether a material never lets light through: a layer with a surface and a mask of 1 at
@@ -270,6 +283,8 @@ struct SurfacePoint {
     material: usize,
     /// Index of the prim in [`Scene::prims`].
     prim: u32,
+    primvars: PrimvarRef,
+    bary: [f32; 3],
 }
 
 /// Surface geometry where the ray `o + t d` hit.
@@ -285,6 +300,8 @@ fn surface_point(accel: &Accel, scene: &Scene, o: Vec3, d: Vec3, hit: &Hit) -> S
         uv: g.uv,
         material: scene.prim_material[g.prim as usize],
         prim: g.prim,
+        primvars: g.primvars,
+        bary: g.bary,
     }
 }
 
@@ -298,7 +315,14 @@ fn to_arr(v: Vec3) -> [f32; 3] {
 }
 
 impl Context<'_> {
-    fn globals(&self, sp: &SurfacePoint, n: Vec3, d: Vec3) -> Globals {
+    /// The shading globals at `sp`, with the material's primvars interpolated into
+    /// `primvars` (scratch at least as long as any material's `primvar_floats`).
+    fn globals<'p>(&self, sp: &SurfacePoint, n: Vec3, d: Vec3, primvars: &'p mut [f32]) -> Globals<'p> {
+        let slots = &self.primvar_slots[sp.material];
+        let used = self.materials[sp.material].info().primvar_floats.min(primvars.len());
+        if !slots.is_empty() {
+            self.scene.primvars.fill(sp.primvars, sp.bary, slots, &mut primvars[..used]);
+        }
         Globals {
             p: to_arr(sp.p),
             n: to_arr(n),
@@ -308,6 +332,7 @@ impl Context<'_> {
             dpdv: to_arr(sp.dpdv),
             u: sp.uv.x,
             v: sp.uv.y,
+            primvars: PrimvarValues::new(&primvars[..used]),
         }
     }
 
@@ -326,7 +351,7 @@ impl Context<'_> {
         let nl = info.layers.len();
         s.site = FaultSite { prim: sp.prim, layer: None };
         let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
-        let mut g = self.globals(sp, facing, d);
+        let mut g = self.globals(sp, facing, d, &mut s.primvars);
         s.emitted = Vec3::ZERO;
         if nl == 0 {
             s.lobes.clear();
@@ -522,6 +547,7 @@ impl Context<'_> {
         dist: f32,
         site: &mut FaultSite,
         counts: &mut EvalCounts,
+        primvars: &mut [f32],
     ) -> Result<f32, Invalid> {
         let accel = &self.scene.accel;
         if self.all_opaque {
@@ -542,7 +568,7 @@ impl Context<'_> {
             if nl > 0 {
                 *site = FaultSite { prim: sp.prim, layer: None };
                 let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
-                let g = self.globals(&sp, facing, d);
+                let g = self.globals(&sp, facing, d, primvars);
                 // Π(1 − m_i) over the layers that pick, from the top (`layering`).
                 let layers = &material.info().layers;
                 let mask_of = |i: usize| match layers[i].constant_mask {
@@ -600,7 +626,7 @@ impl Context<'_> {
         let side = if ng.dot(ls.wi) > 0.0 { ng } else { -ng };
         let o = offset_ray_origin(p, p_error, side);
         let dist = if ls.dist.is_finite() { ls.dist * (1.0 - 1e-4) } else { f32::INFINITY };
-        let tr = self.transmittance(o, ls.wi, dist, &mut s.site, &mut s.counts)?;
+        let tr = self.transmittance(o, ls.wi, dist, &mut s.site, &mut s.counts, &mut s.primvars)?;
         if tr <= 0.0 {
             return Ok(Vec3::ZERO);
         }
@@ -654,7 +680,7 @@ impl Context<'_> {
         let material = self.materials[sp.material];
         let layers = &material.info().layers;
         s.site = FaultSite { prim: sp.prim, layer: None };
-        let g = self.globals(sp, sp.ns, d);
+        let g = self.globals(sp, sp.ns, d, &mut s.primvars);
         let counts = &mut s.counts;
         let mask_of = |i: usize| match layers[i].constant_mask {
             Some(m) => Ok(m),

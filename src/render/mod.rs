@@ -25,6 +25,7 @@ pub mod integrator;
 pub mod light;
 pub mod microfacet;
 pub mod output;
+pub mod primvars;
 pub mod sampling;
 pub mod scene;
 pub mod shapes;

@@ -7,6 +7,7 @@ use super::displace::{DicingOptions, DisplacementStats};
 use super::emitter::Emitters;
 use super::geometry::{self, GeomPrim};
 use super::light::{Light, LightKind, lights_from_stage};
+use super::primvars::PrimvarTable;
 use super::xform::world_transforms;
 use crate::abi::MaterialCode;
 use crate::diag::{Diagnostic, Diagnostics};
@@ -43,6 +44,9 @@ pub struct Scene {
     pub displaced: Vec<bool>,
     /// What displacement cost, when anything was displaced.
     pub displacement: Option<DisplacementStats>,
+    /// The primvars the materials read, per triangle and shape that has them (empty when the
+    /// scene was built without its materials: every primvar then reads its fallback).
+    pub primvars: PrimvarTable,
     /// Whether the stage had no light and [`default_lights`] light it.
     pub default_lights: bool,
 }
@@ -210,7 +214,8 @@ impl Scene {
     }
 
     /// [`Scene::from_stage`] with the camera chosen by `options`. Without the materials,
-    /// nothing is diced: displacement bends shading normals only (see [`Scene::build`]).
+    /// nothing is diced (displacement bends shading normals only) and no primvar is stored
+    /// (see [`Scene::build`]).
     pub fn from_stage_with(
         stage: &Stage,
         material_of_prim: &dyn Fn(&str) -> Option<usize>,
@@ -222,7 +227,7 @@ impl Scene {
 
     /// Builds the render scene with the compiled `materials` (indexed as `material_of_prim`
     /// returns), so that surfaces whose material moves geometry are diced and displaced
-    /// ([`super::displace`]).
+    /// ([`super::displace`]) and the primvars they read are stored ([`super::primvars`]).
     pub fn build(
         stage: &Stage,
         material_of_prim: &dyn Fn(&str) -> Option<usize>,
@@ -232,7 +237,11 @@ impl Scene {
     ) -> Option<Scene> {
         let errors = diags.error_count();
         let xforms = world_transforms(stage, diags);
-        let mut geometry = geometry::build_with_options(stage, &xforms, options.geometry, diags);
+        let mut read: Vec<String> =
+            materials.iter().flat_map(|m| m.info().primvars.iter().map(|p| p.name.clone())).collect();
+        read.sort();
+        read.dedup();
+        let mut geometry = geometry::build_with_primvars(stage, &xforms, options.geometry, &read, diags);
         let mut prim_material = Vec::with_capacity(geometry.prims.len());
         for prim in &geometry.prims {
             match material_of_prim(&prim.path) {
@@ -293,6 +302,7 @@ impl Scene {
             degenerate_triangles: geometry.degenerate,
             accel,
             prims: geometry.prims,
+            primvars: geometry.primvars,
             prim_material,
             lights,
             emitters,

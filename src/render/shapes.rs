@@ -84,6 +84,8 @@ pub struct Shape {
     pub normal_to_world: DMat3,
     /// Index of the renderable prim.
     pub prim: u32,
+    /// Its primvar values (one set for the whole part).
+    pub primvars: super::primvars::PrimvarRef,
 }
 
 /// The smallest root of `a t² + b t + c` in `(tmin, tmax)`, computed stably (no
@@ -246,7 +248,14 @@ impl Shape {
             return None;
         }
         let to_object = m.inverse();
-        Some(Shape { part, to_world: m, to_object, normal_to_world: linear.inverse().transpose(), prim })
+        Some(Shape {
+            part,
+            to_world: m,
+            to_object,
+            normal_to_world: linear.inverse().transpose(),
+            prim,
+            primvars: Default::default(),
+        })
     }
 
     /// World-space bounds `(min, max)`: the transformed corners of the object box.

@@ -77,6 +77,11 @@ pub struct PolyMesh {
     pub indices: Vec<u32>,
     /// Texture coordinates per face-vertex (parallel to `indices`), if any.
     pub uv: Option<Vec<Vec2>>,
+    /// Shading primvar values per face-vertex, `varying_width` each (empty when 0), refined
+    /// linearly within each face as `uv` is.
+    pub varying: Vec<f32>,
+    /// Floats per face-vertex in `varying`.
+    pub varying_width: usize,
     /// Faces that are holes (`holeIndices`): refined with the rest, never emitted.
     pub holes: Vec<bool>,
     /// Per face, the authored face it comes from (GeomSubsets name authored faces).
@@ -96,6 +101,10 @@ pub struct QuadMesh {
     pub quads: Vec<[u32; 4]>,
     /// Texture coordinates per quad corner.
     pub uv: Option<Vec<[Vec2; 4]>>,
+    /// Shading primvar values per quad corner (`4 · varying_width` floats per quad).
+    pub varying: Vec<f32>,
+    /// Floats per quad corner in `varying`.
+    pub varying_width: usize,
     /// Whether each quad lies in a hole (authored, or dropped by `interpolateBoundary = none`).
     pub holes: Vec<bool>,
     /// Per quad, the authored face it refines.
@@ -596,12 +605,20 @@ fn refine(mesh: &PolyMesh, topo: &Topology, sharp: &Sharpness) -> (PolyMesh, Sha
     let mut counts = Vec::with_capacity(quads);
     let mut indices = Vec::with_capacity(quads * 4);
     let mut uv = mesh.uv.as_ref().map(|_| Vec::with_capacity(quads * 4));
+    let w = mesh.varying_width;
+    let mut varying = Vec::with_capacity(quads * 4 * w);
+    let mut centre = vec![0.0f32; w];
     let mut holes = Vec::with_capacity(quads);
     let mut origin = Vec::with_capacity(quads);
     for (f, &o) in topo.offsets.iter().enumerate() {
         let vs = topo.face(mesh, f);
         let m = vs.len();
         let centre_uv = mesh.uv.as_ref().map(|t| t[o..o + m].iter().copied().sum::<Vec2>() / m as f32);
+        if w > 0 {
+            for (j, c) in centre.iter_mut().enumerate() {
+                *c = (0..m).map(|k| mesh.varying[(o + k) * w + j]).sum::<f32>() / m as f32;
+            }
+        }
         for k in 0..m {
             let prev = (k + m - 1) % m;
             counts.push(4);
@@ -615,11 +632,20 @@ fn refine(mesh: &PolyMesh, topo: &Topology, sharp: &Sharpness) -> (PolyMesh, Sha
                 let (here, next, before) = (t[o + k], t[o + (k + 1) % m], t[o + prev]);
                 out.extend([here, (here + next) / 2.0, c, (before + here) / 2.0]);
             }
+            if w > 0 {
+                let at = |j: usize| &mesh.varying[(o + j) * w..(o + j + 1) * w];
+                let (here, next, before) = (at(k), at((k + 1) % m), at(prev));
+                varying.extend_from_slice(here);
+                varying.extend(here.iter().zip(next).map(|(a, b)| (a + b) / 2.0));
+                varying.extend_from_slice(&centre);
+                varying.extend(before.iter().zip(here).map(|(a, b)| (a + b) / 2.0));
+            }
             holes.push(mesh.holes.get(f).copied().unwrap_or(false));
             origin.push(mesh.origin.get(f).copied().unwrap_or(f as u32));
         }
     }
-    let child = PolyMesh { points, counts, indices, uv, holes, origin, tags: SubdivTags::default() };
+    let child =
+        PolyMesh { points, counts, indices, uv, varying, varying_width: w, holes, origin, tags: SubdivTags::default() };
     (child, Sharpness { edges: child_edge_sharpness, vertices })
 }
 
@@ -776,7 +802,16 @@ pub fn catmull_clark(mesh: &PolyMesh, level: u32) -> QuadMesh {
         *n = n.normalize_or_zero();
     }
     let uv = refined.uv.map(|t| t.chunks_exact(4).map(|c| [c[0], c[1], c[2], c[3]]).collect());
-    QuadMesh { points, normals, quads, uv, holes: refined.holes, origin: refined.origin }
+    QuadMesh {
+        points,
+        normals,
+        quads,
+        uv,
+        varying: refined.varying,
+        varying_width: refined.varying_width,
+        holes: refined.holes,
+        origin: refined.origin,
+    }
 }
 
 #[cfg(test)]

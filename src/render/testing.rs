@@ -77,6 +77,7 @@ impl ConstMaterial {
                 .collect(),
             channels,
             channel_floats: offset,
+            ..MaterialInfo::default()
         };
         ConstMaterial { info, layers, fail: None }
     }

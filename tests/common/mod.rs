@@ -40,7 +40,7 @@ pub fn compile_stack(lib: &Library, names: &[String], backend: BackendKind, opti
         .collect();
     let mut diags = Diagnostics::new();
     let mut compiler = Compiler::new(backend, PassOptions { optimize });
-    let code = compiler.compile(lib, &ComposedMaterial { layers }, &mut diags);
+    let code = compiler.compile(lib, &ComposedMaterial { layers, ..Default::default() }, &mut diags);
     assert!(!diags.has_errors());
     code.expect("compiled")
 }

@@ -1,0 +1,256 @@
+//! Primvars for shading: the values of the `primvars:NAME` the scene's materials read
+//! (`abi::MaterialInfo::primvars`), stored per primitive when the geometry is built and
+//! interpolated at hit points into [`crate::abi::Globals::primvars`].
+//!
+//! Geometry resolves USD's interpolation and indexing once, at build time: a triangle stores
+//! its three corners' values (constant and uniform primvars repeat the face's value, vertex and
+//! varying ones the corner's point's, faceVarying ones the face-vertex's, `:indices` resolved),
+//! and an analytic shape stores one set. At a hit the corners are blended with the
+//! barycentrics, which is how Hydra draws every interpolation on a triangulated mesh.
+//! Only prims that have one of the read primvars store anything, and a material that reads
+//! none costs nothing at a hit.
+
+use std::borrow::Cow;
+
+use crate::scene::{Attribute, Prim, Value};
+
+/// Where a primitive's primvar values are in a [`PrimvarTable`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PrimvarRef {
+    /// Index in [`PrimvarTable::layouts`]; `u32::MAX`: the primitive has no stored primvars.
+    pub layout: u32,
+    /// Index of its first value in [`PrimvarTable::values`].
+    pub offset: u32,
+}
+
+impl PrimvarRef {
+    /// No primvars.
+    pub const NONE: PrimvarRef = PrimvarRef { layout: u32::MAX, offset: 0 };
+}
+
+impl Default for PrimvarRef {
+    fn default() -> Self {
+        PrimvarRef::NONE
+    }
+}
+
+/// How one prim's values are laid out: per name of [`PrimvarTable::names`], its place in a
+/// corner.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PrimvarLayout {
+    /// Per name id: `(offset in a corner, components)`; 0 components: the prim lacks it.
+    pub fields: Vec<(u32, u32)>,
+    /// Floats per corner.
+    pub stride: u32,
+    /// Corners per primitive: 3 (a triangle's, blended by barycentrics) or 1 (one value for
+    /// the whole primitive: analytic shapes).
+    pub corners: u32,
+}
+
+/// The stored primvars of a scene.
+#[derive(Clone, Debug, Default)]
+pub struct PrimvarTable {
+    /// The primvar names stored (without `primvars:`), by name id: those the materials read.
+    pub names: Vec<String>,
+    /// Layouts, one per prim that has any of `names`.
+    pub layouts: Vec<PrimvarLayout>,
+    /// Every primitive's corner values.
+    pub values: Vec<f32>,
+}
+
+/// Components stored per primvar at most: the shading language reads floats and triples.
+pub const MAX_COMPONENTS: usize = 3;
+
+/// A primvar a material reads, resolved against a [`PrimvarTable`]: name id (`u32::MAX` when
+/// no prim has it), and where [`crate::abi::PrimvarInfo`] puts it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PrimvarSlot {
+    /// Index in [`PrimvarTable::names`], or `u32::MAX`.
+    pub name: u32,
+    /// Index of the presence flag in the shading point's values.
+    pub offset: u32,
+    /// Components the material reads.
+    pub width: u32,
+}
+
+impl PrimvarTable {
+    /// Appends one primitive's values in layout `layout`; `NONE` past `u32::MAX` values.
+    pub fn push(&mut self, layout: u32, values: &[f32]) -> PrimvarRef {
+        let offset = self.values.len();
+        if offset + values.len() > u32::MAX as usize {
+            return PrimvarRef::NONE;
+        }
+        self.values.extend_from_slice(values);
+        PrimvarRef { layout, offset: offset as u32 }
+    }
+
+    /// The values of triangle `at` re-sampled at three points given by barycentrics of its
+    /// corners (a triangle cut from it, as dicing makes), as a new triangle's; one-value
+    /// primitives keep their values.
+    pub fn resample(&mut self, at: PrimvarRef, corners: [[f32; 3]; 3]) -> PrimvarRef {
+        let Some(layout) = self.layouts.get(at.layout as usize) else { return PrimvarRef::NONE };
+        if layout.corners != 3 {
+            return at;
+        }
+        let stride = layout.stride as usize;
+        let base = at.offset as usize;
+        let offset = self.values.len();
+        if offset + 3 * stride > u32::MAX as usize || base + 3 * stride > offset {
+            return PrimvarRef::NONE;
+        }
+        for b in corners {
+            for k in 0..stride {
+                let v = |c: usize| self.values[base + c * stride + k];
+                let value = v(0) * b[0] + v(1) * b[1] + v(2) * b[2];
+                self.values.push(value);
+            }
+        }
+        PrimvarRef { layout: at.layout, offset: offset as u32 }
+    }
+
+    /// The slots of a material's primvar table.
+    pub fn slots(&self, primvars: &[crate::abi::PrimvarInfo]) -> Vec<PrimvarSlot> {
+        primvars
+            .iter()
+            .map(|p| PrimvarSlot {
+                name: self.names.iter().position(|n| *n == p.name).map_or(u32::MAX, |i| i as u32),
+                offset: p.offset as u32,
+                width: p.width as u32,
+            })
+            .collect()
+    }
+
+    /// Writes the shading point's values of `slots` into `out` (at least as long as the
+    /// material's `primvar_floats`): for each, 1 and the components blended with barycentrics
+    /// `bary` when the primitive has it, else 0s. Allocation-free.
+    #[inline]
+    pub fn fill(&self, at: PrimvarRef, bary: [f32; 3], slots: &[PrimvarSlot], out: &mut [f32]) {
+        let layout = self.layouts.get(at.layout as usize);
+        for slot in slots {
+            let o = slot.offset as usize;
+            let Some(out) = out.get_mut(o..o + 1 + slot.width as usize) else { continue };
+            out.fill(0.0);
+            let Some(layout) = layout else { continue };
+            let Some(&(field, width)) = layout.fields.get(slot.name as usize) else { continue };
+            if width == 0 {
+                continue;
+            }
+            out[0] = 1.0;
+            let base = at.offset as usize + field as usize;
+            let stride = layout.stride as usize;
+            for (k, value) in out[1..].iter_mut().enumerate().take(width as usize) {
+                *value = if layout.corners == 1 {
+                    self.values.get(base + k).copied().unwrap_or(0.0)
+                } else {
+                    let corner = |c: usize| self.values.get(base + c * stride + k).copied().unwrap_or(0.0);
+                    corner(0) * bary[0] + corner(1) * bary[1] + corner(2) * bary[2]
+                };
+            }
+        }
+    }
+}
+
+/// One authored primvar: flattened data (any numeric type, as f64), element width,
+/// interpolation and indices.
+pub(crate) struct Primvar<'a> {
+    pub(crate) data: Cow<'a, [f64]>,
+    pub(crate) width: usize,
+    pub(crate) interpolation: &'a str,
+    pub(crate) indices: Option<&'a [i64]>,
+    pub(crate) attr: &'a Attribute,
+}
+
+impl<'a> Primvar<'a> {
+    /// The attribute `name` of `prim` if it is an array of `width`-tuples.
+    pub(crate) fn get(prim: &'a Prim, name: &str, width: usize, default_interp: &'a str) -> Option<Primvar<'a>> {
+        Primvar::any(prim, name, default_interp).filter(|pv| pv.width == width)
+    }
+
+    /// The attribute `name` of `prim` as a primvar of any numeric type: arrays of scalars
+    /// (width 1) or tuples, or one value (then constant). `None` when it has no such value.
+    pub(crate) fn any(prim: &'a Prim, name: &str, default_interp: &'a str) -> Option<Primvar<'a>> {
+        let attr = prim.attribute(name)?;
+        let value = attr.get()?;
+        let (width, data, single) = match value {
+            Value::TupleArray { width, data } => (*width, Cow::Borrowed(data.as_slice()), false),
+            Value::FloatArray(data) => (1, Cow::Borrowed(data.as_slice()), false),
+            Value::IntArray(data) => (1, Cow::Owned(data.iter().map(|&i| i as f64).collect()), false),
+            Value::Tuple(t) => (t.len(), Cow::Owned(t.clone()), true),
+            other => (1, Cow::Owned(vec![other.as_f64()?]), true),
+        };
+        if width == 0 {
+            return None;
+        }
+        let interpolation = if single {
+            "constant"
+        } else {
+            attr.meta("interpolation").and_then(Value::as_str).unwrap_or(default_interp)
+        };
+        let indices = if single { None } else { prim.value(&format!("{name}:indices")).and_then(Value::as_int_array) };
+        Some(Primvar { data, width, interpolation, indices, attr })
+    }
+
+    /// Number of elements the interpolation needs, given the mesh's counts.
+    pub(crate) fn expected(&self, points: usize, faces: usize, face_vertices: usize) -> Option<usize> {
+        match self.interpolation {
+            "vertex" | "varying" => Some(points),
+            "faceVarying" => Some(face_vertices),
+            "uniform" => Some(faces),
+            "constant" => Some(1),
+            _ => None,
+        }
+    }
+
+    /// The element for (face, face-vertex ordinal, point index).
+    pub(crate) fn at(&self, face: usize, corner: usize, point: usize) -> Option<&[f64]> {
+        let slot = match self.interpolation {
+            "vertex" | "varying" => point,
+            "faceVarying" => corner,
+            "uniform" => face,
+            _ => 0,
+        };
+        let element = match self.indices {
+            Some(ix) => usize::try_from(*ix.get(slot)?).ok()?,
+            None => slot,
+        };
+        self.data.get(element * self.width..(element + 1) * self.width)
+    }
+
+    /// Elements after indexing.
+    pub(crate) fn elements(&self) -> usize {
+        self.indices.map_or(self.data.len() / self.width, <[i64]>::len)
+    }
+
+    /// Whether the indices (if any) stay within the data and the data is finite.
+    pub(crate) fn sound(&self) -> bool {
+        self.indices.is_none_or(|ix| ix.iter().all(|&i| i >= 0 && (i as usize) < self.data.len() / self.width))
+            && self.data.iter().all(|c| c.is_finite())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fill_blends_corners_and_flags_presence() {
+        let table = PrimvarTable {
+            names: vec!["a".into(), "b".into()],
+            layouts: vec![
+                PrimvarLayout { fields: vec![(0, 1), (0, 0)], stride: 1, corners: 3 },
+                PrimvarLayout { fields: vec![(0, 0), (0, 2)], stride: 2, corners: 1 },
+            ],
+            values: vec![1.0, 2.0, 4.0, 0.5, 0.25],
+        };
+        let info = |name: &str, width, offset| crate::abi::PrimvarInfo { name: name.into(), width, offset };
+        let slots = table.slots(&[info("a", 1, 0), info("b", 3, 2), info("c", 1, 6)]);
+        assert_eq!(slots[2].name, u32::MAX);
+        let mut out = [9.0; 8];
+        table.fill(PrimvarRef { layout: 0, offset: 0 }, [0.5, 0.25, 0.25], &slots, &mut out);
+        assert_eq!(out, [1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+        table.fill(PrimvarRef { layout: 1, offset: 3 }, [0.0, 0.0, 1.0], &slots, &mut out);
+        assert_eq!(out, [0.0, 0.0, 1.0, 0.5, 0.25, 0.0, 0.0, 0.0]);
+        table.fill(PrimvarRef::NONE, [1.0, 0.0, 0.0], &slots, &mut out);
+        assert_eq!(out, [0.0; 8]);
+    }
+}
