@@ -148,7 +148,10 @@ fn compiled_object_links_from_c_and_matches_the_jit() {
         .iter()
         .flat_map(|g| {
             let words = [g.p, g.n, g.ng, g.i, g.dpdu, g.dpdv].concat();
-            words.into_iter().chain([g.u, g.v]).flat_map(f32::to_ne_bytes).collect::<Vec<u8>>()
+            let mut raw: Vec<u8> = words.into_iter().chain([g.u, g.v]).flat_map(f32::to_ne_bytes).collect();
+            // The rest of the C struct: no primvars (a null pointer, length 0) and padding.
+            raw.resize(std::mem::size_of::<Globals>(), 0);
+            raw
         })
         .collect();
     let mut child =
