@@ -2,21 +2,12 @@
 //! and header attributes read back with the `exr` crate; progress lines in a log; camera
 //! choice (`--camera`, UsdRender `RenderSettings`); lights hidden from the camera.
 
+mod common;
+
+use common::strata;
 use exr::meta::attribute::AttributeValue;
 use exr::prelude::{FlatSamples, ReadChannels, ReadLayers};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
-
-/// Runs `strata args` with stderr a pipe (not a terminal), as on a render farm.
-fn strata(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_strata"))
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .output()
-        .expect("strata runs")
-}
 
 /// Renders `scene` (`None`: the default scene) into `dir/out.exr` with `extra` arguments.
 fn render(dir: &Path, scene: Option<&Path>, extra: &[&str]) -> (PathBuf, String) {

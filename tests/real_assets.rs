@@ -4,10 +4,11 @@
 
 mod common;
 
+use common::strata;
+
 use exr::meta::attribute::AttributeValue;
 use exr::prelude::{ReadChannels, ReadLayers};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
 use strata::diag::{Diagnostics, SourceMap};
 use strata::render::scene::{DEFAULT_CAMERA_LIGHT_IRRADIANCE, DEFAULT_DOME_RADIANCE, DefaultLights, SceneOptions};
 
@@ -98,17 +99,6 @@ fn an_unlit_stage_is_lit_by_a_camera_light_and_a_dim_dome() {
     let (scene, _, said) = build(&lit, DefaultLights::WhenUnlit);
     assert!(!scene.default_lights && scene.lights.len() == 1, "{said}");
     assert!(!said.contains("no lights"), "{said}");
-}
-
-/// Runs `strata args` with stderr a pipe.
-fn strata(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_strata"))
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .output()
-        .expect("strata runs")
 }
 
 fn header_text(path: &Path, key: &str) -> String {

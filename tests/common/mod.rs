@@ -13,6 +13,17 @@ use strata::diag::{Diagnostics, SourceMap};
 use strata::front::library::Library;
 use strata::ir::wired::PassOptions;
 
+/// Runs the `strata` binary with `args`, stdin closed and stderr a pipe (as on a render farm).
+pub fn strata(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_strata"))
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .output()
+        .expect("strata runs")
+}
+
 /// Loads `text` (plus the prelude) as a library, or panics with the rendered diagnostics.
 pub fn library(text: &str) -> Library {
     let mut sources = SourceMap::new();
