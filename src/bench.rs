@@ -1103,6 +1103,7 @@ fn measure_scenes(
         threads: Some(1),
         max_depth: 6,
         mode: LayerMode::Stochastic,
+        ..Default::default()
     };
     let reference = RenderSettings {
         spp: reference_spp(spp),
@@ -1357,6 +1358,7 @@ pub fn bench_scale() -> Result<String, String> {
         threads: None,
         max_depth: 4,
         mode: LayerMode::Stochastic,
+        ..Default::default()
     };
     for count in [200usize, 2000, 20000] {
         let path = write(&format!("spheres{count}.usda"), &scale_scene(count, compositions, "m.ash"))?;
@@ -1414,6 +1416,7 @@ fn instancing_report(dir: &Path) -> Result<String, String> {
         threads: None,
         max_depth: 2,
         mode: LayerMode::Stochastic,
+        ..Default::default()
     };
     let mib = |b: usize| b as f64 / 1048576.0;
     let n = 224;
@@ -1702,6 +1705,7 @@ pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) ->
         threads: Some(1),
         max_depth: 6,
         mode: LayerMode::Stochastic,
+        ..Default::default()
     };
     let reference_settings = RenderSettings {
         spp: o.reference_spp,
@@ -2260,6 +2264,7 @@ fn measure_features(res: (usize, usize), spp: u32, reps: usize) -> Result<Vec<Fe
         threads: Some(1),
         max_depth: 6,
         mode: LayerMode::Stochastic,
+        ..Default::default()
     };
     let mut times = vec![Vec::new(); scenes.len()];
     let mut evals = vec![crate::render::integrator::EvalCounts::default(); scenes.len()];
@@ -2325,6 +2330,7 @@ fn scale_chart(dir: &Path) -> Result<String, String> {
         threads: None,
         max_depth: 6,
         mode: LayerMode::Stochastic,
+        ..Default::default()
     };
     let measure = |s: f64| -> Result<(f64, f64), String> {
         let usda = tmp.0.join("scale.usda");
@@ -2463,6 +2469,7 @@ pub fn bench_displacement(res: (usize, usize), spp: u32) -> Result<String, Strin
         threads: None,
         max_depth: 4,
         mode: LayerMode::Stochastic,
+        ..Default::default()
     };
     // Compiles once, builds `reps` times (median time), renders once.
     struct Row {

@@ -570,6 +570,7 @@ fn exr_options(
             ("strata/camera".into(), scene.camera_path.clone().unwrap_or_else(|| "(framing camera)".into())),
             ("strata/spp".into(), settings.spp.to_string()),
             ("strata/seed".into(), settings.seed.to_string()),
+            ("strata/sampler".into(), settings.sampler.name().into()),
             ("strata/maxDepth".into(), settings.max_depth.to_string()),
             ("strata/backend".into(), args.backend.to_string()),
             ("strata/layerMode".into(), mode.into()),

@@ -320,6 +320,7 @@ fn render_tiny(scene: &Path) {
         threads: Some(1),
         max_depth: 4,
         mode: crate::render::LayerMode::Stochastic,
+        ..Default::default()
     };
     let _ = crate::render::render(&scene, &materials, &settings, None);
 }

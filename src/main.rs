@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use strata::backend::BackendKind;
 use strata::cli;
+use strata::render::sampler::SamplerKind;
 use strata::render::{LayerMode, RenderSettings};
 
 #[derive(Parser)]
@@ -104,6 +105,10 @@ enum Command {
         /// Evaluate every layer weighted at each vertex instead of picking one (for comparison).
         #[arg(long)]
         weighted: bool,
+        /// How each decision's numbers are spread over a pixel's samples: `sobol`
+        /// (Owen-scrambled, the default) or `independent` (plain Monte Carlo, for comparison).
+        #[arg(long, default_value = "sobol", value_parser = parse_sampler)]
+        sampler: SamplerKind,
         /// Skip constant folding and layer pruning (for comparison).
         #[arg(long)]
         no_optimize: bool,
@@ -283,6 +288,7 @@ fn main() -> ExitCode {
             max_depth,
             backend,
             weighted,
+            sampler,
             no_optimize,
             stats,
             no_default_lights,
@@ -299,6 +305,7 @@ fn main() -> ExitCode {
                 threads: threads.map(|t| t as usize),
                 max_depth,
                 mode: if weighted { LayerMode::Weighted } else { LayerMode::Stochastic },
+                sampler,
             },
             backend,
             optimize: !no_optimize,
@@ -376,6 +383,10 @@ fn main() -> ExitCode {
 }
 
 /// Parses `WIDTHxHEIGHT` (each 1 to 16384).
+fn parse_sampler(text: &str) -> Result<SamplerKind, String> {
+    SamplerKind::from_name(text).ok_or_else(|| format!("`{text}` is not a sampler (sobol, independent)"))
+}
+
 fn parse_dicing_rate(text: &str) -> Result<f32, String> {
     match text.trim().parse::<f32>() {
         Ok(rate) if rate.is_finite() && (0.05..=1e4).contains(&rate) => Ok(rate),

@@ -90,6 +90,7 @@ fn render_at(dir: &Path, scale: f64, offset: [f64; 3]) -> Vec<f32> {
         threads: Some(2),
         max_depth: 3,
         mode: LayerMode::Stochastic,
+        ..Default::default()
     };
     let (image, stats) = render(&scene, &refs, &settings, None).expect("renders");
     assert_eq!(stats.invalid_samples(), 0, "{stats}");

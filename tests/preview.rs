@@ -181,6 +181,7 @@ fn jit_and_interpreter_agree_on_a_preview_network() {
             threads: Some(2),
             max_depth: 3,
             mode: LayerMode::Stochastic,
+            ..Default::default()
         };
         render(&scene, &refs, &settings, None).expect("renders").0
     };

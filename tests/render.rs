@@ -20,7 +20,16 @@ fn render_scene(path: Option<&str>, backend: BackendKind, optimize: bool, mode: 
     let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
     assert!(!diags.has_errors(), "{}", diags.render(&sources));
     let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
-    let settings = RenderSettings { width: 40, height: 30, spp: 2, seed: 7, threads: Some(2), max_depth: 4, mode };
+    let settings = RenderSettings {
+        width: 40,
+        height: 30,
+        spp: 2,
+        seed: 7,
+        threads: Some(2),
+        max_depth: 4,
+        mode,
+        ..Default::default()
+    };
     let (image, stats) = render(&scene, &refs, &settings, None).expect("renders");
     assert_eq!(stats.invalid_samples(), 0, "{stats}");
     image

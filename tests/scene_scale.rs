@@ -82,6 +82,7 @@ fn render_scale(s: f64) -> Image {
         threads: Some(2),
         max_depth: 6,
         mode: LayerMode::Stochastic,
+        ..Default::default()
     };
     let (image, stats) = render(&scene, &refs, &settings, None).expect("renders");
     assert_eq!(stats.invalid_samples(), 0, "scale {s}: {stats}");

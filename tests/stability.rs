@@ -81,7 +81,16 @@ fn render_file(scene: &Path, mode: LayerMode, spp: u32, res: usize, seed: u64) -
     let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
     assert!(!diags.has_errors(), "{}", diags.render(&sources));
     let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
-    let settings = RenderSettings { width: res, height: res, spp, seed, threads: Some(2), max_depth: 8, mode };
+    let settings = RenderSettings {
+        width: res,
+        height: res,
+        spp,
+        seed,
+        threads: Some(2),
+        max_depth: 8,
+        mode,
+        ..Default::default()
+    };
     render(&scene, &refs, &settings, None).expect("renders")
 }
 

@@ -9,7 +9,7 @@ use super::cryptomatte;
 use super::integrator::{
     ChannelMap, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams, Scratch,
 };
-use super::sampling::Rng;
+use super::sampler::{PathSampler, SamplerKind, Slot};
 use super::scene::Scene;
 use crate::abi::{MaterialCode, ShaderError};
 use crate::front::graph::ChannelKind;
@@ -36,6 +36,8 @@ pub struct RenderSettings {
     pub max_depth: u32,
     /// Layer evaluation mode.
     pub mode: LayerMode,
+    /// How each decision's numbers are spread over a pixel's samples.
+    pub sampler: SamplerKind,
 }
 
 impl Default for RenderSettings {
@@ -48,6 +50,7 @@ impl Default for RenderSettings {
             threads: None,
             max_depth: 8,
             mode: LayerMode::Stochastic,
+            sampler: SamplerKind::default(),
         }
     }
 }
@@ -455,14 +458,15 @@ pub fn render(
             material_coverage.clear();
             let px_channels = &mut row.channels[x * channel_floats..(x + 1) * channel_floats];
             for sample in 0..settings.spp {
-                let mut rng = Rng::new(settings.seed, pixel, sample as u64);
-                let jitter = rng.uniform2();
+                let mut sampler = PathSampler::new(settings.sampler, settings.seed, pixel, sample);
+                let jitter = sampler.get2(Slot::Pixel);
                 let film = Vec2::new((x as f32 + jitter.x) / w as f32, (y as f32 + jitter.y) / h as f32);
-                let ray = camera.ray(film, rng.uniform2());
+                let ray = camera.ray(film, sampler.get2(Slot::Lens));
                 // Stratified over the pixel's samples: sample k picks in [k, k + 1) / spp.
-                let u_pick = ((sample as f32 + rng.uniform()) / settings.spp as f32).min(1.0 - f32::EPSILON / 2.0);
+                let u_pick = ((sample as f32 + sampler.get1(Slot::LayerPick)) / settings.spp as f32)
+                    .min(1.0 - f32::EPSILON / 2.0);
                 row.stats.samples += 1;
-                match ctx.trace(ray.o, ray.d, ray.tmin, ray.tmax, u_pick, &mut rng, scratch) {
+                match ctx.trace(ray.o, ray.d, ray.tmin, ray.tmax, u_pick, &mut sampler, scratch) {
                     Ok(r) if r.radiance.is_finite() && r.albedo.is_finite() && r.normal.is_finite() => {
                         row.stats.pass_through_limit += u64::from(r.pass_limit);
                         sum += r.radiance;

@@ -16,7 +16,8 @@ use super::bsdf::{Bsdf, Frame};
 use super::emitter::Emitter;
 use super::light::{Light, LightSample, LightSelection};
 use super::primvars::{PrimvarRef, PrimvarSlot};
-use super::sampling::{Rng, power_heuristic};
+use super::sampler::{PathSampler, Slot};
+use super::sampling::power_heuristic;
 use super::scene::Scene;
 use crate::abi::{Closure, ClosureKind, Globals, MaterialCode, PrimvarValues, ShaderError};
 use crate::layering::{self, Relief};
@@ -602,11 +603,11 @@ impl Context<'_> {
         p_error: Vec3,
         ng: Vec3,
         wo: Vec3,
-        rng: &mut Rng,
+        sampler: &PathSampler,
         s: &mut Scratch,
     ) -> Result<Vec3, Invalid> {
-        let choice = self.light_selection.sample(rng.uniform());
-        let u = rng.uniform2();
+        let choice = self.light_selection.sample(sampler.get1(Slot::LightChoice));
+        let u = sampler.get2(Slot::LightPoint);
         let Some((pick, select_pdf)) = choice else { return Ok(Vec3::ZERO) };
         let ls = match self.scene.lights.get(pick) {
             Some(light) => light.sample_li(p, facing(ng, wo), u),
@@ -614,7 +615,7 @@ impl Context<'_> {
                 let Some(emitter) = self.scene.emitters.list.get(pick - self.scene.lights.len()) else {
                     return Ok(Vec3::ZERO);
                 };
-                let (u_triangle, u_pick) = (rng.uniform(), rng.uniform());
+                let (u_triangle, u_pick) = (sampler.get1(Slot::EmitterTriangle), sampler.get1(Slot::EmitterPick));
                 self.sample_emitter(emitter, p, u_triangle, u, u_pick, s)?
             }
         };
@@ -752,7 +753,7 @@ impl Context<'_> {
         mut tmin: f32,
         mut tmax: f32,
         u_first_pick: f32,
-        rng: &mut Rng,
+        sampler: &mut PathSampler,
         s: &mut Scratch,
     ) -> Result<SampleResult, Invalid> {
         let mut out = SampleResult { depth: f32::INFINITY, ..SampleResult::default() };
@@ -762,6 +763,8 @@ impl Context<'_> {
         let mut from = Scatter { p: o, n: Vec3::ZERO, pdf: None };
         let mut bounces = 0u32;
         let mut passes = 0u32;
+        // Transparent picks passed since the current vertex (each takes its own dimension).
+        let mut vertex_passes = 0u32;
         let mut first = true;
         let mut travelled = 0.0f32;
         let accel = &self.scene.accel;
@@ -776,7 +779,13 @@ impl Context<'_> {
                 break;
             };
             let sp = surface_point(accel, self.scene, o, d, &hit);
-            let u_layer = if bounces == 0 && passes == 0 { u_first_pick } else { rng.uniform() };
+            // The pick at the vertex's first surface has a dimension of its own; each
+            // pass through a transparent pick takes another, so later decisions keep theirs.
+            let u_layer = match (bounces, vertex_passes) {
+                (0, 0) => u_first_pick,
+                (_, 0) => sampler.get1(Slot::LayerPick),
+                _ => sampler.pass_pick(vertex_passes),
+            };
             let shaded = self.shade(&sp, d, u_layer, s, first)?;
             if s.emitted != Vec3::ZERO {
                 let weight = match from.pdf {
@@ -789,6 +798,7 @@ impl Context<'_> {
                 // Transparent: continue straight on, not a bounce. Only the ray moves: MIS and
                 // light pdfs stay with `from`, the vertex that chose `d` (DESIGN.md rule 5).
                 passes += 1;
+                vertex_passes += 1;
                 if passes > MAX_PASS_THROUGH {
                     out.pass_limit = true;
                     break;
@@ -815,10 +825,10 @@ impl Context<'_> {
                 break;
             }
             let wo = -d;
-            out.radiance += throughput * self.direct(sp.p, sp.p_error, sp.ng, wo, rng, s)?;
+            out.radiance += throughput * self.direct(sp.p, sp.p_error, sp.ng, wo, sampler, s)?;
             // Sample the next direction from the picked lobe(s).
-            let uc = rng.uniform();
-            let u2 = rng.uniform2();
+            let uc = sampler.get1(Slot::Lobe);
+            let u2 = sampler.get2(Slot::Direction);
             let Some(next) = sample_lobes(&s.lobes, wo, uc, u2) else { break };
             let wi = next.wi;
             throughput *= next.weight;
@@ -832,9 +842,11 @@ impl Context<'_> {
                 break;
             }
             bounces += 1;
+            vertex_passes = 0;
+            sampler.set_vertex(bounces);
             if bounces >= self.params.rr_depth {
                 let p = throughput.max_element().min(0.95);
-                if rng.uniform() >= p {
+                if sampler.get1(Slot::Roulette) >= p {
                     break;
                 }
                 throughput /= p;

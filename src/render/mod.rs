@@ -5,7 +5,7 @@
 //!   [`accel`]: BVH and ray queries; [`camera`]; [`light`]: UsdLux lights;
 //!   [`shapes`]: analytic quadrics; [`skel`]: UsdSkel skinning and blend shapes; [`scene`]: the render scene; [`support`]: what is not
 //!   rendered, reported.
-//! - [`bsdf`]: BSDF evaluation and sampling ([`microfacet`]: GGX and Fresnel; [`frame`]: shading frames); [`sampling`]: RNG and warps.
+//! - [`bsdf`]: BSDF evaluation and sampling ([`microfacet`]: GGX and Fresnel; [`frame`]: shading frames); [`sampling`]: RNG and warps; [`sampler`]: the per-decision path sampler (Owen-scrambled Sobol).
 //! - [`integrator`]: path tracing with NEE + MIS and layer picking (DESIGN.md rules 5–7);
 //!   [`film`]: the driver, AOVs and statistics; [`output`]: EXR and PNG files.
 //! - [`testing`]: a constant `MaterialCode` for tests and benchmarks.
@@ -26,6 +26,7 @@ pub mod light;
 pub mod microfacet;
 pub mod output;
 pub mod primvars;
+pub mod sampler;
 pub mod sampling;
 pub mod scene;
 pub mod shapes;

@@ -58,7 +58,16 @@ def Mesh "Floor" {{
 
 /// Mean of channel `R` and the standard error of that mean, from the pixels' spread.
 fn mean_and_error(scene: &Scene, materials: &[&dyn MaterialCode], spp: u32, mode: LayerMode) -> (f64, f64) {
-    let settings = RenderSettings { width: 16, height: 16, spp, seed: 7, threads: Some(2), max_depth: 32, mode };
+    let settings = RenderSettings {
+        width: 16,
+        height: 16,
+        spp,
+        seed: 7,
+        threads: Some(2),
+        max_depth: 32,
+        mode,
+        ..Default::default()
+    };
     let (image, stats) = render(scene, materials, &settings, None).expect("render");
     assert_eq!(stats.invalid_samples(), 0);
     let r = image.f32_channel("R").unwrap();

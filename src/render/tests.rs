@@ -33,7 +33,16 @@ def Mesh "Plane" {{
 }
 
 fn settings(spp: u32) -> RenderSettings {
-    RenderSettings { width: 8, height: 8, spp, seed: 1, threads: Some(2), max_depth: 6, mode: LayerMode::Stochastic }
+    RenderSettings {
+        width: 8,
+        height: 8,
+        spp,
+        seed: 1,
+        threads: Some(2),
+        max_depth: 6,
+        mode: LayerMode::Stochastic,
+        ..Default::default()
+    }
 }
 
 fn run(scene: &Scene, material: &dyn MaterialCode, s: &RenderSettings) -> (Image, RenderStats) {

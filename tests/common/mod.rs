@@ -120,6 +120,7 @@ pub fn settings(width: usize, height: usize, spp: u32, seed: u64, max_depth: u32
         threads: Some(2),
         max_depth,
         mode: strata::render::LayerMode::Stochastic,
+        ..Default::default()
     }
 }
 

@@ -1,0 +1,66 @@
+"""Variance per sample against samples per pixel, by the two-seed method, for strata's
+samplers (issue 27: variance per spp must fall as spp grows with a low-discrepancy sampler).
+
+For each sampler and spp, renders the scene twice with different seeds; the variance of one
+render's pixel mean is mean((a - b)^2) / 2 over pixels and channels, and variance per spp is
+that times spp (flat for independent numbers, falling for stratified ones). Optional tool:
+`pip install OpenEXR numpy`.
+
+    python3 tools/variance_per_spp.py [--strata target/release/strata] [--scene S.usda]
+        [--res 160x120] [--spp 1,4,16,64,256] [--samplers sobol,independent]
+"""
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+import OpenEXR
+
+
+def load(path):
+    channels = OpenEXR.File(path).channels()
+    for name in ("RGBA", "RGB"):
+        if name in channels:
+            return np.asarray(channels[name].pixels, dtype=np.float64)[..., :3]
+    return np.stack([np.asarray(channels[c].pixels, dtype=np.float64) for c in "RGB"], -1)
+
+
+def render(args, sampler, spp, seed, out):
+    cmd = [args.strata, "render"]
+    if args.scene:
+        cmd.append(args.scene)
+    cmd += ["-o", out, "--spp", str(spp), "--seed", str(seed), "--res", args.res, "--sampler", sampler]
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return load(out)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--strata", default="target/release/strata")
+    parser.add_argument("--scene", default=None, help="a USD scene (default: the embedded scene)")
+    parser.add_argument("--res", default="160x120")
+    parser.add_argument("--spp", default="1,4,16,64,256")
+    parser.add_argument("--samplers", default="sobol,independent")
+    args = parser.parse_args()
+    ladder = [int(s) for s in args.spp.split(",")]
+    samplers = args.samplers.split(",")
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for sampler in samplers:
+            for spp in ladder:
+                a = render(args, sampler, spp, 1, os.path.join(tmp, "a.exr"))
+                b = render(args, sampler, spp, 2, os.path.join(tmp, "b.exr"))
+                rows[(sampler, spp)] = float(np.mean((a - b) ** 2) / 2 * spp)
+    print(f"variance per spp (two-seed method), scene {args.scene or '(embedded default)'}, {args.res}")
+    print("| spp | " + " | ".join(samplers) + (" | ratio |" if len(samplers) == 2 else " |"))
+    print("|---" * (len(samplers) + 1 + (len(samplers) == 2)) + "|")
+    for spp in ladder:
+        cells = [f"{rows[(s, spp)]:.4g}" for s in samplers]
+        ratio = [f"{rows[(samplers[1], spp)] / rows[(samplers[0], spp)]:.2f}x"] if len(samplers) == 2 else []
+        print(f"| {spp} | " + " | ".join(cells + ratio) + " |")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
