@@ -397,7 +397,7 @@ fn shader_faults_are_counted_and_located_never_fatal() {
         assert!(stderr.contains("discarded: a shader indexed an array out of bounds"), "{stderr}");
         assert!(
             stderr.contains(
-                "first array index out of bounds: prim `/Bad`, material 1, slot `010`, pixel (6, 5) sample 0"
+                "first array index out of bounds: prim `/Bad`, material 1, slot `010`, pixel (9, 6) sample 0"
             ),
             "the same first occurrence from either backend, whatever the threads: {stderr}"
         );
