@@ -488,6 +488,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
     }
     let seconds = start.elapsed().as_secs_f64();
     let exr_options = exr_options(args, &settings, &scene, warnings, time);
+    let write_start = std::time::Instant::now();
     let png = match outputs.write_with(&image, &exr_options) {
         Ok(png) => png,
         Err(e) => {
@@ -495,6 +496,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
             return Err(Failure);
         }
     };
+    let write_ms = write_start.elapsed().as_secs_f64() * 1e3;
     let s = &settings;
     // One line that always reaches the log, whatever stderr is.
     eprintln!(
@@ -515,7 +517,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         eprintln!("{}", stats.evals_line());
         eprintln!(
             "time: parse {parse_ms:.1} ms, compose {compose_ms:.1} ms, compile {compile_ms:.1} ms, \
-             geometry + BVH {scene_ms:.1} ms, render {:.1} ms",
+             geometry + BVH {scene_ms:.1} ms, render {:.1} ms, write EXR + PNG {write_ms:.1} ms",
             seconds * 1e3
         );
     }

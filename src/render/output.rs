@@ -374,9 +374,20 @@ impl PreparedOutputs {
 
     /// [`PreparedOutputs::write`] with header attributes and sample types from `options`.
     pub fn write_with(mut self, image: &Image, options: &ExrOptions) -> Result<PathBuf, OutputError> {
-        self.exr.fill(|out| encode_exr(image, options, out))?;
-        let encoded = encode_png(image, 0.0).map_err(|e| error(&self.png.target, e))?;
-        self.png.fill(|out| out.write_all(&encoded).map_err(|e| e.to_string()))?;
+        // The two encodings are independent; the PNG's deflate runs beside the EXR's.
+        let (exr, png) = (&mut self.exr, &mut self.png);
+        let png_target = png.target.clone();
+        let (exr_written, png_written) = std::thread::scope(|scope| {
+            let png_thread = scope.spawn(move || {
+                let encoded = encode_png(image, 0.0).map_err(|e| error(&png.target, e))?;
+                png.fill(|out| out.write_all(&encoded).map_err(|e| e.to_string()))
+            });
+            let exr_written = exr.fill(|out| encode_exr(image, options, out));
+            let png_written = png_thread.join().unwrap_or_else(|_| Err(error(&png_target, "the PNG encoder panicked")));
+            (exr_written, png_written)
+        });
+        exr_written?;
+        png_written?;
         let png_path = self.png.target.clone();
         self.exr.commit()?;
         self.png.commit()?;
