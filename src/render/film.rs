@@ -413,6 +413,7 @@ pub fn render(
             (scene.bounds.1 - scene.bounds.0).length() / 2.0,
         ),
         primvar_slots: &primvar_slots,
+        pixel_spread: camera.pixel_angle(w),
     };
     let done = AtomicUsize::new(0);
     let progress_lock = Mutex::new(());

@@ -256,6 +256,10 @@ pub struct Context<'a> {
     /// Per material, its primvar reads resolved against [`Scene::primvars`]
     /// (see [`primvar_slots`]).
     pub primvar_slots: &'a [Vec<PrimvarSlot>],
+    /// The angle (radians) one pixel spans at the camera ([`super::camera::Camera::pixel_angle`]):
+    /// the spread of the ray cone whose width at a hit, this angle times the path's length so
+    /// far, is the shading footprint bump's step is taken from (see [`bump_step`]).
+    pub pixel_spread: f32,
 }
 
 /// Each material's primvar reads resolved against the scene's stored primvars.
@@ -338,12 +342,15 @@ impl Context<'_> {
     }
 
     /// Evaluates the picked layer(s) at a hit into `s.lobes`; returns `false` on a
-    /// transparent pick. `d` is the incoming ray direction.
+    /// transparent pick. `d` is the incoming ray direction, `footprint` the width of the ray
+    /// cone at the hit.
+    #[allow(clippy::too_many_arguments)]
     fn shade(
         &self,
         sp: &SurfacePoint,
         d: Vec3,
         u: f32,
+        footprint: f32,
         s: &mut Scratch,
         first: bool,
     ) -> Result<Option<(Vec3, Vec3)>, Invalid> {
@@ -419,7 +426,8 @@ impl Context<'_> {
             s.counts.displacements += 3;
             s.counts.displacement_masks += 3 * weighting.count() as u64;
         }
-        let bumped = bump(material, &g, relief, &mut s.masks_du, &mut s.masks_dv, &mut s.disp)?;
+        let step = bump_step(sp.p, footprint);
+        let bumped = bump(material, &g, relief, step, &mut s.masks_du, &mut s.masks_dv, &mut s.disp)?;
         g.n = to_arr(bumped);
         s.lobes.clear();
         match picked {
@@ -767,6 +775,10 @@ impl Context<'_> {
         let mut vertex_passes = 0u32;
         let mut first = true;
         let mut travelled = 0.0f32;
+        // The ray cone's length from the camera to the current ray's origin, along the path
+        // (pass-throughs and bounces alike): at a hit its width is `pixel_spread` times this
+        // plus the hit distance.
+        let mut cone_length = 0.0f32;
         let accel = &self.scene.accel;
         loop {
             let hit = accel.intersect(o, d, tmin, tmax);
@@ -786,7 +798,8 @@ impl Context<'_> {
                 (_, 0) => sampler.get1(Slot::LayerPick),
                 _ => sampler.pass_pick(vertex_passes),
             };
-            let shaded = self.shade(&sp, d, u_layer, s, first)?;
+            let footprint = self.pixel_spread * (cone_length + hit.t);
+            let shaded = self.shade(&sp, d, u_layer, footprint, s, first)?;
             if s.emitted != Vec3::ZERO {
                 let weight = match from.pdf {
                     None => 1.0,
@@ -807,6 +820,7 @@ impl Context<'_> {
                 let next = offset_ray_origin(sp.p, sp.p_error, side);
                 let advanced = (next - o).dot(d);
                 travelled += advanced;
+                cone_length += advanced;
                 tmax = (tmax - advanced).max(0.0);
                 tmin = 0.0;
                 o = next;
@@ -852,6 +866,7 @@ impl Context<'_> {
                 throughput /= p;
             }
             let side = if sp.ng.dot(wi) > 0.0 { sp.ng } else { -sp.ng };
+            cone_length += hit.t;
             o = offset_ray_origin(sp.p, sp.p_error, side);
             d = wi;
             tmin = 0.0;
@@ -869,12 +884,14 @@ fn bumps(layers: &[crate::abi::LayerInfo], relief: Relief) -> bool {
 /// The bumped shading normal of rule 6: `g.n` tilted by the slope of the combined
 /// displacement of the layers `relief` reads (all of them on a surface that was not diced;
 /// the bump layers only on one that was), by finite differences along `g.dpdu` and `g.dpdv`
-/// (masks and heights are evaluated at the points given, undisplaced by the bump).
-/// `masks_a`, `masks_b` and `heights` are scratch, one float per layer.
+/// (masks and heights are evaluated at the points given, undisplaced by the bump), a step
+/// `h` (scene units, from [`bump_step`]) apart. `masks_a`, `masks_b` and `heights` are
+/// scratch, one float per layer.
 pub(crate) fn bump(
     material: &dyn MaterialCode,
     g: &Globals,
     relief: Relief,
+    h: f32,
     masks_a: &mut [f32],
     masks_b: &mut [f32],
     heights: &mut [f32],
@@ -888,9 +905,6 @@ pub(crate) fn bump(
     let (p, dpdu, dpdv) = (Vec3::from_array(g.p), Vec3::from_array(g.dpdu), Vec3::from_array(g.dpdv));
     let lu = dpdu.length().max(1e-12);
     let lv = dpdv.length().max(1e-12);
-    // A step of 1e-3 scene units (relative beyond 1): small against pattern features, large
-    // against f32 rounding of the position.
-    let h = 1e-3 * p.abs().max_element().max(1.0);
     let eval = |du: f32, dv: f32, masks: &mut [f32], heights: &mut [f32]| -> Result<f32, Invalid> {
         let mut gg = *g;
         gg.p = to_arr(p + dpdu * du + dpdv * dv);
@@ -921,6 +935,26 @@ pub(crate) fn bump(
         return Ok(n);
     }
     Ok(if nb.dot(n) < 0.0 { -nb } else { nb })
+}
+
+/// How many f32 rounding steps of the position the bump step is at least: a step nearer the
+/// rounding of `P` would be mostly rounding error (at 4 ulps, the sampled points are off by at
+/// most an eighth of it).
+const BUMP_MIN_ULPS: f32 = 4.0;
+
+/// The footprint [`shading_state`] assumes: a step of 1e-3 scene units (the tests that call it
+/// work at unit scale).
+const SHADING_STATE_FOOTPRINT: f32 = 2e-3;
+
+/// The finite-difference step of [`bump`] at `p` for a shading footprint `footprint` (the width
+/// of the pixel's ray cone there): half of it, as pbrt-v4's bump mapping takes half the
+/// screen-space differential, so the bump resolves what a pixel can show and follows the
+/// scene's scale and the camera's distance instead of where the object is. It never falls
+/// below [`BUMP_MIN_ULPS`] rounding steps of `p` (the ulp of `x` is at most `x · 2⁻²³`) nor to 0.
+pub(crate) fn bump_step(p: Vec3, footprint: f32) -> f32 {
+    let floor = (BUMP_MIN_ULPS * f32::EPSILON * p.abs().max_element()).max(f32::MIN_POSITIVE);
+    let h = 0.5 * footprint;
+    if h > floor && h.is_finite() { h } else { floor }
 }
 
 /// Layer `layer`'s emitted radiance, clamped at 0 (negative light is no light).
@@ -974,7 +1008,8 @@ pub struct ShadingState {
     pub picked: Vec<(usize, Closure, Vec3, Vec<f32>)>,
 }
 
-/// Computes the [`ShadingState`] of `material` at `g` (`g.n` is the unbumped shading normal).
+/// Computes the [`ShadingState`] of `material` at `g` (`g.n` is the unbumped shading normal),
+/// bumped as at a shading point whose footprint is 2e-3 scene units (a step of 1e-3).
 pub fn shading_state(material: &dyn MaterialCode, g: &Globals) -> Result<ShadingState, Invalid> {
     let info = material.info();
     let nl = info.layers.len();
@@ -986,7 +1021,8 @@ pub fn shading_state(material: &dyn MaterialCode, g: &Globals) -> Result<Shading
     material.displacement(g, &mut heights).map_err(Invalid::Shader)?;
     let displacement = layering::combine_displacement(&info.layers, &heights, &masks);
     let (mut a, mut b) = (vec![0.0; nl], vec![0.0; nl]);
-    let normal = bump(material, g, Relief::All, &mut a, &mut b, &mut heights)?;
+    let step = bump_step(Vec3::from_array(g.p), SHADING_STATE_FOOTPRINT);
+    let normal = bump(material, g, Relief::All, step, &mut a, &mut b, &mut heights)?;
     let mut bumped = *g;
     bumped.n = to_arr(normal);
     let mut picked = Vec::new();

@@ -268,13 +268,12 @@ impl Light {
                 }
                 let dist_c = d2.sqrt();
                 let axis = to / dist_c;
-                let sin2 = radius * radius / d2;
-                let cos_max = (1.0 - sin2).max(0.0).sqrt();
+                let (cos_max, one_minus_cos) = sphere_cone(*radius, d2);
                 let local = uniform_cone(u, cos_max);
                 let frame = super::bsdf::Frame::from_normal(axis);
                 let wi = frame.to_world(local).normalize();
                 let dist = sphere_hit(p, wi, *centre, *radius).unwrap_or(dist_c - radius);
-                LightSample { wi, li: *radiance, pdf: 1.0 / (2.0 * PI * (1.0 - cos_max)), dist, delta: false }
+                LightSample { wi, li: *radiance, pdf: 1.0 / (2.0 * PI * one_minus_cos), dist, delta: false }
             }
             LightKind::Point { position, intensity } => {
                 let to = *position - p;
@@ -325,8 +324,8 @@ impl Light {
                 if d2 <= radius * radius {
                     return 0.0;
                 }
-                let cos_max = (1.0 - radius * radius / d2).max(0.0).sqrt();
-                if wi.dot(to) / d2.sqrt() >= cos_max { 1.0 / (2.0 * PI * (1.0 - cos_max)) } else { 0.0 }
+                let (cos_max, one_minus_cos) = sphere_cone(*radius, d2);
+                if wi.dot(to) / d2.sqrt() >= cos_max { 1.0 / (2.0 * PI * one_minus_cos) } else { 0.0 }
             }
             LightKind::Cylinder { centre, axis, half_length, radius, .. } => {
                 match cylinder_hit(p, wi, *centre, *axis, *half_length, *radius) {
@@ -524,6 +523,20 @@ fn cylinder_area(half_length: f32, radius: f32) -> f32 {
     4.0 * PI * radius * half_length
 }
 
+/// The radiant intensity of a SphereLight of world `radius` treated as a point (`treatAsPoint`,
+/// or a radius of 0), for `emission = intensity · 2^exposure · color`.
+///
+/// UsdLux has no point lights: `treatAsPoint` only says a renderer may approximate the sphere
+/// by a point, so the point must emit what the sphere does. A sphere of uniform radiance `L`
+/// seen from outside has the projected area `π r²` from every direction, so its radiant
+/// intensity is `I = L π r²` (and its power `4π I = L · 4πr² · π`, a Lambertian emitter's).
+/// UsdLux's `L` is the emission, divided by the surface area `4π r²` under `inputs:normalize`:
+/// `I = emission π r²` unnormalised — 0 for a radius of 0, which has no surface to emit
+/// from — and `I = emission / 4` normalised, whatever the radius (the `r → 0` limit included).
+fn point_intensity(emission: Vec3, radius: f32, normalize: bool) -> Vec3 {
+    if normalize { emission / 4.0 } else { emission * (PI * radius * radius) }
+}
+
 /// Ray/cylinder-side distance and outward normal where the ray meets the emitting (outer)
 /// side. The side is convex, so only the entry point can face the ray's origin: from inside
 /// the infinite cylinder, or through an open end, the outer side is never seen.
@@ -553,6 +566,16 @@ fn cylinder_hit(p: Vec3, wi: Vec3, c: Vec3, axis: Vec3, half_length: f32, r: f32
     }
     let outward = (o_perp + d_perp * t).normalize_or_zero().as_vec3();
     Some((t as f32, outward))
+}
+
+/// The cosine of the half angle a sphere of `radius` subtends from a point at squared
+/// distance `d2` from its centre, and one minus it without cancellation (`sin² / (1 + cos)`):
+/// `1 − cos` itself rounds to 0 for a sphere under about 3e-4 radians across, which would
+/// make its solid angle, and so its light, vanish.
+fn sphere_cone(radius: f32, d2: f32) -> (f32, f32) {
+    let sin2 = (radius * radius / d2).min(1.0);
+    let cos_max = (1.0 - sin2).sqrt();
+    (cos_max, sin2 / (1.0 + cos_max))
 }
 
 /// Ray/sphere distance to the outside surface, from outside.
@@ -683,15 +706,31 @@ fn light_kind(prim: &Prim, ty: &str, xf: PrimXform, diags: &mut Diagnostics) -> 
             let scale = ((s.x_axis.length() + s.y_axis.length() + s.z_axis.length()) / 3.0) as f32;
             let radius = r as f32 * scale;
             let area = 4.0 * PI * radius * radius;
-            if normalize && area > 0.0 {
-                emission /= area;
-            }
-            let point_light = prim.value("treatAsPoint").and_then(Value::as_bool).unwrap_or(false);
-            if point_light || radius == 0.0 {
-                // A sphere of radiance L seen from afar has intensity L·πr² in every direction.
-                let intensity = if normalize { emission * area / (4.0 * PI) } else { emission * PI * radius * radius };
+            let treat_as_point = prim.value("treatAsPoint").and_then(Value::as_bool).unwrap_or(false);
+            // A sphere too small for f32 has no area to sample: it is the point it tends to.
+            if treat_as_point || area < f32::MIN_POSITIVE {
+                let intensity = point_intensity(emission, radius, normalize);
+                if intensity == Vec3::ZERO && emission != Vec3::ZERO {
+                    let attr = prim.attribute("inputs:radius").or_else(|| prim.attribute("treatAsPoint"));
+                    diags.push(
+                        Diagnostic::warning(format!(
+                            "light `{}` is a point of radius 0 without `inputs:normalize`: it emits nothing",
+                            prim.path
+                        ))
+                        .at(attr.map_or(prim.span, value_span), "here")
+                        .note(
+                            "UsdLux gives a sphere light radiance `intensity`, so its power is proportional to \
+                             its area; set `inputs:normalize = 1` for a point whose power is independent of its \
+                             size, or give it a radius",
+                        )
+                        .kind("unlit point light"),
+                    );
+                }
                 LightKind::Point { position: point(DVec3::ZERO), intensity }
             } else {
+                if normalize {
+                    emission /= area;
+                }
                 LightKind::Sphere { centre: point(DVec3::ZERO), radius, radiance: emission }
             }
         }
@@ -927,6 +966,18 @@ def CylinderLight "C" { float inputs:length = 3  float inputs:radius = 0.4
             };
             assert!((solid_angle - expected).abs() < 0.02 * expected, "{}: {solid_angle} vs {expected}", light.path);
         }
+    }
+
+    /// A sphere 2e-5 radians across (a bulb seen from afar) still subtends its solid angle
+    /// `π (r/d)²`: `1 − cos` of its cone must not round to 0, which would make it black.
+    #[test]
+    fn a_far_small_sphere_keeps_its_solid_angle() {
+        let l = lights("#usda 1.0\ndef SphereLight \"Bulb\" { float inputs:radius = 1e-4 }\n");
+        let p = Vec3::new(0.0, 10.0, 0.0);
+        let s = l[0].sample_li(p, Vec3::ZERO, Vec2::new(0.3, 0.6)).expect("a sample");
+        let solid_angle = PI * (1e-4f32 / 10.0).powi(2);
+        assert!((1.0 / s.pdf - solid_angle).abs() < 1e-3 * solid_angle, "{} vs {solid_angle}", 1.0 / s.pdf);
+        assert!((l[0].pdf_li(p, Vec3::ZERO, -Vec3::Y) - s.pdf).abs() < 1e-3 * s.pdf);
     }
 
     #[test]

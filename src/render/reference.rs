@@ -210,3 +210,73 @@ fn grey_sheet_over_grey_floor_interreflects_analytically() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// SphereLights as points (UsdLux, see `light::point_intensity`): a sphere of radius `r` and
+/// emission `I₀` has radiance `L = I₀` (over its area `4πr²` under `normalize`), and treated as
+/// a point it keeps the sphere's radiant intensity `I = L π r²`. The floor sees the sphere
+/// wholly above its horizon, where the sphere's own closed form `E = π L (r/d)² cos θ` equals
+/// the point's `E = I cos θ / d²`; so every case with the same `L π r²` must give the same
+/// irradiance, computed here from the formulas alone: `I₀ π r²` unnormalised, `I₀ / 4`
+/// normalised (whatever the radius, 0 included), and 0 for radius 0 unnormalised (a sphere
+/// with no surface, which is reported).
+#[test]
+fn sphere_lights_and_their_points_follow_usdlux() {
+    let floor = ConstMaterial::diffuse([FLOOR; 3]);
+    let (i0, c) = (5.0f64, DVec3::new(0.8, 1.0, 0.3));
+    let cos_over_d2 = (c.y / c.length()) / c.length_squared();
+    let mut failures = Vec::new();
+    for radius in [0.25f64, 0.0] {
+        for treat_as_point in [false, true] {
+            for normalize in [false, true] {
+                let usda = format!(
+                    r#"def SphereLight "Ball" {{ float inputs:intensity = {i0}  float inputs:radius = {radius}
+    bool treatAsPoint = {}  bool inputs:normalize = {}
+    double3 xformOp:translate = ({}, {}, {})  uniform token[] xformOpOrder = ["xformOp:translate"] }}"#,
+                    u8::from(treat_as_point),
+                    u8::from(normalize),
+                    c.x,
+                    c.y,
+                    c.z
+                );
+                let sphere_radiance = if normalize { i0 / (4.0 * PI * radius * radius) } else { i0 };
+                let irradiance = match (radius > 0.0, normalize) {
+                    // The sphere's closed form (its point's is the same number).
+                    (true, _) => PI * sphere_radiance * radius * radius * cos_over_d2,
+                    (false, true) => i0 / 4.0 * cos_over_d2,
+                    (false, false) => 0.0,
+                };
+                let (stage, mut diags) = stage(&format!(
+                    r#"#usda 1.0
+def Camera "Cam" {{
+    float focalLength = 50
+    float horizontalAperture = 0.05
+    double3 xformOp:translate = (0, 20, 0)
+    float xformOp:rotateX = -90
+    uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateX"]
+}}
+def Mesh "Floor" {{
+    int[] faceVertexCounts = [4]
+    int[] faceVertexIndices = [0, 1, 2, 3]
+    point3f[] points = [(-1000, 0, -1000), (-1000, 0, 1000), (1000, 0, 1000), (1000, 0, -1000)]
+}}
+{usda}"#
+                ));
+                let scene = Scene::from_stage(&stage, &|_| Some(0), &mut diags).expect("scene");
+                assert!(!diags.has_errors());
+                let warned = diags.items().iter().any(|d| d.kind == Some("unlit point light"));
+                let expected = FLOOR as f64 / PI * irradiance;
+                let (mean, se) = mean_and_error(&scene, &[&floor], 16, LayerMode::Stochastic);
+                let tolerance = 3.0 * se + 1e-4 * expected;
+                let line = format!(
+                    "radius {radius} treatAsPoint {treat_as_point:<5} normalize {normalize:<5}: \
+                     measured {mean:.6} expected {expected:.6} (±{tolerance:.6}), warned {warned}"
+                );
+                eprintln!("{line}");
+                if (mean - expected).abs() > tolerance || warned != (irradiance == 0.0) {
+                    failures.push(line);
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
