@@ -18,6 +18,25 @@ use std::io::Write;
 use std::path::Path;
 use std::sync::Arc;
 
+// `eprint!`/`eprintln!` panic when stderr is closed (`strata check … 2>&1 | head -1`). These
+// shadow them in this module: the text is lost, never the run, which ends with its own exit
+// code.
+macro_rules! eprint {
+    ($($arg:tt)*) => {{
+        let _ = std::io::Write::write_fmt(&mut std::io::stderr(), format_args!($($arg)*));
+    }};
+}
+macro_rules! eprintln {
+    ($($arg:tt)*) => {{
+        let _ = std::io::Write::write_fmt(&mut std::io::stderr(), format_args!("{}\n", format_args!($($arg)*)));
+    }};
+}
+macro_rules! println {
+    ($($arg:tt)*) => {{
+        let _ = std::io::Write::write_fmt(&mut std::io::stdout(), format_args!("{}\n", format_args!($($arg)*)));
+    }};
+}
+
 /// A command failed; its diagnostics were already printed.
 #[derive(Debug)]
 pub struct Failure;

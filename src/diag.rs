@@ -18,6 +18,45 @@ pub const MAX_SHOWN_PER_FILE: usize = 50;
 /// bytes around each label, with `…` where text was left out.
 pub const MAX_EXCERPT_WIDTH: usize = 160;
 
+/// Names (anything quoted in backticks) longer than this many characters are shown as their
+/// first and last [`ELIDED_NAME_ENDS`] characters: a 22 KB prim name repeated in every
+/// message would otherwise turn a small file into megabytes of diagnostics.
+pub const MAX_NAME_CHARS: usize = 100;
+
+/// Characters kept at each end of an elided name.
+pub const ELIDED_NAME_ENDS: usize = 40;
+
+/// `text` with every backtick-quoted name longer than [`MAX_NAME_CHARS`] characters cut to
+/// its two ends around `…`, followed by its length: `` `abc…xyz` (22000 characters)``.
+pub fn elide_long_names(text: String) -> String {
+    let parts: Vec<&str> = text.split('`').collect();
+    // Odd parts are quoted when a closing backtick follows them.
+    let quoted_long = |i: usize, part: &str| i % 2 == 1 && i + 1 < parts.len() && part.len() > MAX_NAME_CHARS;
+    if !parts.iter().enumerate().any(|(i, p)| quoted_long(i, p) && p.chars().count() > MAX_NAME_CHARS) {
+        return text;
+    }
+    let mut out = String::new();
+    let mut length_note = None;
+    for (i, part) in parts.iter().enumerate() {
+        if i > 0 {
+            out.push('`');
+        }
+        if let Some(count) = length_note.take() {
+            out += &format!(" ({count} characters)");
+        }
+        let count = part.chars().count();
+        if quoted_long(i, part) && count > MAX_NAME_CHARS {
+            out.extend(part.chars().take(ELIDED_NAME_ENDS));
+            out.push('…');
+            out.extend(part.chars().skip(count - ELIDED_NAME_ENDS));
+            length_note = Some(count);
+        } else {
+            out += part;
+        }
+    }
+    out
+}
+
 /// Index of a file in a [`SourceMap`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Default)]
 pub struct FileId(pub u32);
@@ -157,7 +196,8 @@ pub struct Diagnostic {
 
 impl Diagnostic {
     fn new(severity: Severity, message: impl Into<String>) -> Diagnostic {
-        Diagnostic { severity, message: message.into(), labels: Vec::new(), notes: Vec::new(), kind: None }
+        let message = elide_long_names(message.into());
+        Diagnostic { severity, message, labels: Vec::new(), notes: Vec::new(), kind: None }
     }
 
     /// An error.
@@ -178,19 +218,19 @@ impl Diagnostic {
 
     /// Adds the primary label.
     pub fn at(mut self, span: Span, message: impl Into<String>) -> Diagnostic {
-        self.labels.push(Label { span, message: message.into(), primary: true });
+        self.labels.push(Label { span, message: elide_long_names(message.into()), primary: true });
         self
     }
 
     /// Adds a secondary label.
     pub fn also(mut self, span: Span, message: impl Into<String>) -> Diagnostic {
-        self.labels.push(Label { span, message: message.into(), primary: false });
+        self.labels.push(Label { span, message: elide_long_names(message.into()), primary: false });
         self
     }
 
     /// Adds a note line.
     pub fn note(mut self, note: impl Into<String>) -> Diagnostic {
-        self.notes.push(note.into());
+        self.notes.push(elide_long_names(note.into()));
         self
     }
 
@@ -388,7 +428,10 @@ impl<'a> csfiles::Files<'a> for Excerpts {
     }
 }
 
-/// A sink that collects diagnostics from every stage of a run.
+/// A sink that collects diagnostics from every stage of a run. It keeps what
+/// [`Diagnostics::render`] shows — the first [`MAX_SHOWN_PER_FILE`] of each file, and each
+/// file's first error — and only counts the rest, so its memory does not grow with the
+/// number of problems (4 MiB of `}` is four million errors).
 #[derive(Default, Debug)]
 pub struct Diagnostics {
     items: Vec<Diagnostic>,
@@ -397,6 +440,17 @@ pub struct Diagnostics {
     seen: std::collections::HashSet<u64>,
     /// Per warning kind, the index of its first warning in `items` and how many more came.
     kinds: std::collections::HashMap<&'static str, (usize, usize)>,
+    /// Per file (of the primary label; `None`: unlocated), the diagnostics kept and whether
+    /// one of them is an error.
+    kept: std::collections::HashMap<Option<FileId>, (usize, bool)>,
+    /// Per file, in order of first appearance, the errors and other diagnostics counted but
+    /// not kept.
+    dropped: Vec<(Option<FileId>, usize, usize)>,
+}
+
+/// The file a diagnostic is counted under: its primary label's.
+fn file_of(d: &Diagnostic) -> Option<FileId> {
+    d.labels.iter().find(|l| l.primary).or(d.labels.first()).map(|l| l.span.file)
 }
 
 impl Diagnostics {
@@ -408,7 +462,8 @@ impl Diagnostics {
     /// Records one diagnostic.
     pub fn push(&mut self, diagnostic: Diagnostic) {
         use std::hash::{BuildHasher, BuildHasherDefault, DefaultHasher};
-        if !self.seen.insert(BuildHasherDefault::<DefaultHasher>::default().hash_one(&diagnostic)) {
+        let hash = BuildHasherDefault::<DefaultHasher>::default().hash_one(&diagnostic);
+        if !self.seen.insert(hash) {
             return;
         }
         if let (Some(kind), Severity::Warning) = (diagnostic.kind, diagnostic.severity) {
@@ -422,13 +477,45 @@ impl Diagnostics {
                 }
             }
         }
+        let file = file_of(&diagnostic);
+        let error = diagnostic.severity == Severity::Error;
+        let (kept, has_error) = self.kept.entry(file).or_default();
+        // Past the cap, only a file's first error is still kept.
+        let first_error = error && !*has_error;
+        if *kept >= MAX_SHOWN_PER_FILE && !first_error {
+            // A first warning of its kind that is not kept leaves no first to count against.
+            if let Some(kind) = diagnostic.kind
+                && self.kinds.get(kind) == Some(&(self.items.len(), 0))
+            {
+                self.kinds.remove(kind);
+            }
+            // Not remembered either: the sink's memory stays bounded (a repeat of a dropped
+            // diagnostic is counted again).
+            self.seen.remove(&hash);
+            self.count_dropped(file, usize::from(error), usize::from(!error));
+            return;
+        }
+        *kept += 1;
+        *has_error |= error;
         self.items.push(diagnostic);
+    }
+
+    /// Counts diagnostics of `file` that are not kept.
+    fn count_dropped(&mut self, file: Option<FileId>, errors: usize, others: usize) {
+        match self.dropped.iter_mut().find(|d| d.0 == file) {
+            Some(d) => {
+                d.1 += errors;
+                d.2 += others;
+            }
+            None => self.dropped.push((file, errors, others)),
+        }
     }
 
     /// Number of warnings found, each of a kind counted (shown once or not).
     pub fn warning_count(&self) -> usize {
         let shown = self.items.iter().filter(|d| d.severity == Severity::Warning).count();
-        shown + self.kinds.values().map(|(_, more)| more).sum::<usize>()
+        let dropped: usize = self.dropped.iter().map(|d| d.2).sum();
+        shown + dropped + self.kinds.values().map(|(_, more)| more).sum::<usize>()
     }
 
     /// Makes every warning an error (`--strict`: farms and CI fail on what a person would
@@ -440,19 +527,24 @@ impl Diagnostics {
                 d.notes.push("an error because of --strict".into());
             }
         }
+        for dropped in &mut self.dropped {
+            dropped.1 += std::mem::take(&mut dropped.2);
+        }
     }
 
     /// Whether any error (not warning) was recorded.
     pub fn has_errors(&self) -> bool {
-        self.items.iter().any(|d| d.severity == Severity::Error)
+        self.error_count() > 0
     }
 
     /// Number of errors recorded.
     pub fn error_count(&self) -> usize {
-        self.items.iter().filter(|d| d.severity == Severity::Error).count()
+        let dropped: usize = self.dropped.iter().map(|d| d.1).sum();
+        self.items.iter().filter(|d| d.severity == Severity::Error).count() + dropped
     }
 
-    /// All diagnostics in the order they were found.
+    /// The diagnostics kept, in the order they were found: the first
+    /// [`MAX_SHOWN_PER_FILE`] of each file and each file's first error.
     pub fn items(&self) -> &[Diagnostic] {
         &self.items
     }
@@ -462,6 +554,9 @@ impl Diagnostics {
         for d in other.items {
             self.push(d);
         }
+        for (file, errors, others) in other.dropped {
+            self.count_dropped(file, errors, others);
+        }
         // The warnings `other` counted but did not keep.
         for (kind, (_, more)) in other.kinds {
             if let Some(entry) = self.kinds.get_mut(kind) {
@@ -470,44 +565,25 @@ impl Diagnostics {
         }
     }
 
-    /// Renders the diagnostics in order, at most [`MAX_SHOWN_PER_FILE`] per file (the file of
-    /// the primary label; unlocated diagnostics count as one more file), then one line per
-    /// file saying how many were left out. Rendering costs time in proportion to what is
-    /// shown, not to what was found.
+    /// Renders the diagnostics kept, in order — at most [`MAX_SHOWN_PER_FILE`] per file (the
+    /// file of the primary label; unlocated diagnostics count as one more file) and each
+    /// file's first error — then one line per file saying how many were left out. Rendering
+    /// costs time in proportion to what is shown, not to what was found.
     pub fn render(&self, sources: &SourceMap) -> String {
-        // (file, errors left out, others left out), in order of first appearance.
-        let mut shown: std::collections::HashMap<Option<FileId>, usize> = std::collections::HashMap::new();
-        let mut hidden: Vec<(Option<FileId>, usize, usize)> = Vec::new();
         let mut out = String::new();
         let more_of_kind: std::collections::HashMap<usize, usize> =
             self.kinds.values().filter(|(_, more)| *more > 0).copied().collect();
         for (i, d) in self.items.iter().enumerate() {
-            let file = d.labels.iter().find(|l| l.primary).or(d.labels.first()).map(|l| l.span.file);
-            let count = shown.entry(file).or_default();
-            if *count < MAX_SHOWN_PER_FILE {
-                *count += 1;
-                match more_of_kind.get(&i) {
-                    Some(&more) => {
-                        let s = if more == 1 { "" } else { "s" };
-                        out += &d.clone().note(format!("and {more} more warning{s} of this kind")).render(sources);
-                    }
-                    None => out += &d.render(sources),
+            match more_of_kind.get(&i) {
+                Some(&more) => {
+                    let s = if more == 1 { "" } else { "s" };
+                    out += &d.clone().note(format!("and {more} more warning{s} of this kind")).render(sources);
                 }
-                continue;
-            }
-            let i = match hidden.iter().position(|h| h.0 == file) {
-                Some(i) => i,
-                None => {
-                    hidden.push((file, 0, 0));
-                    hidden.len() - 1
-                }
-            };
-            if d.severity == Severity::Error {
-                hidden[i].1 += 1;
-            } else {
-                hidden[i].2 += 1;
+                None => out += &d.render(sources),
             }
         }
+        // (file, errors left out, others left out), in order of first appearance.
+        let hidden = self.dropped.iter().copied().filter(|&(_, errors, others)| errors + others > 0);
         for (file, errors, others) in hidden {
             let more = |n: usize, what: &str| format!("{n} more {what}{}", if n == 1 { "" } else { "s" });
             let what = match (errors, others) {
@@ -670,6 +746,41 @@ mod tests {
         all.make_warnings_errors();
         assert_eq!(all.error_count(), 2);
         assert!(all.items().iter().any(|d| d.severity == Severity::Note));
+    }
+
+    #[test]
+    fn only_what_is_shown_is_kept_and_the_rest_is_counted() {
+        let mut sources = SourceMap::new();
+        let file = sources.add("a.ash", "}".repeat(1000));
+        let mut d = Diagnostics::new();
+        for i in 0..1000 {
+            d.push(Diagnostic::warning(format!("w{i}")).at(Span::new(file, i, i + 1), ""));
+        }
+        // Past the cap, the file's first error is still kept (it decides a layer's fate).
+        d.push(Diagnostic::error("e").at(Span::new(file, 0, 1), ""));
+        d.push(Diagnostic::error("f").at(Span::new(file, 1, 2), ""));
+        assert_eq!(d.items().len(), MAX_SHOWN_PER_FILE + 1);
+        assert_eq!((d.warning_count(), d.error_count()), (1000, 2));
+        let text = d.render(&sources);
+        assert!(text.contains("note: 1 more error and 950 more warnings in a.ash not shown"), "{text}");
+        let mut all = Diagnostics::new();
+        all.extend(d);
+        assert_eq!((all.warning_count(), all.error_count()), (1000, 2));
+        all.make_warnings_errors();
+        assert_eq!((all.warning_count(), all.error_count()), (0, 1002));
+    }
+
+    #[test]
+    fn long_names_are_elided_in_messages_labels_and_notes() {
+        let name = format!("/{}", "x".repeat(5000));
+        let d = Diagnostic::error(format!("`{name}` reaches far; `short` stays"))
+            .at(Span::default(), format!("in `{name}`"))
+            .note(format!("unbalanced ` then `{name}"));
+        let elided = format!("`/{}…{}` (5001 characters)", "x".repeat(39), "x".repeat(40));
+        assert_eq!(d.message, format!("{elided} reaches far; `short` stays"));
+        assert_eq!(d.labels[0].message, format!("in {elided}"));
+        assert!(d.notes[0].len() > 5000, "an unclosed quote is not a name");
+        assert_eq!(elide_long_names("no `names` here".into()), "no `names` here");
     }
 
     #[test]

@@ -16,8 +16,15 @@
 //! files, textures) reads inside packages without knowing about them.
 //!
 //! The limits are process-wide, set once by the command line (`--max-input-size`,
-//! `--max-texture-pixels`) before anything is read, because textures are loaded deep inside
-//! compilation where no options are passed.
+//! `--max-texture-pixels`, `--max-memory`) before anything is read, because textures are
+//! loaded deep inside compilation where no options are passed.
+//!
+//! **Memory.** A few bytes of input can ask for any amount of memory (a texture header, a
+//! render resolution, an instance count), and a failed allocation aborts the process. Each
+//! large structure — a decoded texture, the film, the instances and their BVHs — is estimated
+//! from its sizes before it is allocated and checked against [`memory_budget`] with
+//! [`check_memory`]: half the memory the process may use ([`default_memory_budget`]) unless
+//! `--max-memory` says otherwise.
 
 use std::fmt;
 use std::io::Read;
@@ -43,29 +50,113 @@ pub struct InputLimits {
     pub max_file_bytes: u64,
     /// Largest texture read, in pixels (of its largest layer).
     pub max_texture_pixels: u64,
+    /// Largest single structure built (a decoded texture, the film, the instances and their
+    /// BVHs), in bytes; `None`: [`default_memory_budget`].
+    pub max_memory_bytes: Option<u64>,
 }
 
 impl Default for InputLimits {
     fn default() -> Self {
-        InputLimits { max_file_bytes: DEFAULT_MAX_INPUT_BYTES, max_texture_pixels: DEFAULT_MAX_TEXTURE_PIXELS }
+        InputLimits {
+            max_file_bytes: DEFAULT_MAX_INPUT_BYTES,
+            max_texture_pixels: DEFAULT_MAX_TEXTURE_PIXELS,
+            max_memory_bytes: None,
+        }
     }
 }
 
 static MAX_FILE_BYTES: AtomicU64 = AtomicU64::new(DEFAULT_MAX_INPUT_BYTES);
 static MAX_TEXTURE_PIXELS: AtomicU64 = AtomicU64::new(DEFAULT_MAX_TEXTURE_PIXELS);
+/// 0: not set, the default applies.
+static MAX_MEMORY_BYTES: AtomicU64 = AtomicU64::new(0);
 
 /// Sets the process-wide limits (the command line does this once, before reading anything).
 pub fn set_limits(limits: InputLimits) {
     MAX_FILE_BYTES.store(limits.max_file_bytes, Ordering::Relaxed);
     MAX_TEXTURE_PIXELS.store(limits.max_texture_pixels, Ordering::Relaxed);
+    MAX_MEMORY_BYTES.store(limits.max_memory_bytes.unwrap_or(0), Ordering::Relaxed);
 }
 
 /// The limits in force.
 pub fn limits() -> InputLimits {
+    let memory = MAX_MEMORY_BYTES.load(Ordering::Relaxed);
     InputLimits {
         max_file_bytes: MAX_FILE_BYTES.load(Ordering::Relaxed),
         max_texture_pixels: MAX_TEXTURE_PIXELS.load(Ordering::Relaxed),
+        max_memory_bytes: (memory > 0).then_some(memory),
     }
+}
+
+/// The memory the process may use: the least of the machine's memory (`MemTotal`), the
+/// address-space and data limits (`ulimit -v`, `ulimit -d`, `prlimit --as`) and the cgroup's
+/// `memory.max` (containers); 8 GiB where none of these can be read.
+pub fn available_memory() -> u64 {
+    let mut least = u64::MAX;
+    if let Ok(meminfo) = std::fs::read_to_string("/proc/meminfo")
+        && let Some(kb) = meminfo
+            .lines()
+            .find_map(|l| l.strip_prefix("MemTotal:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+    {
+        least = least.min(kb.saturating_mul(1024));
+    }
+    if let Ok(max) = std::fs::read_to_string("/sys/fs/cgroup/memory.max")
+        && let Ok(bytes) = max.trim().parse::<u64>()
+    {
+        least = least.min(bytes);
+    }
+    #[cfg(unix)]
+    #[allow(clippy::unnecessary_cast)] // rlim_t is u64 on Linux, not everywhere
+    for resource in [libc::RLIMIT_AS, libc::RLIMIT_DATA] {
+        let mut limit = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
+        // SAFETY: getrlimit writes one rlimit through a valid pointer.
+        if unsafe { libc::getrlimit(resource, &mut limit) } == 0 && limit.rlim_cur != libc::RLIM_INFINITY {
+            least = least.min(limit.rlim_cur as u64);
+        }
+    }
+    if least == u64::MAX { 8 << 30 } else { least }
+}
+
+/// The memory budget when `--max-memory` is not given: half of [`available_memory`], which
+/// leaves room for everything that is not one of the budgeted structures (the scene, the
+/// compiled code, thread stacks) and for a structure being copied.
+pub fn default_memory_budget() -> u64 {
+    static BUDGET: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
+    *BUDGET.get_or_init(|| available_memory() / 2)
+}
+
+/// The largest single structure strata may build, in bytes: `--max-memory`, else
+/// [`default_memory_budget`].
+pub fn memory_budget() -> u64 {
+    limits().max_memory_bytes.unwrap_or_else(default_memory_budget)
+}
+
+/// A byte count for messages: `512 bytes`, `3.2 MiB`, `62.0 GiB`.
+pub fn human_bytes(bytes: u64) -> String {
+    match bytes {
+        0..1024 => format!("{bytes} bytes"),
+        1024..0x10_0000 => format!("{:.1} KiB", bytes as f64 / 1024.0),
+        0x10_0000..0x4000_0000 => format!("{:.1} MiB", bytes as f64 / f64::from(1 << 20)),
+        _ => format!("{:.1} GiB", bytes as f64 / f64::from(1 << 30)),
+    }
+}
+
+/// `Ok` when `bytes` (what `what` needs, estimated before allocating it) fits the
+/// [`memory_budget`]; else the message that says so, the budget and how to raise it.
+pub fn check_memory(what: &str, bytes: u64) -> Result<(), String> {
+    let budget = memory_budget();
+    if bytes <= budget {
+        return Ok(());
+    }
+    let whence = match limits().max_memory_bytes {
+        Some(_) => "the memory limit".to_string(),
+        None => format!("the memory limit (half of the {} this process may use)", human_bytes(available_memory())),
+    };
+    Err(format!(
+        "{what} needs {}, more than {whence} of {} (raise it with --max-memory)",
+        human_bytes(bytes),
+        human_bytes(budget)
+    ))
 }
 
 /// Why an input file was not read.

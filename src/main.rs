@@ -8,6 +8,19 @@ use strata::cli;
 use strata::render::sampler::SamplerKind;
 use strata::render::{LayerMode, RenderSettings};
 
+// `print!`/`eprintln!` panic on a closed pipe (`strata … 2>&1 | head -1`); these shadow
+// them: the text is lost, the exit code is the run's.
+macro_rules! print {
+    ($($arg:tt)*) => {{
+        let _ = std::io::Write::write_fmt(&mut std::io::stdout(), format_args!($($arg)*));
+    }};
+}
+macro_rules! eprintln {
+    ($($arg:tt)*) => {{
+        let _ = std::io::Write::write_fmt(&mut std::io::stderr(), format_args!("{}\n", format_args!($($arg)*)));
+    }};
+}
+
 #[derive(Parser)]
 #[command(
     name = "strata",
@@ -25,6 +38,11 @@ struct Args {
     /// Default 134217728 (16384 x 8192).
     #[arg(long, global = true, value_name = "PIXELS", value_parser = parse_size)]
     max_texture_pixels: Option<u64>,
+    /// Largest single structure built — a decoded texture, the film, the instances and their
+    /// BVHs — in bytes, estimated before it is allocated; K, M and G suffixes. Default: half
+    /// the memory this process may use (RAM, `ulimit -v`, the cgroup's limit).
+    #[arg(long, global = true, value_name = "BYTES", value_parser = parse_size)]
+    max_memory: Option<u64>,
 }
 
 #[derive(Subcommand)]
@@ -268,6 +286,7 @@ fn main() -> ExitCode {
     strata::input::set_limits(strata::input::InputLimits {
         max_file_bytes: args.max_input_size.unwrap_or(defaults.max_file_bytes),
         max_texture_pixels: args.max_texture_pixels.unwrap_or(defaults.max_texture_pixels),
+        max_memory_bytes: args.max_memory,
     });
     let result = match args.command {
         Command::Layers { scene, json, time } => cli::layers(scene.as_deref(), json, time),

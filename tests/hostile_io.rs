@@ -461,3 +461,226 @@ fn bad_instances_and_degenerate_geometry_are_diagnosed_or_rendered_never_a_panic
     assert!(stderr.contains("1 instance(s) with a singular transform (a zero scale) skipped"), "{stderr}");
     assert!(out.exists());
 }
+
+// ---- inputs that exhaust memory or output (issue 20) ------------------------------------------
+
+/// The address-space cap the memory tests run `strata` under, as `prlimit --as=2147483648`
+/// does: every input here asked for more before its fix and aborted (or panicked) under it.
+const MEMORY_CAP: u64 = 2 << 30;
+
+/// Runs `strata args` with its address space capped at `bytes`: an allocation past it fails,
+/// and the run must report that as a diagnostic, never abort. Killed at [`DEADLINE`].
+fn strata_capped(args: &[&str], bytes: u64) -> Output {
+    use std::os::unix::process::CommandExt;
+    let mut command = Command::new(env!("CARGO_BIN_EXE_strata"));
+    command.args(args).stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::piped());
+    // SAFETY: only setrlimit, async-signal-safe, runs between fork and exec.
+    unsafe {
+        command.pre_exec(move || {
+            let limit = libc::rlimit { rlim_cur: bytes, rlim_max: bytes };
+            if libc::setrlimit(libc::RLIMIT_AS, &limit) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    let child = command.spawn().expect("strata starts");
+    let pid = child.id();
+    let (send, receive) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = send.send(child.wait_with_output());
+    });
+    receive.recv_timeout(DEADLINE).map(|o| o.expect("strata runs")).unwrap_or_else(|_| {
+        let _ = Command::new("kill").args(["-KILL", &pid.to_string()]).status();
+        panic!("strata {args:?} did not finish within {DEADLINE:?}")
+    })
+}
+
+/// Exit code and stderr of [`strata_capped`] under [`MEMORY_CAP`], asserting that nothing
+/// aborted or panicked.
+fn capped(args: &[&str]) -> (Option<i32>, String) {
+    let out = strata_capped(args, MEMORY_CAP);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!stderr.contains("memory allocation of") && !stderr.contains("panicked"), "{args:?}: {stderr}");
+    (out.status.code(), stderr)
+}
+
+#[test]
+fn a_corrupt_count_in_a_crate_is_a_located_error_never_an_abort() {
+    // Byte 4041 of tests/fixtures/usd/binary/kitchen.usdc set to 0xff: a token value rep gets
+    // both the array and the inlined bit, and openusd read an array of 2.3e17 elements.
+    let file = hostile("kitchen_byte_4041.usdc");
+    let (code, stderr) = capped(&["check", file.to_str().unwrap()]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("malformed usdc") && stderr.contains("past the end of the file"), "{stderr}");
+    assert!(stderr.contains("kitchen_byte_4041.usdc:"), "located: {stderr}");
+    // As a sublayer: a warning, the stage composes without it.
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("root.usda");
+    let sub = std::fs::canonicalize(&file).unwrap();
+    std::fs::write(&root, format!("#usda 1.0\n(\n    subLayers = [@{}@]\n)\n", sub.display())).unwrap();
+    assert_located_warning(&root, "root.usda:3:18", "is not valid USD: malformed usdc");
+    // Every value of that byte, and 0xff at every byte of the file, in process: an abort
+    // here ends the test binary.
+    let good = std::fs::read("tests/fixtures/usd/binary/kitchen.usdc").unwrap();
+    let convert = |bytes: &[u8]| {
+        let mut sources = strata::diag::SourceMap::new();
+        let mut diags = strata::diag::Diagnostics::new();
+        strata::scene::usdc::convert("k.usdc", bytes, Path::new("."), &mut sources, &mut diags);
+    };
+    for value in 0..=255u8 {
+        let mut bytes = good.clone();
+        bytes[4041] = value;
+        convert(&bytes);
+    }
+    for at in 0..good.len() {
+        let mut bytes = good.clone();
+        bytes[at] = 0xff;
+        convert(&bytes);
+    }
+}
+
+/// A 16 x 16 JPEG written by `image`, its frame header then made to claim 16384 x 8192
+/// (2^27 pixels, the pixel limit): what the 1.4 KB JPEG of the issue did.
+fn jpeg_claiming_2_to_the_27_pixels() -> Vec<u8> {
+    let mut bytes = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new(&mut bytes)
+        .encode(&[128u8; 16 * 16 * 3], 16, 16, image::ExtendedColorType::Rgb8)
+        .expect("encodes");
+    let sof = bytes.windows(2).position(|w| w == [0xff, 0xc0]).expect("a baseline frame header");
+    // Marker, length (2), precision (1), height (2), width (2).
+    bytes[sof + 5..sof + 7].copy_from_slice(&8192u16.to_be_bytes());
+    bytes[sof + 7..sof + 9].copy_from_slice(&16384u16.to_be_bytes());
+    bytes
+}
+
+#[test]
+fn textures_past_the_memory_budget_are_their_fallback_with_a_located_warning() {
+    // A 130 KB PNG of 16384 x 8192 grey pixels: 128 MiB decoded, 2 GiB as float texels. It
+    // peaked at 4.2 GB and panicked inside `image` under a 2 GiB cap.
+    let message = "decoding the 16384 x 8192 image needs";
+    let (code, stderr) = capped(&["check", hostile("huge_grey_dome.usda").to_str().unwrap()]);
+    assert_eq!(code, Some(0), "a warning: the dome lights with its colour: {stderr}");
+    assert!(stderr.contains("warning: cannot read dome texture") && stderr.contains(message), "{stderr}");
+    assert!(stderr.contains("huge_grey_dome.usda:6:33") && stderr.contains("--max-memory"), "{stderr}");
+    // The same budget set by the flag, as a shader's texture; and the JPEG.
+    let dir = tempfile::tempdir().unwrap();
+    let jpeg = dir.path().join("claim.jpg");
+    std::fs::write(&jpeg, jpeg_claiming_2_to_the_27_pixels()).unwrap();
+    for texture in [std::fs::canonicalize(hostile("huge_grey.png")).unwrap(), jpeg] {
+        let ash = format!(
+            "substance t {{ node tx = texture(file: {:?}); node d = diffuse(albedo: tx.out); surface = d.bsdf; }}",
+            texture.to_str().unwrap()
+        );
+        std::fs::write(dir.path().join("t.ash"), ash).unwrap();
+        let scene = dir.path().join("scene.usda");
+        let source = std::fs::read_to_string(hostile("source_dev_zero.usda")).unwrap();
+        std::fs::write(&scene, source.replace("/dev/zero", "t.ash").replace("\"zero\"", "\"t\"")).unwrap();
+        let (code, stderr) = capped(&["check", scene.to_str().unwrap()]);
+        assert_eq!(code, Some(0), "{stderr}");
+        assert!(stderr.contains("warning: cannot read texture") && stderr.contains(message), "{stderr}");
+        assert!(stderr.contains("texture file named here"), "located: {stderr}");
+        let (code, stderr) = capped(&["check", scene.to_str().unwrap(), "--max-memory", "1G"]);
+        assert_eq!(code, Some(0), "{stderr}");
+        assert!(stderr.contains("more than the memory limit of 1.0 GiB (raise it with --max-memory)"), "{stderr}");
+    }
+}
+
+#[test]
+fn a_film_past_the_memory_budget_is_an_error_naming_its_size_before_rendering() {
+    // RenderSettings asking for 16384 x 16384: about 250 bytes per pixel, 62 GiB. It aborted.
+    let dir = tempfile::tempdir().unwrap();
+    let exr = dir.path().join("film.exr");
+    let exr = exr.to_str().unwrap();
+    let (code, stderr) = capped(&["render", hostile("film_16384.usda").to_str().unwrap(), "-o", exr]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("a 16384 x 16384 film of 30 channels needs 62.0 GiB"), "{stderr}");
+    assert!(stderr.contains("--max-memory"), "the flag is named: {stderr}");
+    // 8192 x 8192 aborted too.
+    let (code, stderr) =
+        capped(&["render", hostile("film_16384.usda").to_str().unwrap(), "--res", "8192x8192", "-o", exr]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("a 8192 x 8192 film"), "{stderr}");
+    assert!(!Path::new(exr).exists());
+    // The flag sets the budget either way.
+    let small = ["render", "--res", "100x100", "--spp", "1", "-o", exr];
+    let out = strata(&[&small[..], &["--max-memory", "1M"]].concat());
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("a 100 x 100 film"));
+    let out = strata(&[&small[..], &["--max-memory", "64M"]].concat());
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// A PointInstancer of `n` spheres, as usda text.
+fn point_instancer_text(n: usize) -> String {
+    use std::fmt::Write;
+    let mut text = String::from("#usda 1.0\ndef Sphere \"Ball\" { double radius = 0.1 }\n");
+    text += "def PointInstancer \"Points\" {\n    rel prototypes = [</Ball>]\n    int[] protoIndices = [";
+    text += &"0, ".repeat(n);
+    text += "]\n    point3f[] positions = [";
+    for i in 0..n {
+        write!(text, "({}, {}, {}), ", i % 1000, i / 1000 % 1000, i / 1_000_000).unwrap();
+    }
+    text + "]\n}\n"
+}
+
+#[test]
+fn instances_past_the_memory_budget_are_one_error_and_big_arrays_parse_in_bounded_memory() {
+    // A committed instancer over the budget the flag sets.
+    let file = hostile("instances_budget.usda");
+    let out = strata(&["check", file.to_str().unwrap(), "--max-memory", "256K"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("point instancer `/Points`: 1000 instances (about"), "{stderr}");
+    assert!(stderr.contains("instances_budget.usda:5:") && stderr.contains("--max-memory"), "{stderr}");
+    assert_eq!(strata(&["check", file.to_str().unwrap()]).status.code(), Some(0));
+    // 4 million instances (under the 2^22 limit) peaked at 2.5 GB and panicked in obvhs'
+    // builder under a 2 GiB cap; 10 million points (180 MB of text) grew a 2 GiB token buffer.
+    let dir = tempfile::tempdir().unwrap();
+    for (n, message) in
+        [(4_000_000, "4000000 instances (about"), (10_000_000, "would have 10000000 instances, more than 4194304")]
+    {
+        let scene = dir.path().join("points.usda");
+        std::fs::write(&scene, point_instancer_text(n)).unwrap();
+        let (code, stderr) = capped(&["check", scene.to_str().unwrap()]);
+        assert_eq!(code, Some(1), "{stderr}");
+        assert!(stderr.contains(message) && stderr.contains("points.usda:"), "{n}: {stderr}");
+    }
+}
+
+#[test]
+fn diagnostics_keep_only_what_is_shown_and_elide_long_names() {
+    // 4 MiB of `}`: four million errors, 2.1 GB when every one was kept.
+    let dir = tempfile::tempdir().unwrap();
+    let braces = dir.path().join("braces.ash");
+    std::fs::write(&braces, "}".repeat(4 << 20)).unwrap();
+    let (code, stderr) = capped(&["check", braces.to_str().unwrap()]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("more errors in") && stderr.len() < 64 << 10, "{} bytes", stderr.len());
+    // A 22 000-character prim name in every one of 50 messages: 1 MB of stderr.
+    let (code, stderr) = check(&hostile("long_name.usda"));
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains(&format!("`/N{}…{}/S0` (22004 characters)", "a".repeat(38), "a".repeat(37))), "{stderr}");
+    assert!(stderr.len() < 64 << 10, "{} bytes of diagnostics", stderr.len());
+}
+
+#[test]
+fn a_closed_stderr_ends_the_run_with_its_exit_code_not_a_panic() {
+    // `strata check … 2>&1 | head -1`: the pipe closes after the first line and every later
+    // write fails with EPIPE; it panicked (exit 101).
+    let mut fds = [0; 2];
+    // SAFETY: pipe writes two descriptors into the array.
+    assert_eq!(unsafe { libc::pipe(fds.as_mut_ptr()) }, 0);
+    // SAFETY: the read end is ours and closed once.
+    unsafe { libc::close(fds[0]) };
+    // SAFETY: the write end is ours; the Stdio owns it from here.
+    let closed = unsafe { <std::fs::File as std::os::fd::FromRawFd>::from_raw_fd(fds[1]) };
+    let status = Command::new(env!("CARGO_BIN_EXE_strata"))
+        .args(["check", hostile("long_name.usda").to_str().unwrap()])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::from(closed))
+        .status()
+        .unwrap();
+    assert_eq!(status.code(), Some(1), "the check's own exit code");
+}

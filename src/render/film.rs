@@ -357,6 +357,18 @@ struct Row {
     faults: [Option<RowFault>; 3],
 }
 
+/// The peak memory of a `w` × `h` render with `custom_floats` custom-channel floats per pixel
+/// (and the material Cryptomatte layer when `material_crypto`), and its channel count. Every
+/// channel is an f32 per pixel; the rows' accumulation buffers hold all of them while the
+/// image is assembled from them, and writing the EXR copies the image once more (plus the
+/// 8-bit PNG preview): twice the image, plus 8 bytes per pixel.
+pub fn film_bytes(w: usize, h: usize, custom_floats: usize, material_crypto: bool) -> (u64, usize) {
+    let crypto = 2 * cryptomatte::RANKS * (1 + usize::from(material_crypto));
+    let channels = BUILTIN_CHANNELS.len() + crypto + custom_floats;
+    let per_pixel = 2 * 4 * channels as u64 + 8;
+    ((w as u64).saturating_mul(h as u64).saturating_mul(per_pixel), channels)
+}
+
 /// Progress callback: `(rows done, rows total)`.
 pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
 
@@ -399,6 +411,10 @@ pub fn render(
     }
     let mut warnings = Vec::new();
     let (channels, channel_floats, channel_map) = channel_layout(materials, &mut warnings);
+    let material_crypto = scene.material_names.len() == materials.len();
+    let film = film_bytes(w, h, channel_floats, material_crypto);
+    crate::input::check_memory(&format!("a {w} x {h} film of {} channels", film.1), film.0)
+        .map_err(RenderError::BadSettings)?;
     let camera = scene.camera.with_aspect(w as f32 / h as f32);
     let primvar_slots = super::integrator::primvar_slots(scene, materials);
     let ctx = Context {

@@ -52,10 +52,12 @@ impl EnvMap {
     /// header checked against the texture pixel limit before decoding: see [`crate::input`]).
     /// 8-bit colour images are sRGB-decoded, as Hydra reads them; float images are linear.
     pub fn load(path: &std::path::Path) -> Result<EnvMap, String> {
-        use crate::runtime::texture::{ColorSpace, decode_texture_named};
+        use crate::runtime::texture::{ColorSpace, decode_texture_budgeted};
         let bytes = crate::input::read_bytes(path).map_err(|e| e.to_string())?;
-        let image =
-            decode_texture_named(&bytes, Some(path), ColorSpace::Auto, crate::input::limits().max_texture_pixels)?;
+        // Per pixel the map also keeps an RGB texel (12 bytes), a weight (4) and the
+        // distribution's tables (about 8).
+        let max_pixels = crate::input::limits().max_texture_pixels;
+        let image = decode_texture_budgeted(&bytes, Some(path), ColorSpace::Auto, max_pixels, 24)?;
         let texels = image
             .texels
             .into_iter()

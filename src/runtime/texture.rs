@@ -152,7 +152,43 @@ pub fn decode_texture_named(
     space: ColorSpace,
     max_pixels: u64,
 ) -> Result<Texture, String> {
+    decode_texture_budgeted(bytes, name, space, max_pixels, 0)
+}
+
+/// Bytes per pixel of a decoded texture as strata keeps it: RGBA f32.
+const TEXEL_BYTES: u64 = 16;
+
+/// The texture's memory, checked against [`input::memory_budget`] before decoding: what the
+/// decoder produces (`decoded` bytes) plus the RGBA float texels made from it, plus what the
+/// caller builds from those (`extra_per_pixel`: a dome's sampling tables).
+fn check_texture_memory(w: u64, h: u64, decoded: u64, extra_per_pixel: u64) -> Result<(), String> {
+    let pixels = w.saturating_mul(h);
+    let total = decoded.saturating_add(pixels.saturating_mul(TEXEL_BYTES + extra_per_pixel));
+    input::check_memory(&format!("decoding the {w} x {h} image"), total)
+}
+
+/// Rows converted to RGBA floats at a time: the decoded image and the texels are whole, the
+/// conversion's temporary is one band.
+const BAND_ROWS: u32 = 64;
+
+/// [`decode_texture_named`] for a caller that builds `extra_per_pixel` more bytes per pixel
+/// from the texels (counted in the memory check before decoding).
+pub fn decode_texture_budgeted(
+    bytes: &[u8],
+    name: Option<&Path>,
+    space: ColorSpace,
+    max_pixels: u64,
+    extra_per_pixel: u64,
+) -> Result<Texture, String> {
+    use image::ImageDecoder;
     let (width, height, mut texels) = if is_exr(bytes) {
+        check_exr_header(bytes, max_pixels)?;
+        let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(|e| e.to_string())?;
+        for header in meta.headers.iter() {
+            let (w, h) = (header.layer_size.width() as u64, header.layer_size.height() as u64);
+            // Decoded as RGB floats, then widened to RGBA.
+            check_texture_memory(w, h, w.saturating_mul(h).saturating_mul(12), extra_per_pixel)?;
+        }
         let (w, h, rgb) = decode_rgb_exr(bytes, max_pixels)?;
         (w, h, rgb.into_iter().map(|[r, g, b]| [r, g, b, 1.0]).collect::<Vec<_>>())
     } else {
@@ -168,11 +204,15 @@ pub fn decode_texture_named(
             return Err("the image is empty".into());
         }
         let mut reader = image_reader(bytes, name)?;
-        // A second guard inside the decoder: nothing it allocates may exceed RGBA f32 pixels.
+        // A second guard inside the decoder: none of its own buffers may exceed what the
+        // budget leaves beside the texels.
+        let texel_bytes = pixels.saturating_mul(TEXEL_BYTES + extra_per_pixel);
         let mut limits = image::Limits::default();
-        limits.max_alloc = Some(max_pixels.saturating_mul(16).max(1 << 20));
+        limits.max_alloc = Some(input::memory_budget().saturating_sub(texel_bytes).max(1 << 20));
         reader.limits(limits);
-        let image = reader.decode().map_err(|e| e.to_string())?;
+        let decoder = reader.into_decoder().map_err(|e| e.to_string())?;
+        check_texture_memory(u64::from(w), u64::from(h), decoder.total_bytes(), extra_per_pixel)?;
+        let image = image::DynamicImage::from_decoder(decoder).map_err(|e| e.to_string())?;
         let color = image.color();
         let float = matches!(color, image::ColorType::Rgb32F | image::ColorType::Rgba32F);
         let eight_bit = color.bytes_per_pixel() == color.channel_count();
@@ -181,16 +221,20 @@ pub fn decode_texture_named(
             ColorSpace::Srgb => !float,
             ColorSpace::Auto => eight_bit && color.has_color(),
         };
-        let rgba = image.into_rgba32f();
-        let (w, h) = (rgba.width() as usize, rgba.height() as usize);
-        let texels = rgba
-            .pixels()
-            .map(|p| {
+        let (w, h) = (image.width(), image.height());
+        let mut texels: Vec<[f32; 4]> = Vec::new();
+        texels
+            .try_reserve_exact(w as usize * h as usize)
+            .map_err(|_| format!("cannot allocate {} for its texels", input::human_bytes(texel_bytes)))?;
+        // Band by band: converting the whole image at once would hold a third copy.
+        for y in (0..h).step_by(BAND_ROWS as usize) {
+            let band = image.crop_imm(0, y, w, BAND_ROWS.min(h - y)).into_rgba32f();
+            texels.extend(band.pixels().map(|p| {
                 let [r, g, b, a] = p.0;
                 if srgb { [srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b), a] } else { [r, g, b, a] }
-            })
-            .collect();
-        (w, h, texels)
+            }));
+        }
+        (w as usize, h as usize, texels)
     };
     for texel in &mut texels {
         for c in texel.iter_mut() {

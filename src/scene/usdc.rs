@@ -222,6 +222,46 @@ fn u64_at(bytes: &[u8], at: u64) -> Option<u64> {
     Some(u64::from_le_bytes(raw.try_into().ok()?))
 }
 
+/// The length of what a `TfFastCompression` buffer (a chunk count byte, 0 for one LZ4
+/// block, then the block) decompresses to, found from the block's sequence headers alone;
+/// `None` when the framing is malformed or chunked (openusd reads only single blocks).
+fn lz4_decoded_len(buffer: &[u8]) -> Option<u64> {
+    let Some((&chunks, block)) = buffer.split_first() else {
+        return Some(0);
+    };
+    if chunks != 0 {
+        return None;
+    }
+    // A length: 4 bits of the token, then bytes of 255 while they continue.
+    let extended = |mut len: u64, at: &mut usize| -> Option<u64> {
+        if len == 15 {
+            loop {
+                let byte = *block.get(*at)?;
+                *at += 1;
+                len += u64::from(byte);
+                if byte != 255 {
+                    break;
+                }
+            }
+        }
+        Some(len)
+    };
+    let (mut at, mut total) = (0usize, 0u64);
+    while at < block.len() {
+        let token = block[at];
+        at += 1;
+        let literals = extended(u64::from(token >> 4), &mut at)?;
+        at = at.checked_add(usize::try_from(literals).ok()?).filter(|&e| e <= block.len())?;
+        total += literals;
+        if at == block.len() {
+            break; // the last sequence has literals only
+        }
+        at += 2; // match offset
+        total += extended(u64::from(token & 15), &mut at)? + 4;
+    }
+    Some(total)
+}
+
 /// At most this many table entries per byte of their section: LZ4 expands at most 255:1,
 /// and integer coding packs at most four entries per byte. Anything claiming more is
 /// corrupt, and would otherwise make openusd allocate (and fill) a table of that size.
@@ -275,6 +315,7 @@ pub fn precheck(bytes: &[u8]) -> Result<(u8, u8, u8), String> {
         let end = start + size;
         let truncated = || format!("section {name} is truncated");
         let mut pos = start;
+        let mut table_counts = Vec::with_capacity(counts);
         for _ in 0..counts {
             let count = u64_at(bytes, pos).filter(|_| pos + 8 <= end).ok_or_else(truncated)?;
             if count > size.saturating_mul(MAX_ENTRIES_PER_BYTE) {
@@ -283,14 +324,26 @@ pub fn precheck(bytes: &[u8]) -> Result<(u8, u8, u8), String> {
             if name == "STRINGS" && count.saturating_mul(4) > size {
                 return Err(format!("section {name} claims {count} strings in {size} bytes"));
             }
+            table_counts.push(count);
             pos += 8;
         }
+        // openusd sizes its buffers by the counts before decompressing: no count may exceed
+        // what the blocks decompress to (at least 2 bits of it per integer-coded entry).
+        let mut decoded = 0u64;
         for _ in 0..blocks {
             let block = u64_at(bytes, pos).filter(|_| pos + 8 <= end).ok_or_else(truncated)?;
-            pos = (pos + 8)
+            let block_end = (pos + 8)
                 .checked_add(block)
                 .filter(|&e| e <= end)
                 .ok_or_else(|| format!("section {name} holds a compressed block of {block} bytes past its end"))?;
+            decoded += lz4_decoded_len(&bytes[(pos + 8) as usize..block_end as usize])
+                .ok_or_else(|| format!("section {name} holds a malformed compressed block"))?;
+            pos = block_end;
+        }
+        if blocks > 0
+            && let Some(count) = table_counts.iter().find(|&&c| c > decoded.saturating_mul(4))
+        {
+            return Err(format!("section {name} claims {count} entries in {decoded} decompressed bytes"));
         }
     }
     Ok(version)
@@ -372,17 +425,21 @@ impl Probe<'_> {
         let ty = (rep >> 48) & 0xff;
         let (array, inlined, compressed) = (rep & (1 << 63) != 0, rep & (1 << 62) != 0, rep & (1 << 61) != 0);
         let at = rep & ((1 << 48) - 1);
-        if inlined {
+        // Type codes of Pixar's crate format (crateDataTypes.h). openusd reads a value with
+        // the array bit as an array whenever its type has arrays, whatever the inlined bit
+        // says (one flipped byte set both: a petabyte `read_vec`); the other types ignore the
+        // array bit, and only a payload list op ignores the inlined bit.
+        let has_arrays = matches!(ty, 1..=30 | 56 | 57);
+        if inlined && !(array && has_arrays) && ty != 55 {
             return Ok(());
         }
-        // Type codes of Pixar's crate format (crateDataTypes.h).
         match ty {
             10 | 12 | 57 if array => {
                 // string, asset and path-expression arrays: u64 count of u32 string indices.
                 self.counted(at, 4)?;
             }
-            48 => self.array(at, 9, true)?, // DoubleVector, read like a double array
-            _ if array => self.array(at, ty, compressed)?,
+            48 => self.array(at, 9, compressed)?, // DoubleVector, read like a double array
+            _ if array && has_arrays => self.array(at, ty, compressed)?,
             // Token, string, path and unregistered list ops: vectors of u32 indices.
             32 | 33 | 34 | 54 => self.list_op(at, |p, at| p.counted(at, 4))?,
             36 | 38 => self.list_op(at, |p, at| p.counted(at, 4))?,
@@ -470,8 +527,10 @@ impl Probe<'_> {
             15 => 128,
             _ => 1,
         };
-        let ints = matches!(ty, 3..=6);
-        let floats = matches!(ty, 7 | 8 | 9 | 56);
+        // Compressed int arrays exist from crate 0.5.0, compressed float arrays from 0.6.0;
+        // before that openusd reads the flag's arrays uncompressed.
+        let ints = matches!(ty, 3..=6) && self.version >= (0, 5, 0);
+        let floats = matches!(ty, 7 | 8 | 9 | 56) && self.version >= (0, 6, 0);
         // openusd's threshold below which arrays are never compressed.
         let compressed = compressed && count >= 4 && (ints || floats);
         if !compressed {
@@ -492,8 +551,16 @@ impl Probe<'_> {
                 _ => return Ok(()), // openusd rejects the code itself
             }
         }
+        // openusd allocates about 4.25 bytes per element before decompressing: bound the
+        // count by what the LZ4 block decodes to (integer coding spends at least 2 bits on
+        // each element), found by walking the block's sequences without decoding them.
         let compressed_size = self.u64_at(pos)?;
-        self.fits(pos + 8, compressed_size, 1)?;
+        let end = self.fits(pos + 8, compressed_size, 1)?;
+        let block = &self.bytes[(pos + 8) as usize..end as usize];
+        let decoded = lz4_decoded_len(block).ok_or("a compressed array's LZ4 block is malformed")?;
+        if count > decoded.saturating_mul(4) {
+            return Err(format!("claims a compressed array of {count} elements in {decoded} decompressed bytes"));
+        }
         Ok(())
     }
 
@@ -1450,6 +1517,17 @@ mod tests {
             convert_text(&crate_with(sdf::Value::Int(3), Some(("weird", sdf::Value::IntListOp(op)))));
         let text = diags.render(&sources);
         assert!(!diags.has_errors() && text.contains("metadata `weird`"), "{text}");
+    }
+
+    #[test]
+    fn lz4_lengths_come_from_sequence_headers() {
+        assert_eq!(lz4_decoded_len(&[0, 0x50, b'a', b'b', b'c', b'd', b'e']), Some(5));
+        // One literal, a match of 15 + 10 + 4 bytes, then a last literal.
+        assert_eq!(lz4_decoded_len(&[0, 0x1f, b'a', 1, 0, 10, 0x10, b'b']), Some(31));
+        assert_eq!(lz4_decoded_len(&[]), Some(0));
+        assert_eq!(lz4_decoded_len(&[0, 0x50, b'a']), None, "literals past the end");
+        assert_eq!(lz4_decoded_len(&[0, 0xf0]), None, "a length extension past the end");
+        assert_eq!(lz4_decoded_len(&[2, 0x10, b'a']), None, "chunked: openusd cannot read it");
     }
 
     #[test]

@@ -152,27 +152,64 @@ pub struct Lexed {
     pub errors: Vec<Span>,
 }
 
+/// Tokens of `text` one at a time, with the spans of unrecognised text between them: the
+/// parser pulls from this, so a 140 MB array is never held as 70 million tokens at once.
+pub struct TokenStream<'a> {
+    lexer: Lexer<'a, TokenKind>,
+    text: &'a str,
+    file: FileId,
+    prev_end: usize,
+}
+
+impl<'a> TokenStream<'a> {
+    /// A stream over `text`, the contents of `file`.
+    pub fn new(file: FileId, text: &'a str) -> TokenStream<'a> {
+        TokenStream { lexer: TokenKind::lexer(text), text, file, prev_end: 0 }
+    }
+}
+
+impl Iterator for TokenStream<'_> {
+    /// A token, or the span of text no token matches.
+    type Item = Result<Token, Span>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let result = self.lexer.next()?;
+        let range = self.lexer.span();
+        let gap = self.text.get(self.prev_end..range.start).unwrap_or("");
+        let line_start = self.prev_end == 0 || gap.contains('\n');
+        self.prev_end = range.end;
+        let span = Span::new(self.file, range.start, range.end);
+        Some(match result {
+            Ok(kind) => Ok(Token { kind, span, line_start }),
+            Err(()) => Err(span),
+        })
+    }
+}
+
+/// The spans of text no token matches, adjacent bad bytes merged into one span.
+pub fn lex_errors(file: FileId, text: &str) -> Vec<Span> {
+    let mut errors: Vec<Span> = Vec::new();
+    for span in TokenStream::new(file, text).filter_map(Result::err) {
+        match errors.last_mut() {
+            Some(last) if last.end == span.start => last.end = span.end,
+            _ => errors.push(span),
+        }
+    }
+    errors
+}
+
 /// Splits `text` into tokens.
 pub fn lex(file: FileId, text: &str) -> Lexed {
     let mut out = Lexed::default();
-    let mut lexer = TokenKind::lexer(text);
-    let mut prev_end = 0usize;
-    while let Some(result) = lexer.next() {
-        let range = lexer.span();
-        let gap = text.get(prev_end..range.start).unwrap_or("");
-        let line_start = prev_end == 0 || gap.contains('\n');
-        let span = Span::new(file, range.start, range.end);
+    for result in TokenStream::new(file, text) {
         match result {
-            Ok(kind) => out.tokens.push(Token { kind, span, line_start }),
-            Err(()) => {
-                // Merge adjacent bad bytes into one error span.
-                match out.errors.last_mut() {
-                    Some(last) if last.end as usize == range.start => last.end = range.end as u32,
-                    _ => out.errors.push(span),
-                }
-            }
+            Ok(token) => out.tokens.push(token),
+            // Merge adjacent bad bytes into one error span.
+            Err(span) => match out.errors.last_mut() {
+                Some(last) if last.end == span.start => last.end = span.end,
+                _ => out.errors.push(span),
+            },
         }
-        prev_end = range.end;
     }
     out
 }

@@ -4,14 +4,16 @@
 //! (a token at the start of a line, outside any brackets), so one run reports several
 //! problems. The result is always a layer, possibly partial.
 
-use super::lexer::{Token, TokenKind, lex};
+use super::lexer::{Token, TokenKind, TokenStream, lex_errors};
 use super::{
     AttributeSpec, Layer, LayerMetadata, LayerOffset, ListOp, ListOpKind, MetadataEntry, PrimMetadata, PrimSpec,
     PropertySpec, Reference, RelationshipSpec, Specifier, Target, VariantSetSpec,
 };
 use crate::diag::{Diagnostic, Diagnostics, FileId, Span};
 use crate::scene::value::{AssetPath, Value, ValueType};
+use std::cell::RefCell;
 use std::collections::HashMap;
+use std::collections::VecDeque;
 use std::path::Path;
 
 /// A prim body's property names → positions in its `properties`.
@@ -25,9 +27,12 @@ const MAX_DEPTH: usize = 200;
 /// Parses `text` (the contents of `file`) into a layer. Asset paths are resolved against
 /// `base_dir`, the directory of the file.
 pub fn parse(file: FileId, text: &str, base_dir: &Path, diags: &mut Diagnostics) -> Layer {
-    let lexed = lex(file, text);
-    let mut parser = Parser { text, file, tokens: lexed.tokens, pos: 0, base_dir, diags, errors: 0, depth: 0 };
-    for span in lexed.errors {
+    // Unrecognised text is reported first (a pass that keeps nothing else); the parser then
+    // pulls tokens from a second pass through a bounded window.
+    let lex_errors = lex_errors(file, text);
+    let tokens = RefCell::new(TokenWindow::new(TokenStream::new(file, text)));
+    let mut parser = Parser { text, file, tokens, pos: 0, base_dir, diags, errors: 0, depth: 0 };
+    for span in lex_errors {
         parser.error(Diagnostic::error("unrecognised text").at(span, "not valid in a .usda file"));
     }
     parser.layer()
@@ -63,10 +68,56 @@ enum MetaEntry {
     Item(MetaItem),
 }
 
+/// Tokens the parser has looked at recently (it rewinds at most one numeric tuple, never
+/// more than [`TokenWindow::KEEP`] tokens) and those it has peeked ahead at, indexed by
+/// their position in the file's token sequence.
+struct TokenWindow<'a> {
+    stream: TokenStream<'a>,
+    /// Position of `buffer[0]`.
+    base: usize,
+    buffer: VecDeque<Token>,
+    /// No more tokens: the stream is exhausted or the parser stopped.
+    done: bool,
+}
+
+impl<'a> TokenWindow<'a> {
+    /// Tokens kept behind the one asked for.
+    const KEEP: usize = 1 << 16;
+
+    fn new(stream: TokenStream<'a>) -> TokenWindow<'a> {
+        TokenWindow { stream, base: 0, buffer: VecDeque::new(), done: false }
+    }
+
+    /// Token `at`, lexing up to it; `None` past the end or before the window.
+    fn get(&mut self, at: usize) -> Option<Token> {
+        while !self.done && self.base + self.buffer.len() <= at {
+            match self.stream.next() {
+                Some(Ok(token)) => self.buffer.push_back(token),
+                Some(Err(_)) => {} // reported before parsing
+                None => self.done = true,
+            }
+        }
+        if at >= self.base + 2 * Self::KEEP {
+            let drop = (at - Self::KEEP - self.base).min(self.buffer.len());
+            self.buffer.drain(..drop);
+            self.base += drop;
+        }
+        self.buffer.get(at.checked_sub(self.base)?).copied()
+    }
+
+    /// Stops: no token is read after this. Returns the position past the last one read.
+    fn finish(&mut self) -> usize {
+        self.done = true;
+        self.base += self.buffer.len();
+        self.buffer.clear();
+        self.base
+    }
+}
+
 struct Parser<'a, 'd> {
     text: &'a str,
     file: FileId,
-    tokens: Vec<Token>,
+    tokens: RefCell<TokenWindow<'a>>,
     pos: usize,
     base_dir: &'a Path,
     diags: &'d mut Diagnostics,
@@ -78,7 +129,7 @@ impl<'a> Parser<'a, '_> {
     // ---- token helpers ----
 
     fn peek(&self) -> Option<Token> {
-        self.tokens.get(self.pos).copied()
+        self.tokens.borrow_mut().get(self.pos)
     }
 
     fn peek_kind(&self) -> Option<TokenKind> {
@@ -86,7 +137,12 @@ impl<'a> Parser<'a, '_> {
     }
 
     fn peek_at(&self, ahead: usize) -> Option<Token> {
-        self.tokens.get(self.pos + ahead).copied()
+        self.tokens.borrow_mut().get(self.pos + ahead)
+    }
+
+    /// Skips the rest of the file.
+    fn skip_to_end(&mut self) {
+        self.pos = self.tokens.get_mut().finish();
     }
 
     fn slice(&self, span: Span) -> &'a str {
@@ -128,7 +184,11 @@ impl<'a> Parser<'a, '_> {
     }
 
     fn prev_span(&self) -> Span {
-        self.pos.checked_sub(1).and_then(|i| self.tokens.get(i)).map(|t| t.span).unwrap_or_else(|| self.here())
+        self.pos
+            .checked_sub(1)
+            .and_then(|i| self.tokens.borrow_mut().get(i))
+            .map(|t| t.span)
+            .unwrap_or_else(|| self.here())
     }
 
     fn error(&mut self, diagnostic: Diagnostic) {
@@ -138,7 +198,7 @@ impl<'a> Parser<'a, '_> {
         }
         if self.errors == MAX_ERRORS {
             // Stop after this one; the rest of the file is skipped.
-            self.pos = self.tokens.len();
+            self.skip_to_end();
         }
     }
 
@@ -210,7 +270,7 @@ impl<'a> Parser<'a, '_> {
         if self.depth > MAX_DEPTH {
             let span = self.here();
             self.error(Diagnostic::error("nesting too deep").at(span, format!("more than {MAX_DEPTH} levels")));
-            self.pos = self.tokens.len();
+            self.skip_to_end();
             return Err(Reported);
         }
         Ok(())
