@@ -57,10 +57,13 @@ fn listing1_four_objects() {
     insta::assert_snapshot!("listing1_ir", ir);
 }
 
+/// One row of Figure 6's slot UI: `(slot, material, bound at)`.
+type SlotRow = (String, String, String);
+
 /// Every prim's stack as Figure 6's slot UI lists it: rows from the base layer down to the
 /// top, each substance slot followed by its overrides, as `(slot, material, bound at)`; where
 /// a slot is bound is the figure's bright (bound on the prim itself) or dark (inherited) icon.
-fn figure6_rows(json: &str) -> Vec<(String, Vec<(String, String, String)>)> {
+fn figure6_rows(json: &str) -> Vec<(String, Vec<SlotRow>)> {
     let stacks: serde_json::Value = serde_json::from_str(json).unwrap();
     let row = |v: &serde_json::Value| {
         let field = |k: &str| v[k].as_str().unwrap().trim_start_matches("/root/MATERIAL/").to_string();
