@@ -1,13 +1,19 @@
 //! Optimiser invariance of layered materials, as a property: random stacks of 1 to 8 layers
-//! (with and without surface, mask, displacement in every mode, normal and custom channel;
-//! masks absent, 0, 1, constant or varying with exact 0 and 1 regions) compiled with the
+//! (with and without surface, mask, displacement in every mode through `bump` or through the
+//! geometry-moving `displacement` node, normal and custom channel; masks absent, 0, 1,
+//! constant or varying with exact 0 and 1 regions) compiled with the
 //! optimiser on and off, by the JIT and the interpreter, must agree bit for bit on
 //! - every entry point the renderer can call on the optimised material (masks of every layer,
 //!   surface, normal and channels of layers that can be picked, heights of displacements that
 //!   count), and
 //! - everything the integrator derives at a shading point ([`shading_state`]): rule-5 pick
 //!   weights and transparency, the rule-6 combined displacement, the bumped shading normal,
-//!   and each picked layer's closure, shading normal and channels.
+//!   and each picked layer's closure, shading normal and channels, and
+//! - the stochastic pick (rule 5) as the integrator walks it, taking a layer's compile-time
+//!   constant mask from its metadata instead of calling the shader: for numbers on a grid and
+//!   at the top layer's mask boundary, the optimised material, the unoptimised one and the
+//!   unoptimised one with every mask evaluated read the same nonzero masks, bit for bit, and
+//!   pick the same layer.
 //!
 //! JIT and interpreter at the same optimisation level must agree on every entry point of
 //! every layer.
@@ -20,6 +26,7 @@ use strata::abi::{Closure, Globals, MaterialCode, ShaderError};
 use strata::backend::BackendKind;
 use strata::diag::{Diagnostics, SourceMap};
 use strata::front::library::Library;
+use strata::layering;
 use strata::render::integrator::{Invalid, shading_state};
 
 #[derive(Clone, Debug)]
@@ -37,8 +44,9 @@ struct LayerSpec {
     /// 0: none, 1: diffuse with a patterned albedo, 2: glossy with a patterned roughness.
     surface: u8,
     mask: Mask,
-    /// `(mode, varying height)`.
-    displacement: Option<(&'static str, bool)>,
+    /// `(mode, varying height, through the geometry-moving `displacement` node rather than
+    /// `bump`)`.
+    displacement: Option<(&'static str, bool, bool)>,
     normal: bool,
     channel: bool,
 }
@@ -54,7 +62,8 @@ fn mask_strategy() -> impl Strategy<Value = Mask> {
 }
 
 fn layer_strategy() -> impl Strategy<Value = LayerSpec> {
-    let displacement = prop::option::of((prop::sample::select(vec!["none", "add", "mix"]), any::<bool>())).boxed();
+    let displacement =
+        prop::option::of((prop::sample::select(vec!["none", "add", "mix"]), any::<bool>(), any::<bool>())).boxed();
     (0u8..3, mask_strategy(), displacement, any::<bool>(), any::<bool>()).prop_map(
         |(surface, mask, displacement, normal, channel)| LayerSpec { surface, mask, displacement, normal, channel },
     )
@@ -88,9 +97,10 @@ fn source(stack: &[LayerSpec]) -> String {
         if let Some(opacity) = opacity {
             body += &format!("    node m = mask(opacity: {opacity});\n    mask = m.out;\n");
         }
-        if let Some((mode, varying)) = layer.displacement {
+        if let Some((mode, varying, moves_geometry)) = layer.displacement {
             let height = if varying { "pat.out".to_string() } else { format!("{:?}", 0.25 * (i + 1) as f32) };
-            body += &format!("    node b = bump(height: {height}, scale: 0.2, mode: \"{mode}\");\n");
+            let node = if moves_geometry { "displacement" } else { "bump" };
+            body += &format!("    node b = {node}(height: {height}, scale: 0.2, mode: \"{mode}\");\n");
             body += "    displacement = b.out;\n";
         }
         if layer.normal {
@@ -208,6 +218,58 @@ fn integrator_view(code: &dyn MaterialCode, g: &Globals) -> Vec<u32> {
     }
 }
 
+/// The stochastic pick as the integrator walks it: masks known at compile time come from the
+/// layer's metadata (`constant_mask`), the others from the shader; or, with `shortcut` off,
+/// every mask from the shader. Per number of `us`: the bits of each nonzero mask the walk
+/// read, then the picked layer (`u32::MAX` for transparency, `u32::MAX - 1` for a shader
+/// error). The masks are compared too because a constant one bit off changes the pick only
+/// for numbers within a bit of a boundary, which a grid rarely hits below the top layer.
+fn pick_view(code: &dyn MaterialCode, g: &Globals, us: &[f32], shortcut: bool) -> Vec<u32> {
+    let info = code.info();
+    let mut out = Vec::new();
+    for &u in us {
+        let mask_of = |i: usize| {
+            let m = match info.layers[i].constant_mask {
+                Some(m) if shortcut => Ok(m),
+                _ => code.mask(g, i),
+            };
+            // A mask of 0 leaves the walk's number untouched (the optimiser may drop such a
+            // layer from the pick), so only the others are compared.
+            if let Ok(m) = m.map(layering::clamp_mask)
+                && m != 0.0
+            {
+                out.push(m.to_bits());
+            }
+            m
+        };
+        let picked = match layering::pick(&info.layers, u, mask_of) {
+            Ok(Some(i)) => i as u32,
+            Ok(None) => u32::MAX,
+            Err(_) => u32::MAX - 1,
+        };
+        out.push(picked);
+    }
+    out
+}
+
+/// Numbers for [`pick_view`]: a grid over [0, 1), and the top picking layer's mask of the
+/// unoptimised material at `g` with its neighbours below and above, where a mask that differs
+/// in its last bit between the two materials changes the pick.
+fn pick_numbers(raw: &dyn MaterialCode, g: &Globals) -> Vec<f32> {
+    let mut us: Vec<f32> = (0..64).map(|k| (k as f32 + 0.5) / 64.0).collect();
+    if let Some(top) = raw.info().layers.iter().rposition(|l| l.picks())
+        && let Ok(m) = raw.mask(g, top)
+    {
+        let m = layering::clamp_mask(m);
+        for u in [m, f32::from_bits(m.to_bits().saturating_sub(1)), f32::from_bits(m.to_bits() + 1)] {
+            if (0.0..1.0).contains(&u) {
+                us.push(u);
+            }
+        }
+    }
+    us
+}
+
 fn check_stack(stack: &[LayerSpec], seed: u64) -> Result<(), TestCaseError> {
     let text = source(stack);
     let mut sources = SourceMap::new();
@@ -223,6 +285,12 @@ fn check_stack(stack: &[LayerSpec], seed: u64) -> Result<(), TestCaseError> {
     prop_assert_eq!(jit_raw.info(), int_raw.info());
     let shape = jit_opt.as_ref();
     for (k, g) in points(48, seed).iter().enumerate() {
+        // The stochastic pick with constant-mask shortcuts, against every mask evaluated.
+        let us = pick_numbers(jit_raw.as_ref(), g);
+        let picks = pick_view(jit_raw.as_ref(), g, &us, false);
+        for (name, code) in [("jit optimised", &jit_opt), ("interpreter optimised", &int_opt), ("jit", &jit_raw)] {
+            prop_assert_eq!(&pick_view(code.as_ref(), g, &us, true), &picks, "{} picks, point {}\n{}", name, k, text);
+        }
         let reference = entry_points(jit_raw.as_ref(), shape, g);
         let view = integrator_view(jit_raw.as_ref(), g);
         for (name, code) in
@@ -264,18 +332,47 @@ proptest! {
 
 /// The stacks that motivated the property, pinned so they always run: a bump-only layer on
 /// top, an add-mode displacement under an opaque layer, a mix-mode displacement under an
-/// opaque surface-only layer, and a mix layer of mask 1 that replaces what is below.
+/// opaque surface-only layer, a mix layer of mask 1 that replaces what is below; and the same
+/// through geometry-moving `displacement`, with literal masks 1, 0 and 0.4 that only the
+/// optimiser folds to constants, over a varying mask, for the stochastic pick's shortcuts.
 #[test]
 fn known_stacks_are_invariant() {
     let base = LayerSpec { surface: 1, mask: Mask::Absent, displacement: None, normal: false, channel: true };
     let stacks = [
-        vec![base.clone(), LayerSpec { surface: 0, displacement: Some(("add", true)), ..base.clone() }],
-        vec![LayerSpec { displacement: Some(("add", true)), mask: Mask::Varying(2.0), ..base.clone() }, base.clone()],
-        vec![LayerSpec { displacement: Some(("mix", true)), mask: Mask::Varying(2.0), ..base.clone() }, base.clone()],
+        vec![base.clone(), LayerSpec { surface: 0, displacement: Some(("add", true, false)), ..base.clone() }],
         vec![
-            LayerSpec { displacement: Some(("none", true)), ..base.clone() },
-            LayerSpec { surface: 0, mask: Mask::One, displacement: Some(("mix", true)), ..base.clone() },
-            LayerSpec { surface: 2, mask: Mask::Zero, displacement: Some(("add", true)), ..base.clone() },
+            LayerSpec { displacement: Some(("add", true, false)), mask: Mask::Varying(2.0), ..base.clone() },
+            base.clone(),
+        ],
+        vec![
+            LayerSpec { displacement: Some(("mix", true, false)), mask: Mask::Varying(2.0), ..base.clone() },
+            base.clone(),
+        ],
+        vec![
+            LayerSpec { displacement: Some(("none", true, false)), ..base.clone() },
+            LayerSpec { surface: 0, mask: Mask::One, displacement: Some(("mix", true, false)), ..base.clone() },
+            LayerSpec { surface: 2, mask: Mask::Zero, displacement: Some(("add", true, false)), ..base.clone() },
+        ],
+        vec![
+            LayerSpec { displacement: Some(("none", true, true)), ..base.clone() },
+            LayerSpec { mask: Mask::Varying(2.0), displacement: Some(("add", true, true)), ..base.clone() },
+            LayerSpec { surface: 0, mask: Mask::One, displacement: Some(("mix", true, true)), ..base.clone() },
+        ],
+        vec![
+            LayerSpec { mask: Mask::Varying(3.0), displacement: Some(("add", false, true)), ..base.clone() },
+            LayerSpec {
+                surface: 2,
+                mask: Mask::Constant(0.4),
+                displacement: Some(("mix", true, true)),
+                ..base.clone()
+            },
+            LayerSpec { mask: Mask::Zero, displacement: Some(("add", true, true)), ..base.clone() },
+            LayerSpec { mask: Mask::Varying(1.5), ..base.clone() },
+        ],
+        vec![
+            LayerSpec { displacement: Some(("add", true, true)), ..base.clone() },
+            LayerSpec { surface: 2, mask: Mask::One, ..base.clone() },
+            LayerSpec { mask: Mask::Constant(0.4), ..base.clone() },
         ],
     ];
     for stack in &stacks {

@@ -307,15 +307,20 @@ fn surfaceless_layers_hide_nothing() {
     }
 }
 
-/// Rule 7 with a spatially varying mask: the top layer's mask is `s` (texture coordinate,
-/// `x/40 + ½`), and both layers write channel `cov` (top 1, base 0) and `under` (base 1).
-/// The pixel means must equal the mean coverage over the visible window: by symmetry of the
-/// window about x = 0, the mean of `s` is ½, so `cov` → 0.5 and `under` → 0.5. Tolerance:
-/// 3 standard errors of a Bernoulli(½) mean over all samples, plus the window's half-pixel
-/// asymmetry (none: the grid is symmetric).
+/// Rule 7 with a strongly varying, asymmetric mask: the top layer's mask is `(x + ½)²`, read
+/// through the texture coordinate u = x/40 + ½, so 0 at the window's left edge (x = −½) and 1
+/// at its right; both layers write a channel (top `cov`, base `under`, each 1). A pixel's `cov`
+/// is then the mask's mean over the pixel and `under` its complement. Per quadrant the expected
+/// coverage is the mean of `(x + ½)²` over it: 1/12 on the left half, 7/12 on the right, in the
+/// top and the bottom rows alike. A mask evaluated at the wrong point moves some quadrant by at
+/// least 1/4: mirrored (7/12 on the left), u and v swapped (1/12 top right), a fixed point such
+/// as the origin (1/4 everywhere). Tolerance: 5 standard errors of a Bernoulli mean over the
+/// quadrant's samples (the stratified first pick only lowers the spread), at most 0.039.
 #[test]
 fn custom_channels_average_to_their_layers_coverage() {
-    let ash = "shader coord(output float out = 0.0) { out = u; }
+    let ash = "shader ramp_squared(output float out = 0.0) {
+    out = ((u - 0.5) * 40.0 + 0.5) * ((u - 0.5) * 40.0 + 0.5);
+}
 substance base {
     node d = diffuse(albedo: 0.2);
     node c = customChannelFloat(name: \"under\", value: 1.0);
@@ -323,7 +328,7 @@ substance base {
 }
 substance top {
     node d = diffuse(albedo: 0.8);
-    node s = coord();
+    node s = ramp_squared();
     node m = mask(opacity: s.out);
     node c = customChannelFloat(name: \"cov\", value: 1.0);
     surface = d.bsdf;
@@ -331,15 +336,30 @@ substance top {
 }
 ";
     let dir = tempfile::tempdir().unwrap();
-    let (spp, res) = (16, 16);
+    let (spp, res) = (64, 16);
     let image =
         render_file(&plane_scene(dir.path(), ash, &["base".into(), "top".into()]), LayerMode::Stochastic, spp, res);
-    let samples = spp as f64 * (res * res) as f64;
-    let tolerance = 3.0 * (0.25 / samples).sqrt();
-    for (channel, want) in [("cov", 0.5), ("under", 0.5)] {
-        let got = channel_mean(&image, channel);
-        assert!((got - want).abs() < tolerance, "{channel}: {got} vs {want} ± {tolerance}");
+    let half = res / 2;
+    let samples = spp as f64 * (half * half) as f64;
+    // The camera looks down −y with image right = +x and image up = −z: columns run along x.
+    let quadrant_mean = |channel: &str, rows: std::ops::Range<usize>, cols: std::ops::Range<usize>| {
+        let v = image.f32_channel(channel).unwrap();
+        let sum: f64 = rows.flat_map(|r| cols.clone().map(move |c| r * res + c)).map(|i| v[i] as f64).sum();
+        sum / (half * half) as f64
+    };
+    let mut failures = Vec::new();
+    for (rows, row_name) in [(0..half, "top"), (half..res, "bottom")] {
+        for (cols, col_name, coverage) in [(0..half, "left", 1.0 / 12.0), (half..res, "right", 7.0 / 12.0)] {
+            let tolerance = 5.0 * (coverage * (1.0 - coverage) / samples).sqrt();
+            for (channel, want) in [("cov", coverage), ("under", 1.0 - coverage)] {
+                let got = quadrant_mean(channel, rows.clone(), cols.clone());
+                if (got - want).abs() >= tolerance {
+                    failures.push(format!("{channel} {row_name} {col_name}: {got:.4} vs {want:.4} ± {tolerance:.4}"));
+                }
+            }
+        }
     }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
 
 /// Rule 5, stochastic against weighted with spatially varying masks: `n` diffuse layers of

@@ -57,11 +57,88 @@ fn listing1_four_objects() {
     insta::assert_snapshot!("listing1_ir", ir);
 }
 
+/// One row of Figure 6's slot UI: `(slot, material, bound at)`.
+type SlotRow = (String, String, String);
+
+/// Every prim's stack as Figure 6's slot UI lists it: rows from the base layer down to the
+/// top, each substance slot followed by its overrides, as `(slot, material, bound at)`; where
+/// a slot is bound is the figure's bright (bound on the prim itself) or dark (inherited) icon.
+fn figure6_rows(json: &str) -> Vec<(String, Vec<SlotRow>)> {
+    let stacks: serde_json::Value = serde_json::from_str(json).unwrap();
+    let row = |v: &serde_json::Value| {
+        let field = |k: &str| v[k].as_str().unwrap().trim_start_matches("/root/MATERIAL/").to_string();
+        (field("slot"), field("material"), field("bound_at"))
+    };
+    let mut out = Vec::new();
+    for p in stacks.as_array().unwrap() {
+        let mut rows = Vec::new();
+        for layer in p["layers"].as_array().unwrap() {
+            rows.push(row(layer));
+            rows.extend(layer["overrides"].as_array().unwrap().iter().map(row));
+        }
+        out.push((p["prim"].as_str().unwrap().to_string(), rows));
+    }
+    out
+}
+
 #[test]
 fn oscilloscope_production_example() {
     let (table, json, ir, warnings) = run("scenes/paper/oscilloscope.usda");
     // 6.7: removing 050 on the front panel orphans the inherited 050::010.
     assert!(warnings.contains("override slot `050::010` on `/root/geo/frontPanel_M_geo` is ignored"), "{warnings}");
+    // The paper's section 6, whose assignments Figure 6's UI shows, written out by hand before
+    // the snapshots pin the text. At the asset root (6.2, 6.3, 6.5): generic01 in slot 000 with
+    // its override generic01_override01, dirt01 in 050 with dirt01_override; every prim
+    // inherits them. 6.3 / Figure 11: metal_stainless01 and its override on a higher slot
+    // (here 020) of `controls`, reaching only the metal plate behind the knobs. 6.4: the case
+    // replaces slot 000 with metal_stainless01 (the inherited 000::000 override stays, rule 1).
+    // 6.5: plastic_opaque01_red overrides each knob's base colour. 6.6: the case's dirt is
+    // 050 dirt01 (inherited), 050::010 dirt01_override (inherited), 050::020
+    // dirt01_casing_override (object specific). 6.7: an empty 050 removes the dirt on the
+    // front panel. 6.9: the sticker is an extra slot layer (here 030) on the case.
+    let root = "/root";
+    let at = |prim: &str, rows: &[(&str, &str, &str)]| {
+        let rows = rows.iter().map(|(s, m, b)| (s.to_string(), m.to_string(), b.to_string())).collect::<Vec<_>>();
+        (prim.to_string(), rows)
+    };
+    let base = [("000", "generic01", root), ("000::000", "generic01_override01", root)];
+    let dirt = [("050", "dirt01", root), ("050::010", "dirt01_override", root)];
+    let case = "/root/geo/case_M_geo";
+    let knob = |i: u32| {
+        let prim = format!("/root/geo/knobs/knob0{i}_M_geo");
+        let red = ("000::010", "plastic_opaque01_red", prim.as_str());
+        at(&prim, &[base[0], base[1], red, dirt[0], dirt[1]])
+    };
+    let expected = vec![
+        at(
+            case,
+            &[
+                ("000", "metal_stainless01", case),
+                base[1],
+                ("030", "sticker01", case),
+                dirt[0],
+                dirt[1],
+                ("050::020", "dirt01_casing_override", case),
+            ],
+        ),
+        at("/root/geo/frontPanel_M_geo", &base),
+        at("/root/geo/backPanel_M_geo", &[base[0], base[1], dirt[0], dirt[1]]),
+        at(
+            "/root/geo/controls/knobPlate_M_geo",
+            &[
+                base[0],
+                base[1],
+                ("020", "metal_stainless01", "/root/geo/controls"),
+                ("020::000", "metal_stainless01_override", "/root/geo/controls"),
+                dirt[0],
+                dirt[1],
+            ],
+        ),
+        knob(1),
+        knob(2),
+        knob(3),
+    ];
+    assert_eq!(figure6_rows(&json), expected);
     insta::assert_snapshot!("oscilloscope_layers", table);
     insta::assert_snapshot!("oscilloscope_layers_json", json);
     insta::assert_snapshot!("oscilloscope_ir", ir);
