@@ -815,6 +815,12 @@ mod tests {
             node d = diffuse();
             surface = d.bsdf;
         }
+        substance sheet {
+            node m = mask(opacity: 1.0);
+            node d = diffuse();
+            surface = d.bsdf;
+            mask = m.out;
+        }
         override red {
             output color base_color = color(1.0, 0.0, 0.0);
             node aov = customChannelColor(name: "red_marker", value: color(1.0, 1.0, 1.0));
@@ -906,6 +912,29 @@ mod tests {
         let unoptimised = build(&lib, &material, PassOptions { optimize: false }, &mut diags);
         assert_eq!(unoptimised.stats.layers_pruned, 0);
         assert!(unoptimised.nodes.len() > wired.nodes.len());
+    }
+
+    /// A literal mask is a constant at every optimisation level (liveness, and with it what
+    /// is diced and picked, must not depend on the optimiser); unoptimised, nothing else is
+    /// folded or pruned.
+    #[test]
+    fn literal_masks_are_constant_at_every_optimisation_level() {
+        let (lib, _) = setup();
+        let material = ComposedMaterial {
+            layers: vec![
+                layer(&lib, "000", "plastic", &[]),
+                layer(&lib, "010", "sheet", &[]),
+                layer(&lib, "050", "dirt", &[]),
+            ],
+            ..Default::default()
+        };
+        let mut diags = Diagnostics::new();
+        for optimize in [true, false] {
+            let wired = build(&lib, &material, PassOptions { optimize }, &mut diags);
+            let masks: Vec<Option<f32>> = wired.layers.iter().map(Layer::constant_mask).collect();
+            assert_eq!(masks, [Some(1.0), Some(1.0), None], "optimise {optimize}");
+            assert_eq!(wired.layers[0].surface.is_none(), optimize, "optimise {optimize}: plastic under the sheet");
+        }
     }
 
     #[test]
