@@ -701,3 +701,234 @@ fn flat_faces_next_to_hard_edges_stay_flat() {
         }
     }
 }
+
+/// Whether a prim is diced is decided from the masks known at compile time, and a literal
+/// `mask(opacity: …)` is known at every optimisation level (it is a constant only once
+/// folded): a moving layer under a `mix` bump layer with a literal mask 1, or an `add` layer
+/// with a literal mask 0, dices nothing optimised or not; under a literal mask 0 the moving
+/// layer dices alike at both levels. Images and dicing figures are identical.
+#[test]
+fn literal_masks_decide_dicing_alike_at_every_optimisation_level() {
+    let dir = tempfile::tempdir().unwrap();
+    let ash = format!(
+        r#"{GROWN}
+substance FlattenOpaque {{
+    node bsdf = diffuse(albedo: 0.3);
+    node opacity = mask(opacity: 1.0);
+    node b = bump(height: 0.0, mode: "mix");
+    surface = bsdf.bsdf;
+    mask = opacity.out;
+    displacement = b.out;
+}}
+substance FlattenClear {{
+    node bsdf = diffuse(albedo: 0.3);
+    node opacity = mask(opacity: 0.0);
+    node b = bump(height: 0.0, mode: "mix");
+    surface = bsdf.bsdf;
+    mask = opacity.out;
+    displacement = b.out;
+}}
+substance GrownClear {{
+    node bsdf = diffuse(albedo: 0.9);
+    node opacity = mask(opacity: 0.0);
+    node d = displacement(height: 0.25, mode: "add");
+    surface = bsdf.bsdf;
+    mask = opacity.out;
+    displacement = d.out;
+}}
+"#
+    );
+    for (stack, diced) in
+        [(["Grown", "FlattenOpaque"], false), (["Floor", "GrownClear"], false), (["Grown", "FlattenClear"], true)]
+    {
+        let prims = format!(
+            "{}def Sphere \"Ball\" {{\n{}}}\n",
+            camera("Cam", [0.0, 0.0, 6.0], [0.0, 0.0, 0.0]),
+            bindings(&stack)
+        );
+        let names = ["Grown", "Floor", "FlattenOpaque", "FlattenClear", "GrownClear"];
+        let path = stage(dir.path(), &ash, &names, &prims, "def DomeLight \"Sky\" {}\n");
+        let build = |optimize| {
+            let (scene, materials) = built(&path, None, (48, 48), BackendKind::Jit, optimize);
+            let figures = scene.displacement.as_ref().map(|s| (s.prims, s.micro_triangles, s.vertices, s.rate));
+            let image = common::render_scene(&scene, &materials, &common::settings(48, 48, 4, 7, 3));
+            (figures, image)
+        };
+        let (optimised, unoptimised) = (build(true), build(false));
+        assert_eq!(optimised.0.is_some(), diced, "{stack:?}: optimised dicing {:?}", optimised.0);
+        assert_eq!(unoptimised.0, optimised.0, "{stack:?}: unoptimised dicing differs from optimised");
+        assert!(unoptimised.1 == optimised.1, "{stack:?}: unoptimised image differs from optimised");
+    }
+}
+
+/// A 2×1 quad grid in the xz plane facing +y (x from −1 to 1, z from −1 to 1): face 0 is
+/// x ≤ 0, face 1 x ≥ 0, each bound by a GeomSubset to `/Looks/<left>` and `/Looks/<right>`.
+fn split_quad(left: &str, right: &str) -> String {
+    let subset = |name: &str, face: usize, material: &str| {
+        format!(
+            "    def GeomSubset \"{name}\" {{\n        uniform token elementType = \"face\"\n        \
+             uniform token familyName = \"materialBind\"\n        int[] indices = [{face}]\n        \
+             rel material:binding = </Looks/{material}>\n    }}\n"
+        )
+    };
+    format!(
+        "def Mesh \"Split\" {{\n    uniform token subdivisionScheme = \"none\"\n    int[] faceVertexCounts = [4, 4]\n    \
+         int[] faceVertexIndices = [0, 1, 4, 3, 1, 2, 5, 4]\n    \
+         point3f[] points = [(-1, 0, 1), (0, 0, 1), (1, 0, 1), (-1, 0, -1), (0, 0, -1), (1, 0, -1)]\n    \
+         uniform token subsetFamily:materialBind:familyType = \"partition\"\n{}{}}}\n",
+        subset("Left", 0, left),
+        subset("Right", 1, right)
+    )
+}
+
+const LIFTS: &str = r#"
+substance Low {
+    node bsdf = diffuse(albedo: 0.5);
+    node d = displacement(height: 0.1, mode: "none");
+    surface = bsdf.bsdf;
+    displacement = d.out;
+}
+substance High {
+    node bsdf = diffuse(albedo: 0.5);
+    node d = displacement(height: 0.3, mode: "none");
+    surface = bsdf.bsdf;
+    displacement = d.out;
+}
+"#;
+
+/// Two GeomSubsets of one mesh displace by 0.1 and 0.3: the border opens and each side moves
+/// by its own material's height up to the border. Rays a quarter of a micro-triangle from
+/// the border (inside the band a shared border vertex would drag to the other side's
+/// height) hit each side at its own height; the faces are flat, so to f32 precision.
+#[test]
+fn geom_subsets_with_different_displacement_open_along_their_border() {
+    let dir = tempfile::tempdir().unwrap();
+    let prims = format!("{}{}", camera("Top", [0.0, 6.0, 0.0], [-90.0, 0.0, 0.0]), split_quad("Low", "High"));
+    let path = stage(dir.path(), LIFTS, &["Low", "High"], &prims, "def DomeLight \"Sky\" {}\n");
+    let resolution = (128, 128);
+    let (scene, _) = built(&path, None, resolution, BackendKind::Jit, true);
+    let stats = scene.displacement.as_ref().expect("the subsets are displaced");
+    // A micro-edge is 0.7 to 1.4 times the dicing rate in pixels; a pixel is this wide on
+    // the quad (about 6 units from the camera; the raised quad is nearer, so edges only shorter).
+    let pixel = 2.0 * TAN_HALF as f32 * 6.0 / resolution.0 as f32;
+    let probe = 0.25 * 0.7 * stats.rate * pixel;
+    for k in 0..9 {
+        let z = -0.8 + 0.2 * k as f32 + 0.013;
+        for (x, expected) in [(-probe, 0.1f32), (probe, 0.3)] {
+            let hit = scene.accel.intersect(Vec3::new(x, 10.0, z), -Vec3::Y, 0.0, f32::INFINITY).expect("hit");
+            let y = 10.0 - hit.t;
+            assert!(
+                (y - expected).abs() < 1e-4,
+                "at ({x}, {z}), {probe} from the border: height {y}, its subset's material gives {expected}"
+            );
+        }
+    }
+}
+
+const BOX_ON_FLOOR: &str = "def Mesh \"Box\" {\n    rel material:slotBinding:_000 = </Looks/Low>\n    \
+    uniform token subdivisionScheme = \"none\"\n    int[] faceVertexCounts = [4, 4, 4, 4, 4, 4]\n    \
+    int[] faceVertexIndices = [0, 1, 3, 2, 2, 3, 5, 4, 4, 5, 7, 6, 6, 7, 1, 0, 1, 7, 5, 3, 6, 0, 2, 4]\n    \
+    point3f[] points = [(-0.5, 0, 0.5), (0.5, 0, 0.5), (-0.5, 1, 0.5), (0.5, 1, 0.5), (-0.5, 1, -0.5), (0.5, 1, -0.5), (-0.5, 0, -0.5), (0.5, 0, -0.5)]\n}\n";
+
+/// A 3×3 grid of unit quads at y = 0 facing +y whose centre quad is the box's footprint, so
+/// the box's bottom corners and edges coincide with the floor's.
+fn grid_floor() -> String {
+    let mut points = Vec::new();
+    for z in [1.5, 0.5, -0.5, -1.5] {
+        for x in [-1.5, -0.5, 0.5, 1.5] {
+            points.push(format!("({x}, 0, {z})"));
+        }
+    }
+    let mut indices = Vec::new();
+    for row in 0..3 {
+        for col in 0..3 {
+            let i = row * 4 + col;
+            indices.extend([i, i + 1, i + 5, i + 4].map(|v| v.to_string()));
+        }
+    }
+    format!(
+        "def Mesh \"Floor\" {{\n    rel material:slotBinding:_000 = </Looks/Low>\n    \
+         uniform token subdivisionScheme = \"none\"\n    int[] faceVertexCounts = [4, 4, 4, 4, 4, 4, 4, 4, 4]\n    \
+         int[] faceVertexIndices = [{}]\n    point3f[] points = [{}]\n}}\n",
+        indices.join(", "),
+        points.join(", ")
+    )
+}
+
+/// A displaced box standing on a displaced floor (same material, touching along the box's
+/// bottom edges) is the box displaced alone: separate prims are never welded, so the floor
+/// neither moves the box's bottom edge nor averages its normals with the box's. Its
+/// micro-triangles are bit for bit those of the box alone, and its shading normal just above
+/// the contact (within the bottom micro-triangle row, where a weld would bend it) is the one
+/// it has alone.
+#[test]
+fn touching_prims_are_displaced_separately() {
+    let dir = tempfile::tempdir().unwrap();
+    let cam = camera("Cam", [0.0, 0.6, 4.0], [0.0, 0.0, 0.0]);
+    let resolution = (64, 64);
+    // Coarse dicing: the bottom micro-row (the band a weld would bend) is tall.
+    let rate = 16.0;
+    let build = |prims: &str| {
+        let path = stage(dir.path(), LIFTS, &["Low"], &format!("{cam}{prims}"), "def DomeLight \"Sky\" {}\n");
+        let options = strata::render::scene::SceneOptions {
+            dicing: strata::render::displace::DicingOptions { rate, resolution, ..Default::default() },
+            ..Default::default()
+        };
+        let b = build_with(&path, BackendKind::Jit, true, &options);
+        assert!(!b.diags.has_errors(), "{}", b.text);
+        b.scene.unwrap_or_else(|| panic!("{}", b.text))
+    };
+    let alone = build(BOX_ON_FLOOR);
+    let together = build(&format!("{BOX_ON_FLOOR}{}", grid_floor()));
+    assert_eq!(together.displacement.as_ref().map(|s| s.prims), Some(2));
+
+    // Horizontal rays at the box's front face (z = 0.6 displaced, 3.4 from the camera), just above the
+    // raised floor (y = 0.1): a micro-edge there is at least 0.7 · rate pixels, so the bottom
+    // row reaches at least this high (the box's bottom edge starts at y = 0).
+    let pixel = 2.0 * TAN_HALF as f32 * 3.4 / resolution.0 as f32;
+    let row = 0.7 * rate * pixel;
+    assert!(row > 0.2, "bottom row {row}");
+    let mut compared = 0;
+    for i in 0..7 {
+        let x = -0.45 + 0.15 * i as f32;
+        for j in 1..5 {
+            let y = 0.1 + (row - 0.1) * j as f32 / 5.0;
+            let (o, d) = (Vec3::new(x, y, 5.0), -Vec3::Z);
+            let hits = [&alone, &together].map(|scene| {
+                let hit = scene.accel.intersect(o, d, 0.0, f32::INFINITY).expect("the box is ahead");
+                (hit.t, scene.accel.surface(o, d, &hit).ns)
+            });
+            let [(t0, n0), (t1, n1)] = hits;
+            assert!(n0.z > 0.5, "({x}, {y}): the box's front face has normal {n0}");
+            assert!(
+                (t1 - t0).abs() < 1e-5 && (n1 - n0).length() < 1e-5,
+                "({x}, {y}): on the floor the box is at t = {t1} with normal {n1}, alone at {t0} with {n0}"
+            );
+            compared += 1;
+        }
+    }
+    assert_eq!(compared, 28);
+
+    let key = |t: &[Vec3; 3]| t.map(|p| p.to_array().map(f32::to_bits));
+    let mut with_floor: HashMap<_, usize> = HashMap::new();
+    for t in together.accel.world_triangles() {
+        *with_floor.entry(key(t)).or_default() += 1;
+    }
+    let box_triangles = alone.accel.world_triangles();
+    let missing = box_triangles
+        .iter()
+        .filter(|t| match with_floor.get_mut(&key(t)) {
+            Some(n) if *n > 0 => {
+                *n -= 1;
+                false
+            }
+            _ => true,
+        })
+        .count();
+    assert_eq!(
+        missing,
+        0,
+        "of the box's {} micro-triangles, {missing} moved when the floor touched it",
+        box_triangles.len()
+    );
+}

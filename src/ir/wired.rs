@@ -203,6 +203,8 @@ fn build_here(
         drop_black_emission(&mut wired.layers);
         wired.stats.nodes.push(("fold", count_used(&live, &wired.layers)));
         wired.stats.layers_pruned = prune_hidden_layers(&mut wired.layers);
+    } else {
+        fold_masks(lib, &live, &mut wired.layers);
     }
     wired.nodes = eliminate_dead_nodes(live, &mut wired.layers);
     wired.stats.nodes.push(("dce", wired.nodes.len()));
@@ -444,6 +446,25 @@ fn fold_constants(lib: &Library, nodes: &mut [Option<Node>], layers: &mut [Layer
         }
     }
     for_each_root(layers, |op| substitute(op, &folded));
+}
+
+/// Replaces each mask that folds to a constant by that constant, leaving every other node
+/// and product as it is. Which layers can be seen and which displacement moves geometry
+/// ([`layering::liveness`]) is decided from the constant masks, so an unoptimised build must
+/// know the same constants as an optimised one: a literal `mask(opacity: 1.0)` is a constant
+/// at every optimisation level, and optimising never changes what is diced or picked.
+fn fold_masks(lib: &Library, nodes: &[Option<Node>], layers: &mut [Layer]) {
+    if layers.iter().all(|l| !matches!(l.mask, Some(Operand::Node { .. }))) {
+        return;
+    }
+    let mut scratch_nodes = nodes.to_vec();
+    let mut folded = layers.to_vec();
+    fold_constants(lib, &mut scratch_nodes, &mut folded);
+    for (layer, folded) in layers.iter_mut().zip(folded) {
+        if let Some(mask @ Operand::Const(..)) = folded.mask {
+            layer.mask = Some(mask);
+        }
+    }
 }
 
 /// Every node index, each after the nodes its arguments read (iterative depth-first search;
@@ -794,6 +815,12 @@ mod tests {
             node d = diffuse();
             surface = d.bsdf;
         }
+        substance sheet {
+            node m = mask(opacity: 1.0);
+            node d = diffuse();
+            surface = d.bsdf;
+            mask = m.out;
+        }
         override red {
             output color base_color = color(1.0, 0.0, 0.0);
             node aov = customChannelColor(name: "red_marker", value: color(1.0, 1.0, 1.0));
@@ -885,6 +912,29 @@ mod tests {
         let unoptimised = build(&lib, &material, PassOptions { optimize: false }, &mut diags);
         assert_eq!(unoptimised.stats.layers_pruned, 0);
         assert!(unoptimised.nodes.len() > wired.nodes.len());
+    }
+
+    /// A literal mask is a constant at every optimisation level (liveness, and with it what
+    /// is diced and picked, must not depend on the optimiser); unoptimised, nothing else is
+    /// folded or pruned.
+    #[test]
+    fn literal_masks_are_constant_at_every_optimisation_level() {
+        let (lib, _) = setup();
+        let material = ComposedMaterial {
+            layers: vec![
+                layer(&lib, "000", "plastic", &[]),
+                layer(&lib, "010", "sheet", &[]),
+                layer(&lib, "050", "dirt", &[]),
+            ],
+            ..Default::default()
+        };
+        let mut diags = Diagnostics::new();
+        for optimize in [true, false] {
+            let wired = build(&lib, &material, PassOptions { optimize }, &mut diags);
+            let masks: Vec<Option<f32>> = wired.layers.iter().map(Layer::constant_mask).collect();
+            assert_eq!(masks, [Some(1.0), Some(1.0), None], "optimise {optimize}");
+            assert_eq!(wired.layers[0].surface.is_none(), optimize, "optimise {optimize}: plastic under the sheet");
+        }
     }
 
     #[test]

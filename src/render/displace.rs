@@ -15,9 +15,12 @@
 //!   one, two or three split edges becomes two, three or four and is diced again. Midpoints of
 //!   quadric edges are projected back onto the exact surface. When the micro-triangles would
 //!   pass the budget, the rate doubles until they fit (reported).
-//! - **Watertight.** Vertices are welded by exact position across every displaced prim; each
+//! - **Watertight.** Vertices are welded by exact position within one surface and one
+//!   material: a prim, or the faces of one mesh whose GeomSubsets share a material. Each
 //!   welded vertex has one normal (the mean of its corners' normals, so hard edges open no
-//!   crack) and one height, so shared edges stay shared after displacement.
+//!   crack) and one height, so shared edges stay shared after displacement. Separate prims
+//!   that touch (a box on a floor) stay separate, and a mesh opens along the border of
+//!   subsets with different materials: each side moves by its own material's height.
 //! - **Bound.** Each layer's height is clamped to `±bound`; clamped and non-finite samples
 //!   are counted and reported per layer.
 //! - **Shading.** Micro-triangles carry smooth normals of the displaced mesh and the source's
@@ -211,20 +214,30 @@ struct Base {
     creases: HashSet<(u32, u32)>,
 }
 
-/// The key two positions weld on: their exact bits, with −0 as +0.
-fn weld_key(p: Vec3) -> [u32; 3] {
-    p.to_array().map(|x| (x + 0.0).to_bits())
+/// Which corners may weld: those of one surface (a prim, or the mesh a GeomSubset's faces
+/// belong to) bound to one material.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+struct WeldGroup {
+    surface: u32,
+    material: usize,
+}
+
+/// The key two corners weld on: their group and their position's exact bits, with −0 as +0.
+fn weld_key(group: WeldGroup, p: Vec3) -> (WeldGroup, [u32; 3]) {
+    (group, p.to_array().map(|x| (x + 0.0).to_bits()))
 }
 
 impl Base {
-    fn build(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Base {
+    /// Welds the corners of `triangles` and of the base meshes of `shapes`, each within the
+    /// [`WeldGroup`] `group_of` gives its prim.
+    fn build(triangles: Vec<Triangle>, shapes: Vec<Shape>, group_of: impl Fn(u32) -> WeldGroup) -> Base {
         let mut base =
             Base { vertices: Vec::new(), faces: Vec::new(), sources: Vec::new(), shapes, creases: HashSet::new() };
-        let mut index: HashMap<[u32; 3], u32> = HashMap::new();
+        let mut index: HashMap<(WeldGroup, [u32; 3]), u32> = HashMap::new();
         let mut normal_sums: Vec<DVec3> = Vec::new();
-        let mut corner = |base: &mut Base, p: Vec3, n: DVec3, uv: Vec2, k: usize| -> Corner {
+        let mut corner = |base: &mut Base, prim: u32, p: Vec3, n: DVec3, uv: Vec2, k: usize| -> Corner {
             let source = base.sources.len() as u32;
-            let v = *index.entry(weld_key(p)).or_insert_with(|| {
+            let v = *index.entry(weld_key(group_of(prim), p)).or_insert_with(|| {
                 base.vertices.push(Vertex { p, n: n.as_vec3(), uv, source });
                 normal_sums.push(DVec3::ZERO);
                 base.vertices.len() as u32 - 1
@@ -234,7 +247,7 @@ impl Base {
         };
         for t in &triangles {
             let (dpdu, dpdv) = super::accel::tangents(t.p, t.uv, t.cross().normalize_or_zero());
-            let c = [0, 1, 2].map(|k| corner(&mut base, t.p[k], t.n[k].as_dvec3(), t.uv[k], k));
+            let c = [0, 1, 2].map(|k| corner(&mut base, t.prim, t.p[k], t.n[k].as_dvec3(), t.uv[k], k));
             base.faces.push(Face { c, source: base.sources.len() as u32 });
             base.sources.push(Source {
                 prim: t.prim,
@@ -260,7 +273,8 @@ impl Base {
                 }
                 // Wind outward: the analytic normal decides.
                 let order = if cross.dot(normals[0] + normals[1] + normals[2]) < 0.0 { [0, 2, 1] } else { [0, 1, 2] };
-                let c = [0, 1, 2].map(|j| corner(&mut base, world[order[j]], normals[order[j]], tri[order[j]].1, j));
+                let c = [0, 1, 2]
+                    .map(|j| corner(&mut base, shape.prim, world[order[j]], normals[order[j]], tri[order[j]].1, j));
                 base.faces.push(Face { c, source: base.sources.len() as u32 });
                 base.sources.push(Source {
                     prim: shape.prim,
@@ -595,7 +609,10 @@ pub fn displace(
     for prim in diced.iter().map(|t| t.prim).chain(diced_shapes.iter().map(|s| s.prim)) {
         displaced[prim as usize] = true;
     }
-    let mut base = Base::build(diced, diced_shapes);
+    let mut base = Base::build(diced, diced_shapes, |prim| {
+        let of = geometry.prims.get(prim as usize).and_then(|p| p.subset_of).unwrap_or(prim);
+        WeldGroup { surface: of, material: prim_material.get(prim as usize).copied().unwrap_or(usize::MAX) }
+    });
     let (lo, hi) =
         base.vertices.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), v| (lo.min(v.p), hi.max(v.p)));
     let extent = if base.vertices.is_empty() { 1.0 } else { (hi - lo).length().max(f32::MIN_POSITIVE) };

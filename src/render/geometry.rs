@@ -105,6 +105,9 @@ pub struct GeomPrim {
     pub path: String,
     /// Where it is defined (for diagnostics about it).
     pub span: Span,
+    /// For the faces of a GeomSubset with its own material binding: the mesh they belong to
+    /// (displacement welds a mesh's faces across subsets only where they share a material).
+    pub subset_of: Option<u32>,
 }
 
 /// Geometry that instances share: built once, in the space of its root prim.
@@ -374,7 +377,7 @@ impl Builder<'_> {
     fn prim_index(&mut self, prim: &Prim) -> u32 {
         let prims = &mut self.geometry.prims;
         *self.prim_index.entry(prim.path.clone()).or_insert_with(|| {
-            prims.push(GeomPrim { path: prim.path.clone(), span: prim.span });
+            prims.push(GeomPrim { path: prim.path.clone(), span: prim.span, subset_of: None });
             prims.len() as u32 - 1
         })
     }
@@ -397,7 +400,17 @@ impl Builder<'_> {
         // each gets its composed material.
         let face_prims = if prim.type_name.as_deref() == Some("Mesh") {
             let stage = self.stage;
-            material_subsets(stage, prim, index, &mut |subset| self.prim_index(subset), diags)
+            material_subsets(
+                stage,
+                prim,
+                index,
+                &mut |subset| {
+                    let subset_index = self.prim_index(subset);
+                    self.geometry.prims[subset_index as usize].subset_of = Some(index);
+                    subset_index
+                },
+                diags,
+            )
         } else {
             Vec::new()
         };
