@@ -98,6 +98,7 @@ def Material "Looks"
         threads: Some(2),
         max_depth: 1,
         mode: LayerMode::Stochastic,
+        ..Default::default()
     };
     let (image, stats) = render(&scene, &refs, &settings, None).expect("renders");
     assert_eq!(stats.invalid_samples(), 0, "{stats}");
