@@ -417,6 +417,9 @@ fn spawn_worker(options: &FuzzOptions, dir: &Path, first: u64) -> std::io::Resul
         .arg(dir)
         .args(["--seed", &options.seed.to_string(), "--first", &first.to_string()])
         .args(["--stride", &options.jobs.to_string()])
+        // Budgeted structures (textures, film, instances) must be refused below the memory
+        // oracle's line: a refused structure is the answer, a worker past the line a finding.
+        .args(["--max-memory", &(options.max_rss / 2).to_string()])
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
