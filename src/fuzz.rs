@@ -1,14 +1,25 @@
 //! `strata fuzz`: mutation fuzzing of both front ends and the whole `check` pipeline, on the
 //! stable toolchain (no sanitizer coverage needed).
 //!
-//! The corpus is every `.ash` and `.usda` file under the repository's `scenes/`, `tests/in/`,
-//! `tests/fixtures/` and `fuzz/corpus/` (where inputs that once crashed are kept), plus the
-//! prelude. Input `k` of a run is a deterministic function of the seed and `k`: a corpus file
-//! with 1 to 8 mutations, byte-level (replace, delete, insert, duplicate, splice from another
-//! file) or structured (repeat a span hundreds of times, swap in an extreme number, insert a
-//! token of either language). Each input goes through `check` in-process and, for substance
-//! files, through lowering and the JIT (every input) and the interpreter (one in eight); for
-//! scenes, one in sixteen is also rendered at 4x4.
+//! The corpus is every `.ash`, `.usda`, `.usdc` and `.usdz` file under the repository's
+//! `scenes/`, `tests/in/`, `tests/fixtures/` and `fuzz/corpus/` (where inputs that once
+//! crashed are kept), plus the prelude. Input `k` of a run is a deterministic function of the
+//! seed and `k`: a corpus file with 1 to 8 mutations. Text is mutated byte-level (replace,
+//! delete, insert, duplicate, splice from another file) or structurally (repeat a span
+//! hundreds of times, swap in an extreme number, insert a token of either language). Binary
+//! crates and packages get binary mutations (bit flips, extreme little-endian integers, chunk
+//! copies, truncation); a package's members are mutated inside, and their CRCs fixed after, so
+//! the zip reader passes them on to the layer readers. Each input goes through `check`
+//! in-process and, for substance files, through lowering and the JIT (every input) and the
+//! interpreter (one in eight); for scenes, one in sixteen is also rendered at 4x4. With
+//! `--quick`, inputs are only read and composed (scenes) or parsed (substances): many times
+//! more executions per second, for the readers.
+//!
+//! Oracles: a crash (panic, abort, signal), an allocation failure (its message in the
+//! worker's stderr, a class of its own), a hang past the per-input time, a peak resident
+//! memory past the cap (the worker resets and reads its high-water mark around every input,
+//! so a short spike between the parent's polls is caught too), and diagnostics larger than
+//! [`STDERR_PER_INPUT_BYTE`] times the input plus [`STDERR_SLACK`] (what `check` would print).
 //!
 //! Inputs run in worker processes (this same binary, `fuzz --worker`) so that a crash, an
 //! abort, a hang or a memory blow-up costs one worker, not the run: the parent watches each
@@ -47,12 +58,21 @@ impl Entry {
     fn is_substance(&self) -> bool {
         self.rel.extension().is_some_and(|e| e == "ash")
     }
+
+    /// A crate or a package: mutated as bytes, not as text.
+    fn is_binary(&self) -> bool {
+        self.rel.extension().is_some_and(|e| e == "usdc" || e == "usdz") || self.bytes.starts_with(b"PXR-USDC")
+    }
+
+    fn is_package(&self) -> bool {
+        self.bytes.starts_with(b"PK\x03\x04")
+    }
 }
 
 /// The files inputs are made from, and the other files they may refer to.
 #[derive(Clone, Debug, Default)]
 pub struct Corpus {
-    /// `.ash`, `.usda` and `.usdc` files, sorted by path (so input `k` is the same on every machine).
+    /// `.ash`, `.usda`, `.usdc` and `.usdz` files, sorted by path (so input `k` is the same on every machine).
     pub entries: Vec<Entry>,
     /// Every other staged file (textures and the like), relative path and bytes.
     pub assets: Vec<Entry>,
@@ -74,9 +94,9 @@ impl Corpus {
                 } else if kind.is_file() && entry.metadata()?.len() <= MAX_CORPUS_FILE {
                     let rel = path.strip_prefix(root).unwrap_or(&path).to_path_buf();
                     let item = Entry { rel, bytes: std::fs::read(&path)? };
-                    // Binary layers are mutated too: the usdc reader must turn every corrupt
-                    // crate into a diagnostic (src/scene/usdc.rs).
-                    if item.rel.extension().is_some_and(|e| e == "ash" || e == "usda" || e == "usdc") {
+                    // Binary layers and packages are mutated too: the usdc and zip readers must
+                    // turn every corrupt crate or package into a diagnostic.
+                    if item.rel.extension().is_some_and(|e| e == "ash" || e == "usda" || e == "usdc" || e == "usdz") {
                         corpus.entries.push(item);
                     } else {
                         corpus.assets.push(item);
@@ -105,9 +125,29 @@ impl Corpus {
     pub fn input(&self, seed: u64, k: u64) -> (usize, Vec<u8>) {
         let mut rng = Rng::new(seed ^ k.wrapping_mul(0x9e37_79b9_7f4a_7c15));
         let which = rng.below(self.entries.len());
-        let mut bytes = self.entries[which].bytes.clone();
-        for _ in 0..1 + rng.below(8) {
-            mutate(&mut rng, &mut bytes, self);
+        let entry = &self.entries[which];
+        let mut bytes = entry.bytes.clone();
+        let mutations = 1 + rng.below(8);
+        if entry.is_package() && rng.below(4) != 0 {
+            // Inside one member, CRCs fixed after: what the layer readers see.
+            let members = zip_members(&bytes);
+            if !members.is_empty() {
+                let (start, end) = members[rng.below(members.len())];
+                let mut member = bytes[start..end].to_vec();
+                for _ in 0..mutations {
+                    mutate_binary(&mut rng, &mut member, true);
+                }
+                bytes[start..end].copy_from_slice(&member);
+                fix_zip_crcs(&mut bytes);
+                return (which, bytes);
+            }
+        }
+        for _ in 0..mutations {
+            if entry.is_binary() {
+                mutate_binary(&mut rng, &mut bytes, false);
+            } else {
+                mutate(&mut rng, &mut bytes, self);
+            }
         }
         (which, bytes)
     }
@@ -233,20 +273,169 @@ fn mutate(rng: &mut Rng, bytes: &mut Vec<u8>, corpus: &Corpus) {
     }
 }
 
+/// Integers that break careless binary readers (counts, offsets, sizes), little-endian.
+const EXTREME_INTEGERS: [u64; 10] =
+    [0, 1, 0x7f, 0xff, 0x7fff_ffff, 0x8000_0000, 0xffff_ffff, 0x7fff_ffff_ffff_ffff, u64::MAX, 1 << 40];
+
+/// One binary mutation of `bytes`; `same_length` keeps the length (inside a zip member, whose
+/// size the headers state).
+fn mutate_binary(rng: &mut Rng, bytes: &mut Vec<u8>, same_length: bool) {
+    let len = bytes.len();
+    if len == 0 {
+        return;
+    }
+    let at = rng.below(len);
+    match rng.below(if same_length { 4 } else { 7 }) {
+        0 => bytes[at] ^= 1 << rng.below(8),
+        1 => bytes[at] = rng.next() as u8,
+        2 => {
+            // An extreme integer, 4 or 8 bytes wide, where a count or offset may be.
+            let value = EXTREME_INTEGERS[rng.below(EXTREME_INTEGERS.len())].to_le_bytes();
+            let width = if rng.below(2) == 0 { 4 } else { 8 };
+            let end = (at + width).min(len);
+            bytes[at..end].copy_from_slice(&value[..end - at]);
+        }
+        3 => {
+            // Copy a chunk over another place (tables pointing at each other's data).
+            let from = rng.below(len);
+            let n = (1 + rng.below(32)).min(len - from).min(len - at);
+            let chunk = bytes[from..from + n].to_vec();
+            bytes[at..at + n].copy_from_slice(&chunk);
+        }
+        4 => bytes.truncate(at),
+        5 => {
+            let end = (at + 1 + rng.below(64)).min(len);
+            bytes.drain(at..end);
+        }
+        _ => {
+            let from = rng.below(len);
+            let end = (from + 1 + rng.below(64)).min(len);
+            let chunk = bytes[from..end].to_vec();
+            bytes.splice(at..at, chunk);
+        }
+    }
+}
+
+fn le16(bytes: &[u8], at: usize) -> Option<usize> {
+    Some(u16::from_le_bytes(bytes.get(at..at + 2)?.try_into().ok()?) as usize)
+}
+
+fn le32(bytes: &[u8], at: usize) -> Option<usize> {
+    Some(u32::from_le_bytes(bytes.get(at..at + 4)?.try_into().ok()?) as usize)
+}
+
+/// The central directory's entries of a zip: `(entry offset, local header offset)`.
+fn zip_entries(bytes: &[u8]) -> Vec<(usize, usize)> {
+    let Some(end) = (0..bytes.len().saturating_sub(21)).rev().find(|&i| bytes[i..].starts_with(b"PK\x05\x06")) else {
+        return Vec::new();
+    };
+    let (Some(count), Some(mut at)) = (le16(bytes, end + 10), le32(bytes, end + 16)) else { return Vec::new() };
+    let mut out = Vec::new();
+    for _ in 0..count {
+        if !bytes.get(at..).is_some_and(|b| b.starts_with(b"PK\x01\x02")) {
+            break;
+        }
+        let (Some(name), Some(extra), Some(comment), Some(local)) =
+            (le16(bytes, at + 28), le16(bytes, at + 30), le16(bytes, at + 32), le32(bytes, at + 42))
+        else {
+            break;
+        };
+        out.push((at, local));
+        at += 46 + name + extra + comment;
+    }
+    out
+}
+
+/// The data range of each stored member of a zip (usdz members are stored, not deflated).
+fn zip_members(bytes: &[u8]) -> Vec<(usize, usize)> {
+    zip_entries(bytes).into_iter().filter_map(|(_, local)| member_data(bytes, local)).collect()
+}
+
+/// Rewrites every member's CRC-32, in its local header and central directory entry, to match
+/// its (mutated) data.
+fn fix_zip_crcs(bytes: &mut [u8]) {
+    for (entry, local) in zip_entries(bytes) {
+        let Some((start, end)) = member_data(bytes, local) else { continue };
+        let crc = crc32(&bytes[start..end]).to_le_bytes();
+        bytes[local + 14..local + 18].copy_from_slice(&crc);
+        bytes[entry + 16..entry + 20].copy_from_slice(&crc);
+    }
+}
+
+/// The data range of the member whose local header is at `local`.
+fn member_data(bytes: &[u8], local: usize) -> Option<(usize, usize)> {
+    if !bytes.get(local..)?.starts_with(b"PK\x03\x04") {
+        return None;
+    }
+    let start = local + 30 + le16(bytes, local + 26)? + le16(bytes, local + 28)?;
+    let end = start.checked_add(le32(bytes, local + 18)?)?;
+    (end <= bytes.len() && start < end).then_some((start, end))
+}
+
+/// CRC-32 (IEEE, as zip uses it), bit by bit: inputs are small.
+fn crc32(data: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in data {
+        crc ^= b as u32;
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 { (crc >> 1) ^ 0xedb8_8320 } else { crc >> 1 };
+        }
+    }
+    !crc
+}
+
+/// Diagnostics may be this many bytes per input byte, plus [`STDERR_SLACK`]: more is a flood
+/// (a long name repeated in every message: 22 KB in, 1 MB out).
+pub const STDERR_PER_INPUT_BYTE: usize = 16;
+
+/// Diagnostics any input may print: 50 messages with their excerpts.
+pub const STDERR_SLACK: usize = 64 << 10;
+
 /// Runs one input in this process: writes it over its corpus file inside the staged `dir`,
-/// checks it as `strata check` would, compiles and runs what compiles, and restores the file.
-pub fn execute(dir: &Path, corpus: &Corpus, which: usize, bytes: &[u8], k: u64) -> std::io::Result<()> {
+/// checks it as `strata check` would (only reads and composes it when `quick`), compiles and
+/// runs what compiles, and restores the file. Returns the bytes of diagnostics `check` would
+/// print.
+pub fn execute(dir: &Path, corpus: &Corpus, which: usize, bytes: &[u8], k: u64, quick: bool) -> std::io::Result<usize> {
     let entry = &corpus.entries[which];
     let path = dir.join(&entry.rel);
     std::fs::write(&path, bytes)?;
-    let (diags, sources, _) = crate::cli::check_file(&path);
-    let _ = diags.render(&sources);
-    if entry.is_substance() {
-        run_substances(bytes, k.is_multiple_of(8));
-    } else if k.is_multiple_of(16) && !diags.has_errors() {
-        render_tiny(&path);
-    }
-    std::fs::write(&path, &entry.bytes)
+    let printed = if quick {
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        if entry.is_substance() {
+            let _ = Library::from_text("fuzz.ash", &String::from_utf8_lossy(bytes), &mut sources, &mut diags);
+        } else {
+            let _ = crate::scene::Stage::open(&path, &mut sources, &mut diags);
+        }
+        diags.render(&sources).len()
+    } else {
+        let (diags, sources, summary) = crate::cli::check_file(&path);
+        let printed = diags.render(&sources).len() + summary.len();
+        if entry.is_substance() {
+            run_substances(bytes, k.is_multiple_of(8));
+        } else if k.is_multiple_of(16) && !diags.has_errors() {
+            render_tiny(&path);
+        }
+        printed
+    };
+    std::fs::write(&path, &entry.bytes)?;
+    Ok(printed)
+}
+
+/// This process's peak resident memory since [`reset_peak_memory`] (bytes; 0 where `/proc`
+/// does not say).
+fn peak_memory() -> u64 {
+    let Ok(status) = std::fs::read_to_string("/proc/self/status") else { return 0 };
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+        .map_or(0, |kb| kb * 1024)
+}
+
+/// Resets the peak resident memory to the current (Linux: `5` to `/proc/self/clear_refs`).
+fn reset_peak_memory() {
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
 }
 
 /// Compiles every substance of `text` with its file's overrides and evaluates its entry points.
@@ -326,16 +515,19 @@ fn render_tiny(scene: &Path) {
 }
 
 /// The worker loop: inputs `first`, `first + stride`, … until killed. Before each input it
-/// prints `run K` and after it `done K`, so the parent knows which input was in flight.
-pub fn worker(root: &Path, dir: &Path, seed: u64, first: u64, stride: u64) -> std::io::Result<()> {
+/// prints `run K` and after it `done K PEAK PRINTED INPUT` (peak resident bytes while it ran,
+/// bytes of diagnostics, bytes of input), so the parent knows which input was in flight and
+/// what it cost.
+pub fn worker(root: &Path, dir: &Path, seed: u64, first: u64, stride: u64, quick: bool) -> std::io::Result<()> {
     let corpus = Corpus::load(root)?;
     let stdout = std::io::stdout();
     let mut k = first;
     loop {
         let (which, bytes) = corpus.input(seed, k);
         writeln!(stdout.lock(), "run {k}")?;
-        execute(dir, &corpus, which, &bytes, k)?;
-        writeln!(stdout.lock(), "done {k}")?;
+        reset_peak_memory();
+        let printed = execute(dir, &corpus, which, &bytes, k, quick)?;
+        writeln!(stdout.lock(), "done {k} {} {printed} {}", peak_memory(), bytes.len())?;
         k += stride.max(1);
     }
 }
@@ -347,8 +539,19 @@ pub enum Failure {
     Crash(String),
     /// It ran longer than the per-input budget.
     Hang,
-    /// The worker's resident memory passed the budget while running it.
+    /// The worker's resident memory passed the budget while running it (peak bytes).
     Memory(u64),
+    /// An allocation failed (`memory allocation of N bytes failed`, `capacity overflow`): the
+    /// message.
+    OutOfMemory(String),
+    /// Its diagnostics were larger than [`STDERR_PER_INPUT_BYTE`] per input byte plus
+    /// [`STDERR_SLACK`].
+    StderrFlood {
+        /// Bytes of diagnostics.
+        printed: u64,
+        /// Bytes of input.
+        input: u64,
+    },
 }
 
 /// One input that failed, saved to the crash directory.
@@ -381,6 +584,8 @@ pub struct FuzzOptions {
     pub max_rss: u64,
     /// Where failing inputs are written.
     pub crashes: PathBuf,
+    /// Only read and compose scenes, parse substances (the readers, many times faster).
+    pub quick: bool,
 }
 
 /// What a run did.
@@ -396,7 +601,8 @@ pub struct FuzzReport {
 
 enum Event {
     Started(u64),
-    Finished(u64),
+    /// Input, peak resident bytes, bytes of diagnostics, bytes of input.
+    Finished(u64, u64, u64, u64),
     Exited,
 }
 
@@ -420,6 +626,7 @@ fn spawn_worker(options: &FuzzOptions, dir: &Path, first: u64) -> std::io::Resul
         // Budgeted structures (textures, film, instances) must be refused below the memory
         // oracle's line: a refused structure is the answer, a worker past the line a finding.
         .args(["--max-memory", &(options.max_rss / 2).to_string()])
+        .args(if options.quick { &["--quick"][..] } else { &[] })
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -428,10 +635,11 @@ fn spawn_worker(options: &FuzzOptions, dir: &Path, first: u64) -> std::io::Resul
     let stdout = child.stdout.take().expect("piped");
     std::thread::spawn(move || {
         for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            let parse = |p: &str| line.strip_prefix(p).and_then(|k| k.parse().ok());
-            let event = match (parse("run "), parse("done ")) {
-                (Some(k), _) => Event::Started(k),
-                (_, Some(k)) => Event::Finished(k),
+            let numbers =
+                |p: &str| -> Option<Vec<u64>> { line.strip_prefix(p)?.split(' ').map(|n| n.parse().ok()).collect() };
+            let event = match (numbers("run ").as_deref(), numbers("done ").as_deref()) {
+                (Some(&[k]), _) => Event::Started(k),
+                (_, Some(&[k, peak, printed, input])) => Event::Finished(k, peak, printed, input),
                 _ => continue,
             };
             if tx.send(event).is_err() {
@@ -469,6 +677,51 @@ fn resident_bytes(pid: u32) -> u64 {
         .map_or(0, |kb| kb * 1024)
 }
 
+/// The oracles on an input that ran to the end: its peak resident memory and the size of its
+/// diagnostics against the input's size.
+pub fn judge_finished(peak: u64, printed: u64, input: u64, max_rss: u64) -> Option<Failure> {
+    if peak > max_rss {
+        Some(Failure::Memory(peak))
+    } else if printed > (STDERR_PER_INPUT_BYTE as u64).saturating_mul(input).saturating_add(STDERR_SLACK as u64) {
+        Some(Failure::StderrFlood { printed, input })
+    } else {
+        None
+    }
+}
+
+/// What a worker's death was, from the end of its stderr: an allocation failure is a class of
+/// its own (Rust's `memory allocation of N bytes failed`, `capacity overflow`).
+pub fn judge_exit(stderr_tail: &str, message: String) -> Failure {
+    if stderr_tail.contains("memory allocation of") || stderr_tail.contains("capacity overflow") {
+        Failure::OutOfMemory(message)
+    } else {
+        Failure::Crash(message)
+    }
+}
+
+/// Writes input `k` to the crash directory and logs it.
+fn save_finding(
+    options: &FuzzOptions,
+    corpus: &Corpus,
+    k: u64,
+    failure: Failure,
+    log: &mut dyn FnMut(&str),
+) -> std::io::Result<Finding> {
+    let (which, bytes) = corpus.input(options.seed, k);
+    let entry = &corpus.entries[which];
+    let ext = entry.rel.extension().and_then(|e| e.to_str()).unwrap_or("txt");
+    let saved = options.crashes.join(format!("input-{}-{k}.{ext}", options.seed));
+    std::fs::write(&saved, &bytes)?;
+    let finding = Finding { k, base: entry.rel.clone(), failure, saved };
+    log(&format!(
+        "finding: input {k} (from {}): {:?}, saved to {}",
+        finding.base.display(),
+        finding.failure,
+        finding.saved.display()
+    ));
+    Ok(finding)
+}
+
 /// Runs the fuzzer for `options.duration`; `log` receives a line per finding and progress.
 pub fn run(options: &FuzzOptions, log: &mut dyn FnMut(&str)) -> std::io::Result<FuzzReport> {
     let corpus = Corpus::load(&options.root)?;
@@ -489,20 +742,23 @@ pub fn run(options: &FuzzOptions, log: &mut dyn FnMut(&str)) -> std::io::Result<
             while let Ok(event) = w.events.try_recv() {
                 match event {
                     Event::Started(k) => w.in_flight = Some((k, Instant::now())),
-                    Event::Finished(k) => {
+                    Event::Finished(k, peak, printed, input) => {
                         report.executions += 1;
+                        report.peak_rss = report.peak_rss.max(peak);
                         w.in_flight = None;
                         w.next = k + options.jobs;
+                        // Findings the worker survived: it goes on with the next input.
+                        if let Some(failure) = judge_finished(peak, printed, input, options.max_rss) {
+                            report.findings.push(save_finding(options, &corpus, k, failure, log)?);
+                        }
                     }
                     Event::Exited => {
                         let status = w.child.wait().map(|s| s.to_string()).unwrap_or_default();
                         let tail =
                             String::from_utf8_lossy(&w.stderr.lock().unwrap_or_else(|e| e.into_inner())).into_owned();
                         let last: Vec<&str> = tail.lines().rev().take(6).collect();
-                        failure = Some(Failure::Crash(format!(
-                            "{status}: {}",
-                            last.into_iter().rev().collect::<Vec<_>>().join(" | ")
-                        )));
+                        let message = format!("{status}: {}", last.into_iter().rev().collect::<Vec<_>>().join(" | "));
+                        failure = Some(judge_exit(&tail, message));
                         break;
                     }
                 }
@@ -520,20 +776,9 @@ pub fn run(options: &FuzzOptions, log: &mut dyn FnMut(&str)) -> std::io::Result<
                 let _ = w.child.kill();
                 let _ = w.child.wait();
                 let k = w.in_flight.map_or(w.next, |(k, _)| k);
-                let (which, bytes) = corpus.input(options.seed, k);
-                let entry = &corpus.entries[which];
-                let ext = entry.rel.extension().and_then(|e| e.to_str()).unwrap_or("txt");
-                let saved = options.crashes.join(format!("input-{}-{k}.{ext}", options.seed));
-                std::fs::write(&saved, &bytes)?;
-                let finding = Finding { k, base: entry.rel.clone(), failure, saved };
-                log(&format!(
-                    "finding: input {k} (from {}): {:?}, saved to {}",
-                    finding.base.display(),
-                    finding.failure,
-                    finding.saved.display()
-                ));
-                report.findings.push(finding);
+                report.findings.push(save_finding(options, &corpus, k, failure, log)?);
                 // The staged file may hold the failing input: restore it, then go on after it.
+                let entry = &corpus.entries[corpus.input(options.seed, k).0];
                 std::fs::write(dir.join(&entry.rel), &entry.bytes)?;
                 *w = spawn_worker(options, dir, k + options.jobs)?;
             }

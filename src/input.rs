@@ -263,7 +263,7 @@ pub fn read_bytes_limited(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputE
 /// One file that was read: its canonical path and, on Unix, its device, inode and
 /// modification time (which also catch a hard link or a second path to it; the time tells a
 /// reused inode of a deleted input from the input itself).
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
 struct FileIdentity {
     path: PathBuf,
     device_inode: Option<(u64, u64, i64, i64)>,
@@ -289,15 +289,14 @@ impl FileIdentity {
     }
 }
 
-/// Every input file this process has read, so outputs can be checked against them.
-static FILES_READ: Mutex<Vec<FileIdentity>> = Mutex::new(Vec::new());
+/// Every input file this process has read, so outputs can be checked against them. A set:
+/// a scene of 40 000 sublayer files spent most of a minute in a list's `contains`.
+static FILES_READ: std::sync::LazyLock<Mutex<std::collections::HashSet<FileIdentity>>> =
+    std::sync::LazyLock::new(Mutex::default);
 
 fn record_read(path: &Path, meta: &std::fs::Metadata) {
     let identity = FileIdentity::of(path, meta);
-    let mut files = FILES_READ.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-    if !files.contains(&identity) {
-        files.push(identity);
-    }
+    FILES_READ.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).insert(identity);
 }
 
 /// Whether `path` names a file this process has read as an input (a scene, layer, substance
@@ -403,10 +402,35 @@ pub fn resolve_asset(base_dir: &Path, authored: &str) -> PathBuf {
         && let Some((package, dir)) = split_brackets_allow_empty(text)
         && !Path::new(authored).is_absolute()
     {
-        let member = normalize_member(&format!("{dir}/{authored}"));
-        return PathBuf::from(format!("{package}[{member}]"));
+        return PathBuf::from(format!("{package}[{}]", resolve_member(dir, authored)));
     }
     crate::scene::value::normalize(&base_dir.join(authored))
+}
+
+/// `authored` resolved against the directory `dir` of a package, which may itself be inside
+/// a nested package (`inner.usdz[sub]` → `inner.usdz[sub/authored]`): a relative path stays
+/// inside the innermost package, as USD resolves it.
+fn resolve_member(dir: &str, authored: &str) -> String {
+    match split_brackets_allow_empty(dir) {
+        Some((package, inner)) => format!("{package}[{}]", resolve_member(inner, authored)),
+        None => normalize_member(&format!("{dir}/{authored}")),
+    }
+}
+
+/// The package-relative path of `member` inside `package`, which may itself be a member of a
+/// package: `a.usdz[b.usdz]` and `root.usda` give `a.usdz[b.usdz[root.usda]]`, USD's form
+/// (`a.usdz[b.usdz][root.usda]` names no member of `a.usdz`).
+pub fn package_member(package: &Path, member: &str) -> PathBuf {
+    fn nest(package: &str, member: &str) -> String {
+        match split_brackets(package) {
+            Some((outer, inner)) => format!("{outer}[{}]", nest(inner, member)),
+            None => format!("{package}[{member}]"),
+        }
+    }
+    match package.to_str() {
+        Some(text) if split_package_path(package).is_some() => PathBuf::from(nest(text, member)),
+        _ => PathBuf::from(format!("{}[{member}]", package.display())),
+    }
 }
 
 /// Like [`split_brackets`], but `pkg[]` (a package's top directory) is allowed.
@@ -424,8 +448,14 @@ pub fn layer_dir(path: &Path) -> PathBuf {
         && let Some((package, member)) = split_brackets(text)
         && split_package_path(path).is_some()
     {
-        let dir = member.rsplit_once('/').map(|(d, _)| d).unwrap_or("");
-        return PathBuf::from(format!("{package}[{dir}]"));
+        // In a nested package (`a.usdz[b.usdz[sub/x.usda]]`), the innermost member's folder.
+        fn member_dir(member: &str) -> String {
+            match split_brackets(member) {
+                Some((package, inner)) => format!("{package}[{}]", member_dir(inner)),
+                None => member.rsplit_once('/').map(|(d, _)| d).unwrap_or("").to_string(),
+            }
+        }
+        return PathBuf::from(format!("{package}[{}]", member_dir(member)));
     }
     path.parent().unwrap_or(Path::new("")).to_path_buf()
 }

@@ -195,6 +195,10 @@ enum Command {
         /// Most resident memory a worker may use, in MiB.
         #[arg(long, default_value_t = 1024)]
         max_rss_mib: u64,
+        /// Only read and compose scenes and parse substances (no lowering, JIT or render):
+        /// many times more executions per second for the layer and package readers.
+        #[arg(long)]
+        quick: bool,
         /// Run as a worker of a fuzzing run (internal).
         #[arg(long, hide = true)]
         worker: bool,
@@ -371,10 +375,23 @@ fn main() -> ExitCode {
             }
         }
         Command::Check { file, time, strict } => cli::check(&file, time, strict),
-        Command::Fuzz { secs, seed, jobs, root, crashes, timeout, max_rss_mib, worker, stage, first, stride } => {
+        Command::Fuzz {
+            secs,
+            seed,
+            jobs,
+            root,
+            crashes,
+            timeout,
+            max_rss_mib,
+            quick,
+            worker,
+            stage,
+            first,
+            stride,
+        } => {
             if worker {
                 let stage = stage.unwrap_or_else(std::env::temp_dir);
-                return match strata::fuzz::worker(&root, &stage, seed, first, stride) {
+                return match strata::fuzz::worker(&root, &stage, seed, first, stride, quick) {
                     Ok(()) => ExitCode::SUCCESS,
                     Err(e) => {
                         eprintln!("fuzz worker: {e}");
@@ -391,6 +408,7 @@ fn main() -> ExitCode {
                 input_timeout: std::time::Duration::from_secs_f64(timeout.max(0.1)),
                 max_rss: max_rss_mib.saturating_mul(1 << 20),
                 crashes,
+                quick,
             };
             cli::fuzz(&options)
         }

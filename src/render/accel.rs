@@ -23,8 +23,13 @@ use super::primvars::PrimvarRef;
 use super::shapes::Shape;
 use glam::{DAffine3, DMat3, DMat4, Vec2, Vec3, Vec3A};
 use obvhs::aabb::Aabb;
+use obvhs::bvh2::Bvh2;
+use obvhs::bvh2::node::Bvh2Node;
+use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::cwbvh::CwBvh;
 use obvhs::cwbvh::builder::build_cwbvh;
+use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
+use obvhs::ploc::{PlocBuilder, PlocSearchDistance, SortPrecision};
 use obvhs::ray::{Ray, RayHit};
 use obvhs::{Boundable, BvhBuildParams};
 use std::collections::HashMap;
@@ -97,6 +102,8 @@ const MAX_SCALED_ORIGIN: f32 = 1.267_650_6e30;
 pub(crate) struct BvhSpace {
     bvh: CwBvh,
     scale: f32,
+    /// The most boxes one PLOC build was given (see [`PLOC_BATCH`]).
+    largest_batch: usize,
 }
 
 impl BvhSpace {
@@ -113,10 +120,18 @@ impl BvhSpace {
         for b in &mut boxes {
             b.0 = Aabb::new(b.0.min * scale, b.0.max * scale);
         }
-        (!boxes.is_empty()).then(|| BvhSpace {
-            bvh: build_cwbvh(&boxes, BvhBuildParams::medium_build(), &mut Duration::default()),
-            scale,
-        })
+        if boxes.is_empty() {
+            return None;
+        }
+        let params = BvhBuildParams::medium_build();
+        let (bvh, largest_batch) = if boxes.len() <= PLOC_BATCH {
+            (build_cwbvh(&boxes, params, &mut Duration::default()), boxes.len())
+        } else {
+            let (mut bvh2, largest) = build_batched(&boxes);
+            ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
+            (bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false), largest)
+        };
+        Some(BvhSpace { bvh, scale, largest_batch })
     }
 
     /// The ray `o + t d`, `t` in `(tmin, tmax)`, in the scaled space, with the factor `k`
@@ -267,6 +282,12 @@ impl Blas {
             })
             .collect();
         Blas { bvh, positions, attrs, shapes, group_start, group_members, bounds }
+    }
+
+    /// The most primitives one PLOC build was given while building this BVH: at most
+    /// [`PLOC_BATCH`] (128) whatever the geometry, which bounds the build's work.
+    pub fn largest_build_batch(&self) -> usize {
+        self.bvh.as_ref().map_or(0, |b| b.largest_batch)
     }
 
     /// Number of triangles.
@@ -706,6 +727,78 @@ impl Accel {
         geom.prim = self.instance_prims[(inst.prims + local.prim) as usize];
         geom
     }
+}
+
+/// The most primitives one PLOC build is given. PLOC merges only mutually nearest
+/// neighbours, and where the merge cost grows steadily along the sorted order (the thin
+/// triangles of a fan around one vertex) a pass merges one pair per run: n primitives cost
+/// O(n²) (a vertex with 10⁵ neighbours took 23 s). Larger inputs are split top-down at the
+/// median centroid into batches of at most this many, each built by PLOC, so the build is
+/// O(n log n) whatever the geometry.
+pub const PLOC_BATCH: usize = 128;
+
+/// A BVH2 over `boxes`: median splits of the centroids along their widest axis down to
+/// [`PLOC_BATCH`] primitives, PLOC below. Also returns the largest PLOC batch.
+fn build_batched(boxes: &[Padded]) -> (Bvh2, usize) {
+    let mut nodes = vec![Bvh2Node::default()];
+    let mut primitive_indices: Vec<u32> = Vec::with_capacity(boxes.len());
+    let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
+    let mut largest = 0;
+    let mut builder = PlocBuilder::with_capacity(PLOC_BATCH);
+    // The traversal stacks obvhs sizes from it must hold the whole depth.
+    let mut max_depth = 0;
+    // (node slot, range of `order`, depth of the slot)
+    let mut todo = vec![(0usize, 0..order.len(), 0usize)];
+    while let Some((slot, range, depth)) = todo.pop() {
+        let members = &mut order[range.clone()];
+        if members.len() <= PLOC_BATCH {
+            largest = largest.max(members.len());
+            let batch: Vec<Padded> = members.iter().map(|&i| Padded(boxes[i as usize].0)).collect();
+            let sub = builder.build(
+                PlocSearchDistance::Medium,
+                &batch,
+                (0..batch.len() as u32).collect(),
+                SortPrecision::U64,
+                3,
+            );
+            // The batch's root goes to `slot`, its other nodes after the nodes so far (sibling
+            // pairs stay adjacent); its leaves index the shared primitive list.
+            max_depth = max_depth.max(depth + sub.max_depth);
+            let base = nodes.len() as u32;
+            let prim_base = primitive_indices.len() as u32;
+            let place = |j: u32| if j == 0 { slot as u32 } else { base + j - 1 };
+            primitive_indices.extend(sub.primitive_indices.iter().map(|&p| members[p as usize]));
+            let mut moved = sub.nodes.iter().map(|n| {
+                let first = if n.is_leaf() { prim_base + n.first_index } else { place(n.first_index) };
+                Bvh2Node::new(*n.aabb(), n.prim_count, first)
+            });
+            if let Some(root) = moved.next() {
+                nodes[slot] = root;
+            }
+            nodes.extend(moved);
+            continue;
+        }
+        let mut bounds = Aabb::empty();
+        let mut centres = Aabb::empty();
+        for &i in members.iter() {
+            let b = boxes[i as usize].0;
+            bounds = bounds.union(&b);
+            centres.extend(b.center());
+        }
+        let axis = (centres.max - centres.min).max_position();
+        let half = members.len() / 2;
+        members.select_nth_unstable_by(half, |&a, &b| {
+            let (a, b) = (boxes[a as usize].0.center_axis(axis), boxes[b as usize].0.center_axis(axis));
+            a.total_cmp(&b)
+        });
+        let left = nodes.len();
+        nodes.push(Bvh2Node::default());
+        nodes.push(Bvh2Node::default());
+        nodes[slot] = Bvh2Node::new(bounds, 0, left as u32);
+        todo.push((left, range.start..range.start + half, depth + 1));
+        todo.push((left + 1, range.start + half..range.end, depth + 1));
+    }
+    (Bvh2 { nodes, primitive_indices, max_depth, ..Default::default() }, largest)
 }
 
 /// A box as the BVH builder sees it.

@@ -24,6 +24,7 @@ use crate::scene::usda::{
 };
 use crate::scene::usdc::{self, LayerReadError, LayerSource};
 use crate::scene::value::{AssetPath, Value, ValueType, normalize};
+use std::cell::OnceCell;
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
@@ -218,9 +219,16 @@ impl Stage {
         errors_before: usize,
     ) -> Result<Stage, Failed> {
         let mut layers = Layers::default();
-        let mut chain = Vec::new();
+        let mut chain = Chain::default();
         // The root layer is never dropped: its own errors are the stage's errors.
-        let root = layers.add(name, source, dir, key, None, &mut chain, sources, diags).unwrap_or_default();
+        let root = match layers.add(name, source, dir, key, None, &mut chain, sources, diags) {
+            Some(opening) => {
+                let index = opening.index;
+                layers.load_sublayers(opening, &mut chain, sources, diags);
+                index
+            }
+            None => 0,
+        };
         // Redo the pass until it needs no layer that is not loaded yet.
         let arc_warnings;
         let mut stage = loop {
@@ -361,12 +369,90 @@ impl<'s> Iterator for DepthFirst<'s> {
 
 // ---- layers ----
 
+thread_local! {
+    /// Units of composition work that grow with the input (path keys computed, layers looked
+    /// at for a prim's specs, layers walked into a stack); see [`composition_work`].
+    static WORK: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+}
+
+/// Counts `n` units of composition work.
+#[inline]
+fn count_work(n: usize) {
+    WORK.with(|w| w.set(w.get().saturating_add(n as u64)));
+}
+
+/// Units of composition work done on this thread so far: path keys computed (a `realpath`
+/// each), layers looked at for a prim's specs and layers walked into layer stacks. Tests read
+/// it before and after opening a stage to check that composition stays linear in the number
+/// of layers and arcs.
+pub fn composition_work() -> u64 {
+    WORK.with(|w| w.get())
+}
+
 struct LoadedLayer {
     layer: Layer,
-    /// This layer and its sublayers, recursively, strongest first.
-    stack: Vec<usize>,
-    /// For each layer of `stack`, how its times map to this layer's (sublayer offsets).
+    /// The sublayers that loaded, in authored order, each with its layer offset.
+    sublayers: Vec<(usize, LayerOffset)>,
+    /// The layer stack rooted at this layer, built the first time an arc or the stage needs
+    /// it: building one per layer would make a chain of n sublayers cost n² (each layer's
+    /// stack holds every layer below it).
+    stack: OnceCell<LayerStack>,
+}
+
+/// A layer and its sublayers, recursively, strongest first (each layer once).
+struct LayerStack {
+    /// Indices into [`Layers::list`].
+    layers: Vec<usize>,
+    /// For each of `layers`, how its times map to the stack's root layer's (sublayer offsets).
     offsets: Vec<LayerOffset>,
+    /// For each root prim name, the positions in `layers` of the layers that have a spec of
+    /// it: a prim looks only at the layers that speak of it, so n sublayers with a prim each
+    /// compose in O(n), not O(n²).
+    by_root_prim: HashMap<String, Vec<u32>>,
+}
+
+/// The layers being read, root first: a sublayer chain is walked with this explicit stack,
+/// not by recursion, so any depth loads without exhausting the thread's stack (a chain of
+/// 4 500 sublayer files overflowed it; Pixar's library has no depth limit and opens it).
+#[derive(Default)]
+struct Chain {
+    keys: Vec<PathBuf>,
+    /// Position of each key in `keys`: the cycle check is O(1), not O(depth).
+    position: HashMap<PathBuf, usize>,
+}
+
+impl Chain {
+    fn push(&mut self, key: PathBuf) {
+        self.position.insert(key.clone(), self.keys.len());
+        self.keys.push(key);
+    }
+
+    fn pop(&mut self) {
+        if let Some(key) = self.keys.pop() {
+            self.position.remove(&key);
+        }
+    }
+}
+
+/// A registered layer whose sublayers are still to be loaded.
+struct Opening {
+    index: usize,
+    /// Whether the layer has a key on the [`Chain`] (text composed from memory has none).
+    on_chain: bool,
+    sub_layers: std::iter::Enumerate<std::vec::IntoIter<(AssetPath, Span)>>,
+    sub_offsets: Vec<LayerOffset>,
+    /// Sublayers listed so far: listing one again adds no opinions, and reading it again
+    /// would repeat its diagnostics.
+    listed: HashSet<PathBuf>,
+    repeats: usize,
+}
+
+/// What starting to load a layer gave.
+enum Start {
+    /// Known already (or failed, or a cycle): its index, if it loaded.
+    Known(Option<usize>),
+    /// Parsed and registered; its sublayers are still to load.
+    Opened(Opening),
 }
 
 #[derive(Default)]
@@ -388,7 +474,44 @@ impl Layers {
     }
 
     fn key(path: &Path) -> PathBuf {
+        count_work(1);
         crate::input::canonicalize(path).unwrap_or_else(|_| normalize(path))
+    }
+
+    /// The layer stack rooted at layer `index`, if there is such a layer.
+    fn stack(&self, index: usize) -> Option<&LayerStack> {
+        let loaded = self.list.get(index)?;
+        Some(loaded.stack.get_or_init(|| self.build_stack(index)))
+    }
+
+    /// Walks the sublayer graph from `root` in pre-order, strongest first, keeping each
+    /// layer's first occurrence (a layer reached again adds no opinions).
+    fn build_stack(&self, root: usize) -> LayerStack {
+        let mut layers = Vec::new();
+        let mut offsets = Vec::new();
+        let mut seen = HashSet::new();
+        let mut todo = vec![(root, LayerOffset::default())];
+        while let Some((index, offset)) = todo.pop() {
+            if !seen.insert(index) {
+                continue;
+            }
+            let Some(loaded) = self.list.get(index) else { continue };
+            count_work(1);
+            layers.push(index);
+            offsets.push(offset);
+            todo.extend(loaded.sublayers.iter().rev().map(|&(sub, sub_offset)| (sub, offset.then(sub_offset))));
+        }
+        let mut by_root_prim: HashMap<String, Vec<u32>> = HashMap::new();
+        for (position, &index) in layers.iter().enumerate() {
+            for prim in &self.list[index].layer.prims {
+                by_root_prim.entry(prim.name.clone()).or_default().push(position as u32);
+            }
+        }
+        // A layer may list a root prim twice; each layer is looked at once per prim.
+        for positions in by_root_prim.values_mut() {
+            positions.dedup();
+        }
+        LayerStack { layers, offsets, by_root_prim }
     }
 
     /// Loads the layer at `path` (and its sublayers) unless known; diagnostics point at
@@ -399,13 +522,34 @@ impl Layers {
         path: &Path,
         authored: &str,
         span: Span,
-        chain: &mut Vec<PathBuf>,
+        chain: &mut Chain,
         sources: &mut SourceMap,
         diags: &mut Diagnostics,
     ) -> Option<usize> {
+        match self.start(path, authored, span, chain, sources, diags) {
+            Start::Known(index) => index,
+            Start::Opened(opening) => {
+                let index = opening.index;
+                self.load_sublayers(opening, chain, sources, diags);
+                Some(index)
+            }
+        }
+    }
+
+    /// Reads and registers the layer at `path`, unless it is known or a cycle; its
+    /// sublayers are left to [`Layers::load_sublayers`].
+    fn start(
+        &mut self,
+        path: &Path,
+        authored: &str,
+        span: Span,
+        chain: &mut Chain,
+        sources: &mut SourceMap,
+        diags: &mut Diagnostics,
+    ) -> Start {
         let key = Layers::key(path);
-        if let Some(start) = chain.iter().position(|k| *k == key) {
-            let mut cycle = chain[start..].to_vec();
+        if let Some(&start) = chain.position.get(&key) {
+            let mut cycle = chain.keys[start..].to_vec();
             cycle.sort();
             if self.reported_cycles.insert(cycle) {
                 diags.push(
@@ -413,10 +557,10 @@ impl Layers {
                         .at(span, "this sublayer is already being read"),
                 );
             }
-            return None;
+            return Start::Known(None);
         }
         if let Some(known) = self.by_key.get(&key) {
-            return *known;
+            return Start::Known(*known);
         }
         let file = match usdc::read_layer_file(path) {
             Ok(file) => file,
@@ -430,7 +574,7 @@ impl Layers {
                     .at(span, "referenced here"),
                 );
                 self.by_key.insert(key, None);
-                return None;
+                return Start::Known(None);
             }
             Err(LayerReadError::Unreadable(why)) => {
                 self.warnings.push(
@@ -442,7 +586,7 @@ impl Layers {
                     .at(span, "referenced here"),
                 );
                 self.by_key.insert(key, None);
-                return None;
+                return Start::Known(None);
             }
         };
         let dir = crate::input::layer_dir(&file.path);
@@ -453,21 +597,23 @@ impl Layers {
         {
             let known = *known;
             self.by_key.insert(key, known);
-            return known;
+            return Start::Known(known);
         }
         let name = file.path.display().to_string();
-        let index =
+        let opening =
             self.add(&name, file.source, dir, Some(file_key.clone()), Some((authored, span)), chain, sources, diags);
+        let index = opening.as_ref().map(|o| o.index);
         if index.is_none() {
             self.by_key.insert(file_key, None);
         }
         self.by_key.insert(key, index);
-        index
+        opening.map_or(Start::Known(None), Start::Opened)
     }
 
-    /// Parses a layer's text, registers it and loads its sublayers. `from` is the asset path
-    /// and span that name the layer, `None` for the root layer: a root layer with syntax
-    /// errors fails the stage, any other is left out with a warning (`None`), as USD does.
+    /// Parses a layer's text and registers it; its sublayers are left to
+    /// [`Layers::load_sublayers`]. `from` is the asset path and span that name the layer,
+    /// `None` for the root layer: a root layer with syntax errors fails the stage, any other
+    /// is left out with a warning (`None`), as USD does.
     #[allow(clippy::too_many_arguments)]
     fn add(
         &mut self,
@@ -476,10 +622,10 @@ impl Layers {
         dir: PathBuf,
         key: Option<PathBuf>,
         from: Option<(&str, Span)>,
-        chain: &mut Vec<PathBuf>,
+        chain: &mut Chain,
         sources: &mut SourceMap,
         diags: &mut Diagnostics,
-    ) -> Option<usize> {
+    ) -> Option<Opening> {
         let mut parsed = Diagnostics::new();
         let layer = match source {
             LayerSource::Text(text) => {
@@ -506,48 +652,58 @@ impl Layers {
         let index = self.list.len();
         let sub_layers = layer.metadata.sub_layers.clone();
         let sub_offsets = layer.metadata.sub_layer_offsets.clone();
-        self.list.push(LoadedLayer { layer, stack: vec![index], offsets: vec![LayerOffset::default()] });
+        self.list.push(LoadedLayer { layer, sublayers: Vec::new(), stack: OnceCell::new() });
         if let Some(key) = &key {
             self.by_key.insert(key.clone(), Some(index));
             chain.push(key.clone());
         }
-        let mut stack = vec![index];
-        let mut offsets = vec![LayerOffset::default()];
-        // Each sublayer once per layer: listing one again adds no opinions, and reading it
-        // again would repeat its diagnostics.
-        let mut listed: HashSet<PathBuf> = HashSet::new();
-        let mut repeats = 0usize;
-        for (i, (asset, span)) in sub_layers.into_iter().enumerate() {
-            let sub_offset = sub_offsets.get(i).copied().unwrap_or_default();
-            if !listed.insert(Layers::key(&asset.resolved)) {
-                if repeats == 0 {
+        Some(Opening {
+            index,
+            on_chain: key.is_some(),
+            sub_layers: sub_layers.into_iter().enumerate(),
+            sub_offsets,
+            listed: HashSet::new(),
+            repeats: 0,
+        })
+    }
+
+    /// Loads the sublayers of `first`, and theirs, depth first, without recursion.
+    fn load_sublayers(&mut self, first: Opening, chain: &mut Chain, sources: &mut SourceMap, diags: &mut Diagnostics) {
+        let mut open = vec![first];
+        while let Some(top) = open.last_mut() {
+            let Some((i, (asset, span))) = top.sub_layers.next() else {
+                if top.on_chain {
+                    chain.pop();
+                }
+                open.pop();
+                continue;
+            };
+            let sub_offset = top.sub_offsets.get(i).copied().unwrap_or_default();
+            if !top.listed.insert(Layers::key(&asset.resolved)) {
+                if top.repeats == 0 {
                     diags.push(
                         Diagnostic::warning(format!("`{}` is listed more than once in subLayers", asset.authored))
                             .at(span, "listed again here; repeats are ignored"),
                     );
                 }
-                repeats += 1;
+                top.repeats += 1;
                 continue;
             }
-            if let Some(sub) = self.load(&asset.resolved, &asset.authored, span, chain, sources, diags)
-                && let Some((sub_stack, inner)) = self.list.get(sub).map(|l| (l.stack.clone(), l.offsets.clone()))
-            {
-                for (i, inner) in sub_stack.into_iter().zip(inner) {
-                    if !stack.contains(&i) {
-                        stack.push(i);
-                        offsets.push(sub_offset.then(inner));
-                    }
+            let parent = top.index;
+            let sub = match self.start(&asset.resolved, &asset.authored, span, chain, sources, diags) {
+                Start::Known(index) => index,
+                Start::Opened(opening) => {
+                    let index = opening.index;
+                    open.push(opening);
+                    Some(index)
                 }
+            };
+            if let Some(sub) = sub
+                && let Some(loaded) = self.list.get_mut(parent)
+            {
+                loaded.sublayers.push((sub, sub_offset));
             }
         }
-        if key.is_some() {
-            chain.pop();
-        }
-        if let Some(loaded) = self.list.get_mut(index) {
-            loaded.stack = stack;
-            loaded.offsets = offsets;
-        }
-        Some(index)
     }
 }
 
@@ -708,6 +864,10 @@ struct Pass<'l> {
     /// Layers this pass wanted but that are not loaded yet: resolved path, authored asset
     /// path, and where it is named.
     needs: Vec<(PathBuf, String, Span)>,
+    /// The keys of `needs`.
+    needed: HashSet<PathBuf>,
+    /// Resolved asset path → [`Layers::key`], computed once per pass.
+    keys: HashMap<PathBuf, PathBuf>,
     /// Arcs composed around (a target prim that does not exist), one warning per kind.
     warnings: OncePerKind,
     prims: Vec<Prim>,
@@ -725,6 +885,8 @@ impl<'l> Pass<'l> {
             root,
             diags: Diagnostics::new(),
             needs: Vec::new(),
+            needed: HashSet::new(),
+            keys: HashMap::new(),
             warnings: OncePerKind::new(),
             prims: Vec::new(),
             roots: Vec::new(),
@@ -734,19 +896,24 @@ impl<'l> Pass<'l> {
     }
 
     fn stack(&self, layer: usize) -> &'l [usize] {
-        self.layers.get(layer).map(|l| l.stack.as_slice()).unwrap_or(&[])
+        self.layers.stack(layer).map(|s| s.layers.as_slice()).unwrap_or(&[])
     }
 
     /// Specs at `path` in every layer of `stack`, strongest first, each with how its times
     /// map to the stage's when the stack's root layer's map through `time`.
     fn specs_at(&self, stack: usize, path: &str, time: LayerOffset) -> (Vec<&'l PrimSpec>, Vec<LayerOffset>) {
         let layers = self.layers;
-        let Some(loaded) = layers.get(stack) else { return (Vec::new(), Vec::new()) };
-        loaded
-            .stack
+        let Some(stack) = layers.stack(stack) else { return (Vec::new(), Vec::new()) };
+        let Some(root_name) = path.split('/').find(|s| !s.is_empty()) else { return (Vec::new(), Vec::new()) };
+        let Some(positions) = stack.by_root_prim.get(root_name) else { return (Vec::new(), Vec::new()) };
+        count_work(positions.len());
+        positions
             .iter()
-            .zip(&loaded.offsets)
-            .filter_map(|(&i, o)| Some((layers.get(i)?.layer.prim_at(path)?, time.then(*o))))
+            .filter_map(|&at| {
+                let at = at as usize;
+                let spec = layers.get(*stack.layers.get(at)?)?.layer.prim_at(path)?;
+                Some((spec, time.then(*stack.offsets.get(at)?)))
+            })
             .unzip()
     }
 
@@ -940,11 +1107,21 @@ impl<'l> Pass<'l> {
 
     /// The loaded layer for an asset, or records it as needed for the next pass.
     fn layer_for(&mut self, asset: &AssetPath, span: Span) -> Option<usize> {
-        let key = Layers::key(&asset.resolved);
+        // Every prim below a reference asks again: the key (a `realpath`) is computed once
+        // per asset path and pass, and needed layers are a set, so n distinct references
+        // cost O(n), not O(n²) system calls (10 000 references took 85 s).
+        let key = match self.keys.get(&asset.resolved) {
+            Some(key) => key.clone(),
+            None => {
+                let key = Layers::key(&asset.resolved);
+                self.keys.insert(asset.resolved.clone(), key.clone());
+                key
+            }
+        };
         match self.layers.by_key.get(&key) {
             Some(known) => *known,
             None => {
-                if !self.needs.iter().any(|(p, _, _)| Layers::key(p) == key) {
+                if self.needed.insert(key) {
                     self.needs.push((asset.resolved.clone(), asset.authored.clone(), span));
                 }
                 None

@@ -147,7 +147,7 @@ fn read_layer_bytes(path: &Path, bytes: Vec<u8>) -> Result<LayerFile, String> {
         Format::Text => text_layer(path, bytes),
         Format::Package => {
             let root = package_root_layer(&bytes)?;
-            let member = PathBuf::from(format!("{}[{root}]", path.display()));
+            let member = crate::input::package_member(path, &root);
             let bytes = crate::input::read_bytes(&member).map_err(|e| e.to_string())?;
             match detect(&bytes) {
                 Format::Crate => Ok(LayerFile { path: member, source: LayerSource::Crate(bytes) }),
