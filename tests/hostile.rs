@@ -451,11 +451,11 @@ fn diagnostics_are_capped_per_file_and_in_width() {
     assert!(outcome.rendered.contains(&format!("{path}:1:50")), "columns stay those of the file");
 }
 
-/// Every seed file has a test, here or in `tests/hostile_io.rs` (a fuzzing harness takes the
-/// directory as its corpus).
+/// Every seed file has a test, here or in `tests/hostile_io.rs` or `tests/hostile_struct.rs`
+/// (a fuzzing harness takes the directory as its corpus).
 #[test]
 fn every_seed_is_tested() {
-    let tests = [include_str!("hostile.rs"), include_str!("hostile_io.rs")];
+    let tests = [include_str!("hostile.rs"), include_str!("hostile_io.rs"), include_str!("hostile_struct.rs")];
     let mut untested = Vec::new();
     for entry in std::fs::read_dir("tests/in/hostile").unwrap() {
         let name = entry.unwrap().file_name().to_string_lossy().into_owned();
