@@ -4,13 +4,9 @@
 //! scaled alike). The relief is a function of the texture coordinates, so the three scenes
 //! are the same surface; any difference in the normal AOV is the step's.
 
+mod common;
+
 use std::path::Path;
-use strata::abi::MaterialCode;
-use strata::backend::BackendKind;
-use strata::cli::{CompiledScene, compile_scene};
-use strata::diag::{Diagnostics, SourceMap};
-use strata::ir::wired::PassOptions;
-use strata::render::{LayerMode, RenderSettings, Scene, render};
 
 /// A 2 × 2 quad (st over it) under a dome, seen straight down from 5 units, the whole scene
 /// scaled by `scale` and moved by `offset`; its material bumps it by ripples 1/8 of st long and
@@ -81,27 +77,7 @@ def Material "Looks"
     );
     let path = dir.join(format!("{name}.usda"));
     std::fs::write(&path, usda).unwrap();
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled =
-        compile_scene(Some(&path), BackendKind::Jit, PassOptions { optimize: true }, &mut sources, &mut diags)
-            .expect("compiles");
-    let CompiledScene { stage, materials, prim_material, .. } = compiled;
-    let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
-    let settings = RenderSettings {
-        width: 48,
-        height: 48,
-        spp: 4,
-        seed: 3,
-        threads: Some(2),
-        max_depth: 1,
-        mode: LayerMode::Stochastic,
-        ..Default::default()
-    };
-    let (image, stats) = render(&scene, &refs, &settings, None).expect("renders");
-    assert_eq!(stats.invalid_samples(), 0, "{stats}");
+    let image = common::render_file(&path, &common::settings(48, 48, 4, 3, 1));
     let [r, g, b] = ["N.R", "N.G", "N.B"].map(|c| image.f32_channel(c).unwrap().to_vec());
     (0..r.len()).map(|i| [r[i], g[i], b[i]]).collect()
 }

@@ -16,15 +16,8 @@ import sys
 import tempfile
 
 import numpy as np
-import OpenEXR
 
-
-def load(path):
-    channels = OpenEXR.File(path).channels()
-    for name in ("RGBA", "RGB"):
-        if name in channels:
-            return np.asarray(channels[name].pixels, dtype=np.float64)[..., :3]
-    return np.stack([np.asarray(channels[c].pixels, dtype=np.float64) for c in "RGB"], -1)
+from rmse import load  # tools/rmse.py: the beauty RGB of an EXR
 
 
 def render(args, sampler, spp, seed, out):
