@@ -21,6 +21,21 @@ use std::f64::consts::PI;
 /// Albedo of the floor.
 const FLOOR: f32 = 0.5;
 
+/// The scenes' common start: a camera 20 units above a 2000-unit floor, looking down.
+const CAMERA_OVER_FLOOR: &str = r#"#usda 1.0
+def Camera "Cam" {
+    float focalLength = 50
+    float horizontalAperture = 0.05
+    double3 xformOp:translate = (0, 20, 0)
+    float xformOp:rotateX = -90
+    uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateX"]
+}
+def Mesh "Floor" {
+    int[] faceVertexCounts = [4]
+    int[] faceVertexIndices = [0, 1, 2, 3]
+    point3f[] points = [(-1000, 0, -1000), (-1000, 0, 1000), (1000, 0, 1000), (1000, 0, -1000)]
+}"#;
+
 /// A floor (y = 0, 2000 units wide) seen straight down from y = 20 through a lens 0.03° wide,
 /// an optional sheet at y = 0.5 between the floor and the lights, and `lights`.
 fn sheet_scene(lights: &str, sheet: bool) -> Scene {
@@ -34,19 +49,7 @@ fn sheet_scene(lights: &str, sheet: bool) -> Scene {
         ""
     };
     let text = format!(
-        r#"#usda 1.0
-def Camera "Cam" {{
-    float focalLength = 50
-    float horizontalAperture = 0.05
-    double3 xformOp:translate = (0, 20, 0)
-    float xformOp:rotateX = -90
-    uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateX"]
-}}
-def Mesh "Floor" {{
-    int[] faceVertexCounts = [4]
-    int[] faceVertexIndices = [0, 1, 2, 3]
-    point3f[] points = [(-1000, 0, -1000), (-1000, 0, 1000), (1000, 0, 1000), (1000, 0, -1000)]
-}}
+        r#"{CAMERA_OVER_FLOOR}
 {sheet}
 {lights}"#
     );
@@ -246,19 +249,7 @@ fn sphere_lights_and_their_points_follow_usdlux() {
                     (false, false) => 0.0,
                 };
                 let (stage, mut diags) = stage(&format!(
-                    r#"#usda 1.0
-def Camera "Cam" {{
-    float focalLength = 50
-    float horizontalAperture = 0.05
-    double3 xformOp:translate = (0, 20, 0)
-    float xformOp:rotateX = -90
-    uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateX"]
-}}
-def Mesh "Floor" {{
-    int[] faceVertexCounts = [4]
-    int[] faceVertexIndices = [0, 1, 2, 3]
-    point3f[] points = [(-1000, 0, -1000), (-1000, 0, 1000), (1000, 0, 1000), (1000, 0, -1000)]
-}}
+                    r#"{CAMERA_OVER_FLOOR}
 {usda}"#
                 ));
                 let scene = Scene::from_stage(&stage, &|_| Some(0), &mut diags).expect("scene");
