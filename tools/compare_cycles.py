@@ -243,7 +243,8 @@ def throughput(args):
         rates[f'Cycles {version}'] = rate(cpus, cpu1)
     print(f"one thread, matte ball, {res[0]}x{res[1]}, {args.spp} spp, --max-depth {args.max_depth}: "
           f"Msamples per CPU second ({datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC)\n"
-          f"machine: {machine0} at the start, {os.getloadavg()[0]:.2f} at the end; {time.time() - t0:.0f} s\n")
+          f"machine: {machine0} at the start, {os.getloadavg()[0]:.2f} at the end; {time.time() - t0:.0f} s\n"
+          f"command: {' '.join(['tools/compare_cycles.py'] + sys.argv[1:])}\n")
     print("| renderer | Msamples / CPU s | strata / it |\n|---|---|---|")
     for name, r in rates.items():
         print(f"| {name} | {r:.2f} | {rates['strata'] / r:.2f}x |")

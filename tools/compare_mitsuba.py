@@ -11,6 +11,20 @@ Performance section. Not part of the test suite (`cargo test` needs neither Pyth
     python3 tools/compare_mitsuba.py coat     # the glossy / roughplastic model difference alone
     python3 tools/compare_mitsuba.py timing   # matte ball, 640x480, 64 spp, three Mitsuba runs
                                               # (strata: render ... --spp 64 --max-depth 8)
+    python3 tools/compare_mitsuba.py measure [--scenes matte,mcg,layers,layers_dome] [--spp 64]
+        [--res 320x240] [--threads 2] [--max-depth 8] [--csv FILE]
+                       # equal-error CPU time, strata / Mitsuba (README's Performance table)
+    python3 tools/compare_mitsuba.py check    # CI (below)
+
+`measure` renders each scene with strata and Mitsuba at the same resolution, thread count and
+spp, two seeds each, and a 1-spp render of each. Time per spp is CPU seconds (user + sys: of
+the strata child, from os.wait4; of this process for Mitsuba, every thread, with its kernels
+compiled and cached first), the 1-spp render's taken off: what each more sample costs.
+Variance per spp is the two-seed method's mean((a - b)^2) / 2 x spp over pixels and channels;
+the equal-error time ratio is the product of the two ratios. It prints the agreement of the
+mean images (whole image and per region, as `check` judges it), the CPU model and the load
+average with the markdown table, and writes every figure to --csv. tools/compare_cycles.py does
+the same against Cycles; tools/measure_performance.sh runs both and the variance chart.
 
 `images` renders each scene with `target/release/strata render` and with Mitsuba's `path`
 integrator (box filter, independent sampler, same resolution and spp, Mitsuba max_depth =
@@ -661,8 +675,8 @@ def equal_error_row(sc, name, res, spp, strata, other, sigmas=3.0, min_pixels=16
             by_region[rn] = two_seed_variance(s_img[0][mask], s_img[1][mask]) / vo if vo > 0 else float('nan')
     worst = max(by_region, key=lambda k: by_region[k]) if by_region else ''
     return dict(scene=name, res=f'{res[0]}x{res[1]}', spp=spp,
-                strata_cpu_s=[round(c, 3) for c in s_cpu], strata_cpu_1spp_s=round(s_cpu1, 3),
-                other_cpu_s=[round(c, 3) for c in o_cpu], other_cpu_1spp_s=round(o_cpu1, 3),
+                strata_cpu_s=' '.join(f'{c:.3f}' for c in s_cpu), strata_cpu_1spp_s=round(s_cpu1, 3),
+                other_cpu_s=' '.join(f'{c:.3f}' for c in o_cpu), other_cpu_1spp_s=round(o_cpu1, 3),
                 strata_ms_per_spp=1e3 * tps_s, other_ms_per_spp=1e3 * tps_o, time_ratio=tps_s / tps_o,
                 strata_var_per_spp=var_s, other_var_per_spp=var_o, var_ratio=var_s / var_o,
                 equal_error_ratio=tps_s / tps_o * var_s / var_o,

@@ -49,6 +49,7 @@ def two_seed(a, b, spp):
 def mitsuba_rows(args, ladder, res, rows):
     import compare_mitsuba as cm
     mi = cm.load_mitsuba(args.variant)
+    mi.set_log_level(mi.LogLevel.Error)  # its samplers' rounding warnings: such points are left out
     for sampler in args.mitsuba.split(","):
         for spp in ladder:
             scene = cm.mitsuba_scene(mi, cm.SCENES[args.scene], res, spp, args.max_depth, [], sampler)
