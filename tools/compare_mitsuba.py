@@ -728,10 +728,10 @@ def measure(args):
     for name in args.scenes.split(','):
         sc = SCENES[name]
         strata = strata_pair(exe, sc, args.out, name, res, args.spp, args.max_depth, seeds, extra)
-        scene = mitsuba_scene(mi, sc, res, args.spp, args.max_depth, [])
+        scene = mitsuba_scene(mi, sc, res, args.spp, args.max_depth, [], args.mitsuba_sampler)
         rows.append(equal_error_row(sc, name, res, args.spp, strata, mitsuba_pair(mi, scene, args.spp, seeds)))
         print(f"{name}: {rows[-1]['equal_error_ratio']:.2f}x ({time.time() - t0:.0f} s)", file=sys.stderr)
-    head = (f"strata ({strata_rev()}) vs Mitsuba {mi.__version__} `{mi.variant()}`, "
+    head = (f"strata ({strata_rev()}) vs Mitsuba {mi.__version__} `{mi.variant()}` ({args.mitsuba_sampler} sampler), "
             f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC: {res[0]}x{res[1]}, "
             f"{args.spp} spp x seeds {seeds[0]} and {seeds[1]}, {args.threads} threads, box filter, "
             f"strata --max-depth {args.max_depth} = Mitsuba max_depth {args.max_depth + 1}; CPU time (user + sys)\n"
@@ -739,7 +739,7 @@ def measure(args):
             f"command: {' '.join(['tools/compare_mitsuba.py'] + sys.argv[1:])}")
     print(head + '\n\n' + equal_error_table(rows, 'Mitsuba'))
     if args.csv:
-        write_csv(args.csv, rows, dict(other=f'mitsuba {mi.__version__} {mi.variant()}', threads=args.threads,
+        write_csv(args.csv, rows, dict(other=f'mitsuba {mi.__version__} {mi.variant()} {args.mitsuba_sampler}', threads=args.threads,
                                        strata=strata_rev(), machine=machine0))
         print(f"\nwrote {args.csv}")
 
@@ -831,6 +831,7 @@ def main():
     e = sub.add_parser('measure', help='equal-error CPU time, strata / Mitsuba, by the two-seed method')
     render_options(e, 'matte,mcg,layers,layers_dome', 64, '320x240', 8, 'llvm_ad_rgb', '/tmp/strata_vs_mitsuba_measure')
     e.add_argument('--threads', type=int, default=2)
+    e.add_argument('--mitsuba-sampler', default='independent', help="Mitsuba's sampler (its default: independent)")
     e.add_argument('--csv', default=None)
     for name in ('timing', 'coat'):
         sub.add_parser(name).add_argument('--variant', default='llvm_ad_rgb')

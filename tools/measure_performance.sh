@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
-# Issue 27's comparison in one command: equal-error CPU time against Mitsuba 3 (four scenes) and
-# Cycles (the matte ball), one-thread samples per CPU second, and variance per spp against spp
+# Issue 27's comparison in one command: equal-error CPU time against Mitsuba 3 on four scenes
+# (with its default independent sampler, then with its stratified multijitter) and against Cycles
+# on the matte ball, one-thread samples per CPU second, and variance per spp against spp
 # (docs/charts/variance_per_spp.svg). Writes the CSVs under docs/ and the printed tables to
 # docs/performance_run.md, which README's Performance section quotes. Not part of CI.
 #
 #   apt-get install libllvm19                       # Mitsuba's llvm_ad_rgb (else scalar_rgb)
 #   python3 -m venv /tmp/venv && /tmp/venv/bin/pip install mitsuba==3.9.1 numpy bpy matplotlib OpenEXR
 #   cargo build --release
-#   PYTHON=/tmp/venv/bin/python tools/measure_performance.sh     # about 25 min on 2 busy cores
+#   PYTHON=/tmp/venv/bin/python tools/measure_performance.sh     # about 20 min on 2 busy cores
 #
 # Environment: PYTHON (the venv's python), STRATA (default: $CARGO_TARGET_DIR or target, /release/strata).
 set -euo pipefail
@@ -21,6 +22,9 @@ start=$(date +%s)
   echo
   echo '```'
   "$PY" tools/compare_mitsuba.py measure --strata "$STRATA" --csv docs/equal_error_mitsuba.csv
+  echo
+  "$PY" tools/compare_mitsuba.py measure --strata "$STRATA" --mitsuba-sampler multijitter \
+    --csv docs/equal_error_mitsuba_multijitter.csv
   echo
   "$PY" tools/compare_cycles.py measure --strata "$STRATA" --csv docs/equal_error_cycles.csv
   echo
