@@ -8,7 +8,7 @@
 #   apt-get install libllvm19                       # Mitsuba's llvm_ad_rgb (else scalar_rgb)
 #   python3 -m venv /tmp/venv && /tmp/venv/bin/pip install mitsuba==3.9.1 numpy bpy matplotlib OpenEXR
 #   cargo build --release
-#   PYTHON=/tmp/venv/bin/python tools/measure_performance.sh     # about 20 min on 2 busy cores
+#   PYTHON=/tmp/venv/bin/python tools/measure_performance.sh     # about 25 min on 2 busy cores
 #
 # Environment: PYTHON (the venv's python), STRATA (default: $CARGO_TARGET_DIR or target, /release/strata).
 set -euo pipefail
