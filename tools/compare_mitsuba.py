@@ -11,6 +11,20 @@ Performance section. Not part of the test suite (`cargo test` needs neither Pyth
     python3 tools/compare_mitsuba.py coat     # the glossy / roughplastic model difference alone
     python3 tools/compare_mitsuba.py timing   # matte ball, 640x480, 64 spp, three Mitsuba runs
                                               # (strata: render ... --spp 64 --max-depth 8)
+    python3 tools/compare_mitsuba.py measure [--scenes matte,mcg,layers,layers_dome] [--spp 64]
+        [--res 320x240] [--threads 2] [--max-depth 8] [--csv FILE]
+                       # equal-error CPU time, strata / Mitsuba (README's Performance table)
+    python3 tools/compare_mitsuba.py check    # CI (below)
+
+`measure` renders each scene with strata and Mitsuba at the same resolution, thread count and
+spp, two seeds each, and a 1-spp render of each. Time per spp is CPU seconds (user + sys: of
+the strata child, from os.wait4; of this process for Mitsuba, every thread, with its kernels
+compiled and cached first), the 1-spp render's taken off: what each more sample costs.
+Variance per spp is the two-seed method's mean((a - b)^2) / 2 x spp over pixels and channels;
+the equal-error time ratio is the product of the two ratios. It prints the agreement of the
+mean images (whole image and per region, as `check` judges it), the CPU model and the load
+average with the markdown table, and writes every figure to --csv. tools/compare_cycles.py does
+the same against Cycles; tools/measure_performance.sh runs both and the variance chart.
 
 `images` renders each scene with `target/release/strata render` and with Mitsuba's `path`
 integrator (box filter, independent sampler, same resolution and spp, Mitsuba max_depth =
@@ -52,7 +66,7 @@ Mitsuba as exactly as the two models allow:
              bsdf_1 = top ((1 - m) bottom + m top, strata's rule-5 weights).
   opacity    a single layer with mask 0.5: mask bsdf, opacity 0.5.
 """
-import argparse, csv, math, os, resource, subprocess, sys, time
+import argparse, csv, datetime, math, os, resource, subprocess, sys, tempfile, time
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -233,7 +247,7 @@ def quad_matrix(pts):
     return m
 
 
-def mitsuba_scene(mi, sc, res, spp, max_depth, notes):
+def mitsuba_scene(mi, sc, res, spp, max_depth, notes, sampler='independent'):
     T = lambda m: mi.ScalarTransform4f(np.asarray(m, float).tolist())
     cam, tan_w, _ = camera_frame(res)
     d = {'type': 'scene',
@@ -242,7 +256,7 @@ def mitsuba_scene(mi, sc, res, spp, max_depth, notes):
                     'to_world': T(cam @ np.diag([-1.0, 1, -1, 1])),
                     'film': {'type': 'hdrfilm', 'width': res[0], 'height': res[1], 'pixel_format': 'rgb',
                              'rfilter': {'type': 'box'}},
-                    'sampler': {'type': 'independent', 'sample_count': spp}},
+                    'sampler': {'type': sampler, 'sample_count': spp}},
          'dome': {'type': 'constant', 'radiance': rgb(sc['dome'])}}
     if sc['rect']:
         r = sc['rect']
@@ -333,15 +347,31 @@ def regions(sc, res, sub=4):
 # ------------------------------------------------------------------------------------ renders
 
 
+def child_cpu(cmd):
+    """Run `cmd` to its end: (exit code, user + system CPU seconds of that child alone, from
+    os.wait4, wall seconds, stderr). CPU time, not wall time: the machine is shared."""
+    with tempfile.TemporaryFile() as err:
+        t = time.time()
+        p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err)
+        _, status, ru = os.wait4(p.pid, 0)
+        p.returncode = os.waitstatus_to_exitcode(status)
+        wall = time.time() - t
+        err.seek(0)
+        return p.returncode, ru.ru_utime + ru.ru_stime, wall, err.read().decode(errors='replace')
+
+
+def self_cpu():
+    """User + system CPU seconds of this process, every thread included (in-process renderers)."""
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
 def render_strata(exe, scene, exr, spp, res, max_depth, seed, extra=''):
     cmd = [exe, 'render', os.path.join(ROOT, scene), '-o', exr, '--spp', str(spp),
            '--res', f'{res[0]}x{res[1]}', '--max-depth', str(max_depth), '--seed', str(seed)] + extra.split()
-    t, r0 = time.time(), resource.getrusage(resource.RUSAGE_CHILDREN)
-    p = subprocess.run(cmd, capture_output=True, text=True)
-    wall, r1 = time.time() - t, resource.getrusage(resource.RUSAGE_CHILDREN)
-    if p.returncode != 0:
-        sys.exit(f"strata failed: {' '.join(cmd)}\n{p.stderr}")
-    cpu = (r1.ru_utime + r1.ru_stime) - (r0.ru_utime + r0.ru_stime)
+    code, cpu, wall, err = child_cpu(cmd)
+    if code != 0:
+        sys.exit(f"strata failed: {' '.join(cmd)}\n{err}")
     return (wall, cpu), ' '.join(cmd)
 
 
@@ -403,14 +433,29 @@ def pct(x):
     return f"{100 * x:+6.2f} %"
 
 
-def images(args):
-    os.environ.setdefault('DRJIT_LIBLLVM_PATH', '/usr/lib/x86_64-linux-gnu/libLLVM-19.so')
+def load_mitsuba(variant, threads=None):
+    """Mitsuba with `variant` (scalar_rgb, with a note on stderr, when the variant cannot load,
+    e.g. llvm_ad_rgb without libLLVM) and, if given, that many worker threads."""
+    if 'DRJIT_LIBLLVM_PATH' not in os.environ:
+        import glob
+        libs = sorted(glob.glob('/usr/lib/x86_64-linux-gnu/libLLVM-[0-9]*.so*'),
+                      key=lambda f: [int(v) for v in f.split('libLLVM-')[1].split('.so')[0].split('.') if v.isdigit()])
+        if libs:
+            os.environ['DRJIT_LIBLLVM_PATH'] = libs[-1]
     import mitsuba as mi
     try:
-        mi.set_variant(args.variant)
+        mi.set_variant(variant)
     except Exception as e:
-        print(f"variant {args.variant} unavailable ({e}); using scalar_rgb", file=sys.stderr)
+        print(f"variant {variant} unavailable ({e}); using scalar_rgb", file=sys.stderr)
         mi.set_variant('scalar_rgb')
+    if threads:
+        import drjit as dr
+        dr.set_thread_count(threads)
+    return mi
+
+
+def images(args):
+    mi = load_mitsuba(args.variant)
     res = tuple(int(v) for v in args.res.split('x'))
     exe = os.path.join(ROOT, args.strata)
     os.makedirs(args.out, exist_ok=True)
@@ -475,13 +520,34 @@ def images(args):
 MODEL_TOLERANCE = {('mcg', 'coated'): 0.01}
 
 
+def region_agreement(name, sc, res, s, m, sigmas, min_pixels, tolerance=None):
+    """Per object region of scene `name` (sky and regions under `min_pixels` left out): the
+    means of the luminances of two-seed pairs `s` (strata) and `m` (the other renderer), their
+    difference, its standard error, the region's model tolerance and whether |diff| <= sigmas
+    se + tolerance x mean_m. Pixels are independent (each renderer's streams are per pixel),
+    so the variance of a region's mean of a two-render average is sum over pixels of
+    (a - b)^2 / 4, over pixels^2, and the two renderers' add."""
+    tolerance = MODEL_TOLERANCE if tolerance is None else tolerance
+    rows = []
+    for rn, mask in regions(sc, res).items():
+        n = int(mask.sum())
+        if rn == 'sky' or n < min_pixels:
+            continue
+        mean_s, mean_m = [float(((a + b) / 2)[mask].mean()) for a, b in (s, m)]
+        var = sum(float((((a - b) ** 2) / 4)[mask].sum()) for a, b in (s, m)) / (n * n)
+        se = math.sqrt(var)
+        tol = tolerance.get((name, rn), 0.0)
+        diff = mean_s - mean_m
+        rows.append(dict(region=rn, pixels=n, mean_s=mean_s, mean_m=mean_m, diff=diff, se=se, tol=tol,
+                         ok=abs(diff) <= sigmas * se + tol * abs(mean_m)))
+    return rows
+
+
 def check(args):
     """CI: per region, |mean strata - mean Mitsuba| <= sigmas x standard error + the region's
     model tolerance (MODEL_TOLERANCE) x mean Mitsuba, on the luminance of each renderer's
-    average of two renders with different seeds. The standard error comes from the renders
-    themselves: pixels are independent (strata's and Mitsuba's streams are per pixel), so the
-    variance of a region's mean of the two-render average is sum over pixels of (a - b)^2 / 4,
-    over pixels^2, and strata's and Mitsuba's add. Exit status 1 when any region fails."""
+    average of two renders with different seeds (standard error from the renders themselves:
+    region_agreement). Exit status 1 when any region fails."""
     import mitsuba as mi
     mi.set_variant(args.variant)
     res = tuple(int(v) for v in args.res.split('x'))
@@ -504,20 +570,12 @@ def check(args):
         print(f"\n{name}: {sc['usda']}")
         print(f"  {'region':<18}{'pixels':>7}  {'strata':>8} {'Mitsuba':>8}  {'diff':>8}  {'se':>6}  "
               f"{'z':>6}  {'model tol':>9}  verdict")
-        for rn, mask in regions(sc, res).items():
-            n = int(mask.sum())
-            if rn == 'sky' or n < args.min_pixels:
-                continue
-            mean_s, mean_m = [float(((a + b) / 2)[mask].mean()) for a, b in (s, m)]
-            var = sum(float((((a - b) ** 2) / 4)[mask].sum()) for a, b in (s, m)) / (n * n)
-            se = math.sqrt(var)
-            tol = MODEL_TOLERANCE.get((name, rn), 0.0)
-            diff = mean_s - mean_m
-            ok = abs(diff) <= args.sigmas * se + tol * abs(mean_m)
-            if not ok:
-                failed.append(f'{name}/{rn}')
-            print(f"  {rn:<18}{n:>7}  {mean_s:8.4f} {mean_m:8.4f}  {pct(diff / mean_m)}  {100 * se / mean_m:4.2f} %"
-                  f"  {diff / se:+6.2f}  {100 * tol:7.1f} %  {'ok' if ok else 'FAIL'}")
+        for r in region_agreement(name, sc, res, s, m, args.sigmas, args.min_pixels):
+            if not r['ok']:
+                failed.append(f"{name}/{r['region']}")
+            print(f"  {r['region']:<18}{r['pixels']:>7}  {r['mean_s']:8.4f} {r['mean_m']:8.4f}  "
+                  f"{pct(r['diff'] / r['mean_m'])}  {100 * r['se'] / r['mean_m']:4.2f} %"
+                  f"  {r['diff'] / r['se']:+6.2f}  {100 * r['tol']:7.1f} %  {'ok' if r['ok'] else 'FAIL'}")
     print(f"\n{time.time() - t0:.0f} s")
     if failed:
         sys.exit(f"strata differs from Mitsuba beyond noise and model tolerance in: {', '.join(failed)}")
@@ -528,9 +586,7 @@ def timing(args):
     """README's Performance figure: the matte ball at 640x480, 64 spp, three runs (the first
     includes kernel compilation). Compare with
         strata render scenes/compare/matte_ball.usda -o strata.exr --spp 64 --max-depth 8"""
-    os.environ.setdefault('DRJIT_LIBLLVM_PATH', '/usr/lib/x86_64-linux-gnu/libLLVM-19.so')
-    import mitsuba as mi
-    mi.set_variant(args.variant)
+    mi = load_mitsuba(args.variant)
     notes = []
     scene = mitsuba_scene(mi, SCENES['matte'], (640, 480), 64, 8, notes)
     for k in range(3):
@@ -540,14 +596,171 @@ def timing(args):
         print(f"run {k}: {time.time() - t:.2f} s")
 
 
+
+# --------------------------------------------------------------------- equal-error measurement
+
+
+def two_seed_variance(a, b):
+    """Variance of one render's pixel values, from two renders with different seeds: mean over
+    pixels (and channels) of (a - b)^2 / 2. Times spp: variance per sample per pixel."""
+    return float(np.mean((a - b) ** 2) / 2)
+
+
+def machine_line():
+    """CPU model, core count and load average: printed with every measured table."""
+    model, flags = 'unknown CPU', []
+    try:
+        with open('/proc/cpuinfo') as fh:
+            info = fh.read().splitlines()
+        model = next(l.split(':', 1)[1].strip() for l in info if l.startswith('model name'))
+        have = next(l.split(':', 1)[1].split() for l in info if l.startswith('flags'))
+        flags = [f for f in ('avx2', 'fma', 'avx512f') if f in have]
+    except (OSError, StopIteration):
+        pass
+    return f"{model} ({' '.join(flags) or 'no AVX2'}), {os.cpu_count()} cores, load average {' / '.join(f'{v:.2f}' for v in os.getloadavg())} (1/5/15 min)"
+
+
+def strata_rev():
+    p = subprocess.run(['git', '-C', ROOT, 'log', '-1', '--format=%h %cd', '--date=short'], capture_output=True, text=True)
+    return p.stdout.strip() or 'unknown'
+
+
+def strata_pair(exe, sc, out, name, res, spp, max_depth, seeds, extra):
+    """strata's two-seed renders at `spp` (RGB images, CPU seconds each) and the CPU seconds of
+    a 1-spp render: what the process costs besides its samples (parse, compile, BVH, writing)."""
+    imgs, cpus = [], []
+    for seed in seeds:
+        exr = os.path.join(out, f'{name}_strata_{spp}spp_{seed}.exr')
+        (_, cpu), _ = render_strata(exe, sc['usda'], exr, spp, res, max_depth, seed, extra)
+        imgs.append(read_exr(exr))
+        cpus.append(cpu)
+    exr = os.path.join(out, f'{name}_strata_1spp.exr')
+    (_, cpu1), _ = render_strata(exe, sc['usda'], exr, 1, res, max_depth, seeds[0], extra)
+    return imgs, cpus, cpu1
+
+
+def mitsuba_pair(mi, scene, spp, seeds):
+    """Mitsuba's two-seed renders at `spp` and the CPU seconds of each (this process, every
+    thread), and of a 1-spp render. Each render is run twice and the second is timed, so JIT
+    kernels are compiled and cached before the clock runs (as a farm's would be)."""
+    def timed(n, seed):
+        for _ in range(2):
+            c = self_cpu()
+            img = np.array(mi.render(scene, spp=n, seed=seed), dtype=np.float64)
+            cpu = self_cpu() - c
+        return img, cpu
+    pairs = [timed(spp, seed) for seed in seeds]
+    return [p[0] for p in pairs], [p[1] for p in pairs], timed(1, seeds[0])[1]
+
+
+def equal_error_row(sc, name, res, spp, strata, other, sigmas=3.0, min_pixels=16, tolerance=None):
+    """The measured figures of one scene from (images, CPU seconds, 1-spp CPU seconds) of
+    strata and of the other renderer: CPU seconds per spp (the 1-spp render's cost taken off:
+    what each more sample costs), variance per spp by the two-seed method over the whole image
+    and per region, equal-error time = time-per-spp ratio x variance-per-spp ratio, and the
+    agreement of the two mean images (whole image and per region, region_agreement)."""
+    (s_img, s_cpu, s_cpu1), (o_img, o_cpu, o_cpu1) = strata, other
+    tps_s = (np.mean(s_cpu) - s_cpu1) / (spp - 1)
+    tps_o = (np.mean(o_cpu) - o_cpu1) / (spp - 1)
+    var_s, var_o = two_seed_variance(*s_img) * spp, two_seed_variance(*o_img) * spp
+    ls, lo = [luminance(i) for i in s_img], [luminance(i) for i in o_img]
+    mean_s, mean_o = float(np.mean(ls)), float(np.mean(lo))
+    n = ls[0].size
+    se = math.sqrt(sum(float(((a - b) ** 2 / 4).sum()) for a, b in (ls, lo))) / n
+    regs = region_agreement(name, sc, res, ls, lo, sigmas, min_pixels, tolerance)
+    by_region = {}
+    for rn, mask in regions(sc, res).items():
+        if rn != 'sky' and mask.sum() >= min_pixels:
+            vo = two_seed_variance(o_img[0][mask], o_img[1][mask])
+            by_region[rn] = two_seed_variance(s_img[0][mask], s_img[1][mask]) / vo if vo > 0 else float('nan')
+    worst = max(by_region, key=lambda k: by_region[k]) if by_region else ''
+    return dict(scene=name, res=f'{res[0]}x{res[1]}', spp=spp,
+                strata_cpu_s=' '.join(f'{c:.3f}' for c in s_cpu), strata_cpu_1spp_s=round(s_cpu1, 3),
+                other_cpu_s=' '.join(f'{c:.3f}' for c in o_cpu), other_cpu_1spp_s=round(o_cpu1, 3),
+                strata_ms_per_spp=1e3 * tps_s, other_ms_per_spp=1e3 * tps_o, time_ratio=tps_s / tps_o,
+                strata_var_per_spp=var_s, other_var_per_spp=var_o, var_ratio=var_s / var_o,
+                equal_error_ratio=tps_s / tps_o * var_s / var_o,
+                worst_region=worst, worst_region_var_ratio=by_region.get(worst, float('nan')),
+                region_var_ratios=' '.join(f'{k}={v:.3f}' for k, v in by_region.items()),
+                mean_strata=mean_s, mean_other=mean_o, mean_rel_diff=(mean_s - mean_o) / mean_o,
+                mean_rel_se=se / mean_o,
+                regions_ok=sum(r['ok'] for r in regs), regions=len(regs),
+                regions_failed=' '.join(r['region'] for r in regs if not r['ok']),
+                worst_region_z=max((abs(r['diff']) / r['se'] for r in regs), default=0.0))
+
+
+def equal_error_table(rows, other):
+    """The README table of equal_error_row rows, markdown."""
+    out = [f"| scene | CPU ms per spp, strata / {other} | time per spp | variance per spp (worst region) | "
+           f"**equal-error time** | image mean, strata vs {other} (± 3 se) | regions within 3 se + tol |",
+           "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        worst = (f" ({r['worst_region']} {r['worst_region_var_ratio']:.2f})"
+                 if r['worst_region'] and abs(r['worst_region_var_ratio'] - r['var_ratio']) > 0.1 else '')
+        out.append(f"| {r['scene']} | {r['strata_ms_per_spp']:.1f} / {r['other_ms_per_spp']:.1f} | "
+                   f"{r['time_ratio']:.2f}x | {r['var_ratio']:.2f}{worst} | **{r['equal_error_ratio']:.2f}x** | "
+                   f"{100 * r['mean_rel_diff']:+.2f} % ± {300 * r['mean_rel_se']:.2f} | "
+                   f"{r['regions_ok']}/{r['regions']}{' (' + r['regions_failed'] + ')' if r['regions_failed'] else ''} |")
+    return '\n'.join(out)
+
+
+def write_csv(path, rows, extra):
+    """rows (dicts) to `path`, each with the `extra` columns (renderer versions, machine)."""
+    rows = [{**r, **extra} for r in rows]
+    with open(path, 'w', newline='') as fh:
+        wr = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
+        wr.writeheader()
+        for r in rows:
+            wr.writerow({k: (f'{v:.6g}' if isinstance(v, float) else v) for k, v in r.items()})
+
+
+def measure(args):
+    """Equal-error CPU time, strata / Mitsuba, per comparison scene (issue 27): both renderers at
+    the same resolution, thread count and spp, two seeds each; see equal_error_row."""
+    mi = load_mitsuba(args.variant, args.threads)
+    res = tuple(int(v) for v in args.res.split('x'))
+    exe = os.path.join(ROOT, args.strata)
+    os.makedirs(args.out, exist_ok=True)
+    seeds = (args.seed, args.seed + 1)
+    extra = f'--threads {args.threads} {args.strata_args}'.strip()
+    t0, machine0 = time.time(), machine_line()
+    rows = []
+    for name in args.scenes.split(','):
+        sc = SCENES[name]
+        strata = strata_pair(exe, sc, args.out, name, res, args.spp, args.max_depth, seeds, extra)
+        scene = mitsuba_scene(mi, sc, res, args.spp, args.max_depth, [], args.mitsuba_sampler)
+        rows.append(equal_error_row(sc, name, res, args.spp, strata, mitsuba_pair(mi, scene, args.spp, seeds)))
+        print(f"{name}: {rows[-1]['equal_error_ratio']:.2f}x ({time.time() - t0:.0f} s)", file=sys.stderr)
+    head = (f"strata ({strata_rev()}) vs Mitsuba {mi.__version__} `{mi.variant()}` ({args.mitsuba_sampler} sampler), "
+            f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC: {res[0]}x{res[1]}, "
+            f"{args.spp} spp x seeds {seeds[0]} and {seeds[1]}, {args.threads} threads, box filter, "
+            f"strata --max-depth {args.max_depth} = Mitsuba max_depth {args.max_depth + 1}; CPU time (user + sys)\n"
+            f"machine: {machine0} at the start, {os.getloadavg()[0]:.2f} at the end; {time.time() - t0:.0f} s\n"
+            f"command: {' '.join(['tools/compare_mitsuba.py'] + sys.argv[1:])}")
+    print(head + '\n\n' + equal_error_table(rows, 'Mitsuba'))
+    if args.csv:
+        write_csv(args.csv, rows, dict(other=f'mitsuba {mi.__version__} {mi.variant()} {args.mitsuba_sampler}', threads=args.threads,
+                                       strata=strata_rev(), machine=machine0))
+        print(f"\nwrote {args.csv}")
+
+
+def read_exr(path):
+    """The RGB of an EXR as float64 (h, w, 3), through OpenEXR (tools/rmse.py) or Mitsuba."""
+    try:
+        sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+        from rmse import load
+        return load(path)
+    except ImportError:
+        import mitsuba as mi
+        return read_exr_rgb(mi, path)
+
+
 def coat(args):
     """Directional albedo of strata's glossy BSDF (a numpy transcription of bsdf.rs) against the
     roughplastic it is mapped to, by quadrature under uniform white light: the size of the
     model difference alone, for the `coated` region of scene mcg."""
-    os.environ.setdefault('DRJIT_LIBLLVM_PATH', '/usr/lib/x86_64-linux-gnu/libLLVM-19.so')
-    import mitsuba as mi
+    mi = load_mitsuba(args.variant)
     import drjit as dr
-    mi.set_variant(args.variant)
     kind, p = next(b for n, _, b in SCENES['mcg']['objects'] if n == 'coated')
     albedo, alpha, eta = np.array(p['albedo']), p['roughness'] ** 2, p['ior']
     notes = []
@@ -591,37 +804,39 @@ def coat(args):
         print(f"  {mu_o:11.1f}  {a_s:8.4f} {a_m:8.4f}  {pct(a_s / a_m - 1)}")
 
 
+def render_options(p, scenes, spp, res, max_depth, variant, out):
+    """The options every rendering subcommand takes, with that subcommand's defaults."""
+    p.add_argument('--scenes', default=scenes)
+    p.add_argument('--spp', type=int, default=spp)
+    p.add_argument('--res', default=res)
+    p.add_argument('--max-depth', type=int, default=max_depth)
+    p.add_argument('--seed', type=int, default=1)
+    p.add_argument('--variant', default=variant)
+    p.add_argument('--strata', default='target/release/strata')
+    p.add_argument('--out', default=out)
+    p.add_argument('--strata-args', default='', help='extra strata render flags, e.g. --weighted')
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     sub = ap.add_subparsers(dest='cmd', required=True)
     a = sub.add_parser('images')
-    a.add_argument('--scenes', default='matte,mcg,layers_dome,layers')
-    a.add_argument('--spp', type=int, default=1024)
-    a.add_argument('--res', default='320x240')
-    a.add_argument('--max-depth', type=int, default=16)
-    a.add_argument('--seed', type=int, default=1)
+    render_options(a, 'matte,mcg,layers_dome,layers', 1024, '320x240', 16, 'llvm_ad_rgb', '/tmp/strata_vs_mitsuba')
     a.add_argument('--pass-spp', type=int, default=64, help='Mitsuba samples per render call')
-    a.add_argument('--variant', default='llvm_ad_rgb')
-    a.add_argument('--strata', default='target/release/strata')
-    a.add_argument('--out', default='/tmp/strata_vs_mitsuba')
     a.add_argument('--csv', default=None)
-    a.add_argument('--strata-args', default='', help='extra strata render flags, e.g. --weighted')
     c = sub.add_parser('check', help='CI: fail when a region differs beyond noise and model tolerance')
-    c.add_argument('--scenes', default='matte,mcg,layers_dome,layers')
-    c.add_argument('--spp', type=int, default=128)
-    c.add_argument('--res', default='128x96')
-    c.add_argument('--max-depth', type=int, default=8)
-    c.add_argument('--seed', type=int, default=1)
+    render_options(c, 'matte,mcg,layers_dome,layers', 128, '128x96', 8, 'scalar_rgb', 'target/mitsuba_check')
     c.add_argument('--sigmas', type=float, default=3.0)
     c.add_argument('--min-pixels', type=int, default=16)
-    c.add_argument('--variant', default='scalar_rgb')
-    c.add_argument('--strata', default='target/release/strata')
-    c.add_argument('--out', default='target/mitsuba_check')
-    c.add_argument('--strata-args', default='')
+    e = sub.add_parser('measure', help='equal-error CPU time, strata / Mitsuba, by the two-seed method')
+    render_options(e, 'matte,mcg,layers,layers_dome', 64, '320x240', 8, 'llvm_ad_rgb', '/tmp/strata_vs_mitsuba_measure')
+    e.add_argument('--threads', type=int, default=2)
+    e.add_argument('--mitsuba-sampler', default='independent', help="Mitsuba's sampler (its default: independent)")
+    e.add_argument('--csv', default=None)
     for name in ('timing', 'coat'):
         sub.add_parser(name).add_argument('--variant', default='llvm_ad_rgb')
     args = ap.parse_args()
-    {'images': images, 'check': check, 'timing': timing, 'coat': coat}[args.cmd](args)
+    {'images': images, 'check': check, 'measure': measure, 'timing': timing, 'coat': coat}[args.cmd](args)
 
 
 if __name__ == '__main__':
