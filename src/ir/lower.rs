@@ -9,6 +9,7 @@
 //! The arithmetic mirrors [`super::eval`] operation for operation (same order, same runtime
 //! functions), so a folded constant and the compiled code compute the same bits.
 
+use super::eval::MAX_INLINED_NESTING;
 use super::ssa::{self, BinOp, Block, Builder, CmpOp, EntryKind, Inst, Module, Slot, Terminator, Ty, UnOp, Var};
 use super::wired::{Operand, WiredMaterial};
 use crate::abi::{self, ChannelInfo, MaterialInfo, PrimvarInfo};
@@ -31,13 +32,6 @@ pub const LOOP_BUDGET: i32 = 1 << 20;
 /// Deepest nesting of inlined user functions (recursion is rejected by the checker; this
 /// guards a broken library).
 const MAX_INLINE_DEPTH: u32 = 64;
-
-/// Deepest nesting of statements and expressions in one entry function once node bodies and
-/// user functions are inlined into one another: four functions each nested to the parser's
-/// [`MAX_NESTING`](crate::front::parser::MAX_NESTING). Lowering and constant folding recurse
-/// this deep at most, which the compiler stack ([`crate::stack`]) holds with room to spare;
-/// past it lowering reports the inlining chain.
-pub const MAX_INLINED_NESTING: u32 = 4 * crate::front::parser::MAX_NESTING;
 
 /// Lowered instructions one entry function may reach while inlining (dead code included).
 /// Real materials lower to a few thousand; the limit leaves room for generated code (a flat

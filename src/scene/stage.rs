@@ -17,13 +17,14 @@
 //! they are loaded, and the pass is redone, so layers in unselected variants are never read.
 
 use crate::diag::{Diagnostic, Diagnostics, Failed, FileId, OncePerKind, Severity, SourceMap, Span};
+use crate::input::normalize;
 use crate::scene::time::{self, TimeCode};
 use crate::scene::usda::{
     self, Layer, LayerMetadata, LayerOffset, ListOp, MetadataEntry, PrimSpec, PropertySpec, Reference, Specifier,
     Target,
 };
 use crate::scene::usdc::{self, LayerReadError, LayerSource};
-use crate::scene::value::{AssetPath, Value, ValueType, normalize};
+use crate::scene::value::{AssetPath, Value, ValueType};
 use std::cell::OnceCell;
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
