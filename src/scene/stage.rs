@@ -565,27 +565,20 @@ impl Layers {
         }
         let file = match usdc::read_layer_file(path) {
             Ok(file) => file,
-            Err(LayerReadError::MaterialX) => {
-                self.warnings.push(
-                    "materialx layer",
-                    authored,
-                    Diagnostic::warning(format!(
-                        "`{authored}` is a MaterialX document; strata does not read MaterialX yet: its materials are absent"
-                    ))
-                    .at(span, "referenced here"),
-                );
-                self.by_key.insert(key, None);
-                return Start::Known(None);
-            }
-            Err(LayerReadError::Unreadable(why)) => {
-                self.warnings.push(
-                    "unreadable layer",
-                    authored,
-                    Diagnostic::warning(format!(
-                        "cannot read layer `{authored}`: {why}; the stage is composed without it"
-                    ))
-                    .at(span, "referenced here"),
-                );
+            Err(error) => {
+                let (kind, message) = match error {
+                    LayerReadError::MaterialX => (
+                        "materialx layer",
+                        format!(
+                            "`{authored}` is a MaterialX document; strata does not read MaterialX yet: its materials are absent"
+                        ),
+                    ),
+                    LayerReadError::Unreadable(why) => (
+                        "unreadable layer",
+                        format!("cannot read layer `{authored}`: {why}; the stage is composed without it"),
+                    ),
+                };
+                self.warnings.push(kind, authored, Diagnostic::warning(message).at(span, "referenced here"));
                 self.by_key.insert(key, None);
                 return Start::Known(None);
             }
