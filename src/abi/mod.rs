@@ -7,6 +7,8 @@
 
 use std::fmt;
 
+pub mod layering;
+
 /// The kind of value a custom channel carries.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum ChannelKind {
@@ -279,7 +281,7 @@ pub trait MaterialCode: Send + Sync {
     /// Layer and channel metadata.
     fn info(&self) -> &MaterialInfo;
     /// Writes each layer's mask, clamped to [0, 1] (absent mask: 1), whether or not the layer
-    /// has a surface: which masks weigh what is `crate::layering`'s to say. `out.len()` is the layer count.
+    /// has a surface: which masks weigh what is `layering`'s to say. `out.len()` is the layer count.
     fn masks(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError>;
     /// One layer's mask, as [`MaterialCode::masks`] writes it. Stochastic layer picking walks
     /// the stack from the top and stops at the picked layer (paper 5.3), so its cost does not

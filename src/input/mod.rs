@@ -32,6 +32,8 @@ use std::path::{Component, Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+pub mod scenes;
+
 /// Default limit on the size of any one input file: 256 MiB. The largest scenes and
 /// textures strata is meant for are a few tens of MB; a file beyond this is far more likely
 /// a mistake (or an attack) than a scene, and reading it would cost seconds and gigabytes.

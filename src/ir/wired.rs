@@ -8,6 +8,7 @@
 
 use super::eval::eval_node;
 use crate::abi::LayerInfo;
+use crate::abi::layering::{self, Unpickable};
 use crate::abi::{ChannelKind, DisplacementMode};
 use crate::compose::{ComposedMaterial, MaterialRef};
 use crate::diag::{Diagnostic, Diagnostics, Span, did_you_mean};
@@ -16,7 +17,6 @@ use crate::front::graph::{Graph, Source};
 use crate::front::hir::{ExprKind, FuncId};
 use crate::front::library::Library;
 use crate::front::types::{Type, Value};
-use crate::layering::{self, Unpickable};
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 
