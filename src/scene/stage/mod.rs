@@ -11,14 +11,14 @@
 //!
 //! Every layer — the root and each sublayer, reference and payload — is read by
 //! [`usdc::read_layer_file`], which tells `.usda` text, `.usdc` crates and usdz packages apart
-//! by content; crates are converted to the same [`Layer`] syntax tree the usda parser builds.
+//! by content; crates are converted to the same [`Layer`](crate::scene::usda::Layer) syntax tree the usda parser builds.
 //!
 //! Referenced layers are loaded lazily: a composition pass records the layers it is missing,
 //! they are loaded, and the pass is redone, so layers in unselected variants are never read.
 //!
-//! Files: [`layers`] (loading, sublayers, layer stacks), [`prim_index`] (nodes and path
-//! mapping), [`pass`] (the prim tree), [`arcs`] (inherits, references, payloads), [`variants`]
-//! and [`properties`] (attributes, relationships and their list ops).
+//! Files: `layers` (loading, sublayers, layer stacks), `prim_index` (nodes and path mapping),
+//! `pass` (the prim tree), `arcs` (inherits, references, payloads), `variants` and
+//! `properties` (attributes, relationships and their list ops).
 
 use crate::diag::{Diagnostic, Diagnostics, Failed, FileId, SourceMap, Span};
 use crate::scene::time::{self, TimeCode};

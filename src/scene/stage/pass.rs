@@ -3,8 +3,7 @@
 
 use super::layers::Layers;
 use super::prim_index::{Arc, Node, join_path};
-use super::properties::compose_properties;
-use super::variants::selections;
+use super::properties::{compose_properties, selections};
 use super::{Prim, PrimId, count_work};
 use crate::diag::{Diagnostics, OncePerKind, Span};
 use crate::scene::usda::{LayerOffset, PrimSpec, Specifier};

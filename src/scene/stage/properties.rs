@@ -1,9 +1,9 @@
 //! Property composition: attributes (values, time samples, metadata) and relationships
-//! (target list ops) from a prim's opinions in strength order.
+//! (target list ops) from a prim's opinions in strength order; and its variant selections.
 
 use super::prim_index::{Node, map_path};
 use super::{Attribute, Relationship};
-use crate::scene::time::{self};
+use crate::scene::time;
 use crate::scene::usda::{self, LayerOffset, ListOp, MetadataEntry, PrimSpec, PropertySpec, Target};
 use std::collections::HashMap;
 
@@ -147,4 +147,17 @@ pub(super) fn compose_relationship(specs: &[(&usda::RelationshipSpec, &Node)]) -
         custom: specs.iter().any(|(r, _)| r.custom),
         metadata,
     }
+}
+
+/// Variant selections, strongest opinion per set.
+pub(super) fn selections(opinions: &[(&PrimSpec, &Node)]) -> Vec<(String, String)> {
+    let mut out: Vec<(String, String)> = Vec::new();
+    for (spec, _) in opinions {
+        for (set, selection, _) in &spec.metadata.variant_selections {
+            if !out.iter().any(|(s, _)| s == set) {
+                out.push((set.clone(), selection.clone()));
+            }
+        }
+    }
+    out
 }

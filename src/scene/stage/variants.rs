@@ -3,6 +3,7 @@
 
 use super::pass::Pass;
 use super::prim_index::{Arc, MAX_NODES, Node};
+use super::properties::selections;
 use crate::diag::{Diagnostic, Span};
 use crate::scene::usda::{LayerOffset, PrimSpec};
 
@@ -142,17 +143,4 @@ impl<'l> Node<'l> {
             child.unapplied_sets(out);
         }
     }
-}
-
-/// Variant selections, strongest opinion per set.
-pub(super) fn selections(opinions: &[(&PrimSpec, &Node)]) -> Vec<(String, String)> {
-    let mut out: Vec<(String, String)> = Vec::new();
-    for (spec, _) in opinions {
-        for (set, selection, _) in &spec.metadata.variant_selections {
-            if !out.iter().any(|(s, _)| s == set) {
-                out.push((set.clone(), selection.clone()));
-            }
-        }
-    }
-    out
 }

@@ -3,9 +3,9 @@
 
 use super::guarded;
 use super::precheck::{check_value_sizes, precheck};
-use super::spans::retarget_layer;
+use super::spans::{NO_FILE, retarget_layer};
 use super::values::{convert_value, layer_offset};
-use crate::diag::{Diagnostic, Diagnostics, FileId, SourceMap, Span};
+use crate::diag::{Diagnostic, Diagnostics, SourceMap, Span};
 use crate::scene::usda::{
     AttributeSpec, Layer, LayerMetadata, ListOp, MetadataEntry, PrimMetadata, PrimSpec, PropertySpec, Reference,
     RelationshipSpec, Specifier, Target, VariantSetSpec,
@@ -96,9 +96,6 @@ pub(super) struct Converter<'a> {
     pub(super) base_dir: &'a Path,
     pub(super) pending: Vec<Pending>,
 }
-
-/// Placeholder file id for spans until the outline is registered.
-pub(super) const NO_FILE: FileId = FileId(u32::MAX);
 
 impl Converter<'_> {
     /// Appends one outline line (indented by `depth`) and returns the span of its text.

@@ -1,9 +1,11 @@
 //! Span fix-up: the converter writes spans before the outline has a file id; these point a
 //! converted layer's spans at the outline once it is registered.
 
-use super::convert::NO_FILE;
 use crate::diag::{FileId, Span};
 use crate::scene::usda::{Layer, ListOp, MetadataEntry, PrimSpec, PropertySpec};
+
+/// Placeholder file id for spans until the outline is registered.
+pub(super) const NO_FILE: FileId = FileId(u32::MAX);
 
 pub(super) fn fix(span: &mut Span, file: FileId) {
     if span.file == NO_FILE {

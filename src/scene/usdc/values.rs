@@ -3,7 +3,7 @@
 
 use crate::scene::usda::LayerOffset;
 use crate::scene::value::{AssetPath, Value};
-use openusd::sdf::{self};
+use openusd::sdf;
 use std::fmt::Write as _;
 use std::path::Path;
 
