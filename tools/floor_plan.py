@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Print the module import graph's cycles and its imports that run up the floors.
 
-    python3 tools/floor_plan.py [--src src] [--edges] [--with-tests]
+    python3 tools/floor_plan.py [--src src] [--edges] [--with-tests] [--big]
 
 A module is one source file (`src/scene/value.rs` is `scene/value`, `src/scene/usda/mod.rs` is
 `scene/usda`). An edge A -> B is a `crate::…`, `super::…` or `self::…` path in A's code (use
@@ -12,7 +12,7 @@ child that defines it, since re-exports are aliases, not code of their own.
 
 Floors, from the ground up (a module may import its own floor and the ones below it):
 
-    ground: diag, input, abi, runtime, stack, text
+    ground: diag, input, abi, runtime, stack
     front -> scene -> compose -> ir -> backend -> render -> tools (cli, bench, fuzz, plot)
 
 Top-level modules not named here are reported as unplaced. Exit status is 1 when there is a cycle
@@ -25,7 +25,7 @@ import re
 import sys
 from collections import defaultdict
 
-GROUND = {"diag", "input", "abi", "runtime", "stack", "text"}
+GROUND = {"diag", "input", "abi", "runtime", "stack"}
 STAGES = ["front", "scene", "compose", "ir", "backend", "render"]
 TOOLS = {"cli", "bench", "fuzz", "plot", "main"}
 
@@ -353,6 +353,7 @@ def main():
     ap.add_argument("--src", default=os.path.join(os.path.dirname(__file__), "..", "src"))
     ap.add_argument("--edges", action="store_true", help="print every edge")
     ap.add_argument("--with-tests", action="store_true", help="count #[cfg(test)] code too")
+    ap.add_argument("--big", action="store_true", help="list the files over 1000 lines")
     args = ap.parse_args()
     crate = Crate(os.path.normpath(args.src), args.with_tests)
     graph = crate.edges()
@@ -381,6 +382,11 @@ def main():
         print(f"  {a} ({floor_name(floor_of(a))}) -> {b} ({floor_name(floor_of(b))})  src/{a} line {lines[0]}")
     if unplaced:
         print(f"unplaced top-level modules (no floor): {', '.join(unplaced)}")
+    if args.big:
+        for mod, path in sorted(crate.files.items()):
+            n = sum(1 for _ in open(path, encoding="utf-8"))
+            if n > 1000:
+                print(f"  over 1000 lines: {os.path.relpath(path, args.src)} ({n})")
     return 1 if comps or upward else 0
 
 

@@ -1,5 +1,5 @@
 //! The bridge from a composed USD stage to composition: reads slot-binding relationships into
-//! a [`BindingTree`], finds each bound Material's strata shader (UsdShade source-asset
+//! a [`BindingTree`](super::slots::BindingTree), finds each bound Material's strata shader (UsdShade source-asset
 //! convention) and the input values it sets (its own, or through `.connect` the Material's
 //! interface inputs, as UsdShade resolves them), and assembles one [`ComposedMaterial`] per
 //! renderable prim.

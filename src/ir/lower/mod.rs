@@ -9,8 +9,8 @@
 //! The arithmetic mirrors [`super::eval`] operation for operation (same order, same runtime
 //! functions), so a folded constant and the compiled code compute the same bits.
 //!
-//! This module holds the entry functions, storage and budgets; [`stmt`], [`expr`] and
-//! [`intrinsic`] lower statements, expressions and intrinsic calls.
+//! This module holds the entry functions, storage and budgets; `stmt`, `expr` and
+//! `intrinsic` lower statements, expressions and intrinsic calls.
 
 use super::eval::MAX_INLINED_NESTING;
 use super::ssa::{self, BinOp, Block, Builder, CmpOp, EntryKind, Inst, Module, Slot, Terminator, Ty, UnOp, Var};
