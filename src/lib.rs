@@ -1,19 +1,21 @@
 //! strata: a shading-language compiler for binding-level layered shading.
 //!
-//! The pipeline, one module per stage (dependencies point down this list only):
-//! - [`diag`]: source files, spans and diagnostics shared by every stage; [`text`]: scanning
-//!   loops both lexers share.
+//! The pipeline, one module per stage. Modules stand on floors (ARCHITECTURE.md, "Floor plan"):
+//! ground (`diag`, `input`, `abi`, `runtime`, `stack`), then `front`, `scene`, `compose`, `ir`,
+//! `backend`, `render`, and the tools; a module imports only its own floor and those below.
+//! - [`diag`]: source files, spans and diagnostics shared by every stage; [`diag::text`]:
+//!   scanning loops both lexers share.
 //! - [`front`]: substance files (`.ash`) → checked node types and graphs.
-//! - [`input`]: bounded reads of every input file (scenes, substances, textures).
+//! - [`input`]: bounded reads of every input file (scenes, substances, textures);
+//!   [`input::scenes`]: the embedded default scene.
 //! - [`scene`]: USD ASCII scenes → a composed prim hierarchy.
 //! - [`compose`]: slot bindings → one composed material per renderable prim.
 //! - [`ir`]: the wired IR of a composed material, its passes and text form.
 //! - [`backend`]: lowered IR → Cranelift JIT, native objects, or the reference interpreter.
-//! - [`layering`]: which layers take part in the pick, hide, or weight displacement (rules 5, 6).
-//! - [`abi`]: the `#[repr(C)]` contract between compiled materials and the renderer.
+//! - [`abi`]: the `#[repr(C)]` contract between compiled materials and the renderer;
+//!   [`abi::layering`]: which layers take part in the pick, hide, or weight displacement (rules 5, 6).
 //! - [`render`]: the path tracer (geometry, BVH, lights, integrator, EXR output).
 //! - [`runtime`]: noise, patterns and math semantics shared by every backend.
-//! - [`scenes`]: the embedded default scene.
 //! - [`stack`]: the compiler thread with a known stack size that the recursive passes run on.
 //! - [`bench`]: the measurements behind `strata bench shade` and `strata bench render`.
 //! - [`fuzz`]: `strata fuzz`, mutation fuzzing of both front ends in worker processes.
@@ -31,11 +33,15 @@ pub mod front;
 pub mod fuzz;
 pub mod input;
 pub mod ir;
-pub mod layering;
 pub mod plot;
 pub mod render;
 pub mod runtime;
 pub mod scene;
-pub mod scenes;
 pub mod stack;
-pub mod text;
+
+// Old path kept for the merge; remove after (render/, cli.rs and tests/layering.rs use it).
+pub use crate::abi::layering;
+// Old path kept for the merge; remove after (cli.rs uses it).
+pub use crate::input::scenes;
+// Old path kept for the merge; remove after.
+pub use crate::diag::text;

@@ -4,7 +4,7 @@
 //! stack they need grows with it. Two things keep that bounded whatever the input:
 //!
 //! - every recursive pass has a documented depth limit ([`crate::front::parser::MAX_NESTING`]
-//!   for source nesting, [`crate::ir::lower::MAX_INLINED_NESTING`] once function bodies are
+//!   for source nesting, [`crate::ir::eval::MAX_INLINED_NESTING`] once function bodies are
 //!   inlined into one another) and long flat chains (`x + x + …`, 100 000 terms) are walked
 //!   iteratively, so depth never grows with the length of a chain;
 //! - the passes run on a thread whose stack size is known ([`COMPILER_STACK_BYTES`]), not on

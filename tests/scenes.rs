@@ -167,7 +167,7 @@ fn displacement_example() {
 
 #[test]
 fn embedded_default_scene_matches_the_file() {
-    let (name, text) = strata::scenes::DEFAULT_SCENE;
+    let (name, text) = strata::input::scenes::DEFAULT_SCENE;
     assert!(name.ends_with("default.usda"));
     assert_eq!(text, std::fs::read_to_string("scenes/default/default.usda").unwrap());
 }

@@ -4,6 +4,8 @@
 //! [`ComposedMaterial`] names, for each layer bottom to top, the substance and its overrides
 //! with the input values the scene sets. [`crate::ir::wired`] turns it into the wired IR.
 
+pub mod binding;
+pub mod connect;
 pub mod preview;
 pub mod scene;
 pub mod slots;

@@ -11,7 +11,7 @@
 //! share one graph, so identical materials still share one compiled material (DESIGN.md rule 8).
 
 use super::MaterialRef;
-use super::scene::{Producer, convert_input, producer};
+use super::connect::{Producer, convert_input, producer};
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::front::ast::Product;
 use crate::front::graph::{NodeInstance, Source};

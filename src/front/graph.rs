@@ -6,6 +6,8 @@ use super::check::resolve_type;
 use super::hir::{FuncId, Function};
 use super::types::{Type, Value};
 use crate::diag::{Diagnostic, Diagnostics, Span, did_you_mean};
+// Old path kept for the merge; remove after (render/ and layering import them from here).
+pub use crate::abi::{ChannelKind, DisplacementMode};
 use std::collections::HashMap;
 
 /// What drives a port, an output or a product.
@@ -61,55 +63,6 @@ pub struct NodeInstance {
     pub args: Vec<Option<Source>>,
     /// Where it is declared.
     pub span: Span,
-}
-
-/// The kind of value a custom channel carries.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum ChannelKind {
-    /// RGB.
-    Color,
-    /// One float.
-    Float,
-    /// One integer.
-    Integer,
-}
-
-impl ChannelKind {
-    /// The node type that declares this kind of channel.
-    pub fn node_type(self) -> &'static str {
-        match self {
-            ChannelKind::Color => "customChannelColor",
-            ChannelKind::Float => "customChannelFloat",
-            ChannelKind::Integer => "customChannelInteger",
-        }
-    }
-
-    /// Recognises custom-channel node types by name.
-    pub fn from_node_type(name: &str) -> Option<ChannelKind> {
-        [ChannelKind::Color, ChannelKind::Float, ChannelKind::Integer].into_iter().find(|k| k.node_type() == name)
-    }
-}
-
-/// How a layer's displacement combines with the layers below (DESIGN.md rule 6).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum DisplacementMode {
-    /// Adds everywhere, ignoring masks.
-    None,
-    /// Adds `mask · height`.
-    Add,
-    /// Blends `D ← lerp(D, height, mask)`.
-    Mix,
-}
-
-impl DisplacementMode {
-    /// The mode's name in source.
-    pub fn name(self) -> &'static str {
-        match self {
-            DisplacementMode::None => "none",
-            DisplacementMode::Add => "add",
-            DisplacementMode::Mix => "mix",
-        }
-    }
 }
 
 /// A product binding.

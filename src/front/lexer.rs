@@ -64,10 +64,10 @@ pub enum Tok {
     IntLit,
     #[regex(r"([0-9]+\.[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?|[0-9]+[eE][+-]?[0-9]+")]
     FloatLit,
-    #[token("\"", |lex| crate::text::close_quoted(lex, b'"'))]
+    #[token("\"", |lex| crate::diag::text::close_quoted(lex, b'"'))]
     StrLit,
     /// A block comment: skipped when closed, an error to the end of the file when not.
-    #[token("/*", crate::text::skip_block_comment)]
+    #[token("/*", crate::diag::text::skip_block_comment)]
     BlockComment,
 
     #[token("(")]

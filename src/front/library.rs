@@ -55,7 +55,7 @@ impl Library {
             if !seen.insert(canonical.clone()) {
                 continue;
             }
-            let read = match crate::scenes::embedded(&path) {
+            let read = match crate::input::scenes::embedded(&path) {
                 Some(text) => Ok(text.to_string()),
                 None => crate::input::read_text(&path),
             };

@@ -7,8 +7,14 @@ use crate::front::hir::{Expr, ExprKind, Function, Place, Stmt, UnaryOp};
 use crate::front::intrinsics::Intrinsic;
 use crate::front::library::Library;
 use crate::front::types::{Type, Value};
-use crate::ir::lower::MAX_INLINED_NESTING;
 use crate::runtime::{math, noise};
+
+/// Deepest nesting of statements and expressions in one entry function once node bodies and
+/// user functions are inlined into one another: four functions each nested to the parser's
+/// [`MAX_NESTING`](crate::front::parser::MAX_NESTING). Lowering and constant folding recurse
+/// this deep at most, which the compiler stack ([`crate::stack`]) holds with room to spare;
+/// past it lowering reports the inlining chain.
+pub const MAX_INLINED_NESTING: u32 = 4 * crate::front::parser::MAX_NESTING;
 
 /// Loop iterations one folding attempt may spend before it gives up.
 const FOLD_BUDGET: u32 = 100_000;

@@ -8,14 +8,15 @@
 
 use super::eval::eval_node;
 use crate::abi::LayerInfo;
+use crate::abi::layering::{self, Unpickable};
+use crate::abi::{ChannelKind, DisplacementMode};
 use crate::compose::{ComposedMaterial, MaterialRef};
 use crate::diag::{Diagnostic, Diagnostics, Span, did_you_mean};
 use crate::front::ast::{GraphKind, Product};
-use crate::front::graph::{ChannelKind, DisplacementMode, Graph, Source};
+use crate::front::graph::{Graph, Source};
 use crate::front::hir::{ExprKind, FuncId};
 use crate::front::library::Library;
 use crate::front::types::{Type, Value};
-use crate::layering::{self, Unpickable};
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 

@@ -6,7 +6,7 @@
 //! lives on the attribute; [`ValueType`] classifies it and [`Value::coerce`] turns a value
 //! as written into the shape that type needs.
 
-use std::path::{Component, Path, PathBuf};
+use std::path::{Path, PathBuf};
 
 /// An asset path as authored, plus its resolution against the authoring layer's directory.
 #[derive(Clone, Debug, PartialEq)]
@@ -28,23 +28,6 @@ impl AssetPath {
             if authored.is_empty() { PathBuf::new() } else { crate::input::resolve_asset(base_dir, &authored) };
         AssetPath { authored, resolved }
     }
-}
-
-/// Removes `.` and resolves `..` components without touching the file system.
-pub(crate) fn normalize(path: &Path) -> PathBuf {
-    let mut out = PathBuf::new();
-    for component in path.components() {
-        match component {
-            Component::CurDir => {}
-            Component::ParentDir => {
-                if !out.pop() {
-                    out.push("..");
-                }
-            }
-            other => out.push(other.as_os_str()),
-        }
-    }
-    out
 }
 
 /// A typed value.

@@ -58,11 +58,11 @@ pub enum TokenKind {
     #[token("-inf")]
     Number,
     /// A single-line string in `"` or `'` quotes, escapes not yet processed.
-    #[token("\"", |lex| crate::text::close_quoted(lex, b'"'))]
-    #[token("'", |lex| crate::text::close_quoted(lex, b'\''))]
+    #[token("\"", |lex| crate::diag::text::close_quoted(lex, b'"'))]
+    #[token("'", |lex| crate::diag::text::close_quoted(lex, b'\''))]
     String,
     /// A block comment: skipped when closed, an error to the end of the file when not.
-    #[token("/*", crate::text::skip_block_comment)]
+    #[token("/*", crate::diag::text::skip_block_comment)]
     BlockComment,
     /// A triple-quoted string (`"""` or `'''`), which may span lines.
     #[token("\"\"\"", |lex| close_triple(lex, "\"\"\""))]

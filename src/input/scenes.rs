@@ -8,9 +8,9 @@ use std::path::Path;
 pub const EMBEDDED_DIR: &str = "<embedded>";
 
 /// The default scene: (display name, USD text).
-pub const DEFAULT_SCENE: (&str, &str) = ("<embedded>/default.usda", include_str!("../scenes/default/default.usda"));
+pub const DEFAULT_SCENE: (&str, &str) = ("<embedded>/default.usda", include_str!("../../scenes/default/default.usda"));
 
-const FILES: &[(&str, &str)] = &[("default.ash", include_str!("../scenes/default/default.ash"))];
+const FILES: &[(&str, &str)] = &[("default.ash", include_str!("../../scenes/default/default.ash"))];
 
 /// The text of an embedded file, if `path` names one.
 pub fn embedded(path: &Path) -> Option<&'static str> {

@@ -5,8 +5,58 @@
 //! Architecture invariant: the renderer sees only this module — entry points, closure values
 //! and layer metadata — never the IR or a backend.
 
-use crate::front::graph::{ChannelKind, DisplacementMode};
 use std::fmt;
+
+pub mod layering;
+
+/// The kind of value a custom channel carries.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum ChannelKind {
+    /// RGB.
+    Color,
+    /// One float.
+    Float,
+    /// One integer.
+    Integer,
+}
+
+impl ChannelKind {
+    /// The node type that declares this kind of channel.
+    pub fn node_type(self) -> &'static str {
+        match self {
+            ChannelKind::Color => "customChannelColor",
+            ChannelKind::Float => "customChannelFloat",
+            ChannelKind::Integer => "customChannelInteger",
+        }
+    }
+
+    /// Recognises custom-channel node types by name.
+    pub fn from_node_type(name: &str) -> Option<ChannelKind> {
+        [ChannelKind::Color, ChannelKind::Float, ChannelKind::Integer].into_iter().find(|k| k.node_type() == name)
+    }
+}
+
+/// How a layer's displacement combines with the layers below (DESIGN.md rule 6).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum DisplacementMode {
+    /// Adds everywhere, ignoring masks.
+    None,
+    /// Adds `mask · height`.
+    Add,
+    /// Blends `D ← lerp(D, height, mask)`.
+    Mix,
+}
+
+impl DisplacementMode {
+    /// The mode's name in source.
+    pub fn name(self) -> &'static str {
+        match self {
+            DisplacementMode::None => "none",
+            DisplacementMode::Add => "add",
+            DisplacementMode::Mix => "mix",
+        }
+    }
+}
 
 /// Inputs of one shading point, in world space. Field order is the C ABI.
 #[repr(C)]
@@ -231,7 +281,7 @@ pub trait MaterialCode: Send + Sync {
     /// Layer and channel metadata.
     fn info(&self) -> &MaterialInfo;
     /// Writes each layer's mask, clamped to [0, 1] (absent mask: 1), whether or not the layer
-    /// has a surface: which masks weigh what is `crate::layering`'s to say. `out.len()` is the layer count.
+    /// has a surface: which masks weigh what is `layering`'s to say. `out.len()` is the layer count.
     fn masks(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError>;
     /// One layer's mask, as [`MaterialCode::masks`] writes it. Stochastic layer picking walks
     /// the stack from the top and stops at the picked layer (paper 5.3), so its cost does not

@@ -16,8 +16,8 @@
 //!
 //! Masks are clamped to [0, 1] and a NaN mask counts as 0 ([`clamp_mask`]), everywhere.
 
+use crate::abi::DisplacementMode;
 use crate::abi::LayerInfo;
-use crate::front::graph::DisplacementMode;
 
 /// A mask value as every rule reads it: clamped to [0, 1], NaN as 0.
 pub fn clamp_mask(m: f32) -> f32 {

@@ -10,6 +10,8 @@ use codespan_reporting::term;
 use std::fmt;
 use std::ops::Range;
 
+pub mod text;
+
 /// Diagnostics [`Diagnostics::render`] shows per file; the rest are counted in one closing
 /// line, so a file that yields one error per byte cannot flood the terminal.
 pub const MAX_SHOWN_PER_FILE: usize = 50;

@@ -28,9 +28,11 @@
 
 use std::fmt;
 use std::io::Read;
-use std::path::{Path, PathBuf};
+use std::path::{Component, Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
+
+pub mod scenes;
 
 /// Default limit on the size of any one input file: 256 MiB. The largest scenes and
 /// textures strata is meant for are a few tens of MB; a file beyond this is far more likely
@@ -404,7 +406,24 @@ pub fn resolve_asset(base_dir: &Path, authored: &str) -> PathBuf {
     {
         return PathBuf::from(format!("{package}[{}]", resolve_member(dir, authored)));
     }
-    crate::scene::value::normalize(&base_dir.join(authored))
+    normalize(&base_dir.join(authored))
+}
+
+/// Removes `.` and resolves `..` components without touching the file system.
+pub(crate) fn normalize(path: &Path) -> PathBuf {
+    let mut out = PathBuf::new();
+    for component in path.components() {
+        match component {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                if !out.pop() {
+                    out.push("..");
+                }
+            }
+            other => out.push(other.as_os_str()),
+        }
+    }
+    out
 }
 
 /// `authored` resolved against the directory `dir` of a package, which may itself be inside
