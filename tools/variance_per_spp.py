@@ -8,6 +8,11 @@ that times spp (flat for independent numbers, falling for stratified ones). Opti
 
     python3 tools/variance_per_spp.py [--strata target/release/strata] [--scene S.usda]
         [--res 160x120] [--spp 1,4,16,64,256] [--samplers sobol,independent]
+        [--crop X0,Y0,X1,Y1] [--pairs N] [--strata-args="--max-depth 16"]
+
+--crop measures one region only (pixels X0 <= x < X1, Y0 <= y < Y1), e.g. the rough glass
+sphere of scenes/compare/metal_coat_glass.usda at 160x120: --crop 113,52,133,72. --pairs
+averages the figure over N seed pairs (1,2), (3,4), ...
 """
 import argparse
 import os
@@ -25,8 +30,13 @@ def render(args, sampler, spp, seed, out):
     if args.scene:
         cmd.append(args.scene)
     cmd += ["-o", out, "--spp", str(spp), "--seed", str(seed), "--res", args.res, "--sampler", sampler]
+    cmd += args.strata_args.split()
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return load(out)
+    img = load(out)
+    if args.crop:
+        x0, y0, x1, y1 = (int(v) for v in args.crop.split(","))
+        img = img[y0:y1, x0:x1]
+    return img
 
 
 def main():
@@ -36,6 +46,9 @@ def main():
     parser.add_argument("--res", default="160x120")
     parser.add_argument("--spp", default="1,4,16,64,256")
     parser.add_argument("--samplers", default="sobol,independent")
+    parser.add_argument("--crop", default=None, help="X0,Y0,X1,Y1: measure this pixel region only")
+    parser.add_argument("--pairs", type=int, default=1, help="seed pairs to average over")
+    parser.add_argument("--strata-args", default="", help="extra arguments of `strata render`")
     args = parser.parse_args()
     ladder = [int(s) for s in args.spp.split(",")]
     samplers = args.samplers.split(",")
@@ -43,10 +56,15 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         for sampler in samplers:
             for spp in ladder:
-                a = render(args, sampler, spp, 1, os.path.join(tmp, "a.exr"))
-                b = render(args, sampler, spp, 2, os.path.join(tmp, "b.exr"))
-                rows[(sampler, spp)] = float(np.mean((a - b) ** 2) / 2 * spp)
-    print(f"variance per spp (two-seed method), scene {args.scene or '(embedded default)'}, {args.res}")
+                total = 0.0
+                for k in range(args.pairs):
+                    a = render(args, sampler, spp, 2 * k + 1, os.path.join(tmp, "a.exr"))
+                    b = render(args, sampler, spp, 2 * k + 2, os.path.join(tmp, "b.exr"))
+                    total += float(np.mean((a - b) ** 2) / 2 * spp)
+                rows[(sampler, spp)] = total / args.pairs
+    region = f", pixels {args.crop}" if args.crop else ""
+    print(f"variance per spp (two-seed method, {args.pairs} pair(s)), scene {args.scene or '(embedded default)'}, "
+          f"{args.res}{region}")
     print("| spp | " + " | ".join(samplers) + (" | ratio |" if len(samplers) == 2 else " |"))
     print("|---" * (len(samplers) + 1 + (len(samplers) == 2)) + "|")
     for spp in ladder:

@@ -281,6 +281,27 @@ impl Bsdf {
         }
     }
 
+    /// Whether the BSDF has a non-delta lobe that transmits (rough glass): light sampling at
+    /// such a vertex must cover both sides of the surface, not only the side of `wo`.
+    pub fn transmits(&self) -> bool {
+        matches!(*self, Bsdf::Glass { ggx, eta, .. } if !glass_smooth(ggx, eta))
+    }
+
+    /// The radiance compression `η'²` a sampled direction `wi` went through (η' = transmitted
+    /// over incident index; 1 for reflection and for every lobe but glass's transmission):
+    /// the factor by which `f` of a transmitted direction is scaled down (see the module
+    /// conventions). Russian roulette multiplies it back so that a path inside glass is not
+    /// played for its compressed throughput (Mitsuba 3's `path` integrator does the same).
+    pub fn compression(&self, wo: Vec3, wi: Vec3) -> f32 {
+        match *self {
+            Bsdf::Glass { eta, .. } if wo.z * wi.z < 0.0 => {
+                let etap = if wo.z > 0.0 { eta } else { 1.0 / eta };
+                etap * etap
+            }
+            _ => 1.0,
+        }
+    }
+
     /// True when the BSDF has no non-delta lobe, so next-event estimation cannot contribute
     /// (also true for [`Bsdf::Black`], which reflects nothing at all).
     pub fn is_delta(&self) -> bool {

@@ -178,6 +178,35 @@ def DistantLight "Sun" { float inputs:intensity = 2  float inputs:angle = 5  boo
     }
 }
 
+/// `LayerMode::Auto` resolves per material (weighted for a 3-layer stack, stochastic for one
+/// layer), says so in the stats, and renders exactly what the forced mode renders; the two
+/// forced modes agree in expectation (`stochastic_and_weighted_evaluation_agree`).
+#[test]
+fn auto_layer_mode_chooses_per_material_and_reports_it() {
+    let scene = plane_scene(r#"def DomeLight "Sky" { float inputs:intensity = 0.5 }"#);
+    let stack = ConstMaterial::new(
+        vec![
+            ConstLayer::diffuse(1.0, [0.8, 0.8, 0.8]),
+            ConstLayer::diffuse(0.6, [0.9, 0.2, 0.1]),
+            ConstLayer::diffuse(0.25, [0.1, 0.3, 0.9]),
+        ],
+        &[],
+    );
+    let single = ConstMaterial::new(vec![ConstLayer::diffuse(1.0, [0.5, 0.5, 0.5])], &[]);
+    for (material, pickable, chosen) in [(&stack, 3, LayerMode::Weighted), (&single, 1, LayerMode::Stochastic)] {
+        let mut s = settings(4);
+        s.mode = LayerMode::Auto;
+        let (auto, stats) = run(&scene, material, &s);
+        let [m] = stats.layer_modes.as_slice() else { panic!("one material: {:?}", stats.layer_modes) };
+        assert_eq!((m.pickable, m.mode, m.automatic), (pickable, chosen, true));
+        assert_eq!(stats.evals_line().contains("(auto)"), pickable > 1, "{}", stats.evals_line());
+        s.mode = chosen;
+        let (forced, stats) = run(&scene, material, &s);
+        assert_eq!(auto, forced, "auto must render what {chosen:?} renders");
+        assert!(!stats.layer_modes[0].automatic);
+    }
+}
+
 #[test]
 fn same_seed_is_bit_identical_with_one_or_two_threads() {
     let scene = plane_scene(
