@@ -162,10 +162,11 @@ pub fn combine_relief(layers: &[LayerInfo], heights: &[f32], masks: &[f32], part
 /// Most layers that can be picked for which [`prefers_weighted`] chooses weighted evaluation.
 ///
 /// Measured with `strata bench render` (noise-masked layer stacks, 64x64, 16 spp, one thread,
-/// Sobol sampler; equal-error cost = time per sample × RMSE², stochastic over weighted): 2.06x
-/// at 2 layers, 2.27x at 4, 1.53x at 8, 0.71x at 16 — weighted evaluation removes the pick's
-/// noise (the RMSE ratio is 1.2–1.4x) for a cost that grows with every layer it evaluates. The
-/// crossover lies between 8 and 16.
+/// Sobol sampler; equal-error cost = time per sample × RMSE², stochastic over weighted; two
+/// runs on a loaded machine): 2.06x / 1.41x at 2 layers, 2.27x / 1.94x at 4, 1.53x / 1.33x at
+/// 8, 0.71x / 0.84x at 16 — weighted evaluation removes the pick's noise (the RMSE ratio is
+/// 1.2–1.4x) for a cost that grows with every layer it evaluates. The crossover lies between
+/// 8 and 16.
 pub const WEIGHTED_MAX_LAYERS: usize = 8;
 
 /// The automatic choice of layer evaluation for a material (`LayerMode::Auto`): weighted

@@ -1,9 +1,10 @@
 //! The per-sample path allocates nothing (issue 27 item 3): shading, the per-vertex layer pick
 //! and mask evaluation, BSDF sampling, light sampling and shadow rays. A counting global
 //! allocator sees every allocation of the process; a render at 1 thread allocates per row and
-//! per render (film rows, stats), never per sample, so the same render at more samples per
-//! pixel must make exactly as many allocations. One test function: nothing else runs in this
-//! binary while it counts.
+//! per render (film rows, stats), never per sample, so the same render at 16 times the samples
+//! per pixel must make as many allocations, up to the few that rayon's scheduling makes or
+//! not from run to run (0–4 measured, against 1440 more samples and several thousand more
+//! shading points). One test function: nothing else runs in this binary while it counts.
 
 mod common;
 
@@ -46,15 +47,22 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
+/// Allocations a render may make or not from run to run (rayon's job queues).
+const SCHEDULER_JITTER: u64 = 8;
+
 /// Allocations made by one render of `scene` at `spp` on one thread.
-fn allocations(
-    scene: &strata::render::Scene,
-    materials: &[Arc<dyn MaterialCode>],
-    mode: LayerMode,
-    spp: u32,
-) -> u64 {
+fn allocations(scene: &strata::render::Scene, materials: &[Arc<dyn MaterialCode>], mode: LayerMode, spp: u32) -> u64 {
     let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
-    let settings = RenderSettings { width: 12, height: 8, spp, seed: 3, threads: Some(1), max_depth: 8, mode, ..Default::default() };
+    let settings = RenderSettings {
+        width: 12,
+        height: 8,
+        spp,
+        seed: 3,
+        threads: Some(1),
+        max_depth: 8,
+        mode,
+        ..Default::default()
+    };
     let before = ALLOCATIONS.load(Ordering::Relaxed);
     let (_, stats) = strata::render::render(scene, &refs, &settings, None).expect("renders");
     let after = ALLOCATIONS.load(Ordering::Relaxed);
@@ -71,7 +79,8 @@ fn samples_allocate_nothing() {
     std::fs::write(&ash, mask_stack_source(4, MaskKind::Noise)).unwrap();
     std::fs::write(&usda, layered_scene(4, "stack.ash")).unwrap();
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    let scenes = [usda, root.join("scenes/compare/metal_coat_glass.usda"), root.join("scenes/compare/layers_card.usda")];
+    let scenes =
+        [usda, root.join("scenes/compare/metal_coat_glass.usda"), root.join("scenes/compare/layers_card.usda")];
     let mut failures = vec![];
     for path in &scenes {
         let (scene, materials) = common::scene_file(path);
@@ -82,7 +91,8 @@ fn samples_allocate_nothing() {
             let many = allocations(&scene, &materials, mode, 16);
             // The counter sees the render: the film's rows are allocated.
             assert!(one >= 8, "{}: only {one} allocations counted", path.display());
-            if many != one {
+            // One allocation per 100 extra samples would be 14: far above the scheduler's jitter.
+            if many.abs_diff(one) > SCHEDULER_JITTER {
                 failures.push(format!("{} {mode:?}: {one} allocations at 1 spp, {many} at 16", path.display()));
             }
         }

@@ -225,6 +225,8 @@ pub struct Scratch {
     /// Radiance the last [`Context::shade`] found emitted towards the ray (zero unless the
     /// picked layer emits and the ray hit the front).
     emitted: Vec3,
+    /// The last BSDF whose albedo the AOV took, and that albedo.
+    albedo_memo: Option<(Bsdf, Vec3)>,
     /// Where the last shader ran: read after a sample fails.
     pub site: FaultSite,
     /// Entry points called so far on this thread (the film resets and collects it per row).
@@ -248,6 +250,7 @@ impl Scratch {
             primvars: vec![0.0; primvar_floats],
             channels: vec![0.0; global_channels],
             emitted: Vec3::ZERO,
+            albedo_memo: None,
             site: FaultSite::default(),
             counts: EvalCounts::default(),
         }
@@ -460,10 +463,10 @@ impl Context<'_> {
             let weighting = info.layers.iter().filter(|l| l.displacement.is_some() && l.mask_weights_displacement());
             s.counts.displacements += 3;
             s.counts.displacement_masks += 3 * weighting.count() as u64;
+            let step = bump_step(sp.p, footprint);
+            let bumped = bump(material, &g, relief, step, &mut s.masks_du, &mut s.masks_dv, &mut s.disp)?;
+            g.n = to_arr(bumped);
         }
-        let step = bump_step(sp.p, footprint);
-        let bumped = bump(material, &g, relief, step, &mut s.masks_du, &mut s.masks_dv, &mut s.disp)?;
-        g.n = to_arr(bumped);
         s.lobes.clear();
         match picked {
             Some(i) => {
@@ -489,17 +492,26 @@ impl Context<'_> {
         let mut albedo = Vec3::ZERO;
         let mut normal = Vec3::ZERO;
         if first {
-            // The AOVs are the first visible hit's; `albedo()` integrates a Fresnel term, so
-            // later bounces skip it.
+            // The AOVs are the first visible hit's; `albedo()` integrates a Fresnel term (8
+            // to 24 Fresnel evaluations), so later bounces skip it, and a pixel's samples that
+            // meet the same closure (a material with constant parameters) compute it once.
+            // (`trace` has cleared `s.channels`.)
             let mut best = -1.0;
             for lobe in &s.lobes {
-                albedo += lobe.bsdf.albedo() * lobe.weight;
+                let a = match s.albedo_memo {
+                    Some((bsdf, a)) if bsdf == lobe.bsdf => a,
+                    _ => {
+                        let a = lobe.bsdf.albedo();
+                        s.albedo_memo = Some((lobe.bsdf, a));
+                        a
+                    }
+                };
+                albedo += a * lobe.weight;
                 if lobe.weight > best {
                     best = lobe.weight;
                     normal = lobe.frame.n;
                 }
             }
-            s.channels.iter_mut().for_each(|c| *c = 0.0);
             let map = &self.channel_map[sp.material];
             if !map.is_empty() {
                 // Integer channels are never blended (rule 7): weighted evaluation takes them
