@@ -145,7 +145,7 @@ pub struct MaterialLayerMode {
 
 impl fmt::Display for MaterialLayerMode {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let why = if self.automatic { "auto" } else { "forced" };
+        let why = if self.automatic { "auto" } else { "as set" };
         write!(f, "layers: {}: {} pickable, {} ({why})", self.material, self.pickable, self.mode.name())
     }
 }

@@ -142,6 +142,18 @@ fn transparency_shows_the_dome_through_a_masked_layer() {
     assert_mean_within(&image, "A", 0.3, pick_standard_error(0.3, 1.0, 0.0, samples));
 }
 
+/// An opaque grey base under masks 0.6 (red) and 0.25 (blue).
+fn three_diffuse_layers() -> ConstMaterial {
+    ConstMaterial::new(
+        vec![
+            ConstLayer::diffuse(1.0, [0.8, 0.8, 0.8]),
+            ConstLayer::diffuse(0.6, [0.9, 0.2, 0.1]),
+            ConstLayer::diffuse(0.25, [0.1, 0.3, 0.9]),
+        ],
+        &[],
+    )
+}
+
 #[test]
 fn stochastic_and_weighted_evaluation_agree() {
     let scene = plane_scene(
@@ -150,14 +162,7 @@ def Sphere "Ball" { double radius = 0.3  double3 xformOp:translate = (0, 0.3, 0)
 def DistantLight "Sun" { float inputs:intensity = 2  float inputs:angle = 5  bool inputs:normalize = 1
     float3 xformOp:rotateXYZ = (-40, 20, 0)  uniform token[] xformOpOrder = ["xformOp:rotateXYZ"] }"#,
     );
-    let material = ConstMaterial::new(
-        vec![
-            ConstLayer::diffuse(1.0, [0.8, 0.8, 0.8]),
-            ConstLayer::diffuse(0.6, [0.9, 0.2, 0.1]),
-            ConstLayer::diffuse(0.25, [0.1, 0.3, 0.9]),
-        ],
-        &[],
-    );
+    let material = three_diffuse_layers();
     let mut s = pick_settings();
     let (stochastic, _) = run(&scene, &material, &s);
     s.mode = LayerMode::Weighted;
@@ -184,14 +189,7 @@ def DistantLight "Sun" { float inputs:intensity = 2  float inputs:angle = 5  boo
 #[test]
 fn auto_layer_mode_chooses_per_material_and_reports_it() {
     let scene = plane_scene(r#"def DomeLight "Sky" { float inputs:intensity = 0.5 }"#);
-    let stack = ConstMaterial::new(
-        vec![
-            ConstLayer::diffuse(1.0, [0.8, 0.8, 0.8]),
-            ConstLayer::diffuse(0.6, [0.9, 0.2, 0.1]),
-            ConstLayer::diffuse(0.25, [0.1, 0.3, 0.9]),
-        ],
-        &[],
-    );
+    let stack = three_diffuse_layers();
     let single = ConstMaterial::new(vec![ConstLayer::diffuse(1.0, [0.5, 0.5, 0.5])], &[]);
     for (material, pickable, chosen) in [(&stack, 3, LayerMode::Weighted), (&single, 1, LayerMode::Stochastic)] {
         let mut s = settings(4);
