@@ -579,6 +579,7 @@ fn exr_options(
     let mode = match settings.mode {
         crate::render::LayerMode::Stochastic => "stochastic",
         crate::render::LayerMode::Weighted => "weighted",
+        crate::render::LayerMode::Auto => "auto",
     };
     let scene_name = args.scene.as_ref().map_or("(embedded default scene)".to_string(), |p| p.display().to_string());
     ExrOptions {

@@ -11,12 +11,17 @@ tool: `pip install OpenEXR numpy` (strata alone); mitsuba==3.9.1 for --mitsuba, 
     python3 tools/variance_per_spp.py [--strata target/release/strata] [--scene S.usda | matte]
         [--res 160x120] [--spp 1,4,16,64,256] [--samplers sobol,independent]
         [--mitsuba independent,multijitter,ldsampler] [--cycles] [--max-depth 8]
-        [--csv FILE] [--svg FILE]
+        [--csv FILE] [--svg FILE] [--crop X0,Y0,X1,Y1] [--pairs N]
+        [--strata-args="--max-depth 16"]
 
 --scene takes a USD file (strata only), or the name of a comparison scene of
 tools/compare_mitsuba.py (matte, mcg, layers, layers_dome), which Mitsuba renders too; Cycles
 renders `matte` only (tools/compare_cycles.py). Default: strata's embedded scene. A sampler
 that cannot take a sample count (Mitsuba's ldsampler takes powers of 4) has no point there.
+
+--crop measures one region only (pixels X0 <= x < X1, Y0 <= y < Y1), e.g. the rough glass
+sphere of scenes/compare/metal_coat_glass.usda at 160x120: --crop 113,52,133,72. --pairs
+averages the figure over N seed pairs (1,2), (3,4), ...
 """
 import argparse
 import csv
@@ -37,8 +42,13 @@ def render(args, sampler, spp, seed, out):
     cmd += ["-o", out, "--spp", str(spp), "--seed", str(seed), "--res", args.res, "--sampler", sampler]
     if args.max_depth:
         cmd += ["--max-depth", str(args.max_depth)]
+    cmd += args.strata_args.split()
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return load(out)
+    img = load(out)
+    if args.crop:
+        x0, y0, x1, y1 = (int(v) for v in args.crop.split(","))
+        img = img[y0:y1, x0:x1]
+    return img
 
 
 def two_seed(a, b, spp):
@@ -106,6 +116,9 @@ def main():
     parser.add_argument("--cycles", action="store_true", help="Cycles too (scene matte only)")
     parser.add_argument("--csv", default=None)
     parser.add_argument("--svg", default=None)
+    parser.add_argument("--crop", default=None, help="X0,Y0,X1,Y1: measure this pixel region only (strata)")
+    parser.add_argument("--pairs", type=int, default=1, help="seed pairs to average over (strata)")
+    parser.add_argument("--strata-args", default="", help="extra arguments of `strata render`")
     args = parser.parse_args()
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     ladder = [int(s) for s in args.spp.split(",")]
@@ -124,16 +137,20 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         for sampler in args.samplers.split(","):
             for spp in ladder:
-                a = render(args, sampler, spp, 1, os.path.join(tmp, "a.exr"))
-                b = render(args, sampler, spp, 2, os.path.join(tmp, "b.exr"))
-                rows[(f"strata {sampler}", spp)] = two_seed(a, b, spp)
+                total = 0.0
+                for k in range(args.pairs):
+                    a = render(args, sampler, spp, 2 * k + 1, os.path.join(tmp, "a.exr"))
+                    b = render(args, sampler, spp, 2 * k + 2, os.path.join(tmp, "b.exr"))
+                    total += two_seed(a, b, spp)
+                rows[(f"strata {sampler}", spp)] = total / args.pairs
         if args.mitsuba:
             versions.append(mitsuba_rows(args, ladder, res, rows))
         if args.cycles:
             versions.append(cycles_rows(args, ladder, res, rows, tmp))
     names = list(dict.fromkeys(name for name, _ in rows))
-    title = (f"variance per spp (two-seed method), scene {args.scene or '(embedded default)'}, {args.res}"
-             + (f", --max-depth {args.max_depth}" if args.max_depth else ""))
+    title = (f"variance per spp (two-seed method, {args.pairs} pair(s)), scene {args.scene or '(embedded default)'}, {args.res}"
+             + (f", --max-depth {args.max_depth}" if args.max_depth else "")
+             + (f", pixels {args.crop}" if args.crop else ""))
     print(f"{title}; {', '.join(versions)}")
     print("| spp | " + " | ".join(names) + " |")
     print("|---" * (len(names) + 1) + "|")

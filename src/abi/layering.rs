@@ -159,6 +159,31 @@ pub fn combine_relief(layers: &[LayerInfo], heights: &[f32], masks: &[f32], part
     d
 }
 
+/// Most layers that can be picked for which [`prefers_weighted`] chooses weighted evaluation.
+///
+/// Measured with `strata bench render` (noise-masked layer stacks, 64x64, 16 spp, one thread,
+/// Sobol sampler; equal-error cost = time per sample × RMSE², stochastic over weighted; two
+/// runs on a loaded machine): 2.06x / 1.41x at 2 layers, 2.27x / 1.94x at 4, 1.53x / 1.33x at
+/// 8, 0.71x / 0.84x at 16 — weighted evaluation removes the pick's noise (the RMSE ratio is
+/// 1.2–1.4x) for a cost that grows with every layer it evaluates. The crossover lies between
+/// 8 and 16.
+pub const WEIGHTED_MAX_LAYERS: usize = 8;
+
+/// The automatic choice of layer evaluation for a material (`LayerMode::Auto`): weighted
+/// evaluation when 2 to [`WEIGHTED_MAX_LAYERS`] of its layers can be picked ([`liveness`]:
+/// with a surface, a mask not 0 at compile time, not hidden under an opaque layer), stochastic
+/// picking otherwise. With one pickable layer the two do the same work; with more than the
+/// bound, evaluating every surface costs more than the pick's noise. Both are unbiased, so the
+/// choice changes noise and time, never the expected image.
+pub fn prefers_weighted(layers: &[LayerInfo]) -> bool {
+    (2..=WEIGHTED_MAX_LAYERS).contains(&pickable_count(layers))
+}
+
+/// How many layers can ever be picked, from compile-time facts ([`liveness`]).
+pub fn pickable_count(layers: &[LayerInfo]) -> usize {
+    liveness(layers).iter().filter(|l| l.unpickable.is_none()).count()
+}
+
 /// Why a layer can never be picked.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Unpickable {
@@ -310,6 +335,24 @@ mod tests {
         assert_eq!(combine_displacement(&layers, &[1.0, f32::INFINITY, 4.0], &[0.0, 0.0, 0.0]), 1.0);
         // NaN masks count as 0.
         assert_eq!(combine_displacement(&layers, &h, &[f32::NAN, f32::NAN, f32::NAN]), 1.0);
+    }
+
+    #[test]
+    fn weighted_is_preferred_for_two_to_eight_pickable_layers() {
+        let varying = |n: usize| vec![layer(true, None, None); n];
+        assert!(!prefers_weighted(&varying(1)));
+        assert!(prefers_weighted(&varying(2)));
+        assert!(prefers_weighted(&varying(WEIGHTED_MAX_LAYERS)));
+        assert!(!prefers_weighted(&varying(WEIGHTED_MAX_LAYERS + 1)));
+        // Layers that can never be picked do not count: surfaceless, mask 0, hidden below an
+        // opaque layer.
+        let mut layers = varying(1);
+        layers.push(layer(false, Some(D::Add), None));
+        layers.push(layer(true, None, Some(0.0)));
+        assert!(!prefers_weighted(&layers));
+        let hidden = [layer(true, None, None), layer(true, None, None), layer(true, None, Some(1.0))];
+        assert!(!prefers_weighted(&hidden));
+        assert!(prefers_weighted(&hidden[1..].iter().cloned().chain([layer(true, None, None)]).collect::<Vec<_>>()));
     }
 
     #[test]

@@ -39,7 +39,7 @@ pub struct BsdfSample {
 
 /// A BSDF built from a compiled shader's closure value. Small, Copy, no allocation; every
 /// parameter is already sanitised, so the hot-path methods never see NaN or out-of-range values.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Bsdf {
     /// Absorbs everything (`ClosureKind::None`).
     Black,
@@ -278,6 +278,27 @@ impl Bsdf {
                 let fav = hemispherical_average(|mu| fresnel_dielectric(mu, eta));
                 Vec3::splat(fav) + (1.0 - fav) * tint
             }
+        }
+    }
+
+    /// Whether the BSDF has a non-delta lobe that transmits (rough glass): light sampling at
+    /// such a vertex must cover both sides of the surface, not only the side of `wo`.
+    pub fn transmits(&self) -> bool {
+        matches!(*self, Bsdf::Glass { ggx, eta, .. } if !glass_smooth(ggx, eta))
+    }
+
+    /// The radiance compression `η'²` a sampled direction `wi` went through (η' = transmitted
+    /// over incident index; 1 for reflection and for every lobe but glass's transmission):
+    /// the factor by which `f` of a transmitted direction is scaled down (see the module
+    /// conventions). Russian roulette multiplies it back so that a path inside glass is not
+    /// played for its compressed throughput (Mitsuba 3's `path` integrator does the same).
+    pub fn compression(&self, wo: Vec3, wi: Vec3) -> f32 {
+        match *self {
+            Bsdf::Glass { eta, .. } if wo.z * wi.z < 0.0 => {
+                let etap = if wo.z > 0.0 { eta } else { 1.0 / eta };
+                etap * etap
+            }
+            _ => 1.0,
         }
     }
 
@@ -687,7 +708,7 @@ mod tests {
             let uc = rng.f32();
             let u = rng.vec2();
             if let Some(s) = b.sample(wo, uc, u) {
-                let w = (s.f.max_element() * s.wi.z.abs() / s.pdf) as f64 * compression(b, wo, s.wi);
+                let w = (s.f.max_element() * s.wi.z.abs() / s.pdf * b.compression(wo, s.wi)) as f64;
                 for (k, sum) in sums.iter_mut().enumerate() {
                     if k == 0 || !s.delta {
                         sum[0] += w;
@@ -703,20 +724,12 @@ mod tests {
         })
     }
 
-    /// η² for a direction transmitted through glass (undoing the radiance compression), else 1.
-    fn compression(b: &Bsdf, wo: Vec3, wi: Vec3) -> f64 {
-        match *b {
-            Bsdf::Glass { eta, .. } if wi.z * wo.z < 0.0 => (if wo.z > 0.0 { eta } else { 1.0 / eta } as f64).powi(2),
-            _ => 1.0,
-        }
-    }
-
     /// The same balance by deterministic quadrature of `eval` (not of anything `sample`
     /// produces): ∫ f |cos θi| dω on the χ² grid graded around the lobe centres. Delta lobes are
     /// invisible to it.
     fn quadrature(b: &Bsdf, wo: Vec3) -> f64 {
         let case = Case { name: String::new(), bsdf: *b, wo };
-        let f = |wi: Vec3| (b.eval(wo, wi).max_element() as f64 * wi.z.abs() as f64 * compression(b, wo, wi)) as f32;
+        let f = |wi: Vec3| b.eval(wo, wi).max_element() * wi.z.abs() * b.compression(wo, wi);
         sphere_integral(f, &centres(&case))
     }
 
@@ -895,6 +908,37 @@ mod tests {
 
     fn close(a: Vec3, b: Vec3, rel: f32) -> bool {
         (a - b).abs().max_element() <= rel * a.abs().max(b.abs()).max_element() + 1e-6
+    }
+
+    /// A lossless glass's sampled weight `f |cos| / pdf` times [`Bsdf::compression`] is the
+    /// single-scattering masking `G2/G1 ≤ 1` (exactly 1 when smooth), on both sides: what Russian
+    /// roulette plays for. Without the factor, light leaving the medium would weigh η² = 2.25.
+    #[test]
+    fn compression_undoes_the_radiance_scaling_of_transmission() {
+        let mut rng = Pcg32::new(13, 5);
+        for r in [0.0f32, 0.2, 0.7] {
+            let b = glass(1.0, r, 1.5);
+            for wo in [dir(0.6, 0.3), dir(-0.6, 0.3), dir(-0.95, 1.0)] {
+                let mut transmitted = 0;
+                for _ in 0..2000 {
+                    let Some(s) = b.sample(wo, rng.f32(), rng.vec2()) else { continue };
+                    let c = b.compression(wo, s.wi);
+                    let w = s.f.max_element() * s.wi.z.abs() / s.pdf * c;
+                    assert!(w <= 1.0 + 1e-4 && (r > 0.0 || (w - 1.0).abs() < 1e-4), "r={r} wo={wo}: {w}");
+                    if s.wi.z * wo.z < 0.0 {
+                        transmitted += 1;
+                        let want = if wo.z > 0.0 { 2.25 } else { 1.0 / 2.25 };
+                        assert!((c - want).abs() < 1e-6, "r={r} wo={wo}: compression {c}");
+                    } else {
+                        assert_eq!(c, 1.0);
+                    }
+                }
+                // Beyond the critical angle (cos 0.745 inside) a smooth interface reflects all.
+                let total_internal = wo.z < 0.0 && wo.z > -(1.0 - 1.0 / 2.25f32).sqrt();
+                assert!(transmitted > 100 || total_internal, "r={r} wo={wo}: {transmitted} transmissions");
+            }
+        }
+        assert_eq!(diffuse(0.5).compression(Vec3::Z, -Vec3::Z), 1.0);
     }
 
     #[test]

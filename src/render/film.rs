@@ -49,7 +49,7 @@ impl Default for RenderSettings {
             seed: 0,
             threads: None,
             max_depth: 8,
-            mode: LayerMode::Stochastic,
+            mode: LayerMode::Auto,
             sampler: SamplerKind::default(),
         }
     }
@@ -126,6 +126,28 @@ pub struct RenderStats {
     /// For each kind of shader fault that happened, where it first happened (in pixel order,
     /// so the same whatever the thread count).
     pub first_faults: Vec<FaultReport>,
+    /// How each material's layers were evaluated, in material order.
+    pub layer_modes: Vec<MaterialLayerMode>,
+}
+
+/// The layer evaluation one material got (`strata render --stats` prints one line each).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MaterialLayerMode {
+    /// The material's name (its index when the scene has no names).
+    pub material: String,
+    /// Layers that can be picked ([`crate::layering::liveness`]).
+    pub pickable: usize,
+    /// The evaluation used (never `Auto`).
+    pub mode: LayerMode,
+    /// Whether the automatic rule chose it ([`LayerMode::Auto`]) rather than an override.
+    pub automatic: bool,
+}
+
+impl fmt::Display for MaterialLayerMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let why = if self.automatic { "auto" } else { "as set" };
+        write!(f, "layers: {}: {} pickable, {} ({why})", self.material, self.pickable, self.mode.name())
+    }
 }
 
 /// A kind of shader fault that discards a sample.
@@ -197,7 +219,8 @@ struct RowFault {
 }
 
 impl RenderStats {
-    /// The shader calls of the render per camera sample, one line for `strata render --stats`.
+    /// The shader calls of the render per camera sample, one line for `strata render --stats`,
+    /// then one line per material with more than one layer: how its layers were evaluated.
     pub fn evals_line(&self) -> String {
         let e = &self.evals;
         let per = |n: u64| n as f64 / self.samples.max(1) as f64;
@@ -212,7 +235,7 @@ impl RenderStats {
             per(e.normals),
             per(e.channels),
             per(e.emissions)
-        )
+        ) + &self.layer_modes.iter().filter(|m| m.pickable > 1).map(|m| format!("\n{m}")).collect::<String>()
     }
 
     /// Samples thrown away for any reason.
@@ -417,7 +440,9 @@ pub fn render(
         .map_err(RenderError::BadSettings)?;
     let camera = scene.camera.with_aspect(w as f32 / h as f32);
     let primvar_slots = super::integrator::primvar_slots(scene, materials);
+    let layer_modes: Vec<LayerMode> = materials.iter().map(|m| settings.mode.resolve(*m)).collect();
     let ctx = Context {
+        layer_modes: &layer_modes,
         scene,
         materials,
         channel_map: &channel_map,
@@ -582,7 +607,18 @@ pub fn render(
         None => run(),
     };
     // Assemble channels and stats in row order.
-    let mut stats = RenderStats { warnings, ..RenderStats::default() };
+    let layer_modes = materials
+        .iter()
+        .zip(&layer_modes)
+        .enumerate()
+        .map(|(k, (m, &mode))| MaterialLayerMode {
+            material: scene.material_names.get(k).cloned().unwrap_or_else(|| format!("#{k}")),
+            pickable: crate::layering::pickable_count(&m.info().layers),
+            mode,
+            automatic: settings.mode == LayerMode::Auto,
+        })
+        .collect();
+    let mut stats = RenderStats { warnings, layer_modes, ..RenderStats::default() };
     let n = w * h;
     let mut planes: Vec<Vec<f32>> = vec![Vec::with_capacity(n); BUILTIN_CHANNELS.len() + channel_floats];
     for (y, row) in rows.iter().enumerate() {

@@ -23,14 +23,40 @@ use crate::abi::{Closure, ClosureKind, Globals, MaterialCode, PrimvarValues, Sha
 use crate::layering::{self, Relief};
 use glam::{Vec2, Vec3};
 
-/// How layers are evaluated at a path vertex.
+/// How layers are evaluated at a path vertex. Both evaluations are unbiased: they render
+/// the same image in expectation and differ in noise and time.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum LayerMode {
     /// Pick one layer per vertex with probability equal to its weight (DESIGN.md rule 5).
-    #[default]
     Stochastic,
-    /// Evaluate every layer, weighted (reference and benchmark mode).
+    /// Evaluate every layer, weighted.
     Weighted,
+    /// Per material, whichever of the two costs less for equal error by
+    /// [`layering::prefers_weighted`] (weighted for 2 to 8 pickable layers); the explicit
+    /// modes above override it for every material.
+    #[default]
+    Auto,
+}
+
+impl LayerMode {
+    /// The mode `material` is rendered with: `self`, or for [`LayerMode::Auto`] the rule's
+    /// choice. Never `Auto`.
+    pub fn resolve(self, material: &dyn MaterialCode) -> LayerMode {
+        match self {
+            LayerMode::Auto if layering::prefers_weighted(&material.info().layers) => LayerMode::Weighted,
+            LayerMode::Auto => LayerMode::Stochastic,
+            mode => mode,
+        }
+    }
+
+    /// Lower-case name, as `--stats` and the EXR header print it.
+    pub fn name(self) -> &'static str {
+        match self {
+            LayerMode::Stochastic => "stochastic",
+            LayerMode::Weighted => "weighted",
+            LayerMode::Auto => "auto",
+        }
+    }
 }
 
 /// Most transparent surfaces one ray passes straight through before it is absorbed.
@@ -43,7 +69,8 @@ pub struct PathParams {
     pub max_depth: u32,
     /// Bounces before Russian roulette starts.
     pub rr_depth: u32,
-    /// Layer evaluation mode.
+    /// Layer evaluation mode as requested ([`Context::layer_modes`] holds what each
+    /// material gets).
     pub mode: LayerMode,
 }
 
@@ -105,6 +132,9 @@ pub(crate) struct LobeSample {
     pub(crate) weight: Vec3,
     /// The mixture's solid-angle pdf for MIS, `None` after a delta lobe.
     pub(crate) pdf: Option<f32>,
+    /// The radiance compression `η'²` of the sampled lobe's refraction (1 for reflection):
+    /// see [`Bsdf::compression`].
+    pub(crate) compression: f32,
 }
 
 /// Samples the lobes of a shading point (weights summing to 1): picks lobe `k` with
@@ -124,20 +154,22 @@ pub(crate) fn sample_lobes(lobes: &[Lobe], wo: Vec3, uc: f32, u: glam::Vec2) -> 
     }
     let lobe = &lobes[k];
     let uc_lobe = if lobe.weight > 0.0 { ((uc - start) / lobe.weight).clamp(0.0, 0.999_999_94) } else { 0.0 };
-    let bs = lobe.bsdf.sample(lobe.frame.to_local(wo), uc_lobe, u)?;
+    let wo_local = lobe.frame.to_local(wo);
+    let bs = lobe.bsdf.sample(wo_local, uc_lobe, u)?;
     let wi = lobe.frame.to_world(bs.wi).normalize();
+    let compression = lobe.bsdf.compression(wo_local, bs.wi);
     if bs.delta || lobes.len() == 1 {
         if bs.pdf.is_nan() || bs.pdf <= 0.0 {
             return None;
         }
         let pdf = if bs.delta { None } else { Some(bs.pdf) };
-        return Some(LobeSample { wi, weight: bs.f * (bs.wi.z.abs() / bs.pdf), pdf });
+        return Some(LobeSample { wi, weight: bs.f * (bs.wi.z.abs() / bs.pdf), pdf, compression });
     }
     let (f, pdf) = Context::eval_lobes(lobes, wo, wi);
     if pdf.is_nan() || pdf <= 0.0 {
         return None;
     }
-    Some(LobeSample { wi, weight: f / pdf, pdf: Some(pdf) })
+    Some(LobeSample { wi, weight: f / pdf, pdf: Some(pdf), compression })
 }
 
 /// Shader entry points the integrator called, counted per thread in [`Scratch::counts`] (plain
@@ -193,6 +225,8 @@ pub struct Scratch {
     /// Radiance the last [`Context::shade`] found emitted towards the ray (zero unless the
     /// picked layer emits and the ray hit the front).
     emitted: Vec3,
+    /// The last BSDF whose albedo the AOV took, and that albedo.
+    albedo_memo: Option<(Bsdf, Vec3)>,
     /// Where the last shader ran: read after a sample fails.
     pub site: FaultSite,
     /// Entry points called so far on this thread (the film resets and collects it per row).
@@ -216,6 +250,7 @@ impl Scratch {
             primvars: vec![0.0; primvar_floats],
             channels: vec![0.0; global_channels],
             emitted: Vec3::ZERO,
+            albedo_memo: None,
             site: FaultSite::default(),
             counts: EvalCounts::default(),
         }
@@ -248,6 +283,9 @@ pub struct Context<'a> {
     pub channel_map: &'a ChannelMap,
     /// Parameters.
     pub params: PathParams,
+    /// Per material, the layer evaluation it gets (`params.mode` resolved by
+    /// [`LayerMode::resolve`]; never `Auto`).
+    pub layer_modes: &'a [LayerMode],
     /// Whether every material has a layer whose mask is 1 at compile time: then no surface
     /// lets light through and shadow rays can stop at their first hit, in any order.
     pub all_opaque: bool,
@@ -370,8 +408,8 @@ impl Context<'_> {
         let front = sp.ng.dot(d) < 0.0;
         // Rule 5 (`layering`). Stochastic: walk down from the top, evaluating masks only until
         // a layer is picked. Weighted: every mask, every layer.
-        let picked = match self.params.mode {
-            LayerMode::Stochastic => {
+        let picked = match self.layer_modes[sp.material] {
+            LayerMode::Stochastic | LayerMode::Auto => {
                 let counts = &mut s.counts;
                 // A mask known at compile time (an opaque layer's 1, a constant) is not a
                 // shader call: a scene without varying masks pays nothing for transparency.
@@ -425,10 +463,10 @@ impl Context<'_> {
             let weighting = info.layers.iter().filter(|l| l.displacement.is_some() && l.mask_weights_displacement());
             s.counts.displacements += 3;
             s.counts.displacement_masks += 3 * weighting.count() as u64;
+            let step = bump_step(sp.p, footprint);
+            let bumped = bump(material, &g, relief, step, &mut s.masks_du, &mut s.masks_dv, &mut s.disp)?;
+            g.n = to_arr(bumped);
         }
-        let step = bump_step(sp.p, footprint);
-        let bumped = bump(material, &g, relief, step, &mut s.masks_du, &mut s.masks_dv, &mut s.disp)?;
-        g.n = to_arr(bumped);
         s.lobes.clear();
         match picked {
             Some(i) => {
@@ -454,17 +492,26 @@ impl Context<'_> {
         let mut albedo = Vec3::ZERO;
         let mut normal = Vec3::ZERO;
         if first {
-            // The AOVs are the first visible hit's; `albedo()` integrates a Fresnel term, so
-            // later bounces skip it.
+            // The AOVs are the first visible hit's; `albedo()` integrates a Fresnel term (8
+            // to 24 Fresnel evaluations), so later bounces skip it, and a pixel's samples that
+            // meet the same closure (a material with constant parameters) compute it once.
+            // (`trace` has cleared `s.channels`.)
             let mut best = -1.0;
             for lobe in &s.lobes {
-                albedo += lobe.bsdf.albedo() * lobe.weight;
+                let a = match s.albedo_memo {
+                    Some((bsdf, a)) if bsdf == lobe.bsdf => a,
+                    _ => {
+                        let a = lobe.bsdf.albedo();
+                        s.albedo_memo = Some((lobe.bsdf, a));
+                        a
+                    }
+                };
+                albedo += a * lobe.weight;
                 if lobe.weight > best {
                     best = lobe.weight;
                     normal = lobe.frame.n;
                 }
             }
-            s.channels.iter_mut().for_each(|c| *c = 0.0);
             let map = &self.channel_map[sp.material];
             if !map.is_empty() {
                 // Integer channels are never blended (rule 7): weighted evaluation takes them
@@ -618,7 +665,7 @@ impl Context<'_> {
         let u = sampler.get2(Slot::LightPoint);
         let Some((pick, select_pdf)) = choice else { return Ok(Vec3::ZERO) };
         let ls = match self.scene.lights.get(pick) {
-            Some(light) => light.sample_li(p, facing(ng, wo), u),
+            Some(light) => light.sample_li(p, light_side(&s.lobes, ng, wo), u),
             None => {
                 let Some(emitter) = self.scene.emitters.list.get(pick - self.scene.lights.len()) else {
                     return Ok(Vec3::ZERO);
@@ -779,6 +826,9 @@ impl Context<'_> {
         // (pass-throughs and bounces alike): at a hit its width is `pixel_spread` times this
         // plus the hit distance.
         let mut cone_length = 0.0f32;
+        // The product of the radiance compressions `η'²` of the refractions so far: inside
+        // glass the throughput is 1/η² of what it will be once the path leaves again.
+        let mut compression = 1.0f32;
         let accel = &self.scene.accel;
         loop {
             let hit = accel.intersect(o, d, tmin, tmax);
@@ -846,7 +896,8 @@ impl Context<'_> {
             let Some(next) = sample_lobes(&s.lobes, wo, uc, u2) else { break };
             let wi = next.wi;
             throughput *= next.weight;
-            from = Scatter { p: sp.p, n: facing(sp.ng, wo), pdf: next.pdf };
+            compression *= next.compression;
+            from = Scatter { p: sp.p, n: light_side(&s.lobes, sp.ng, wo), pdf: next.pdf };
             if !throughput.is_finite() {
                 // Reported by the caller as a non-finite sample.
                 out.radiance = Vec3::NAN;
@@ -859,7 +910,9 @@ impl Context<'_> {
             vertex_passes = 0;
             sampler.set_vertex(bounces);
             if bounces >= self.params.rr_depth {
-                let p = throughput.max_element().min(0.95);
+                // Played for the throughput the path will have outside the medium, so a path
+                // is not killed (and its survivors boosted) for the 1/η² of being inside.
+                let p = (throughput.max_element() * compression).min(0.95);
                 if sampler.get1(Slot::Roulette) >= p {
                     break;
                 }
@@ -1040,6 +1093,14 @@ pub fn shading_state(material: &dyn MaterialCode, g: &Globals) -> Result<Shading
 /// `ng` turned to the side of `w`.
 fn facing(ng: Vec3, w: Vec3) -> Vec3 {
     if ng.dot(w) >= 0.0 { ng } else { -ng }
+}
+
+/// The normal that light sampling at a vertex with `lobes` is given (see [`Light::sample_li`]):
+/// `ng` turned to `wo`'s side, or zero where a lobe transmits (rough glass), so that a
+/// constant dome is sampled over the whole sphere and light through the surface gets its
+/// share of next-event estimation, MIS-weighted against the transmission lobe.
+fn light_side(lobes: &[Lobe], ng: Vec3, wo: Vec3) -> Vec3 {
+    if lobes.iter().any(|l| l.bsdf.transmits()) { Vec3::ZERO } else { facing(ng, wo) }
 }
 
 /// The path vertex that chose the current ray direction (pbrt-v4's previous interaction).

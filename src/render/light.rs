@@ -218,8 +218,8 @@ impl Light {
     /// side of the surface at `p` that the light can reach (the side of the outgoing
     /// direction), or zero where there is none: a constant dome is then sampled
     /// cosine-weighted over that hemisphere instead of uniformly over the sphere, so no sample
-    /// is spent below the surface. (Light through the surface, for transmission, is left to
-    /// BSDF sampling, which MIS weights fully where this pdf is zero.)
+    /// is spent below the surface. (Where the BSDF transmits, the integrator passes zero, so
+    /// light through the surface is sampled too; see `integrator::light_side`.)
     pub fn sample_li(&self, p: Vec3, n: Vec3, u: Vec2) -> Option<LightSample> {
         let s = match &self.kind {
             LightKind::Dome { radiance, map, to_world, .. } => match map {

@@ -42,7 +42,8 @@ mod reference;
 mod tests;
 
 pub use film::{
-    Channel, ChannelData, FaultKind, FaultReport, Image, Progress, RenderError, RenderSettings, RenderStats, render,
+    Channel, ChannelData, FaultKind, FaultReport, Image, MaterialLayerMode, Progress, RenderError, RenderSettings,
+    RenderStats, render,
 };
 pub use integrator::LayerMode;
 pub use output::{ExrOptions, OutputError, PreparedOutputs, prepare_outputs, write_exr, write_outputs, write_png};

@@ -142,6 +142,18 @@ fn transparency_shows_the_dome_through_a_masked_layer() {
     assert_mean_within(&image, "A", 0.3, pick_standard_error(0.3, 1.0, 0.0, samples));
 }
 
+/// An opaque grey base under masks 0.6 (red) and 0.25 (blue).
+fn three_diffuse_layers() -> ConstMaterial {
+    ConstMaterial::new(
+        vec![
+            ConstLayer::diffuse(1.0, [0.8, 0.8, 0.8]),
+            ConstLayer::diffuse(0.6, [0.9, 0.2, 0.1]),
+            ConstLayer::diffuse(0.25, [0.1, 0.3, 0.9]),
+        ],
+        &[],
+    )
+}
+
 #[test]
 fn stochastic_and_weighted_evaluation_agree() {
     let scene = plane_scene(
@@ -150,14 +162,7 @@ def Sphere "Ball" { double radius = 0.3  double3 xformOp:translate = (0, 0.3, 0)
 def DistantLight "Sun" { float inputs:intensity = 2  float inputs:angle = 5  bool inputs:normalize = 1
     float3 xformOp:rotateXYZ = (-40, 20, 0)  uniform token[] xformOpOrder = ["xformOp:rotateXYZ"] }"#,
     );
-    let material = ConstMaterial::new(
-        vec![
-            ConstLayer::diffuse(1.0, [0.8, 0.8, 0.8]),
-            ConstLayer::diffuse(0.6, [0.9, 0.2, 0.1]),
-            ConstLayer::diffuse(0.25, [0.1, 0.3, 0.9]),
-        ],
-        &[],
-    );
+    let material = three_diffuse_layers();
     let mut s = pick_settings();
     let (stochastic, _) = run(&scene, &material, &s);
     s.mode = LayerMode::Weighted;
@@ -175,6 +180,28 @@ def DistantLight "Sun" { float inputs:intensity = 2  float inputs:angle = 5  boo
         let level = f64::from(mean(&weighted, name));
         assert!(bound < 0.005 * level, "{name}: the bound {bound} is too loose to see a 2 % bias of {level}");
         assert!(mean_d.abs() < bound, "{name}: stochastic − weighted = {mean_d}, 5 se = {bound}");
+    }
+}
+
+/// `LayerMode::Auto` resolves per material (weighted for a 3-layer stack, stochastic for one
+/// layer), says so in the stats, and renders exactly what the forced mode renders; the two
+/// forced modes agree in expectation (`stochastic_and_weighted_evaluation_agree`).
+#[test]
+fn auto_layer_mode_chooses_per_material_and_reports_it() {
+    let scene = plane_scene(r#"def DomeLight "Sky" { float inputs:intensity = 0.5 }"#);
+    let stack = three_diffuse_layers();
+    let single = ConstMaterial::new(vec![ConstLayer::diffuse(1.0, [0.5, 0.5, 0.5])], &[]);
+    for (material, pickable, chosen) in [(&stack, 3, LayerMode::Weighted), (&single, 1, LayerMode::Stochastic)] {
+        let mut s = settings(4);
+        s.mode = LayerMode::Auto;
+        let (auto, stats) = run(&scene, material, &s);
+        let [m] = stats.layer_modes.as_slice() else { panic!("one material: {:?}", stats.layer_modes) };
+        assert_eq!((m.pickable, m.mode, m.automatic), (pickable, chosen, true));
+        assert_eq!(stats.evals_line().contains("(auto)"), pickable > 1, "{}", stats.evals_line());
+        s.mode = chosen;
+        let (forced, stats) = run(&scene, material, &s);
+        assert_eq!(auto, forced, "auto must render what {chosen:?} renders");
+        assert!(!stats.layer_modes[0].automatic);
     }
 }
 
