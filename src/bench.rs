@@ -10,7 +10,7 @@
 //!   stochastic vs weighted layer evaluation.
 
 use crate::abi::{Closure, ClosureKind, Globals, LayerInfo, MaterialCode, MaterialInfo, ShaderError};
-use crate::backend::{self, BackendKind, Compiler};
+use crate::backend::{self, BackendKind};
 use crate::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
 use crate::diag::{Diagnostics, SourceMap, Span};
 use crate::front::library::Library;
@@ -19,6 +19,7 @@ use crate::ir::wired::{self, PassOptions};
 use crate::plot::Series;
 use crate::render::{LayerMode, RenderSettings, Scene};
 use crate::runtime::{math, noise};
+use crate::session::{SceneSource, Session, SessionOptions};
 use std::fmt::Write as _;
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
@@ -550,13 +551,12 @@ fn shade_report(scene: Option<&Path>, prim: Option<&str>, o: &ShadeOptions) -> R
             (lib, material, "built-in benchmark material (3 layers: glossy, fbm-masked dirt, cellular metal)".into())
         }
         Some(path) => {
-            let mut sources = SourceMap::new();
-            let mut diags = Diagnostics::new();
-            let composition = crate::cli::compose_file(Some(path), &mut sources, &mut diags);
-            let composition = match composition {
-                Some(c) if !diags.has_errors() => c,
-                _ => return Err(diag_error(&format!("cannot compose {}", path.display()), &diags, &sources)),
-            };
+            let mut session = Session::open_default(SceneSource::File(path.to_path_buf()));
+            if session.composition().is_none() || session.diagnostics().has_errors() {
+                let message = format!("cannot compose {}", path.display());
+                return Err(diag_error(&message, session.diagnostics(), session.sources()));
+            }
+            let Some(composition) = session.into_composition() else { unreachable!("composed above") };
             let (prim, material) = match prim {
                 Some(p) => {
                     let m = composition
@@ -1031,33 +1031,20 @@ fn load_scene(path: &Path) -> Result<Loaded, String> {
 /// Loads a scene (`None`: the embedded default scene) and compiles it with `backend`.
 fn load_scene_with(path: Option<&Path>, backend: BackendKind) -> Result<Loaded, String> {
     let shown = path.map_or_else(|| "the default scene".to_string(), |p| p.display().to_string());
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let fail = |diags: &Diagnostics, sources: &SourceMap| diag_error(&format!("cannot load {shown}"), diags, sources);
-    let Some(stage) = crate::cli::open_scene(path, &mut sources, &mut diags) else {
-        return Err(fail(&diags, &sources));
+    let options = SessionOptions { backend, ..Default::default() };
+    let mut session = Session::open(SceneSource::from_path(path), options);
+    let fail =
+        |session: &Session| diag_error(&format!("cannot load {shown}"), session.diagnostics(), session.sources());
+    let max_layers = match session.composition() {
+        Some(c) => c.materials.iter().map(|m| m.layers.len()).max().unwrap_or(0),
+        None => return Err(fail(&session)),
     };
-    let composition = crate::compose::scene::compose_stage(&stage, &mut sources, &mut diags);
-    if diags.has_errors() {
-        return Err(fail(&diags, &sources));
-    }
-    let mut compiler = Compiler::new(backend, PassOptions::default());
-    let mut materials = Vec::new();
-    for m in &composition.materials {
-        match compiler.compile(&composition.library, m, &mut diags) {
-            Some(code) => materials.push(code),
-            None => return Err(fail(&diags, &sources)),
-        }
-    }
-    let max_layers = composition.materials.iter().map(|m| m.layers.len()).max().unwrap_or(0);
-    let by_prim: std::collections::HashMap<&str, usize> =
-        composition.stacks.iter().zip(&composition.prim_material).map(|(s, &m)| (s.prim.as_str(), m)).collect();
-    let lookup = |prim: &str| by_prim.get(prim).copied();
     // As `strata render` builds it: displaced surfaces diced (for a 640x480 image).
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
-    let scene =
-        Scene::build(&stage, &lookup, &refs, &Default::default(), &mut diags).ok_or_else(|| fail(&diags, &sources))?;
-    Ok(Loaded { scene, materials, max_layers })
+    if session.prepare(&Default::default()).is_none() || session.diagnostics().has_errors() {
+        return Err(fail(&session));
+    }
+    let Some((scene, compiled)) = session.into_scene() else { unreachable!("prepared above") };
+    Ok(Loaded { scene, materials: compiled.materials, max_layers })
 }
 
 /// Renders and returns (seconds, RGB pixels).
@@ -1380,14 +1367,14 @@ pub fn bench_scale() -> Result<String, String> {
     let path = write("grid.usda", &grid_mesh_scene(n))?;
     let before = peak_rss_mib();
     let start = Instant::now();
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let stage = crate::cli::open_scene(Some(&path), &mut sources, &mut diags)
-        .ok_or_else(|| diag_error("cannot load the grid", &diags, &sources))?;
+    let session = Session::open_default(SceneSource::File(path.clone()));
+    let stage =
+        session.stage().ok_or_else(|| diag_error("cannot load the grid", session.diagnostics(), session.sources()))?;
     let parse_ms = ms_since(start);
     let build_start = Instant::now();
-    let scene = Scene::from_stage(&stage, &|_| Some(0), &mut diags)
-        .ok_or_else(|| diag_error("cannot build the grid", &diags, &sources))?;
+    let mut diags = Diagnostics::new();
+    let scene = Scene::from_stage(stage, &|_| Some(0), &mut diags)
+        .ok_or_else(|| diag_error("cannot build the grid", &diags, session.sources()))?;
     let build_ms = ms_since(build_start);
     let triangles = scene.accel.triangle_count();
     let grown = (peak_rss_mib() - before).max(0.0);
@@ -2480,11 +2467,12 @@ pub fn bench_displacement(res: (usize, usize), spp: u32) -> Result<String, Strin
         rgb: Vec<[f32; 3]>,
     }
     let measure = |path: &Path, rate: Option<f32>, seed: u64| -> Result<Row, String> {
-        let mut sources = SourceMap::new();
-        let mut diags = Diagnostics::new();
-        let compiled =
-            crate::cli::compile_scene(Some(path), BackendKind::Jit, PassOptions::default(), &mut sources, &mut diags)
-                .ok_or_else(|| diag_error("cannot compile", &diags, &sources))?;
+        let mut session = Session::open_default(SceneSource::File(path.to_path_buf()));
+        session.compile();
+        let (Some(stage), Some(compiled)) = (session.stage(), session.compiled()) else {
+            return Err(diag_error("cannot compile", session.diagnostics(), session.sources()));
+        };
+        let (sources, mut diags) = (session.sources(), Diagnostics::new());
         let refs: Vec<&dyn MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
         let options = crate::render::scene::SceneOptions {
             dicing: crate::render::displace::DicingOptions {
@@ -2500,13 +2488,13 @@ pub fn bench_displacement(res: (usize, usize), spp: u32) -> Result<String, Strin
         for _ in 0..3 {
             let start = Instant::now();
             let built = match rate {
-                Some(_) => Scene::build(&compiled.stage, &lookup, &refs, &options, &mut diags),
-                None => Scene::from_stage_with(&compiled.stage, &lookup, &options, &mut diags),
+                Some(_) => Scene::build(stage, &lookup, &refs, &options, &mut diags),
+                None => Scene::from_stage_with(stage, &lookup, &options, &mut diags),
             };
             times.push(ms_since(start));
             scene = built;
         }
-        let scene = scene.ok_or_else(|| diag_error("cannot build", &diags, &sources))?;
+        let scene = scene.ok_or_else(|| diag_error("cannot build", &diags, sources))?;
         times.sort_by(f64::total_cmp);
         let loaded = Loaded { scene, materials: compiled.materials.clone(), max_layers: 1 };
         let (render_s, rgb) = render_rgb(&loaded, &settings(seed))?;

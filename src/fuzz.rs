@@ -409,7 +409,7 @@ pub fn execute(dir: &Path, corpus: &Corpus, which: usize, bytes: &[u8], k: u64, 
         }
         diags.render(&sources).len()
     } else {
-        let (diags, sources, summary) = crate::cli::check_file(&path);
+        let (diags, sources, summary) = crate::session::check_file(&path);
         let printed = diags.render(&sources).len() + summary.len();
         if entry.is_substance() {
             run_substances(bytes, k.is_multiple_of(8));
@@ -479,13 +479,12 @@ fn run_substances(text: &[u8], interp: bool) {
 }
 
 fn render_tiny(scene: &Path) {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let Some(compiled) =
-        crate::cli::compile_scene(Some(scene), BackendKind::Jit, PassOptions::default(), &mut sources, &mut diags)
-    else {
+    let mut session = crate::session::Session::open_default(crate::session::SceneSource::File(scene.to_path_buf()));
+    session.compile();
+    let (Some(stage), Some(compiled)) = (session.stage(), session.compiled()) else {
         return;
     };
+    let mut diags = Diagnostics::new();
     let materials: Vec<&dyn crate::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
     // Displaced surfaces are diced as for a 4x4 image, under a small budget.
     let options = crate::render::scene::SceneOptions {
@@ -493,7 +492,7 @@ fn render_tiny(scene: &Path) {
         ..Default::default()
     };
     let Some(scene) = crate::render::Scene::build(
-        &compiled.stage,
+        stage,
         &|p| compiled.prim_material.get(p).copied(),
         &materials,
         &options,

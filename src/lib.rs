@@ -14,6 +14,8 @@
 //! - [`render`]: the path tracer (geometry, BVH, lights, integrator, EXR output).
 //! - [`runtime`]: noise, patterns and math semantics shared by every backend.
 //! - [`scenes`]: the embedded default scene.
+//! - [`session`]: the pipeline's entry point: a scene opened, composed, compiled and built
+//!   for rendering, updated incrementally after a change.
 //! - [`stack`]: the compiler thread with a known stack size that the recursive passes run on.
 //! - [`bench`]: the measurements behind `strata bench shade` and `strata bench render`.
 //! - [`fuzz`]: `strata fuzz`, mutation fuzzing of both front ends in worker processes.
@@ -37,5 +39,6 @@ pub mod render;
 pub mod runtime;
 pub mod scene;
 pub mod scenes;
+pub mod session;
 pub mod stack;
 pub mod text;

@@ -5,12 +5,10 @@
 //! leaking through the plane where the objects touch it would brighten the contact shadows.
 
 use std::path::{Path, PathBuf};
-use strata::abi::MaterialCode;
 use strata::backend::BackendKind;
-use strata::cli::{CompiledScene, compile_scene};
-use strata::diag::{Diagnostics, SourceMap};
 use strata::ir::wired::PassOptions;
 use strata::render::{LayerMode, RenderSettings, Scene, render};
+use strata::session::{SceneSource, Session, SessionOptions};
 
 fn scene_text(scale: f64, offset: [f64; 3]) -> String {
     let [x, y, z] = offset;
@@ -73,15 +71,17 @@ def DomeLight "Sky"
 fn render_at(dir: &Path, scale: f64, offset: [f64; 3]) -> Vec<f32> {
     let path: PathBuf = dir.join(format!("scale_{scale}_{}.usda", offset[0]));
     std::fs::write(&path, scene_text(scale, offset)).unwrap();
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled =
-        compile_scene(Some(&path), BackendKind::Jit, PassOptions { optimize: true }, &mut sources, &mut diags)
-            .expect("compiles");
-    let CompiledScene { stage, materials, prim_material, .. } = compiled;
-    let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    let options =
+        SessionOptions { backend: BackendKind::Jit, passes: PassOptions { optimize: true }, ..Default::default() };
+    let mut session = Session::open(SceneSource::File(path.to_path_buf()), options);
+    session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
+    let mut diags = session.take_diagnostics();
+    let (stage, compiled, sources) =
+        (session.stage().expect("opened"), session.compiled().expect("compiled"), session.sources());
+    let scene =
+        Scene::from_stage(stage, &|p| compiled.prim_material.get(p).copied(), &mut diags).expect("scene builds");
+    assert!(!diags.has_errors(), "{}", diags.render(sources));
+    let refs = compiled.refs();
     let settings = RenderSettings {
         width: 80,
         height: 60,

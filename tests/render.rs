@@ -4,22 +4,22 @@
 
 use std::path::Path;
 use std::process::Command;
-use strata::abi::MaterialCode;
 use strata::backend::BackendKind;
-use strata::cli::{CompiledScene, compile_scene};
-use strata::diag::{Diagnostics, SourceMap};
 use strata::ir::wired::PassOptions;
 use strata::render::{Image, LayerMode, RenderSettings, Scene, render};
+use strata::session::{SceneSource, Session, SessionOptions};
 
 fn render_scene(path: Option<&str>, backend: BackendKind, optimize: bool, mode: LayerMode) -> Image {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled = compile_scene(path.map(Path::new), backend, PassOptions { optimize }, &mut sources, &mut diags)
-        .expect("compiles");
-    let CompiledScene { stage, materials, prim_material, .. } = compiled;
-    let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    let options = SessionOptions { backend, passes: PassOptions { optimize }, ..Default::default() };
+    let mut session = Session::open(SceneSource::from_path(path.map(Path::new)), options);
+    session.compile().expect("compiles");
+    let mut diags = session.take_diagnostics();
+    let (stage, compiled, sources) =
+        (session.stage().expect("opened"), session.compiled().expect("compiled"), session.sources());
+    let scene =
+        Scene::from_stage(stage, &|p| compiled.prim_material.get(p).copied(), &mut diags).expect("scene builds");
+    assert!(!diags.has_errors(), "{}", diags.render(sources));
+    let refs = compiled.refs();
     let settings = RenderSettings {
         width: 40,
         height: 30,

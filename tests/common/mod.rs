@@ -94,20 +94,20 @@ pub fn scene_file_with(
     optimize: bool,
     resolution: (usize, usize),
 ) -> (strata::render::Scene, Vec<Arc<dyn MaterialCode>>) {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled = strata::cli::compile_scene(Some(path), backend, PassOptions { optimize }, &mut sources, &mut diags)
-        .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    let strata::cli::CompiledScene { stage, materials, prim_material, .. } = compiled;
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    use strata::session::{SceneSource, Session, SessionOptions};
+    let options = SessionOptions { backend, passes: PassOptions { optimize }, ..Default::default() };
+    let mut session = Session::open(SceneSource::File(path.to_path_buf()), options);
+    session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
     let options = strata::render::scene::SceneOptions {
         dicing: strata::render::displace::DicingOptions { resolution, ..Default::default() },
         ..Default::default()
     };
-    let scene = strata::render::Scene::build(&stage, &|p| prim_material.get(p).copied(), &refs, &options, &mut diags)
-        .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    (scene, materials)
+    if session.prepare(&options).is_none() {
+        panic!("{}", session.diagnostics().render(session.sources()));
+    }
+    assert!(!session.diagnostics().has_errors(), "{}", session.diagnostics().render(session.sources()));
+    let (scene, compiled) = session.into_scene().expect("prepared");
+    (scene, compiled.materials)
 }
 
 /// Settings for a small stochastic test render on two threads.
