@@ -75,7 +75,8 @@ pub fn material_hash(material: &ComposedMaterial, library: &Library, files: &mut
     format!("{:?}", material.display).hash(&mut hasher);
     let mut reference = |r: &MaterialRef, hasher: &mut DefaultHasher| {
         r.path.hash(hasher);
-        format!("{:?}{:?}", r.values, r.span).hash(hasher);
+        // Not the span: a layer read again gets new file ids, and spans only locate messages.
+        format!("{:?}", r.values).hash(hasher);
         let index = r.graph.0 as usize;
         let graph = library.get(r.graph);
         graph.name.hash(hasher);
@@ -133,12 +134,32 @@ pub fn geometry_hash(stage: &Stage) -> u64 {
             attr.name.hash(&mut hasher);
             attr.type_name.hash(&mut hasher);
             let value = attr.value.as_ref().map(|(v, _)| v);
-            format!("{value:?}{}{:?}{:?}", attr.blocked, attr.time_samples, attr.metadata).hash(&mut hasher);
+            format!("{value:?}{}{:?}", attr.blocked, attr.time_samples).hash(&mut hasher);
+            for m in &attr.metadata {
+                format!("{}{:?}{:?}", m.key, m.op, m.value).hash(&mut hasher);
+            }
+            for (target, _) in &attr.connections {
+                target.hash(&mut hasher);
+            }
         }
         for rel in prim.relationships.iter().filter(|r| !r.name.starts_with("material:")) {
             rel.name.hash(&mut hasher);
-            format!("{:?}", rel.targets).hash(&mut hasher);
+            for (target, _) in &rel.targets {
+                target.hash(&mut hasher);
+            }
         }
     }
     hasher.finish()
+}
+
+/// Whether a prim outside material networks (a dome light's texture) names an asset for
+/// which `is_file` holds: the render scene reads it, so its change rebuilds the scene.
+pub fn names_asset_outside_materials(stage: &Stage, is_file: &dyn Fn(&Path) -> bool) -> bool {
+    stage.depth_first().any(|(id, prim)| {
+        !is_shading(stage, id)
+            && prim
+                .attributes
+                .iter()
+                .any(|a| a.value.as_ref().and_then(|(v, _)| v.as_asset()).is_some_and(|asset| is_file(&asset.resolved)))
+    })
 }

@@ -654,15 +654,9 @@ impl Session {
                     Err(e) => self.diags.push(Diagnostic::warning(e).kind("unreadable texture")),
                 }
                 // A dome map or other asset outside the materials is read by the scene build.
+                let file = canonical(path);
                 let named_by_scene = self.stage.as_ref().is_some_and(|stage| {
-                    stage.depth_first().any(|(_, prim)| {
-                        prim.attributes.iter().any(|a| {
-                            a.value
-                                .as_ref()
-                                .and_then(|(v, _)| v.as_asset())
-                                .is_some_and(|asset| canonical(&asset.resolved) == canonical(path))
-                        })
-                    })
+                    fingerprint::names_asset_outside_materials(stage, &|asset| canonical(asset) == file)
                 });
                 if named_by_scene && let Some(options) = self.prepared.as_ref().map(|p| p.options.clone()) {
                     report.geometry_rebuilt = true;
