@@ -9,29 +9,11 @@ use strata::render::{Image, RenderSettings};
 use strata::scene::Value;
 use strata::session::{Change, ChangeKind, Pass, SceneSource, Session, SessionOptions};
 
-/// The default scene written to `dir` with its substances split over two files: `dirt.ash`
-/// holds the dirt substance (and the node type only it uses), `default.ash` the others; an
-/// `unused.ash` sits beside them. Returns the scene's path.
+/// The default scene in `dir` with the dirt substance in `dirt.ash`, and an `unused.ash`
+/// beside it.
 fn split_default_scene(dir: &Path) -> PathBuf {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/default");
-    let ash = std::fs::read_to_string(root.join("default.ash")).unwrap();
-    let usda = std::fs::read_to_string(root.join("default.usda")).unwrap();
-    let cut = |from: &str, to: &str| {
-        let (a, b) = (ash.find(from).expect(from), ash.find(to).expect(to));
-        (a, b)
-    };
-    let (threshold, clay) = cut("shader threshold(", "substance clay");
-    let (dirt, red) = cut("substance dirt {", "override red_paint");
-    let dirt_text = format!("{}{}", &ash[threshold..clay], &ash[dirt..red]);
-    let rest = format!("{}{}{}", &ash[..threshold], &ash[clay..dirt], &ash[red..]);
-    std::fs::write(dir.join("dirt.ash"), dirt_text).unwrap();
-    std::fs::write(dir.join("default.ash"), rest).unwrap();
     std::fs::write(dir.join("unused.ash"), "substance unused { node d = diffuse(); surface = d.bsdf; }\n").unwrap();
-    let at = usda.find("def Material \"Dirt\"").unwrap();
-    let usda = format!("{}{}", &usda[..at], usda[at..].replacen("@default.ash@", "@dirt.ash@", 1));
-    let path = dir.join("default.usda");
-    std::fs::write(&path, usda).unwrap();
-    path
+    strata::session::write_split_default_scene(dir).unwrap()
 }
 
 fn settings() -> RenderSettings {

@@ -15,9 +15,11 @@
 //! Rendering never changes the session, so the same session renders the same pass to the
 //! same image, bit for bit, whatever was updated before.
 
+mod example;
 mod fingerprint;
 mod layers;
 
+pub use example::write_split_default_scene;
 pub use layers::{layers_json, layers_table};
 
 use crate::abi::MaterialCode;

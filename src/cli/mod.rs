@@ -1,16 +1,21 @@
-//! The subcommands behind `strata`: each parses nothing itself, drives the pipeline through a
-//! [`Session`], reports diagnostics to stderr and prints its result to stdout.
+//! The subcommands behind `strata` (the binary crate; `main.rs` parses the arguments): each
+//! drives the pipeline through the library's [`Session`], reports diagnostics to stderr and
+//! prints its result to stdout. [`bench`] and [`fuzz`] are the measurement and fuzzing
+//! subcommands; they use the library only, never this module.
 
-use crate::backend::{BackendKind, Compiler};
-use crate::diag::{Diagnostics, SourceMap};
-use crate::front::library::Library;
-use crate::ir::ssa::EntryKind;
-use crate::ir::wired::PassOptions;
-use crate::render::ExrOptions;
-use crate::scene::TimeCode;
-use crate::session::{Pass, SceneSource, Session, SessionOptions, layers_json, layers_table};
+pub mod bench;
+pub mod fuzz;
+
 use std::io::Write;
 use std::path::Path;
+use strata::backend::{BackendKind, Compiler};
+use strata::diag::{Diagnostics, SourceMap};
+use strata::front::library::Library;
+use strata::ir::ssa::EntryKind;
+use strata::ir::wired::PassOptions;
+use strata::render::ExrOptions;
+use strata::scene::TimeCode;
+use strata::session::{Pass, SceneSource, Session, SessionOptions, layers_json, layers_table};
 
 // `eprint!`/`eprintln!` panic when stderr is closed (`strata check … 2>&1 | head -1`). These
 // shadow them in this module: the text is lost, never the run, which ends with its own exit
@@ -100,7 +105,7 @@ pub fn ir(scene: &Path, prim: &str, optimize: bool, stats: bool, lowered: bool) 
 
 /// `strata check FILE [--time T] [--strict]`
 pub fn check(file: &Path, time: Option<TimeCode>, strict: bool) -> Result<(), Failure> {
-    let (mut diags, sources, summary) = crate::session::check_file_at(file, time);
+    let (mut diags, sources, summary) = strata::session::check_file_at(file, time);
     if strict {
         diags.make_warnings_errors();
     }
@@ -116,7 +121,7 @@ pub struct RenderArgs {
     /// The EXR to write; the PNG preview goes beside it.
     pub output: std::path::PathBuf,
     /// Image size, samples, seed, threads, depth and layer mode.
-    pub settings: crate::render::RenderSettings,
+    pub settings: strata::render::RenderSettings,
     /// Which backend runs the shaders.
     pub backend: BackendKind,
     /// Constant folding and layer pruning (off only to compare).
@@ -136,7 +141,7 @@ pub struct RenderArgs {
     /// `RenderSettings` prim's `resolution` replaces them.
     pub resolution_given: bool,
     /// Whether a stage without lights gets the default lights (`--no-default-lights`: never).
-    pub default_lights: crate::render::scene::DefaultLights,
+    pub default_lights: strata::render::scene::DefaultLights,
     /// Every warning is an error (`--strict`): nothing is rendered from a stage USD had to
     /// compose around.
     pub strict: bool,
@@ -154,7 +159,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
     }
     // Both outputs' temporaries are created before anything else: an unwritable directory,
     // or an `OUT.png` that is a directory, fails now rather than after the render.
-    let outputs = match crate::render::prepare_outputs(&args.output) {
+    let outputs = match strata::render::prepare_outputs(&args.output) {
         Ok(outputs) => outputs,
         Err(e) => {
             eprintln!("error: {e}");
@@ -178,10 +183,10 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         if let (false, Some((w, h))) = (args.resolution_given, view.resolution) {
             (settings.width, settings.height) = (w, h);
         }
-        let options = crate::render::scene::SceneOptions {
+        let options = strata::render::scene::SceneOptions {
             camera: view.camera,
-            geometry: crate::render::geometry::GeometryOptions { subdiv_level: args.subdiv_level },
-            dicing: crate::render::displace::DicingOptions {
+            geometry: strata::render::geometry::GeometryOptions { subdiv_level: args.subdiv_level },
+            dicing: strata::render::displace::DicingOptions {
                 rate: args.dicing_rate,
                 resolution: (settings.width, settings.height),
                 ..Default::default()
@@ -272,7 +277,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
 /// scene's texture (or any other input) would destroy it.
 fn refuse_to_overwrite_inputs(outputs: &[&Path]) -> Result<(), Failure> {
     for output in outputs {
-        if crate::input::was_read(output) {
+        if strata::input::was_read(output) {
             eprintln!("error: `{}` is an input of this run; refusing to overwrite it", output.display());
             return Err(Failure);
         }
@@ -295,15 +300,15 @@ fn samples_per_second(samples: u64, seconds: f64) -> String {
 /// warnings the run reported (a farm can reject an image made from a stage with problems).
 fn exr_options(
     args: &RenderArgs,
-    settings: &crate::render::RenderSettings,
-    scene: &crate::render::Scene,
+    settings: &strata::render::RenderSettings,
+    scene: &strata::render::Scene,
     warnings: usize,
     time: TimeCode,
 ) -> ExrOptions {
     let camera = scene.camera.with_aspect(settings.width as f32 / settings.height as f32);
     let mode = match settings.mode {
-        crate::render::LayerMode::Stochastic => "stochastic",
-        crate::render::LayerMode::Weighted => "weighted",
+        strata::render::LayerMode::Stochastic => "stochastic",
+        strata::render::LayerMode::Weighted => "weighted",
     };
     let scene_name = args.scene.as_ref().map_or("(embedded default scene)".to_string(), |p| p.display().to_string());
     ExrOptions {
@@ -329,12 +334,12 @@ fn exr_options(
             ("strata/time".into(), time.to_string()),
         ]
         .into_iter()
-        .chain(crate::render::cryptomatte::header_attributes(
-            crate::render::cryptomatte::OBJECT_LAYER,
+        .chain(strata::render::cryptomatte::header_attributes(
+            strata::render::cryptomatte::OBJECT_LAYER,
             scene.prims.iter().map(|p| p.path.as_str()),
         ))
-        .chain(crate::render::cryptomatte::header_attributes(
-            crate::render::cryptomatte::MATERIAL_LAYER,
+        .chain(strata::render::cryptomatte::header_attributes(
+            strata::render::cryptomatte::MATERIAL_LAYER,
             scene.material_names.iter().map(String::as_str),
         ))
         .collect(),
@@ -416,11 +421,11 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
         .iter()
         .enumerate()
         .filter(|(i, g)| {
-            g.kind == crate::front::ast::GraphKind::Substance
+            g.kind == strata::front::ast::GraphKind::Substance
                 && canonical.is_some()
                 && lib.graph_files.get(*i).and_then(|p| p.canonicalize().ok()) == canonical
         })
-        .map(|(i, g)| (crate::front::library::GraphId(i as u32), g.name.clone()))
+        .map(|(i, g)| (strata::front::library::GraphId(i as u32), g.name.clone()))
         .collect();
     if substances.is_empty() {
         eprintln!("error: {} declares no substance", file.display());
@@ -429,10 +434,10 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
     let mut compiler = Compiler::new(BackendKind::Jit, PassOptions::default());
     let mut modules = Vec::new();
     for (graph, name) in &substances {
-        let material = crate::compose::ComposedMaterial {
-            layers: vec![crate::compose::ComposedLayer {
-                slot: crate::compose::Slot::parse("000").expect("a valid slot name"),
-                substance: crate::compose::MaterialRef {
+        let material = strata::compose::ComposedMaterial {
+            layers: vec![strata::compose::ComposedLayer {
+                slot: strata::compose::Slot::parse("000").expect("a valid slot name"),
+                substance: strata::compose::MaterialRef {
                     path: String::new(),
                     graph: *graph,
                     values: Vec::new(),
@@ -466,7 +471,7 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
             // A mask known at compile time needs no code: define it in the header.
             header += &format!(
                 "static inline uint32_t {name}_mask(const StrataGlobals *g, float *out) {{ (void)g; *out = {}f; return 0; }}\n",
-                crate::front::types::format_f32(m)
+                strata::front::types::format_f32(m)
             );
         }
         for f in &module.functions {
@@ -488,7 +493,7 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
             functions.push((symbol, f));
         }
     }
-    let object = match crate::backend::object::compile(&file.display().to_string(), &functions) {
+    let object = match strata::backend::object::compile(&file.display().to_string(), &functions) {
         Ok(bytes) => bytes,
         Err(e) => {
             eprintln!("error: code generation failed: {e}");
@@ -515,13 +520,13 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
 
 /// Writes a file whole or not at all: a fsynced temporary file beside it, then a rename.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    crate::render::output::write_file_atomically(path, bytes).map_err(|e| std::io::Error::other(e.message))
+    strata::render::output::write_file_atomically(path, bytes).map_err(|e| std::io::Error::other(e.message))
 }
 
 /// `strata fuzz`: runs the fuzzer and prints its report; fails if any input failed.
-pub fn fuzz(options: &crate::fuzz::FuzzOptions) -> Result<(), Failure> {
+pub fn fuzz(options: &fuzz::FuzzOptions) -> Result<(), Failure> {
     let start = std::time::Instant::now();
-    let report = match crate::fuzz::run(options, &mut |line| eprintln!("{line}")) {
+    let report = match fuzz::run(options, &mut |line| eprintln!("{line}")) {
         Ok(report) => report,
         Err(e) => {
             eprintln!("error: fuzzing failed: {e}");

@@ -9,22 +9,25 @@
 //! - [`bench_render`]: time per sample and error against a high-spp reference for 1–16 layers,
 //!   stochastic vs weighted layer evaluation.
 
-use crate::abi::{Closure, ClosureKind, Globals, LayerInfo, MaterialCode, MaterialInfo, ShaderError};
-use crate::backend::{self, BackendKind};
-use crate::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
-use crate::diag::{Diagnostics, SourceMap, Span};
-use crate::front::library::Library;
-use crate::ir::lower;
-use crate::ir::wired::{self, PassOptions};
-use crate::plot::Series;
-use crate::render::{LayerMode, RenderSettings, Scene};
-use crate::runtime::{math, noise};
-use crate::session::{SceneSource, Session, SessionOptions};
 use std::fmt::Write as _;
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
+use strata::abi::{Closure, ClosureKind, Globals, LayerInfo, MaterialCode, MaterialInfo, ShaderError};
+use strata::backend::{self, BackendKind};
+use strata::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
+use strata::diag::{Diagnostics, SourceMap, Span};
+use strata::front::library::Library;
+use strata::ir::lower;
+use strata::ir::wired::{self, PassOptions};
+use strata::plot::Series;
+use strata::render::{LayerMode, RenderSettings, Scene};
+use strata::runtime::{math, noise};
+use strata::session::{SceneSource, Session, SessionOptions};
+
+mod update;
+pub use update::bench_update;
 
 /// The built-in benchmark material: three substances, composed bottom to top in this order.
 pub const BENCH_SOURCE: &str = r#"// strata's built-in shading benchmark: three layers.
@@ -504,7 +507,7 @@ fn single_layer_stack(lib: &Library, names: &[&str]) -> Result<ComposedMaterial,
 }
 
 /// Wires, optimises and lowers a composed material.
-fn lower_material(lib: &Library, material: &ComposedMaterial) -> Result<(crate::ir::ssa::Module, usize), String> {
+fn lower_material(lib: &Library, material: &ComposedMaterial) -> Result<(strata::ir::ssa::Module, usize), String> {
     lower_material_with(lib, material, lower::LowerOptions::default())
 }
 
@@ -513,7 +516,7 @@ fn lower_material_with(
     lib: &Library,
     material: &ComposedMaterial,
     options: lower::LowerOptions,
-) -> Result<(crate::ir::ssa::Module, usize), String> {
+) -> Result<(strata::ir::ssa::Module, usize), String> {
     let mut diags = Diagnostics::new();
     let wired = wired::build(lib, material, PassOptions::default(), &mut diags);
     let module = lower::lower(lib, &wired, options, &mut diags);
@@ -1051,7 +1054,7 @@ fn load_scene_with(path: Option<&Path>, backend: BackendKind) -> Result<Loaded, 
 fn render_rgb(l: &Loaded, settings: &RenderSettings) -> Result<(f64, Vec<[f32; 3]>), String> {
     let materials: Vec<&dyn MaterialCode> = l.materials.iter().map(|m| m.as_ref()).collect();
     let start = Instant::now();
-    let (image, _) = crate::render::render(&l.scene, &materials, settings, None).map_err(|e| e.to_string())?;
+    let (image, _) = strata::render::render(&l.scene, &materials, settings, None).map_err(|e| e.to_string())?;
     let secs = start.elapsed().as_secs_f64();
     let channel = |name: &str| image.f32_channel(name).map(<[f32]>::to_vec).ok_or_else(|| format!("no {name} channel"));
     let (r, g, b) = (channel("R")?, channel("G")?, channel("B")?);
@@ -1665,9 +1668,9 @@ fn error_curves(
     Ok(curves)
 }
 
-/// Formats a ratio pair of [`crate::plot::equal_ratios`] for a caption.
+/// Formats a ratio pair of [`strata::plot::equal_ratios`] for a caption.
 fn ratio_text(a: &[(f64, f64)], b: &[(f64, f64)]) -> String {
-    match crate::plot::equal_ratios(a, b) {
+    match strata::plot::equal_ratios(a, b) {
         Some((e, t, how)) => format!("equal-time RMSE ratio {e:.2}, equal-RMSE time ratio {t:.2} ({how})"),
         None => "no ratio (empty curve)".into(),
     }
@@ -1677,7 +1680,7 @@ fn ratio_text(a: &[(f64, f64)], b: &[(f64, f64)]) -> String {
 /// into `dir` as SVG, and returns the printed report (the same ratios as the captions).
 /// `mitsuba_csv`, when it exists, is `tools/compare_mitsuba.py`'s CSV (optional).
 pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) -> Result<String, String> {
-    use crate::plot::{Bar, bars, loglog};
+    use strata::plot::{Bar, bars, loglog};
     std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     let mut out = String::new();
     let svg = |name: &str| dir.join(name);
@@ -1727,7 +1730,7 @@ pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) ->
                 });
             }
             let ratios = ratio_text(&curves[0], &curves[1]);
-            if let Some((_, t, _)) = crate::plot::equal_ratios(&curves[0], &curves[1]) {
+            if let Some((_, t, _)) = strata::plot::equal_ratios(&curves[0], &curves[1]) {
                 cross.push((n as f64, t));
             }
             writeln!(out, "  {n:>3} layers: {ratios}").unwrap();
@@ -1949,7 +1952,7 @@ fn mitsuba_chart(csv: &Path, file: &Path) -> Result<String, String> {
         series.push(Series { label: format!("{name}, strata"), points: s, color: c, dashed: false });
         series.push(Series { label: format!("{name}, Mitsuba 3"), points: m, color: c, dashed: true });
     }
-    crate::plot::loglog(
+    strata::plot::loglog(
         file,
         "strata (circles) vs Mitsuba 3 (triangles), docs/mitsuba_compare.csv",
         "CPU seconds per render (1024 spp, 320x240)",
@@ -1962,8 +1965,8 @@ fn mitsuba_chart(csv: &Path, file: &Path) -> Result<String, String> {
 
 /// Directional albedo `E(wo) = ∫ f |cos θi| dωi` of `bsdf` by sampling (`n` samples), with the
 /// radiance compression of transmission undone (× η²) so glass reads R + T.
-fn sampled_albedo(bsdf: &crate::render::bsdf::Bsdf, wo: glam::Vec3, n: usize, seed: u64) -> f64 {
-    use crate::render::bsdf::Bsdf;
+fn sampled_albedo(bsdf: &strata::render::bsdf::Bsdf, wo: glam::Vec3, n: usize, seed: u64) -> f64 {
+    use strata::render::bsdf::Bsdf;
     let mut rng = SplitMix(seed);
     let mut sum = 0.0f64;
     for _ in 0..n {
@@ -1991,8 +1994,8 @@ fn direction(cos_theta: f64) -> glam::Vec3 {
 /// incidence down to cos θo = 1e-4 around the delta switch, and of rough glass as its index
 /// approaches 1. Returns the report lines.
 pub fn stability_charts(dir: &Path) -> Result<String, String> {
-    use crate::abi::{Closure, ClosureKind};
-    use crate::render::bsdf::Bsdf;
+    use strata::abi::{Closure, ClosureKind};
+    use strata::render::bsdf::Bsdf;
     let make = |kind: ClosureKind, params: &[f32]| {
         let mut c = Closure { kind: kind as u32, params: [0.0; 8] };
         c.params[..params.len()].copy_from_slice(params);
@@ -2027,7 +2030,7 @@ pub fn stability_charts(dir: &Path) -> Result<String, String> {
     for line in &caption[3..] {
         writeln!(out, "stability, GGX: {line}").unwrap();
     }
-    crate::plot::loglog(
+    strata::plot::loglog(
         &dir.join("stability_ggx.svg"),
         "GGX energy vs incidence: conductor (solid), glass (dashed)",
         "cos θo",
@@ -2076,7 +2079,7 @@ pub fn stability_charts(dir: &Path) -> Result<String, String> {
     for line in &caption[3..] {
         writeln!(out, "stability, glass near index 1: {line}").unwrap();
     }
-    crate::plot::loglog(
+    strata::plot::loglog(
         &dir.join("stability_glass.svg"),
         "Rough glass energy as the index approaches 1",
         "η − 1",
@@ -2225,7 +2228,7 @@ struct FeatureRow {
     feature: &'static str,
     /// Median ns per camera sample.
     ns: f64,
-    evals: crate::render::integrator::EvalCounts,
+    evals: strata::render::integrator::EvalCounts,
     samples: u64,
 }
 
@@ -2254,13 +2257,14 @@ fn measure_features(res: (usize, usize), spp: u32, reps: usize) -> Result<Vec<Fe
         ..Default::default()
     };
     let mut times = vec![Vec::new(); scenes.len()];
-    let mut evals = vec![crate::render::integrator::EvalCounts::default(); scenes.len()];
+    let mut evals = vec![strata::render::integrator::EvalCounts::default(); scenes.len()];
     let mut samples = vec![0u64; scenes.len()];
     for rep in 0..=reps {
         for (k, (_, l)) in scenes.iter().enumerate() {
             let materials: Vec<&dyn MaterialCode> = l.materials.iter().map(|m| m.as_ref()).collect();
             let start = Instant::now();
-            let (_, stats) = crate::render::render(&l.scene, &materials, &settings, None).map_err(|e| e.to_string())?;
+            let (_, stats) =
+                strata::render::render(&l.scene, &materials, &settings, None).map_err(|e| e.to_string())?;
             let ns = start.elapsed().as_secs_f64() * 1e9 / stats.samples.max(1) as f64;
             // Repetition 0 is the warm-up.
             if rep > 0 {
@@ -2324,7 +2328,7 @@ fn scale_chart(dir: &Path) -> Result<String, String> {
         std::fs::write(&usda, scaled_scene(s)).map_err(|e| format!("cannot write {}: {e}", usda.display()))?;
         let l = load_scene(&usda)?;
         let materials: Vec<&dyn MaterialCode> = l.materials.iter().map(|m| m.as_ref()).collect();
-        let (image, _) = crate::render::render(&l.scene, &materials, &settings, None).map_err(|e| e.to_string())?;
+        let (image, _) = strata::render::render(&l.scene, &materials, &settings, None).map_err(|e| e.to_string())?;
         let mean = |name: &str| {
             image.f32_channel(name).map_or(f64::NAN, |v| v.iter().map(|&x| f64::from(x)).sum::<f64>() / v.len() as f64)
         };
@@ -2348,7 +2352,7 @@ fn scale_chart(dir: &Path) -> Result<String, String> {
         "Holds from 1e-12 to 3e5 (each BVH traversed in a power-of-two-scaled space, past obvhs' absolute 1e-4 cull).".into(),
         "Refused with a located error: triangles under 1e-11 units (geometry::MIN_TRIANGLE_EDGE), coordinates beyond 1e7 (MAX_EXTENT). tests/scene_scale.rs.".into(),
     ];
-    crate::plot::loglog(
+    strata::plot::loglog(
         &dir.join("stability_scale.svg"),
         "Intersection against scene scale",
         "scene scale",
@@ -2461,7 +2465,7 @@ pub fn bench_displacement(res: (usize, usize), spp: u32) -> Result<String, Strin
     // Compiles once, builds `reps` times (median time), renders once.
     struct Row {
         setup_ms: f64,
-        stats: Option<crate::render::displace::DisplacementStats>,
+        stats: Option<strata::render::displace::DisplacementStats>,
         bytes: usize,
         render_ms: f64,
         rgb: Vec<[f32; 3]>,
@@ -2474,8 +2478,8 @@ pub fn bench_displacement(res: (usize, usize), spp: u32) -> Result<String, Strin
         };
         let (sources, mut diags) = (session.sources(), Diagnostics::new());
         let refs: Vec<&dyn MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
-        let options = crate::render::scene::SceneOptions {
-            dicing: crate::render::displace::DicingOptions {
+        let options = strata::render::scene::SceneOptions {
+            dicing: strata::render::displace::DicingOptions {
                 rate: rate.unwrap_or(1.0),
                 resolution: res,
                 ..Default::default()
