@@ -4,11 +4,12 @@
 //! Self-intersection ("acne") would show as speckled shadow on the lit surfaces; light
 //! leaking through the plane where the objects touch it would brighten the contact shadows.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use strata::backend::BackendKind;
-use strata::ir::wired::PassOptions;
-use strata::render::{LayerMode, RenderSettings, Scene, render};
-use strata::session::{SceneSource, Session, SessionOptions};
+use strata::render::{LayerMode, RenderSettings, render};
+use strata::session::SceneSource;
 
 fn scene_text(scale: f64, offset: [f64; 3]) -> String {
     let [x, y, z] = offset;
@@ -71,17 +72,8 @@ def DomeLight "Sky"
 fn render_at(dir: &Path, scale: f64, offset: [f64; 3]) -> Vec<f32> {
     let path: PathBuf = dir.join(format!("scale_{scale}_{}.usda", offset[0]));
     std::fs::write(&path, scene_text(scale, offset)).unwrap();
-    let options =
-        SessionOptions { backend: BackendKind::Jit, passes: PassOptions { optimize: true }, ..Default::default() };
-    let mut session = Session::open(SceneSource::File(path.to_path_buf()), options);
-    session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
-    let mut diags = session.take_diagnostics();
-    let (stage, compiled, sources) =
-        (session.stage().expect("opened"), session.compiled().expect("compiled"), session.sources());
-    let scene =
-        Scene::from_stage(stage, &|p| compiled.prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(sources));
-    let refs = compiled.refs();
+    let (session, scene) = common::stage_scene(SceneSource::File(path.to_path_buf()), BackendKind::Jit, true);
+    let refs = session.compiled().expect("compiled").refs();
     let settings = RenderSettings {
         width: 80,
         height: 60,

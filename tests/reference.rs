@@ -16,10 +16,9 @@ use glam::Vec3;
 use std::path::{Path, PathBuf};
 use strata::abi::Globals;
 use strata::backend::BackendKind;
-use strata::ir::wired::PassOptions;
 use strata::render::integrator::shading_state;
-use strata::render::{Image, LayerMode, RenderSettings, Scene, render};
-use strata::session::{SceneSource, Session, SessionOptions};
+use strata::render::{Image, LayerMode, RenderSettings, render};
+use strata::session::SceneSource;
 
 /// A node type whose outputs are affine in the shading position, so every height and mask
 /// below has a gradient known in closed form: `out = c + gx·x + gz·z`.
@@ -237,16 +236,8 @@ def Scope "Looks"
 }
 
 fn render_file(scene: &Path, mode: LayerMode, spp: u32, res: usize) -> Image {
-    let options = SessionOptions { backend: BackendKind::Jit, passes: PassOptions::default(), ..Default::default() };
-    let mut session = Session::open(SceneSource::File(scene.to_path_buf()), options);
-    session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
-    let mut diags = session.take_diagnostics();
-    let (stage, compiled, sources) =
-        (session.stage().expect("opened"), session.compiled().expect("compiled"), session.sources());
-    let scene =
-        Scene::from_stage(stage, &|p| compiled.prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(sources));
-    let refs = compiled.refs();
+    let (session, scene) = common::stage_scene(SceneSource::File(scene.to_path_buf()), BackendKind::Jit, true);
+    let refs = session.compiled().expect("compiled").refs();
     let settings = RenderSettings {
         width: res,
         height: res,

@@ -2,24 +2,17 @@
 //! identical images, so do optimised and unoptimised materials, and `strata render` writes
 //! whole outputs or none.
 
+mod common;
+
 use std::path::Path;
 use std::process::Command;
 use strata::backend::BackendKind;
-use strata::ir::wired::PassOptions;
-use strata::render::{Image, LayerMode, RenderSettings, Scene, render};
-use strata::session::{SceneSource, Session, SessionOptions};
+use strata::render::{Image, LayerMode, RenderSettings, render};
+use strata::session::SceneSource;
 
 fn render_scene(path: Option<&str>, backend: BackendKind, optimize: bool, mode: LayerMode) -> Image {
-    let options = SessionOptions { backend, passes: PassOptions { optimize }, ..Default::default() };
-    let mut session = Session::open(SceneSource::from_path(path.map(Path::new)), options);
-    session.compile().expect("compiles");
-    let mut diags = session.take_diagnostics();
-    let (stage, compiled, sources) =
-        (session.stage().expect("opened"), session.compiled().expect("compiled"), session.sources());
-    let scene =
-        Scene::from_stage(stage, &|p| compiled.prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(sources));
-    let refs = compiled.refs();
+    let (session, scene) = common::stage_scene(SceneSource::from_path(path.map(Path::new)), backend, optimize);
+    let refs = session.compiled().expect("compiled").refs();
     let settings = RenderSettings {
         width: 40,
         height: 30,

@@ -8,10 +8,11 @@
 //! self-intersection ("acne") darkens the floor and sphere, missed hits show the sky (alpha
 //! below 1), and leaks through the contact show up as light where the sphere meets the floor.
 
+mod common;
+
 use strata::backend::BackendKind;
-use strata::ir::wired::PassOptions;
 use strata::render::{Image, LayerMode, RenderSettings, Scene, render};
-use strata::session::{SceneSource, Session, SessionOptions};
+use strata::session::{SceneSource, Session};
 
 fn scene_at(s: f64) -> String {
     let v = |x: f64| format!("{:e}", x * s);
@@ -64,16 +65,8 @@ fn render_scale(s: f64) -> Image {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("scale.usda");
     std::fs::write(&path, scene_at(s)).unwrap();
-    let options = SessionOptions { backend: BackendKind::Jit, passes: PassOptions::default(), ..Default::default() };
-    let mut session = Session::open(SceneSource::File(path.to_path_buf()), options);
-    session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
-    let mut diags = session.take_diagnostics();
-    let (stage, compiled, sources) =
-        (session.stage().expect("opened"), session.compiled().expect("compiled"), session.sources());
-    let scene =
-        Scene::from_stage(stage, &|p| compiled.prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(sources));
-    let refs = compiled.refs();
+    let (session, scene) = common::stage_scene(SceneSource::File(path.to_path_buf()), BackendKind::Jit, true);
+    let refs = session.compiled().expect("compiled").refs();
     let settings = RenderSettings {
         width: 24,
         height: 24,
@@ -132,8 +125,7 @@ fn scene_below_f32_resolution_is_a_located_error() {
     let path = dir.path().join("tiny.usda");
     let text = scene_at(1e-14);
     std::fs::write(&path, &text).unwrap();
-    let options = SessionOptions { backend: BackendKind::Jit, passes: PassOptions::default(), ..Default::default() };
-    let mut session = Session::open(SceneSource::File(path.to_path_buf()), options);
+    let mut session = Session::open_default(SceneSource::File(path.clone()));
     session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
     let mut diags = session.take_diagnostics();
     let (stage, compiled, sources) =

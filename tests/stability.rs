@@ -5,11 +5,12 @@
 //! estimator of the same integral, or the render of the input the rule says is equivalent.
 //! (Intersection at extreme scene scales is in `tests/scene_scale.rs`.)
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use strata::backend::BackendKind;
-use strata::ir::wired::PassOptions;
-use strata::render::{Image, LayerMode, RenderSettings, RenderStats, Scene, render};
-use strata::session::{SceneSource, Session, SessionOptions};
+use strata::render::{Image, LayerMode, RenderSettings, RenderStats, render};
+use strata::session::SceneSource;
 
 /// A 40×40 plane at y = 0 seen from above by a camera at height 5 (a 10-unit window), under a
 /// dome (`dome` is its extra attributes), its slots bound in order to the substances `layers`
@@ -71,16 +72,8 @@ def Scope "Looks"
 }
 
 fn render_file(scene: &Path, mode: LayerMode, spp: u32, res: usize, seed: u64) -> (Image, RenderStats) {
-    let options = SessionOptions { backend: BackendKind::Jit, passes: PassOptions::default(), ..Default::default() };
-    let mut session = Session::open(SceneSource::File(scene.to_path_buf()), options);
-    session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
-    let mut diags = session.take_diagnostics();
-    let (stage, compiled, sources) =
-        (session.stage().expect("opened"), session.compiled().expect("compiled"), session.sources());
-    let scene =
-        Scene::from_stage(stage, &|p| compiled.prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(sources));
-    let refs = compiled.refs();
+    let (session, scene) = common::stage_scene(SceneSource::File(scene.to_path_buf()), BackendKind::Jit, true);
+    let refs = session.compiled().expect("compiled").refs();
     let settings = RenderSettings {
         width: res,
         height: res,

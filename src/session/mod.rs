@@ -145,6 +145,23 @@ pub struct UpdateReport {
     pub ms: f64,
 }
 
+impl UpdateReport {
+    /// A report of a change that redid nothing (yet).
+    fn nothing(kind: ChangeKind) -> UpdateReport {
+        UpdateReport {
+            kind,
+            restaged: false,
+            recomposed: false,
+            recompiled: 0,
+            reused: 0,
+            geometry_rebuilt: false,
+            textures_reloaded: 0,
+            failed: false,
+            ms: 0.0,
+        }
+    }
+}
+
 /// Counters over a session's life, for tests and `--stats`.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SessionStats {
@@ -637,17 +654,7 @@ impl Session {
             Change::Texture(_) => ChangeKind::Texture,
             Change::Value { .. } => ChangeKind::Value,
         };
-        let mut report = UpdateReport {
-            kind,
-            restaged: false,
-            recomposed: false,
-            recompiled: 0,
-            reused: 0,
-            geometry_rebuilt: false,
-            textures_reloaded: 0,
-            failed: false,
-            ms: 0.0,
-        };
+        let mut report = UpdateReport::nothing(kind);
         match (kind, change) {
             (ChangeKind::Unrelated, _) => {}
             (ChangeKind::Texture, Change::File(path) | Change::Texture(path)) => {
@@ -685,17 +692,7 @@ impl Session {
     }
 
     fn redo_from_composition(&mut self, kind: ChangeKind, start: Instant) -> UpdateReport {
-        let mut report = UpdateReport {
-            kind,
-            restaged: false,
-            recomposed: false,
-            recompiled: 0,
-            reused: 0,
-            geometry_rebuilt: false,
-            textures_reloaded: 0,
-            failed: false,
-            ms: 0.0,
-        };
+        let mut report = UpdateReport::nothing(kind);
         self.redo_from_composition_into(&mut report);
         report.ms = start.elapsed().as_secs_f64() * 1e3;
         report

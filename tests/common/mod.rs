@@ -141,3 +141,22 @@ pub fn render_file(path: &std::path::Path, settings: &strata::render::RenderSett
     let (scene, materials) = scene_file_with(path, BackendKind::Jit, true, (settings.width, settings.height));
     render_scene(&scene, &materials, settings)
 }
+
+/// A scene opened and compiled in a session, with its render scene built from the stage alone
+/// (`Scene::from_stage`: nothing diced, no primvars stored); panics with the rendered
+/// diagnostics on any error.
+pub fn stage_scene(
+    source: strata::session::SceneSource,
+    backend: BackendKind,
+    optimize: bool,
+) -> (strata::session::Session, strata::render::Scene) {
+    let options = strata::session::SessionOptions { backend, passes: PassOptions { optimize }, ..Default::default() };
+    let mut session = strata::session::Session::open(source, options);
+    session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
+    let mut diags = session.take_diagnostics();
+    let (stage, compiled) = (session.stage().expect("opened"), session.compiled().expect("compiled"));
+    let scene = strata::render::Scene::from_stage(stage, &|p| compiled.prim_material.get(p).copied(), &mut diags)
+        .unwrap_or_else(|| panic!("{}", diags.render(session.sources())));
+    assert!(!diags.has_errors(), "{}", diags.render(session.sources()));
+    (session, scene)
+}
