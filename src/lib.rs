@@ -16,27 +16,24 @@
 //!   [`abi::layering`]: which layers take part in the pick, hide, or weight displacement (rules 5, 6).
 //! - [`render`]: the path tracer (geometry, BVH, lights, integrator, EXR output).
 //! - [`runtime`]: noise, patterns and math semantics shared by every backend.
+//! - [`session`]: the pipeline's entry point: a scene opened, composed, compiled and built
+//!   for rendering, updated incrementally after a change.
 //! - [`stack`]: the compiler thread with a known stack size that the recursive passes run on.
-//! - [`bench`]: the measurements behind `strata bench shade` and `strata bench render`.
-//! - [`fuzz`]: `strata fuzz`, mutation fuzzing of both front ends in worker processes.
-//! - [`cli`]: the `strata` subcommands.
 
 #![warn(missing_docs)]
 
 pub mod abi;
 pub mod backend;
-pub mod bench;
-pub mod cli;
 pub mod compose;
 pub mod diag;
 pub mod front;
-pub mod fuzz;
 pub mod input;
 pub mod ir;
 pub mod plot;
 pub mod render;
 pub mod runtime;
 pub mod scene;
+pub mod session;
 pub mod stack;
 
 // Old path kept for the merge; remove after (render/, cli.rs and tests/layering.rs use it).

@@ -1,10 +1,11 @@
 //! The `strata` command line. See `strata --help` and DESIGN.md for the contracts.
 
+mod cli;
+
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use strata::backend::BackendKind;
-use strata::cli;
 use strata::render::sampler::SamplerKind;
 use strata::render::{LayerMode, RenderSettings};
 
@@ -120,9 +121,13 @@ enum Command {
         /// Shader backend.
         #[arg(long, value_enum, default_value_t = BackendKind::Jit)]
         backend: BackendKind,
-        /// Evaluate every layer weighted at each vertex instead of picking one (for comparison).
-        #[arg(long)]
+        /// Evaluate every layer weighted at each vertex, for every material (default: chosen per
+        /// material, weighted for 2 to 8 pickable layers, one layer picked by weight otherwise).
+        #[arg(long, conflicts_with = "stochastic")]
         weighted: bool,
+        /// Pick one layer per vertex by mask weights, for every material.
+        #[arg(long)]
+        stochastic: bool,
         /// How each decision's numbers are spread over a pixel's samples: `sobol`
         /// (Owen-scrambled, the default) or `independent` (plain Monte Carlo, for comparison).
         #[arg(long, default_value = "sobol", value_parser = parse_sampler)]
@@ -261,6 +266,20 @@ enum BenchCommand {
         #[arg(long, default_value = "96x64", value_parser = parse_resolution)]
         res: (usize, usize),
     },
+    /// What a live edit costs on the default scene: time from a file change (a substance
+    /// file, a layer's material input, a layer's geometry) to the session updated, to the
+    /// first new samples and to the full image, against opening a fresh session.
+    Update {
+        /// Samples per pixel of each image.
+        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=4096))]
+        spp: u32,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "640x480", value_parser = parse_resolution)]
+        res: (usize, usize),
+        /// Edits of each kind (the median is reported).
+        #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=1000))]
+        repeats: u32,
+    },
     /// Measure and draw every chart of README's Charts section and docs/STABILITY.md as SVG:
     /// error vs time of stochastic vs weighted layering (1-64 layers; constant, noise and thin
     /// masks), JIT vs interpreter, strata vs Mitsuba 3 (from the committed CSV), per-point
@@ -311,6 +330,7 @@ fn main() -> ExitCode {
             max_depth,
             backend,
             weighted,
+            stochastic,
             sampler,
             no_optimize,
             stats,
@@ -327,7 +347,11 @@ fn main() -> ExitCode {
                 seed,
                 threads: threads.map(|t| t as usize),
                 max_depth,
-                mode: if weighted { LayerMode::Weighted } else { LayerMode::Stochastic },
+                mode: match (weighted, stochastic) {
+                    (true, _) => LayerMode::Weighted,
+                    (_, true) => LayerMode::Stochastic,
+                    _ => LayerMode::Auto,
+                },
                 sampler,
             },
             backend,
@@ -349,18 +373,16 @@ fn main() -> ExitCode {
         Command::Compile { file, output } => cli::compile(&file, &output),
         Command::Bench { what } => {
             let report = match what {
-                BenchCommand::Shade { scene, prim } => strata::bench::bench_shade(scene.as_deref(), prim.as_deref()),
-                BenchCommand::Render { scene, spp, res } => strata::bench::bench_render(scene.as_deref(), spp, res),
-                BenchCommand::Scale => strata::bench::bench_scale(),
-                BenchCommand::Displacement { spp, res } => strata::bench::bench_displacement(res, spp),
-                BenchCommand::Features { spp, res } => strata::bench::bench_features(res, spp, 7),
+                BenchCommand::Shade { scene, prim } => cli::bench::bench_shade(scene.as_deref(), prim.as_deref()),
+                BenchCommand::Render { scene, spp, res } => cli::bench::bench_render(scene.as_deref(), spp, res),
+                BenchCommand::Scale => cli::bench::bench_scale(),
+                BenchCommand::Displacement { spp, res } => cli::bench::bench_displacement(res, spp),
+                BenchCommand::Features { spp, res } => cli::bench::bench_features(res, spp, 7),
+                BenchCommand::Update { spp, res, repeats } => cli::bench::bench_update(res, spp, repeats as usize),
                 BenchCommand::Charts { plot, mitsuba_csv, quick } => {
-                    let options = if quick {
-                        strata::bench::ChartOptions::quick()
-                    } else {
-                        strata::bench::ChartOptions::default()
-                    };
-                    strata::bench::bench_charts(&plot, Some(&mitsuba_csv), &options)
+                    let options =
+                        if quick { cli::bench::ChartOptions::quick() } else { cli::bench::ChartOptions::default() };
+                    cli::bench::bench_charts(&plot, Some(&mitsuba_csv), &options)
                 }
             };
             match report {
@@ -391,7 +413,7 @@ fn main() -> ExitCode {
         } => {
             if worker {
                 let stage = stage.unwrap_or_else(std::env::temp_dir);
-                return match strata::fuzz::worker(&root, &stage, seed, first, stride, quick) {
+                return match cli::fuzz::worker(&root, &stage, seed, first, stride, quick) {
                     Ok(()) => ExitCode::SUCCESS,
                     Err(e) => {
                         eprintln!("fuzz worker: {e}");
@@ -400,7 +422,7 @@ fn main() -> ExitCode {
                 };
             }
             let jobs = jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get() as u64));
-            let options = strata::fuzz::FuzzOptions {
+            let options = cli::fuzz::FuzzOptions {
                 root,
                 duration: std::time::Duration::from_secs_f64(secs.max(0.0)),
                 seed,

@@ -13,7 +13,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use strata::abi::MaterialCode;
-use strata::bench::{MaskKind, layered_scene, mask_stack_source};
+use strata::input::generated::{MaskKind, layered_scene, mask_stack_source};
 use strata::render::{LayerMode, RenderSettings};
 
 /// Counts allocations and reallocations, then defers to the system allocator.

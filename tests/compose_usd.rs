@@ -209,7 +209,7 @@ fn a_malformed_root_layer_stays_an_error() {
 /// `strata check` output on the scenes above: warnings, located, one per kind, exit 0.
 fn check_warnings(case: &str) -> String {
     let path = format!("tests/fixtures/compose_around/{case}.usda");
-    let (diags, sources, _) = strata::cli::check_file(Path::new(&path));
+    let (diags, sources, _) = strata::session::check_file(Path::new(&path));
     assert!(!diags.has_errors(), "{}", diags.render(&sources));
     diags.render(&sources)
 }

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 use std::process::Command;
-use strata::cli::check_file;
+use strata::session::check_file;
 
 fn diagnostics(path: &str) -> String {
     let (diags, sources, _) = check_file(Path::new(path));

@@ -16,6 +16,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use strata::backend::BackendKind;
 use strata::render::Scene;
+use strata::session::{SceneSource, Session, SessionOptions};
 
 /// Node types the test substances share: an affine function of the texture coordinates.
 const PATTERNS: &str = r#"
@@ -101,20 +102,15 @@ fn build_with(
     optimize: bool,
     options: &strata::render::scene::SceneOptions,
 ) -> Built {
-    let mut sources = strata::diag::SourceMap::new();
-    let mut diags = strata::diag::Diagnostics::new();
-    let compiled = strata::cli::compile_scene(
-        Some(path),
-        backend,
-        strata::ir::wired::PassOptions { optimize },
-        &mut sources,
-        &mut diags,
-    )
-    .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    let refs: Vec<&dyn strata::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
-    let scene = Scene::build(&compiled.stage, &|p| compiled.prim_material.get(p).copied(), &refs, options, &mut diags);
-    let text = diags.render(&sources);
-    Built { scene, materials: compiled.materials, diags, text }
+    let passes = strata::ir::wired::PassOptions { optimize };
+    let session_options = SessionOptions { backend, passes, ..Default::default() };
+    let mut session = Session::open(SceneSource::File(path.to_path_buf()), session_options);
+    let materials = session.compile_or_report().unwrap_or_else(|e| panic!("{e}")).materials.clone();
+    session.prepare(options);
+    let diags = session.take_diagnostics();
+    let text = diags.render(session.sources());
+    let scene = session.into_scene().map(|(scene, _)| scene);
+    Built { scene, materials, diags, text }
 }
 
 /// Dicing options for an image of `resolution` with a micro-triangle `budget`.

@@ -1,6 +1,6 @@
 //! The floor plan (ARCHITECTURE.md): every `crate::` path in the library's non-test code names a
 //! module on its own floor or a lower one. Floors, from the ground up: diag, input, abi,
-//! runtime, stack; front; scene; compose; ir; backend; render; the tools (cli, bench, fuzz,
+//! runtime, stack; front; scene; compose; ir; backend; render; session; the tools (cli, bench, fuzz,
 //! plot). `tools/floor_plan.py` prints the same check per file, with import cycles.
 
 use std::path::{Path, PathBuf};
@@ -14,6 +14,7 @@ const FLOORS: &[&[&str]] = &[
     &["ir"],
     &["backend"],
     &["render"],
+    &["session"],
     &["cli", "bench", "fuzz", "plot", "main"],
 ];
 

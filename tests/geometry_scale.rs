@@ -4,13 +4,12 @@
 //! Self-intersection ("acne") would show as speckled shadow on the lit surfaces; light
 //! leaking through the plane where the objects touch it would brighten the contact shadows.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use strata::abi::MaterialCode;
 use strata::backend::BackendKind;
-use strata::cli::{CompiledScene, compile_scene};
-use strata::diag::{Diagnostics, SourceMap};
-use strata::ir::wired::PassOptions;
-use strata::render::{LayerMode, RenderSettings, Scene, render};
+use strata::render::{LayerMode, RenderSettings, render};
+use strata::session::SceneSource;
 
 fn scene_text(scale: f64, offset: [f64; 3]) -> String {
     let [x, y, z] = offset;
@@ -73,15 +72,8 @@ def DomeLight "Sky"
 fn render_at(dir: &Path, scale: f64, offset: [f64; 3]) -> Vec<f32> {
     let path: PathBuf = dir.join(format!("scale_{scale}_{}.usda", offset[0]));
     std::fs::write(&path, scene_text(scale, offset)).unwrap();
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled =
-        compile_scene(Some(&path), BackendKind::Jit, PassOptions { optimize: true }, &mut sources, &mut diags)
-            .expect("compiles");
-    let CompiledScene { stage, materials, prim_material, .. } = compiled;
-    let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    let (session, scene) = common::stage_scene(SceneSource::File(path.to_path_buf()), BackendKind::Jit, true);
+    let refs = session.compiled().expect("compiled").refs();
     let settings = RenderSettings {
         width: 80,
         height: 60,

@@ -417,7 +417,7 @@ fn prelude_names_are_reserved() {
     assert!(outcome.rendered.contains(&format!("{path}:3:11")), "{}", outcome.rendered);
 
     // The scene with an unbound prim (shaded by the built-in default_substance) that panicked.
-    let (diags, sources, _) = strata::cli::check_file(Path::new("tests/in/hostile/default_substance.usda"));
+    let (diags, sources, _) = strata::session::check_file(Path::new("tests/in/hostile/default_substance.usda"));
     let rendered = diags.render(&sources);
     assert!(rendered.contains("`default_substance` is a built-in graph"), "{rendered}");
 

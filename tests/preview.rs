@@ -7,12 +7,10 @@
 mod common;
 
 use std::path::Path;
-use strata::abi::MaterialCode;
 use strata::backend::BackendKind;
-use strata::cli::{check_file, compile_scene};
-use strata::diag::{Diagnostics, SourceMap};
 use strata::ir::wired::PassOptions;
 use strata::render::{Image, LayerMode, RenderSettings, Scene, render};
+use strata::session::{SceneSource, Session, SessionOptions, check_file};
 
 const DIR: &str = "tests/fixtures/usd/preview";
 /// Image size: one pixel per texel of the 32 × 32 checker.
@@ -166,13 +164,14 @@ fn the_texture_node_reads_png() {
 fn jit_and_interpreter_agree_on_a_preview_network() {
     let path = format!("{DIR}/dirt.usda");
     let image = |backend| {
-        let mut sources = SourceMap::new();
-        let mut diags = Diagnostics::new();
-        let compiled = compile_scene(Some(Path::new(&path)), backend, PassOptions::default(), &mut sources, &mut diags)
-            .expect("compiles");
-        let scene = Scene::from_stage(&compiled.stage, &|p| compiled.prim_material.get(p).copied(), &mut diags)
-            .expect("scene builds");
-        let refs: Vec<&dyn MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
+        let options = SessionOptions { backend, passes: PassOptions::default(), ..Default::default() };
+        let mut session = Session::open(SceneSource::File(Path::new(&path).to_path_buf()), options);
+        session.compile().expect("compiles");
+        let mut diags = session.take_diagnostics();
+        let (stage, compiled) = (session.stage().expect("opened"), session.compiled().expect("compiled"));
+        let scene =
+            Scene::from_stage(stage, &|p| compiled.prim_material.get(p).copied(), &mut diags).expect("scene builds");
+        let refs = compiled.refs();
         let settings = RenderSettings {
             width: 16,
             height: 16,

@@ -9,8 +9,8 @@ use common::strata;
 use exr::meta::attribute::AttributeValue;
 use exr::prelude::{ReadChannels, ReadLayers};
 use std::path::{Path, PathBuf};
-use strata::diag::{Diagnostics, SourceMap};
 use strata::render::scene::{DEFAULT_CAMERA_LIGHT_IRRADIANCE, DEFAULT_DOME_RADIANCE, DefaultLights, SceneOptions};
+use strata::session::{SceneSource, Session, SessionOptions};
 
 /// A large white quad (no material: the default white diffuse) facing a camera on its axis,
 /// and no light.
@@ -37,27 +37,17 @@ fn build(
     path: &Path,
     lights: DefaultLights,
 ) -> (strata::render::Scene, Vec<std::sync::Arc<dyn strata::abi::MaterialCode>>, String) {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled = strata::cli::compile_scene(
-        Some(path),
-        strata::backend::BackendKind::Jit,
-        strata::ir::wired::PassOptions { optimize: true },
-        &mut sources,
-        &mut diags,
-    )
-    .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    let refs: Vec<&dyn strata::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
+    let passes = strata::ir::wired::PassOptions { optimize: true };
+    let options = SessionOptions { backend: strata::backend::BackendKind::Jit, passes, ..Default::default() };
+    let mut session = Session::open(SceneSource::File(path.to_path_buf()), options);
+    session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
     let options = SceneOptions { default_lights: lights, ..Default::default() };
-    let scene = strata::render::Scene::build(
-        &compiled.stage,
-        &|p| compiled.prim_material.get(p).copied(),
-        &refs,
-        &options,
-        &mut diags,
-    )
-    .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    (scene, compiled.materials, diags.render(&sources))
+    if session.prepare(&options).is_none() {
+        panic!("{}", session.diagnostics().render(session.sources()));
+    }
+    let said = session.diagnostics().render(session.sources());
+    let (scene, compiled) = session.into_scene().expect("prepared");
+    (scene, compiled.materials, said)
 }
 
 #[test]

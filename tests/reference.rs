@@ -14,13 +14,11 @@ mod common;
 
 use glam::Vec3;
 use std::path::{Path, PathBuf};
-use strata::abi::{Globals, MaterialCode};
+use strata::abi::Globals;
 use strata::backend::BackendKind;
-use strata::cli::{CompiledScene, compile_scene};
-use strata::diag::{Diagnostics, SourceMap};
-use strata::ir::wired::PassOptions;
 use strata::render::integrator::shading_state;
-use strata::render::{Image, LayerMode, RenderSettings, Scene, render};
+use strata::render::{Image, LayerMode, RenderSettings, render};
+use strata::session::SceneSource;
 
 /// A node type whose outputs are affine in the shading position, so every height and mask
 /// below has a gradient known in closed form: `out = c + gx·x + gz·z`.
@@ -238,14 +236,8 @@ def Scope "Looks"
 }
 
 fn render_file(scene: &Path, mode: LayerMode, spp: u32, res: usize) -> Image {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled = compile_scene(Some(scene), BackendKind::Jit, PassOptions::default(), &mut sources, &mut diags);
-    let CompiledScene { stage, materials, prim_material, .. } =
-        compiled.unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    let (session, scene) = common::stage_scene(SceneSource::File(scene.to_path_buf()), BackendKind::Jit, true);
+    let refs = session.compiled().expect("compiled").refs();
     let settings = RenderSettings {
         width: res,
         height: res,

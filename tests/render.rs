@@ -2,24 +2,17 @@
 //! identical images, so do optimised and unoptimised materials, and `strata render` writes
 //! whole outputs or none.
 
+mod common;
+
 use std::path::Path;
 use std::process::Command;
-use strata::abi::MaterialCode;
 use strata::backend::BackendKind;
-use strata::cli::{CompiledScene, compile_scene};
-use strata::diag::{Diagnostics, SourceMap};
-use strata::ir::wired::PassOptions;
-use strata::render::{Image, LayerMode, RenderSettings, Scene, render};
+use strata::render::{Image, LayerMode, RenderSettings, render};
+use strata::session::SceneSource;
 
 fn render_scene(path: Option<&str>, backend: BackendKind, optimize: bool, mode: LayerMode) -> Image {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled = compile_scene(path.map(Path::new), backend, PassOptions { optimize }, &mut sources, &mut diags)
-        .expect("compiles");
-    let CompiledScene { stage, materials, prim_material, .. } = compiled;
-    let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    let (session, scene) = common::stage_scene(SceneSource::from_path(path.map(Path::new)), backend, optimize);
+    let refs = session.compiled().expect("compiled").refs();
     let settings = RenderSettings {
         width: 40,
         height: 30,

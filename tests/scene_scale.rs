@@ -8,12 +8,11 @@
 //! self-intersection ("acne") darkens the floor and sphere, missed hits show the sky (alpha
 //! below 1), and leaks through the contact show up as light where the sphere meets the floor.
 
-use strata::abi::MaterialCode;
+mod common;
+
 use strata::backend::BackendKind;
-use strata::cli::{CompiledScene, compile_scene};
-use strata::diag::{Diagnostics, SourceMap};
-use strata::ir::wired::PassOptions;
 use strata::render::{Image, LayerMode, RenderSettings, Scene, render};
+use strata::session::{SceneSource, Session};
 
 fn scene_at(s: f64) -> String {
     let v = |x: f64| format!("{:e}", x * s);
@@ -66,14 +65,8 @@ fn render_scale(s: f64) -> Image {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("scale.usda");
     std::fs::write(&path, scene_at(s)).unwrap();
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled = compile_scene(Some(&path), BackendKind::Jit, PassOptions::default(), &mut sources, &mut diags);
-    let CompiledScene { stage, materials, prim_material, .. } =
-        compiled.unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    let (session, scene) = common::stage_scene(SceneSource::File(path.to_path_buf()), BackendKind::Jit, true);
+    let refs = session.compiled().expect("compiled").refs();
     let settings = RenderSettings {
         width: 24,
         height: 24,
@@ -132,13 +125,14 @@ fn scene_below_f32_resolution_is_a_located_error() {
     let path = dir.path().join("tiny.usda");
     let text = scene_at(1e-14);
     std::fs::write(&path, &text).unwrap();
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled = compile_scene(Some(&path), BackendKind::Jit, PassOptions::default(), &mut sources, &mut diags);
-    let CompiledScene { stage, prim_material, .. } = compiled.unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    let _ = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags);
+    let mut session = Session::open_default(SceneSource::File(path.clone()));
+    session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
+    let mut diags = session.take_diagnostics();
+    let (stage, compiled, sources) =
+        (session.stage().expect("opened"), session.compiled().expect("compiled"), session.sources());
+    let _ = Scene::from_stage(stage, &|p| compiled.prim_material.get(p).copied(), &mut diags);
     assert!(diags.has_errors(), "a 1e-14 scene must be refused");
-    let report = diags.render(&sources);
+    let report = diags.render(sources);
     // The floor's `def Mesh` line, 1-based, as file:line:col.
     let line = text.lines().position(|l| l.contains("def Mesh \"Floor\"")).unwrap() + 1;
     assert!(report.contains("/World/Floor") && report.contains("resolution"), "{report}");

@@ -2,27 +2,28 @@
 //! (`strata layers`), its JSON, and the wired IR of every renderable prim (`strata ir`).
 
 use std::path::Path;
-use strata::cli;
 use strata::compose::scene::compose_stage;
 use strata::diag::{Diagnostics, SourceMap};
 use strata::ir::wired::{self, PassOptions};
+use strata::session::{self, SceneSource, Session};
 
 /// Composes a scene and returns (layers table, layers JSON, wired IR of every prim, diagnostics).
 fn run(path: &str) -> (String, String, String, String) {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let stage = cli::open_scene(Some(Path::new(path)), &mut sources, &mut diags).expect("scene opens");
-    let composition = compose_stage(&stage, &mut sources, &mut diags);
+    let mut session = Session::open_default(SceneSource::File(Path::new(path).to_path_buf()));
+    session.composition().expect("scene opens");
+    let mut diags = session.take_diagnostics();
+    let (stage, composition, sources) =
+        (session.stage().expect("opened"), session.composed().expect("composed"), session.sources());
     let mut ir = String::new();
     for (stack, &material) in composition.stacks.iter().zip(&composition.prim_material) {
         let wired =
             wired::build(&composition.library, &composition.materials[material], PassOptions::default(), &mut diags);
         ir += &format!("# {}  [{}]\n{}\n", stack.prim, wired.stats_line(), wired.to_text(&composition.library));
     }
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    let table = cli::layers_table(&composition.stacks, Some(&stage));
-    let json = cli::layers_json(&composition.stacks);
-    (table, json, ir, diags.render(&sources))
+    assert!(!diags.has_errors(), "{}", diags.render(sources));
+    let table = session::layers_table(&composition.stacks, Some(stage));
+    let json = session::layers_json(&composition.stacks);
+    (table, json, ir, diags.render(sources))
 }
 
 #[test]
@@ -175,18 +176,16 @@ fn embedded_default_scene_matches_the_file() {
 #[test]
 fn pixar_written_fixture_composes() {
     // Written by Pixar's usd-core (tests/fixtures/usd/make_pixar_fixture.py); read as it is.
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let stage = cli::open_scene(Some(Path::new("tests/fixtures/usd/pixar_written.usda")), &mut sources, &mut diags)
-        .expect("Pixar's file opens");
-    let tree = strata::compose::scene::binding_tree(&stage, &mut diags);
-    let stacks = strata::compose::slots::resolve_stacks(&tree, &mut diags);
+    let mut session = Session::open_default(SceneSource::File("tests/fixtures/usd/pixar_written.usda".into()));
+    session.stage().expect("Pixar's file opens");
+    let stacks = session.layer_stacks();
+    let diags = session.take_diagnostics();
     // The fixture's `_050:_:_010` has two targets: an error (one material per slot), and not
     // applied. Everything else composes.
-    let rendered = diags.render(&sources);
+    let rendered = diags.render(session.sources());
     assert_eq!(diags.error_count(), 1, "{rendered}");
     assert!(rendered.contains("`material:slotBinding:_050:_:_010` has 2 targets"), "{rendered}");
-    insta::assert_snapshot!("pixar_written_layers_json", cli::layers_json(&stacks));
+    insta::assert_snapshot!("pixar_written_layers_json", session::layers_json(&stacks));
 }
 
 #[test]
@@ -259,14 +258,14 @@ def Scope "M" {
 
 /// The lowered IR (typed SSA, one function per entry point) of one prim's material, validated.
 fn lowered(path: &str, prim: &str) -> String {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let stage = cli::open_scene(Some(Path::new(path)), &mut sources, &mut diags).expect("scene opens");
-    let composition = compose_stage(&stage, &mut sources, &mut diags);
+    let mut session = Session::open_default(SceneSource::File(Path::new(path).to_path_buf()));
+    session.composition().expect("scene opens");
+    let mut diags = session.take_diagnostics();
+    let (composition, sources) = (session.composed().expect("composed"), session.sources());
     let material = composition.material_of(prim).expect("renderable prim");
     let mut compiler = strata::backend::Compiler::new(strata::backend::BackendKind::Jit, PassOptions::default());
     let module = compiler.lower(&composition.library, material, &mut diags);
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
+    assert!(!diags.has_errors(), "{}", diags.render(sources));
     for f in &module.functions {
         strata::ir::ssa::validate(f).unwrap_or_else(|e| panic!("{e}\n{}", f.to_text()));
     }

@@ -5,13 +5,12 @@
 //! estimator of the same integral, or the render of the input the rule says is equivalent.
 //! (Intersection at extreme scene scales is in `tests/scene_scale.rs`.)
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use strata::abi::MaterialCode;
 use strata::backend::BackendKind;
-use strata::cli::{CompiledScene, compile_scene};
-use strata::diag::{Diagnostics, SourceMap};
-use strata::ir::wired::PassOptions;
-use strata::render::{Image, LayerMode, RenderSettings, RenderStats, Scene, render};
+use strata::render::{Image, LayerMode, RenderSettings, RenderStats, render};
+use strata::session::SceneSource;
 
 /// A 40×40 plane at y = 0 seen from above by a camera at height 5 (a 10-unit window), under a
 /// dome (`dome` is its extra attributes), its slots bound in order to the substances `layers`
@@ -73,14 +72,8 @@ def Scope "Looks"
 }
 
 fn render_file(scene: &Path, mode: LayerMode, spp: u32, res: usize, seed: u64) -> (Image, RenderStats) {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled = compile_scene(Some(scene), BackendKind::Jit, PassOptions::default(), &mut sources, &mut diags);
-    let CompiledScene { stage, materials, prim_material, .. } =
-        compiled.unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    let scene = Scene::from_stage(&stage, &|p| prim_material.get(p).copied(), &mut diags).expect("scene builds");
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    let (session, scene) = common::stage_scene(SceneSource::File(scene.to_path_buf()), BackendKind::Jit, true);
+    let refs = session.compiled().expect("compiled").refs();
     let settings = RenderSettings {
         width: res,
         height: res,

@@ -26,7 +26,7 @@ import sys
 from collections import defaultdict
 
 GROUND = {"diag", "input", "abi", "runtime", "stack"}
-STAGES = ["front", "scene", "compose", "ir", "backend", "render"]
+STAGES = ["front", "scene", "compose", "ir", "backend", "render", "session"]
 TOOLS = {"cli", "bench", "fuzz", "plot", "main"}
 
 

@@ -32,6 +32,7 @@ use std::path::{Component, Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+pub mod generated;
 pub mod scenes;
 
 /// Default limit on the size of any one input file: 256 MiB. The largest scenes and

@@ -271,6 +271,36 @@ pub fn register_file_as(path: &Path, space: ColorSpace) -> Result<i32, String> {
     register(key, texture)
 }
 
+/// Whether a texture was registered under a name starting with `prefix` (a canonical path
+/// and `#`: loaded from that file in any colour space).
+pub fn registered_from(prefix: &str) -> bool {
+    strata_rt::texture::names().iter().any(|n| n.to_string_lossy().starts_with(prefix))
+}
+
+/// Reads `path` again into every registry entry loaded from it (one per colour space), so
+/// materials compiled against those ids see the new texels without recompiling. Returns how
+/// many entries were replaced: 0 when no texture was loaded from `path`.
+pub fn reload_file(path: &Path) -> Result<usize, String> {
+    let Ok(canonical) = crate::input::canonicalize(path) else { return Ok(0) };
+    let mut replaced = 0;
+    for (id, name) in strata_rt::texture::names().into_iter().enumerate() {
+        let name = name.to_string_lossy().into_owned();
+        let Some(space) = [ColorSpace::Auto, ColorSpace::Srgb, ColorSpace::Raw]
+            .into_iter()
+            .find(|space| name == format!("{}#{}", canonical.display(), space.key()))
+        else {
+            continue;
+        };
+        let texture = input::read_bytes(&canonical)
+            .map_err(|e| e.to_string())
+            .and_then(|bytes| decode_texture_named(&bytes, Some(path), space, input::limits().max_texture_pixels))
+            .map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
+        strata_rt::texture::replace(id as i32, texture)?;
+        replaced += 1;
+    }
+    Ok(replaced)
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;

@@ -94,20 +94,20 @@ pub fn scene_file_with(
     optimize: bool,
     resolution: (usize, usize),
 ) -> (strata::render::Scene, Vec<Arc<dyn MaterialCode>>) {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled = strata::cli::compile_scene(Some(path), backend, PassOptions { optimize }, &mut sources, &mut diags)
-        .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    let strata::cli::CompiledScene { stage, materials, prim_material, .. } = compiled;
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    use strata::session::{SceneSource, Session, SessionOptions};
+    let options = SessionOptions { backend, passes: PassOptions { optimize }, ..Default::default() };
+    let mut session = Session::open(SceneSource::File(path.to_path_buf()), options);
+    session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
     let options = strata::render::scene::SceneOptions {
         dicing: strata::render::displace::DicingOptions { resolution, ..Default::default() },
         ..Default::default()
     };
-    let scene = strata::render::Scene::build(&stage, &|p| prim_material.get(p).copied(), &refs, &options, &mut diags)
-        .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
-    assert!(!diags.has_errors(), "{}", diags.render(&sources));
-    (scene, materials)
+    if session.prepare(&options).is_none() {
+        panic!("{}", session.diagnostics().render(session.sources()));
+    }
+    assert!(!session.diagnostics().has_errors(), "{}", session.diagnostics().render(session.sources()));
+    let (scene, compiled) = session.into_scene().expect("prepared");
+    (scene, compiled.materials)
 }
 
 /// Settings for a small stochastic test render on two threads.
@@ -140,4 +140,23 @@ pub fn render_scene(
 pub fn render_file(path: &std::path::Path, settings: &strata::render::RenderSettings) -> strata::render::Image {
     let (scene, materials) = scene_file_with(path, BackendKind::Jit, true, (settings.width, settings.height));
     render_scene(&scene, &materials, settings)
+}
+
+/// A scene opened and compiled in a session, with its render scene built from the stage alone
+/// (`Scene::from_stage`: nothing diced, no primvars stored); panics with the rendered
+/// diagnostics on any error.
+pub fn stage_scene(
+    source: strata::session::SceneSource,
+    backend: BackendKind,
+    optimize: bool,
+) -> (strata::session::Session, strata::render::Scene) {
+    let options = strata::session::SessionOptions { backend, passes: PassOptions { optimize }, ..Default::default() };
+    let mut session = strata::session::Session::open(source, options);
+    session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
+    let mut diags = session.take_diagnostics();
+    let (stage, compiled) = (session.stage().expect("opened"), session.compiled().expect("compiled"));
+    let scene = strata::render::Scene::from_stage(stage, &|p| compiled.prim_material.get(p).copied(), &mut diags)
+        .unwrap_or_else(|| panic!("{}", diags.render(session.sources())));
+    assert!(!diags.has_errors(), "{}", diags.render(session.sources()));
+    (session, scene)
 }

@@ -86,6 +86,20 @@ pub fn find(name: &Path) -> Option<i32> {
     REGISTRY.read().ok().and_then(|r| r.textures.iter().position(|(p, _)| p == name)).map(|i| i as i32)
 }
 
+/// The names of every registered texture, by id.
+pub fn names() -> Vec<PathBuf> {
+    REGISTRY.read().map(|r| r.textures.iter().map(|(p, _)| p.clone()).collect()).unwrap_or_default()
+}
+
+/// Replaces the texels of texture `id` (its file changed): code compiled against the id reads
+/// the new texels from the next lookup on. Lookups already running keep the old texels.
+pub fn replace(id: i32, texture: Texture) -> Result<(), String> {
+    let mut registry = REGISTRY.write().map_err(|_| "texture registry poisoned".to_string())?;
+    let entry = usize::try_from(id).ok().and_then(|i| registry.textures.get_mut(i)).ok_or("no such texture")?;
+    entry.1 = Arc::new(texture);
+    Ok(())
+}
+
 /// Registers an in-memory texture under a name (tests, generated images).
 pub fn register(name: PathBuf, texture: Texture) -> Result<i32, String> {
     let mut registry = REGISTRY.write().map_err(|_| "texture registry poisoned".to_string())?;

@@ -308,6 +308,12 @@ impl Stage {
         &self.prims[id.0 as usize]
     }
 
+    /// The prim with id `id`, to edit in place (a session's input-value change,
+    /// `crate::session`). Its path and place in the hierarchy must not change.
+    pub fn prim_mut(&mut self, id: PrimId) -> &mut Prim {
+        &mut self.prims[id.0 as usize]
+    }
+
     /// Number of prims.
     pub fn len(&self) -> usize {
         self.prims.len()

@@ -1,22 +1,21 @@
-//! The subcommands behind `strata`: each loads its input, reports diagnostics to stderr and
-//! prints its result to stdout. Kept in the library so tests can run them.
+//! The subcommands behind `strata` (the binary crate; `main.rs` parses the arguments): each
+//! drives the pipeline through the library's [`Session`], reports diagnostics to stderr and
+//! prints its result to stdout. [`bench`] and [`fuzz`] are the measurement and fuzzing
+//! subcommands; they use the library only, never this module.
 
-use crate::abi::MaterialCode;
-use crate::backend::{BackendKind, Compiler};
-use crate::compose::scene::{SceneComposition, compose_stage};
-use crate::compose::slots::PrimStack;
-use crate::diag::{Diagnostics, SourceMap};
-use crate::front::library::Library;
-use crate::ir::ssa::EntryKind;
-use crate::ir::wired::{self, PassOptions};
-use crate::render::ExrOptions;
-use crate::scene::{Stage, TimeCode};
-use crate::scenes;
-use serde::Serialize;
-use std::collections::HashMap;
+pub mod bench;
+pub mod fuzz;
+
 use std::io::Write;
 use std::path::Path;
-use std::sync::Arc;
+use strata::backend::{BackendKind, Compiler};
+use strata::diag::{Diagnostics, SourceMap};
+use strata::front::library::Library;
+use strata::ir::ssa::EntryKind;
+use strata::ir::wired::PassOptions;
+use strata::render::ExrOptions;
+use strata::scene::TimeCode;
+use strata::session::{Pass, SceneSource, Session, SessionOptions, layers_json, layers_table};
 
 // `eprint!`/`eprintln!` panic when stderr is closed (`strata check … 2>&1 | head -1`). These
 // shadow them in this module: the text is lost, never the run, which ends with its own exit
@@ -56,136 +55,12 @@ fn report(diags: &Diagnostics, sources: &SourceMap) -> Result<(), Failure> {
     }
 }
 
-/// Opens a scene file, or the embedded default scene when `path` is `None`.
-pub fn open_scene(path: Option<&Path>, sources: &mut SourceMap, diags: &mut Diagnostics) -> Option<Stage> {
-    open_scene_at(path, None, sources, diags)
-}
-
-/// As [`open_scene`], read at `time` (`--time`; `None`: [`Stage::opening_time`]).
-pub fn open_scene_at(
-    path: Option<&Path>,
-    time: Option<TimeCode>,
-    sources: &mut SourceMap,
-    diags: &mut Diagnostics,
-) -> Option<Stage> {
-    let mut stage = match path {
-        Some(p) => Stage::open(p, sources, diags).ok(),
-        None => {
-            let (name, text) = scenes::DEFAULT_SCENE;
-            Stage::from_text(name, text, Path::new(scenes::EMBEDDED_DIR), sources, diags).ok()
-        }
-    }?;
-    if let Some(time) = time {
-        stage.set_time(time);
-    }
-    Some(stage)
-}
-
-#[derive(Serialize)]
-struct JsonOverride<'a> {
-    slot: String,
-    material: &'a str,
-    bound_at: &'a str,
-}
-
-#[derive(Serialize)]
-struct JsonLayer<'a> {
-    slot: String,
-    material: &'a str,
-    bound_at: &'a str,
-    overrides: Vec<JsonOverride<'a>>,
-}
-
-#[derive(Serialize)]
-struct JsonPrim<'a> {
-    prim: &'a str,
-    layers: Vec<JsonLayer<'a>>,
-}
-
-/// The `strata layers --json` document (DESIGN.md).
-pub fn layers_json(stacks: &[PrimStack]) -> String {
-    let prims: Vec<JsonPrim> = stacks
-        .iter()
-        .map(|s| JsonPrim {
-            prim: &s.prim,
-            layers: s
-                .layers
-                .iter()
-                .map(|l| JsonLayer {
-                    slot: l.slot.name(),
-                    material: &l.applied.material,
-                    bound_at: &l.applied.bound_at,
-                    overrides: l
-                        .overrides
-                        .iter()
-                        .map(|o| JsonOverride {
-                            slot: o.slot.name(),
-                            material: &o.applied.material,
-                            bound_at: &o.applied.bound_at,
-                        })
-                        .collect(),
-                })
-                .collect(),
-        })
-        .collect();
-    serde_json::to_string_pretty(&prims).unwrap_or_default()
-}
-
-/// The `strata layers` table: per prim, layers bottom to top, `*` marking bindings authored
-/// on the prim itself (the paper's bright icons) rather than inherited. With the `stage`, a
-/// prim with no layers says which display primvars its default substance reads.
-pub fn layers_table(stacks: &[PrimStack], stage: Option<&crate::scene::Stage>) -> String {
-    let mut out = String::new();
-    // Slot names are padded to 12 columns, or to the longest (`material:binding`) when wider.
-    let width = stacks
-        .iter()
-        .flat_map(|s| s.layers.iter().flat_map(|l| std::iter::once(&l.slot).chain(l.overrides.iter().map(|o| &o.slot))))
-        .map(|s| s.name().chars().count())
-        .max()
-        .unwrap_or(0)
-        .max(12);
-    for stack in stacks {
-        out += &format!("{}\n", stack.prim);
-        if stack.layers.is_empty() {
-            let display = stage.map(|s| crate::compose::scene::display_primvars(s, &stack.prim)).unwrap_or_default();
-            out += &format!("  (default substance: {})\n", display.describe());
-        }
-        for layer in &stack.layers {
-            let mark = if layer.applied.bound_at == stack.prim { '*' } else { ' ' };
-            out += &format!(
-                "  {mark} {:<width$} {:<40} bound at {}\n",
-                layer.slot.name(),
-                layer.applied.material,
-                layer.applied.bound_at
-            );
-            for o in &layer.overrides {
-                let mark = if o.applied.bound_at == stack.prim { '*' } else { ' ' };
-                out += &format!(
-                    "  {mark} {:<width$} {:<40} bound at {}\n",
-                    o.slot.name(),
-                    o.applied.material,
-                    o.applied.bound_at
-                );
-            }
-        }
-    }
-    out
-}
-
 /// `strata layers [SCENE] [--json]`
 pub fn layers(scene: Option<&Path>, json: bool, time: Option<TimeCode>) -> Result<(), Failure> {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let stage = open_scene_at(scene, time, &mut sources, &mut diags);
-    let stacks = match &stage {
-        Some(stage) => {
-            let tree = crate::compose::scene::binding_tree(stage, &mut diags);
-            crate::compose::slots::resolve_stacks(&tree, &mut diags)
-        }
-        None => Vec::new(),
-    };
-    report(&diags, &sources)?;
-    let text = if json { layers_json(&stacks) + "\n" } else { layers_table(&stacks, stage.as_ref()) };
+    let mut session = Session::open(SceneSource::from_path(scene), SessionOptions { time, ..Default::default() });
+    let stacks = session.layer_stacks();
+    report(&session.take_diagnostics(), session.sources())?;
+    let text = if json { layers_json(&stacks) + "\n" } else { layers_table(&stacks, session.stage()) };
     print_out(&text)
 }
 
@@ -202,90 +77,35 @@ fn print_out(text: &str) -> Result<(), Failure> {
     }
 }
 
-/// Composes a scene file completely, reporting every problem.
-pub fn compose_file(
-    scene: Option<&Path>,
-    sources: &mut SourceMap,
-    diags: &mut Diagnostics,
-) -> Option<SceneComposition> {
-    let stage = open_scene(scene, sources, diags)?;
-    Some(compose_stage(&stage, sources, diags))
-}
-
 /// `strata ir SCENE --prim PATH [--lowered]`: the wired IR of one prim's material, or its
 /// lowered IR.
 pub fn ir(scene: &Path, prim: &str, optimize: bool, stats: bool, lowered: bool) -> Result<(), Failure> {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let composition = compose_file(Some(scene), &mut sources, &mut diags);
-    report(&diags, &sources)?;
-    let Some(composition) = composition else { return Err(Failure) };
-    let Some(material) = composition.material_of(prim) else {
-        eprintln!("error: `{prim}` is not a renderable prim of {}", scene.display());
-        let prims: Vec<&str> = composition.stacks.iter().map(|s| s.prim.as_str()).take(20).collect();
-        eprintln!("  renderable prims: {}", prims.join(", "));
+    let options = SessionOptions { passes: PassOptions { optimize }, ..Default::default() };
+    let mut session = Session::open(SceneSource::File(scene.to_path_buf()), options);
+    if session.composition().is_none() || session.diagnostics().has_errors() {
+        report(&session.take_diagnostics(), session.sources())?;
         return Err(Failure);
+    }
+    report(&session.take_diagnostics(), session.sources())?;
+    let (text, stats_line) = match session.ir(prim, lowered) {
+        Some(Ok(ir)) => ir,
+        Some(Err(prims)) => {
+            eprintln!("error: `{prim}` is not a renderable prim of {}", scene.display());
+            eprintln!("  renderable prims: {}", prims.join(", "));
+            return Err(Failure);
+        }
+        None => return Err(Failure),
     };
-    let mut diags = Diagnostics::new();
-    let passes = PassOptions { optimize };
-    let (text, stats_line) = if lowered {
-        let mut compiler = Compiler::new(BackendKind::Jit, passes);
-        let module = compiler.lower(&composition.library, material, &mut diags);
-        let line = format!("lowered: {} function(s), {} instruction(s)", module.functions.len(), module.inst_count());
-        (module.to_text(), line)
-    } else {
-        let wired = wired::build(&composition.library, material, passes, &mut diags);
-        (wired.to_text(&composition.library), wired.stats_line())
-    };
-    report(&diags, &sources)?;
+    report(&session.take_diagnostics(), session.sources())?;
     if stats {
         eprintln!("{stats_line}");
     }
     print_out(&text)
 }
 
-/// Checks a substance file or scene: every diagnostic, and a one-line summary when it is clean.
-pub fn check_file(file: &Path) -> (Diagnostics, SourceMap, String) {
-    check_file_at(file, None)
-}
-
-/// As [`check_file`], with a scene read at `time` (`None`: [`Stage::opening_time`]).
-pub fn check_file_at(file: &Path, time: Option<TimeCode>) -> (Diagnostics, SourceMap, String) {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let is_substance = file.extension().is_some_and(|e| e == "ash");
-    let summary = if is_substance {
-        let lib = Library::load(&[(file.to_path_buf(), Default::default())], &mut sources, &mut diags);
-        let user = lib.graphs.len().saturating_sub(1);
-        format!("{}: ok ({user} graph(s))", file.display())
-    } else {
-        // Everything `render` would reject: composition, lowering (textures), geometry,
-        // lights and camera — all without generating code or tracing a ray.
-        match open_scene_at(Some(file), time, &mut sources, &mut diags) {
-            Some(stage) => {
-                let c = compose_stage(&stage, &mut sources, &mut diags);
-                let mut compiler = Compiler::new(BackendKind::Jit, PassOptions::default());
-                let mut distinct = std::collections::HashSet::new();
-                for material in &c.materials {
-                    distinct.insert(compiler.lower(&c.library, material, &mut diags).to_text());
-                }
-                crate::render::Scene::from_stage(&stage, &|_| Some(0), &mut diags);
-                format!(
-                    "{}: ok ({} renderable prim(s), {} distinct material(s))",
-                    file.display(),
-                    c.stacks.len(),
-                    distinct.len()
-                )
-            }
-            None => String::new(),
-        }
-    };
-    (diags, sources, summary)
-}
-
 /// `strata check FILE [--time T] [--strict]`
 pub fn check(file: &Path, time: Option<TimeCode>, strict: bool) -> Result<(), Failure> {
-    let (mut diags, sources, summary) = check_file_at(file, time);
+    let (mut diags, sources, summary) = strata::session::check_file_at(file, time);
     if strict {
         diags.make_warnings_errors();
     }
@@ -301,7 +121,7 @@ pub struct RenderArgs {
     /// The EXR to write; the PNG preview goes beside it.
     pub output: std::path::PathBuf,
     /// Image size, samples, seed, threads, depth and layer mode.
-    pub settings: crate::render::RenderSettings,
+    pub settings: strata::render::RenderSettings,
     /// Which backend runs the shaders.
     pub backend: BackendKind,
     /// Constant folding and layer pruning (off only to compare).
@@ -321,97 +141,12 @@ pub struct RenderArgs {
     /// `RenderSettings` prim's `resolution` replaces them.
     pub resolution_given: bool,
     /// Whether a stage without lights gets the default lights (`--no-default-lights`: never).
-    pub default_lights: crate::render::scene::DefaultLights,
+    pub default_lights: strata::render::scene::DefaultLights,
     /// Every warning is an error (`--strict`): nothing is rendered from a stage USD had to
     /// compose around.
     pub strict: bool,
     /// The time code to render (`--time`; `None`: [`Stage::opening_time`]).
     pub time: Option<TimeCode>,
-}
-
-/// A scene with every distinct material compiled.
-pub struct CompiledScene {
-    /// The composed stage.
-    pub stage: Stage,
-    /// Compiled materials.
-    pub materials: Vec<Arc<dyn MaterialCode>>,
-    /// Per renderable prim path, its index in `materials`.
-    pub prim_material: HashMap<String, usize>,
-    /// Per material, a name for its slot stack (see [`material_name`]), for ID mattes.
-    pub material_names: Vec<String>,
-    /// The compiler, with its statistics.
-    pub compiler: Compiler,
-    /// Wall time reading the scene (USD and every file it names) and composing it, ms.
-    pub parse_ms: f64,
-    /// Wall time composing slot stacks into materials, ms.
-    pub compose_ms: f64,
-    /// Wall time compiling the materials (wire, passes, lowering, codegen), ms.
-    pub compile_ms: f64,
-}
-
-/// Composes a scene and compiles every distinct material once.
-pub fn compile_scene(
-    scene: Option<&Path>,
-    backend: BackendKind,
-    passes: PassOptions,
-    sources: &mut SourceMap,
-    diags: &mut Diagnostics,
-) -> Option<CompiledScene> {
-    compile_scene_at(scene, None, backend, passes, sources, diags)
-}
-
-/// As [`compile_scene`], with the scene read at `time` (`None`: [`Stage::opening_time`]).
-pub fn compile_scene_at(
-    scene: Option<&Path>,
-    time: Option<TimeCode>,
-    backend: BackendKind,
-    passes: PassOptions,
-    sources: &mut SourceMap,
-    diags: &mut Diagnostics,
-) -> Option<CompiledScene> {
-    let start = std::time::Instant::now();
-    let stage = open_scene_at(scene, time, sources, diags)?;
-    let parse_ms = start.elapsed().as_secs_f64() * 1e3;
-    let start = std::time::Instant::now();
-    let composition = compose_stage(&stage, sources, diags);
-    let compose_ms = start.elapsed().as_secs_f64() * 1e3;
-    if diags.has_errors() {
-        return None;
-    }
-    let start = std::time::Instant::now();
-    let mut compiler = Compiler::new(backend, passes);
-    let mut materials = Vec::with_capacity(composition.materials.len());
-    for material in &composition.materials {
-        materials.push(compiler.compile(&composition.library, material, diags)?);
-    }
-    let compile_ms = start.elapsed().as_secs_f64() * 1e3;
-    let prim_material =
-        composition.stacks.iter().zip(&composition.prim_material).map(|(s, m)| (s.prim.clone(), *m)).collect();
-    // Each material is named after the first prim stack composing it: identical compositions
-    // are shared (DESIGN.md rule 8), so that stack stands for all of them.
-    let material_names = (0..materials.len())
-        .map(|m| {
-            let first = composition.prim_material.iter().position(|&pm| pm == m);
-            first.and_then(|i| composition.stacks.get(i)).map_or_else(|| format!("material {m}"), material_name)
-        })
-        .collect();
-    Some(CompiledScene { stage, materials, prim_material, material_names, compiler, parse_ms, compose_ms, compile_ms })
-}
-
-/// The name of a composed material in ID mattes: its slot stack, bottom first, as
-/// `slot=/Material/Path` entries (overrides as `slot:_:override=/Path`) joined by ` | `.
-pub fn material_name(stack: &PrimStack) -> String {
-    if stack.layers.is_empty() {
-        return "(default substance)".into();
-    }
-    let mut parts = Vec::new();
-    for layer in &stack.layers {
-        parts.push(format!("{}={}", layer.slot.name(), layer.applied.material));
-        for o in &layer.overrides {
-            parts.push(format!("{}={}", o.slot.name(), o.applied.material));
-        }
-    }
-    parts.join(" | ")
 }
 
 /// `strata render [SCENE] -o OUT.exr …`
@@ -424,7 +159,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
     }
     // Both outputs' temporaries are created before anything else: an unwritable directory,
     // or an `OUT.png` that is a directory, fails now rather than after the render.
-    let outputs = match crate::render::prepare_outputs(&args.output) {
+    let outputs = match strata::render::prepare_outputs(&args.output) {
         Ok(outputs) => outputs,
         Err(e) => {
             eprintln!("error: {e}");
@@ -432,62 +167,52 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         }
     };
     let compile_start = std::time::Instant::now();
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let compiled = compile_scene_at(
-        args.scene.as_deref(),
-        args.time,
-        args.backend,
-        PassOptions { optimize: args.optimize },
-        &mut sources,
-        &mut diags,
-    );
+    let options = SessionOptions {
+        backend: args.backend,
+        passes: PassOptions { optimize: args.optimize },
+        time: args.time,
+        strict: args.strict,
+        limits: None,
+    };
+    let mut session = Session::open(SceneSource::from_path(args.scene.as_deref()), options);
     let mut settings = args.settings.clone();
-    let scene_start = std::time::Instant::now();
-    let scene = compiled.as_ref().and_then(|c| {
-        let view = crate::render::scene::choose_view(&c.stage, args.camera.as_deref(), &mut diags)?;
+    let mut prepared = false;
+    if session.compile().is_some()
+        && let Some(view) = session.view(args.camera.as_deref())
+    {
         if let (false, Some((w, h))) = (args.resolution_given, view.resolution) {
             (settings.width, settings.height) = (w, h);
         }
-        let options = crate::render::scene::SceneOptions {
+        let options = strata::render::scene::SceneOptions {
             camera: view.camera,
-            geometry: crate::render::geometry::GeometryOptions { subdiv_level: args.subdiv_level },
-            dicing: crate::render::displace::DicingOptions {
+            geometry: strata::render::geometry::GeometryOptions { subdiv_level: args.subdiv_level },
+            dicing: strata::render::displace::DicingOptions {
                 rate: args.dicing_rate,
                 resolution: (settings.width, settings.height),
                 ..Default::default()
             },
             default_lights: args.default_lights,
         };
-        let refs: Vec<&dyn MaterialCode> = c.materials.iter().map(|m| m.as_ref()).collect();
-        crate::render::Scene::build(&c.stage, &|p| c.prim_material.get(p).copied(), &refs, &options, &mut diags)
-    });
-    let scene_ms = scene_start.elapsed().as_secs_f64() * 1e3;
-    if args.strict {
-        diags.make_warnings_errors();
+        prepared = session.prepare(&options).is_some();
     }
-    let time = compiled.as_ref().map_or(TimeCode::Default, |c| c.stage.time());
-    report(&diags, &sources)?;
+    let time = session.stage().map_or(TimeCode::Default, |s| s.time());
+    let diags = session.take_diagnostics();
+    report(&diags, session.sources())?;
     let warnings = diags.warning_count();
-    let (
-        Some(CompiledScene { materials, compiler, material_names, parse_ms, compose_ms, compile_ms, .. }),
-        Some(mut scene),
-    ) = (compiled, scene)
-    else {
+    let (true, Some(scene)) = (prepared, session.scene()) else {
         return Err(Failure);
     };
-    scene.material_names = material_names;
     let compile_seconds = compile_start.elapsed().as_secs_f64();
     // Every input (layers, substance files, textures, dome maps) has been read by now.
     refuse_to_overwrite_inputs(&[outputs.exr_path(), outputs.png_path()])?;
     if args.stats {
-        eprintln!("compile ({}): {}", args.backend, compiler.stats);
+        eprintln!("compile ({}): {}", args.backend, session.compile_stats());
         if let Some(displacement) = &scene.displacement {
             let (world, _) = scene.accel.bytes();
             eprintln!("{displacement}; BVHs and triangles {:.1} MiB", world as f64 / (1024.0 * 1024.0));
         }
     }
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
+    let exr_options = exr_options(args, &settings, scene, warnings, time);
     let bar = progress_bar(settings.height as u64);
     let start = std::time::Instant::now();
     let log = LogProgress::new(start);
@@ -495,7 +220,8 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         Some(bar) => bar.set_position(done as u64),
         None => log.update(done, total),
     };
-    let (image, stats) = match crate::render::render(&scene, &refs, &settings, Some(&progress)) {
+    let pass = Pass { settings: settings.clone(), time: None };
+    let (image, stats) = match session.render(&pass, Some(&progress)) {
         Ok(result) => result,
         Err(e) => {
             eprintln!("error: {e}");
@@ -506,7 +232,6 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         bar.finish_and_clear();
     }
     let seconds = start.elapsed().as_secs_f64();
-    let exr_options = exr_options(args, &settings, &scene, warnings, time);
     let write_start = std::time::Instant::now();
     let png = match outputs.write_with(&image, &exr_options) {
         Ok(png) => png,
@@ -534,9 +259,14 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
     }
     if args.stats {
         eprintln!("{}", stats.evals_line());
+        let t = session.stats();
         eprintln!(
-            "time: parse {parse_ms:.1} ms, compose {compose_ms:.1} ms, compile {compile_ms:.1} ms, \
-             geometry + BVH {scene_ms:.1} ms, render {:.1} ms, write EXR + PNG {write_ms:.1} ms",
+            "time: parse {:.1} ms, compose {:.1} ms, compile {:.1} ms, geometry + BVH {:.1} ms, render {:.1} ms, \
+             write EXR + PNG {write_ms:.1} ms",
+            t.parse_ms,
+            t.compose_ms,
+            t.compile_ms,
+            t.scene_ms,
             seconds * 1e3
         );
     }
@@ -547,7 +277,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
 /// scene's texture (or any other input) would destroy it.
 fn refuse_to_overwrite_inputs(outputs: &[&Path]) -> Result<(), Failure> {
     for output in outputs {
-        if crate::input::was_read(output) {
+        if strata::input::was_read(output) {
             eprintln!("error: `{}` is an input of this run; refusing to overwrite it", output.display());
             return Err(Failure);
         }
@@ -570,16 +300,16 @@ fn samples_per_second(samples: u64, seconds: f64) -> String {
 /// warnings the run reported (a farm can reject an image made from a stage with problems).
 fn exr_options(
     args: &RenderArgs,
-    settings: &crate::render::RenderSettings,
-    scene: &crate::render::Scene,
+    settings: &strata::render::RenderSettings,
+    scene: &strata::render::Scene,
     warnings: usize,
     time: TimeCode,
 ) -> ExrOptions {
     let camera = scene.camera.with_aspect(settings.width as f32 / settings.height as f32);
     let mode = match settings.mode {
-        crate::render::LayerMode::Stochastic => "stochastic",
-        crate::render::LayerMode::Weighted => "weighted",
-        crate::render::LayerMode::Auto => "auto",
+        strata::render::LayerMode::Stochastic => "stochastic",
+        strata::render::LayerMode::Weighted => "weighted",
+        strata::render::LayerMode::Auto => "auto",
     };
     let scene_name = args.scene.as_ref().map_or("(embedded default scene)".to_string(), |p| p.display().to_string());
     ExrOptions {
@@ -605,12 +335,12 @@ fn exr_options(
             ("strata/time".into(), time.to_string()),
         ]
         .into_iter()
-        .chain(crate::render::cryptomatte::header_attributes(
-            crate::render::cryptomatte::OBJECT_LAYER,
+        .chain(strata::render::cryptomatte::header_attributes(
+            strata::render::cryptomatte::OBJECT_LAYER,
             scene.prims.iter().map(|p| p.path.as_str()),
         ))
-        .chain(crate::render::cryptomatte::header_attributes(
-            crate::render::cryptomatte::MATERIAL_LAYER,
+        .chain(strata::render::cryptomatte::header_attributes(
+            strata::render::cryptomatte::MATERIAL_LAYER,
             scene.material_names.iter().map(String::as_str),
         ))
         .collect(),
@@ -692,11 +422,11 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
         .iter()
         .enumerate()
         .filter(|(i, g)| {
-            g.kind == crate::front::ast::GraphKind::Substance
+            g.kind == strata::front::ast::GraphKind::Substance
                 && canonical.is_some()
                 && lib.graph_files.get(*i).and_then(|p| p.canonicalize().ok()) == canonical
         })
-        .map(|(i, g)| (crate::front::library::GraphId(i as u32), g.name.clone()))
+        .map(|(i, g)| (strata::front::library::GraphId(i as u32), g.name.clone()))
         .collect();
     if substances.is_empty() {
         eprintln!("error: {} declares no substance", file.display());
@@ -705,10 +435,10 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
     let mut compiler = Compiler::new(BackendKind::Jit, PassOptions::default());
     let mut modules = Vec::new();
     for (graph, name) in &substances {
-        let material = crate::compose::ComposedMaterial {
-            layers: vec![crate::compose::ComposedLayer {
-                slot: crate::compose::Slot::parse("000").expect("a valid slot name"),
-                substance: crate::compose::MaterialRef {
+        let material = strata::compose::ComposedMaterial {
+            layers: vec![strata::compose::ComposedLayer {
+                slot: strata::compose::Slot::parse("000").expect("a valid slot name"),
+                substance: strata::compose::MaterialRef {
                     path: String::new(),
                     graph: *graph,
                     values: Vec::new(),
@@ -742,7 +472,7 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
             // A mask known at compile time needs no code: define it in the header.
             header += &format!(
                 "static inline uint32_t {name}_mask(const StrataGlobals *g, float *out) {{ (void)g; *out = {}f; return 0; }}\n",
-                crate::front::types::format_f32(m)
+                strata::front::types::format_f32(m)
             );
         }
         for f in &module.functions {
@@ -764,7 +494,7 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
             functions.push((symbol, f));
         }
     }
-    let object = match crate::backend::object::compile(&file.display().to_string(), &functions) {
+    let object = match strata::backend::object::compile(&file.display().to_string(), &functions) {
         Ok(bytes) => bytes,
         Err(e) => {
             eprintln!("error: code generation failed: {e}");
@@ -791,13 +521,13 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
 
 /// Writes a file whole or not at all: a fsynced temporary file beside it, then a rename.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    crate::render::output::write_file_atomically(path, bytes).map_err(|e| std::io::Error::other(e.message))
+    strata::render::output::write_file_atomically(path, bytes).map_err(|e| std::io::Error::other(e.message))
 }
 
 /// `strata fuzz`: runs the fuzzer and prints its report; fails if any input failed.
-pub fn fuzz(options: &crate::fuzz::FuzzOptions) -> Result<(), Failure> {
+pub fn fuzz(options: &fuzz::FuzzOptions) -> Result<(), Failure> {
     let start = std::time::Instant::now();
-    let report = match crate::fuzz::run(options, &mut |line| eprintln!("{line}")) {
+    let report = match fuzz::run(options, &mut |line| eprintln!("{line}")) {
         Ok(report) => report,
         Err(e) => {
             eprintln!("error: fuzzing failed: {e}");

@@ -9,21 +9,26 @@
 //! - [`bench_render`]: time per sample and error against a high-spp reference for 1–16 layers,
 //!   stochastic vs weighted layer evaluation.
 
-use crate::abi::{Closure, ClosureKind, Globals, LayerInfo, MaterialCode, MaterialInfo, ShaderError};
-use crate::backend::{self, BackendKind, Compiler};
-use crate::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
-use crate::diag::{Diagnostics, SourceMap, Span};
-use crate::front::library::Library;
-use crate::ir::lower;
-use crate::ir::wired::{self, PassOptions};
-use crate::plot::Series;
-use crate::render::{LayerMode, RenderSettings, Scene};
-use crate::runtime::{math, noise};
 use std::fmt::Write as _;
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
+use strata::abi::{Closure, ClosureKind, Globals, LayerInfo, MaterialCode, MaterialInfo, ShaderError};
+use strata::backend::{self, BackendKind};
+use strata::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
+use strata::diag::{Diagnostics, SourceMap, Span};
+use strata::front::library::Library;
+use strata::input::generated::{MaskKind, layered_scene, layered_source, mask_stack_source};
+use strata::ir::lower;
+use strata::ir::wired::{self, PassOptions};
+use strata::plot::Series;
+use strata::render::{LayerMode, RenderSettings, Scene};
+use strata::runtime::{math, noise};
+use strata::session::{SceneSource, Session, SessionOptions};
+
+mod update;
+pub use update::bench_update;
 
 /// The built-in benchmark material: three substances, composed bottom to top in this order.
 pub const BENCH_SOURCE: &str = r#"// strata's built-in shading benchmark: three layers.
@@ -503,7 +508,7 @@ fn single_layer_stack(lib: &Library, names: &[&str]) -> Result<ComposedMaterial,
 }
 
 /// Wires, optimises and lowers a composed material.
-fn lower_material(lib: &Library, material: &ComposedMaterial) -> Result<(crate::ir::ssa::Module, usize), String> {
+fn lower_material(lib: &Library, material: &ComposedMaterial) -> Result<(strata::ir::ssa::Module, usize), String> {
     lower_material_with(lib, material, lower::LowerOptions::default())
 }
 
@@ -512,7 +517,7 @@ fn lower_material_with(
     lib: &Library,
     material: &ComposedMaterial,
     options: lower::LowerOptions,
-) -> Result<(crate::ir::ssa::Module, usize), String> {
+) -> Result<(strata::ir::ssa::Module, usize), String> {
     let mut diags = Diagnostics::new();
     let wired = wired::build(lib, material, PassOptions::default(), &mut diags);
     let module = lower::lower(lib, &wired, options, &mut diags);
@@ -550,13 +555,12 @@ fn shade_report(scene: Option<&Path>, prim: Option<&str>, o: &ShadeOptions) -> R
             (lib, material, "built-in benchmark material (3 layers: glossy, fbm-masked dirt, cellular metal)".into())
         }
         Some(path) => {
-            let mut sources = SourceMap::new();
-            let mut diags = Diagnostics::new();
-            let composition = crate::cli::compose_file(Some(path), &mut sources, &mut diags);
-            let composition = match composition {
-                Some(c) if !diags.has_errors() => c,
-                _ => return Err(diag_error(&format!("cannot compose {}", path.display()), &diags, &sources)),
-            };
+            let mut session = Session::open_default(SceneSource::File(path.to_path_buf()));
+            if session.composition().is_none() || session.diagnostics().has_errors() {
+                let message = format!("cannot compose {}", path.display());
+                return Err(diag_error(&message, session.diagnostics(), session.sources()));
+            }
+            let Some(composition) = session.into_composition() else { unreachable!("composed above") };
             let (prim, material) = match prim {
                 Some(p) => {
                     let m = composition
@@ -939,84 +943,6 @@ fn compile_sweep_rows(sizes: &[usize], reps: usize) -> Result<(String, Vec<Compi
 /// Layer counts of the `bench render` sweep.
 const RENDER_LAYERS: [usize; 5] = [1, 2, 4, 8, 16];
 
-/// A `.ash` file with `n` substances `layer_0` … : each a noise-thresholded mask (none on the
-/// bottom layer, which is opaque) over a diffuse or glossy surface of its own colour.
-pub fn layered_source(n: usize) -> String {
-    let mut s = String::from(
-        "shader threshold(float value = 0.0, float edge = 0.5, float softness = 0.1, output float out) {\n    \
-         out = smoothstep(edge, edge + max(softness, 1e-4), value);\n}\n\n",
-    );
-    for k in 0..n {
-        // Colours around the hue circle.
-        let h = k as f32 / n.max(1) as f32 * 6.0;
-        let c = |o: f32| 0.15 + 0.7 * (((h + o) % 6.0 - 3.0).abs() - 1.0).clamp(0.0, 1.0);
-        let (r, g, b) = (c(0.0), c(4.0), c(2.0));
-        writeln!(s, "substance layer_{k} {{").unwrap();
-        if k % 2 == 0 {
-            writeln!(s, "    node s = diffuse(albedo: color({r:.3}, {g:.3}, {b:.3}));").unwrap();
-        } else {
-            writeln!(s, "    node s = glossy(albedo: color({r:.3}, {g:.3}, {b:.3}), roughness: 0.3);").unwrap();
-        }
-        s += "    surface = s.bsdf;\n";
-        if k > 0 {
-            writeln!(s, "    node n = noise(scale: {:.3});", 2.0 + 1.37 * k as f32).unwrap();
-            s += "    node t = threshold(value: n.out, edge: 0.5, softness: 0.1);\n";
-            s += "    node m = mask(opacity: t.out);\n    mask = m.out;\n";
-        }
-        s += "}\n\n";
-    }
-    s
-}
-
-/// A scene: a camera, a dome and a distant light, and a unit sphere with `n` slots bound to
-/// the substances of [`layered_source`] in `file`.
-pub fn layered_scene(n: usize, file: &str) -> String {
-    let mut s = String::from(
-        r#"#usda 1.0
-def Xform "World"
-{
-    def Camera "Camera"
-    {
-        float focalLength = 50
-        float horizontalAperture = 36
-        float verticalAperture = 36
-        float3 xformOp:translate = (0, 0, 4)
-        uniform token[] xformOpOrder = ["xformOp:translate"]
-    }
-    def DomeLight "Sky"
-    {
-        float inputs:intensity = 0.8
-    }
-    def DistantLight "Sun"
-    {
-        float inputs:intensity = 2
-        float inputs:angle = 3
-        float3 xformOp:rotateXYZ = (-40, 30, 0)
-        uniform token[] xformOpOrder = ["xformOp:rotateXYZ"]
-    }
-    def Sphere "Ball"
-    {
-        double radius = 1
-"#,
-    );
-    for k in 0..n {
-        writeln!(s, "        rel material:slotBinding:_{:03} = </Looks/L{k}>", k * 10).unwrap();
-    }
-    s += "    }\n}\n\ndef Scope \"Looks\"\n{\n";
-    for k in 0..n {
-        writeln!(
-            s,
-            "    def Material \"L{k}\"\n    {{\n        def Shader \"Surface\"\n        {{\n            \
-             uniform token info:implementationSource = \"sourceAsset\"\n            \
-             uniform asset info:strata:sourceAsset = @{file}@\n            \
-             uniform token info:strata:sourceAsset:subIdentifier = \"layer_{k}\"\n        }}\n    }}"
-        )
-        .unwrap();
-    }
-    s += "}\n";
-    s
-}
-
 /// A scene loaded, composed, compiled with the JIT and ready to render.
 struct Loaded {
     scene: Scene,
@@ -1031,40 +957,27 @@ fn load_scene(path: &Path) -> Result<Loaded, String> {
 /// Loads a scene (`None`: the embedded default scene) and compiles it with `backend`.
 fn load_scene_with(path: Option<&Path>, backend: BackendKind) -> Result<Loaded, String> {
     let shown = path.map_or_else(|| "the default scene".to_string(), |p| p.display().to_string());
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let fail = |diags: &Diagnostics, sources: &SourceMap| diag_error(&format!("cannot load {shown}"), diags, sources);
-    let Some(stage) = crate::cli::open_scene(path, &mut sources, &mut diags) else {
-        return Err(fail(&diags, &sources));
+    let options = SessionOptions { backend, ..Default::default() };
+    let mut session = Session::open(SceneSource::from_path(path), options);
+    let fail =
+        |session: &Session| diag_error(&format!("cannot load {shown}"), session.diagnostics(), session.sources());
+    let max_layers = match session.composition() {
+        Some(c) => c.materials.iter().map(|m| m.layers.len()).max().unwrap_or(0),
+        None => return Err(fail(&session)),
     };
-    let composition = crate::compose::scene::compose_stage(&stage, &mut sources, &mut diags);
-    if diags.has_errors() {
-        return Err(fail(&diags, &sources));
-    }
-    let mut compiler = Compiler::new(backend, PassOptions::default());
-    let mut materials = Vec::new();
-    for m in &composition.materials {
-        match compiler.compile(&composition.library, m, &mut diags) {
-            Some(code) => materials.push(code),
-            None => return Err(fail(&diags, &sources)),
-        }
-    }
-    let max_layers = composition.materials.iter().map(|m| m.layers.len()).max().unwrap_or(0);
-    let by_prim: std::collections::HashMap<&str, usize> =
-        composition.stacks.iter().zip(&composition.prim_material).map(|(s, &m)| (s.prim.as_str(), m)).collect();
-    let lookup = |prim: &str| by_prim.get(prim).copied();
     // As `strata render` builds it: displaced surfaces diced (for a 640x480 image).
-    let refs: Vec<&dyn MaterialCode> = materials.iter().map(|m| m.as_ref()).collect();
-    let scene =
-        Scene::build(&stage, &lookup, &refs, &Default::default(), &mut diags).ok_or_else(|| fail(&diags, &sources))?;
-    Ok(Loaded { scene, materials, max_layers })
+    if session.prepare(&Default::default()).is_none() || session.diagnostics().has_errors() {
+        return Err(fail(&session));
+    }
+    let Some((scene, compiled)) = session.into_scene() else { unreachable!("prepared above") };
+    Ok(Loaded { scene, materials: compiled.materials, max_layers })
 }
 
 /// Renders and returns (seconds, RGB pixels).
 fn render_rgb(l: &Loaded, settings: &RenderSettings) -> Result<(f64, Vec<[f32; 3]>), String> {
     let materials: Vec<&dyn MaterialCode> = l.materials.iter().map(|m| m.as_ref()).collect();
     let start = Instant::now();
-    let (image, _) = crate::render::render(&l.scene, &materials, settings, None).map_err(|e| e.to_string())?;
+    let (image, _) = strata::render::render(&l.scene, &materials, settings, None).map_err(|e| e.to_string())?;
     let secs = start.elapsed().as_secs_f64();
     let channel = |name: &str| image.f32_channel(name).map(<[f32]>::to_vec).ok_or_else(|| format!("no {name} channel"));
     let (r, g, b) = (channel("R")?, channel("G")?, channel("B")?);
@@ -1380,14 +1293,14 @@ pub fn bench_scale() -> Result<String, String> {
     let path = write("grid.usda", &grid_mesh_scene(n))?;
     let before = peak_rss_mib();
     let start = Instant::now();
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let stage = crate::cli::open_scene(Some(&path), &mut sources, &mut diags)
-        .ok_or_else(|| diag_error("cannot load the grid", &diags, &sources))?;
+    let session = Session::open_default(SceneSource::File(path.clone()));
+    let stage =
+        session.stage().ok_or_else(|| diag_error("cannot load the grid", session.diagnostics(), session.sources()))?;
     let parse_ms = ms_since(start);
     let build_start = Instant::now();
-    let scene = Scene::from_stage(&stage, &|_| Some(0), &mut diags)
-        .ok_or_else(|| diag_error("cannot build the grid", &diags, &sources))?;
+    let mut diags = Diagnostics::new();
+    let scene = Scene::from_stage(stage, &|_| Some(0), &mut diags)
+        .ok_or_else(|| diag_error("cannot build the grid", &diags, session.sources()))?;
     let build_ms = ms_since(build_start);
     let triangles = scene.accel.triangle_count();
     let grown = (peak_rss_mib() - before).max(0.0);
@@ -1502,85 +1415,6 @@ fn instancing_report(dir: &Path) -> Result<String, String> {
 
 // ---- bench charts -----------------------------------------------------------------------------
 
-/// How the layers of a [`mask_stack_source`] are masked.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum MaskKind {
-    /// Constant masks chosen so that every layer has the same weight `1/n` (layer `k` from the
-    /// bottom has mask `1/(k+1)`): all the noise of stochastic picking comes from the pick.
-    Constant,
-    /// Noise thresholded at 0.5 (about half coverage each), as in `bench render`.
-    Noise,
-    /// Thin high-contrast stripes: mask 1 on 3 % of the surface, 0 elsewhere, a different
-    /// direction and phase per layer.
-    Thin,
-}
-
-impl MaskKind {
-    /// All kinds, in chart order.
-    pub const ALL: [MaskKind; 3] = [MaskKind::Constant, MaskKind::Noise, MaskKind::Thin];
-
-    /// Short name for file names and labels.
-    pub fn name(self) -> &'static str {
-        match self {
-            MaskKind::Constant => "constant",
-            MaskKind::Noise => "noise",
-            MaskKind::Thin => "thin",
-        }
-    }
-}
-
-/// Coverage of one [`MaskKind::Thin`] stripe layer.
-pub const THIN_COVERAGE: f64 = 0.03;
-
-/// A `.ash` file with `n` substances `layer_0` … over a sphere (see [`layered_scene`]), masked
-/// as `kind` says; the bottom layer is opaque.
-pub fn mask_stack_source(n: usize, kind: MaskKind) -> String {
-    let mut s = String::from(
-        "shader threshold(float value = 0.0, float edge = 0.5, float softness = 0.1, output float out) {\n    \
-         out = smoothstep(edge, edge + max(softness, 1e-4), value);\n}\n\n\
-         shader stripes(float dx = 1.0, float dy = 0.0, float freq = 8.0, float phase = 0.0, float width = 0.03, output float out) {\n    \
-         float f = (P[0] * dx + P[1] * dy + P[2] * 0.3) * freq + phase;\n    \
-         out = f - floor(f) < width ? 1.0 : 0.0;\n}\n\n",
-    );
-    for k in 0..n {
-        let h = k as f32 / n.max(1) as f32 * 6.0;
-        let c = |o: f32| 0.15 + 0.7 * (((h + o) % 6.0 - 3.0).abs() - 1.0).clamp(0.0, 1.0);
-        let (r, g, b) = (c(0.0), c(4.0), c(2.0));
-        writeln!(s, "substance layer_{k} {{").unwrap();
-        if k % 2 == 0 {
-            writeln!(s, "    node s = diffuse(albedo: color({r:.3}, {g:.3}, {b:.3}));").unwrap();
-        } else {
-            writeln!(s, "    node s = glossy(albedo: color({r:.3}, {g:.3}, {b:.3}), roughness: 0.3);").unwrap();
-        }
-        s += "    surface = s.bsdf;\n";
-        if k > 0 {
-            match kind {
-                MaskKind::Constant => writeln!(s, "    node m = mask(opacity: {:.9});", 1.0 / (k + 1) as f64).unwrap(),
-                MaskKind::Noise => {
-                    writeln!(s, "    node n = noise(scale: {:.3});", 2.0 + 1.37 * k as f32).unwrap();
-                    s += "    node t = threshold(value: n.out, edge: 0.5, softness: 0.1);\n";
-                    s += "    node m = mask(opacity: t.out);\n";
-                }
-                MaskKind::Thin => {
-                    let a = k as f64 * 2.399_963;
-                    writeln!(
-                        s,
-                        "    node t = stripes(dx: {:.4}, dy: {:.4}, phase: {:.4}, width: {THIN_COVERAGE});",
-                        a.cos(),
-                        a.sin(),
-                        (k as f64 * 0.618_034).fract()
-                    )
-                    .unwrap();
-                    s += "    node m = mask(opacity: t.out);\n";
-                }
-            }
-            s += "    mask = m.out;\n";
-        }
-        s += "}\n\n";
-    }
-    s
-}
-
 /// Writes `source` and [`layered_scene`] into `dir` as `name.ash`/`name.usda` and loads them.
 fn load_generated(dir: &Path, name: &str, n: usize, source: &str, backend: BackendKind) -> Result<Loaded, String> {
     let ash = dir.join(format!("{name}.ash"));
@@ -1678,9 +1512,9 @@ fn error_curves(
     Ok(curves)
 }
 
-/// Formats a ratio pair of [`crate::plot::equal_ratios`] for a caption.
+/// Formats a ratio pair of [`strata::plot::equal_ratios`] for a caption.
 fn ratio_text(a: &[(f64, f64)], b: &[(f64, f64)]) -> String {
-    match crate::plot::equal_ratios(a, b) {
+    match strata::plot::equal_ratios(a, b) {
         Some((e, t, how)) => format!("equal-time RMSE ratio {e:.2}, equal-RMSE time ratio {t:.2} ({how})"),
         None => "no ratio (empty curve)".into(),
     }
@@ -1690,7 +1524,7 @@ fn ratio_text(a: &[(f64, f64)], b: &[(f64, f64)]) -> String {
 /// into `dir` as SVG, and returns the printed report (the same ratios as the captions).
 /// `mitsuba_csv`, when it exists, is `tools/compare_mitsuba.py`'s CSV (optional).
 pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) -> Result<String, String> {
-    use crate::plot::{Bar, bars, loglog};
+    use strata::plot::{Bar, bars, loglog};
     std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     let mut out = String::new();
     let svg = |name: &str| dir.join(name);
@@ -1740,7 +1574,7 @@ pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) ->
                 });
             }
             let ratios = ratio_text(&curves[0], &curves[1]);
-            if let Some((_, t, _)) = crate::plot::equal_ratios(&curves[0], &curves[1]) {
+            if let Some((_, t, _)) = strata::plot::equal_ratios(&curves[0], &curves[1]) {
                 cross.push((n as f64, t));
             }
             writeln!(out, "  {n:>3} layers: {ratios}").unwrap();
@@ -1962,7 +1796,7 @@ fn mitsuba_chart(csv: &Path, file: &Path) -> Result<String, String> {
         series.push(Series { label: format!("{name}, strata"), points: s, color: c, dashed: false });
         series.push(Series { label: format!("{name}, Mitsuba 3"), points: m, color: c, dashed: true });
     }
-    crate::plot::loglog(
+    strata::plot::loglog(
         file,
         "strata (circles) vs Mitsuba 3 (triangles), docs/mitsuba_compare.csv",
         "CPU seconds per render (1024 spp, 320x240)",
@@ -1975,8 +1809,8 @@ fn mitsuba_chart(csv: &Path, file: &Path) -> Result<String, String> {
 
 /// Directional albedo `E(wo) = ∫ f |cos θi| dωi` of `bsdf` by sampling (`n` samples), with the
 /// radiance compression of transmission undone (× η²) so glass reads R + T.
-fn sampled_albedo(bsdf: &crate::render::bsdf::Bsdf, wo: glam::Vec3, n: usize, seed: u64) -> f64 {
-    use crate::render::bsdf::Bsdf;
+fn sampled_albedo(bsdf: &strata::render::bsdf::Bsdf, wo: glam::Vec3, n: usize, seed: u64) -> f64 {
+    use strata::render::bsdf::Bsdf;
     let mut rng = SplitMix(seed);
     let mut sum = 0.0f64;
     for _ in 0..n {
@@ -2004,8 +1838,8 @@ fn direction(cos_theta: f64) -> glam::Vec3 {
 /// incidence down to cos θo = 1e-4 around the delta switch, and of rough glass as its index
 /// approaches 1. Returns the report lines.
 pub fn stability_charts(dir: &Path) -> Result<String, String> {
-    use crate::abi::{Closure, ClosureKind};
-    use crate::render::bsdf::Bsdf;
+    use strata::abi::{Closure, ClosureKind};
+    use strata::render::bsdf::Bsdf;
     let make = |kind: ClosureKind, params: &[f32]| {
         let mut c = Closure { kind: kind as u32, params: [0.0; 8] };
         c.params[..params.len()].copy_from_slice(params);
@@ -2040,7 +1874,7 @@ pub fn stability_charts(dir: &Path) -> Result<String, String> {
     for line in &caption[3..] {
         writeln!(out, "stability, GGX: {line}").unwrap();
     }
-    crate::plot::loglog(
+    strata::plot::loglog(
         &dir.join("stability_ggx.svg"),
         "GGX energy vs incidence: conductor (solid), glass (dashed)",
         "cos θo",
@@ -2089,7 +1923,7 @@ pub fn stability_charts(dir: &Path) -> Result<String, String> {
     for line in &caption[3..] {
         writeln!(out, "stability, glass near index 1: {line}").unwrap();
     }
-    crate::plot::loglog(
+    strata::plot::loglog(
         &dir.join("stability_glass.svg"),
         "Rough glass energy as the index approaches 1",
         "η − 1",
@@ -2238,7 +2072,7 @@ struct FeatureRow {
     feature: &'static str,
     /// Median ns per camera sample.
     ns: f64,
-    evals: crate::render::integrator::EvalCounts,
+    evals: strata::render::integrator::EvalCounts,
     samples: u64,
 }
 
@@ -2267,13 +2101,14 @@ fn measure_features(res: (usize, usize), spp: u32, reps: usize) -> Result<Vec<Fe
         ..Default::default()
     };
     let mut times = vec![Vec::new(); scenes.len()];
-    let mut evals = vec![crate::render::integrator::EvalCounts::default(); scenes.len()];
+    let mut evals = vec![strata::render::integrator::EvalCounts::default(); scenes.len()];
     let mut samples = vec![0u64; scenes.len()];
     for rep in 0..=reps {
         for (k, (_, l)) in scenes.iter().enumerate() {
             let materials: Vec<&dyn MaterialCode> = l.materials.iter().map(|m| m.as_ref()).collect();
             let start = Instant::now();
-            let (_, stats) = crate::render::render(&l.scene, &materials, &settings, None).map_err(|e| e.to_string())?;
+            let (_, stats) =
+                strata::render::render(&l.scene, &materials, &settings, None).map_err(|e| e.to_string())?;
             let ns = start.elapsed().as_secs_f64() * 1e9 / stats.samples.max(1) as f64;
             // Repetition 0 is the warm-up.
             if rep > 0 {
@@ -2337,7 +2172,7 @@ fn scale_chart(dir: &Path) -> Result<String, String> {
         std::fs::write(&usda, scaled_scene(s)).map_err(|e| format!("cannot write {}: {e}", usda.display()))?;
         let l = load_scene(&usda)?;
         let materials: Vec<&dyn MaterialCode> = l.materials.iter().map(|m| m.as_ref()).collect();
-        let (image, _) = crate::render::render(&l.scene, &materials, &settings, None).map_err(|e| e.to_string())?;
+        let (image, _) = strata::render::render(&l.scene, &materials, &settings, None).map_err(|e| e.to_string())?;
         let mean = |name: &str| {
             image.f32_channel(name).map_or(f64::NAN, |v| v.iter().map(|&x| f64::from(x)).sum::<f64>() / v.len() as f64)
         };
@@ -2361,7 +2196,7 @@ fn scale_chart(dir: &Path) -> Result<String, String> {
         "Holds from 1e-12 to 3e5 (each BVH traversed in a power-of-two-scaled space, past obvhs' absolute 1e-4 cull).".into(),
         "Refused with a located error: triangles under 1e-11 units (geometry::MIN_TRIANGLE_EDGE), coordinates beyond 1e7 (MAX_EXTENT). tests/scene_scale.rs.".into(),
     ];
-    crate::plot::loglog(
+    strata::plot::loglog(
         &dir.join("stability_scale.svg"),
         "Intersection against scene scale",
         "scene scale",
@@ -2474,20 +2309,21 @@ pub fn bench_displacement(res: (usize, usize), spp: u32) -> Result<String, Strin
     // Compiles once, builds `reps` times (median time), renders once.
     struct Row {
         setup_ms: f64,
-        stats: Option<crate::render::displace::DisplacementStats>,
+        stats: Option<strata::render::displace::DisplacementStats>,
         bytes: usize,
         render_ms: f64,
         rgb: Vec<[f32; 3]>,
     }
     let measure = |path: &Path, rate: Option<f32>, seed: u64| -> Result<Row, String> {
-        let mut sources = SourceMap::new();
-        let mut diags = Diagnostics::new();
-        let compiled =
-            crate::cli::compile_scene(Some(path), BackendKind::Jit, PassOptions::default(), &mut sources, &mut diags)
-                .ok_or_else(|| diag_error("cannot compile", &diags, &sources))?;
+        let mut session = Session::open_default(SceneSource::File(path.to_path_buf()));
+        session.compile();
+        let (Some(stage), Some(compiled)) = (session.stage(), session.compiled()) else {
+            return Err(diag_error("cannot compile", session.diagnostics(), session.sources()));
+        };
+        let (sources, mut diags) = (session.sources(), Diagnostics::new());
         let refs: Vec<&dyn MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
-        let options = crate::render::scene::SceneOptions {
-            dicing: crate::render::displace::DicingOptions {
+        let options = strata::render::scene::SceneOptions {
+            dicing: strata::render::displace::DicingOptions {
                 rate: rate.unwrap_or(1.0),
                 resolution: res,
                 ..Default::default()
@@ -2500,13 +2336,13 @@ pub fn bench_displacement(res: (usize, usize), spp: u32) -> Result<String, Strin
         for _ in 0..3 {
             let start = Instant::now();
             let built = match rate {
-                Some(_) => Scene::build(&compiled.stage, &lookup, &refs, &options, &mut diags),
-                None => Scene::from_stage_with(&compiled.stage, &lookup, &options, &mut diags),
+                Some(_) => Scene::build(stage, &lookup, &refs, &options, &mut diags),
+                None => Scene::from_stage_with(stage, &lookup, &options, &mut diags),
             };
             times.push(ms_since(start));
             scene = built;
         }
-        let scene = scene.ok_or_else(|| diag_error("cannot build", &diags, &sources))?;
+        let scene = scene.ok_or_else(|| diag_error("cannot build", &diags, sources))?;
         times.sort_by(f64::total_cmp);
         let loaded = Loaded { scene, materials: compiled.materials.clone(), max_layers: 1 };
         let (render_s, rgb) = render_rgb(&loaded, &settings(seed))?;

@@ -26,17 +26,17 @@
 //! worker's progress and resident memory, kills it past the per-input time or memory budget,
 //! saves the input that did it under the crash directory, and starts a new worker after it.
 
-use crate::backend::{BackendKind, Compiler};
-use crate::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
-use crate::diag::{Diagnostics, SourceMap, Span};
-use crate::front::ast::GraphKind;
-use crate::front::library::Library;
-use crate::ir::wired::PassOptions;
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
+use strata::backend::{BackendKind, Compiler};
+use strata::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
+use strata::diag::{Diagnostics, SourceMap, Span};
+use strata::front::ast::GraphKind;
+use strata::front::library::Library;
+use strata::ir::wired::PassOptions;
 
 /// Folders of the repository whose files make the corpus (and are staged for each worker, so
 /// that relative references between them resolve).
@@ -82,7 +82,7 @@ impl Corpus {
     /// Loads the corpus under `root` (the repository), plus the prelude as `prelude.ash`.
     pub fn load(root: &Path) -> std::io::Result<Corpus> {
         let mut corpus = Corpus::default();
-        corpus.entries.push(Entry { rel: "prelude.ash".into(), bytes: crate::front::library::PRELUDE.into() });
+        corpus.entries.push(Entry { rel: "prelude.ash".into(), bytes: strata::front::library::PRELUDE.into() });
         let mut stack: Vec<PathBuf> = CORPUS_DIRS.iter().map(|d| root.join(d)).filter(|d| d.is_dir()).collect();
         while let Some(dir) = stack.pop() {
             for entry in std::fs::read_dir(&dir)? {
@@ -405,11 +405,11 @@ pub fn execute(dir: &Path, corpus: &Corpus, which: usize, bytes: &[u8], k: u64, 
         if entry.is_substance() {
             let _ = Library::from_text("fuzz.ash", &String::from_utf8_lossy(bytes), &mut sources, &mut diags);
         } else {
-            let _ = crate::scene::Stage::open(&path, &mut sources, &mut diags);
+            let _ = strata::scene::Stage::open(&path, &mut sources, &mut diags);
         }
         diags.render(&sources).len()
     } else {
-        let (diags, sources, summary) = crate::cli::check_file(&path);
+        let (diags, sources, summary) = strata::session::check_file(&path);
         let printed = diags.render(&sources).len() + summary.len();
         if entry.is_substance() {
             run_substances(bytes, k.is_multiple_of(8));
@@ -471,29 +471,33 @@ fn run_substances(text: &[u8], interp: bool) {
             let Some(code) = Compiler::new(backend, PassOptions::default()).compile(&lib, &material, &mut diags) else {
                 continue;
             };
-            let g =
-                crate::abi::Globals { p: [0.3, -1.2, 2.5], n: [0.0, 1.0, 0.0], u: 0.25, v: 0.75, ..Default::default() };
-            let _ = crate::render::integrator::shading_state(code.as_ref(), &g);
+            let g = strata::abi::Globals {
+                p: [0.3, -1.2, 2.5],
+                n: [0.0, 1.0, 0.0],
+                u: 0.25,
+                v: 0.75,
+                ..Default::default()
+            };
+            let _ = strata::render::integrator::shading_state(code.as_ref(), &g);
         }
     }
 }
 
 fn render_tiny(scene: &Path) {
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let Some(compiled) =
-        crate::cli::compile_scene(Some(scene), BackendKind::Jit, PassOptions::default(), &mut sources, &mut diags)
-    else {
+    let mut session = strata::session::Session::open_default(strata::session::SceneSource::File(scene.to_path_buf()));
+    session.compile();
+    let (Some(stage), Some(compiled)) = (session.stage(), session.compiled()) else {
         return;
     };
-    let materials: Vec<&dyn crate::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
+    let mut diags = Diagnostics::new();
+    let materials: Vec<&dyn strata::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
     // Displaced surfaces are diced as for a 4x4 image, under a small budget.
-    let options = crate::render::scene::SceneOptions {
-        dicing: crate::render::displace::DicingOptions { resolution: (4, 4), budget: 1 << 16, ..Default::default() },
+    let options = strata::render::scene::SceneOptions {
+        dicing: strata::render::displace::DicingOptions { resolution: (4, 4), budget: 1 << 16, ..Default::default() },
         ..Default::default()
     };
-    let Some(scene) = crate::render::Scene::build(
-        &compiled.stage,
+    let Some(scene) = strata::render::Scene::build(
+        stage,
         &|p| compiled.prim_material.get(p).copied(),
         &materials,
         &options,
@@ -501,17 +505,17 @@ fn render_tiny(scene: &Path) {
     ) else {
         return;
     };
-    let settings = crate::render::RenderSettings {
+    let settings = strata::render::RenderSettings {
         width: 4,
         height: 4,
         spp: 1,
         seed: 1,
         threads: Some(1),
         max_depth: 4,
-        mode: crate::render::LayerMode::Stochastic,
+        mode: strata::render::LayerMode::Stochastic,
         ..Default::default()
     };
-    let _ = crate::render::render(&scene, &materials, &settings, None);
+    let _ = strata::render::render(&scene, &materials, &settings, None);
 }
 
 /// The worker loop: inputs `first`, `first + stride`, … until killed. Before each input it
@@ -800,4 +804,72 @@ pub fn run(options: &FuzzOptions, log: &mut dyn FnMut(&str)) -> std::io::Result<
     }
     let _ = std::fs::remove_dir_all(&base);
     Ok(report)
+}
+
+// Moved from tests/hostile_struct.rs when the fuzzer left the library for the binary crate
+// (integration tests see the library only); the assertions are unchanged.
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn corpus() -> Corpus {
+        Corpus::load(Path::new(env!("CARGO_MANIFEST_DIR"))).unwrap()
+    }
+
+    /// The fuzzer mutates a package inside its members and fixes their CRCs: the zip reader
+    /// passes the mutated bytes on to the layer readers.
+    #[test]
+    fn fuzzed_packages_stay_readable_zips() {
+        let corpus = corpus();
+        let is_package = |i: usize| corpus.entries[i].bytes.starts_with(b"PK\x03\x04");
+        assert!((0..corpus.entries.len()).any(is_package), "usdz seeds in the corpus");
+        let mut readable_and_changed = 0;
+        for k in 0..20_000 {
+            let (which, bytes) = corpus.input(5, k);
+            if !is_package(which) || bytes == corpus.entries[which].bytes {
+                continue;
+            }
+            let Ok(mut zip) = zip::ZipArchive::new(std::io::Cursor::new(&bytes)) else { continue };
+            // Every member reads to its end: the CRCs match the mutated data.
+            let all_read = (0..zip.len()).all(|i| {
+                let Ok(mut member) = zip.by_index(i) else { return false };
+                std::io::copy(&mut member, &mut std::io::sink()).is_ok()
+            });
+            readable_and_changed += usize::from(all_read);
+        }
+        assert!(readable_and_changed > 20, "only {readable_and_changed} mutated packages pass the zip reader");
+    }
+
+    /// Crates get binary mutations (never grammar tokens), which mostly keep the header.
+    #[test]
+    fn fuzzed_crates_are_mutated_as_bytes() {
+        let corpus = corpus();
+        let is_crate = |i: usize| corpus.entries[i].bytes.starts_with(b"PXR-USDC");
+        let (mut total, mut kept_magic) = (0, 0);
+        for k in 0..20_000 {
+            let (which, bytes) = corpus.input(9, k);
+            if is_crate(which) {
+                total += 1;
+                kept_magic += usize::from(bytes.starts_with(b"PXR-USDC"));
+                assert!(!bytes.windows(13).any(|w| w == b"def Xform \"X\""), "a text token in a crate");
+            }
+        }
+        assert!(total > 0 && kept_magic * 10 > total * 8, "{kept_magic} of {total} kept the magic");
+    }
+
+    #[test]
+    fn fuzz_oracles_tell_memory_floods_and_allocation_failures() {
+        let mib = 1 << 20;
+        assert_eq!(judge_finished(2048 * mib, 0, 10, 1024 * mib), Some(Failure::Memory(2048 * mib)));
+        assert_eq!(judge_finished(10 * mib, 64 << 10, 10, 1024 * mib), None);
+        // 22 KB of input, 1 MB of diagnostics: the long-name flood.
+        assert_eq!(
+            judge_finished(10 * mib, 1 << 20, 22_000, 1024 * mib),
+            Some(Failure::StderrFlood { printed: 1 << 20, input: 22_000 })
+        );
+        assert_eq!(judge_finished(10 * mib, 400_000, 22_000, 1024 * mib), None);
+        let oom = "memory allocation of 936205475788011600 bytes failed\n";
+        assert!(matches!(judge_exit(oom, "abort".into()), Failure::OutOfMemory(_)));
+        assert!(matches!(judge_exit("thread 'main' panicked at src/x.rs", "101".into()), Failure::Crash(_)));
+    }
 }

@@ -1,0 +1,868 @@
+//! The library's entry point to the pipeline: a [`Session`] owns the prepared state of one
+//! scene — its stage, compositions, compiled materials, render scene (geometry, BVH, lights)
+//! and diagnostics — and updates it after a change, redoing only what depends on it.
+//!
+//! Phases run on demand and are remembered, each from the one before it:
+//!
+//! ```text
+//! open ─► stage ─► composition ─► compiled materials ─► render scene ─► render passes
+//!          (layers)   (+ substance files)  (by content hash)   (geometry, BVH, lights)
+//! ```
+//!
+//! [`Session::apply_change`] says what changed (a USD layer, a substance file, a texture, an
+//! input value) and redoes, eagerly, only the phases that depend on it; ARCHITECTURE.md
+//! ("The Session") lists what each change redoes and the invariants, each with its test.
+//! Rendering never changes the session, so the same session renders the same pass to the
+//! same image, bit for bit, whatever was updated before.
+
+mod example;
+mod fingerprint;
+mod layers;
+
+pub use example::write_split_default_scene;
+pub use layers::{layers_json, layers_table};
+
+use crate::abi::MaterialCode;
+use crate::backend::{BackendKind, CompileStats, Compiler};
+use crate::compose::scene::{SceneComposition, compose_stage};
+use crate::compose::slots::PrimStack;
+use crate::diag::{Diagnostic, Diagnostics, FileId, SourceMap};
+use crate::front::library::Library;
+use crate::input::InputLimits;
+use crate::ir::wired::{self, PassOptions};
+use crate::render::scene::{SceneOptions, View};
+use crate::render::{Image, Progress, RenderError, RenderSettings, RenderStats};
+use crate::scene::{Stage, TimeCode, Value, ValueType};
+use crate::scenes;
+use fingerprint::FileHashes;
+use std::collections::{HashMap, HashSet};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Which scene a session opens.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SceneSource {
+    /// The scene embedded in the binary ([`crate::scenes::DEFAULT_SCENE`]).
+    Default,
+    /// A USD file: `.usda`, `.usdc`, `.usd` or `.usdz`.
+    File(PathBuf),
+}
+
+impl SceneSource {
+    /// A file, or the default scene for `None` (the CLI's optional `SCENE` argument).
+    pub fn from_path(path: Option<&Path>) -> SceneSource {
+        path.map_or(SceneSource::Default, |p| SceneSource::File(p.to_path_buf()))
+    }
+
+    /// How the scene is named in headers and messages.
+    pub fn display_name(&self) -> String {
+        match self {
+            SceneSource::Default => "(embedded default scene)".into(),
+            SceneSource::File(p) => p.display().to_string(),
+        }
+    }
+}
+
+/// How a session prepares its scene.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SessionOptions {
+    /// Which backend runs the shaders.
+    pub backend: BackendKind,
+    /// Constant folding and layer pruning.
+    pub passes: PassOptions,
+    /// The time code the stage is read at (`None`: [`Stage::opening_time`]).
+    pub time: Option<TimeCode>,
+    /// Every warning is an error in [`Session::take_diagnostics`] (`--strict`).
+    pub strict: bool,
+    /// Input limits to set for the process before reading (`None`: leave them as they are;
+    /// they are process-wide, see [`crate::input::set_limits`]).
+    pub limits: Option<InputLimits>,
+}
+
+/// What changed on disk or in the session's input.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Change {
+    /// A file changed; the session works out what it is to this scene (a layer of the stage,
+    /// a substance file a composition uses, a texture, or nothing).
+    File(PathBuf),
+    /// A USD layer of the stage changed.
+    Layer(PathBuf),
+    /// A substance (`.ash`) file changed.
+    Substance(PathBuf),
+    /// A texture or dome map changed.
+    Texture(PathBuf),
+    /// An attribute of a prim is set to a new value in memory (a shader's `inputs:roughness`):
+    /// the stage is not read again. `type_name` declares it when the prim does not author it.
+    Value {
+        /// The prim holding the attribute (`/Looks/Clay/Surface`).
+        prim: String,
+        /// The attribute's full name (`inputs:roughness`).
+        attribute: String,
+        /// Its USD type when it must be declared (`float`, `color3f`).
+        type_name: String,
+        /// The new value (converted to the attribute's type).
+        value: Value,
+    },
+}
+
+/// What [`Change`] a file was to this scene.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ChangeKind {
+    /// A USD layer of the stage.
+    Layer,
+    /// A substance file that a composition uses.
+    Substance,
+    /// A texture the materials or lights read.
+    Texture,
+    /// An attribute value set in memory.
+    Value,
+    /// Nothing the prepared scene depends on.
+    Unrelated,
+}
+
+/// What an update redid.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UpdateReport {
+    /// What the change was to this scene.
+    pub kind: ChangeKind,
+    /// The stage was read again (its layers).
+    pub restaged: bool,
+    /// The stage was composed again (slot stacks, substance files, composed materials).
+    pub recomposed: bool,
+    /// Compositions compiled because their content hash is new.
+    pub recompiled: usize,
+    /// Compositions whose compiled code was kept (content hash unchanged).
+    pub reused: usize,
+    /// Geometry and BVH were built again.
+    pub geometry_rebuilt: bool,
+    /// Texture registry entries read again.
+    pub textures_reloaded: usize,
+    /// The update failed (its errors are in the diagnostics); the session keeps the last
+    /// materials and render scene that prepared cleanly.
+    pub failed: bool,
+    /// Wall time of the update, ms.
+    pub ms: f64,
+}
+
+impl UpdateReport {
+    /// A report of a change that redid nothing (yet).
+    fn nothing(kind: ChangeKind) -> UpdateReport {
+        UpdateReport {
+            kind,
+            restaged: false,
+            recomposed: false,
+            recompiled: 0,
+            reused: 0,
+            geometry_rebuilt: false,
+            textures_reloaded: 0,
+            failed: false,
+            ms: 0.0,
+        }
+    }
+}
+
+/// Counters over a session's life, for tests and `--stats`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SessionStats {
+    /// Times the stage was read (open, layer changes).
+    pub stage_reads: usize,
+    /// Times the stage was composed.
+    pub compositions: usize,
+    /// Compositions compiled (their content hash was not cached).
+    pub materials_compiled: usize,
+    /// Compositions whose compiled code came from the content-hash cache.
+    pub materials_reused: usize,
+    /// Times geometry, BVH and lights were built.
+    pub scene_builds: usize,
+    /// Times an existing render scene was rebound to new materials (BVH kept).
+    pub scene_rebinds: usize,
+    /// Wall time of the last stage read (USD and every layer it names), ms.
+    pub parse_ms: f64,
+    /// Wall time of the last composition, ms.
+    pub compose_ms: f64,
+    /// Wall time of the last compilation of materials, ms.
+    pub compile_ms: f64,
+    /// Wall time of the last render-scene build or rebind, ms.
+    pub scene_ms: f64,
+}
+
+/// Why a pass could not be rendered.
+#[derive(Debug)]
+pub enum PassError {
+    /// The scene did not prepare (its errors are in the diagnostics).
+    NotPrepared,
+    /// The renderer refused the settings.
+    Render(RenderError),
+}
+
+impl std::fmt::Display for PassError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PassError::NotPrepared => write!(f, "the scene has errors and was not prepared"),
+            PassError::Render(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for PassError {}
+
+/// One render of a prepared scene.
+#[derive(Clone, Debug)]
+pub struct Pass {
+    /// Image size, samples, seed, threads, depth, layer mode and sampler.
+    pub settings: RenderSettings,
+    /// The time code to render at (`None`: the session's). A different time re-reads
+    /// animated values and redoes what depends on them, as a change would.
+    pub time: Option<TimeCode>,
+}
+
+/// The compiled materials of a session.
+pub struct Compiled {
+    /// One compiled material per distinct composition.
+    pub materials: Vec<Arc<dyn MaterialCode>>,
+    /// Per renderable prim path, its index in `materials`.
+    pub prim_material: HashMap<String, usize>,
+    /// Per material, a name for its slot stack (see [`material_name`]), for ID mattes.
+    pub material_names: Vec<String>,
+}
+
+impl Compiled {
+    /// The materials as the renderer takes them.
+    pub fn refs(&self) -> Vec<&dyn MaterialCode> {
+        self.materials.iter().map(|m| m.as_ref()).collect()
+    }
+}
+
+/// A composition with the content hash of each of its materials.
+struct Composed {
+    scene: SceneComposition,
+    hashes: Vec<u64>,
+    /// Canonical paths of the substance files (and their imports) the materials use.
+    files: HashSet<PathBuf>,
+    /// Composition reported errors: a change to any substance file may fix it.
+    failed: bool,
+}
+
+/// The render scene with what it was built from.
+struct Prepared {
+    scene: crate::render::Scene,
+    options: SceneOptions,
+    /// [`fingerprint::geometry_hash`] of the stage it was built from.
+    geometry: u64,
+    /// What the materials made the build depend on: the primvars they read, and per prim
+    /// the hash of its material when that material moves geometry (0 otherwise).
+    material_key: (Vec<String>, Vec<u64>),
+}
+
+/// The prepared state of one scene. See the module documentation.
+pub struct Session {
+    source: SceneSource,
+    options: SessionOptions,
+    sources: SourceMap,
+    diags: Diagnostics,
+    stage: Option<Stage>,
+    /// Canonical paths of the stage's layers.
+    layers: HashSet<PathBuf>,
+    composed: Option<Composed>,
+    compiled: Option<Compiled>,
+    /// The content hash of each of `compiled`'s materials.
+    compiled_hashes: Vec<u64>,
+    compiler: Compiler,
+    /// Compiled code by material content hash (the current materials').
+    code: HashMap<u64, Arc<dyn MaterialCode>>,
+    prepared: Option<Prepared>,
+    stats: SessionStats,
+}
+
+impl Session {
+    /// Opens a scene: reads its stage (at `options.time`). Composition, compilation and the
+    /// render scene follow on demand. Problems go to the session's diagnostics; a stage that
+    /// fails to open leaves a session with no stage.
+    pub fn open(source: SceneSource, options: SessionOptions) -> Session {
+        if let Some(limits) = options.limits {
+            crate::input::set_limits(limits);
+        }
+        let mut session = Session {
+            source,
+            options,
+            sources: SourceMap::new(),
+            diags: Diagnostics::new(),
+            stage: None,
+            layers: HashSet::new(),
+            composed: None,
+            compiled: None,
+            compiled_hashes: Vec::new(),
+            compiler: Compiler::new(options.backend, options.passes),
+            code: HashMap::new(),
+            prepared: None,
+            stats: SessionStats::default(),
+        };
+        session.read_stage();
+        session
+    }
+
+    /// Opens `source` with default options (JIT, optimised, opening time).
+    pub fn open_default(source: SceneSource) -> Session {
+        Session::open(source, SessionOptions::default())
+    }
+
+    fn read_stage(&mut self) {
+        let start = Instant::now();
+        let first = file_count(&self.sources);
+        let mut stage = match &self.source {
+            SceneSource::File(p) => Stage::open(p, &mut self.sources, &mut self.diags).ok(),
+            SceneSource::Default => {
+                let (name, text) = scenes::DEFAULT_SCENE;
+                Stage::from_text(name, text, Path::new(scenes::EMBEDDED_DIR), &mut self.sources, &mut self.diags).ok()
+            }
+        };
+        if let (Some(stage), Some(time)) = (&mut stage, self.options.time) {
+            stage.set_time(time);
+        }
+        self.layers =
+            (first..file_count(&self.sources)).map(|i| canonical(Path::new(self.sources.name(FileId(i))))).collect();
+        if let SceneSource::File(p) = &self.source {
+            self.layers.insert(canonical(p));
+        }
+        self.stage = stage;
+        self.stats.stage_reads += 1;
+        self.stats.parse_ms = start.elapsed().as_secs_f64() * 1e3;
+    }
+
+    /// The scene this session opened.
+    pub fn source(&self) -> &SceneSource {
+        &self.source
+    }
+
+    /// The options the session was opened with.
+    pub fn options(&self) -> &SessionOptions {
+        &self.options
+    }
+
+    /// The composed stage, if it opened.
+    pub fn stage(&self) -> Option<&Stage> {
+        self.stage.as_ref()
+    }
+
+    /// Every file read so far, for rendering diagnostics.
+    pub fn sources(&self) -> &SourceMap {
+        &self.sources
+    }
+
+    /// Diagnostics of the work done since they were last taken (open, or the last update).
+    pub fn diagnostics(&self) -> &Diagnostics {
+        &self.diags
+    }
+
+    /// Takes the diagnostics (leaving none), with warnings made errors if the session is
+    /// strict.
+    pub fn take_diagnostics(&mut self) -> Diagnostics {
+        let mut diags = std::mem::take(&mut self.diags);
+        if self.options.strict {
+            diags.make_warnings_errors();
+        }
+        diags
+    }
+
+    /// Counters and timings.
+    pub fn stats(&self) -> &SessionStats {
+        &self.stats
+    }
+
+    /// What compiling the materials cost, summed over the session's life.
+    pub fn compile_stats(&self) -> &CompileStats {
+        &self.compiler.stats
+    }
+
+    /// The slot stack of every renderable prim (`strata layers`): bindings only, no
+    /// substance file is read.
+    pub fn layer_stacks(&mut self) -> Vec<PrimStack> {
+        if let Some(c) = &self.composed {
+            return c.scene.stacks.clone();
+        }
+        let Some(stage) = &self.stage else { return Vec::new() };
+        let tree = crate::compose::scene::binding_tree(stage, &mut self.diags);
+        crate::compose::slots::resolve_stacks(&tree, &mut self.diags)
+    }
+
+    /// The composition: slot stacks, the substance library and the distinct composed
+    /// materials. `None` when the stage did not open.
+    pub fn composition(&mut self) -> Option<&SceneComposition> {
+        if self.composed.is_none() {
+            self.compose();
+        }
+        self.composed.as_ref().map(|c| &c.scene)
+    }
+
+    fn compose(&mut self) {
+        let Some(stage) = &self.stage else {
+            self.composed = None;
+            return;
+        };
+        let start = Instant::now();
+        let errors = self.diags.error_count();
+        let scene = compose_stage(stage, &mut self.sources, &mut self.diags);
+        let mut files = FileHashes::default();
+        let hashes =
+            scene.materials.iter().map(|m| fingerprint::material_hash(m, &scene.library, &mut files)).collect();
+        let failed = self.diags.error_count() > errors;
+        self.composed = Some(Composed { scene, hashes, files: files.visited(), failed });
+        self.stats.compositions += 1;
+        self.stats.compose_ms = start.elapsed().as_secs_f64() * 1e3;
+    }
+
+    /// Compiles every distinct composed material, reusing the code of any whose content
+    /// hash was compiled before. `None` when the scene has errors (so far in the
+    /// diagnostics) or a material failed to compile; the last good materials stay.
+    pub fn compile(&mut self) -> Option<&Compiled> {
+        if self.compiled.is_none() || self.needs_compile() {
+            self.compile_now()?;
+        }
+        self.compiled.as_ref()
+    }
+
+    /// [`Session::compile`], or the rendered diagnostics when it fails (tests, tools).
+    pub fn compile_or_report(&mut self) -> Result<&Compiled, String> {
+        if self.compile().is_none() {
+            return Err(self.diags.render(&self.sources));
+        }
+        self.compiled.as_ref().ok_or_else(String::new)
+    }
+
+    /// Whether the composition's materials differ from the compiled ones.
+    fn needs_compile(&self) -> bool {
+        self.composed.as_ref().is_some_and(|c| c.hashes != self.compiled_hashes)
+    }
+
+    /// Compiles the current composition; counts compiled and reused materials.
+    fn compile_now(&mut self) -> Option<(usize, usize)> {
+        self.composition()?;
+        if self.diags.has_errors() {
+            return None;
+        }
+        let composed = self.composed.as_ref()?;
+        let start = Instant::now();
+        let (mut compiled, mut reused) = (0, 0);
+        let mut materials = Vec::with_capacity(composed.scene.materials.len());
+        for (material, &hash) in composed.scene.materials.iter().zip(&composed.hashes) {
+            let code = match self.code.get(&hash) {
+                Some(code) => {
+                    reused += 1;
+                    code.clone()
+                }
+                None => {
+                    compiled += 1;
+                    self.compiler.compile(&composed.scene.library, material, &mut self.diags)?
+                }
+            };
+            materials.push(code);
+        }
+        // Keep the code of the current materials only: the cache does not grow with edits.
+        self.code = composed.hashes.iter().copied().zip(materials.iter().cloned()).collect();
+        let scene = &composed.scene;
+        let prim_material = scene.stacks.iter().zip(&scene.prim_material).map(|(s, m)| (s.prim.clone(), *m)).collect();
+        // Each material is named after the first prim stack composing it: identical
+        // compositions are shared (DESIGN.md rule 8), so that stack stands for all of them.
+        let material_names = (0..materials.len())
+            .map(|m| {
+                let first = scene.prim_material.iter().position(|&pm| pm == m);
+                first.and_then(|i| scene.stacks.get(i)).map_or_else(|| format!("material {m}"), material_name)
+            })
+            .collect();
+        self.compiled_hashes = composed.hashes.clone();
+        self.compiled = Some(Compiled { materials, prim_material, material_names });
+        self.stats.materials_compiled += compiled;
+        self.stats.materials_reused += reused;
+        self.stats.compile_ms = start.elapsed().as_secs_f64() * 1e3;
+        Some((compiled, reused))
+    }
+
+    /// The camera and resolution to render through: `camera`, else the stage's render
+    /// settings camera, else the first camera ([`crate::render::scene::choose_view`]).
+    pub fn view(&mut self, camera: Option<&str>) -> Option<View> {
+        let stage = self.stage.as_ref()?;
+        crate::render::scene::choose_view(stage, camera, &mut self.diags)
+    }
+
+    /// Builds the render scene (geometry, BVH, lights, camera) with the compiled materials,
+    /// or returns the one built with the same `options`. `None` when anything so far failed.
+    pub fn prepare(&mut self, options: &SceneOptions) -> Option<&crate::render::Scene> {
+        self.compile()?;
+        let fresh = self.prepared.as_ref().is_some_and(|p| format!("{:?}", p.options) == format!("{options:?}"));
+        if !fresh {
+            self.build_scene(options.clone())?;
+        }
+        self.prepared.as_ref().map(|p| &p.scene)
+    }
+
+    fn build_scene(&mut self, options: SceneOptions) -> Option<()> {
+        let (stage, compiled) = (self.stage.as_ref()?, self.compiled.as_ref()?);
+        let start = Instant::now();
+        let refs = compiled.refs();
+        let mut scene = crate::render::Scene::build(
+            stage,
+            &|p| compiled.prim_material.get(p).copied(),
+            &refs,
+            &options,
+            &mut self.diags,
+        );
+        self.stats.scene_builds += 1;
+        self.stats.scene_ms = start.elapsed().as_secs_f64() * 1e3;
+        if let Some(scene) = &mut scene {
+            scene.material_names = compiled.material_names.clone();
+        }
+        let geometry = fingerprint::geometry_hash(stage);
+        self.prepared = scene.map(|scene| {
+            let material_key = material_key(&scene, &refs, &self.compiled_hashes);
+            Prepared { scene, options, geometry, material_key }
+        });
+        self.prepared.as_ref().map(|_| ())
+    }
+
+    /// The prepared render scene, if [`Session::prepare`] succeeded.
+    pub fn scene(&self) -> Option<&crate::render::Scene> {
+        self.prepared.as_ref().map(|p| &p.scene)
+    }
+
+    /// The composition, if [`Session::composition`] ran.
+    pub fn composed(&self) -> Option<&SceneComposition> {
+        self.composed.as_ref().map(|c| &c.scene)
+    }
+
+    /// The composition, taken out of the session (benchmarks that measure its materials).
+    pub fn into_composition(mut self) -> Option<SceneComposition> {
+        self.composition()?;
+        self.composed.map(|c| c.scene)
+    }
+
+    /// The render scene and its materials, taken out of the session.
+    pub fn into_scene(self) -> Option<(crate::render::Scene, Compiled)> {
+        Some((self.prepared?.scene, self.compiled?))
+    }
+
+    /// The compiled materials, if [`Session::compile`] succeeded.
+    pub fn compiled(&self) -> Option<&Compiled> {
+        self.compiled.as_ref()
+    }
+
+    /// Renders a pass of the prepared scene. The session is not changed (unless the pass
+    /// asks for another time), so equal passes give equal images.
+    pub fn render(&mut self, pass: &Pass, progress: Option<Progress>) -> Result<(Image, RenderStats), PassError> {
+        if let Some(time) = pass.time
+            && self.stage.as_ref().is_some_and(|s| s.time() != time)
+        {
+            self.options.time = Some(time);
+            if let Some(stage) = &mut self.stage {
+                stage.set_time(time);
+            }
+            self.redo_from_composition(ChangeKind::Value, Instant::now());
+        }
+        let (Some(prepared), Some(compiled)) = (&self.prepared, &self.compiled) else {
+            return Err(PassError::NotPrepared);
+        };
+        crate::render::render(&prepared.scene, &compiled.refs(), &pass.settings, progress).map_err(PassError::Render)
+    }
+
+    /// The wired IR of renderable prim `prim`'s material (`strata ir`), or with `lowered`
+    /// its lowered IR, with a statistics line. `Err` lists some renderable prims when
+    /// `prim` is not one; `None` when the scene did not compose.
+    pub fn ir(&mut self, prim: &str, lowered: bool) -> Option<Result<(String, String), Vec<String>>> {
+        self.composition()?;
+        let composed = &self.composed.as_ref()?.scene;
+        let Some(material) = composed.material_of(prim) else {
+            return Some(Err(composed.stacks.iter().map(|s| s.prim.clone()).take(20).collect()));
+        };
+        let passes = self.options.passes;
+        Some(Ok(if lowered {
+            let mut compiler = Compiler::new(BackendKind::Jit, passes);
+            let module = compiler.lower(&composed.library, material, &mut self.diags);
+            let line =
+                format!("lowered: {} function(s), {} instruction(s)", module.functions.len(), module.inst_count());
+            (module.to_text(), line)
+        } else {
+            let wired = wired::build(&composed.library, material, passes, &mut self.diags);
+            (wired.to_text(&composed.library), wired.stats_line())
+        }))
+    }
+
+    /// Everything `render` would reject — composition, lowering (textures), geometry, lights
+    /// and camera — without generating code or tracing a ray (`strata check`). Returns the
+    /// number of renderable prims and of distinct lowered materials.
+    pub fn check(&mut self) -> Option<(usize, usize)> {
+        self.composition()?;
+        let (stage, composed) = (self.stage.as_ref()?, &self.composed.as_ref()?.scene);
+        let mut compiler = Compiler::new(BackendKind::Jit, PassOptions::default());
+        let mut distinct = HashSet::new();
+        for material in &composed.materials {
+            distinct.insert(compiler.lower(&composed.library, material, &mut self.diags).to_text());
+        }
+        crate::render::Scene::from_stage(stage, &|_| Some(0), &mut self.diags);
+        Some((composed.stacks.len(), distinct.len()))
+    }
+
+    /// What `path` is to this scene.
+    pub fn classify(&self, path: &Path) -> ChangeKind {
+        let path = canonical(path);
+        if self.layers.contains(&path) {
+            return ChangeKind::Layer;
+        }
+        let is = |ext: &[&str]| path.extension().and_then(|e| e.to_str()).is_some_and(|e| ext.contains(&e));
+        match &self.composed {
+            Some(c) if c.files.contains(&path) || (c.failed && is(&["ash"])) => return ChangeKind::Substance,
+            _ => {}
+        }
+        if self.reads_texture(&path) {
+            return ChangeKind::Texture;
+        }
+        // A stage that failed to open may have failed for want of this layer.
+        if self.stage.is_none() && is(&["usd", "usda", "usdc", "usdz"]) {
+            return ChangeKind::Layer;
+        }
+        ChangeKind::Unrelated
+    }
+
+    /// Whether a texture was loaded from `path`, or a prim outside material networks (a
+    /// dome light) names it.
+    fn reads_texture(&self, path: &Path) -> bool {
+        let prefix = format!("{}#", path.display());
+        if crate::runtime::texture::registered_from(&prefix) {
+            return true;
+        }
+        self.stage.as_ref().is_some_and(|stage| {
+            stage.depth_first().any(|(_, prim)| {
+                prim.attributes.iter().any(|a| {
+                    a.value
+                        .as_ref()
+                        .and_then(|(v, _)| v.as_asset())
+                        .is_some_and(|asset| canonical(&asset.resolved) == path)
+                })
+            })
+        })
+    }
+
+    /// Brings the prepared state up to date after `change`, redoing only what depends on
+    /// it; what was never prepared stays unprepared. The diagnostics afterwards are the
+    /// update's.
+    pub fn apply_change(&mut self, change: &Change) -> UpdateReport {
+        let start = Instant::now();
+        self.diags = Diagnostics::new();
+        let kind = match change {
+            Change::File(path) => self.classify(path),
+            Change::Layer(_) => ChangeKind::Layer,
+            Change::Substance(_) => ChangeKind::Substance,
+            Change::Texture(_) => ChangeKind::Texture,
+            Change::Value { .. } => ChangeKind::Value,
+        };
+        let mut report = UpdateReport::nothing(kind);
+        match (kind, change) {
+            (ChangeKind::Unrelated, _) => {}
+            (ChangeKind::Texture, Change::File(path) | Change::Texture(path)) => {
+                match crate::runtime::texture::reload_file(path) {
+                    Ok(n) => report.textures_reloaded = n,
+                    Err(e) => self.diags.push(Diagnostic::warning(e).kind("unreadable texture")),
+                }
+                // A dome map or other asset outside the materials is read by the scene build.
+                let file = canonical(path);
+                let named_by_scene = self.stage.as_ref().is_some_and(|stage| {
+                    fingerprint::names_asset_outside_materials(stage, &|asset| canonical(asset) == file)
+                });
+                if named_by_scene && let Some(options) = self.prepared.as_ref().map(|p| p.options.clone()) {
+                    report.geometry_rebuilt = true;
+                    report.failed = self.build_scene(options).is_none();
+                }
+            }
+            (ChangeKind::Value, Change::Value { prim, attribute, type_name, value }) => {
+                if let Err(message) = self.set_value(prim, attribute, type_name, value) {
+                    self.diags.push(Diagnostic::error(message));
+                    report.failed = true;
+                } else {
+                    self.redo_from_composition_into(&mut report);
+                }
+            }
+            (ChangeKind::Layer, _) => {
+                self.read_stage();
+                report.restaged = true;
+                self.redo_from_composition_into(&mut report);
+            }
+            _ => self.redo_from_composition_into(&mut report),
+        }
+        report.ms = start.elapsed().as_secs_f64() * 1e3;
+        report
+    }
+
+    fn redo_from_composition(&mut self, kind: ChangeKind, start: Instant) -> UpdateReport {
+        let mut report = UpdateReport::nothing(kind);
+        self.redo_from_composition_into(&mut report);
+        report.ms = start.elapsed().as_secs_f64() * 1e3;
+        report
+    }
+
+    /// Composes again (if composed before), compiles the materials whose content hash is
+    /// new (if compiled before), and rebinds or rebuilds the render scene (if built before).
+    fn redo_from_composition_into(&mut self, report: &mut UpdateReport) {
+        if self.composed.is_none() {
+            return;
+        }
+        self.compose();
+        report.recomposed = true;
+        if self.compiled.is_none() {
+            return;
+        }
+        match self.compile_now() {
+            Some((compiled, reused)) => (report.recompiled, report.reused) = (compiled, reused),
+            None => {
+                report.failed = true;
+                return;
+            }
+        }
+        let (Some(prepared), Some(stage), Some(compiled)) = (&self.prepared, &self.stage, &self.compiled) else {
+            return;
+        };
+        let old_geometry = prepared.geometry;
+        let old_key = &prepared.material_key;
+        let refs = compiled.refs();
+        let geometry = fingerprint::geometry_hash(stage);
+        // Prims keep their order and paths when the geometry hash is unchanged.
+        let prim_material: Option<Vec<usize>> =
+            prepared.scene.prims.iter().map(|p| compiled.prim_material.get(&p.path).copied()).collect();
+        let keep = geometry == old_geometry
+            && prim_material.as_ref().is_some_and(|pm| material_key_of(pm, &refs, &self.compiled_hashes) == *old_key);
+        if keep && let (Some(prim_material), Some(prepared)) = (prim_material, self.prepared.as_mut()) {
+            let start = Instant::now();
+            rebind(&mut prepared.scene, prim_material, &refs, compiled.material_names.clone());
+            self.stats.scene_rebinds += 1;
+            self.stats.scene_ms = start.elapsed().as_secs_f64() * 1e3;
+        } else if let Some(options) = self.prepared.as_ref().map(|p| p.options.clone()) {
+            report.geometry_rebuilt = true;
+            report.failed = self.build_scene(options).is_none();
+        }
+    }
+
+    /// Sets attribute `attribute` of prim `prim` (declaring it as `type_name` when the prim
+    /// does not author it) to `value` at every time.
+    fn set_value(&mut self, prim: &str, attribute: &str, type_name: &str, value: &Value) -> Result<(), String> {
+        let stage = self.stage.as_mut().ok_or("the stage did not open")?;
+        let id = stage.find(prim).ok_or_else(|| format!("no prim `{prim}` on the stage"))?;
+        let prim = stage.prim_mut(id);
+        let index = match prim.attributes.iter().position(|a| a.name == attribute) {
+            Some(i) => i,
+            None => {
+                prim.attributes.push(crate::scene::Attribute {
+                    name: attribute.to_string(),
+                    type_name: type_name.to_string(),
+                    value_type: ValueType::parse(type_name.trim_end_matches("[]"), type_name.ends_with("[]")),
+                    value: None,
+                    default_value: None,
+                    blocked: false,
+                    span: Default::default(),
+                    custom: false,
+                    uniform: false,
+                    connections: Vec::new(),
+                    time_samples: Vec::new(),
+                    metadata: Vec::new(),
+                });
+                prim.attributes.len() - 1
+            }
+        };
+        let attr = &mut prim.attributes[index];
+        let value = value.clone().coerce(&attr.value_type).map_err(|e| format!("`{attribute}`: {e}"))?;
+        attr.value = Some((value.clone(), attr.span));
+        attr.default_value = Some((value, attr.span));
+        attr.time_samples.clear();
+        attr.blocked = false;
+        Ok(())
+    }
+}
+
+/// What a render scene's build read from its materials: the primvars they read, and per
+/// prim the content hash of its material when that material moves geometry (0 otherwise).
+fn material_key(scene: &crate::render::Scene, refs: &[&dyn MaterialCode], hashes: &[u64]) -> (Vec<String>, Vec<u64>) {
+    material_key_of(&scene.prim_material, refs, hashes)
+}
+
+fn material_key_of(prim_material: &[usize], refs: &[&dyn MaterialCode], hashes: &[u64]) -> (Vec<String>, Vec<u64>) {
+    let mut primvars: Vec<String> =
+        refs.iter().flat_map(|m| m.info().primvars.iter().map(|p| p.name.clone())).collect();
+    primvars.sort();
+    primvars.dedup();
+    let moves =
+        |m: usize| refs.get(m).is_some_and(|code| code.info().layers.iter().any(|l| l.displacement_bound.is_some()));
+    let displacing =
+        prim_material.iter().map(|&m| if moves(m) { hashes.get(m).copied().unwrap_or(0) } else { 0 }).collect();
+    (primvars, displacing)
+}
+
+/// Points a built render scene at new materials, keeping geometry, BVH and lights: only the
+/// emissive triangles are found again, since which materials emit may have changed.
+fn rebind(scene: &mut crate::render::Scene, prim_material: Vec<usize>, refs: &[&dyn MaterialCode], names: Vec<String>) {
+    let radius = (scene.bounds.1 - scene.bounds.0).length() / 2.0;
+    let light_power: f32 = scene.lights.iter().filter(|l| !l.is_infinite()).map(|l| l.power(radius)).sum();
+    scene.emitters =
+        crate::render::emitter::Emitters::build(&scene.accel, scene.prims.len(), &prim_material, refs, light_power);
+    scene.prim_material = prim_material;
+    scene.material_names = names;
+}
+
+/// The name of a composed material in ID mattes: its slot stack, bottom first, as
+/// `slot=/Material/Path` entries (overrides as `slot:_:override=/Path`) joined by ` | `.
+pub fn material_name(stack: &PrimStack) -> String {
+    if stack.layers.is_empty() {
+        return "(default substance)".into();
+    }
+    let mut parts = Vec::new();
+    for layer in &stack.layers {
+        parts.push(format!("{}={}", layer.slot.name(), layer.applied.material));
+        for o in &layer.overrides {
+            parts.push(format!("{}={}", o.slot.name(), o.applied.material));
+        }
+    }
+    parts.join(" | ")
+}
+
+/// Checks a substance file or a scene (`strata check`): every diagnostic, and a one-line
+/// summary when it is clean.
+pub fn check_file(file: &Path) -> (Diagnostics, SourceMap, String) {
+    check_file_at(file, None)
+}
+
+/// As [`check_file`], with a scene read at `time` (`None`: [`Stage::opening_time`]).
+pub fn check_file_at(file: &Path, time: Option<TimeCode>) -> (Diagnostics, SourceMap, String) {
+    if file.extension().is_some_and(|e| e == "ash") {
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let lib = Library::load(&[(file.to_path_buf(), Default::default())], &mut sources, &mut diags);
+        let user = lib.graphs.len().saturating_sub(1);
+        return (diags, sources, format!("{}: ok ({user} graph(s))", file.display()));
+    }
+    let options = SessionOptions { time, ..SessionOptions::default() };
+    let mut session = Session::open(SceneSource::File(file.to_path_buf()), options);
+    let summary = match session.check() {
+        Some((prims, distinct)) => {
+            format!("{}: ok ({prims} renderable prim(s), {distinct} distinct material(s))", file.display())
+        }
+        None => String::new(),
+    };
+    let diags = std::mem::take(&mut session.diags);
+    (diags, session.sources, summary)
+}
+
+/// The number of files in `sources` (names past the end read `<unknown>`).
+fn file_count(sources: &SourceMap) -> u32 {
+    let (mut low, mut high) = (0u32, 1u32);
+    while sources.name(FileId(high - 1)) != "<unknown>" {
+        low = high;
+        high = high.saturating_mul(2);
+    }
+    // The first unknown index lies in [low, high).
+    while low < high {
+        let mid = low + (high - low) / 2;
+        if sources.name(FileId(mid)) == "<unknown>" { high = mid } else { low = mid + 1 }
+    }
+    low
+}
+
+/// `path` canonicalised when it exists (so two spellings of one file compare equal).
+fn canonical(path: &Path) -> PathBuf {
+    crate::input::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())
+}

@@ -1,0 +1,189 @@
+//! The `Session`'s update invariants (ARCHITECTURE.md, "The Session"): after a change it redoes
+//! only what depends on it — counted through its statistics against what the composition
+//! says depends on the change — and renders the same image, bit for bit, as a session opened
+//! fresh on the changed files.
+
+use std::path::{Path, PathBuf};
+use strata::render::scene::SceneOptions;
+use strata::render::{Image, RenderSettings};
+use strata::scene::Value;
+use strata::session::{Change, ChangeKind, Pass, SceneSource, Session, SessionOptions};
+
+/// The default scene in `dir` with the dirt substance in `dirt.ash`, and an `unused.ash`
+/// beside it.
+fn split_default_scene(dir: &Path) -> PathBuf {
+    std::fs::write(dir.join("unused.ash"), "substance unused { node d = diffuse(); surface = d.bsdf; }\n").unwrap();
+    strata::session::write_split_default_scene(dir).unwrap()
+}
+
+fn settings() -> RenderSettings {
+    RenderSettings { width: 48, height: 36, spp: 4, seed: 11, threads: Some(2), ..Default::default() }
+}
+
+/// Opens `path` and prepares it for rendering, panicking with the diagnostics on errors.
+fn prepared(path: &Path) -> Session {
+    let mut session = Session::open(SceneSource::File(path.to_path_buf()), SessionOptions::default());
+    let options = SceneOptions::default();
+    if session.prepare(&options).is_none() {
+        panic!("{}", session.diagnostics().render(session.sources()));
+    }
+    session
+}
+
+fn render(session: &mut Session) -> Image {
+    session.render(&Pass { settings: settings(), time: None }, None).expect("renders").0
+}
+
+/// The number of distinct composed materials whose slot stack binds `material`: what a
+/// change to it must recompile, read from the composition (not from the update's counts).
+fn compositions_using(session: &Session, material: &str) -> usize {
+    let c = session.composed().expect("composed");
+    let mut using: Vec<usize> =
+        c.stacks
+            .iter()
+            .zip(&c.prim_material)
+            .filter(|(stack, _)| {
+                stack.layers.iter().any(|l| {
+                    l.applied.material == material || l.overrides.iter().any(|o| o.applied.material == material)
+                })
+            })
+            .map(|(_, &m)| m)
+            .collect();
+    using.sort();
+    using.dedup();
+    using.len()
+}
+
+fn edit(path: &Path, from: &str, to: &str) {
+    let text = std::fs::read_to_string(path).unwrap();
+    assert!(text.contains(from), "{from} in {}", path.display());
+    std::fs::write(path, text.replacen(from, to, 1)).unwrap();
+}
+
+#[test]
+fn a_substance_file_change_recompiles_only_the_compositions_that_use_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = split_default_scene(dir.path());
+    let mut session = prepared(&scene);
+    let before = render(&mut session);
+    let materials = session.compiled().unwrap().materials.len();
+    let using_dirt = compositions_using(&session, "/Looks/Dirt");
+    assert!(using_dirt > 0 && using_dirt < materials, "{using_dirt} of {materials}");
+    let stats = session.stats().clone();
+
+    edit(&dir.path().join("dirt.ash"), "color(0.2, 0.15, 0.1)", "color(0.1, 0.3, 0.6)");
+    let report = session.apply_change(&Change::File(dir.path().join("dirt.ash")));
+    assert_eq!(report.kind, ChangeKind::Substance);
+    assert!(!report.failed, "{}", session.diagnostics().render(session.sources()));
+    assert_eq!(report.recompiled, using_dirt, "{report:?}");
+    assert_eq!(report.reused, materials - using_dirt, "{report:?}");
+    assert_eq!(session.stats().materials_compiled - stats.materials_compiled, using_dirt);
+    assert!(!report.restaged && !report.geometry_rebuilt, "{report:?}");
+    assert_eq!(session.stats().scene_builds, stats.scene_builds, "geometry and BVH kept");
+    assert_eq!(session.stats().stage_reads, stats.stage_reads, "no layer read again");
+
+    let updated = render(&mut session);
+    assert_ne!(updated, before, "the dirt colour shows");
+    let fresh = render(&mut prepared(&scene));
+    assert!(updated == fresh, "an updated session renders what a fresh one does, bit for bit");
+    assert!(render(&mut session) == updated, "rendering does not change the session");
+}
+
+#[test]
+fn a_change_to_an_unrelated_file_recompiles_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = split_default_scene(dir.path());
+    let mut session = prepared(&scene);
+    let before = render(&mut session);
+    let stats = session.stats().clone();
+    for file in ["unused.ash", "notes.txt"] {
+        std::fs::write(dir.path().join(file), "changed").unwrap();
+        let report = session.apply_change(&Change::File(dir.path().join(file)));
+        assert_eq!(report.kind, ChangeKind::Unrelated, "{file}");
+        assert_eq!((report.recompiled, report.recomposed, report.geometry_rebuilt), (0, false, false), "{file}");
+    }
+    assert_eq!(session.stats(), &stats);
+    assert!(render(&mut session) == before);
+}
+
+#[test]
+fn a_layer_change_keeps_geometry_unless_it_moves_something() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = split_default_scene(dir.path());
+    let mut session = prepared(&scene);
+    let using_floor = compositions_using(&session, "/Looks/Floor");
+    let builds = session.stats().scene_builds;
+
+    // A material input authored in the layer: the floor's composition only, geometry kept.
+    edit(&scene, "float inputs:tiles = 6", "float inputs:tiles = 3");
+    let report = session.apply_change(&Change::File(scene.clone()));
+    assert_eq!(report.kind, ChangeKind::Layer);
+    assert!(report.restaged && report.recomposed && !report.geometry_rebuilt, "{report:?}");
+    assert_eq!(report.recompiled, using_floor, "{report:?}");
+    assert_eq!(session.stats().scene_builds, builds);
+    assert!(render(&mut session) == render(&mut prepared(&scene)));
+
+    // A ball moved: geometry and BVH are built again; no material is recompiled.
+    edit(&scene, "float3 xformOp:translate = (1.8, 0.8, 0)", "float3 xformOp:translate = (1.5, 0.8, 0.3)");
+    let report = session.apply_change(&Change::File(scene.clone()));
+    assert!(report.geometry_rebuilt && report.recompiled == 0, "{report:?}");
+    assert_eq!(session.stats().scene_builds, builds + 1);
+    assert!(render(&mut session) == render(&mut prepared(&scene)));
+}
+
+#[test]
+fn an_input_value_set_in_memory_renders_as_if_authored() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = split_default_scene(dir.path());
+    let mut session = prepared(&scene);
+    let using_metal = compositions_using(&session, "/Looks/Metal");
+    let report = session.apply_change(&Change::Value {
+        prim: "/Looks/Metal/Surface".into(),
+        attribute: "inputs:roughness".into(),
+        type_name: "float".into(),
+        value: Value::Float(0.6),
+    });
+    assert_eq!(report.kind, ChangeKind::Value);
+    assert!(!report.restaged && !report.geometry_rebuilt, "{report:?}");
+    assert_eq!(report.recompiled, using_metal, "{report:?}");
+    // The oracle: the same value authored in the layer, opened fresh.
+    edit(
+        &scene,
+        "uniform token info:strata:sourceAsset:subIdentifier = \"brushed_metal\"",
+        "uniform token info:strata:sourceAsset:subIdentifier = \"brushed_metal\"\n            float inputs:roughness = 0.6",
+    );
+    assert!(render(&mut session) == render(&mut prepared(&scene)));
+}
+
+/// A 4x4 RGB PNG of one colour.
+fn solid_png(rgb: [u8; 3]) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    let mut encoder = png::Encoder::new(&mut bytes, 4, 4);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Eight);
+    let mut writer = encoder.write_header().unwrap();
+    writer.write_image_data(&rgb.repeat(16)).unwrap();
+    writer.finish().unwrap();
+    bytes
+}
+
+#[test]
+fn a_texture_change_reloads_texels_without_recompiling() {
+    let dir = tempfile::tempdir().unwrap();
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/usd/preview");
+    std::fs::copy(fixtures.join("textured.usda"), dir.path().join("textured.usda")).unwrap();
+    std::fs::copy(fixtures.join("checker.png"), dir.path().join("checker.png")).unwrap();
+    let scene = dir.path().join("textured.usda");
+    let mut session = prepared(&scene);
+    let before = render(&mut session);
+    let stats = session.stats().clone();
+
+    std::fs::write(dir.path().join("checker.png"), solid_png([200, 30, 30])).unwrap();
+    let report = session.apply_change(&Change::File(dir.path().join("checker.png")));
+    assert_eq!(report.kind, ChangeKind::Texture);
+    assert!(report.textures_reloaded >= 1 && report.recompiled == 0 && !report.geometry_rebuilt, "{report:?}");
+    assert_eq!(session.stats(), &stats, "nothing composed, compiled or built");
+    let updated = render(&mut session);
+    assert_ne!(updated, before);
+    assert!(updated == render(&mut prepared(&scene)));
+}
