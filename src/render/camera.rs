@@ -253,6 +253,12 @@ impl Camera {
         (self.near, self.far)
     }
 
+    /// Whether rays start across a lens (depth of field), so [`Camera::ray`] reads its `lens`
+    /// sample; a pinhole camera ignores it and its caller need not draw one.
+    pub fn has_lens(&self) -> bool {
+        self.lens_radius > 0.0
+    }
+
     /// The ray through film position `film` (`[0,1]²`, x to the right, y downwards) using
     /// lens sample `lens` (`[0,1)²`, unused for a pinhole).
     pub fn ray(&self, film: Vec2, lens: Vec2) -> CameraRay {

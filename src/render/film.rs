@@ -503,7 +503,10 @@ pub fn render(
                 let mut sampler = PathSampler::new(settings.sampler, settings.seed, pixel, sample);
                 let jitter = sampler.get2(Slot::Pixel);
                 let film = Vec2::new((x as f32 + jitter.x) / w as f32, (y as f32 + jitter.y) / h as f32);
-                let ray = camera.ray(film, sampler.get2(Slot::Lens));
+                // Numbers are counter based: skipping the lens draw of a pinhole camera
+                // changes no other decision's numbers.
+                let lens = if camera.has_lens() { sampler.get2(Slot::Lens) } else { Vec2::ZERO };
+                let ray = camera.ray(film, lens);
                 // Stratified over the pixel's samples: sample k picks in [k, k + 1) / spp.
                 let u_pick = ((sample as f32 + sampler.get1(Slot::LayerPick)) / settings.spp as f32)
                     .min(1.0 - f32::EPSILON / 2.0);

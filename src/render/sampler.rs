@@ -121,9 +121,11 @@ impl PathSampler {
                 Vec2::new(unit((bits >> 32) as u32), unit(bits as u32))
             }
             SamplerKind::Sobol => {
-                let index = nested_uniform_scramble(self.sample, key as u32);
-                let x = nested_uniform_scramble(sobol_0(index), (key >> 32) as u32);
-                let y = nested_uniform_scramble(sobol_1(index), mix64(key) as u32);
+                // In the reversed-bit domain (see `owen_hash`): `index` is the shuffled
+                // sample index reversed, whose Sobol dimension 0 is the index itself.
+                let index = owen_hash(self.sample.reverse_bits(), key as u32);
+                let x = owen_hash(index.reverse_bits(), (key >> 32) as u32).reverse_bits();
+                let y = owen_hash(sobol_1_reversed(index), mix64(key) as u32).reverse_bits();
                 Vec2::new(unit(x), unit(y))
             }
         }
@@ -136,8 +138,8 @@ impl PathSampler {
                 unit((mix64(key ^ u64::from(self.sample).wrapping_mul(0x9e37_79b9_7f4a_7c15)) >> 32) as u32)
             }
             SamplerKind::Sobol => {
-                let index = nested_uniform_scramble(self.sample, key as u32);
-                unit(nested_uniform_scramble(sobol_0(index), (key >> 32) as u32))
+                let index = owen_hash(self.sample.reverse_bits(), key as u32);
+                unit(owen_hash(index.reverse_bits(), (key >> 32) as u32).reverse_bits())
             }
         }
     }
@@ -164,25 +166,16 @@ fn unit(bits: u32) -> f32 {
 }
 
 /// Sobol dimension 0 (van der Corput in base 2) of point `index`, as 32 bits of fraction.
-#[inline]
+#[cfg(test)]
 fn sobol_0(index: u32) -> u32 {
     index.reverse_bits()
 }
 
-/// Sobol dimension 1 of point `index`, as 32 bits of fraction.
-#[inline]
+/// Sobol dimension 1 of point `index`, as 32 bits of fraction: the XOR of the direction
+/// numbers of `index`'s set bits (the definition; the sampler uses [`sobol_1_reversed`]).
+#[cfg(test)]
 fn sobol_1(index: u32) -> u32 {
-    let mut bits = 0;
-    let mut rest = index;
-    let mut k = 0;
-    while rest != 0 {
-        if rest & 1 != 0 {
-            bits ^= SOBOL_1_DIRECTIONS[k];
-        }
-        rest >>= 1;
-        k += 1;
-    }
-    bits
+    (0..32).filter(|k| index >> k & 1 != 0).fold(0, |bits, k| bits ^ SOBOL_1_DIRECTIONS[k])
 }
 
 /// Direction numbers of Sobol dimension 1: primitive polynomial x + 1 (degree 1) with
@@ -198,21 +191,63 @@ const SOBOL_1_DIRECTIONS: [u32; 32] = {
     v
 };
 
-/// Owen scrambling of a 32-bit fraction by a hash that flips each bit depending only on the
-/// bits above it (Laine–Karras form on reversed bits, Burley 2020), keyed by `seed`. As a
-/// map on sample indices it is a shuffle that keeps every aligned power-of-two run together.
+/// `sobol_1` in the reversed-bit domain: `sobol_1_reversed(i.reverse_bits())` is
+/// `sobol_1(i).reverse_bits()`. The map is linear over GF(2), so it is the XOR of four
+/// byte-table lookups (4 KiB) instead of a loop over the 32 bits of a shuffled index.
 #[inline]
-fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
-    let mut v = x.reverse_bits();
-    // Each step only carries information from low bits to high ones (additions and
-    // multiplications by even constants), so bit k of the result depends on bits ≤ k of
-    // the input: in reversed order, on the bits above it — an Owen scramble.
+fn sobol_1_reversed(z: u32) -> u32 {
+    let t = &SOBOL_1_REVERSED_BYTES;
+    t[0][(z & 0xff) as usize]
+        ^ t[1][(z >> 8 & 0xff) as usize]
+        ^ t[2][(z >> 16 & 0xff) as usize]
+        ^ t[3][(z >> 24) as usize]
+}
+
+/// Entry `[b][byte]`: the XOR, over the set bits t of `byte`, of the reversed direction number
+/// that bit 8b + t of a reversed index selects (bit j of a reversed index is bit 31 − j of it).
+const SOBOL_1_REVERSED_BYTES: [[u32; 256]; 4] = {
+    let mut table = [[0u32; 256]; 4];
+    let mut b = 0;
+    while b < 4 {
+        let mut byte = 0;
+        while byte < 256 {
+            let mut bits = 0u32;
+            let mut t = 0;
+            while t < 8 {
+                if byte >> t & 1 != 0 {
+                    bits ^= SOBOL_1_DIRECTIONS[31 - (8 * b + t)].reverse_bits();
+                }
+                t += 1;
+            }
+            table[b][byte] = bits;
+            byte += 1;
+        }
+        b += 1;
+    }
+    table
+};
+
+/// The Laine–Karras hash on reversed bits (Burley 2020), keyed by `seed`: bit k of the
+/// result depends only on bits ≤ k of `v` (additions and multiplications by even constants
+/// carry information from low bits to high ones only). On reversed bits that is an Owen
+/// scramble of the fraction `v.reverse_bits()`, and as a map on reversed sample indices a
+/// shuffle that keeps every aligned power-of-two run of samples together. The sampler works
+/// in this reversed domain throughout and reverses each coordinate once at the end.
+#[inline]
+fn owen_hash(mut v: u32, seed: u32) -> u32 {
     v ^= v.wrapping_mul(0x3d20_adea);
     v = v.wrapping_add(seed);
     v = v.wrapping_mul((seed >> 16) | 1);
     v ^= v.wrapping_mul(0x0552_6c56);
     v ^= v.wrapping_mul(0x53a2_2864);
-    v.reverse_bits()
+    v
+}
+
+/// Owen scrambling of a 32-bit fraction `x` keyed by `seed` (the definition the reversed
+/// domain implements).
+#[cfg(test)]
+fn nested_uniform_scramble(x: u32, seed: u32) -> u32 {
+    owen_hash(x.reverse_bits(), seed).reverse_bits()
 }
 
 #[cfg(test)]
@@ -236,6 +271,29 @@ mod tests {
                     seen[cell] = true;
                 }
             }
+        }
+    }
+
+    /// The reversed-domain sampler draws exactly the points of the definition: scrambled
+    /// index, then Sobol dimensions 0 and 1 of it, each Owen-scrambled.
+    #[test]
+    fn reversed_domain_matches_the_definition() {
+        let mut state = 0x1234_5678_9abc_def0u64;
+        for _ in 0..10_000 {
+            state = mix64(state);
+            let z = state as u32;
+            assert_eq!(sobol_1_reversed(z.reverse_bits()), sobol_1(z).reverse_bits(), "index {z:#x}");
+        }
+        for (seed, pixel, sample) in [(0u64, 0u64, 0u32), (5, 11, 3), (9, 1 << 40, 255), (1, 2, 1 << 20)] {
+            let s = PathSampler::new(SamplerKind::Sobol, seed, pixel, sample);
+            let key = s.dimension_key(Slot::Direction as u32);
+            let index = nested_uniform_scramble(sample, key as u32);
+            let x = nested_uniform_scramble(sobol_0(index), (key >> 32) as u32);
+            let y = nested_uniform_scramble(sobol_1(index), mix64(key) as u32);
+            assert_eq!(s.get2(Slot::Direction), Vec2::new(unit(x), unit(y)));
+            let key = s.dimension_key(Slot::Roulette as u32);
+            let index = nested_uniform_scramble(sample, key as u32);
+            assert_eq!(s.get1(Slot::Roulette), unit(nested_uniform_scramble(sobol_0(index), (key >> 32) as u32)));
         }
     }
 
