@@ -29,16 +29,8 @@ pub mod diag;
 pub mod front;
 pub mod input;
 pub mod ir;
-pub mod plot;
 pub mod render;
 pub mod runtime;
 pub mod scene;
 pub mod session;
 pub mod stack;
-
-// Old path kept for the merge; remove after (render/, cli.rs and tests/layering.rs use it).
-pub use crate::abi::layering;
-// Old path kept for the merge; remove after (cli.rs uses it).
-pub use crate::input::scenes;
-// Old path kept for the merge; remove after.
-pub use crate::diag::text;

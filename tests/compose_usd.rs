@@ -12,7 +12,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
-use strata::compose::scene::binding_tree;
+use strata::compose::binding::binding_tree;
 use strata::compose::slots::resolve_stacks;
 use strata::diag::{Diagnostics, Severity, SourceMap};
 use strata::scene::{Stage, Value};

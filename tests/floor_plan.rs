@@ -1,7 +1,7 @@
 //! The floor plan (ARCHITECTURE.md): every `crate::` path in the library's non-test code names a
 //! module on its own floor or a lower one. Floors, from the ground up: diag, input, abi,
-//! runtime, stack; front; scene; compose; ir; backend; render; session; the tools (cli, bench, fuzz,
-//! plot). `tools/floor_plan.py` prints the same check per file, with import cycles.
+//! runtime, stack; front; scene; compose; ir; backend; render; session; the tools (cli, bench, fuzz).
+//! `tools/floor_plan.py` prints the same check per file, with import cycles.
 
 use std::path::{Path, PathBuf};
 
@@ -15,15 +15,10 @@ const FLOORS: &[&[&str]] = &[
     &["backend"],
     &["render"],
     &["session"],
-    &["cli", "bench", "fuzz", "plot", "main"],
+    &["cli", "bench", "fuzz", "main"],
 ];
 
-/// Re-exports at the crate root that keep an old path compiling (`pub use crate::abi::layering`
-/// is reached as `crate::layering`): the floor of what they name.
-const ALIASES: &[(&str, &str)] = &[("layering", "abi"), ("scenes", "input"), ("text", "diag")];
-
 fn floor_of(module: &str) -> Option<usize> {
-    let module = ALIASES.iter().find(|(alias, _)| *alias == module).map_or(module, |(_, to)| to);
     FLOORS.iter().position(|floor| floor.contains(&module))
 }
 

@@ -22,11 +22,11 @@ mod common;
 
 use proptest::prelude::*;
 use std::sync::Arc;
+use strata::abi::layering;
 use strata::abi::{Closure, Globals, MaterialCode, ShaderError};
 use strata::backend::BackendKind;
 use strata::diag::{Diagnostics, SourceMap};
 use strata::front::library::Library;
-use strata::layering;
 use strata::render::integrator::{Invalid, shading_state};
 
 #[derive(Clone, Debug)]

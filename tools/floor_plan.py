@@ -27,7 +27,7 @@ from collections import defaultdict
 
 GROUND = {"diag", "input", "abi", "runtime", "stack"}
 STAGES = ["front", "scene", "compose", "ir", "backend", "render", "session"]
-TOOLS = {"cli", "bench", "fuzz", "plot", "main"}
+TOOLS = {"cli", "bench", "fuzz", "main"}
 
 
 def floor_of(module):

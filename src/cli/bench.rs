@@ -9,6 +9,7 @@
 //! - [`bench_render`]: time per sample and error against a high-spp reference for 1–16 layers,
 //!   stochastic vs weighted layer evaluation.
 
+use crate::cli::plot::Series;
 use std::fmt::Write as _;
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
@@ -22,7 +23,6 @@ use strata::front::library::Library;
 use strata::input::generated::{MaskKind, layered_scene, layered_source, mask_stack_source};
 use strata::ir::lower;
 use strata::ir::wired::{self, PassOptions};
-use strata::plot::Series;
 use strata::render::{LayerMode, RenderSettings, Scene};
 use strata::runtime::{math, noise};
 use strata::session::{SceneSource, Session, SessionOptions};
@@ -1512,9 +1512,9 @@ fn error_curves(
     Ok(curves)
 }
 
-/// Formats a ratio pair of [`strata::plot::equal_ratios`] for a caption.
+/// Formats a ratio pair of [`crate::cli::plot::equal_ratios`] for a caption.
 fn ratio_text(a: &[(f64, f64)], b: &[(f64, f64)]) -> String {
-    match strata::plot::equal_ratios(a, b) {
+    match crate::cli::plot::equal_ratios(a, b) {
         Some((e, t, how)) => format!("equal-time RMSE ratio {e:.2}, equal-RMSE time ratio {t:.2} ({how})"),
         None => "no ratio (empty curve)".into(),
     }
@@ -1524,7 +1524,7 @@ fn ratio_text(a: &[(f64, f64)], b: &[(f64, f64)]) -> String {
 /// into `dir` as SVG, and returns the printed report (the same ratios as the captions).
 /// `mitsuba_csv`, when it exists, is `tools/compare_mitsuba.py`'s CSV (optional).
 pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) -> Result<String, String> {
-    use strata::plot::{Bar, bars, loglog};
+    use crate::cli::plot::{Bar, bars, loglog};
     std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     let mut out = String::new();
     let svg = |name: &str| dir.join(name);
@@ -1574,7 +1574,7 @@ pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) ->
                 });
             }
             let ratios = ratio_text(&curves[0], &curves[1]);
-            if let Some((_, t, _)) = strata::plot::equal_ratios(&curves[0], &curves[1]) {
+            if let Some((_, t, _)) = crate::cli::plot::equal_ratios(&curves[0], &curves[1]) {
                 cross.push((n as f64, t));
             }
             writeln!(out, "  {n:>3} layers: {ratios}").unwrap();
@@ -1796,7 +1796,7 @@ fn mitsuba_chart(csv: &Path, file: &Path) -> Result<String, String> {
         series.push(Series { label: format!("{name}, strata"), points: s, color: c, dashed: false });
         series.push(Series { label: format!("{name}, Mitsuba 3"), points: m, color: c, dashed: true });
     }
-    strata::plot::loglog(
+    crate::cli::plot::loglog(
         file,
         "strata (circles) vs Mitsuba 3 (triangles), docs/mitsuba_compare.csv",
         "CPU seconds per render (1024 spp, 320x240)",
@@ -1874,7 +1874,7 @@ pub fn stability_charts(dir: &Path) -> Result<String, String> {
     for line in &caption[3..] {
         writeln!(out, "stability, GGX: {line}").unwrap();
     }
-    strata::plot::loglog(
+    crate::cli::plot::loglog(
         &dir.join("stability_ggx.svg"),
         "GGX energy vs incidence: conductor (solid), glass (dashed)",
         "cos θo",
@@ -1923,7 +1923,7 @@ pub fn stability_charts(dir: &Path) -> Result<String, String> {
     for line in &caption[3..] {
         writeln!(out, "stability, glass near index 1: {line}").unwrap();
     }
-    strata::plot::loglog(
+    crate::cli::plot::loglog(
         &dir.join("stability_glass.svg"),
         "Rough glass energy as the index approaches 1",
         "η − 1",
@@ -2196,7 +2196,7 @@ fn scale_chart(dir: &Path) -> Result<String, String> {
         "Holds from 1e-12 to 3e5 (each BVH traversed in a power-of-two-scaled space, past obvhs' absolute 1e-4 cull).".into(),
         "Refused with a located error: triangles under 1e-11 units (geometry::MIN_TRIANGLE_EDGE), coordinates beyond 1e7 (MAX_EXTENT). tests/scene_scale.rs.".into(),
     ];
-    strata::plot::loglog(
+    crate::cli::plot::loglog(
         &dir.join("stability_scale.svg"),
         "Intersection against scene scale",
         "scene scale",

@@ -5,6 +5,7 @@
 
 pub mod bench;
 pub mod fuzz;
+pub mod plot;
 
 use std::io::Write;
 use std::path::Path;

@@ -4,6 +4,7 @@
 //! interface inputs, as UsdShade resolves them), and assembles one [`ComposedMaterial`] per
 //! renderable prim.
 
+use super::binding::binding_tree;
 use super::connect::{attribute_path, convert_input, value_producer};
 use super::slots::{PrimStack, resolve_stacks};
 use super::{ComposedLayer, ComposedMaterial, DisplayPrimvars, MaterialRef, preview};
@@ -13,9 +14,6 @@ use crate::front::library::Library;
 use crate::scene::{Stage, Value as UsdValue};
 use std::collections::HashMap;
 use std::path::PathBuf;
-
-// Old path kept for the merge; remove after (render/ and cli.rs name them here).
-pub use super::binding::{RENDERABLE_TYPES, binding_tree, is_bound_subset, is_renderable};
 
 /// Where a Material prim's substance lives and which inputs it sets.
 #[derive(Clone, Debug)]

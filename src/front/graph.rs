@@ -5,9 +5,8 @@ use super::ast::{self, BaseType, ExprKind as A, GraphKind, Product};
 use super::check::resolve_type;
 use super::hir::{FuncId, Function};
 use super::types::{Type, Value};
+use crate::abi::{ChannelKind, DisplacementMode};
 use crate::diag::{Diagnostic, Diagnostics, Span, did_you_mean};
-// Old path kept for the merge; remove after (render/ and layering import them from here).
-pub use crate::abi::{ChannelKind, DisplacementMode};
 use std::collections::HashMap;
 
 /// What drives a port, an output or a product.

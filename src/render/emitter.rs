@@ -18,8 +18,8 @@
 
 use super::accel::{Accel, Hit, WORLD};
 use super::sampling::Distribution1D;
+use crate::abi::layering;
 use crate::abi::{Globals, MaterialCode};
-use crate::layering;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 

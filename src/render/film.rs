@@ -11,8 +11,8 @@ use super::integrator::{
 };
 use super::sampler::{PathSampler, SamplerKind, Slot};
 use super::scene::Scene;
+use crate::abi::ChannelKind;
 use crate::abi::{MaterialCode, ShaderError};
-use crate::front::graph::ChannelKind;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::fmt;
@@ -135,7 +135,7 @@ pub struct RenderStats {
 pub struct MaterialLayerMode {
     /// The material's name (its index when the scene has no names).
     pub material: String,
-    /// Layers that can be picked ([`crate::layering::liveness`]).
+    /// Layers that can be picked ([`crate::abi::layering::liveness`]).
     pub pickable: usize,
     /// The evaluation used (never `Auto`).
     pub mode: LayerMode,
@@ -616,7 +616,7 @@ pub fn render(
         .enumerate()
         .map(|(k, (m, &mode))| MaterialLayerMode {
             material: scene.material_names.get(k).cloned().unwrap_or_else(|| format!("#{k}")),
-            pickable: crate::layering::pickable_count(&m.info().layers),
+            pickable: crate::abi::layering::pickable_count(&m.info().layers),
             mode,
             automatic: settings.mode == LayerMode::Auto,
         })

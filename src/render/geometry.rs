@@ -10,7 +10,7 @@ use super::primvars::{MAX_COMPONENTS, Primvar, PrimvarLayout, PrimvarRef, Primva
 use super::shapes::{Part, Shape};
 use super::subdiv::{PolyMesh, catmull_clark, read_tags, refined_faces};
 use super::xform::{PrimXform, local_transform, value_span, world_transforms};
-use crate::compose::scene::{is_bound_subset, is_renderable};
+use crate::compose::binding::{is_bound_subset, is_renderable};
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::scene::{Prim, PrimId, Stage, Value};
 use glam::{DMat3, DMat4, DQuat, DVec3, Vec2, Vec3};

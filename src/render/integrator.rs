@@ -19,8 +19,8 @@ use super::primvars::{PrimvarRef, PrimvarSlot};
 use super::sampler::{PathSampler, Slot};
 use super::sampling::power_heuristic;
 use super::scene::Scene;
+use crate::abi::layering::{self, Relief};
 use crate::abi::{Closure, ClosureKind, Globals, MaterialCode, PrimvarValues, ShaderError};
-use crate::layering::{self, Relief};
 use glam::{Vec2, Vec3};
 
 /// How layers are evaluated at a path vertex. Both evaluations are unbiased: they render

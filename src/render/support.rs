@@ -12,7 +12,7 @@
 
 use super::light::LIGHT_TYPES;
 use super::xform::{PrimXform, value_span};
-use crate::compose::scene::RENDERABLE_TYPES;
+use crate::compose::binding::RENDERABLE_TYPES;
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::scene::{Prim, Stage, Value};
 use std::collections::BTreeMap;

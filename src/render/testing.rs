@@ -1,8 +1,8 @@
 //! A [`MaterialCode`] test double with constant outputs per layer, for the renderer's tests
 //! and benchmarks (no compiler needed).
 
+use crate::abi::ChannelKind;
 use crate::abi::{ChannelInfo, Closure, ClosureKind, Globals, LayerInfo, MaterialCode, MaterialInfo, ShaderError};
-use crate::front::graph::ChannelKind;
 
 /// One constant layer.
 #[derive(Clone, Debug)]

@@ -5,8 +5,8 @@ use super::integrator::LayerMode;
 use super::scene::Scene;
 use super::testing::{ConstLayer, ConstMaterial};
 use super::{Image, xform::tests::stage};
+use crate::abi::ChannelKind;
 use crate::abi::{MaterialCode, ShaderError};
-use crate::front::graph::ChannelKind;
 
 /// A 2000 × 2000 quad at y = 0 seen from straight above through a narrow lens, plus `extra`.
 fn plane_scene(extra: &str) -> Scene {

@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 /// holds the dirt substance and the node type only it uses, `default.ash` the others — so a
 /// change to one file touches only some compositions. Returns the scene's path.
 pub fn write_split_default_scene(dir: &Path) -> std::io::Result<PathBuf> {
-    let usda = crate::scenes::DEFAULT_SCENE.1;
-    let ash = crate::scenes::embedded(&Path::new(crate::scenes::EMBEDDED_DIR).join("default.ash"))
+    let usda = crate::input::scenes::DEFAULT_SCENE.1;
+    let ash = crate::input::scenes::embedded(&Path::new(crate::input::scenes::EMBEDDED_DIR).join("default.ash"))
         .ok_or_else(|| std::io::Error::other("the default scene's substance file is not embedded"))?;
     let find = |what: &str, text: &str| {
         text.find(what).ok_or_else(|| std::io::Error::other(format!("the default scene has no `{what}`")))

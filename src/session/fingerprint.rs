@@ -34,7 +34,7 @@ impl FileHashes {
                 continue;
             }
             canonical.hash(&mut hasher);
-            let text = match crate::scenes::embedded(&path) {
+            let text = match crate::input::scenes::embedded(&path) {
                 Some(text) => text.to_string(),
                 None => match crate::input::read_text(&path) {
                     Ok(text) => text,

@@ -29,11 +29,11 @@ use crate::compose::slots::PrimStack;
 use crate::diag::{Diagnostic, Diagnostics, FileId, SourceMap};
 use crate::front::library::Library;
 use crate::input::InputLimits;
+use crate::input::scenes;
 use crate::ir::wired::{self, PassOptions};
 use crate::render::scene::{SceneOptions, View};
 use crate::render::{Image, Progress, RenderError, RenderSettings, RenderStats};
 use crate::scene::{Stage, TimeCode, Value, ValueType};
-use crate::scenes;
 use fingerprint::FileHashes;
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -43,7 +43,7 @@ use std::time::Instant;
 /// Which scene a session opens.
 #[derive(Clone, Debug, PartialEq)]
 pub enum SceneSource {
-    /// The scene embedded in the binary ([`crate::scenes::DEFAULT_SCENE`]).
+    /// The scene embedded in the binary ([`crate::input::scenes::DEFAULT_SCENE`]).
     Default,
     /// A USD file: `.usda`, `.usdc`, `.usd` or `.usdz`.
     File(PathBuf),
@@ -382,7 +382,7 @@ impl Session {
             return c.scene.stacks.clone();
         }
         let Some(stage) = &self.stage else { return Vec::new() };
-        let tree = crate::compose::scene::binding_tree(stage, &mut self.diags);
+        let tree = crate::compose::binding::binding_tree(stage, &mut self.diags);
         crate::compose::slots::resolve_stacks(&tree, &mut self.diags)
     }
 
