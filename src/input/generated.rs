@@ -4,33 +4,14 @@
 
 use std::fmt::Write;
 
+/// The shader that thresholds noise into a soft-edged mask, shared by every generated stack.
+const THRESHOLD_SHADER: &str = "shader threshold(float value = 0.0, float edge = 0.5, float softness = 0.1, output float out) {\n    \
+     out = smoothstep(edge, edge + max(softness, 1e-4), value);\n}\n\n";
+
 /// A `.ash` file with `n` substances `layer_0` … : each a noise-thresholded mask (none on the
 /// bottom layer, which is opaque) over a diffuse or glossy surface of its own colour.
 pub fn layered_source(n: usize) -> String {
-    let mut s = String::from(
-        "shader threshold(float value = 0.0, float edge = 0.5, float softness = 0.1, output float out) {\n    \
-         out = smoothstep(edge, edge + max(softness, 1e-4), value);\n}\n\n",
-    );
-    for k in 0..n {
-        // Colours around the hue circle.
-        let h = k as f32 / n.max(1) as f32 * 6.0;
-        let c = |o: f32| 0.15 + 0.7 * (((h + o) % 6.0 - 3.0).abs() - 1.0).clamp(0.0, 1.0);
-        let (r, g, b) = (c(0.0), c(4.0), c(2.0));
-        writeln!(s, "substance layer_{k} {{").unwrap();
-        if k % 2 == 0 {
-            writeln!(s, "    node s = diffuse(albedo: color({r:.3}, {g:.3}, {b:.3}));").unwrap();
-        } else {
-            writeln!(s, "    node s = glossy(albedo: color({r:.3}, {g:.3}, {b:.3}), roughness: 0.3);").unwrap();
-        }
-        s += "    surface = s.bsdf;\n";
-        if k > 0 {
-            writeln!(s, "    node n = noise(scale: {:.3});", 2.0 + 1.37 * k as f32).unwrap();
-            s += "    node t = threshold(value: n.out, edge: 0.5, softness: 0.1);\n";
-            s += "    node m = mask(opacity: t.out);\n    mask = m.out;\n";
-        }
-        s += "}\n\n";
-    }
-    s
+    stack_source(n, MaskKind::Noise, THRESHOLD_SHADER.to_string())
 }
 
 /// A scene: a camera, a dome and a distant light, and a unit sphere with `n` slots bound to
@@ -115,13 +96,17 @@ pub const THIN_COVERAGE: f64 = 0.03;
 /// A `.ash` file with `n` substances `layer_0` … over a sphere (see [`layered_scene`]), masked
 /// as `kind` says; the bottom layer is opaque.
 pub fn mask_stack_source(n: usize, kind: MaskKind) -> String {
-    let mut s = String::from(
-        "shader threshold(float value = 0.0, float edge = 0.5, float softness = 0.1, output float out) {\n    \
-         out = smoothstep(edge, edge + max(softness, 1e-4), value);\n}\n\n\
-         shader stripes(float dx = 1.0, float dy = 0.0, float freq = 8.0, float phase = 0.0, float width = 0.03, output float out) {\n    \
+    let header = format!(
+        "{THRESHOLD_SHADER}shader stripes(float dx = 1.0, float dy = 0.0, float freq = 8.0, float phase = 0.0, float width = 0.03, output float out) {{\n    \
          float f = (P[0] * dx + P[1] * dy + P[2] * 0.3) * freq + phase;\n    \
-         out = f - floor(f) < width ? 1.0 : 0.0;\n}\n\n",
+         out = f - floor(f) < width ? 1.0 : 0.0;\n}}\n\n"
     );
+    stack_source(n, kind, header)
+}
+
+/// `header` then `n` substances `layer_0` …, alternately diffuse and glossy in colours around
+/// the hue circle, each above the bottom one masked as `kind` says.
+fn stack_source(n: usize, kind: MaskKind, mut s: String) -> String {
     for k in 0..n {
         let h = k as f32 / n.max(1) as f32 * 6.0;
         let c = |o: f32| 0.15 + 0.7 * (((h + o) % 6.0 - 3.0).abs() - 1.0).clamp(0.0, 1.0);
