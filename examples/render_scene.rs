@@ -6,7 +6,7 @@
 //! (no scene: the embedded default scene; no output: `example.exr`).
 
 use std::path::PathBuf;
-use strata::render::displace::DicingOptions;
+use strata::render::geometry::displace::DicingOptions;
 use strata::render::scene::SceneOptions;
 use strata::render::{RenderSettings, write_outputs};
 use strata::session::{Pass, SceneSource, Session, SessionOptions};

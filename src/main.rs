@@ -6,7 +6,7 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use strata::backend::BackendKind;
-use strata::render::sampler::SamplerKind;
+use strata::render::sampling::sampler::SamplerKind;
 use strata::render::{LayerMode, RenderSettings};
 
 // `print!`/`eprintln!` panic on a closed pipe (`strata … 2>&1 | head -1`); these shadow
@@ -103,7 +103,7 @@ enum Command {
         subdiv_level: u32,
         /// Displaced surfaces are diced into micro-triangles about this many pixels long (a
         /// scene past 4 194 304 micro-triangles is diced coarser, with a warning).
-        #[arg(long, default_value_t = strata::render::displace::DEFAULT_DICING_RATE, value_parser = parse_dicing_rate)]
+        #[arg(long, default_value_t = strata::render::geometry::displace::DEFAULT_DICING_RATE, value_parser = parse_dicing_rate)]
         dicing_rate: f32,
         /// Store RGBA and colour AOVs (albedo, N, colour channels) as 16-bit half floats;
         /// Z, P, scalar and integer channels stay 32-bit.
@@ -302,7 +302,7 @@ fn main() -> ExitCode {
     // Interrupted (Ctrl-C, SIGTERM, SIGHUP): delete half-written outputs, then exit as a
     // signal-killed process would. ctrlc runs this on its own thread, not in the handler.
     let _ = ctrlc::set_handler(|| {
-        strata::render::output::remove_temporary_files();
+        strata::render::film::output::remove_temporary_files();
         std::process::exit(130);
     });
     let defaults = strata::input::InputLimits::default();

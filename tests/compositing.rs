@@ -197,7 +197,7 @@ fn half_flag_stores_colour_as_half_and_data_as_float() {
     for c in &image.layer_data.channel_data.list {
         let name = c.name.to_string();
         let half = matches!(c.sample_data, FlatSamples::F16(_));
-        let expect_half = strata::render::output::is_half_channel(&name);
+        let expect_half = strata::render::film::output::is_half_channel(&name);
         assert_eq!(half, expect_half, "{name}");
     }
     for name in ["R", "G", "B", "A", "albedo.R", "N.G"] {
@@ -364,7 +364,7 @@ fn a_cryptomatte_pixel_decodes_to_its_prim_path_through_the_manifest() {
     assert_eq!(decode(1, h - 2).0, "/World/Floor");
     assert_eq!(floats(&image, "CryptoObject00.G")[w / 2], 0.0, "sky has no coverage");
     // The composed material (the slot stack) decodes the same way through its own layer.
-    let material_key = strata::render::cryptomatte::layer_key("CryptoMaterial");
+    let material_key = strata::render::film::cryptomatte::layer_key("CryptoMaterial");
     assert_eq!(text(&image, &format!("cryptomatte/{material_key}/name")), "CryptoMaterial");
     let materials: std::collections::HashMap<String, String> =
         serde_json::from_str(&text(&image, &format!("cryptomatte/{material_key}/manifest"))).expect("JSON manifest");

@@ -116,7 +116,7 @@ fn build_with(
 /// Dicing options for an image of `resolution` with a micro-triangle `budget`.
 fn dicing(resolution: (usize, usize), budget: usize) -> strata::render::scene::SceneOptions {
     strata::render::scene::SceneOptions {
-        dicing: strata::render::displace::DicingOptions { resolution, budget, ..Default::default() },
+        dicing: strata::render::geometry::displace::DicingOptions { resolution, budget, ..Default::default() },
         ..Default::default()
     }
 }
@@ -131,7 +131,7 @@ fn built(
 ) -> (Scene, Vec<std::sync::Arc<dyn strata::abi::MaterialCode>>) {
     let options = strata::render::scene::SceneOptions {
         camera: camera.map(str::to_string),
-        ..dicing(res, strata::render::displace::DEFAULT_MICRO_TRIANGLE_BUDGET)
+        ..dicing(res, strata::render::geometry::displace::DEFAULT_MICRO_TRIANGLE_BUDGET)
     };
     let b = build_with(path, backend, optimize, &options);
     assert!(!b.diags.has_errors(), "{}", b.text);
@@ -324,7 +324,7 @@ substance Tall {
         &path,
         BackendKind::Jit,
         true,
-        &dicing((64, 64), strata::render::displace::DEFAULT_MICRO_TRIANGLE_BUDGET),
+        &dicing((64, 64), strata::render::geometry::displace::DEFAULT_MICRO_TRIANGLE_BUDGET),
     );
     let scene = scene.expect("builds");
     // Height 0.1 + 2u passes 0.5 at u = 0.2: clamped there, exact below.
@@ -520,7 +520,8 @@ substance Broken {
 "#;
     let prims = format!("{}{}", camera("Top", [0.0, 6.0, 0.0], [-90.0, 0.0, 0.0]), quad(&bindings(&["Broken"])));
     let path = stage(dir.path(), ash, &["Broken"], &prims, "def DomeLight \"Sky\" {}\n");
-    let (scene, _, diags, text) = built_with_budget(&path, strata::render::displace::DEFAULT_MICRO_TRIANGLE_BUDGET);
+    let (scene, _, diags, text) =
+        built_with_budget(&path, strata::render::geometry::displace::DEFAULT_MICRO_TRIANGLE_BUDGET);
     let warning =
         diags.items().iter().find(|d| d.message.contains("NaN or infinite")).unwrap_or_else(|| panic!("{text}"));
     assert!(warning.message.contains("`/Quad`"), "{text}");
@@ -867,7 +868,7 @@ fn touching_prims_are_displaced_separately() {
     let build = |prims: &str| {
         let path = stage(dir.path(), LIFTS, &["Low"], &format!("{cam}{prims}"), "def DomeLight \"Sky\" {}\n");
         let options = strata::render::scene::SceneOptions {
-            dicing: strata::render::displace::DicingOptions { rate, resolution, ..Default::default() },
+            dicing: strata::render::geometry::displace::DicingOptions { rate, resolution, ..Default::default() },
             ..Default::default()
         };
         let b = build_with(&path, BackendKind::Jit, true, &options);

@@ -7,8 +7,8 @@ use glam::{Vec2, Vec3};
 use std::fs;
 use std::path::{Path, PathBuf};
 use strata::diag::{Diagnostics, SourceMap};
-use strata::render::accel::{Accel, Blas, PLOC_BATCH};
 use strata::render::geometry::Triangle;
+use strata::render::geometry::accel::{Accel, Blas, PLOC_BATCH};
 use strata::scene::Stage;
 use strata::scene::stage::composition_work;
 

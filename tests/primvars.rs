@@ -10,9 +10,9 @@ use strata::abi::{Globals, PrimvarInfo, PrimvarValues};
 use strata::backend::BackendKind;
 use strata::diag::{Diagnostics, SourceMap};
 use strata::render::Image;
+use strata::render::geometry::primvars::PrimvarRef;
+use strata::render::geometry::xform::world_transforms;
 use strata::render::geometry::{GeometryOptions, build_with_primvars};
-use strata::render::primvars::PrimvarRef;
-use strata::render::xform::world_transforms;
 use strata::scene::Stage;
 
 const DIR: &str = "tests/fixtures/usd/primvars";

@@ -2,7 +2,7 @@
 //! DESIGN.md rule, each a table of case → expected value. Every expected value is analytic
 //! (worked out by hand in the table, from the rule's formula) or an independent estimator's;
 //! none comes from an earlier strata output. The transport families under each light type
-//! live in `src/render/reference.rs`.
+//! live in `src/render/integrator/reference.rs`.
 //!
 //! - Rule 6: the shading normal of stacked `none`/`add`/`mix` displacements with spatially
 //!   varying masks, including surfaceless and hidden layers, against the analytic gradient.

@@ -9,8 +9,8 @@ use serde_json::Value as Json;
 use std::path::Path;
 use std::process::Command;
 use strata::diag::{Diagnostics, SourceMap};
-use strata::render::skel::skinned_world_points;
-use strata::render::xform::world_transforms;
+use strata::render::geometry::skel::skinned_world_points;
+use strata::render::geometry::xform::world_transforms;
 use strata::scene::{Stage, TimeCode, Value};
 
 const DIR: &str = "tests/fixtures/skel";

@@ -1809,8 +1809,8 @@ fn mitsuba_chart(csv: &Path, file: &Path) -> Result<String, String> {
 
 /// Directional albedo `E(wo) = ∫ f |cos θi| dωi` of `bsdf` by sampling (`n` samples), with the
 /// radiance compression of transmission undone (× η²) so glass reads R + T.
-fn sampled_albedo(bsdf: &strata::render::bsdf::Bsdf, wo: glam::Vec3, n: usize, seed: u64) -> f64 {
-    use strata::render::bsdf::Bsdf;
+fn sampled_albedo(bsdf: &strata::render::material::bsdf::Bsdf, wo: glam::Vec3, n: usize, seed: u64) -> f64 {
+    use strata::render::material::bsdf::Bsdf;
     let mut rng = SplitMix(seed);
     let mut sum = 0.0f64;
     for _ in 0..n {
@@ -1839,7 +1839,7 @@ fn direction(cos_theta: f64) -> glam::Vec3 {
 /// approaches 1. Returns the report lines.
 pub fn stability_charts(dir: &Path) -> Result<String, String> {
     use strata::abi::{Closure, ClosureKind};
-    use strata::render::bsdf::Bsdf;
+    use strata::render::material::bsdf::Bsdf;
     let make = |kind: ClosureKind, params: &[f32]| {
         let mut c = Closure { kind: kind as u32, params: [0.0; 8] };
         c.params[..params.len()].copy_from_slice(params);
@@ -2309,7 +2309,7 @@ pub fn bench_displacement(res: (usize, usize), spp: u32) -> Result<String, Strin
     // Compiles once, builds `reps` times (median time), renders once.
     struct Row {
         setup_ms: f64,
-        stats: Option<strata::render::displace::DisplacementStats>,
+        stats: Option<strata::render::geometry::displace::DisplacementStats>,
         bytes: usize,
         render_ms: f64,
         rgb: Vec<[f32; 3]>,
@@ -2323,7 +2323,7 @@ pub fn bench_displacement(res: (usize, usize), spp: u32) -> Result<String, Strin
         let (sources, mut diags) = (session.sources(), Diagnostics::new());
         let refs: Vec<&dyn MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
         let options = strata::render::scene::SceneOptions {
-            dicing: strata::render::displace::DicingOptions {
+            dicing: strata::render::geometry::displace::DicingOptions {
                 rate: rate.unwrap_or(1.0),
                 resolution: res,
                 ..Default::default()

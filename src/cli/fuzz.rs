@@ -493,7 +493,11 @@ fn render_tiny(scene: &Path) {
     let materials: Vec<&dyn strata::abi::MaterialCode> = compiled.materials.iter().map(|m| m.as_ref()).collect();
     // Displaced surfaces are diced as for a 4x4 image, under a small budget.
     let options = strata::render::scene::SceneOptions {
-        dicing: strata::render::displace::DicingOptions { resolution: (4, 4), budget: 1 << 16, ..Default::default() },
+        dicing: strata::render::geometry::displace::DicingOptions {
+            resolution: (4, 4),
+            budget: 1 << 16,
+            ..Default::default()
+        },
         ..Default::default()
     };
     let Some(scene) = strata::render::Scene::build(

@@ -187,7 +187,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         let options = strata::render::scene::SceneOptions {
             camera: view.camera,
             geometry: strata::render::geometry::GeometryOptions { subdiv_level: args.subdiv_level },
-            dicing: strata::render::displace::DicingOptions {
+            dicing: strata::render::geometry::displace::DicingOptions {
                 rate: args.dicing_rate,
                 resolution: (settings.width, settings.height),
                 ..Default::default()
@@ -336,12 +336,12 @@ fn exr_options(
             ("strata/time".into(), time.to_string()),
         ]
         .into_iter()
-        .chain(strata::render::cryptomatte::header_attributes(
-            strata::render::cryptomatte::OBJECT_LAYER,
+        .chain(strata::render::film::cryptomatte::header_attributes(
+            strata::render::film::cryptomatte::OBJECT_LAYER,
             scene.prims.iter().map(|p| p.path.as_str()),
         ))
-        .chain(strata::render::cryptomatte::header_attributes(
-            strata::render::cryptomatte::MATERIAL_LAYER,
+        .chain(strata::render::film::cryptomatte::header_attributes(
+            strata::render::film::cryptomatte::MATERIAL_LAYER,
             scene.material_names.iter().map(String::as_str),
         ))
         .collect(),
@@ -522,7 +522,7 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
 
 /// Writes a file whole or not at all: a fsynced temporary file beside it, then a rename.
 pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    strata::render::output::write_file_atomically(path, bytes).map_err(|e| std::io::Error::other(e.message))
+    strata::render::film::output::write_file_atomically(path, bytes).map_err(|e| std::io::Error::other(e.message))
 }
 
 /// `strata fuzz`: runs the fuzzer and prints its report; fails if any input failed.

@@ -443,7 +443,7 @@ mod tests {
     use crate::compose::scene::compose_stage;
     use crate::diag::{Diagnostics, SourceMap};
     use crate::ir::wired::PassOptions;
-    use crate::render::bsdf::Bsdf;
+    use crate::render::material::bsdf::Bsdf;
     use crate::render::sampling::Rng;
     use crate::scene::Stage;
     use glam::Vec3;

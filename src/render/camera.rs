@@ -7,9 +7,9 @@
 //! follows the image aspect. Depth of field (when `fStop > 0` and `focusDistance > 0`) uses a
 //! thin lens of diameter `focalLength / fStop`, converted from tenths of a unit to scene units.
 
-use super::sampling::concentric_disk;
-use super::xform::value_span;
 use crate::diag::{Diagnostic, Diagnostics};
+use crate::render::geometry::xform::value_span;
+use crate::render::sampling::concentric_disk;
 use crate::scene::{Prim, Value};
 use glam::{DMat4, Mat4, Vec2, Vec3};
 
@@ -285,7 +285,7 @@ impl Camera {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::xform::{tests::stage, world_transforms};
+    use crate::render::geometry::xform::{tests::stage, world_transforms};
 
     /// Whether `p` projects inside the image of `camera`.
     fn in_view(camera: &Camera, p: Vec3) -> bool {

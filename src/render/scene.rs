@@ -1,16 +1,16 @@
 //! The render scene: triangles in a BVH, the material of each renderable prim, lights and
 //! the camera, built once from a composed stage.
 
-use super::accel::{Accel, Blas};
-use super::camera::Camera;
-use super::displace::{DicingOptions, DisplacementStats};
-use super::emitter::Emitters;
-use super::geometry::{self, GeomPrim};
-use super::light::{Light, LightKind, lights_from_stage};
-use super::primvars::PrimvarTable;
-use super::xform::world_transforms;
 use crate::abi::MaterialCode;
 use crate::diag::{Diagnostic, Diagnostics};
+use crate::render::camera::Camera;
+use crate::render::geometry::accel::{Accel, Blas};
+use crate::render::geometry::displace::{DicingOptions, DisplacementStats};
+use crate::render::geometry::primvars::PrimvarTable;
+use crate::render::geometry::xform::world_transforms;
+use crate::render::geometry::{self, GeomPrim};
+use crate::render::light::emitter::Emitters;
+use crate::render::light::{Light, LightKind, lights_from_stage};
 use crate::scene::Stage;
 use glam::Vec3;
 
@@ -227,7 +227,7 @@ impl Scene {
 
     /// Builds the render scene with the compiled `materials` (indexed as `material_of_prim`
     /// returns), so that surfaces whose material moves geometry are diced and displaced
-    /// ([`super::displace`]) and the primvars they read are stored ([`super::primvars`]).
+    /// ([`crate::render::geometry::displace`]) and the primvars they read are stored ([`crate::render::geometry::primvars`]).
     pub fn build(
         stage: &Stage,
         material_of_prim: &dyn Fn(&str) -> Option<usize>,
@@ -255,7 +255,7 @@ impl Scene {
                 }
             }
         }
-        super::support::report_unsupported(stage, &xforms, diags);
+        crate::render::support::report_unsupported(stage, &xforms, diags);
         let mut lights = lights_from_stage(stage, &xforms, diags);
         let bounds = geometry.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
         let chosen = match &options.camera {
@@ -279,8 +279,14 @@ impl Scene {
         if diags.error_count() > errors {
             return None;
         }
-        let displaced =
-            super::displace::displace(&mut geometry, &prim_material, materials, &camera, &options.dicing, diags);
+        let displaced = crate::render::geometry::displace::displace(
+            &mut geometry,
+            &prim_material,
+            materials,
+            &camera,
+            &options.dicing,
+            diags,
+        );
         if diags.error_count() > errors {
             return None;
         }
@@ -317,7 +323,7 @@ impl Scene {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::xform::tests::stage;
+    use crate::render::geometry::xform::tests::stage;
     use glam::Vec2;
 
     #[test]

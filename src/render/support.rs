@@ -10,10 +10,10 @@
 //! Warnings are grouped per kind: the first prim is pointed at, the rest are counted, so a
 //! scene of 100 000 curves prints one warning, not 100 000.
 
-use super::light::LIGHT_TYPES;
-use super::xform::{PrimXform, value_span};
 use crate::compose::binding::RENDERABLE_TYPES;
 use crate::diag::{Diagnostic, Diagnostics, Span};
+use crate::render::geometry::xform::{PrimXform, value_span};
+use crate::render::light::LIGHT_TYPES;
 use crate::scene::{Prim, Stage, Value};
 use std::collections::BTreeMap;
 

@@ -1,12 +1,12 @@
 //! End-to-end render tests with the constant test-double material.
 
-use super::film::{RenderSettings, RenderStats, render};
-use super::integrator::LayerMode;
-use super::scene::Scene;
-use super::testing::{ConstLayer, ConstMaterial};
-use super::{Image, xform::tests::stage};
+use super::{Image, geometry::xform::tests::stage};
 use crate::abi::ChannelKind;
 use crate::abi::{MaterialCode, ShaderError};
+use crate::render::film::{RenderSettings, RenderStats, render};
+use crate::render::integrator::LayerMode;
+use crate::render::scene::Scene;
+use crate::render::testing::{ConstLayer, ConstMaterial};
 
 /// A 2000 × 2000 quad at y = 0 seen from straight above through a narrow lens, plus `extra`.
 fn plane_scene(extra: &str) -> Scene {

@@ -798,8 +798,13 @@ fn material_key_of(prim_material: &[usize], refs: &[&dyn MaterialCode], hashes: 
 fn rebind(scene: &mut crate::render::Scene, prim_material: Vec<usize>, refs: &[&dyn MaterialCode], names: Vec<String>) {
     let radius = (scene.bounds.1 - scene.bounds.0).length() / 2.0;
     let light_power: f32 = scene.lights.iter().filter(|l| !l.is_infinite()).map(|l| l.power(radius)).sum();
-    scene.emitters =
-        crate::render::emitter::Emitters::build(&scene.accel, scene.prims.len(), &prim_material, refs, light_power);
+    scene.emitters = crate::render::light::emitter::Emitters::build(
+        &scene.accel,
+        scene.prims.len(),
+        &prim_material,
+        refs,
+        light_power,
+    );
     scene.prim_material = prim_material;
     scene.material_names = names;
 }

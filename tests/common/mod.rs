@@ -99,7 +99,7 @@ pub fn scene_file_with(
     let mut session = Session::open(SceneSource::File(path.to_path_buf()), options);
     session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
     let options = strata::render::scene::SceneOptions {
-        dicing: strata::render::displace::DicingOptions { resolution, ..Default::default() },
+        dicing: strata::render::geometry::displace::DicingOptions { resolution, ..Default::default() },
         ..Default::default()
     };
     if session.prepare(&options).is_none() {

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::sync::OnceLock;
 use std::time::Instant;
 use strata::render::RenderSettings;
-use strata::render::displace::DicingOptions;
+use strata::render::geometry::displace::DicingOptions;
 use strata::render::scene::SceneOptions;
 use strata::session::{Change, Pass, SceneSource, Session, SessionOptions};
 

@@ -17,10 +17,10 @@
 //! scaling is exact in f32, the primitive tests run unscaled, and the cull falls to 1e-13 of
 //! the extent, far below f32's resolution there (6e-8), at every scene scale.
 
-use super::frame::Frame;
-use super::geometry::Triangle;
-use super::primvars::PrimvarRef;
-use super::shapes::Shape;
+use crate::render::geometry::Triangle;
+use crate::render::geometry::primvars::PrimvarRef;
+use crate::render::geometry::shapes::Shape;
+use crate::render::material::frame::Frame;
 use glam::{DAffine3, DMat3, DMat4, Vec2, Vec3, Vec3A};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::Bvh2;
@@ -560,7 +560,7 @@ impl Accel {
                 skipped += 1;
                 continue;
             };
-            let (wlo, whi) = super::shapes::transformed_box(&m, lo.as_dvec3(), hi.as_dvec3());
+            let (wlo, whi) = crate::render::geometry::shapes::transformed_box(&m, lo.as_dvec3(), hi.as_dvec3());
             let (wlo, whi) = (wlo.as_vec3(), whi.as_vec3());
             if !wlo.is_finite() || !whi.is_finite() {
                 skipped += 1;
@@ -1083,7 +1083,12 @@ mod tests {
         ] {
             let (plane, n) = tilted_plane(scale, centre);
             let sphere = Shape::new(
-                super::super::shapes::Part::Sphere { r: 1.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY },
+                crate::render::geometry::shapes::Part::Sphere {
+                    r: 1.0,
+                    cz: 0.0,
+                    zmin: f64::NEG_INFINITY,
+                    zmax: f64::INFINITY,
+                },
                 DMat4::from_scale_rotation_translation(
                     glam::DVec3::new(1.0, 0.6, 0.8) * scale as f64 * 0.2,
                     glam::DQuat::from_rotation_y(0.4),
@@ -1119,7 +1124,12 @@ mod tests {
             // by a transform that scales, turns and moves it.
             let (unit_plane, _) = tilted_plane(1.0, Vec3::ZERO);
             let unit_sphere = Shape::new(
-                super::super::shapes::Part::Sphere { r: 1.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY },
+                crate::render::geometry::shapes::Part::Sphere {
+                    r: 1.0,
+                    cz: 0.0,
+                    zmin: f64::NEG_INFINITY,
+                    zmax: f64::INFINITY,
+                },
                 DMat4::from_scale_rotation_translation(
                     glam::DVec3::new(1.0, 0.6, 0.8) * 0.2,
                     glam::DQuat::from_rotation_y(0.4),

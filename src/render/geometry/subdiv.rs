@@ -30,7 +30,7 @@
 //!   the last level (sharpness left there counts as sharp, darts get the estimate).
 //!
 //! Face-varying data (`st`) is refined linearly within each face (USD's
-//! `faceVaryingLinearInterpolation = "all"`; other values are reported by [`super::support`]).
+//! `faceVaryingLinearInterpolation = "all"`; other values are reported by [`crate::render::support`]).
 
 use crate::diag::{Diagnostic, Diagnostics};
 use crate::scene::{Prim, Value};
@@ -126,7 +126,7 @@ pub fn refined_faces(counts: &[u32], level: u32) -> u64 {
 /// what does not fit is reported and left out, and the mesh still renders.
 pub fn read_tags(prim: &Prim, npoints: usize, counts: &[i64], indices: &[i64], diags: &mut Diagnostics) -> SubdivTags {
     let warn = |diags: &mut Diagnostics, name: &str, message: String| {
-        let span = prim.attribute(name).map_or(prim.span, super::xform::value_span);
+        let span = prim.attribute(name).map_or(prim.span, crate::render::geometry::xform::value_span);
         diags.push(Diagnostic::warning(format!("mesh `{}`: {message}", prim.path)).at(span, "here"));
     };
     let ints = |name: &str| prim.value(name).and_then(Value::as_int_array).unwrap_or(&[]);
@@ -946,7 +946,7 @@ mod tests {
     }
 
     fn references() -> Vec<Reference> {
-        let text = include_str!("../../tests/fixtures/subdiv/opensubdiv_limits.txt");
+        let text = include_str!("../../../tests/fixtures/subdiv/opensubdiv_limits.txt");
         let lines: Vec<&str> = text.lines().collect();
         let mut at = 0usize;
         let mut next = || {
@@ -1219,7 +1219,7 @@ mod tests {
              int[] faceVertexIndices = [0, 2, 3, 1, 4, 5, 7, 6, 0, 1, 5, 4, 2, 6, 7, 3, 0, 4, 6, 2, 1, 3, 7, 5]\n    \
              {attributes}\n}}\n"
         );
-        let (stage, mut diags) = crate::render::xform::tests::stage(&text);
+        let (stage, mut diags) = crate::render::geometry::xform::tests::stage(&text);
         let prim = stage.prim(stage.find("/M").unwrap());
         let c = cube();
         let indices: Vec<i64> = c.indices.iter().map(|&i| i as i64).collect();

@@ -5,14 +5,16 @@
 //! (seed, pixel, sample) and are accumulated in sample order, which makes the image
 //! bit-identical whatever the thread count. Rows are rendered in parallel with rayon.
 
-use super::cryptomatte;
-use super::integrator::{
-    ChannelMap, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams, Scratch,
-};
-use super::sampler::{PathSampler, SamplerKind, Slot};
-use super::scene::Scene;
+pub mod cryptomatte;
+pub mod output;
+
 use crate::abi::ChannelKind;
 use crate::abi::{MaterialCode, ShaderError};
+use crate::render::integrator::{
+    ChannelMap, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams, Scratch,
+};
+use crate::render::sampling::sampler::{PathSampler, SamplerKind, Slot};
+use crate::render::scene::Scene;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::fmt;
@@ -439,7 +441,7 @@ pub fn render(
     crate::input::check_memory(&format!("a {w} x {h} film of {} channels", film.1), film.0)
         .map_err(RenderError::BadSettings)?;
     let camera = scene.camera.with_aspect(w as f32 / h as f32);
-    let primvar_slots = super::integrator::primvar_slots(scene, materials);
+    let primvar_slots = crate::render::integrator::primvar_slots(scene, materials);
     let layer_modes: Vec<LayerMode> = materials.iter().map(|m| settings.mode.resolve(*m)).collect();
     let ctx = Context {
         layer_modes: &layer_modes,
@@ -447,8 +449,8 @@ pub fn render(
         materials,
         channel_map: &channel_map,
         params: PathParams { max_depth: settings.max_depth, rr_depth: 3, mode: settings.mode },
-        all_opaque: materials.iter().all(|m| super::integrator::is_opaque(*m)),
-        light_selection: super::light::LightSelection::with_emitters(
+        all_opaque: materials.iter().all(|m| crate::render::integrator::is_opaque(*m)),
+        light_selection: crate::render::light::LightSelection::with_emitters(
             &scene.lights,
             &scene.emitters.list.iter().map(|e| e.power).collect::<Vec<_>>(),
             (scene.bounds.1 - scene.bounds.0).length() / 2.0,

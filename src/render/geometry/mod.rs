@@ -5,13 +5,21 @@
 //! become analytic [`Shape`]s, intersected exactly in object space: nothing is tessellated.
 //! Malformed meshes are diagnosed (never a panic); zero-area triangles are skipped and counted.
 
-use super::accel::InstanceDesc;
-use super::primvars::{MAX_COMPONENTS, Primvar, PrimvarLayout, PrimvarRef, PrimvarTable};
-use super::shapes::{Part, Shape};
-use super::subdiv::{PolyMesh, catmull_clark, read_tags, refined_faces};
-use super::xform::{PrimXform, local_transform, value_span, world_transforms};
+pub mod accel;
+pub mod displace;
+pub mod primvars;
+pub mod shapes;
+pub mod skel;
+pub mod subdiv;
+pub mod xform;
+
 use crate::compose::binding::{is_bound_subset, is_renderable};
 use crate::diag::{Diagnostic, Diagnostics, Span};
+use crate::render::geometry::accel::InstanceDesc;
+use crate::render::geometry::primvars::{MAX_COMPONENTS, Primvar, PrimvarLayout, PrimvarRef, PrimvarTable};
+use crate::render::geometry::shapes::{Part, Shape};
+use crate::render::geometry::subdiv::{PolyMesh, catmull_clark, read_tags, refined_faces};
+use crate::render::geometry::xform::{PrimXform, local_transform, value_span, world_transforms};
 use crate::scene::{Prim, PrimId, Stage, Value};
 use glam::{DMat3, DMat4, DQuat, DVec3, Vec2, Vec3};
 use std::collections::{HashMap, HashSet};
@@ -153,7 +161,7 @@ impl Geometry {
         let world = bounds_of(&self.triangles, &self.shapes);
         let instances = self.instances.iter().filter_map(|i| {
             let (lo, hi) = self.prototypes[i.prototype as usize].bounds?;
-            Some(super::shapes::transformed_box(&i.to_world, lo, hi))
+            Some(crate::render::geometry::shapes::transformed_box(&i.to_world, lo, hi))
         });
         let (lo, hi) = world.into_iter().chain(instances).reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))?;
         Some((lo.as_vec3(), hi.as_vec3()))
@@ -393,7 +401,7 @@ impl Builder<'_> {
             return;
         }
         // UsdSkel: a skinned prim is emitted from its posed copy.
-        let posed = super::skel::posed_prim(self.stage, self.xforms, prim, world, diags);
+        let posed = crate::render::geometry::skel::posed_prim(self.stage, self.xforms, prim, world, diags);
         let prim = posed.as_ref().unwrap_or(prim);
         let index = self.prim_index(prim);
         // GeomSubset material bindings: their faces are renderable prims of their own, so
@@ -579,7 +587,7 @@ impl Builder<'_> {
         diags: &mut Diagnostics,
     ) -> bool {
         let Some((lo, hi)) = self.geometry.prototypes[prototype as usize].bounds else { return true };
-        let (wlo, whi) = super::shapes::transformed_box(&to_world, lo, hi);
+        let (wlo, whi) = crate::render::geometry::shapes::transformed_box(&to_world, lo, hi);
         if let Some(far) = [wlo, whi].into_iter().find(|w| !w.is_finite() || w.abs().max_element() > MAX_EXTENT) {
             let mut d = beyond_extent(self.stage, prim, far);
             if let Some((i, span)) = which {
@@ -1565,7 +1573,7 @@ fn plane(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::xform::tests::stage;
+    use crate::render::geometry::xform::tests::stage;
 
     /// Two cylinders, the second moved by `xform_ops` (USD text) through its parent.
     fn far_apart(ops: &str) -> (Geometry, Vec<String>) {
@@ -1907,7 +1915,7 @@ def Xform "C" (instanceable = true references = </Proto>) {
         let g = build_with(&good, &xforms, &mut diags);
         assert!(!diags.has_errors(), "{diags:?}");
         assert_eq!(g.shapes.len(), 2);
-        let accel = super::super::accel::Accel::new(g.triangles, g.shapes);
+        let accel = crate::render::geometry::accel::Accel::new(g.triangles, g.shapes);
         let hit = accel.intersect(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z, 0.0, f32::INFINITY).expect("hit");
         assert!((hit.t - 4.75).abs() < 1e-5, "{}", hit.t);
         let hit = accel.intersect(Vec3::new(3.0, 0.0, 5.0), -Vec3::Z, 0.0, f32::INFINITY).expect("hit");

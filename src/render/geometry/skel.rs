@@ -23,8 +23,8 @@
 //! Attribute values are already those at the stage's time ([`crate::scene::Stage::set_time`]):
 //! nothing here reads samples.
 
-use super::xform::{PrimXform, value_span};
 use crate::diag::{Diagnostic, Diagnostics, Span};
+use crate::render::geometry::xform::{PrimXform, value_span};
 use crate::scene::{Prim, PrimId, Stage, Value};
 use glam::{DMat3, DMat4, DQuat, DVec3};
 use std::collections::HashMap;
@@ -565,7 +565,7 @@ fn sub_shape_weights(sorted: &[(f64, Option<Vec<DVec3>>)], w: f64) -> Vec<(f64, 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::xform::{tests::stage, world_transforms};
+    use crate::render::geometry::xform::{tests::stage, world_transforms};
 
     #[test]
     fn sub_shape_weights_match_usd() {

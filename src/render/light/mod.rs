@@ -10,11 +10,13 @@
 //! ([`Light::escape`]). Every sampleable light gives the same density from
 //! [`Light::sample_li`] and [`Light::pdf_li`], which multiple importance sampling needs.
 
-use super::sampling::{
+pub mod emitter;
+
+use crate::diag::{Diagnostic, Diagnostics};
+use crate::render::geometry::xform::{PrimXform, value_span};
+use crate::render::sampling::{
     Distribution1D, Distribution2D, concentric_disk, cosine_hemisphere, uniform_cone, uniform_sphere,
 };
-use super::xform::{PrimXform, value_span};
-use crate::diag::{Diagnostic, Diagnostics};
 use crate::scene::{Prim, Stage, Value};
 use glam::{DMat3, DVec3, Mat3, Vec2, Vec3};
 use std::f32::consts::PI;
@@ -224,7 +226,8 @@ impl Light {
         let s = match &self.kind {
             LightKind::Dome { radiance, map, to_world, .. } => match map {
                 None if n != Vec3::ZERO => {
-                    let wi = super::bsdf::Frame::from_normal(n).to_world(cosine_hemisphere(u)).normalize();
+                    let wi =
+                        crate::render::material::bsdf::Frame::from_normal(n).to_world(cosine_hemisphere(u)).normalize();
                     let pdf = wi.dot(n).max(0.0) / PI;
                     LightSample { wi, li: *radiance, pdf, dist: f32::INFINITY, delta: false }
                 }
@@ -257,7 +260,7 @@ impl Light {
             LightKind::Cylinder { centre, axis, half_length, radius, radiance } => {
                 let z = (2.0 * u.x - 1.0) * half_length;
                 let (sin_phi, cos_phi) = (2.0 * PI * u.y).sin_cos();
-                let frame = super::bsdf::Frame::from_normal(*axis);
+                let frame = crate::render::material::bsdf::Frame::from_normal(*axis);
                 let outward = frame.to_world(Vec3::new(cos_phi, sin_phi, 0.0));
                 let q = *centre + *axis * z + outward * *radius;
                 area_sample(p, q, outward, cylinder_area(*half_length, *radius), *radiance)?
@@ -272,7 +275,7 @@ impl Light {
                 let axis = to / dist_c;
                 let (cos_max, one_minus_cos) = sphere_cone(*radius, d2);
                 let local = uniform_cone(u, cos_max);
-                let frame = super::bsdf::Frame::from_normal(axis);
+                let frame = crate::render::material::bsdf::Frame::from_normal(axis);
                 let wi = frame.to_world(local).normalize();
                 let dist = sphere_hit(p, wi, *centre, *radius).unwrap_or(dist_c - radius);
                 LightSample { wi, li: *radiance, pdf: 1.0 / (2.0 * PI * one_minus_cos), dist, delta: false }
@@ -290,7 +293,7 @@ impl Light {
                 if *cos_max >= 1.0 {
                     LightSample { wi: *dir, li: *radiance, pdf: 1.0, dist: f32::INFINITY, delta: true }
                 } else {
-                    let frame = super::bsdf::Frame::from_normal(*dir);
+                    let frame = crate::render::material::bsdf::Frame::from_normal(*dir);
                     let wi = frame.to_world(uniform_cone(u, *cos_max)).normalize();
                     let pdf = 1.0 / (2.0 * PI * (1.0 - cos_max));
                     LightSample { wi, li: *radiance, pdf, dist: f32::INFINITY, delta: false }
@@ -428,7 +431,7 @@ impl LightSelection {
     }
 
     /// The selection for `lights` followed by emissive surfaces of power `emitters`
-    /// (bounded lights: [`super::emitter::Emitter::power`]); index `lights.len() + k` is
+    /// (bounded lights: [`crate::render::light::emitter::Emitter::power`]); index `lights.len() + k` is
     /// emitter `k`.
     pub fn with_emitters(lights: &[Light], emitters: &[f32], scene_radius: f32) -> LightSelection {
         // (at infinity, power) of every entry.
@@ -849,8 +852,8 @@ pub fn blackbody_rgb(kelvin: f64) -> DVec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::render::geometry::xform::{tests::stage, world_transforms};
     use crate::render::sampling::Rng;
-    use crate::render::xform::{tests::stage, world_transforms};
 
     pub(crate) fn lights(text: &str) -> Vec<Light> {
         let (stage, mut diags) = stage(text);
@@ -947,7 +950,7 @@ def CylinderLight "C" { float inputs:length = 3  float inputs:radius = 0.4
                 LightKind::Cylinder { centre, axis, half_length, radius, .. } => {
                     // Reference: midpoint quadrature over the side, (z, φ) in m × m cells.
                     let m = 600;
-                    let frame = crate::render::bsdf::Frame::from_normal(*axis);
+                    let frame = crate::render::material::bsdf::Frame::from_normal(*axis);
                     let (hl, r) = (*half_length as f64, *radius as f64);
                     let da = (2.0 * hl / m as f64) * (2.0 * std::f64::consts::PI * r / m as f64);
                     let mut sum = 0.0f64;

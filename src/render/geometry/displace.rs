@@ -29,13 +29,13 @@
 //! Geometry inside instances is not diced (its prototype is shared by instances at different
 //! distances); a warning says so and those prims are bumped.
 
-use super::camera::Camera;
-use super::geometry::{Geometry, Triangle};
-use super::primvars::PrimvarRef;
-use super::shapes::Shape;
 use crate::abi::layering::{self, Relief};
 use crate::abi::{Globals, MaterialCode};
 use crate::diag::{Diagnostic, Diagnostics};
+use crate::render::camera::Camera;
+use crate::render::geometry::primvars::PrimvarRef;
+use crate::render::geometry::shapes::Shape;
+use crate::render::geometry::{Geometry, Triangle};
 use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
@@ -246,7 +246,7 @@ impl Base {
             Corner { v, b: SOURCE_CORNERS[k] }
         };
         for t in &triangles {
-            let (dpdu, dpdv) = super::accel::tangents(t.p, t.uv, t.cross().normalize_or_zero());
+            let (dpdu, dpdv) = crate::render::geometry::accel::tangents(t.p, t.uv, t.cross().normalize_or_zero());
             let c = [0, 1, 2].map(|k| corner(&mut base, t.prim, t.p[k], t.n[k].as_dvec3(), t.uv[k], k));
             base.faces.push(Face { c, source: base.sources.len() as u32 });
             base.sources.push(Source {
@@ -687,8 +687,9 @@ pub fn displace(
         v.p += v.n * h;
     }
     // Displaced geometry is held to the extent every other prim is (a huge bound allows it).
-    if let Some(v) =
-        vertices.iter().find(|v| !v.p.is_finite() || v.p.abs().max_element() as f64 > super::geometry::MAX_EXTENT)
+    if let Some(v) = vertices
+        .iter()
+        .find(|v| !v.p.is_finite() || v.p.abs().max_element() as f64 > crate::render::geometry::MAX_EXTENT)
     {
         let prim = &geometry.prims[base.sources[v.source as usize].prim as usize];
         diags.push(
@@ -696,7 +697,7 @@ pub fn displace(
                 "the displaced surface of `{}` reaches {}, beyond ±{:e} scene units",
                 prim.path,
                 v.p,
-                super::geometry::MAX_EXTENT
+                crate::render::geometry::MAX_EXTENT
             ))
             .at(prim.span, "displaced here")
             .note("lower the displacement node's `bound` (heights are clamped to it)"),

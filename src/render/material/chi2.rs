@@ -3,7 +3,7 @@
 //! direction sampler against its pdf over the sphere (after pbrt-v4's bsdfs_test and Mitsuba's
 //! chi2.py), with graded binning around narrow lobes and Šidák-ready p-values.
 
-use crate::render::bsdf::BsdfSample;
+use crate::render::material::bsdf::BsdfSample;
 use glam::{Vec2, Vec3};
 use std::f64::consts::TAU;
 

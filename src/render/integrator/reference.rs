@@ -9,12 +9,12 @@
 //! 1e-4, so the pixels are independent estimates of one value; the test allows
 //! `3σ` of their mean (σ from the pixels' own spread) plus 1e-4 for the patch.
 
-use super::film::{RenderSettings, render};
-use super::integrator::LayerMode;
-use super::scene::Scene;
-use super::testing::{ConstLayer, ConstMaterial};
-use super::xform::tests::stage;
 use crate::abi::MaterialCode;
+use crate::render::film::{RenderSettings, render};
+use crate::render::geometry::xform::tests::stage;
+use crate::render::integrator::LayerMode;
+use crate::render::scene::Scene;
+use crate::render::testing::{ConstLayer, ConstMaterial};
 use glam::DVec3;
 use std::f64::consts::PI;
 

@@ -11,16 +11,19 @@
 //! against. Shadow rays account for transparency by its expected value (the product of
 //! `w_T` at the surfaces they cross), which matches the stochastic pass-through on average.
 
-use super::accel::{Accel, Hit, WORLD, offset_ray_origin};
-use super::bsdf::{Bsdf, Frame};
-use super::emitter::Emitter;
-use super::light::{Light, LightSample, LightSelection};
-use super::primvars::{PrimvarRef, PrimvarSlot};
-use super::sampler::{PathSampler, Slot};
-use super::sampling::power_heuristic;
-use super::scene::Scene;
+#[cfg(test)]
+mod reference;
+
 use crate::abi::layering::{self, Relief};
 use crate::abi::{Closure, ClosureKind, Globals, MaterialCode, PrimvarValues, ShaderError};
+use crate::render::geometry::accel::{Accel, Hit, WORLD, offset_ray_origin};
+use crate::render::geometry::primvars::{PrimvarRef, PrimvarSlot};
+use crate::render::light::emitter::Emitter;
+use crate::render::light::{Light, LightSample, LightSelection};
+use crate::render::material::bsdf::{Bsdf, Frame};
+use crate::render::sampling::power_heuristic;
+use crate::render::sampling::sampler::{PathSampler, Slot};
+use crate::render::scene::Scene;
 use glam::{Vec2, Vec3};
 
 /// How layers are evaluated at a path vertex. Both evaluations are unbiased: they render
@@ -294,7 +297,7 @@ pub struct Context<'a> {
     /// Per material, its primvar reads resolved against [`Scene::primvars`]
     /// (see [`primvar_slots`]).
     pub primvar_slots: &'a [Vec<PrimvarSlot>],
-    /// The angle (radians) one pixel spans at the camera ([`super::camera::Camera::pixel_angle`]):
+    /// The angle (radians) one pixel spans at the camera ([`crate::render::camera::Camera::pixel_angle`]):
     /// the spread of the ray cone whose width at a hit, this angle times the path's length so
     /// far, is the shading footprint bump's step is taken from (see [`bump_step`]).
     pub pixel_spread: f32,
@@ -1130,8 +1133,8 @@ impl Scatter {
 mod tests {
     use super::*;
     use crate::abi::ClosureKind;
-    use crate::render::bsdf::BsdfSample;
-    use crate::render::chi2::{CHI2_SAMPLES, Pcg32, SIGNIFICANCE, chi2_test, dir};
+    use crate::render::material::bsdf::BsdfSample;
+    use crate::render::material::chi2::{CHI2_SAMPLES, Pcg32, SIGNIFICANCE, chi2_test, dir};
     use std::f64::consts::PI;
 
     fn bsdf(kind: ClosureKind, params: &[f32]) -> Bsdf {

@@ -12,14 +12,14 @@
 //!   transport: transmitted `f` is scaled by `1/η²` (η = ratio of the indices, transmitted over
 //!   incident), the radiance compression across the interface; importance transport (light
 //!   tracing) would omit it and is not provided.
-//! - Roughness is perceptual (`α = roughness²`); below [`DELTA_ALPHA`](super::microfacet::DELTA_ALPHA) a lobe is a Dirac delta.
+//! - Roughness is perceptual (`α = roughness²`); below [`DELTA_ALPHA`](crate::render::material::microfacet::DELTA_ALPHA) a lobe is a Dirac delta.
 
 use crate::abi::{Closure, ClosureKind};
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, FRAC_PI_4, PI};
 
-pub use super::frame::Frame;
-use super::microfacet::{
+pub use crate::render::material::frame::Frame;
+use crate::render::material::microfacet::{
     Ggx, fresnel_conductor, fresnel_conductor3, fresnel_dielectric, gulbrandsen, hemispherical_average,
 };
 
@@ -541,7 +541,7 @@ fn glass_sample(tint: Vec3, ggx: Ggx, eta: f32, wo: Vec3, uc: f32, u: Vec2) -> O
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::chi2::*;
+    use crate::render::material::chi2::*;
 
     // ---------------------------------------------------------------- helpers
 
@@ -1109,7 +1109,7 @@ mod tests {
             ];
             for (name, b) in bsdfs {
                 if !matches!(b, Bsdf::Glossy { .. }) {
-                    let smooth = r * r < crate::render::microfacet::DELTA_ALPHA;
+                    let smooth = r * r < crate::render::material::microfacet::DELTA_ALPHA;
                     assert_eq!(b.is_delta(), smooth, "{name} r={r}");
                 }
                 for &z in &GRAZING_COS {

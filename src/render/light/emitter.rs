@@ -16,15 +16,15 @@
 //!
 //! A material with no emitting layer costs nothing here: no triangle is visited for it.
 
-use super::accel::{Accel, Hit, WORLD};
-use super::sampling::Distribution1D;
 use crate::abi::layering;
 use crate::abi::{Globals, MaterialCode};
+use crate::render::geometry::accel::{Accel, Hit, WORLD};
+use crate::render::sampling::Distribution1D;
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
 /// Emitters whose power is below this fraction of all bounded lights' and emitters' power
-/// are not sampled as lights (BSDF sampling still finds them): under [`super::light::
+/// are not sampled as lights (BSDF sampling still finds them): under [`crate::render::light::
 /// LightSelection`]'s uniform share, thousands of faint emitters would otherwise take light
 /// samples from the lights that matter.
 pub const MIN_POWER_SHARE: f32 = 1e-4;
@@ -122,7 +122,7 @@ impl Emitters {
 
     /// Finds the emissive world triangles of `accel` and estimates their power through the
     /// `materials` (indexed by `prim_material`). `light_power` is the power of the scene's
-    /// bounded lights ([`super::light::Light::power`]), against which faint emitters are
+    /// bounded lights ([`crate::render::light::Light::power`]), against which faint emitters are
     /// dropped (see [`MIN_POWER_SHARE`]). Materials that cannot emit cost one check each.
     pub fn build(
         accel: &Accel,
@@ -232,7 +232,7 @@ fn expected_emission(material: &dyn MaterialCode, g: &Globals, masks: &mut [f32]
     sum
 }
 
-/// Rec. 709 luminance (as [`super::light`] chooses lights by).
+/// Rec. 709 luminance (as [`crate::render::light`] chooses lights by).
 fn luminance(c: Vec3) -> f32 {
     0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
 }

@@ -11,7 +11,7 @@
 //! the process is interrupted (the command line calls it on SIGINT/SIGTERM/SIGHUP); those of
 //! a process that was killed outright are removed by the next run writing the same target.
 
-use super::film::{ChannelData, Image};
+use crate::render::film::{ChannelData, Image};
 use exr::meta::attribute::{AttributeValue, Chromaticities, Text};
 use exr::prelude::{
     AnyChannel, AnyChannels, Encoding, FlatSamples, ImageAttributes, IntegerBounds, Layer, LayerAttributes, Vec2,
@@ -174,10 +174,10 @@ pub struct ExrOptions {
     /// Store beauty and colour-like channels as 16-bit half floats (see [`is_half_channel`]).
     pub half: bool,
     /// The render camera's `worldToCamera` in OpenEXR's convention (column vectors; written
-    /// in OpenEXR's row-vector layout): see [`super::camera::Camera::world_to_camera_exr`].
+    /// in OpenEXR's row-vector layout): see [`crate::render::camera::Camera::world_to_camera_exr`].
     pub world_to_camera: Option<glam::Mat4>,
     /// The render camera's `worldToNDC` in OpenEXR's convention (column vectors): see
-    /// [`super::camera::Camera::world_to_ndc_exr`].
+    /// [`crate::render::camera::Camera::world_to_ndc_exr`].
     pub world_to_ndc: Option<glam::Mat4>,
     /// Near and far clipping planes (a non-finite far plane is not written).
     pub clipping: Option<(f32, f32)>,
@@ -229,7 +229,7 @@ fn standard_attributes() -> Vec<(&'static str, String)> {
         ("strata/P/space", "world".into()),
         ("strata/albedo/space", "lin_rec709".into()),
         ("strata/Z/space", "camera (depth along the viewing axis, positive)".into()),
-        ("strata/Z/miss", format!("{:e}", super::film::DEPTH_MISS)),
+        ("strata/Z/miss", format!("{:e}", crate::render::film::DEPTH_MISS)),
     ]
 }
 

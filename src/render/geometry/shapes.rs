@@ -85,7 +85,7 @@ pub struct Shape {
     /// Index of the renderable prim.
     pub prim: u32,
     /// Its primvar values (one set for the whole part).
-    pub primvars: super::primvars::PrimvarRef,
+    pub primvars: crate::render::geometry::primvars::PrimvarRef,
 }
 
 /// The smallest root of `a t² + b t + c` in `(tmin, tmax)`, computed stably (no
@@ -292,7 +292,7 @@ impl Shape {
         let p32 = world.as_vec3();
         SurfaceHit {
             p: p32,
-            p_error: p32.abs() * crate::render::accel::gamma(2) + f64_error.as_vec3(),
+            p_error: p32.abs() * crate::render::geometry::accel::gamma(2) + f64_error.as_vec3(),
             n: n.as_vec3(),
             uv: Vec2::new(u as f32, v as f32),
             dpdu: self.to_world.transform_vector3(dpdu).as_vec3(),
@@ -393,7 +393,7 @@ pub fn transformed_box(m: &DMat4, lo: DVec3, hi: DVec3) -> (DVec3, DVec3) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::accel::offset_ray_origin;
+    use crate::render::geometry::accel::offset_ray_origin;
 
     fn sphere(m: DMat4) -> Shape {
         Shape::new(Part::Sphere { r: 1.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY }, m, 0).unwrap()
@@ -471,7 +471,7 @@ mod tests {
             let n = Vec3::new(a.cos(), a.sin(), 0.0);
             let p = Vec3::new(3.0, 0.0, 0.0) + n;
             let inward = (-n + n.any_orthonormal_vector() * 0.5).normalize();
-            let start = offset_ray_origin(p, p.abs() * crate::render::accel::gamma(3), -n);
+            let start = offset_ray_origin(p, p.abs() * crate::render::geometry::accel::gamma(3), -n);
             let t = s.intersect(start, inward, 0.0, f32::INFINITY).expect("far side");
             // The chord at this angle: 2 cos(angle to the normal).
             assert!((t - 2.0 * inward.dot(-n)).abs() < 1e-4, "{t}");

@@ -4,6 +4,8 @@
 //! (seed, pixel, sample index), so an image is bit-identical whatever the thread count or
 //! the order in which tiles are rendered.
 
+pub mod sampler;
+
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 
