@@ -34,7 +34,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     eprintln!("{}", session.compile_stats());
 
     // The renderer sees only `MaterialCode`: compiled entry points and closure values.
-    let (image, stats) = session.render(&Pass { settings, time: None }, None)?;
+    let (image, stats) = session.render(&Pass::full(settings), None)?;
     let png = write_outputs(&image, &output)?;
     eprintln!("{stats}\nwrote {} and {}", output.display(), png.display());
     Ok(())

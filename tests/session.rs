@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 use strata::render::scene::SceneOptions;
-use strata::render::{Image, RenderSettings};
+use strata::render::{Image, Region, RenderSettings, Window};
 use strata::scene::Value;
 use strata::session::{Change, ChangeKind, Pass, SceneSource, Session, SessionOptions};
 
@@ -31,7 +31,7 @@ fn prepared(path: &Path) -> Session {
 }
 
 fn render(session: &mut Session) -> Image {
-    session.render(&Pass { settings: settings(), time: None }, None).expect("renders").0
+    session.render(&Pass::full(settings()), None).expect("renders").0
 }
 
 /// The number of distinct composed materials whose slot stack binds `material`: what a
@@ -186,4 +186,97 @@ fn a_texture_change_reloads_texels_without_recompiling() {
     let updated = render(&mut session);
     assert_ne!(updated, before);
     assert!(updated == render(&mut prepared(&scene)));
+}
+
+/// The channel `c` of `image` cropped to `region`.
+fn crop(image: &Image, c: usize, region: Region) -> strata::render::ChannelData {
+    use strata::render::ChannelData::{F32, U32};
+    let rows = region.y..region.y + region.height;
+    let pick = |w: usize| rows.clone().flat_map(move |y| (region.x..region.x + region.width).map(move |x| y * w + x));
+    match &image.channels[c].data {
+        F32(v) => F32(pick(image.width).map(|i| v[i]).collect()),
+        U32(v) => U32(pick(image.width).map(|i| v[i]).collect()),
+    }
+}
+
+/// A pass over a region renders that crop of the full image bit for bit (every channel, the
+/// Cryptomatte ranks included), whatever the thread count; the full sample range is the full render.
+#[test]
+fn a_window_renders_the_full_images_pixels() {
+    let mut session = Session::open(SceneSource::Default, SessionOptions::default());
+    session.prepare(&SceneOptions::default()).expect("prepares");
+    let full = render(&mut session);
+    for (region, threads) in [
+        (Region { x: 0, y: 0, width: 48, height: 36 }, 2),
+        (Region { x: 5, y: 7, width: 13, height: 11 }, 1),
+        (Region { x: 47, y: 35, width: 1, height: 1 }, 2),
+        (Region { x: 0, y: 20, width: 48, height: 3 }, 3),
+    ] {
+        let settings = RenderSettings { threads: Some(threads), ..settings() };
+        let pass = Pass { window: Window { region: Some(region), samples: Some(0..4) }, ..Pass::full(settings) };
+        let part = session.render(&pass, None).expect("renders").0;
+        assert_eq!((part.width, part.height), (region.width, region.height));
+        assert_eq!(part.channels.len(), full.channels.len());
+        for (c, channel) in part.channels.iter().enumerate() {
+            assert_eq!(channel.name, full.channels[c].name);
+            assert!(channel.data == crop(&full, c, region), "{} differs in {region:?}", channel.name);
+        }
+    }
+}
+
+/// Sample ranges that cover `0..spp` hold every sample once: their average weighted by their
+/// lengths is the full render's (to float rounding: each part sums its own samples), and a
+/// range is the same samples whichever pass renders it.
+#[test]
+fn sample_ranges_split_the_full_render() {
+    let mut session = Session::open(SceneSource::Default, SessionOptions::default());
+    session.prepare(&SceneOptions::default()).expect("prepares");
+    let spp = 8;
+    let settings = RenderSettings { spp, ..settings() };
+    let full = session.render(&Pass::full(settings.clone()), None).expect("renders").0;
+    let parts = [0..3, 3..4, 4..8];
+    let rendered: Vec<Image> = parts
+        .iter()
+        .map(|samples| {
+            let window = Window { region: None, samples: Some(samples.clone()) };
+            session.render(&Pass { window, ..Pass::full(settings.clone()) }, None).expect("renders").0
+        })
+        .collect();
+    let beauty = |image: &Image, name: &str| image.f32_channel(name).expect("channel").to_vec();
+    let mut differs = 0;
+    for name in ["R", "G", "B", "A", "albedo.R"] {
+        let whole = beauty(&full, name);
+        let mut merged = vec![0.0f64; whole.len()];
+        for (samples, image) in parts.iter().zip(&rendered) {
+            for (m, v) in merged.iter_mut().zip(beauty(image, name)) {
+                *m += f64::from(v) * samples.len() as f64 / f64::from(spp);
+            }
+        }
+        for (w, m) in whole.iter().zip(&merged) {
+            assert!((f64::from(*w) - m).abs() <= 1e-5 * (1.0 + m.abs()), "{name}: {w} vs {m}");
+        }
+        // The parts are not the whole: a range really renders only its samples.
+        differs += beauty(&rendered[1], name).iter().zip(&whole).filter(|(a, b)| a != b).count();
+    }
+    assert!(differs > 0, "one sample of eight rendered the same image as all eight");
+    // The same range again, through another pass, is the same image bit for bit.
+    let again = Window { region: None, samples: Some(3..4) };
+    let image = session.render(&Pass { window: again, ..Pass::full(settings.clone()) }, None).expect("renders").0;
+    assert_eq!(image, rendered[1]);
+}
+
+/// A window outside the image or an empty sample range is refused, not clamped.
+#[test]
+fn windows_outside_the_image_are_refused() {
+    let mut session = Session::open(SceneSource::Default, SessionOptions::default());
+    session.prepare(&SceneOptions::default()).expect("prepares");
+    for window in [
+        Window { region: Some(Region { x: 40, y: 0, width: 9, height: 1 }), samples: None },
+        Window { region: Some(Region { x: 0, y: 0, width: 0, height: 1 }), samples: None },
+        Window { region: None, samples: Some(2..2) },
+        Window { region: None, samples: Some(3..5) },
+    ] {
+        let pass = Pass { window: window.clone(), ..Pass::full(settings()) };
+        assert!(session.render(&pass, None).is_err(), "{window:?} rendered");
+    }
 }

@@ -221,7 +221,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         Some(bar) => bar.set_position(done as u64),
         None => log.update(done, total),
     };
-    let pass = Pass { settings: settings.clone(), time: None };
+    let pass = Pass::full(settings.clone());
     let (image, stats) = match session.render(&pass, Some(&progress)) {
         Ok(result) => result,
         Err(e) => {

@@ -33,8 +33,8 @@ pub use film::output::{
     ExrOptions, OutputError, PreparedOutputs, prepare_outputs, write_exr, write_outputs, write_png,
 };
 pub use film::{
-    Channel, ChannelData, FaultKind, FaultReport, Image, MaterialLayerMode, Progress, RenderError, RenderSettings,
-    RenderStats, render,
+    Channel, ChannelData, FaultKind, FaultReport, Image, MaterialLayerMode, Progress, Region, RenderError,
+    RenderSettings, RenderStats, Window, render, render_window,
 };
 pub use integrator::LayerMode;
 pub use scene::Scene;

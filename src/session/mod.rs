@@ -32,7 +32,7 @@ use crate::input::InputLimits;
 use crate::input::scenes;
 use crate::ir::wired::{self, PassOptions};
 use crate::render::scene::{SceneOptions, View};
-use crate::render::{Image, Progress, RenderError, RenderSettings, RenderStats};
+use crate::render::{Image, Progress, RenderError, RenderSettings, RenderStats, Window};
 use crate::scene::{Stage, TimeCode, Value, ValueType};
 use fingerprint::FileHashes;
 use std::collections::{HashMap, HashSet};
@@ -207,14 +207,25 @@ impl std::fmt::Display for PassError {
 
 impl std::error::Error for PassError {}
 
-/// One render of a prepared scene.
-#[derive(Clone, Debug)]
+/// One render of a prepared scene: the image of `settings`, or a window of it — a region
+/// of its pixels over a range of each pixel's samples, as a farm split or a progressive
+/// view renders it ([`Window`]: a window's pixels are the full render's, bit for bit).
+#[derive(Clone, Debug, Default)]
 pub struct Pass {
-    /// Image size, samples, seed, threads, depth, layer mode and sampler.
+    /// Image size, samples per pixel, seed, threads, depth, layer mode and sampler.
     pub settings: RenderSettings,
     /// The time code to render at (`None`: the session's). A different time re-reads
     /// animated values and redoes what depends on them, as a change would.
     pub time: Option<TimeCode>,
+    /// The part of the image to render (`Window::FULL`: all of it).
+    pub window: Window,
+}
+
+impl Pass {
+    /// The whole image of `settings` at the session's time.
+    pub fn full(settings: RenderSettings) -> Pass {
+        Pass { settings, time: None, window: Window::FULL }
+    }
 }
 
 /// The compiled materials of a session.
@@ -561,7 +572,8 @@ impl Session {
         let (Some(prepared), Some(compiled)) = (&self.prepared, &self.compiled) else {
             return Err(PassError::NotPrepared);
         };
-        crate::render::render(&prepared.scene, &compiled.refs(), &pass.settings, progress).map_err(PassError::Render)
+        crate::render::render_window(&prepared.scene, &compiled.refs(), &pass.settings, &pass.window, progress)
+            .map_err(PassError::Render)
     }
 
     /// The wired IR of renderable prim `prim`'s material (`strata ir`), or with `lowered`

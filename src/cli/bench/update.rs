@@ -58,7 +58,7 @@ fn run(dir: &Path, res: (usize, usize), spp: u32, repeats: usize) -> Result<Stri
         dicing: DicingOptions { resolution: res, ..DicingOptions::default() },
         ..SceneOptions::default()
     };
-    let pass = Pass { settings, time: None };
+    let pass = Pass::full(settings);
     let open = || -> Result<Session, String> {
         let mut session = Session::open(SceneSource::File(scene.clone()), SessionOptions::default());
         if session.prepare(&options).is_none() {

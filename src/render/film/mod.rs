@@ -18,6 +18,7 @@ use crate::render::scene::Scene;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::fmt;
+use std::ops::Range;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -54,6 +55,59 @@ impl Default for RenderSettings {
             mode: LayerMode::Auto,
             sampler: SamplerKind::default(),
         }
+    }
+}
+
+/// A rectangle of pixels of the image, `x`/`y` from the top-left corner.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Region {
+    /// Left column.
+    pub x: usize,
+    /// Top row.
+    pub y: usize,
+    /// Columns.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+}
+
+/// The part of an image one pass renders: a region of its pixels and a range of each pixel's
+/// camera samples. Samples are keyed by their absolute pixel and sample index (the image's
+/// `spp` still stratifies the layer pick), so a window's pixels are exactly the full render's
+/// pixels over the same samples: a region of the full sample range equals that crop of the
+/// full image bit for bit, and sample ranges that cover `0..spp` hold every sample once.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Window {
+    /// The pixels (`None`: all of them).
+    pub region: Option<Region>,
+    /// The camera samples of each pixel (`None`: `0..spp`).
+    pub samples: Option<Range<u32>>,
+}
+
+impl Window {
+    /// The whole image, every sample.
+    pub const FULL: Window = Window { region: None, samples: None };
+
+    /// The region and sample range for `settings`, or why they do not fit its image.
+    fn resolve(&self, settings: &RenderSettings) -> Result<(Region, Range<u32>), RenderError> {
+        let full = Region { x: 0, y: 0, width: settings.width, height: settings.height };
+        let region = self.region.unwrap_or(full);
+        let inside = region.x.checked_add(region.width).is_some_and(|r| r <= settings.width)
+            && region.y.checked_add(region.height).is_some_and(|b| b <= settings.height);
+        if !inside || region.width == 0 || region.height == 0 {
+            return Err(RenderError::BadSettings(format!(
+                "region {}x{} at ({}, {}) is empty or outside the {}x{} image",
+                region.width, region.height, region.x, region.y, settings.width, settings.height
+            )));
+        }
+        let samples = self.samples.clone().unwrap_or(0..settings.spp);
+        if samples.is_empty() || samples.end > settings.spp {
+            return Err(RenderError::BadSettings(format!(
+                "samples {}..{} are empty or outside 0..{}",
+                samples.start, samples.end, settings.spp
+            )));
+        }
+        Ok((region, samples))
     }
 }
 
@@ -397,7 +451,8 @@ pub fn film_bytes(w: usize, h: usize, custom_floats: usize, material_crypto: boo
 /// Progress callback: `(rows done, rows total)`.
 pub type Progress<'a> = &'a (dyn Fn(usize, usize) + Sync);
 
-/// Renders `scene` through `materials` (indexed by `scene.prim_material`).
+/// Renders `scene` through `materials` (indexed by `scene.prim_material`): the whole image,
+/// every sample ([`render_window`] renders part of it).
 ///
 /// The image's channels ([`BUILTIN_CHANNELS`], Cryptomatte, then custom channels):
 /// - `R G B A`: linear Rec.709 radiance, premultiplied by `A`, the fraction of samples that
@@ -422,6 +477,18 @@ pub fn render(
     settings: &RenderSettings,
     progress: Option<Progress>,
 ) -> Result<(Image, RenderStats), RenderError> {
+    render_window(scene, materials, settings, &Window::FULL, progress)
+}
+
+/// Renders the pixels and samples of `window` (see [`render`] for the channels): an image of
+/// the region's size whose pixels average the window's samples. Progress counts the region's rows.
+pub fn render_window(
+    scene: &Scene,
+    materials: &[&dyn MaterialCode],
+    settings: &RenderSettings,
+    window: &Window,
+    progress: Option<Progress>,
+) -> Result<(Image, RenderStats), RenderError> {
     let (w, h) = (settings.width, settings.height);
     if w == 0 || h == 0 || settings.spp == 0 {
         return Err(RenderError::BadSettings(format!("{w}x{h} at {} spp", settings.spp)));
@@ -434,11 +501,13 @@ pub fn render(
             return Err(RenderError::MissingMaterial { prim: prim.path.clone(), index });
         }
     }
+    let (region, samples) = window.resolve(settings)?;
     let mut warnings = Vec::new();
     let (channels, channel_floats, channel_map) = channel_layout(materials, &mut warnings);
     let material_crypto = scene.material_names.len() == materials.len();
-    let film = film_bytes(w, h, channel_floats, material_crypto);
-    crate::input::check_memory(&format!("a {w} x {h} film of {} channels", film.1), film.0)
+    let (rw, rh) = (region.width, region.height);
+    let film = film_bytes(rw, rh, channel_floats, material_crypto);
+    crate::input::check_memory(&format!("a {rw} x {rh} film of {} channels", film.1), film.0)
         .map_err(RenderError::BadSettings)?;
     let camera = scene.camera.with_aspect(w as f32 / h as f32);
     let primvar_slots = crate::render::integrator::primvar_slots(scene, materials);
@@ -466,24 +535,28 @@ pub fn render(
     } else {
         Vec::new()
     };
+    // Each pixel averages the window's samples; invalid ones count as black.
+    let inv = 1.0 / samples.len() as f32;
     let render_row = |y: usize, scratch: &mut Scratch| -> Row {
         // Counted per row on this thread's scratch, no atomics in the sample loop.
         scratch.counts = EvalCounts::default();
         let mut coverage = cryptomatte::PixelCoverage::default();
         let mut material_coverage = cryptomatte::PixelCoverage::default();
         let mut row = Row {
-            rgba: vec![[0.0; 4]; w],
-            albedo: vec![Vec3::ZERO; w],
-            normal: vec![Vec3::ZERO; w],
-            position: vec![Vec3::ZERO; w],
-            depth: vec![DEPTH_MISS; w],
-            crypto: vec![[0.0; 2 * cryptomatte::RANKS]; w],
-            crypto_material: vec![[0.0; 2 * cryptomatte::RANKS]; if material_ids.is_empty() { 0 } else { w }],
-            channels: vec![0.0; w * channel_floats],
+            rgba: vec![[0.0; 4]; rw],
+            albedo: vec![Vec3::ZERO; rw],
+            normal: vec![Vec3::ZERO; rw],
+            position: vec![Vec3::ZERO; rw],
+            depth: vec![DEPTH_MISS; rw],
+            crypto: vec![[0.0; 2 * cryptomatte::RANKS]; rw],
+            crypto_material: vec![[0.0; 2 * cryptomatte::RANKS]; if material_ids.is_empty() { 0 } else { rw }],
+            channels: vec![0.0; rw * channel_floats],
             stats: RenderStats::default(),
             faults: [None; 3],
         };
-        for x in 0..w {
+        for (rx, x) in (region.x..region.x + rw).enumerate() {
+            // Keyed by the pixel's place in the whole image, so a window's numbers are the
+            // full render's.
             let pixel = (y * w + x) as u64;
             let mut sum = Vec3::ZERO;
             let mut alpha = 0.0f32;
@@ -500,8 +573,8 @@ pub fn render(
             let mut nearest = f32::INFINITY;
             coverage.clear();
             material_coverage.clear();
-            let px_channels = &mut row.channels[x * channel_floats..(x + 1) * channel_floats];
-            for sample in 0..settings.spp {
+            let px_channels = &mut row.channels[rx * channel_floats..(rx + 1) * channel_floats];
+            for sample in samples.clone() {
                 let mut sampler = PathSampler::new(settings.sampler, settings.seed, pixel, sample);
                 let jitter = sampler.get2(Slot::Pixel);
                 let film = Vec2::new((x as f32 + jitter.x) / w as f32, (y as f32 + jitter.y) / h as f32);
@@ -524,9 +597,9 @@ pub fn render(
                             position += r.position;
                             hits += 1;
                             if let Some(prim) = r.prim {
-                                coverage.add(prim, r.alpha / settings.spp as f32);
+                                coverage.add(prim, r.alpha * inv);
                                 if let Some(&m) = scene.prim_material.get(prim as usize) {
-                                    material_coverage.add(m as u32, r.alpha / settings.spp as f32);
+                                    material_coverage.add(m as u32, r.alpha * inv);
                                 }
                             }
                             // Depth along the viewing axis, not along the ray; the lens
@@ -570,17 +643,16 @@ pub fn render(
                 }
             }
             // Invalid samples count in the average as black (they are reported, not hidden).
-            let inv = 1.0 / settings.spp as f32;
             let c = sum * inv;
-            row.rgba[x] = [c.x, c.y, c.z, alpha * inv];
-            row.albedo[x] = albedo * inv;
-            row.normal[x] = if hits > 0 { (normal / hits as f32).normalize_or_zero() } else { Vec3::ZERO };
-            row.crypto[x] = coverage.ranked(&object_ids);
-            if let Some(px) = row.crypto_material.get_mut(x) {
+            row.rgba[rx] = [c.x, c.y, c.z, alpha * inv];
+            row.albedo[rx] = albedo * inv;
+            row.normal[rx] = if hits > 0 { (normal / hits as f32).normalize_or_zero() } else { Vec3::ZERO };
+            row.crypto[rx] = coverage.ranked(&object_ids);
+            if let Some(px) = row.crypto_material.get_mut(rx) {
                 *px = material_coverage.ranked(&material_ids);
             }
-            row.position[x] = if hits > 0 { position / hits as f32 } else { Vec3::ZERO };
-            row.depth[x] = depth;
+            row.position[rx] = if hits > 0 { position / hits as f32 } else { Vec3::ZERO };
+            row.depth[rx] = depth;
             for c in &channels {
                 if c.kind != ChannelKind::Integer {
                     for k in 0..width(c.kind) {
@@ -593,12 +665,12 @@ pub fn render(
         let n = done.fetch_add(1, Ordering::Relaxed) + 1;
         if let Some(progress) = progress {
             let _guard = progress_lock.lock();
-            progress(n, h);
+            progress(n, rh);
         }
         row
     };
     let run = || -> Vec<Row> {
-        (0..h)
+        (region.y..region.y + rh)
             .into_par_iter()
             .map_init(|| Scratch::new(materials, channel_floats), |scratch, y| render_row(y, scratch))
             .collect()
@@ -624,9 +696,9 @@ pub fn render(
         })
         .collect();
     let mut stats = RenderStats { warnings, layer_modes, ..RenderStats::default() };
-    let n = w * h;
+    let n = rw * rh;
     let mut planes: Vec<Vec<f32>> = vec![Vec::with_capacity(n); BUILTIN_CHANNELS.len() + channel_floats];
-    for (y, row) in rows.iter().enumerate() {
+    for (y, row) in (region.y..).zip(&rows) {
         for (kind, fault) in FaultKind::ALL.into_iter().zip(row.faults) {
             if let Some(fault) = fault
                 && !stats.first_faults.iter().any(|f| f.kind == kind)
@@ -655,7 +727,7 @@ pub fn render(
         stats.nonfinite_samples += s.nonfinite_samples;
         stats.pass_through_limit += s.pass_through_limit;
         stats.evals.add(&s.evals);
-        for x in 0..w {
+        for x in 0..rw {
             let values = [
                 row.rgba[x][0],
                 row.rgba[x][1],
@@ -707,5 +779,5 @@ pub fn render(
             out.push(Channel { name: format!("{}{suffix}", c.name), data });
         }
     }
-    Ok((Image { width: w, height: h, channels: out }, stats))
+    Ok((Image { width: rw, height: rh, channels: out }, stats))
 }
