@@ -18,9 +18,11 @@
 mod example;
 mod fingerprint;
 mod layers;
+mod object;
 
 pub use example::write_split_default_scene;
 pub use layers::{layers_json, layers_table};
+pub use object::{ShaderObject, shader_object};
 
 use crate::abi::MaterialCode;
 use crate::backend::{BackendKind, CompileStats, Compiler};
