@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 use strata::render::scene::SceneOptions;
-use strata::render::{Image, Region, RenderSettings, Window};
+use strata::render::{Image, Region, RenderSettings, Window, WindowSums};
 use strata::scene::Value;
 use strata::session::{Change, ChangeKind, Pass, SceneSource, Session, SessionOptions};
 
@@ -278,5 +278,38 @@ fn windows_outside_the_image_are_refused() {
     ] {
         let pass = Pass { window: window.clone(), ..Pass::full(settings()) };
         assert!(session.render(&pass, None).is_err(), "{window:?} rendered");
+    }
+}
+
+/// Sample ranges rendered apart and merged as exact sums make the image one pass over all
+/// the samples renders, bit for bit, for 1, 2, 3 and 7 parts merged in any order: every
+/// channel, the Cryptomatte ranks and the integer channels' nearest-sample ids included.
+#[test]
+fn sample_ranges_merge_into_the_full_image_bit_for_bit() {
+    let mut session = Session::open(SceneSource::Default, SessionOptions::default());
+    session.prepare(&SceneOptions::default()).expect("prepares");
+    let spp = 14;
+    let settings = RenderSettings { spp, width: 24, height: 18, ..settings() };
+    let full = session.render(&Pass::full(settings.clone()), None).expect("renders").0;
+    for cuts in [vec![], vec![7], vec![1, 9], vec![1, 2, 3, 5, 8, 13]] {
+        let mut bounds = vec![0];
+        bounds.extend(&cuts);
+        bounds.push(spp);
+        let mut parts: Vec<WindowSums> = bounds
+            .windows(2)
+            .map(|b| {
+                let window = Window { region: None, samples: Some(b[0]..b[1]) };
+                session.render_sums(&Pass { window, ..Pass::full(settings.clone()) }, None).expect("renders").2
+            })
+            .collect();
+        // Merge in a scrambled order: the last part first.
+        parts.rotate_right(1);
+        let mut merged = parts[0].clone();
+        for part in &parts[1..] {
+            merged.merge(part).expect("disjoint samples of the same pixels");
+        }
+        let image = session.image_from_sums(&merged).expect("prepared");
+        assert!(image == full, "{} parts merged differ from the full image", bounds.len() - 1);
+        assert!(merged.merge(&parts[0]).is_err(), "samples merged twice");
     }
 }

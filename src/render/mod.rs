@@ -34,7 +34,7 @@ pub use film::output::{
 };
 pub use film::{
     Channel, ChannelData, FaultKind, FaultReport, Image, MaterialLayerMode, Progress, Region, RenderError,
-    RenderSettings, RenderStats, Window, render, render_window,
+    RenderSettings, RenderStats, Window, WindowSums, image_from_sums, render, render_sums, render_window,
 };
 pub use integrator::LayerMode;
 pub use scene::Scene;

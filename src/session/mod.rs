@@ -34,7 +34,7 @@ use crate::input::InputLimits;
 use crate::input::scenes;
 use crate::ir::wired::{self, PassOptions};
 use crate::render::scene::{SceneOptions, View};
-use crate::render::{Image, Progress, RenderError, RenderSettings, RenderStats, Window};
+use crate::render::{Image, Progress, RenderError, RenderSettings, RenderStats, Window, WindowSums};
 use crate::scene::{Stage, TimeCode, Value, ValueType};
 use fingerprint::FileHashes;
 use std::collections::{HashMap, HashSet};
@@ -562,7 +562,42 @@ impl Session {
     /// Renders a pass of the prepared scene. The session is not changed (unless the pass
     /// asks for another time), so equal passes give equal images.
     pub fn render(&mut self, pass: &Pass, progress: Option<Progress>) -> Result<(Image, RenderStats), PassError> {
-        if let Some(time) = pass.time
+        self.render_at(pass.time);
+        let (Some(prepared), Some(compiled)) = (&self.prepared, &self.compiled) else {
+            return Err(PassError::NotPrepared);
+        };
+        crate::render::render_window(&prepared.scene, &compiled.refs(), &pass.settings, &pass.window, progress)
+            .map_err(PassError::Render)
+    }
+
+    /// [`Session::render`], also returning each pixel's exact sums: passes over other samples
+    /// of the same pixels merge into them ([`WindowSums::merge`]), and
+    /// [`Session::image_from_sums`] makes the image one pass over all their samples renders,
+    /// bit for bit, however the samples were split (a farm's splits, a view's progressive passes).
+    pub fn render_sums(
+        &mut self,
+        pass: &Pass,
+        progress: Option<Progress>,
+    ) -> Result<(Image, RenderStats, WindowSums), PassError> {
+        self.render_at(pass.time);
+        let (Some(prepared), Some(compiled)) = (&self.prepared, &self.compiled) else {
+            return Err(PassError::NotPrepared);
+        };
+        crate::render::render_sums(&prepared.scene, &compiled.refs(), &pass.settings, &pass.window, progress)
+            .map_err(PassError::Render)
+    }
+
+    /// The image of merged sums from [`Session::render_sums`] of this session's prepared scene.
+    pub fn image_from_sums(&self, sums: &WindowSums) -> Result<Image, PassError> {
+        let (Some(prepared), Some(compiled)) = (&self.prepared, &self.compiled) else {
+            return Err(PassError::NotPrepared);
+        };
+        Ok(crate::render::image_from_sums(&prepared.scene, &compiled.refs(), sums))
+    }
+
+    /// Moves the stage to `time` (if given and different), redoing what depends on it.
+    fn render_at(&mut self, time: Option<TimeCode>) {
+        if let Some(time) = time
             && self.stage.as_ref().is_some_and(|s| s.time() != time)
         {
             self.options.time = Some(time);
@@ -571,11 +606,6 @@ impl Session {
             }
             self.redo_from_composition(ChangeKind::Value, Instant::now());
         }
-        let (Some(prepared), Some(compiled)) = (&self.prepared, &self.compiled) else {
-            return Err(PassError::NotPrepared);
-        };
-        crate::render::render_window(&prepared.scene, &compiled.refs(), &pass.settings, &pass.window, progress)
-            .map_err(PassError::Render)
     }
 
     /// The wired IR of renderable prim `prim`'s material (`strata ir`), or with `lowered`

@@ -6,6 +6,7 @@
 //! coverage, ID, coverage). The header names the layer and carries a manifest mapping each
 //! name to its ID as 8 hex digits, so a compositor can pick any prim by name.
 
+use super::sum::ExactSum;
 use std::collections::BTreeMap;
 
 /// The object layer's name (the channel prefix).
@@ -107,38 +108,18 @@ fn ascii_json(json: &str) -> String {
     out
 }
 
-/// Per-pixel coverage of each ID, accumulated sample by sample.
-#[derive(Debug, Default)]
-pub struct PixelCoverage {
-    entries: Vec<(u32, f32)>,
-}
-
-impl PixelCoverage {
-    /// Starts a new pixel (keeps the allocation).
-    pub fn clear(&mut self) {
-        self.entries.clear();
+/// The [`RANKS`] most-covering IDs of a pixel as interleaved `(id, coverage)` floats, from each
+/// ID index's summed alpha over `samples` samples; `ids[index]` gives each index's ID and
+/// unused ranks are 0. Ranked by the exact sums, ties to the lower index, so the result does
+/// not depend on sample order or on how the samples were split.
+pub fn ranked(coverage: &mut [(u32, ExactSum)], ids: &[f32], samples: u32) -> [f32; 2 * RANKS] {
+    coverage.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+    let mut out = [0.0; 2 * RANKS];
+    for (rank, &(index, sum)) in coverage.iter().take(RANKS).enumerate() {
+        out[2 * rank] = ids.get(index as usize).copied().unwrap_or(0.0);
+        out[2 * rank + 1] = sum.mean(samples);
     }
-
-    /// Adds `weight` to the coverage of object `index`.
-    pub fn add(&mut self, index: u32, weight: f32) {
-        match self.entries.iter_mut().find(|(i, _)| *i == index) {
-            Some((_, w)) => *w += weight,
-            None => self.entries.push((index, weight)),
-        }
-    }
-
-    /// The [`RANKS`] most-covering objects as interleaved `(id, coverage)` floats, `ids[index]`
-    /// giving each object's ID; unused ranks are 0. Ties go to the lower index, so the result
-    /// does not depend on sample order.
-    pub fn ranked(&mut self, ids: &[f32]) -> [f32; 2 * RANKS] {
-        self.entries.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-        let mut out = [0.0; 2 * RANKS];
-        for (rank, &(index, coverage)) in self.entries.iter().take(RANKS).enumerate() {
-            out[2 * rank] = ids.get(index as usize).copied().unwrap_or(0.0);
-            out[2 * rank + 1] = coverage;
-        }
-        out
-    }
+    out
 }
 
 #[cfg(test)]
@@ -190,10 +171,8 @@ mod tests {
     #[test]
     fn coverage_ranks_by_weight_then_index() {
         let ids = [10.0, 20.0, 30.0];
-        let mut px = PixelCoverage::default();
-        for (i, w) in [(2, 0.25), (0, 0.25), (1, 0.5)] {
-            px.add(i, w);
-        }
-        assert_eq!(px.ranked(&ids), [20.0, 0.5, 10.0, 0.25, 30.0, 0.25, 0.0, 0.0]);
+        let mut px: Vec<(u32, ExactSum)> = [(2, 0.25), (0, 0.25), (1, 0.5)].map(|(i, w)| (i, ExactSum::of(w))).into();
+        assert_eq!(ranked(&mut px, &ids, 1), [20.0, 0.5, 10.0, 0.25, 30.0, 0.25, 0.0, 0.0]);
+        assert_eq!(ranked(&mut px, &ids, 2), [20.0, 0.25, 10.0, 0.125, 30.0, 0.125, 0.0, 0.0]);
     }
 }

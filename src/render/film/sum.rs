@@ -1,0 +1,167 @@
+//! Exact sums of samples, so that a pixel's value does not depend on how its samples were
+//! split between passes, threads or machines.
+//!
+//! A float sum depends on the order of its terms; a farm that renders samples `0..k` and
+//! `k..n` of a pixel apart and adds the two sums gets a different last bit than one process
+//! adding all `n` in order. Here each sample is rounded once, toward zero, to a multiple of
+//! 2⁻⁴⁰ (9.1e-13: a sample's error is below one f32 ulp of any value above 1e-5, and a float
+//! sum of a few hundred samples errs more) and summed as a 128-bit integer, which is exact and
+//! associative: any split of the samples, merged in any order, gives the same sum bit for bit,
+//! and the pixel is that sum divided once. Values below 2²² in magnitude (every radiance,
+//! albedo, normal and most positions) convert with one truncating conversion to i64.
+
+/// 2⁴⁰: one unit of the sum is 2⁻⁴⁰.
+const SCALE: f64 = 1_099_511_627_776.0;
+
+/// Per-sample values are clamped to ±2⁵⁵ so that 2³² samples cannot overflow 127 bits.
+const LIMIT: f64 = 36_028_797_018_963_968.0;
+
+/// Below 2⁶² units (values below 2²²), a sample converts through `i64`.
+const FAST: f64 = 4_611_686_018_427_387_904.0;
+
+/// An exact sum of finite `f32` samples (see the module documentation).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct ExactSum(i128);
+
+impl ExactSum {
+    /// Adds `v` rounded toward zero to a multiple of 2⁻⁴⁰ (and clamped to ±2⁵⁵). NaN adds 0;
+    /// the film discards non-finite samples before they get here.
+    #[inline]
+    pub fn add(&mut self, v: f32) {
+        // Exact: an f32 times a power of two is an f64 with the same significand, and the
+        // float-to-integer conversions truncate (NaN converts to 0). Both paths give the
+        // same integer; the first is one instruction.
+        let units = f64::from(v) * SCALE;
+        self.0 += if units.abs() < FAST {
+            units as i64 as i128
+        } else {
+            (units.clamp(-LIMIT * SCALE, LIMIT * SCALE)) as i128
+        };
+    }
+
+    /// The sum of one sample.
+    pub fn of(v: f32) -> ExactSum {
+        let mut s = ExactSum::default();
+        s.add(v);
+        s
+    }
+
+    /// Adds another sum (exact).
+    #[inline]
+    pub fn merge(&mut self, other: ExactSum) {
+        self.0 += other.0;
+    }
+
+    /// The sum, rounded to the nearest `f64`.
+    pub fn value(self) -> f64 {
+        self.0 as f64 / SCALE
+    }
+
+    /// The mean of `count` samples, rounded once to `f32` (0 when `count` is 0).
+    pub fn mean(self, count: u32) -> f32 {
+        if count == 0 { 0.0 } else { (self.value() / f64::from(count)) as f32 }
+    }
+
+    /// The raw fixed-point value, for files that carry sums between processes.
+    pub fn to_bits(self) -> i128 {
+        self.0
+    }
+
+    /// The sum whose raw value is `bits` ([`ExactSum::to_bits`]).
+    pub fn from_bits(bits: i128) -> ExactSum {
+        ExactSum(bits)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic stream of awkward values: tiny, huge, negative, subnormal, and the
+    /// ordinary values in between.
+    fn values() -> Vec<f32> {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        (0..4000)
+            .map(|i| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                let unit = (state >> 40) as f32 / (1u64 << 24) as f32;
+                match i % 7 {
+                    0 => unit * 1e6,
+                    1 => unit * 1e-7,
+                    2 => -unit,
+                    3 => f32::from_bits((state >> 41) as u32 & 0x007f_ffff),
+                    4 => 1.0 + unit * f32::EPSILON,
+                    _ => unit,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn any_split_merged_in_any_order_is_the_same_sum() {
+        let v = values();
+        let mut whole = ExactSum::default();
+        v.iter().for_each(|&x| whole.add(x));
+        for cuts in [vec![1], vec![1000, 1001], vec![3, 999, 2000, 3999], vec![571, 1142, 1713, 2284, 2855, 3426]] {
+            let mut bounds = vec![0];
+            bounds.extend(&cuts);
+            bounds.push(v.len());
+            let parts: Vec<ExactSum> = bounds
+                .windows(2)
+                .map(|w| {
+                    let mut s = ExactSum::default();
+                    v[w[0]..w[1]].iter().for_each(|&x| s.add(x));
+                    s
+                })
+                .collect();
+            let mut forward = ExactSum::default();
+            parts.iter().for_each(|&p| forward.merge(p));
+            let mut backward = ExactSum::default();
+            parts.iter().rev().for_each(|&p| backward.merge(p));
+            assert_eq!(forward, whole, "{cuts:?}");
+            assert_eq!(backward, whole, "{cuts:?}");
+        }
+        // A float sum in two halves does differ from the sum in order: the property is not free.
+        let sequential: f32 = v.iter().sum();
+        let halves: f32 = v[..1234].iter().sum::<f32>() + v[1234..].iter().sum::<f32>();
+        assert_ne!(sequential.to_bits(), halves.to_bits());
+    }
+
+    #[test]
+    fn sums_are_accurate_to_the_fixed_point_step() {
+        let v = values();
+        let mut sum = ExactSum::default();
+        v.iter().for_each(|&x| sum.add(x));
+        // Compensated f64 reference: every f32 is exact in f64, so a Neumaier sum is accurate
+        // to about one f64 ulp of the total.
+        let (mut s, mut c) = (0.0f64, 0.0f64);
+        for &x in &v {
+            let x = f64::from(x);
+            let t = s + x;
+            c += if s.abs() >= x.abs() { (s - t) + x } else { (x - t) + s };
+            s = t;
+        }
+        let reference = s + c;
+        assert!((sum.value() - reference).abs() <= reference.abs() * 1e-15 + v.len() as f64 / SCALE);
+        assert_eq!(ExactSum::default().mean(0), 0.0);
+        let mut one = ExactSum::default();
+        one.add(0.75);
+        one.add(0.25);
+        assert_eq!(one.mean(2), 0.5);
+        assert_eq!(ExactSum::from_bits(one.to_bits()), one);
+    }
+
+    #[test]
+    fn huge_and_non_finite_values_clamp_instead_of_overflowing() {
+        let mut s = ExactSum::default();
+        for _ in 0..1000 {
+            s.add(f32::MAX);
+        }
+        assert_eq!(s.value(), 1000.0 * LIMIT);
+        let mut n = ExactSum::default();
+        n.add(f32::NAN);
+        assert_eq!(n, ExactSum::default());
+    }
+}
