@@ -446,6 +446,7 @@ pub fn compile(file: &Path, output: &Path) -> Result<(), Failure> {
                     span: Default::default(),
                 },
                 overrides: Vec::new(),
+                vertical: Vec::new(),
             }],
             ..Default::default()
         };

@@ -66,7 +66,7 @@ impl FileHashes {
     }
 }
 
-/// The content hash of a composed material: its slots, the values bound to each substance
+/// The content hash of a composed material: its slots (vertical ones included), the values bound to each substance
 /// and override, and each graph's content — the text of the file that declares it and of
 /// the files that file imports, or, for a graph composed from a UsdShade network, the graph
 /// itself. Graph ids are left out: they shift when another file gains a graph.
@@ -95,6 +95,16 @@ pub fn material_hash(material: &ComposedMaterial, library: &Library, files: &mut
         for (slot, o) in &layer.overrides {
             slot.name().hash(&mut hasher);
             reference(o, &mut hasher);
+        }
+        // Vertical layers (rule 3b) are hashed even while lowering leaves them out, so the
+        // lowering that adds them compiles the material again.
+        for vertical in &layer.vertical {
+            vertical.slot.name().hash(&mut hasher);
+            reference(&vertical.substance, &mut hasher);
+            for (slot, o) in &vertical.overrides {
+                slot.name().hash(&mut hasher);
+                reference(o, &mut hasher);
+            }
         }
         '|'.hash(&mut hasher);
     }
