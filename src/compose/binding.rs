@@ -290,9 +290,11 @@ fn collection_slot_binding(
         );
         return None;
     }
-    let owner_and_name = collection_path.split_once(".collection:");
-    let owner = owner_and_name.and_then(|(owner, _)| stage.find(owner)).map(|id| stage.prim(id));
-    let (Some(owner), Some((_, collection_name))) = (owner, owner_and_name) else {
+    let found = collection_path.split_once(".collection:").and_then(|(owner, name)| {
+        let owner = stage.prim(stage.find(owner)?);
+        Collection::exists(owner, name).then_some((owner, name))
+    });
+    let Some((owner, collection_name)) = found else {
         diags.push(
             Diagnostic::warning(format!(
                 "`{}` on `{}`: collection `{collection_path}` does not exist; the binding is ignored",

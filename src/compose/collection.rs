@@ -41,6 +41,15 @@ impl Collection {
         }
     }
 
+    /// Whether `owner` defines collection `name`: applies `CollectionAPI:NAME` or authors one
+    /// of its properties.
+    pub fn exists(owner: &Prim, name: &str) -> bool {
+        let prefix = format!("collection:{name}:");
+        owner.api_schemas.iter().any(|s| s.strip_prefix("CollectionAPI:") == Some(name))
+            || owner.attributes.iter().any(|a| a.name.starts_with(&prefix))
+            || owner.relationships.iter().any(|r| r.name.starts_with(&prefix))
+    }
+
     /// Whether `path` is a member: with `expandPrims`, the closest of its ancestors (itself
     /// included) that the collection names decides, an exclude beating an include.
     pub fn contains(&self, path: &str) -> bool {

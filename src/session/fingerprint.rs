@@ -173,3 +173,41 @@ pub fn names_asset_outside_materials(stage: &Stage, is_file: &dyn Fn(&Path) -> b
                 .any(|a| a.value.as_ref().and_then(|(v, _)| v.as_asset()).is_some_and(|asset| is_file(&asset.resolved)))
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compose::scene::compose_stage;
+    use crate::diag::{Diagnostics, SourceMap};
+
+    /// The content hash of the one material of a stage binding the paper's listing-1
+    /// substances.
+    fn hash_of(bindings: &str) -> u64 {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/paper");
+        let mut text = String::from("#usda 1.0\ndef Scope \"L\" {\n");
+        for name in ["SubstanceA", "SubstanceB"] {
+            text += &format!(
+                "def Material \"{name}\" {{ def Shader \"S\" {{\n uniform token info:implementationSource = \"sourceAsset\"\n uniform asset info:strata:sourceAsset = @listing1.ash@\n uniform token info:strata:sourceAsset:subIdentifier = \"{name}\"\n }} }}\n"
+            );
+        }
+        text += "}\n";
+        text += bindings;
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let stage = Stage::from_text("hash.usda", &text, &dir, &mut sources, &mut diags).expect("stage");
+        let scene = compose_stage(&stage, &mut sources, &mut diags);
+        assert!(!diags.has_errors(), "{}", diags.render(&sources));
+        material_hash(&scene.materials[0], &scene.library, &mut FileHashes::default())
+    }
+
+    #[test]
+    fn a_vertical_layer_changes_the_content_hash() {
+        let plain = hash_of(r#"def Mesh "a" { rel material:slotBinding:_000 = </L/SubstanceA> }"#);
+        let coated = r#"def Mesh "a" {
+    rel material:slotBinding:_000 = </L/SubstanceA>
+    rel material:slotBinding:_000:vertical:_010 = </L/SubstanceB>
+}"#;
+        assert_ne!(plain, hash_of(coated), "lowering vertical layers later must recompile");
+        assert_eq!(hash_of(coated), hash_of(coated));
+    }
+}
