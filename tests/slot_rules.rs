@@ -332,23 +332,16 @@ def Xform "W" (prepend apiSchemas = ["CollectionAPI:c"]) {
 
 // ---------------------------------------------------------------- rule 3b: composed material
 
-/// A stage binding the paper's listing-1 substances (`scenes/paper/listing1.ash`).
+/// A stage that binds the paper's listing-1 substances (`tests/fixtures/vertical/materials.usda`
+/// defines them as `/L/SubstanceA`..`C`) with `bindings`, composed.
 fn composed(bindings: &str) -> (strata::compose::scene::SceneComposition, String, Diagnostics) {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/paper");
-    let mut text = String::from("#usda 1.0\ndef Scope \"L\" {\n");
-    for name in ["SubstanceA", "SubstanceB", "SubstanceC"] {
-        text += &format!(
-            "def Material \"{name}\" {{ def Shader \"S\" {{\n uniform token info:implementationSource = \"sourceAsset\"\n uniform asset info:strata:sourceAsset = @listing1.ash@\n uniform token info:strata:sourceAsset:subIdentifier = \"{name}\"\n }} }}\n"
-        );
-    }
-    text += "}\n";
-    text += bindings;
+    let text = format!("#usda 1.0\n(\n    subLayers = [@materials.usda@]\n)\n{bindings}");
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
-    let stage = Stage::from_text("vertical.usda", &text, &dir, &mut sources, &mut diags).expect("stage");
+    let dir = Path::new("tests/fixtures/vertical");
+    let stage = Stage::from_text("vertical.usda", &text, dir, &mut sources, &mut diags).expect("stage");
     let scene = compose_stage(&stage, &mut sources, &mut diags);
-    let rendered = diags.render(&sources);
-    (scene, rendered, diags)
+    (scene, diags.render(&sources), diags)
 }
 
 #[test]

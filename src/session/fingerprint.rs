@@ -89,19 +89,13 @@ pub fn material_hash(material: &ComposedMaterial, library: &Library, files: &mut
             _ => format!("{graph:?}").hash(hasher),
         }
     };
+    // Vertical layers (rule 3b) are hashed even while lowering leaves them out, so the
+    // lowering that adds them compiles the material again.
     for layer in &material.layers {
-        layer.slot.name().hash(&mut hasher);
-        reference(&layer.substance, &mut hasher);
-        for (slot, o) in &layer.overrides {
-            slot.name().hash(&mut hasher);
-            reference(o, &mut hasher);
-        }
-        // Vertical layers (rule 3b) are hashed even while lowering leaves them out, so the
-        // lowering that adds them compiles the material again.
-        for vertical in &layer.vertical {
-            vertical.slot.name().hash(&mut hasher);
-            reference(&vertical.substance, &mut hasher);
-            for (slot, o) in &vertical.overrides {
+        for part in std::iter::once(layer).chain(&layer.vertical) {
+            part.slot.name().hash(&mut hasher);
+            reference(&part.substance, &mut hasher);
+            for (slot, o) in &part.overrides {
                 slot.name().hash(&mut hasher);
                 reference(o, &mut hasher);
             }
@@ -180,20 +174,12 @@ mod tests {
     use crate::compose::scene::compose_stage;
     use crate::diag::{Diagnostics, SourceMap};
 
-    /// The content hash of the one material of a stage binding the paper's listing-1
-    /// substances.
+    /// The content hash of the one material of a stage that binds the paper's listing-1
+    /// substances (`tests/fixtures/vertical/materials.usda`) with `bindings`.
     fn hash_of(bindings: &str) -> u64 {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/paper");
-        let mut text = String::from("#usda 1.0\ndef Scope \"L\" {\n");
-        for name in ["SubstanceA", "SubstanceB"] {
-            text += &format!(
-                "def Material \"{name}\" {{ def Shader \"S\" {{\n uniform token info:implementationSource = \"sourceAsset\"\n uniform asset info:strata:sourceAsset = @listing1.ash@\n uniform token info:strata:sourceAsset:subIdentifier = \"{name}\"\n }} }}\n"
-            );
-        }
-        text += "}\n";
-        text += bindings;
-        let mut sources = SourceMap::new();
-        let mut diags = Diagnostics::new();
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/vertical");
+        let text = format!("#usda 1.0\n(\n    subLayers = [@materials.usda@]\n)\n{bindings}");
+        let (mut sources, mut diags) = (SourceMap::new(), Diagnostics::new());
         let stage = Stage::from_text("hash.usda", &text, &dir, &mut sources, &mut diags).expect("stage");
         let scene = compose_stage(&stage, &mut sources, &mut diags);
         assert!(!diags.has_errors(), "{}", diags.render(&sources));
