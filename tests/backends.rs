@@ -37,6 +37,7 @@ fn single_layer(lib: &Library, name: &str) -> ComposedMaterial {
                 span: Default::default(),
             },
             overrides: Vec::new(),
+            vertical: Vec::new(),
         }],
         ..Default::default()
     }

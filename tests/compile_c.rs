@@ -90,6 +90,7 @@ fn jit_lines(points: &[Globals]) -> String {
                         span: Default::default(),
                     },
                     overrides: Vec::new(),
+                    vertical: Vec::new(),
                 }],
                 ..Default::default()
             };

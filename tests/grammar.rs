@@ -401,6 +401,7 @@ fn every_optional_part_of_for() {
                     span: Default::default(),
                 },
                 overrides: Vec::new(),
+                vertical: Vec::new(),
             }],
             ..Default::default()
         };

@@ -50,6 +50,7 @@ fn compile(name: &str, text: &str, substance: &str) -> Outcome {
                 slot: Slot::parse("000").unwrap(),
                 substance: MaterialRef { path: "/Looks/A".into(), graph, values: Vec::new(), span: Default::default() },
                 overrides: Vec::new(),
+                vertical: Vec::new(),
             }],
             ..Default::default()
         };

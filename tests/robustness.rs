@@ -38,6 +38,7 @@ fn run_everything(text: &str) {
             slot: Slot::parse("000").unwrap(),
             substance: MaterialRef { path: "/s".into(), graph: id, values: vec![], span: Span::default() },
             overrides: overrides.iter().cloned().map(|o| (Slot::parse("000::001").unwrap(), o)).collect(),
+            vertical: Vec::new(),
         };
         let material = ComposedMaterial { layers: vec![layer], ..Default::default() };
         let mut diags = Diagnostics::new();
@@ -175,6 +176,7 @@ fn pathological_programs_are_diagnosed() {
                 slot: Slot::parse("000").unwrap(),
                 substance: MaterialRef { path: "/a".into(), graph, values: vec![], span: Span::default() },
                 overrides: vec![],
+                vertical: Vec::new(),
             }],
             ..Default::default()
         };

@@ -278,3 +278,29 @@ fn default_scene_lowered_ir() {
     insta::assert_snapshot!("default_center_lowered", lowered("scenes/default/default.usda", "/World/Balls/Center"));
     insta::assert_snapshot!("listing1_lowered", lowered("scenes/paper/listing1.usda", "/Root/Group/ObjectC"));
 }
+
+/// The oscilloscope for a flat hierarchy (paper 7.5): every part a sibling, the bindings
+/// collection-based on the root (DESIGN.md rule 1c). Its slot table must equal the
+/// hierarchical original's, prim by prim (by leaf name: the paths differ), slot by slot;
+/// only where each binding is authored differs.
+#[test]
+fn oscilloscope_flat_hierarchy_composes_the_same_layer_table() {
+    let rows_by_leaf = |path: &str| {
+        let (_, json, _, warnings) = run(path);
+        assert!(warnings.contains("override slot `050::010` on `/root/geo/frontPanel_M_geo` is ignored"), "{warnings}");
+        let rows: Vec<(String, Vec<(String, String)>)> = figure6_rows(&json)
+            .into_iter()
+            .map(|(prim, rows)| {
+                let leaf = prim.rsplit('/').next().unwrap().to_string();
+                (leaf, rows.into_iter().map(|(slot, material, _)| (slot, material)).collect())
+            })
+            .collect();
+        (rows, json)
+    };
+    let (hierarchical, _) = rows_by_leaf("scenes/paper/oscilloscope.usda");
+    let (flat, json) = rows_by_leaf("scenes/paper/oscilloscope_flat.usda");
+    assert_eq!(hierarchical.len(), 7);
+    assert_eq!(flat, hierarchical);
+    // The case's metal came from its collection, and `strata layers --json` says so.
+    assert!(json.contains(r#""collection": "/root.collection:casing""#), "{json}");
+}

@@ -501,6 +501,7 @@ fn single_layer_stack(lib: &Library, names: &[&str]) -> Result<ComposedMaterial,
                     span: Span::default(),
                 },
                 overrides: Vec::new(),
+                vertical: Vec::new(),
             })
         })
         .collect::<Result<Vec<_>, String>>()?;

@@ -464,6 +464,7 @@ fn run_substances(text: &[u8], interp: bool) {
                 .cloned()
                 .map(|o| (Slot::parse("000::001").expect("valid"), o))
                 .collect(),
+            vertical: Vec::new(),
         };
         let material = ComposedMaterial { layers: vec![layer], ..Default::default() };
         for &backend in backends {

@@ -176,9 +176,11 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
     let mut session = Session::open(SceneSource::from_path(args.scene.as_deref()), options);
     let mut settings = args.settings.clone();
     let mut prepared = false;
-    if session.compile().is_some()
-        && let Some(view) = session.view(args.camera.as_deref())
-    {
+    let compiled = session.compile().is_some();
+    if compiled {
+        session.lint_slots();
+    }
+    if compiled && let Some(view) = session.view(args.camera.as_deref()) {
         if let (false, Some((w, h))) = (args.resolution_given, view.resolution) {
             (settings.width, settings.height) = (w, h);
         }

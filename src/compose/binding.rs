@@ -2,10 +2,14 @@
 //! collection-based, with `bindMaterialAs` strength) and strata's slot bindings, read into a
 //! [`BindingTree`].
 
-use super::slots::{Binding, BindingPrim, BindingTree, SLOT_BINDING_PREFIX, Slot, decode_slot};
+use super::collection::Collection;
+use super::slots::{
+    Binding, BindingPrim, BindingTree, CollectionSlotBinding, SLOT_BINDING_PREFIX, Slot, decode_slot,
+    split_collection_binding,
+};
 use crate::diag::{Diagnostic, Diagnostics, OncePerKind, Span};
 use crate::scene::{Prim, PrimId, Stage, Value as UsdValue};
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 
 /// Prim types that are rendered, and so get a composed material.
 pub const RENDERABLE_TYPES: &[&str] = &["Mesh", "Sphere", "Cube", "Cylinder", "Cone", "Capsule", "Plane", "Points"];
@@ -84,57 +88,6 @@ fn binding_strength(prim: &Prim, rel: &crate::scene::Relationship, diags: &mut D
     }
 }
 
-/// A UsdCollectionAPI collection, as far as material binding needs it: which prims it holds.
-struct Collection {
-    includes: HashSet<String>,
-    excludes: HashSet<String>,
-    /// `expansionRule = "explicitOnly"`: only the included paths themselves.
-    explicit_only: bool,
-    /// `includeRoot`: the pseudo-root's descendants, i.e. everything not excluded.
-    include_root: bool,
-}
-
-impl Collection {
-    /// Reads collection `name` of `owner` (`collection:NAME:includes`, `excludes`,
-    /// `expansionRule`, `includeRoot`).
-    fn read(owner: &Prim, name: &str) -> Collection {
-        let paths = |rel: &str| -> HashSet<String> {
-            owner
-                .relationship(&format!("collection:{name}:{rel}"))
-                .map(|r| r.targets.iter().map(|(p, _)| p.clone()).collect())
-                .unwrap_or_default()
-        };
-        Collection {
-            includes: paths("includes"),
-            excludes: paths("excludes"),
-            explicit_only: owner.value(&format!("collection:{name}:expansionRule")).and_then(UsdValue::as_str)
-                == Some("explicitOnly"),
-            include_root: matches!(owner.value(&format!("collection:{name}:includeRoot")), Some(UsdValue::Bool(true))),
-        }
-    }
-
-    /// Whether `path` is a member: with `expandPrims`, the closest of its ancestors (itself
-    /// included) that the collection names decides, an exclude beating an include.
-    fn contains(&self, path: &str) -> bool {
-        if self.explicit_only {
-            return self.includes.contains(path) && !self.excludes.contains(path);
-        }
-        let mut p = path;
-        loop {
-            if self.excludes.contains(p) {
-                return false;
-            }
-            if self.includes.contains(p) {
-                return true;
-            }
-            match p.rsplit_once('/') {
-                Some(("", _)) | None => return self.include_root && !self.excludes.contains("/"),
-                Some((parent, _)) => p = parent,
-            }
-        }
-    }
-}
-
 /// A collection-based binding: `material:binding:collection:NAME = [<collection>, <material>]`.
 struct CollectionBinding {
     collection: Collection,
@@ -208,9 +161,7 @@ fn collection_bindings(
                 .at(*span, "no such prim"),
             );
         }
-        if let Some(nested) =
-            collection.includes.iter().chain(&collection.excludes).find(|p| p.contains(".collection:"))
-        {
+        if let Some(nested) = collection.nested() {
             diags.push(
                 Diagnostic::warning(format!(
                     "collection `{collection_path}` names the collection `{nested}`; strata does not expand nested collections"
@@ -267,6 +218,121 @@ fn resolve_with_collections(
     winner
 }
 
+/// A slot binding's target, when it exists; a missing one binds nothing (as UsdShade resolves
+/// a binding to a missing prim), reported once per kind.
+fn existing_target(
+    stage: &Stage,
+    prim: &Prim,
+    rel: &crate::scene::Relationship,
+    path: &str,
+    span: Span,
+    missing: &mut OncePerKind,
+) -> Option<String> {
+    if stage.find(path).is_some() {
+        return Some(path.to_string());
+    }
+    missing.push(
+        "missing slot binding target",
+        path,
+        Diagnostic::warning(format!(
+            "slot binding `{}` on `{}` targets `{path}`, which does not exist: the slot is not bound",
+            rel.name, prim.path
+        ))
+        .at(span, "no such prim"),
+    );
+    None
+}
+
+/// A collection-based slot binding (DESIGN.md rule 1c): `material:slotBinding:<slot>:collection:NAME
+/// = [<collection>, <material>]`. The empty form names only the collection, `= [<collection>]`,
+/// and removes the slot for its members; a list with no collection (`= None`) says nothing
+/// about whom to remove it from, so it is reported and ignored.
+#[allow(clippy::too_many_arguments)]
+fn collection_slot_binding(
+    stage: &Stage,
+    prim: &Prim,
+    rel: &crate::scene::Relationship,
+    slot: Slot,
+    name: &str,
+    authored: Span,
+    missing: &mut OncePerKind,
+    diags: &mut Diagnostics,
+) -> Option<CollectionSlotBinding> {
+    let ((collection_path, collection_span), material) = match rel.targets.as_slice() {
+        [] => {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "collection slot binding `{}` on `{}` names no collection; it is ignored",
+                    rel.name, prim.path
+                ))
+                .at(authored, "empty")
+                .note("to remove the slot for a collection's members, target only the collection: `= [<collection>]`"),
+            );
+            return None;
+        }
+        [collection] => (collection, None),
+        [collection, (material, span)] => (collection, Some((material, *span))),
+        targets => {
+            diags.push(
+                Diagnostic::error(format!(
+                    "collection slot binding `{}` on `{}` must target a collection and a material, in that order (or only the collection, to remove the slot for its members)",
+                    rel.name, prim.path
+                ))
+                .at(authored, format!("{} target(s)", targets.len())),
+            );
+            return None;
+        }
+    };
+    if name.is_empty() {
+        diags.push(
+            Diagnostic::error(format!("collection slot binding `{}` on `{}` has no binding name", rel.name, prim.path))
+                .at(rel.span, "expected `...:collection:NAME`"),
+        );
+        return None;
+    }
+    let found = collection_path.split_once(".collection:").and_then(|(owner, name)| {
+        let owner = stage.prim(stage.find(owner)?);
+        Collection::exists(owner, name).then_some((owner, name))
+    });
+    let Some((owner, collection_name)) = found else {
+        diags.push(
+            Diagnostic::warning(format!(
+                "`{}` on `{}`: collection `{collection_path}` does not exist; the binding is ignored",
+                rel.name, prim.path
+            ))
+            .at(*collection_span, "no such collection"),
+        );
+        return None;
+    };
+    let members = Collection::read(owner, collection_name);
+    if let Some(nested) = members.nested() {
+        diags.push(
+            Diagnostic::warning(format!(
+                "collection `{collection_path}` names the collection `{nested}`; strata does not expand nested collections"
+            ))
+            .at(*collection_span, "bound here")
+            .note("list the prims in `includes` instead"),
+        );
+    }
+    if members.has_expression {
+        diags.push(
+            Diagnostic::warning(format!(
+                "collection `{collection_path}` has a `membershipExpression`; strata does not evaluate path expressions and reads only its includes and excludes"
+            ))
+            .at(*collection_span, "bound here"),
+        );
+    }
+    let (material, span) = match material {
+        Some((path, span)) => (existing_target(stage, prim, rel, path, span, missing), span),
+        None => (None, authored),
+    };
+    Some(CollectionSlotBinding {
+        binding: Binding { slot, material, span, stronger: false, authored_at: None },
+        collection: collection_path.clone(),
+        members,
+    })
+}
+
 /// Reads the slot bindings of every prim (depth first, parents before children), with
 /// UsdShade's `material:binding` as the base layer below every slot.
 pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
@@ -282,11 +348,12 @@ pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
     let mut missing = OncePerKind::new();
     for (id, prim) in stage.depth_first() {
         let mut bindings = Vec::new();
+        let mut slot_collections = Vec::new();
         for rel in prim.relationships_with_prefix(SLOT_BINDING_PREFIX) {
             // Declared only (`rel material:slotBinding:_050`, no target opinion in any layer):
             // no binding at all, as in USD. An authored empty list is an empty binding.
             let Some(authored) = rel.authored else { continue };
-            let encoded = &rel.name[SLOT_BINDING_PREFIX.len()..];
+            let (encoded, collection_name) = split_collection_binding(&rel.name[SLOT_BINDING_PREFIX.len()..]);
             let slot = match decode_slot(encoded) {
                 Ok(slot) => slot,
                 Err(message) => {
@@ -297,21 +364,22 @@ pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
                     continue;
                 }
             };
+            if let Some(name) = collection_name {
+                slot_collections.extend(collection_slot_binding(
+                    stage,
+                    prim,
+                    rel,
+                    slot,
+                    name,
+                    authored,
+                    &mut missing,
+                    diags,
+                ));
+                continue;
+            }
             let (material, span) = match rel.targets.as_slice() {
                 [] => (None, authored),
-                [(path, span)] if stage.find(path).is_none() => {
-                    missing.push(
-                        "missing slot binding target",
-                        path,
-                        Diagnostic::warning(format!(
-                            "slot binding `{}` on `{}` targets `{path}`, which does not exist: the slot is not bound",
-                            rel.name, prim.path
-                        ))
-                        .at(*span, "no such prim"),
-                    );
-                    (None, *span)
-                }
-                [(path, span)] => (Some(path.clone()), *span),
+                [(path, span)] => (existing_target(stage, prim, rel, path, *span, &mut missing), *span),
                 targets => {
                     let mut d = Diagnostic::error(format!(
                         "slot binding `{}` has {} targets; a slot binds one material",
@@ -355,7 +423,13 @@ pub fn binding_tree(stage: &Stage, diags: &mut Diagnostics) -> BindingTree {
         if !resolve {
             bindings.extend(own);
         }
-        tree.prims.push(BindingPrim { path: prim.path.clone(), parent, bindings, renderable });
+        tree.prims.push(BindingPrim {
+            path: prim.path.clone(),
+            parent,
+            bindings,
+            collections: slot_collections,
+            renderable,
+        });
         if resolve {
             // Collections take part: this prim's binding is resolved whole, by UsdShade's
             // rules (it may differ from what inheriting direct bindings gives).

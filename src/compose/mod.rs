@@ -5,6 +5,7 @@
 //! with the input values the scene sets. [`crate::ir::wired`] turns it into the wired IR.
 
 pub mod binding;
+pub mod collection;
 pub mod connect;
 pub mod preview;
 pub mod scene;
@@ -38,6 +39,22 @@ pub struct ComposedLayer {
     pub substance: MaterialRef,
     /// Attached overrides in ascending slot order (the last wins a contested input).
     pub overrides: Vec<(Slot, MaterialRef)>,
+    /// For a horizontal layer, its vertical layers (`000|010`, DESIGN.md rule 3b) in byte
+    /// order, the first lying directly on this layer's surface; each one's mask is its
+    /// coverage. Always empty for a vertical layer.
+    pub vertical: Vec<ComposedLayer>,
+}
+
+impl ComposedLayer {
+    /// A horizontal layer with no vertical layers.
+    pub fn new(slot: Slot, substance: MaterialRef, overrides: Vec<(Slot, MaterialRef)>) -> ComposedLayer {
+        ComposedLayer { slot, substance, overrides, vertical: Vec::new() }
+    }
+
+    /// The substance and the overrides, in key order.
+    fn references(&self) -> impl Iterator<Item = &MaterialRef> {
+        std::iter::once(&self.substance).chain(self.overrides.iter().map(|(_, o)| o))
+    }
 }
 
 /// The material of one renderable prim: layers bottom to top. No layers means the default
@@ -92,8 +109,15 @@ impl ComposedMaterial {
             key += self.display.default_substance();
         }
         for layer in &self.layers {
-            for m in std::iter::once(&layer.substance).chain(layer.overrides.iter().map(|(_, o)| o)) {
+            for m in layer.references() {
                 key += &format!("{}{:?};", m.graph.0, m.values);
+            }
+            // Vertical layers in their order: a coat over a layer makes another material.
+            for vertical in &layer.vertical {
+                key.push('^');
+                for m in vertical.references() {
+                    key += &format!("{}{:?};", m.graph.0, m.values);
+                }
             }
             key.push('|');
         }

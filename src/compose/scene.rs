@@ -6,10 +6,10 @@
 
 use super::binding::binding_tree;
 use super::connect::{attribute_path, convert_input, value_producer};
-use super::slots::{PrimStack, resolve_stacks};
+use super::slots::{LayerBinding, PrimStack, resolve_stacks};
 use super::{ComposedLayer, ComposedMaterial, DisplayPrimvars, MaterialRef, preview};
-use crate::diag::{Diagnostic, Diagnostics, SourceMap, Span, did_you_mean};
-use crate::front::ast::GraphKind;
+use crate::diag::{Diagnostic, Diagnostics, OncePerKind, SourceMap, Span, did_you_mean};
+use crate::front::ast::{GraphKind, Product};
 use crate::front::library::Library;
 use crate::scene::{Stage, Value as UsdValue};
 use std::collections::HashMap;
@@ -73,7 +73,7 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
     let mut previews: Vec<(String, Span)> = Vec::new();
     let mut preview_paths: std::collections::HashSet<String> = std::collections::HashSet::new();
     for stack in &stacks {
-        for layer in &stack.layers {
+        for layer in stack.layers.iter().flat_map(|l| std::iter::once(l).chain(&l.vertical)) {
             let applied = std::iter::once(&layer.applied).chain(layer.overrides.iter().map(|o| &o.applied));
             for applied in applied {
                 if stage.find(&applied.material).is_some_and(|id| preview::is_preview_material(stage, id)) {
@@ -103,48 +103,62 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
     let mut materials = Vec::new();
     let mut prim_material = Vec::with_capacity(stacks.len());
     let mut by_key: HashMap<String, usize> = HashMap::new();
+    let mut displaced_vertical = OncePerKind::new();
+    // Vertical layers are composed but not lowered yet: each slot reported once, at its first
+    // binding, with the number of prims it reaches.
+    let mut pending_vertical: Vec<(String, Span, usize)> = Vec::new();
     for stack in &stacks {
         let mut composed = ComposedMaterial::default();
+        let mut resolve = |path: &str, span: Span, kind: GraphKind, diags: &mut Diagnostics| {
+            refs.entry(path.to_string())
+                .or_insert_with(|| {
+                    let source = found.get(path).cloned().flatten()?;
+                    material_ref(&library, path, &source, span, diags)
+                })
+                .clone()
+                .filter(|r| {
+                    let graph = library.get(r.graph);
+                    if graph.kind != kind {
+                        let (want, got) = match kind {
+                            GraphKind::Substance => ("a substance slot", "an override"),
+                            GraphKind::Override => ("an override slot", "a substance"),
+                        };
+                        diags.push(
+                            Diagnostic::error(format!("`{path}` is bound to {want} but `{}` is {got}", graph.name))
+                                .at(span, "bound here")
+                                .also(graph.span, "declared here"),
+                        );
+                        return false;
+                    }
+                    true
+                })
+        };
         for layer in &stack.layers {
-            let mut resolve = |path: &str, span: Span, kind: GraphKind, diags: &mut Diagnostics| {
-                refs.entry(path.to_string())
-                    .or_insert_with(|| {
-                        let source = found.get(path).cloned().flatten()?;
-                        material_ref(&library, path, &source, span, diags)
-                    })
-                    .clone()
-                    .filter(|r| {
-                        let graph = library.get(r.graph);
-                        if graph.kind != kind {
-                            let (want, got) = match kind {
-                                GraphKind::Substance => ("a substance slot", "an override"),
-                                GraphKind::Override => ("an override slot", "a substance"),
-                            };
-                            diags.push(
-                                Diagnostic::error(format!("`{path}` is bound to {want} but `{}` is {got}", graph.name))
-                                    .at(span, "bound here")
-                                    .also(graph.span, "declared here"),
-                            );
-                            return false;
-                        }
-                        true
-                    })
-            };
-            let Some(substance) = resolve(&layer.applied.material, layer.applied.span, GraphKind::Substance, diags)
-            else {
-                continue;
-            };
-            let mut overrides = Vec::new();
-            for o in &layer.overrides {
-                if let Some(r) = resolve(&o.applied.material, o.applied.span, GraphKind::Override, diags) {
-                    overrides.push((o.slot.clone(), MaterialRef { span: o.applied.span, ..r }));
+            let Some(mut horizontal) = compose_layer(layer, &mut resolve, diags) else { continue };
+            for vertical in &layer.vertical {
+                let Some(vertical) = compose_layer(vertical, &mut resolve, diags) else { continue };
+                let graph = library.get(vertical.substance.graph);
+                if let Some(product) = graph.products.iter().find(|p| p.product == Product::Displacement) {
+                    displaced_vertical.push(
+                        "displacement on a vertical layer",
+                        &vertical.substance.path,
+                        Diagnostic::warning(format!(
+                            "`{}` has a displacement product; on vertical slot `{}` it is ignored (a vertical layer only coats the surface below it)",
+                            graph.name,
+                            vertical.slot.name()
+                        ))
+                        .at(vertical.substance.span, "bound here")
+                        .also(product.span, "displacement"),
+                    );
                 }
+                let name = vertical.slot.name();
+                match pending_vertical.iter_mut().find(|(slot, _, _)| *slot == name) {
+                    Some((_, _, prims)) => *prims += 1,
+                    None => pending_vertical.push((name, vertical.substance.span, 1)),
+                }
+                horizontal.vertical.push(vertical);
             }
-            composed.layers.push(ComposedLayer {
-                slot: layer.slot.clone(),
-                substance: MaterialRef { span: layer.applied.span, ..substance },
-                overrides,
-            });
+            composed.layers.push(horizontal);
         }
         if composed.layers.is_empty() {
             composed.display = display_primvars(stage, &stack.prim);
@@ -155,7 +169,40 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
         });
         prim_material.push(index);
     }
+    for (slot, span, prims) in pending_vertical {
+        diags.push(vertical_not_yet_rendered(&slot, span, prims));
+    }
+    displaced_vertical.report(diags);
     SceneComposition { stacks, library, materials, prim_material }
+}
+
+/// A resolved layer (horizontal or vertical) with its substance and overrides looked up;
+/// `None` when the substance could not be (already reported).
+fn compose_layer(
+    layer: &LayerBinding,
+    resolve: &mut impl FnMut(&str, Span, GraphKind, &mut Diagnostics) -> Option<MaterialRef>,
+    diags: &mut Diagnostics,
+) -> Option<ComposedLayer> {
+    let substance = resolve(&layer.applied.material, layer.applied.span, GraphKind::Substance, diags)?;
+    let mut overrides = Vec::new();
+    for o in &layer.overrides {
+        if let Some(r) = resolve(&o.applied.material, o.applied.span, GraphKind::Override, diags) {
+            overrides.push((o.slot.clone(), MaterialRef { span: o.applied.span, ..r }));
+        }
+    }
+    Some(ComposedLayer::new(layer.slot.clone(), MaterialRef { span: layer.applied.span, ..substance }, overrides))
+}
+
+/// The warning for a vertical layer that composition keeps (in the material, its identity
+/// and its content hash) but lowering leaves out until the `layer(top, base)` closure
+/// operator lands: the prim renders without its coat, and says so. This is the one place
+/// to remove when vertical layers are lowered.
+fn vertical_not_yet_rendered(slot: &str, binding: Span, prims: usize) -> Diagnostic {
+    Diagnostic::warning(format!(
+        "vertical slot {slot} composed but not yet rendered: {prims} prim(s) render without it"
+    ))
+    .at(binding, "bound here")
+    .note("vertical layers need the `layer(top, base)` closure operator, which is not merged yet")
 }
 
 /// The display primvars renderable prim `path` authors (a GeomSubset: its mesh's).

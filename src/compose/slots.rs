@@ -2,6 +2,7 @@
 //! section 5.2 and appendix B). This module knows nothing about USD files: it works on a
 //! [`BindingTree`] that the scene adapter fills from relationships.
 
+use super::collection::Collection;
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use std::collections::BTreeMap;
 
@@ -13,34 +14,49 @@ pub const SLOT_BINDING_PREFIX: &str = "material:slotBinding:";
 /// byte order puts it below every slot: slot bindings layer over a DCC's own materials.
 pub const MATERIAL_BINDING_SLOT: &str = "material:binding";
 
-/// A parsed slot name: `050` or the override slot `050::010`.
+/// A parsed slot name: `050`, the override slot `050::010`, the vertical slot `000|010`
+/// (DESIGN.md rule 3b) or an override of a vertical slot, `000|010::020`.
+///
+/// The derived order is byte order on `base`, then the slot itself before its overrides
+/// (`None` first), then its vertical slots in byte order, each followed by its overrides: the
+/// order in which [`resolve_stacks`] attaches them.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct Slot {
     /// The substance slot (`050`).
     pub base: String,
+    /// The vertical part (`010` of `000|010`), for vertical slots and their overrides.
+    pub vertical: Option<String>,
     /// The override part (`010`), for override slots.
     pub over: Option<String>,
 }
 
 impl Slot {
-    /// Parses the canonical form (`050`, `050::010`).
+    /// Parses the canonical form (`050`, `050::010`, `000|010`, `000|010::020`).
     pub fn parse(name: &str) -> Result<Slot, String> {
         let mut parts = name.split("::");
-        let base = parts.next().unwrap_or_default().to_string();
+        let layer = parts.next().unwrap_or_default();
         let over = parts.next().map(str::to_string);
         if parts.next().is_some() {
             return Err(format!("slot `{name}` has more than one `::`; overrides of overrides are not supported"));
         }
-        if base.is_empty() || over.as_deref() == Some("") {
+        let mut layer_parts = layer.split('|');
+        let base = layer_parts.next().unwrap_or_default().to_string();
+        let vertical = layer_parts.next().map(str::to_string);
+        if layer_parts.next().is_some() {
+            return Err(format!(
+                "slot `{name}` has more than one `|`; a vertical slot lies on a horizontal one (`000|010`), not on another vertical slot"
+            ));
+        }
+        if base.is_empty() || over.as_deref() == Some("") || vertical.as_deref() == Some("") {
             return Err(format!("slot `{name}` has an empty element"));
         }
-        Ok(Slot { base, over })
+        Ok(Slot { base, vertical, over })
     }
 
     /// The base layer that UsdShade's `material:binding` resolves to (DESIGN.md,
     /// "UsdShade material:binding").
     pub fn material_binding() -> Slot {
-        Slot { base: String::new(), over: None }
+        Slot { base: String::new(), vertical: None, over: None }
     }
 
     /// Whether this is the `material:binding` base layer.
@@ -48,39 +64,79 @@ impl Slot {
         self.base.is_empty()
     }
 
+    /// The slot a layer of this slot lies in: itself without its override part (`000|010`
+    /// for `000|010::020`).
+    pub fn layer(&self) -> Slot {
+        Slot { over: None, ..self.clone() }
+    }
+
     /// The canonical name.
     pub fn name(&self) -> String {
         if self.is_material_binding() {
             return MATERIAL_BINDING_SLOT.to_string();
         }
-        match &self.over {
-            Some(o) => format!("{}::{o}", self.base),
-            None => self.base.clone(),
+        let mut name = self.base.clone();
+        if let Some(v) = &self.vertical {
+            name += "|";
+            name += v;
         }
+        if let Some(o) = &self.over {
+            name += "::";
+            name += o;
+        }
+        name
     }
 }
 
+/// The element that encodes the vertical separator `|` (DESIGN.md Inputs 3); it has no
+/// leading `_`.
+const VERTICAL_ELEMENT: &str = "vertical";
+
+/// The element that starts the binding name of a collection-based slot binding (rule 1c); it
+/// has no leading `_`.
+const COLLECTION_ELEMENT: &str = "collection";
+
 /// Encodes a slot name as a USD property name suffix: split on `:`, prefix each element with
-/// `_`, join with `:` (`050::000` → `_050:_:_000`).
+/// `_`, join with `:` (`050::000` → `_050:_:_000`); the vertical separator `|` is the element
+/// `vertical` (`000|010` → `_000:vertical:_010`).
 pub fn encode_slot(slot: &str) -> String {
-    slot.split(':').map(|e| format!("_{e}")).collect::<Vec<_>>().join(":")
+    let encode = |part: &str| part.split(':').map(|e| format!("_{e}")).collect::<Vec<_>>().join(":");
+    slot.split('|').map(encode).collect::<Vec<_>>().join(&format!(":{VERTICAL_ELEMENT}:"))
 }
 
 /// Decodes the suffix of a `material:slotBinding:` relationship into a slot: strips one leading
-/// `_` from each `:`-separated element.
+/// `_` from each `:`-separated element; the element `vertical` stands for `|`.
 pub fn decode_slot(encoded: &str) -> Result<Slot, String> {
-    let mut elements = Vec::new();
+    let mut name = String::new();
+    let mut after_separator = true;
     for element in encoded.split(':') {
-        match element.strip_prefix('_') {
-            Some(rest) => elements.push(rest),
-            None => {
-                return Err(format!(
-                    "slot binding element `{element}` does not start with `_` (appendix B encoding: slot `050` is `_050`)"
-                ));
-            }
+        if element == VERTICAL_ELEMENT {
+            name.push('|');
+            after_separator = true;
+            continue;
         }
+        let Some(rest) = element.strip_prefix('_') else {
+            return Err(format!(
+                "slot binding element `{element}` does not start with `_` (appendix B encoding: slot `050` is `_050`)"
+            ));
+        };
+        if !after_separator {
+            name.push(':');
+        }
+        name += rest;
+        after_separator = false;
     }
-    Slot::parse(&elements.join(":"))
+    Slot::parse(&name)
+}
+
+/// Splits the suffix of a `material:slotBinding:` relationship into the encoded slot and,
+/// for a collection-based binding (`_050:collection:dirtAreas`, rule 1c), the binding name.
+pub fn split_collection_binding(encoded: &str) -> (&str, Option<&str>) {
+    let marker = format!(":{COLLECTION_ELEMENT}:");
+    match encoded.find(&marker) {
+        Some(at) => (&encoded[..at], Some(&encoded[at + marker.len()..])),
+        None => (encoded, None),
+    }
 }
 
 /// One authored slot binding.
@@ -101,6 +157,20 @@ pub struct Binding {
     pub authored_at: Option<String>,
 }
 
+/// A collection-based slot binding (DESIGN.md rule 1c): `material:slotBinding:<slot>:collection:<name>
+/// = [<collection>, <material>]` binds the slot on the prim that authors it and on its
+/// descendants that the collection includes.
+#[derive(Clone, Debug)]
+pub struct CollectionSlotBinding {
+    /// The slot, the material (`None`: an empty binding, which removes the slot for the
+    /// members) and where it is authored.
+    pub binding: Binding,
+    /// The collection's path (`/Root.collection:dirty`), as `strata layers` names it.
+    pub collection: String,
+    /// Its membership.
+    pub members: Collection,
+}
+
 /// A prim of the hierarchy, reduced to what slot resolution needs.
 #[derive(Clone, Debug)]
 pub struct BindingPrim {
@@ -110,6 +180,9 @@ pub struct BindingPrim {
     pub parent: Option<usize>,
     /// Bindings authored on this prim.
     pub bindings: Vec<Binding>,
+    /// Collection-based slot bindings authored on this prim, in property order (for one slot,
+    /// the first whose collection holds a prim binds it).
+    pub collections: Vec<CollectionSlotBinding>,
     /// Whether this prim is renderable geometry (gets a composed material).
     pub renderable: bool,
 }
@@ -130,6 +203,8 @@ pub struct Applied {
     pub bound_at: String,
     /// Where it is authored.
     pub span: Span,
+    /// The collection that bound it (`/Root.collection:dirty`), for a collection-based binding.
+    pub collection: Option<String>,
 }
 
 /// An override attached to a layer.
@@ -150,6 +225,9 @@ pub struct LayerBinding {
     pub applied: Applied,
     /// Overrides attached to the slot, ascending by override name (the last wins).
     pub overrides: Vec<OverrideBinding>,
+    /// For a horizontal layer, its vertical layers (`000|010`, rule 3b) in byte order, the
+    /// first lying directly on this layer's surface; always empty for a vertical layer.
+    pub vertical: Vec<LayerBinding>,
 }
 
 /// The resolved slot stack of one renderable prim.
@@ -161,19 +239,26 @@ pub struct PrimStack {
     pub layers: Vec<LayerBinding>,
 }
 
-/// Resolves every renderable prim's slot stack: inheritance, replacement, removal, byte-order
-/// sorting and override attachment. Overrides of a slot with no substance are warned about.
+/// A slot in effect on a prim: the depth of the prim whose binding put it there (rule 1c
+/// compares depths), and what it binds (`None`: removed).
+type Effective = (usize, Option<Applied>);
+
+/// Resolves every renderable prim's slot stack: inheritance, replacement, removal,
+/// collection-based bindings, byte-order sorting, and the attachment of overrides and vertical
+/// slots. Overrides and vertical slots of a slot with no substance are warned about.
 pub fn resolve_stacks(tree: &BindingTree, diags: &mut Diagnostics) -> Vec<PrimStack> {
-    // The slots in effect at each prim, built incrementally from the parent's.
-    let mut effective: Vec<BTreeMap<Slot, Option<Applied>>> = Vec::with_capacity(tree.prims.len());
+    // The direct bindings in effect at each prim, built incrementally from the parent's.
+    let mut effective: Vec<BTreeMap<Slot, Effective>> = Vec::with_capacity(tree.prims.len());
+    // Each prim's depth (a root is 0).
+    let mut depth: Vec<usize> = Vec::with_capacity(tree.prims.len());
     // The slots an ancestor bound with `strongerThanDescendants`, which no deeper binding
     // replaces.
     let mut locked: Vec<Vec<Slot>> = Vec::with_capacity(tree.prims.len());
     let mut stacks = Vec::new();
     for prim in &tree.prims {
-        let (mut slots, mut strong) = match prim.parent {
-            Some(p) => (effective[p].clone(), locked[p].clone()),
-            None => (BTreeMap::new(), Vec::new()),
+        let (mut slots, mut strong, here) = match prim.parent {
+            Some(p) => (effective[p].clone(), locked[p].clone(), depth[p] + 1),
+            None => (BTreeMap::new(), Vec::new(), 0),
         };
         for binding in &prim.bindings {
             if strong.contains(&binding.slot) && binding.authored_at.is_none() {
@@ -188,40 +273,103 @@ pub fn resolve_stacks(tree: &BindingTree, diags: &mut Diagnostics) -> Vec<PrimSt
                 material: m.clone(),
                 bound_at: binding.authored_at.clone().unwrap_or_else(|| prim.path.clone()),
                 span: binding.span,
+                collection: None,
             });
-            slots.insert(binding.slot.clone(), applied);
+            slots.insert(binding.slot.clone(), (here, applied));
         }
         if prim.renderable {
-            stacks.push(stack_of(&prim.path, &slots, diags));
+            let mut with_collections = slots.clone();
+            apply_collections(tree, prim, here, &mut with_collections);
+            stacks.push(stack_of(&prim.path, &with_collections, diags));
         }
         effective.push(slots);
+        depth.push(here);
         locked.push(strong);
     }
     stacks
 }
 
-fn stack_of(prim: &str, slots: &BTreeMap<Slot, Option<Applied>>, diags: &mut Diagnostics) -> PrimStack {
-    // BTreeMap order on (base, over) is byte order on the base name, and `None` (the substance
-    // slot itself) sorts before its overrides, which come in ascending byte order.
+/// Applies the collection-based slot bindings that reach `prim` (at `depth`) from it and its
+/// ancestors (rule 1c): per slot, the deepest level whose collection holds the prim offers
+/// (its first such binding in property order), and it replaces the direct binding in effect
+/// unless that one is authored deeper; at one level the collection binding is stronger.
+fn apply_collections(tree: &BindingTree, prim: &BindingPrim, depth: usize, slots: &mut BTreeMap<Slot, Effective>) {
+    let mut offered: Vec<&Slot> = Vec::new();
+    let mut level = Some(prim);
+    let mut level_depth = depth;
+    while let Some(at) = level {
+        for c in &at.collections {
+            let slot = &c.binding.slot;
+            if offered.contains(&slot) || !c.members.contains(&prim.path) {
+                continue;
+            }
+            offered.push(slot);
+            if slots.get(slot).is_some_and(|(direct_depth, _)| *direct_depth > level_depth) {
+                continue;
+            }
+            let applied = c.binding.material.as_ref().map(|m| Applied {
+                material: m.clone(),
+                bound_at: at.path.clone(),
+                span: c.binding.span,
+                collection: Some(c.collection.clone()),
+            });
+            slots.insert(slot.clone(), (level_depth, applied));
+        }
+        level = at.parent.map(|p| &tree.prims[p]);
+        level_depth = level_depth.saturating_sub(1);
+    }
+}
+
+fn stack_of(prim: &str, slots: &BTreeMap<Slot, Effective>, diags: &mut Diagnostics) -> PrimStack {
+    // BTreeMap order on (base, vertical, over) is byte order on the base name; the substance
+    // slot itself (`None`) comes first, then its overrides in ascending byte order, then each
+    // vertical slot in byte order followed by its own overrides.
     let mut layers: Vec<LayerBinding> = Vec::new();
-    for (slot, applied) in slots {
+    for (slot, (_, applied)) in slots {
         let Some(applied) = applied else { continue };
-        match &slot.over {
-            None => layers.push(LayerBinding { slot: slot.clone(), applied: applied.clone(), overrides: Vec::new() }),
-            Some(_) => match layers.last_mut().filter(|l| l.slot.base == slot.base) {
+        let layer = layers.last_mut().filter(|l| l.slot.base == slot.base);
+        match (&slot.vertical, &slot.over) {
+            (None, None) => layers.push(LayerBinding {
+                slot: slot.clone(),
+                applied: applied.clone(),
+                overrides: Vec::new(),
+                vertical: Vec::new(),
+            }),
+            (None, Some(_)) => match layer {
                 Some(layer) => layer.overrides.push(OverrideBinding { slot: slot.clone(), applied: applied.clone() }),
-                None => diags.push(
-                    Diagnostic::warning(format!(
-                        "override slot `{}` on `{prim}` is ignored: slot `{}` has no substance there",
-                        slot.name(),
-                        slot.base
-                    ))
-                    .at(applied.span, "bound here"),
-                ),
+                None => ignored(diags, prim, slot, "override", &slot.base, applied),
             },
+            (Some(_), None) => match layer {
+                Some(layer) => layer.vertical.push(LayerBinding {
+                    slot: slot.clone(),
+                    applied: applied.clone(),
+                    overrides: Vec::new(),
+                    vertical: Vec::new(),
+                }),
+                None => ignored(diags, prim, slot, "vertical", &slot.base, applied),
+            },
+            (Some(_), Some(_)) => {
+                let vertical = layer.and_then(|l| l.vertical.last_mut()).filter(|v| v.slot == slot.layer());
+                match vertical {
+                    Some(v) => v.overrides.push(OverrideBinding { slot: slot.clone(), applied: applied.clone() }),
+                    None => ignored(diags, prim, slot, "override", &slot.layer().name(), applied),
+                }
+            }
         }
     }
     PrimStack { prim: prim.to_string(), layers }
+}
+
+/// Warns that an override or vertical slot is ignored on `prim` because `base` has no
+/// substance there.
+fn ignored(diags: &mut Diagnostics, prim: &str, slot: &Slot, kind: &str, base: &str, applied: &Applied) {
+    diags.push(
+        Diagnostic::warning(format!(
+            "{kind} slot `{}` on `{prim}` is ignored: slot `{base}` has no substance there",
+            slot.name()
+        ))
+        .at(applied.span, "bound here"),
+    );
 }
 
 #[cfg(test)]
@@ -260,6 +408,7 @@ mod tests {
                             }
                         })
                         .collect(),
+                    collections: Vec::new(),
                     renderable: *renderable,
                 })
                 .collect(),
@@ -343,7 +492,7 @@ mod tests {
 
     #[test]
     fn utf8_slots_decode_and_sort_byte_by_byte() {
-        assert_eq!(decode_slot("_é:_:_ü").unwrap(), Slot { base: "é".into(), over: Some("ü".into()) });
+        assert_eq!(decode_slot("_é:_:_ü").unwrap(), Slot { base: "é".into(), vertical: None, over: Some("ü".into()) });
         assert_eq!(encode_slot("é::ü"), "_é:_:_ü");
         // U+FF21 (EF BC A1) before U+10400 (F0 90 90 80): UTF-8 byte order is code point
         // order, where UTF-16 order would swap them.

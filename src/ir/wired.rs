@@ -860,6 +860,7 @@ mod tests {
             slot: Slot::parse(slot).unwrap(),
             substance: mref(lib, name),
             overrides: overrides.iter().map(|(s, n)| (Slot::parse(s).unwrap(), mref(lib, n))).collect(),
+            vertical: Vec::new(),
         }
     }
 

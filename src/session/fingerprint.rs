@@ -66,7 +66,7 @@ impl FileHashes {
     }
 }
 
-/// The content hash of a composed material: its slots, the values bound to each substance
+/// The content hash of a composed material: its slots (vertical ones included), the values bound to each substance
 /// and override, and each graph's content — the text of the file that declares it and of
 /// the files that file imports, or, for a graph composed from a UsdShade network, the graph
 /// itself. Graph ids are left out: they shift when another file gains a graph.
@@ -89,12 +89,16 @@ pub fn material_hash(material: &ComposedMaterial, library: &Library, files: &mut
             _ => format!("{graph:?}").hash(hasher),
         }
     };
+    // Vertical layers (rule 3b) are hashed even while lowering leaves them out, so the
+    // lowering that adds them compiles the material again.
     for layer in &material.layers {
-        layer.slot.name().hash(&mut hasher);
-        reference(&layer.substance, &mut hasher);
-        for (slot, o) in &layer.overrides {
-            slot.name().hash(&mut hasher);
-            reference(o, &mut hasher);
+        for part in std::iter::once(layer).chain(&layer.vertical) {
+            part.slot.name().hash(&mut hasher);
+            reference(&part.substance, &mut hasher);
+            for (slot, o) in &part.overrides {
+                slot.name().hash(&mut hasher);
+                reference(o, &mut hasher);
+            }
         }
         '|'.hash(&mut hasher);
     }
@@ -162,4 +166,34 @@ pub fn names_asset_outside_materials(stage: &Stage, is_file: &dyn Fn(&Path) -> b
                 .iter()
                 .any(|a| a.value.as_ref().and_then(|(v, _)| v.as_asset()).is_some_and(|asset| is_file(&asset.resolved)))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::compose::scene::compose_stage;
+    use crate::diag::{Diagnostics, SourceMap};
+
+    /// The content hash of the one material of a stage that binds the paper's listing-1
+    /// substances (`tests/fixtures/vertical/materials.usda`) with `bindings`.
+    fn hash_of(bindings: &str) -> u64 {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/vertical");
+        let text = format!("#usda 1.0\n(\n    subLayers = [@materials.usda@]\n)\n{bindings}");
+        let (mut sources, mut diags) = (SourceMap::new(), Diagnostics::new());
+        let stage = Stage::from_text("hash.usda", &text, &dir, &mut sources, &mut diags).expect("stage");
+        let scene = compose_stage(&stage, &mut sources, &mut diags);
+        assert!(!diags.has_errors(), "{}", diags.render(&sources));
+        material_hash(&scene.materials[0], &scene.library, &mut FileHashes::default())
+    }
+
+    #[test]
+    fn a_vertical_layer_changes_the_content_hash() {
+        let plain = hash_of(r#"def Mesh "a" { rel material:slotBinding:_000 = </L/SubstanceA> }"#);
+        let coated = r#"def Mesh "a" {
+    rel material:slotBinding:_000 = </L/SubstanceA>
+    rel material:slotBinding:_000:vertical:_010 = </L/SubstanceB>
+}"#;
+        assert_ne!(plain, hash_of(coated), "lowering vertical layers later must recompile");
+        assert_eq!(hash_of(coated), hash_of(coated));
+    }
 }

@@ -18,6 +18,7 @@
 mod example;
 mod fingerprint;
 mod layers;
+mod lints;
 mod object;
 
 pub use example::write_split_default_scene;
@@ -635,6 +636,7 @@ impl Session {
     /// number of renderable prims and of distinct lowered materials.
     pub fn check(&mut self) -> Option<(usize, usize)> {
         self.composition()?;
+        self.lint_slots();
         let (stage, composed) = (self.stage.as_ref()?, &self.composed.as_ref()?.scene);
         let mut compiler = Compiler::new(BackendKind::Jit, PassOptions::default());
         let mut distinct = HashSet::new();
@@ -643,6 +645,16 @@ impl Session {
         }
         crate::render::Scene::from_stage(stage, &|_| Some(0), &mut self.diags);
         Some((composed.stacks.len(), distinct.len()))
+    }
+
+    /// The slot-name lints (issue 23: numeric names of different lengths, look-alike
+    /// names, overrides and vertical slots of slots never bound, slots hidden everywhere,
+    /// substances that show nothing) on the current composition, as warnings. `check` runs
+    /// them; `strata render` calls this once per run.
+    pub fn lint_slots(&mut self) {
+        if let (Some(stage), Some(composed)) = (&self.stage, &self.composed) {
+            lints::lint_slots(stage, &composed.scene, &mut self.diags);
+        }
     }
 
     /// What `path` is to this scene.

@@ -81,6 +81,7 @@ pub fn shader_object(file: &Path, sources: &mut SourceMap, diags: &mut Diagnosti
                     span: Default::default(),
                 },
                 overrides: Vec::new(),
+                vertical: Vec::new(),
             }],
             ..Default::default()
         };

@@ -47,6 +47,7 @@ pub fn compile_stack(lib: &Library, names: &[String], backend: BackendKind, opti
                 span: Default::default(),
             },
             overrides: Vec::new(),
+            vertical: Vec::new(),
         })
         .collect();
     let mut diags = Diagnostics::new();

@@ -1,0 +1,372 @@
+//! Composition rules 1c (collection-based slot bindings) and 3b (vertical slots `X|Y`),
+//! data-driven: each case is a small stage and the layer table derived by hand from
+//! DESIGN.md, never from strata's output. Collection membership is checked against the
+//! answers usd-core's `ComputeMembershipQuery` gave (`tools/make_slot_collection_fixtures.py`
+//! wrote `tests/fixtures/slot_collections/`); no Python runs at test time.
+
+use std::path::Path;
+use strata::compose::binding::binding_tree;
+use strata::compose::scene::compose_stage;
+use strata::compose::slots::{LayerBinding, PrimStack, resolve_stacks};
+use strata::diag::{Diagnostics, Severity, SourceMap};
+use strata::scene::Stage;
+
+/// One layer as `slot=material@bound_at`, `~collection` when a collection bound it,
+/// `[override=material]` per override and `{vertical ...}` per vertical layer.
+fn layer_text(l: &LayerBinding) -> String {
+    let mut t = format!("{}={}@{}", l.slot.name(), l.applied.material, l.applied.bound_at);
+    if let Some(c) = &l.applied.collection {
+        t += &format!("~{c}");
+    }
+    for o in &l.overrides {
+        t += &format!("[{}={}]", o.slot.name(), o.applied.material);
+    }
+    for v in &l.vertical {
+        t += &format!("{{{}}}", layer_text(v));
+    }
+    t
+}
+
+fn table(stacks: &[PrimStack]) -> Vec<String> {
+    stacks
+        .iter()
+        .map(|s| format!("{}: {}", s.prim, s.layers.iter().map(layer_text).collect::<Vec<_>>().join(" ")))
+        .collect()
+}
+
+/// The stage `text` with empty Materials `/M/A`..`/M/Z` appended (the bound materials).
+fn open(text: &str) -> (Stage, SourceMap, Diagnostics) {
+    let mut text = format!("#usda 1.0\n{text}\ndef Scope \"M\" {{\n");
+    for name in 'A'..='Z' {
+        text += &format!("    def Material \"{name}\" {{}}\n");
+    }
+    text += "}\n";
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let stage = Stage::from_text("rules.usda", &text, Path::new("."), &mut sources, &mut diags)
+        .unwrap_or_else(|_| panic!("{}", diags.render(&sources)));
+    (stage, sources, diags)
+}
+
+/// The layer table of `text`, and the rendered warnings.
+fn layers(text: &str) -> (Vec<String>, String) {
+    let (stage, sources, mut diags) = open(text);
+    let tree = binding_tree(&stage, &mut diags);
+    let stacks = resolve_stacks(&tree, &mut diags);
+    assert!(!diags.has_errors(), "{}", diags.render(&sources));
+    (table(&stacks), diags.render(&sources))
+}
+
+// ---------------------------------------------------------------- rule 1c: membership
+
+#[test]
+fn collection_membership_agrees_with_usd_core() {
+    let folder = Path::new("tests/fixtures/slot_collections");
+    let mut cases = 0;
+    for entry in std::fs::read_dir(folder).expect("fixtures") {
+        let path = entry.expect("entry").path();
+        if path.extension().is_none_or(|e| e != "usda") {
+            continue;
+        }
+        cases += 1;
+        let mut sources = SourceMap::new();
+        let mut diags = Diagnostics::new();
+        let stage = Stage::open(&path, &mut sources, &mut diags).expect("fixture opens");
+        let stacks = resolve_stacks(&binding_tree(&stage, &mut diags), &mut diags);
+        assert!(diags.items().is_empty(), "{}: {}", path.display(), diags.render(&sources));
+        let expected = std::fs::read_to_string(path.with_extension("expected")).expect("expected");
+        for line in expected.lines().filter(|l| !l.starts_with('#')) {
+            let mut words = line.split(' ');
+            let (Some("bound"), Some(prim), Some(answer)) = (words.next(), words.next(), words.next()) else {
+                panic!("bad line `{line}`");
+            };
+            let stack = stacks.iter().find(|s| s.prim == prim).unwrap_or_else(|| panic!("{prim} is renderable"));
+            let bound = stack.layers.iter().any(|l| l.slot.name() == "050" && l.applied.material == "/M/Dirt");
+            assert_eq!(bound, answer == "yes", "{}: {prim} (usd-core says {answer})", path.display());
+        }
+    }
+    assert_eq!(cases, 6, "every generated case is checked");
+}
+
+// ---------------------------------------------------------------- rule 1c: strength
+
+#[test]
+fn collection_beats_a_direct_binding_at_the_same_level() {
+    let (lines, _) = layers(
+        r#"
+def Xform "W" (prepend apiSchemas = ["CollectionAPI:dirty"]) {
+    rel collection:dirty:includes = </W/a>
+    rel material:slotBinding:_050 = </M/A>
+    rel material:slotBinding:_050:collection:dirt = [</W.collection:dirty>, </M/B>]
+    def Mesh "a" {}
+    def Mesh "b" {}
+}
+"#,
+    );
+    assert_eq!(lines, vec!["/W/a: 050=/M/B@/W~/W.collection:dirty", "/W/b: 050=/M/A@/W"]);
+}
+
+#[test]
+fn across_levels_the_deeper_binding_replaces() {
+    let (lines, _) = layers(
+        r#"
+def Xform "W" (prepend apiSchemas = ["CollectionAPI:dirty"]) {
+    rel collection:dirty:includes = [</W/a>, </W/b>]
+    rel material:slotBinding:_050:collection:dirt = [</W.collection:dirty>, </M/B>]
+    def Mesh "a" {
+        rel material:slotBinding:_050 = </M/C>
+        def Mesh "x" {}
+    }
+    def Xform "b" (prepend apiSchemas = ["CollectionAPI:inner"]) {
+        rel collection:inner:includes = </W/b/y>
+        rel material:slotBinding:_050:collection:inner = [</W/b.collection:inner>, </M/D>]
+        def Mesh "y" {}
+        def Mesh "z" {}
+    }
+}
+def Xform "V" (prepend apiSchemas = ["CollectionAPI:c"]) {
+    rel collection:c:includes = </V/p/q>
+    rel material:slotBinding:_050:collection:c = [</V.collection:c>, </M/E>]
+    def Xform "p" {
+        rel material:slotBinding:_050 = </M/F>
+        def Mesh "q" {}
+    }
+}
+"#,
+    );
+    assert_eq!(
+        lines,
+        vec![
+            // /W/a's direct binding is deeper than /W's collection binding.
+            "/W/a: 050=/M/C@/W/a",
+            "/W/a/x: 050=/M/C@/W/a",
+            // /W/b's own collection binding is deeper than /W's.
+            "/W/b/y: 050=/M/D@/W/b~/W/b.collection:inner",
+            "/W/b/z: 050=/M/B@/W~/W.collection:dirty",
+            // A direct binding on an ancestor below the collection's level wins.
+            "/V/p/q: 050=/M/F@/V/p",
+        ]
+    );
+}
+
+#[test]
+fn an_empty_collection_binding_removes_until_bound_again() {
+    let (lines, _) = layers(
+        r#"
+def Xform "W" (prepend apiSchemas = ["CollectionAPI:clean"]) {
+    rel collection:clean:includes = </W/a>
+    rel material:slotBinding:_000 = </M/A>
+    rel material:slotBinding:_050 = </M/D>
+    rel material:slotBinding:_050:collection:clean = </W.collection:clean>
+    def Mesh "a" {
+        def Mesh "x" {}
+        def Mesh "y" { rel material:slotBinding:_050 = </M/E> }
+    }
+    def Mesh "b" {}
+}
+"#,
+    );
+    assert_eq!(
+        lines,
+        vec![
+            "/W/a: 000=/M/A@/W",
+            "/W/a/x: 000=/M/A@/W",
+            "/W/a/y: 000=/M/A@/W 050=/M/E@/W/a/y",
+            "/W/b: 000=/M/A@/W 050=/M/D@/W",
+        ]
+    );
+}
+
+#[test]
+fn the_first_collection_binding_in_property_order_wins_and_overrides_and_vertical_slots_bind_too() {
+    let (lines, _) = layers(
+        r#"
+def Xform "W" (prepend apiSchemas = ["CollectionAPI:one", "CollectionAPI:two"]) {
+    rel collection:one:includes = </W/a>
+    rel collection:two:includes = </W>
+    rel material:slotBinding:_000 = </M/A>
+    rel material:slotBinding:_000:collection:first = [</W.collection:one>, </M/B>]
+    rel material:slotBinding:_000:collection:second = [</W.collection:two>, </M/C>]
+    rel material:slotBinding:_000:_:_010:collection:o = [</W.collection:one>, </M/O>]
+    rel material:slotBinding:_000:vertical:_010:collection:v = [</W.collection:one>, </M/V>]
+    def Mesh "a" {}
+    def Mesh "b" {}
+}
+"#,
+    );
+    assert_eq!(
+        lines,
+        vec![
+            "/W/a: 000=/M/B@/W~/W.collection:one[000::010=/M/O]{000|010=/M/V@/W~/W.collection:one}",
+            "/W/b: 000=/M/C@/W~/W.collection:two",
+        ]
+    );
+}
+
+#[test]
+fn collection_binding_mistakes_are_located_warnings() {
+    let (lines, warnings) = layers(
+        r#"
+def Xform "W" (prepend apiSchemas = ["CollectionAPI:e"]) {
+    rel collection:e:membershipExpression = None
+    rel material:slotBinding:_050:collection:gone = [</W.collection:nothere>, </M/A>]
+    rel material:slotBinding:_060:collection:none = None
+    def Mesh "a" {}
+}
+"#,
+    );
+    assert_eq!(lines, vec!["/W/a: "]);
+    assert!(warnings.contains("collection `/W.collection:nothere` does not exist"), "{warnings}");
+    assert!(warnings.contains("names no collection"), "{warnings}");
+}
+
+// ---------------------------------------------------------------- rule 3b: vertical slots
+
+#[test]
+fn vertical_slots_decode_sort_by_bytes_and_attach_overrides() {
+    let (lines, warnings) = layers(
+        r#"
+def Mesh "a" {
+    rel material:slotBinding:_000 = </M/A>
+    rel material:slotBinding:_000:vertical:_020 = </M/T>
+    rel material:slotBinding:_000:vertical:_010 = </M/C>
+    rel material:slotBinding:_000:vertical:_010:_:_030 = </M/Z>
+    rel material:slotBinding:_000:vertical:_010:_:_005 = </M/Y>
+    rel material:slotBinding:_000:vertical:_9 = </M/N>
+    rel material:slotBinding:_000:_:_001 = </M/O>
+    rel material:slotBinding:_050 = </M/D>
+}
+"#,
+    );
+    assert_eq!(
+        lines,
+        vec![
+            "/a: 000=/M/A@/a[000::001=/M/O]{000|010=/M/C@/a[000|010::005=/M/Y][000|010::030=/M/Z]}{000|020=/M/T@/a}{000|9=/M/N@/a} 050=/M/D@/a"
+        ]
+    );
+    assert!(warnings.is_empty(), "{warnings}");
+}
+
+#[test]
+fn vertical_slots_are_inherited_replaced_and_removed() {
+    let (lines, _) = layers(
+        r#"
+def Xform "r" {
+    rel material:slotBinding:_000 = </M/A>
+    rel material:slotBinding:_000:vertical:_010 = </M/C>
+    def Mesh "inherits" {}
+    def Mesh "replaces" { rel material:slotBinding:_000:vertical:_010 = </M/D> }
+    def Xform "removes" {
+        rel material:slotBinding:_000:vertical:_010 = None
+        def Mesh "below" {}
+        def Mesh "again" { rel material:slotBinding:_000:vertical:_010 = </M/E> }
+    }
+}
+"#,
+    );
+    assert_eq!(
+        lines,
+        vec![
+            "/r/inherits: 000=/M/A@/r{000|010=/M/C@/r}",
+            "/r/replaces: 000=/M/A@/r{000|010=/M/D@/r/replaces}",
+            "/r/removes/below: 000=/M/A@/r",
+            "/r/removes/again: 000=/M/A@/r{000|010=/M/E@/r/removes/again}",
+        ]
+    );
+}
+
+#[test]
+fn removing_the_base_slot_keeps_its_vertical_slots_for_where_it_is_bound_again() {
+    let (lines, warnings) = layers(
+        r#"
+def Xform "r" {
+    rel material:slotBinding:_000 = </M/A>
+    rel material:slotBinding:_000:vertical:_010 = </M/C>
+    rel material:slotBinding:_000:vertical:_010:_:_020 = </M/Z>
+    def Xform "bare" {
+        rel material:slotBinding:_000 = None
+        def Mesh "m" {}
+        def Mesh "rebound" { rel material:slotBinding:_000 = </M/B> }
+    }
+}
+"#,
+    );
+    assert_eq!(
+        lines,
+        vec!["/r/bare/m: ", "/r/bare/rebound: 000=/M/B@/r/bare/rebound{000|010=/M/C@/r[000|010::020=/M/Z]}"]
+    );
+    assert!(
+        warnings.contains("vertical slot `000|010` on `/r/bare/m` is ignored: slot `000` has no substance there"),
+        "{warnings}"
+    );
+    assert!(warnings.contains("override slot `000|010::020` on `/r/bare/m` is ignored"), "{warnings}");
+    assert!(!warnings.contains("/r/bare/rebound"), "{warnings}");
+}
+
+#[test]
+fn layers_json_nests_vertical_layers_and_names_collections() {
+    let (stage, _, mut diags) = open(
+        r#"
+def Xform "W" (prepend apiSchemas = ["CollectionAPI:c"]) {
+    rel collection:c:includes = </W/a>
+    rel material:slotBinding:_000 = </M/A>
+    rel material:slotBinding:_000:vertical:_010:collection:wet = [</W.collection:c>, </M/C>]
+    def Mesh "a" { rel material:slotBinding:_000:vertical:_010:_:_020 = </M/Z> }
+}
+"#,
+    );
+    let stacks = resolve_stacks(&binding_tree(&stage, &mut diags), &mut diags);
+    let json: serde_json::Value = serde_json::from_str(&strata::session::layers_json(&stacks)).unwrap();
+    let expected = serde_json::json!([{
+        "prim": "/W/a",
+        "layers": [{
+            "slot": "000", "material": "/M/A", "bound_at": "/W", "overrides": [],
+            "vertical": [{
+                "slot": "000|010", "material": "/M/C", "bound_at": "/W", "collection": "/W.collection:c",
+                "overrides": [{"slot": "000|010::020", "material": "/M/Z", "bound_at": "/W/a"}]
+            }]
+        }]
+    }]);
+    assert_eq!(json, expected);
+}
+
+// ---------------------------------------------------------------- rule 3b: composed material
+
+/// A stage that binds the paper's listing-1 substances (`tests/fixtures/vertical/materials.usda`
+/// defines them as `/L/SubstanceA`..`C`) with `bindings`, composed.
+fn composed(bindings: &str) -> (strata::compose::scene::SceneComposition, String, Diagnostics) {
+    let text = format!("#usda 1.0\n(\n    subLayers = [@materials.usda@]\n)\n{bindings}");
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let dir = Path::new("tests/fixtures/vertical");
+    let stage = Stage::from_text("vertical.usda", &text, dir, &mut sources, &mut diags).expect("stage");
+    let scene = compose_stage(&stage, &mut sources, &mut diags);
+    (scene, diags.render(&sources), diags)
+}
+
+#[test]
+fn composed_materials_carry_vertical_layers_and_warn_they_are_not_yet_rendered() {
+    let (scene, rendered, diags) = composed(
+        r#"
+def Mesh "a" {
+    rel material:slotBinding:_000 = </L/SubstanceA>
+    rel material:slotBinding:_000:vertical:_010 = </L/SubstanceB>
+}
+def Mesh "b" {
+    rel material:slotBinding:_000 = </L/SubstanceA>
+    rel material:slotBinding:_000:vertical:_010 = </L/SubstanceC>
+}
+def Mesh "c" { rel material:slotBinding:_000 = </L/SubstanceA> }
+"#,
+    );
+    assert!(!diags.has_errors(), "{rendered}");
+    let a = scene.material_of("/a").unwrap();
+    assert_eq!(a.layers.len(), 1);
+    assert_eq!(a.layers[0].vertical.len(), 1);
+    assert_eq!(a.layers[0].vertical[0].slot.name(), "000|010");
+    // The coat makes a different material: three prims, three materials.
+    assert_eq!(scene.materials.len(), 3);
+    let warnings: Vec<_> = diags.items().iter().filter(|d| d.severity == Severity::Warning).collect();
+    assert_eq!(warnings.len(), 1, "one warning per vertical slot: {rendered}");
+    assert!(rendered.contains("vertical slot 000|010 composed but not yet rendered: 2 prim(s)"), "{rendered}");
+}
