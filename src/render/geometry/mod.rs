@@ -15,7 +15,6 @@ pub mod xform;
 
 use crate::compose::binding::{is_bound_subset, is_renderable};
 use crate::diag::{Diagnostic, Diagnostics, Span};
-use crate::render::geometry::accel::InstanceDesc;
 use crate::render::geometry::primvars::{MAX_COMPONENTS, Primvar, PrimvarLayout, PrimvarRef, PrimvarTable};
 use crate::render::geometry::shapes::{Part, Shape};
 use crate::render::geometry::subdiv::{PolyMesh, catmull_clark, read_tags, refined_faces};
@@ -81,6 +80,18 @@ pub const MAX_INSTANCES: usize = 1 << 22;
 /// top-level BVH over it (Morton codes, node arrays, indices; about 250). Measured: 4 million
 /// point instances peaked at 2.5 GB, their text parsed included.
 pub const INSTANCE_BYTES: u64 = 640;
+
+/// A prototype placed in the world.
+#[derive(Clone, Copy, Debug)]
+pub struct InstanceDesc {
+    /// Object (prototype) space to world.
+    pub to_world: DMat4,
+    /// Index of the prototype's BLAS.
+    pub prototype: u32,
+    /// Where the instance's prim table starts in the instance prim table: prototype-local
+    /// prim `j` of this instance is the renderable prim `instance_prims[prims + j]`.
+    pub prims: u32,
+}
 
 /// One world-space triangle.
 #[derive(Clone, Copy, Debug)]

@@ -5,10 +5,13 @@
 //! memory grows with unique geometry, not with copies. A scene without instances has no top
 //! level at all: its rays traverse the world BLAS only, as a single-level BVH would.
 //!
-//! Each BVH is an obvhs compressed-wide BVH (CWBVH) over triangles and shapes alike, with a
-//! watertight ray/triangle test (Woop, Benthin & Wald 2013), so rays through shared edges and
-//! vertices never slip between triangles, and robust ray origins so secondary rays do not
-//! re-hit their own surface.
+//! Each BVH is an obvhs compressed-wide BVH (CWBVH: 8 children per 80-byte node, child boxes
+//! quantised to 8 bits, children visited in ray-octant order, occlusion stopping at the first
+//! hit) over triangles and shapes alike, traversed with an AVX2 node test where the CPU has
+//! one (`wide.rs`, chosen at run time), with a watertight ray/triangle test (Woop, Benthin &
+//! Wald 2013), so rays through shared edges and vertices never slip between triangles, and
+//! robust ray origins so secondary rays do not re-hit their own surface. `benches/bvh.rs`
+//! measures it against Embree.
 //!
 //! obvhs culls every box whose exit distance along the ray is below an absolute 1e-4
 //! (`cwbvh::node::EPSILON`, applied instead of the ray's `tmin`): in a scene a few 1e-4 units
@@ -21,7 +24,7 @@ use crate::render::geometry::Triangle;
 use crate::render::geometry::primvars::PrimvarRef;
 use crate::render::geometry::shapes::Shape;
 use crate::render::material::frame::Frame;
-use glam::{DAffine3, DMat3, DMat4, Vec2, Vec3, Vec3A};
+use glam::{DAffine3, DMat3, Vec2, Vec3, Vec3A};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::Bvh2;
 use obvhs::bvh2::node::Bvh2Node;
@@ -30,10 +33,17 @@ use obvhs::cwbvh::CwBvh;
 use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
 use obvhs::ploc::{PlocBuilder, PlocSearchDistance, SortPrecision};
-use obvhs::ray::{Ray, RayHit};
+use obvhs::ray::Ray;
 use obvhs::{Boundable, BvhBuildParams};
 use std::collections::HashMap;
 use std::time::Duration;
+
+mod wide;
+
+// Defined below the BVH (geometry produces instances; shapes bound their own hit points), so
+// the render modules import in one direction: accel → geometry → shapes.
+pub use crate::render::geometry::InstanceDesc;
+pub use crate::render::geometry::shapes::{gamma, offset_ray_origin};
 
 /// [`Hit::instance`] of a hit on the world's (un-instanced) geometry.
 pub const WORLD: u32 = u32::MAX;
@@ -187,13 +197,16 @@ impl BvhSpace {
 /// One bottom-level acceleration structure: a BVH over object-space triangles and shapes.
 pub struct Blas {
     bvh: Option<BvhSpace>,
-    /// Triangle positions, the only triangle data the intersection loop reads.
+    /// Triangle positions, the only triangle data the intersection loop reads. (A second
+    /// copy in the BVH's leaf order, so a leaf's triangles are adjacent as in Embree's leaves,
+    /// measured no faster beyond noise on 3·10⁵ triangles, at 36 more bytes per triangle.)
     positions: Vec<[Vec3; 3]>,
     attrs: Vec<TriangleAttrs>,
     shapes: Vec<Shape>,
     /// The BVH's primitives are groups of primitives with bit-identical bounding boxes:
-    /// group `g` holds `group_members[group_start[g]..group_start[g + 1]]`, primitive indices
-    /// as in [`Hit::index`].
+    /// BVH primitive `id` holds `group_members[group_start[id]..group_start[id + 1]]`,
+    /// primitive indices as in [`Hit::index`]. Groups are stored in the BVH's leaf order, so
+    /// a leaf's groups are adjacent and no index table lies between a leaf and its members.
     group_start: Vec<u32>,
     group_members: Vec<u32>,
     /// Object-space bounds `(min, max)` of the finite primitives; `None` when there are none.
@@ -222,7 +235,10 @@ fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (O
     // Primitives with bit-identical boxes (copies of one mesh at one place) become one BVH
     // primitive: PLOC merges only mutually-nearest pairs, and among n equal boxes every
     // pass merges one pair, so n coincident copies cost O(n²) to build.
-    let mut group_of_box: HashMap<[u32; 6], u32> = HashMap::new();
+    // FNV, not std's SipHash: keys are our own boxes, and hashing was a sixth of the build
+    // of a 10⁶-triangle mesh.
+    let mut group_of_box: HashMap<[u32; 6], u32, fnv::FnvBuildHasher> =
+        HashMap::with_capacity_and_hasher(count, fnv::FnvBuildHasher::default());
     let mut boxes: Vec<Padded> = Vec::new();
     let mut group_of_primitive: Vec<u32> = Vec::with_capacity(count);
     for (lo, hi) in bounds {
@@ -252,7 +268,18 @@ fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (O
             next[g as usize] += 1;
         }
     }
-    (BvhSpace::build(boxes), group_start, group_members)
+    let Some(mut space) = BvhSpace::build(boxes) else { return (None, group_start, group_members) };
+    // The groups in leaf order (obvhs' primitive ids); the id-to-group table is then unused.
+    let leaf_order = std::mem::take(&mut space.bvh.primitive_indices);
+    let mut leaf_start = Vec::with_capacity(leaf_order.len() + 1);
+    let mut leaf_members = Vec::with_capacity(group_members.len());
+    leaf_start.push(0);
+    for &g in &leaf_order {
+        let g = g as usize;
+        leaf_members.extend_from_slice(&group_members[group_start[g] as usize..group_start[g + 1] as usize]);
+        leaf_start.push(leaf_members.len() as u32);
+    }
+    (Some(space), leaf_start, leaf_members)
 }
 
 impl Blas {
@@ -330,29 +357,22 @@ impl Blas {
         }
     }
 
-    /// `(t, b1, b2)` of the ray against primitive `index`.
-    #[inline]
-    fn hit_primitive(
-        &self,
-        pre: &RayPre,
-        o: Vec3,
-        d: Vec3,
-        index: u32,
-        tmin: f32,
-        tmax: f32,
-    ) -> Option<(f32, f32, f32)> {
-        let i = index as usize;
-        match self.positions.get(i) {
-            Some(p) => pre.intersect(p, tmin, tmax),
-            None => self.shapes[i - self.positions.len()].intersect(o, d, tmin, tmax).map(|t| (t, 0.0, 0.0)),
+    /// `(t, b1, b2)` of the ray against the primitive in leaf slot `k` (an index into
+    /// `group_members`).
+    #[inline(always)]
+    fn hit_slot(&self, pre: &RayPre, o: Vec3, d: Vec3, k: usize, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        let i = self.group_members[k] as usize;
+        if let Some(p) = self.positions.get(i) {
+            pre.intersect(p, tmin, tmax)
+        } else {
+            self.shapes[i - self.positions.len()].intersect(o, d, tmin, tmax).map(|t| (t, 0.0, 0.0))
         }
     }
 
-    /// The primitives of BVH primitive `id`.
+    /// The leaf slots (indices into `group_members`) of BVH primitive `id`.
     #[inline]
-    fn group(&self, bvh: &CwBvh, id: usize) -> &[u32] {
-        let g = bvh.primitive_indices[id] as usize;
-        &self.group_members[self.group_start[g] as usize..self.group_start[g + 1] as usize]
+    fn group(&self, id: usize) -> std::ops::Range<usize> {
+        self.group_start[id] as usize..self.group_start[id + 1] as usize
     }
 
     /// The closest hit `(t, index, b1, b2)` of `o + t d`, `t` in `(tmin, tmax)`; `d` need
@@ -363,13 +383,12 @@ impl Blas {
         let pre = RayPre::new(o, d);
         let (ray, k) = space.ray(o, d, tmin, tmax)?;
         let mut best = None;
-        let mut hit = RayHit::none();
-        space.bvh.ray_traverse(ray, &mut hit, |r, id| {
+        wide::closest(&space.bvh, ray, |r, id| {
             let mut closest = unscale(r.tmax, k, tmax);
             let mut found = false;
-            for &index in self.group(&space.bvh, id) {
-                if let Some((t, b1, b2)) = self.hit_primitive(&pre, o, d, index, tmin, closest) {
-                    best = Some((t, index, b1, b2));
+            for k in self.group(id) {
+                if let Some((t, b1, b2)) = self.hit_slot(&pre, o, d, k, tmin, closest) {
+                    best = Some((t, self.group_members[k], b1, b2));
                     closest = t;
                     found = true;
                 }
@@ -385,13 +404,9 @@ impl Blas {
         let Some(space) = self.bvh.as_ref() else { return false };
         let pre = RayPre::new(o, d);
         let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return false };
-        !space.bvh.ray_traverse_miss(ray, |r, id| {
+        wide::any(&space.bvh, ray, |r, id| {
             let tmax = unscale(r.tmax, k, tmax);
-            self.group(&space.bvh, id)
-                .iter()
-                .find_map(|&index| self.hit_primitive(&pre, o, d, index, tmin, tmax))
-                // Any hit occludes; 0 ends the traversal.
-                .map_or(f32::INFINITY, |_| 0.0)
+            self.group(id).any(|k| self.hit_slot(&pre, o, d, k, tmin, tmax).is_some())
         })
     }
 
@@ -497,18 +512,6 @@ pub(crate) fn tangents(p: [Vec3; 3], uv: [Vec2; 3], n: Vec3) -> (Vec3, Vec3) {
     }
     let f = Frame::from_normal(n);
     (f.t, f.b)
-}
-
-/// A prototype placed in the world.
-#[derive(Clone, Copy, Debug)]
-pub struct InstanceDesc {
-    /// Object (prototype) space to world.
-    pub to_world: DMat4,
-    /// Index of the prototype's BLAS.
-    pub prototype: u32,
-    /// Where the instance's prim table starts in the instance prim table: prototype-local
-    /// prim `j` of this instance is the renderable prim `instance_prims[prims + j]`.
-    pub prims: u32,
 }
 
 /// An instance as the traversal uses it.
@@ -631,9 +634,8 @@ impl Accel {
         let Some(space) = &self.tlas else { return best };
         let tmax = best.map_or(tmax, |h| h.t);
         let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return best };
-        let mut hit = RayHit::none();
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
-        space.bvh.ray_traverse(ray, &mut hit, |r, id| {
+        wide::closest(&space.bvh, ray, |r, id| {
             let i = space.bvh.primitive_indices[id];
             let inst = &self.instances[i as usize];
             let oo = inst.to_object.transform_point3(od).as_vec3();
@@ -664,16 +666,12 @@ impl Accel {
         let Some(space) = &self.tlas else { return false };
         let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return false };
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
-        !space.bvh.ray_traverse_miss(ray, |r, id| {
+        wide::any(&space.bvh, ray, |r, id| {
             let inst = &self.instances[space.bvh.primitive_indices[id] as usize];
             let oo = inst.to_object.transform_point3(od).as_vec3();
             let ob = inst.to_object.transform_vector3(dd).as_vec3();
             let finite = oo.is_finite() && ob.is_finite() && ob != Vec3::ZERO;
-            if finite && self.prototypes[inst.prototype as usize].occluded(oo, ob, tmin, unscale(r.tmax, k, tmax)) {
-                0.0
-            } else {
-                f32::INFINITY
-            }
+            finite && self.prototypes[inst.prototype as usize].occluded(oo, ob, tmin, unscale(r.tmax, k, tmax))
         })
     }
 
@@ -738,44 +736,20 @@ impl Accel {
 pub const PLOC_BATCH: usize = 128;
 
 /// A BVH2 over `boxes`: median splits of the centroids along their widest axis down to
-/// [`PLOC_BATCH`] primitives, PLOC below. Also returns the largest PLOC batch.
+/// [`PLOC_BATCH`] primitives, PLOC below. Also returns the largest PLOC batch. The splits are
+/// made first; the batches, independent of each other, are then built in parallel (rayon)
+/// and stitched under their split nodes.
 fn build_batched(boxes: &[Padded]) -> (Bvh2, usize) {
+    use rayon::prelude::*;
     let mut nodes = vec![Bvh2Node::default()];
-    let mut primitive_indices: Vec<u32> = Vec::with_capacity(boxes.len());
     let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
-    let mut largest = 0;
-    let mut builder = PlocBuilder::with_capacity(PLOC_BATCH);
-    // The traversal stacks obvhs sizes from it must hold the whole depth.
-    let mut max_depth = 0;
-    // (node slot, range of `order`, depth of the slot)
+    // (node slot, range of `order`, depth of the slot) of each batch, in split order.
+    let mut batches: Vec<(usize, std::ops::Range<usize>, usize)> = Vec::new();
     let mut todo = vec![(0usize, 0..order.len(), 0usize)];
     while let Some((slot, range, depth)) = todo.pop() {
         let members = &mut order[range.clone()];
         if members.len() <= PLOC_BATCH {
-            largest = largest.max(members.len());
-            let batch: Vec<Padded> = members.iter().map(|&i| Padded(boxes[i as usize].0)).collect();
-            let sub = builder.build(
-                PlocSearchDistance::Medium,
-                &batch,
-                (0..batch.len() as u32).collect(),
-                SortPrecision::U64,
-                3,
-            );
-            // The batch's root goes to `slot`, its other nodes after the nodes so far (sibling
-            // pairs stay adjacent); its leaves index the shared primitive list.
-            max_depth = max_depth.max(depth + sub.max_depth);
-            let base = nodes.len() as u32;
-            let prim_base = primitive_indices.len() as u32;
-            let place = |j: u32| if j == 0 { slot as u32 } else { base + j - 1 };
-            primitive_indices.extend(sub.primitive_indices.iter().map(|&p| members[p as usize]));
-            let mut moved = sub.nodes.iter().map(|n| {
-                let first = if n.is_leaf() { prim_base + n.first_index } else { place(n.first_index) };
-                Bvh2Node::new(*n.aabb(), n.prim_count, first)
-            });
-            if let Some(root) = moved.next() {
-                nodes[slot] = root;
-            }
-            nodes.extend(moved);
+            batches.push((slot, range, depth));
             continue;
         }
         let mut bounds = Aabb::empty();
@@ -798,6 +772,40 @@ fn build_batched(boxes: &[Padded]) -> (Bvh2, usize) {
         todo.push((left, range.start..range.start + half, depth + 1));
         todo.push((left + 1, range.start + half..range.end, depth + 1));
     }
+    let built: Vec<Bvh2> = batches
+        .par_iter()
+        .map_init(
+            || PlocBuilder::with_capacity(PLOC_BATCH),
+            |builder, (_, range, _)| {
+                let batch: Vec<Padded> = order[range.clone()].iter().map(|&i| Padded(boxes[i as usize].0)).collect();
+                let indices = (0..batch.len() as u32).collect();
+                builder.build(PlocSearchDistance::Medium, &batch, indices, SortPrecision::U64, 3)
+            },
+        )
+        .collect();
+    let mut primitive_indices: Vec<u32> = Vec::with_capacity(boxes.len());
+    let mut largest = 0;
+    // The traversal stacks obvhs sizes from it must hold the whole depth.
+    let mut max_depth = 0;
+    for ((slot, range, depth), sub) in batches.into_iter().zip(built) {
+        let members = &order[range];
+        largest = largest.max(members.len());
+        // The batch's root goes to `slot`, its other nodes after the nodes so far (sibling
+        // pairs stay adjacent); its leaves index the shared primitive list.
+        max_depth = max_depth.max(depth + sub.max_depth);
+        let base = nodes.len() as u32;
+        let prim_base = primitive_indices.len() as u32;
+        let place = |j: u32| if j == 0 { slot as u32 } else { base + j - 1 };
+        primitive_indices.extend(sub.primitive_indices.iter().map(|&p| members[p as usize]));
+        let mut moved = sub.nodes.iter().map(|n| {
+            let first = if n.is_leaf() { prim_base + n.first_index } else { place(n.first_index) };
+            Bvh2Node::new(*n.aabb(), n.prim_count, first)
+        });
+        if let Some(root) = moved.next() {
+            nodes[slot] = root;
+        }
+        nodes.extend(moved);
+    }
     (Bvh2 { nodes, primitive_indices, max_depth, ..Default::default() }, largest)
 }
 
@@ -808,14 +816,6 @@ impl Boundable for Padded {
     fn aabb(&self) -> Aabb {
         self.0
     }
-}
-
-/// `γ(n) = n ε / (1 − n ε)`, ε = 2⁻²⁴ (half an f32 ULP at 1): the bound on the relative
-/// error of `n` successive f32 operations (Higham; pbrt-v4 `gamma`).
-#[inline]
-pub fn gamma(n: i32) -> f32 {
-    let e = f32::EPSILON * 0.5;
-    (n as f32 * e) / (1.0 - n as f32 * e)
 }
 
 /// Per-ray precomputation of the watertight test (pbrt-v4's, after Woop, Benthin & Wald
@@ -851,11 +851,12 @@ impl RayPre {
     #[inline]
     fn intersect(&self, p: &[Vec3; 3], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
         let [kx, ky, kz] = self.k;
-        // Translate to the ray origin, permute, shear.
+        // Translate to the ray origin, permute, shear. The permutation indexes a 4-array
+        // with indices below 4: loads, no branches and no bounds checks.
         let shear = |v: Vec3| {
-            let v = v - self.o;
-            let z = v[kz];
-            (v[kx] + self.s.x * z, v[ky] + self.s.y * z, z)
+            let v = (v - self.o).extend(0.0).to_array();
+            let z = v[kz & 3];
+            (v[kx & 3] + self.s.x * z, v[ky & 3] + self.s.y * z, z)
         };
         let (x0, y0, z0) = shear(p[0]);
         let (x1, y1, z1) = shear(p[1]);
@@ -906,27 +907,10 @@ impl RayPre {
     }
 }
 
-/// A spawn point for a ray leaving a surface point `p` whose components are uncertain by
-/// `p_error`, towards the side of the geometric normal `n` (pointing to where the ray goes):
-/// `p` moved along `n` past the error box, then rounded away from the surface (pbrt-v4's
-/// `OffsetRayOrigin`). The offset is as small as the error bound allows, at any scale.
-pub fn offset_ray_origin(p: Vec3, p_error: Vec3, n: Vec3) -> Vec3 {
-    let d = n.abs().dot(p_error);
-    let offset = n * d;
-    let mut po = p + offset;
-    for i in 0..3 {
-        if offset[i] > 0.0 {
-            po[i] = po[i].next_up();
-        } else if offset[i] < 0.0 {
-            po[i] = po[i].next_down();
-        }
-    }
-    po
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::DMat4;
     use glam::Vec2;
 
     fn tri(p: [Vec3; 3]) -> Triangle {
@@ -1083,12 +1067,7 @@ mod tests {
         ] {
             let (plane, n) = tilted_plane(scale, centre);
             let sphere = Shape::new(
-                crate::render::geometry::shapes::Part::Sphere {
-                    r: 1.0,
-                    cz: 0.0,
-                    zmin: f64::NEG_INFINITY,
-                    zmax: f64::INFINITY,
-                },
+                crate::render::geometry::shapes::Part::Sphere { r: 1.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY },
                 DMat4::from_scale_rotation_translation(
                     glam::DVec3::new(1.0, 0.6, 0.8) * scale as f64 * 0.2,
                     glam::DQuat::from_rotation_y(0.4),
@@ -1124,12 +1103,7 @@ mod tests {
             // by a transform that scales, turns and moves it.
             let (unit_plane, _) = tilted_plane(1.0, Vec3::ZERO);
             let unit_sphere = Shape::new(
-                crate::render::geometry::shapes::Part::Sphere {
-                    r: 1.0,
-                    cz: 0.0,
-                    zmin: f64::NEG_INFINITY,
-                    zmax: f64::INFINITY,
-                },
+                crate::render::geometry::shapes::Part::Sphere { r: 1.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY },
                 DMat4::from_scale_rotation_translation(
                     glam::DVec3::new(1.0, 0.6, 0.8) * 0.2,
                     glam::DQuat::from_rotation_y(0.4),
@@ -1163,6 +1137,71 @@ mod tests {
                     vec![0],
                 );
                 assert_no_self_hits(&alone, k == 0, aim, &format!("instance {k}, scale {scale}, centre {centre}"));
+            }
+        }
+    }
+
+    /// Brute force over every triangle with the same watertight test: the nearest `t` and
+    /// every triangle hit at exactly that `t` (a ray through a shared edge hits both).
+    fn brute_force(tris: &[[Vec3; 3]], o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, Vec<u32>)> {
+        let pre = RayPre::new(o, d);
+        let hits: Vec<(f32, u32)> =
+            tris.iter().enumerate().filter_map(|(i, p)| pre.intersect(p, 0.0, tmax).map(|h| (h.0, i as u32))).collect();
+        let t = hits.iter().map(|h| h.0).reduce(f32::min)?;
+        Some((t, hits.iter().filter(|h| h.0 == t).map(|h| h.1).collect()))
+    }
+
+    /// A random mesh: a jittered grid of `n` x `n` quads folded into hills (shared edges and
+    /// vertices, as real meshes have), plus `loose` free triangles anywhere.
+    fn random_mesh(n: usize, heights: &[f32], loose: &[[f32; 9]]) -> Vec<[Vec3; 3]> {
+        let vertex = |i: usize, j: usize| {
+            let h = heights[(i * (n + 1) + j) % heights.len()];
+            Vec3::new(i as f32 / n as f32 - 0.5, h, j as f32 / n as f32 - 0.5)
+        };
+        let mut tris = Vec::new();
+        for i in 0..n {
+            for j in 0..n {
+                tris.push([vertex(i, j), vertex(i + 1, j), vertex(i, j + 1)]);
+                tris.push([vertex(i + 1, j), vertex(i + 1, j + 1), vertex(i, j + 1)]);
+            }
+        }
+        for c in loose {
+            tris.push([Vec3::new(c[0], c[1], c[2]), Vec3::new(c[3], c[4], c[5]), Vec3::new(c[6], c[7], c[8])]);
+        }
+        tris
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 64, ..Default::default() })]
+
+        /// The wide BVH (on whichever node test this CPU runs) finds the nearest hit brute
+        /// force finds, and occlusion agrees with the closest hit at every ray length.
+        #[test]
+        fn wide_bvh_finds_the_brute_force_nearest_hit(
+            n in 1usize..24,
+            heights in proptest::collection::vec(-0.3f32..0.3, 1..64),
+            loose in proptest::collection::vec(proptest::array::uniform9(-1.0f32..1.0), 0..40),
+            rays in proptest::collection::vec((proptest::array::uniform3(-2.0f32..2.0), proptest::array::uniform3(-1.0f32..1.0), 0.05f32..4.0), 64),
+        ) {
+            let tris = random_mesh(n, &heights, &loose);
+            let accel = Accel::new(tris.iter().map(|&p| tri(p)).collect(), Vec::new());
+            for (o, d, length) in rays {
+                let (o, d) = (Vec3::from(o), Vec3::from(d).normalize_or_zero());
+                if d == Vec3::ZERO {
+                    continue;
+                }
+                let expected = brute_force(&tris, o, d, f32::INFINITY);
+                let got = accel.intersect(o, d, 0.0, f32::INFINITY);
+                match (&expected, got) {
+                    (None, None) => {}
+                    (Some((t, indices)), Some(hit)) => {
+                        proptest::prop_assert_eq!(hit.t, *t);
+                        proptest::prop_assert!(indices.contains(&hit.index), "hit {} not among {:?}", hit.index, indices);
+                    }
+                    _ => proptest::prop_assert!(false, "BVH {:?}, brute force {:?}, ray {} {}", got, expected, o, d),
+                }
+                let blocked = expected.as_ref().is_some_and(|(t, _)| *t < length);
+                proptest::prop_assert_eq!(accel.occluded(o, d, 0.0, length), blocked, "ray {} {} length {}", o, d, length);
             }
         }
     }
