@@ -107,7 +107,7 @@ mod avx2 {
     /// visit in the high byte, leaf primitives in the low 24 bits).
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn node_hits(node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
+    pub(super) fn node_hits(node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
         let scale = node.compute_extent() * ray.inv_direction;
         let origin = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
         // Entry and exit distances along one axis: a ray going down that axis enters
@@ -133,5 +133,63 @@ mod avx2 {
             hits |= child_bits << bit_index;
         }
         hits
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3A;
+    use obvhs::aabb::Aabb;
+    use obvhs::cwbvh::builder::build_cwbvh;
+    use obvhs::ray::Ray;
+
+    /// The AVX2 node test accepts exactly the boxes obvhs' SSE test accepts, node by node,
+    /// for rays in every octant (including axis-parallel ones).
+    #[test]
+    fn avx2_node_test_matches_obvhs_on_every_node() {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if !has_avx2() {
+                return;
+            }
+            let mut seed = 1u32;
+            let mut next = move || {
+                seed ^= seed << 13;
+                seed ^= seed >> 17;
+                seed ^= seed << 5;
+                seed as f32 / u32::MAX as f32 * 2.0 - 1.0
+            };
+            let boxes: Vec<Aabb> = (0..500)
+                .map(|_| {
+                    let c = Vec3A::new(next(), next(), next()) * 100.0;
+                    let h = Vec3A::new(next().abs(), next().abs(), next().abs()) * 3.0;
+                    Aabb::new(c - h, c + h)
+                })
+                .collect();
+            let bvh = build_cwbvh(&boxes, obvhs::BvhBuildParams::medium_build(), &mut Default::default());
+            let mut compared = 0;
+            for r in 0..400 {
+                let mut d = Vec3A::new(next(), next(), next());
+                if r % 7 == 0 {
+                    d.y = 0.0;
+                }
+                let ray = Ray::new(Vec3A::new(next(), next(), next()) * 150.0, d.normalize(), 0.0, 50.0 + 200.0 * next().abs());
+                let oct = bvh.new_traversal(ray.direction).oct_inv4;
+                for node in &bvh.nodes {
+                    // SAFETY: AVX2 is present (checked above).
+                    let wide = unsafe { avx2_node_hits(node, &ray, oct) };
+                    assert_eq!(wide, node.intersect_ray(&ray, oct), "ray {r}");
+                    compared += u32::from(wide != 0);
+                }
+            }
+            assert!(compared > 100, "the rays must meet some boxes ({compared})");
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn avx2_node_hits(node: &obvhs::cwbvh::node::CwBvhNode, ray: &Ray, oct: u32) -> u32 {
+        avx2::node_hits(node, ray, oct)
     }
 }
