@@ -174,7 +174,12 @@ mod tests {
                 if r % 7 == 0 {
                     d.y = 0.0;
                 }
-                let ray = Ray::new(Vec3A::new(next(), next(), next()) * 150.0, d.normalize(), 0.0, 50.0 + 200.0 * next().abs());
+                let ray = Ray::new(
+                    Vec3A::new(next(), next(), next()) * 150.0,
+                    d.normalize(),
+                    0.0,
+                    50.0 + 200.0 * next().abs(),
+                );
                 let oct = bvh.new_traversal(ray.direction).oct_inv4;
                 for node in &bvh.nodes {
                     // SAFETY: AVX2 is present (checked above).
