@@ -1,4 +1,4 @@
-//! Ray-traversal benchmark: strata's BVH ([`strata::render::accel::Accel`]) on bumpy spheres
+//! Ray-traversal benchmark: strata's BVH ([`strata::render::geometry::accel::Accel`]) on bumpy spheres
 //! of 1 to 10⁶ triangles, primary, diffuse-bounce and shadow rays, one thread; with
 //! `--features embree`, Intel Embree 3 (Debian's `libembree-dev`) on the very same triangles
 //! and rays, and the ratio of the two.
@@ -18,9 +18,9 @@
 use glam::{Vec2, Vec3};
 use std::hint::black_box;
 use std::time::Instant;
-use strata::render::accel::{Accel, offset_ray_origin};
+use strata::render::geometry::accel::{Accel, offset_ray_origin};
 use strata::render::geometry::Triangle;
-use strata::render::primvars::PrimvarRef;
+use strata::render::geometry::primvars::PrimvarRef;
 
 /// Rays per kind per round.
 const RAYS: usize = 1 << 17;
