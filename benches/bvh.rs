@@ -18,8 +18,8 @@
 use glam::{Vec2, Vec3};
 use std::hint::black_box;
 use std::time::Instant;
-use strata::render::geometry::accel::{Accel, offset_ray_origin};
 use strata::render::geometry::Triangle;
+use strata::render::geometry::accel::{Accel, offset_ray_origin};
 use strata::render::geometry::primvars::PrimvarRef;
 
 /// Rays per kind per round.

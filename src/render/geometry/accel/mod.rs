@@ -138,6 +138,9 @@ impl BvhSpace {
             (build_cwbvh(&boxes, params, &mut Duration::default()), boxes.len())
         } else {
             let (mut bvh2, largest) = build_batched(&boxes);
+            // The boxes are in the nodes now: freed before the optimiser and the conversion
+            // allocate theirs (build peak memory).
+            drop(boxes);
             ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
             (bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false), largest)
         };
@@ -194,8 +197,15 @@ impl BvhSpace {
     }
 }
 
-/// One bottom-level acceleration structure: a BVH over object-space triangles and shapes.
+/// The most primitives a BLAS tests one by one instead of building a BVH over them: a ray
+/// then meets them with no box test, traversal state or stack, so a scene of one triangle or
+/// one sphere pays for its primitives only.
+pub const FLAT_PRIMITIVES: usize = 8;
+
+/// One bottom-level acceleration structure: a BVH over object-space triangles and shapes, or,
+/// for at most [`FLAT_PRIMITIVES`], a list of them.
 pub struct Blas {
+    /// `None` when the BLAS is flat: every primitive in `group_members` is tested.
     bvh: Option<BvhSpace>,
     /// Triangle positions, the only triangle data the intersection loop reads. (A second
     /// copy in the BVH's leaf order, so a leaf's triangles are adjacent as in Embree's leaves,
@@ -207,6 +217,7 @@ pub struct Blas {
     /// BVH primitive `id` holds `group_members[group_start[id]..group_start[id + 1]]`,
     /// primitive indices as in [`Hit::index`]. Groups are stored in the BVH's leaf order, so
     /// a leaf's groups are adjacent and no index table lies between a leaf and its members.
+    /// A flat BLAS has one group: its finite primitives.
     group_start: Vec<u32>,
     group_members: Vec<u32>,
     /// Object-space bounds `(min, max)` of the finite primitives; `None` when there are none.
@@ -260,6 +271,9 @@ fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (O
     for g in 0..boxes.len() {
         group_start[g + 1] += group_start[g];
     }
+    // The box table and the per-primitive groups are freed before the BVH is built: on a
+    // mesh of distinct boxes the table is the largest allocation here (build peak memory).
+    drop(group_of_box);
     let mut next = group_start.clone();
     let mut group_members = vec![0u32; group_start[boxes.len()] as usize];
     for (index, &g) in group_of_primitive.iter().enumerate() {
@@ -268,6 +282,7 @@ fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (O
             next[g as usize] += 1;
         }
     }
+    drop((next, group_of_primitive));
     let Some(mut space) = BvhSpace::build(boxes) else { return (None, group_start, group_members) };
     // The groups in leaf order (obvhs' primitive ids); the id-to-group table is then unused.
     let leaf_order = std::mem::take(&mut space.bvh.primitive_indices);
@@ -287,18 +302,10 @@ impl Blas {
     /// Primitives with non-finite bounds are kept (indices stay valid) but can never be hit;
     /// the geometry stage reports them before this.
     pub fn new(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Blas {
-        let tri_bounds = |t: &Triangle| (t.p[0].min(t.p[1]).min(t.p[2]), t.p[0].max(t.p[1]).max(t.p[2]));
-        let mut bounds: Option<(Vec3, Vec3)> = None;
-        for (lo, hi) in triangles.iter().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds)) {
-            if lo.is_finite() && hi.is_finite() {
-                bounds = Some(bounds.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
-            }
-        }
-        let count = triangles.len() + shapes.len();
-        let (bvh, group_start, group_members) =
-            build_grouped(triangles.iter().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds)), count);
-        let positions = triangles.iter().map(|t| t.p).collect();
-        let attrs = triangles
+        // The triangles are split into what the traversal reads and what a hit reads, and
+        // freed, before the BVH is built (build peak memory).
+        let positions: Vec<[Vec3; 3]> = triangles.iter().map(|t| t.p).collect();
+        let attrs: Vec<TriangleAttrs> = triangles
             .iter()
             .map(|t| TriangleAttrs {
                 n: t.n,
@@ -308,6 +315,27 @@ impl Blas {
                 primvars: t.primvars,
             })
             .collect();
+        drop(triangles);
+        let tri_bounds = |p: &[Vec3; 3]| (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+        let mut bounds: Option<(Vec3, Vec3)> = None;
+        for (lo, hi) in positions.iter().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds)) {
+            if lo.is_finite() && hi.is_finite() {
+                bounds = Some(bounds.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
+            }
+        }
+        let count = positions.len() + shapes.len();
+        let all_bounds = positions.iter().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds));
+        let (bvh, group_start, group_members) = if count <= FLAT_PRIMITIVES {
+            // Primitives with non-finite bounds are left out, as the BVH leaves them out.
+            let finite: Vec<u32> = all_bounds
+                .enumerate()
+                .filter(|(_, (lo, hi))| lo.is_finite() && hi.is_finite())
+                .map(|(i, _)| i as u32)
+                .collect();
+            (None, vec![0, finite.len() as u32], finite)
+        } else {
+            build_grouped(all_bounds, count)
+        };
         Blas { bvh, positions, attrs, shapes, group_start, group_members, bounds }
     }
 
@@ -375,11 +403,16 @@ impl Blas {
         self.group_start[id] as usize..self.group_start[id + 1] as usize
     }
 
+    /// Whether the BLAS holds no primitive that a ray can hit.
+    fn is_empty(&self) -> bool {
+        self.group_members.is_empty()
+    }
+
     /// The closest hit `(t, index, b1, b2)` of `o + t d`, `t` in `(tmin, tmax)`; `d` need
     /// not be unit length (object-space rays are not), and `t` is in its units.
     #[inline]
     fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32, f32, f32)> {
-        let space = self.bvh.as_ref()?;
+        let Some(space) = self.bvh.as_ref() else { return self.intersect_flat(o, d, tmin, tmax) };
         let pre = RayPre::new(o, d);
         let (ray, k) = space.ray(o, d, tmin, tmax)?;
         let mut best = None;
@@ -398,10 +431,34 @@ impl Blas {
         best
     }
 
+    /// [`Blas::intersect`] without a BVH: every primitive tested.
+    #[inline]
+    fn intersect_flat(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32, f32, f32)> {
+        if self.is_empty() {
+            return None;
+        }
+        let pre = RayPre::new(o, d);
+        let mut best = None;
+        let mut closest = tmax;
+        for k in 0..self.group_members.len() {
+            if let Some((t, b1, b2)) = self.hit_slot(&pre, o, d, k, tmin, closest) {
+                best = Some((t, self.group_members[k], b1, b2));
+                closest = t;
+            }
+        }
+        best
+    }
+
     /// Whether anything lies on `o + t d` within `(tmin, tmax)`.
     #[inline]
     fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
-        let Some(space) = self.bvh.as_ref() else { return false };
+        let Some(space) = self.bvh.as_ref() else {
+            if self.is_empty() {
+                return false;
+            }
+            let pre = RayPre::new(o, d);
+            return (0..self.group_members.len()).any(|k| self.hit_slot(&pre, o, d, k, tmin, tmax).is_some());
+        };
         let pre = RayPre::new(o, d);
         let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return false };
         wide::any(&space.bvh, ray, |r, id| {
@@ -593,7 +650,7 @@ impl Accel {
 
     /// Number of bottom-level structures in use: the world's (when not empty) and the prototypes'.
     pub fn blas_count(&self) -> usize {
-        usize::from(self.world.bvh.is_some()) + self.prototypes.len()
+        usize::from(!self.world.is_empty()) + self.prototypes.len()
     }
 
     /// Number of instances in the top level.
@@ -735,6 +792,9 @@ impl Accel {
 /// O(n log n) whatever the geometry.
 pub const PLOC_BATCH: usize = 128;
 
+/// How many PLOC batches are built in parallel before they are stitched into the tree.
+const PARALLEL_BATCHES: usize = 256;
+
 /// A BVH2 over `boxes`: median splits of the centroids along their widest axis down to
 /// [`PLOC_BATCH`] primitives, PLOC below. Also returns the largest PLOC batch. The splits are
 /// made first; the batches, independent of each other, are then built in parallel (rayon)
@@ -772,22 +832,30 @@ fn build_batched(boxes: &[Padded]) -> (Bvh2, usize) {
         todo.push((left, range.start..range.start + half, depth + 1));
         todo.push((left + 1, range.start + half..range.end, depth + 1));
     }
-    let built: Vec<Bvh2> = batches
-        .par_iter()
-        .map_init(
-            || PlocBuilder::with_capacity(PLOC_BATCH),
-            |builder, (_, range, _)| {
-                let batch: Vec<Padded> = order[range.clone()].iter().map(|&i| Padded(boxes[i as usize].0)).collect();
-                let indices = (0..batch.len() as u32).collect();
-                builder.build(PlocSearchDistance::Medium, &batch, indices, SortPrecision::U64, 3)
-            },
-        )
-        .collect();
+    // One primitive per PLOC leaf: the tree has exactly 2n − 1 nodes, allocated once.
+    nodes.reserve_exact((2 * boxes.len()).saturating_sub(1 + nodes.len()));
     let mut primitive_indices: Vec<u32> = Vec::with_capacity(boxes.len());
     let mut largest = 0;
     // The traversal stacks obvhs sizes from it must hold the whole depth.
     let mut max_depth = 0;
-    for ((slot, range, depth), sub) in batches.into_iter().zip(built) {
+    // The batches are built in parallel a window at a time and stitched as each window ends,
+    // so the built-but-unstitched trees are a few MB, not a copy of the whole tree.
+    let built = batches.chunks(PARALLEL_BATCHES).flat_map(|window| {
+        let trees: Vec<Bvh2> = window
+            .par_iter()
+            .map_init(
+                || PlocBuilder::with_capacity(PLOC_BATCH),
+                |builder, (_, range, _)| {
+                    let batch: Vec<Padded> =
+                        order[range.clone()].iter().map(|&i| Padded(boxes[i as usize].0)).collect();
+                    let indices = (0..batch.len() as u32).collect();
+                    builder.build(PlocSearchDistance::Medium, &batch, indices, SortPrecision::U64, 3)
+                },
+            )
+            .collect();
+        window.iter().cloned().zip(trees)
+    });
+    for ((slot, range, depth), sub) in built {
         let members = &order[range];
         largest = largest.max(members.len());
         // The batch's root goes to `slot`, its other nodes after the nodes so far (sibling
@@ -1067,7 +1135,12 @@ mod tests {
         ] {
             let (plane, n) = tilted_plane(scale, centre);
             let sphere = Shape::new(
-                crate::render::geometry::shapes::Part::Sphere { r: 1.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY },
+                crate::render::geometry::shapes::Part::Sphere {
+                    r: 1.0,
+                    cz: 0.0,
+                    zmin: f64::NEG_INFINITY,
+                    zmax: f64::INFINITY,
+                },
                 DMat4::from_scale_rotation_translation(
                     glam::DVec3::new(1.0, 0.6, 0.8) * scale as f64 * 0.2,
                     glam::DQuat::from_rotation_y(0.4),
@@ -1103,7 +1176,12 @@ mod tests {
             // by a transform that scales, turns and moves it.
             let (unit_plane, _) = tilted_plane(1.0, Vec3::ZERO);
             let unit_sphere = Shape::new(
-                crate::render::geometry::shapes::Part::Sphere { r: 1.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY },
+                crate::render::geometry::shapes::Part::Sphere {
+                    r: 1.0,
+                    cz: 0.0,
+                    zmin: f64::NEG_INFINITY,
+                    zmax: f64::INFINITY,
+                },
                 DMat4::from_scale_rotation_translation(
                     glam::DVec3::new(1.0, 0.6, 0.8) * 0.2,
                     glam::DQuat::from_rotation_y(0.4),
@@ -1171,6 +1249,34 @@ mod tests {
         tris
     }
 
+    /// Checks `accel`'s closest hit against brute force over `tris`, and occlusion against
+    /// the closest hit at each ray's length.
+    fn agrees_with_brute_force(
+        tris: &[[Vec3; 3]],
+        rays: Vec<([f32; 3], [f32; 3], f32)>,
+    ) -> Result<(), proptest::test_runner::TestCaseError> {
+        let accel = Accel::new(tris.iter().map(|&p| tri(p)).collect(), Vec::new());
+        for (o, d, length) in rays {
+            let (o, d) = (Vec3::from(o), Vec3::from(d).normalize_or_zero());
+            if d == Vec3::ZERO {
+                continue;
+            }
+            let expected = brute_force(tris, o, d, f32::INFINITY);
+            let got = accel.intersect(o, d, 0.0, f32::INFINITY);
+            match (&expected, got) {
+                (None, None) => {}
+                (Some((t, indices)), Some(hit)) => {
+                    proptest::prop_assert_eq!(hit.t, *t);
+                    proptest::prop_assert!(indices.contains(&hit.index), "hit {} not among {:?}", hit.index, indices);
+                }
+                _ => proptest::prop_assert!(false, "BVH {:?}, brute force {:?}, ray {} {}", got, expected, o, d),
+            }
+            let blocked = expected.as_ref().is_some_and(|(t, _)| *t < length);
+            proptest::prop_assert_eq!(accel.occluded(o, d, 0.0, length), blocked, "ray {} {} length {}", o, d, length);
+        }
+        Ok(())
+    }
+
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig { cases: 64, ..Default::default() })]
 
@@ -1183,26 +1289,16 @@ mod tests {
             loose in proptest::collection::vec(proptest::array::uniform9(-1.0f32..1.0), 0..40),
             rays in proptest::collection::vec((proptest::array::uniform3(-2.0f32..2.0), proptest::array::uniform3(-1.0f32..1.0), 0.05f32..4.0), 64),
         ) {
-            let tris = random_mesh(n, &heights, &loose);
-            let accel = Accel::new(tris.iter().map(|&p| tri(p)).collect(), Vec::new());
-            for (o, d, length) in rays {
-                let (o, d) = (Vec3::from(o), Vec3::from(d).normalize_or_zero());
-                if d == Vec3::ZERO {
-                    continue;
-                }
-                let expected = brute_force(&tris, o, d, f32::INFINITY);
-                let got = accel.intersect(o, d, 0.0, f32::INFINITY);
-                match (&expected, got) {
-                    (None, None) => {}
-                    (Some((t, indices)), Some(hit)) => {
-                        proptest::prop_assert_eq!(hit.t, *t);
-                        proptest::prop_assert!(indices.contains(&hit.index), "hit {} not among {:?}", hit.index, indices);
-                    }
-                    _ => proptest::prop_assert!(false, "BVH {:?}, brute force {:?}, ray {} {}", got, expected, o, d),
-                }
-                let blocked = expected.as_ref().is_some_and(|(t, _)| *t < length);
-                proptest::prop_assert_eq!(accel.occluded(o, d, 0.0, length), blocked, "ray {} {} length {}", o, d, length);
-            }
+            agrees_with_brute_force(&random_mesh(n, &heights, &loose), rays)?;
+        }
+
+        /// So does a BLAS small enough to be flat (no BVH), and one just past the threshold.
+        #[test]
+        fn flat_blas_finds_the_brute_force_nearest_hit(
+            loose in proptest::collection::vec(proptest::array::uniform9(-1.0f32..1.0), 0..=FLAT_PRIMITIVES + 2),
+            rays in proptest::collection::vec((proptest::array::uniform3(-2.0f32..2.0), proptest::array::uniform3(-1.0f32..1.0), 0.05f32..4.0), 64),
+        ) {
+            agrees_with_brute_force(&random_mesh(0, &[0.0], &loose), rays)?;
         }
     }
 }

@@ -9,8 +9,12 @@
 //! fused multiply-add), so they accept exactly the same boxes and a render is bit-identical
 //! on either path.
 
+use glam::{UVec2, Vec3A, uvec2};
 use obvhs::cwbvh::CwBvh;
-use obvhs::ray::{Ray, RayHit};
+use obvhs::cwbvh::node::CwBvhNode;
+use obvhs::faststack::FastStack;
+use obvhs::ray::Ray;
+use std::mem::MaybeUninit;
 
 /// Whether the AVX2 path runs (std caches the CPUID query: one load per call).
 #[inline]
@@ -36,7 +40,7 @@ pub(super) fn closest(bvh: &CwBvh, ray: Ray, mut on_primitive: impl FnMut(&Ray, 
         unsafe { avx2::closest(bvh, ray, &mut on_primitive) };
         return;
     }
-    bvh.ray_traverse(ray, &mut RayHit::none(), on_primitive);
+    closest_with(bvh, ray, &mut on_primitive, |node, ray, oct| node.intersect_ray(ray, oct));
 }
 
 /// Whether `on_primitive(ray, id)` holds for any primitive whose leaf box `ray` meets; stops
@@ -48,12 +52,135 @@ pub(super) fn any(bvh: &CwBvh, ray: Ray, mut on_primitive: impl FnMut(&Ray, usiz
         // SAFETY: the CPU has AVX2 (checked just above).
         return unsafe { avx2::any(bvh, ray, &mut on_primitive) };
     }
-    !bvh.ray_traverse_miss(ray, |r, id| if on_primitive(r, id) { 0.0 } else { f32::INFINITY })
+    any_with(bvh, ray, &mut on_primitive, |node, ray, oct| node.intersect_ray(ray, oct))
+}
+
+/// obvhs' traversal depth bound (`TRAVERSAL_STACK_SIZE`, crate-private there; its builders
+/// keep compressed-wide BVHs shallower).
+const STACK_SIZE: usize = 32;
+
+/// The node groups still to visit. obvhs' own stack is an array it zeroes for every ray
+/// (256 bytes, a memset per traversal that the profile showed); this one starts
+/// uninitialised and reads only what it wrote.
+struct Stack {
+    slots: [MaybeUninit<UVec2>; STACK_SIZE],
+    len: usize,
+}
+
+impl Stack {
+    #[inline(always)]
+    fn new() -> Stack {
+        Stack { slots: [MaybeUninit::uninit(); STACK_SIZE], len: 0 }
+    }
+}
+
+impl FastStack<UVec2> for Stack {
+    /// Pushes `v`; when full, overwrites the top as obvhs' stack does (a depth its builders
+    /// never produce).
+    #[inline(always)]
+    fn push(&mut self, v: UVec2) {
+        self.slots[self.len] = MaybeUninit::new(v);
+        self.len = (self.len + 1).min(STACK_SIZE - 1);
+    }
+
+    /// Pops the top; the traversal calls it only when the stack is not empty.
+    #[inline(always)]
+    fn pop_fast(&mut self) -> UVec2 {
+        self.pop().unwrap_or_default()
+    }
+
+    #[inline(always)]
+    fn pop(&mut self) -> Option<UVec2> {
+        self.len = self.len.checked_sub(1)?;
+        // SAFETY: slots below `len` were written by `push`.
+        Some(unsafe { self.slots[self.len].assume_init() })
+    }
+
+    #[inline(always)]
+    fn len(&self) -> usize {
+        self.len
+    }
+
+    #[inline(always)]
+    fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    #[inline(always)]
+    fn clear(&mut self) {
+        self.len = 0;
+    }
+}
+
+/// obvhs' `Traversal` (the fields its `traverse!` macro reads) over [`Stack`].
+struct State {
+    stack: Stack,
+    current_group: UVec2,
+    primitive_group: UVec2,
+    oct_inv4: u32,
+    primitive_id: u32,
+    hitmask: u32,
+}
+
+impl State {
+    /// The state at the root of `bvh` for a ray along `direction` (obvhs' `new_traversal`).
+    #[inline(always)]
+    fn new(bvh: &CwBvh, direction: Vec3A) -> State {
+        // The octant, inverted, in each byte: children are visited nearest-octant first.
+        let oct_inv4 = (if direction.x < 0.0 { 0 } else { 0x0404_0404 })
+            | (if direction.y < 0.0 { 0 } else { 0x0202_0202 })
+            | (if direction.z < 0.0 { 0 } else { 0x0101_0101 });
+        State {
+            stack: Stack::new(),
+            current_group: if bvh.nodes.is_empty() { UVec2::ZERO } else { uvec2(0, 0x8000_0000) },
+            primitive_group: UVec2::ZERO,
+            oct_inv4,
+            primitive_id: 0,
+            hitmask: 0,
+        }
+    }
+}
+
+/// [`closest`] with the node test `node_hits` (obvhs' `ray_traverse`).
+#[inline(always)]
+fn closest_with<F: FnMut(&Ray, usize) -> f32>(
+    bvh: &CwBvh,
+    ray: Ray,
+    on_primitive: &mut F,
+    node_hits: impl Fn(&CwBvhNode, &Ray, u32) -> u32,
+) {
+    let mut ray = ray;
+    let mut state = State::new(bvh, ray.direction);
+    let mut node: &CwBvhNode;
+    obvhs::traverse!(bvh, node, state, node_hits(node, &ray, state.oct_inv4), {
+        let t = on_primitive(&ray, state.primitive_id as usize);
+        if t < ray.tmax {
+            ray.tmax = t;
+        }
+    });
+}
+
+/// [`any`] with the node test `node_hits` (obvhs' `ray_traverse_miss`).
+#[inline(always)]
+fn any_with<F: FnMut(&Ray, usize) -> bool>(
+    bvh: &CwBvh,
+    ray: Ray,
+    on_primitive: &mut F,
+    node_hits: impl Fn(&CwBvhNode, &Ray, u32) -> u32,
+) -> bool {
+    let mut state = State::new(bvh, ray.direction);
+    let mut node: &CwBvhNode;
+    obvhs::traverse!(bvh, node, state, node_hits(node, &ray, state.oct_inv4), {
+        if on_primitive(&ray, state.primitive_id as usize) {
+            return true;
+        }
+    });
+    false
 }
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use glam::{UVec2, Vec3A};
+    use glam::Vec3A;
     use obvhs::cwbvh::CwBvh;
     use obvhs::cwbvh::node::CwBvhNode;
     use obvhs::ray::Ray;
@@ -66,32 +193,13 @@ mod avx2 {
     /// [`super::closest`] with the AVX2 node test.
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn closest<F: FnMut(&Ray, usize) -> f32>(bvh: &CwBvh, ray: Ray, on_primitive: &mut F) {
-        let mut ray = ray;
-        let mut state = bvh.new_traversal(ray.direction);
-        let mut node: &CwBvhNode;
-        obvhs::traverse!(bvh, node, state, node_hits(node, &ray, state.oct_inv4), {
-            let t = on_primitive(&ray, state.primitive_id as usize);
-            if t < ray.tmax {
-                ray.tmax = t;
-            }
-        });
+        super::closest_with(bvh, ray, on_primitive, |node, ray, oct| node_hits(node, ray, oct));
     }
 
     /// [`super::any`] with the AVX2 node test.
     #[target_feature(enable = "avx2")]
     pub(super) unsafe fn any<F: FnMut(&Ray, usize) -> bool>(bvh: &CwBvh, ray: Ray, on_primitive: &mut F) -> bool {
-        let mut state = bvh.new_traversal(ray.direction);
-        let mut node: &CwBvhNode;
-        let mut found = false;
-        'traversal: {
-            obvhs::traverse!(bvh, node, state, node_hits(node, &ray, state.oct_inv4), {
-                if on_primitive(&ray, state.primitive_id as usize) {
-                    found = true;
-                    break 'traversal;
-                }
-            });
-        }
-        found
+        super::any_with(bvh, ray, on_primitive, |node, ray, oct| node_hits(node, ray, oct))
     }
 
     /// The 8 quantised coordinates `q` as f32 lanes (exact).
