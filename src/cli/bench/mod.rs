@@ -8,6 +8,10 @@
 //!   interpreter, and compile time against graph size.
 //! - [`bench_render`]: time per sample and error against a high-spp reference for 1–16 layers,
 //!   stochastic vs weighted layer evaluation.
+//!
+//! One file per bench family (`shade`, `render`, `scale`, `charts`, `features`,
+//! `displacement`, `update`); this file keeps what they share: sample points, medians, the
+//! temporary directory and scene loading.
 
 use crate::cli::plot::Series;
 use std::fmt::Write as _;

@@ -248,7 +248,13 @@ fn instancing_report(dir: &Path) -> Result<String, String> {
 // ---- bench charts -----------------------------------------------------------------------------
 
 /// Writes `source` and [`layered_scene`] into `dir` as `name.ash`/`name.usda` and loads them.
-pub(super) fn load_generated(dir: &Path, name: &str, n: usize, source: &str, backend: BackendKind) -> Result<Loaded, String> {
+pub(super) fn load_generated(
+    dir: &Path,
+    name: &str,
+    n: usize,
+    source: &str,
+    backend: BackendKind,
+) -> Result<Loaded, String> {
     let ash = dir.join(format!("{name}.ash"));
     let usda = dir.join(format!("{name}.usda"));
     std::fs::write(&ash, source).map_err(|e| format!("cannot write {}: {e}", ash.display()))?;

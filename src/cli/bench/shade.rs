@@ -411,7 +411,10 @@ fn single_layer_stack(lib: &Library, names: &[&str]) -> Result<ComposedMaterial,
 }
 
 /// Wires, optimises and lowers a composed material.
-pub(super) fn lower_material(lib: &Library, material: &ComposedMaterial) -> Result<(strata::ir::ssa::Module, usize), String> {
+pub(super) fn lower_material(
+    lib: &Library,
+    material: &ComposedMaterial,
+) -> Result<(strata::ir::ssa::Module, usize), String> {
     lower_material_with(lib, material, lower::LowerOptions::default())
 }
 

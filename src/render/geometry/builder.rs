@@ -72,7 +72,7 @@ struct Builder<'s> {
 }
 
 /// As [`build_with`], with a triangle budget other than [`MAX_TRIANGLES`] (for tests).
-fn build_within(
+pub(super) fn build_within(
     stage: &Stage,
     xforms: &[PrimXform],
     options: GeometryOptions,

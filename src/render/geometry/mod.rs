@@ -197,6 +197,7 @@ fn bounds_of(triangles: &[Triangle], shapes: &[Shape]) -> Option<(DVec3, DVec3)>
 
 #[cfg(test)]
 mod tests {
+    use super::builder::build_within;
     use super::*;
     use crate::render::geometry::xform::tests::stage;
 

@@ -1,4 +1,3 @@
-
 use super::*;
 use crate::abi::ClosureKind;
 use crate::render::material::bsdf::BsdfSample;

@@ -609,6 +609,7 @@ fn sphere_hit(p: Vec3, wi: Vec3, c: Vec3, r: f32) -> Option<f32> {
 
 #[cfg(test)]
 mod tests {
+    use super::usd::blackbody_xyz;
     use super::*;
     use crate::render::geometry::xform::{tests::stage, world_transforms};
     use crate::render::sampling::Rng;

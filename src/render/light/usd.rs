@@ -221,7 +221,7 @@ fn cie_xyz(nm: f64) -> DVec3 {
 
 /// CIE XYZ of a blackbody at `kelvin` (Planck's law integrated against [`cie_xyz`], 360–830 nm
 /// in 1 nm steps), in arbitrary units.
-fn blackbody_xyz(kelvin: f64) -> DVec3 {
+pub(super) fn blackbody_xyz(kelvin: f64) -> DVec3 {
     // Second radiation constant c2 = hc/k, in nm·K.
     const C2: f64 = 1.438_776_877e7;
     (360..=830)

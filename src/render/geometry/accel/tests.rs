@@ -1,4 +1,3 @@
-
 use super::*;
 use glam::DMat4;
 use glam::Vec2;
