@@ -127,7 +127,7 @@ struct Reference {
 }
 
 fn references() -> Vec<Reference> {
-    let text = include_str!("../../../tests/fixtures/subdiv/opensubdiv_limits.txt");
+    let text = include_str!("../../../../tests/fixtures/subdiv/opensubdiv_limits.txt");
     let lines: Vec<&str> = text.lines().collect();
     let mut at = 0usize;
     let mut next = || {
