@@ -136,15 +136,15 @@ pub fn bench_features(res: (usize, usize), spp: u32, reps: usize) -> Result<Stri
 }
 
 /// One variant of `bench features`.
-struct FeatureRow {
-    feature: &'static str,
+pub(super) struct FeatureRow {
+    pub(super) feature: &'static str,
     /// Median ns per camera sample.
-    ns: f64,
-    evals: strata::render::integrator::EvalCounts,
-    samples: u64,
+    pub(super) ns: f64,
+    pub(super) evals: strata::render::integrator::EvalCounts,
+    pub(super) samples: u64,
 }
 
-fn measure_features(res: (usize, usize), spp: u32, reps: usize) -> Result<Vec<FeatureRow>, String> {
+pub(super) fn measure_features(res: (usize, usize), spp: u32, reps: usize) -> Result<Vec<FeatureRow>, String> {
     let dir = TempDir::new()?;
     let texture = dir.0.join("texture.exr");
     exr::prelude::write_rgb_file(&texture, 4, 4, |x, y| (x as f32 / 4.0, y as f32 / 4.0, 0.5))

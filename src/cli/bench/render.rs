@@ -80,7 +80,7 @@ pub fn bench_render(scene: Option<&Path>, spp: u32, res: (usize, usize)) -> Resu
     render_report(scene, spp, res, &RENDER_LAYERS, 5)
 }
 
-fn render_report(
+pub(super) fn render_report(
     scene: Option<&Path>,
     spp: u32,
     res: (usize, usize),

@@ -438,11 +438,11 @@ fn lower_material_with(
 
 /// What one `bench shade` run measures (the tests use tiny values).
 #[derive(Clone, Debug)]
-struct ShadeOptions {
-    points: usize,
-    reps: usize,
-    sizes: Vec<usize>,
-    compile_reps: usize,
+pub(super) struct ShadeOptions {
+    pub(super) points: usize,
+    pub(super) reps: usize,
+    pub(super) sizes: Vec<usize>,
+    pub(super) compile_reps: usize,
 }
 
 /// `strata bench shade [SCENE --prim PATH]`: per-shading-point cost of a composed material,
@@ -453,7 +453,7 @@ pub fn bench_shade(scene: Option<&Path>, prim: Option<&str>) -> Result<String, S
     shade_report(scene, prim, &options)
 }
 
-fn shade_report(scene: Option<&Path>, prim: Option<&str>, o: &ShadeOptions) -> Result<String, String> {
+pub(super) fn shade_report(scene: Option<&Path>, prim: Option<&str>, o: &ShadeOptions) -> Result<String, String> {
     let mut out = String::new();
     let (lib, material, label) = match scene {
         None => {
@@ -609,7 +609,7 @@ pub(super) fn time_contenders(
 }
 
 /// Nodes of the arithmetic-only material.
-const ARITHMETIC_NODES: usize = 64;
+pub(super) const ARITHMETIC_NODES: usize = 64;
 
 /// A mask computed by `n` arithmetic nodes (`math` and `mix_float` over expressions of `P`,
 /// no runtime-library calls): where the interpreter's own dispatch cost shows, which the
@@ -713,7 +713,7 @@ fn arithmetic_report(points: &[Globals], reps: usize) -> Result<String, String> 
 }
 
 /// Loads `source` and composes its substance `name` as a one-layer material.
-fn single_substance(source: &str, name: &str) -> Result<(Library, ComposedMaterial), String> {
+pub(super) fn single_substance(source: &str, name: &str) -> Result<(Library, ComposedMaterial), String> {
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
     let (lib, _) = Library::from_text(&format!("{name}.ash"), source, &mut sources, &mut diags);
