@@ -1,5 +1,5 @@
 //! Subdivision creases and corners read from USD (`tests/in/subdiv/creased_cubes.usda`): the
-//! attributes reach the subdivision (`src/render/geometry/subdiv.rs` holds the rule-by-rule tests).
+//! attributes reach the subdivision (`src/render/geometry/subdiv/tests.rs` holds the rule-by-rule tests).
 
 use std::path::Path;
 use strata::diag::{Diagnostics, SourceMap};

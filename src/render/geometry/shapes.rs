@@ -292,7 +292,7 @@ impl Shape {
         let p32 = world.as_vec3();
         SurfaceHit {
             p: p32,
-            p_error: p32.abs() * crate::render::geometry::accel::gamma(2) + f64_error.as_vec3(),
+            p_error: p32.abs() * gamma(2) + f64_error.as_vec3(),
             n: n.as_vec3(),
             uv: Vec2::new(u as f32, v as f32),
             dpdu: self.to_world.transform_vector3(dpdu).as_vec3(),
@@ -390,10 +390,35 @@ pub fn transformed_box(m: &DMat4, lo: DVec3, hi: DVec3) -> (DVec3, DVec3) {
     (min, max)
 }
 
+/// `γ(n) = n ε / (1 − n ε)`, ε = 2⁻²⁴ (half an f32 ULP at 1): the bound on the relative
+/// error of `n` successive f32 operations (Higham; pbrt-v4 `gamma`).
+#[inline]
+pub fn gamma(n: i32) -> f32 {
+    let e = f32::EPSILON * 0.5;
+    (n as f32 * e) / (1.0 - n as f32 * e)
+}
+
+/// A spawn point for a ray leaving a surface point `p` whose components are uncertain by
+/// `p_error`, towards the side of the geometric normal `n` (pointing to where the ray goes):
+/// `p` moved along `n` past the error box, then rounded away from the surface (pbrt-v4's
+/// `OffsetRayOrigin`). The offset is as small as the error bound allows, at any scale.
+pub fn offset_ray_origin(p: Vec3, p_error: Vec3, n: Vec3) -> Vec3 {
+    let d = n.abs().dot(p_error);
+    let offset = n * d;
+    let mut po = p + offset;
+    for i in 0..3 {
+        if offset[i] > 0.0 {
+            po[i] = po[i].next_up();
+        } else if offset[i] < 0.0 {
+            po[i] = po[i].next_down();
+        }
+    }
+    po
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::geometry::accel::offset_ray_origin;
 
     fn sphere(m: DMat4) -> Shape {
         Shape::new(Part::Sphere { r: 1.0, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY }, m, 0).unwrap()
@@ -471,7 +496,7 @@ mod tests {
             let n = Vec3::new(a.cos(), a.sin(), 0.0);
             let p = Vec3::new(3.0, 0.0, 0.0) + n;
             let inward = (-n + n.any_orthonormal_vector() * 0.5).normalize();
-            let start = offset_ray_origin(p, p.abs() * crate::render::geometry::accel::gamma(3), -n);
+            let start = offset_ray_origin(p, p.abs() * gamma(3), -n);
             let t = s.intersect(start, inward, 0.0, f32::INFINITY).expect("far side");
             // The chord at this angle: 2 cos(angle to the normal).
             assert!((t - 2.0 * inward.dot(-n)).abs() < 1e-4, "{t}");

@@ -5,10 +5,13 @@
 //! memory grows with unique geometry, not with copies. A scene without instances has no top
 //! level at all: its rays traverse the world BLAS only, as a single-level BVH would.
 //!
-//! Each BVH is an obvhs compressed-wide BVH (CWBVH) over triangles and shapes alike, with a
-//! watertight ray/triangle test (Woop, Benthin & Wald 2013), so rays through shared edges and
-//! vertices never slip between triangles, and robust ray origins so secondary rays do not
-//! re-hit their own surface.
+//! Each BVH is an obvhs compressed-wide BVH (CWBVH: 8 children per 80-byte node, child boxes
+//! quantised to 8 bits, children visited in ray-octant order, occlusion stopping at the first
+//! hit) over triangles and shapes alike, traversed with an AVX2 node test where the CPU has
+//! one (`wide.rs`, chosen at run time), with a watertight ray/triangle test (Woop, Benthin &
+//! Wald 2013), so rays through shared edges and vertices never slip between triangles, and
+//! robust ray origins so secondary rays do not re-hit their own surface. `benches/bvh.rs`
+//! measures it against Embree.
 //!
 //! obvhs culls every box whose exit distance along the ray is below an absolute 1e-4
 //! (`cwbvh::node::EPSILON`, applied instead of the ray's `tmin`): in a scene a few 1e-4 units
@@ -21,7 +24,7 @@ use crate::render::geometry::Triangle;
 use crate::render::geometry::primvars::PrimvarRef;
 use crate::render::geometry::shapes::Shape;
 use crate::render::material::frame::Frame;
-use glam::{DAffine3, DMat3, DMat4, Vec2, Vec3, Vec3A};
+use glam::{DAffine3, DMat3, Vec2, Vec3, Vec3A};
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::Bvh2;
 use obvhs::bvh2::node::Bvh2Node;
@@ -30,10 +33,17 @@ use obvhs::cwbvh::CwBvh;
 use obvhs::cwbvh::builder::build_cwbvh;
 use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
 use obvhs::ploc::{PlocBuilder, PlocSearchDistance, SortPrecision};
-use obvhs::ray::{Ray, RayHit};
+use obvhs::ray::Ray;
 use obvhs::{Boundable, BvhBuildParams};
 use std::collections::HashMap;
 use std::time::Duration;
+
+mod wide;
+
+// Defined below the BVH (geometry produces instances; shapes bound their own hit points), so
+// the render modules import in one direction: accel → geometry → shapes.
+pub use crate::render::geometry::InstanceDesc;
+pub use crate::render::geometry::shapes::{gamma, offset_ray_origin};
 
 /// [`Hit::instance`] of a hit on the world's (un-instanced) geometry.
 pub const WORLD: u32 = u32::MAX;
@@ -128,6 +138,9 @@ impl BvhSpace {
             (build_cwbvh(&boxes, params, &mut Duration::default()), boxes.len())
         } else {
             let (mut bvh2, largest) = build_batched(&boxes);
+            // The boxes are in the nodes now: freed before the optimiser and the conversion
+            // allocate theirs (build peak memory).
+            drop(boxes);
             ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
             (bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false), largest)
         };
@@ -184,16 +197,27 @@ impl BvhSpace {
     }
 }
 
-/// One bottom-level acceleration structure: a BVH over object-space triangles and shapes.
+/// The most primitives a BLAS tests one by one instead of building a BVH over them: a ray
+/// then meets them with no box test, traversal state or stack, so a scene of one triangle or
+/// one sphere pays for its primitives only.
+pub const FLAT_PRIMITIVES: usize = 8;
+
+/// One bottom-level acceleration structure: a BVH over object-space triangles and shapes, or,
+/// for at most [`FLAT_PRIMITIVES`], a list of them.
 pub struct Blas {
+    /// `None` when the BLAS is flat: every primitive in `group_members` is tested.
     bvh: Option<BvhSpace>,
-    /// Triangle positions, the only triangle data the intersection loop reads.
+    /// Triangle positions, the only triangle data the intersection loop reads. (A second
+    /// copy in the BVH's leaf order, so a leaf's triangles are adjacent as in Embree's leaves,
+    /// measured no faster beyond noise on 3·10⁵ triangles, at 36 more bytes per triangle.)
     positions: Vec<[Vec3; 3]>,
     attrs: Vec<TriangleAttrs>,
     shapes: Vec<Shape>,
     /// The BVH's primitives are groups of primitives with bit-identical bounding boxes:
-    /// group `g` holds `group_members[group_start[g]..group_start[g + 1]]`, primitive indices
-    /// as in [`Hit::index`].
+    /// BVH primitive `id` holds `group_members[group_start[id]..group_start[id + 1]]`,
+    /// primitive indices as in [`Hit::index`]. Groups are stored in the BVH's leaf order, so
+    /// a leaf's groups are adjacent and no index table lies between a leaf and its members.
+    /// A flat BLAS has one group: its finite primitives.
     group_start: Vec<u32>,
     group_members: Vec<u32>,
     /// Object-space bounds `(min, max)` of the finite primitives; `None` when there are none.
@@ -222,7 +246,10 @@ fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (O
     // Primitives with bit-identical boxes (copies of one mesh at one place) become one BVH
     // primitive: PLOC merges only mutually-nearest pairs, and among n equal boxes every
     // pass merges one pair, so n coincident copies cost O(n²) to build.
-    let mut group_of_box: HashMap<[u32; 6], u32> = HashMap::new();
+    // FNV, not std's SipHash: keys are our own boxes, and hashing was a sixth of the build
+    // of a 10⁶-triangle mesh.
+    let mut group_of_box: HashMap<[u32; 6], u32, fnv::FnvBuildHasher> =
+        HashMap::with_capacity_and_hasher(count, fnv::FnvBuildHasher::default());
     let mut boxes: Vec<Padded> = Vec::new();
     let mut group_of_primitive: Vec<u32> = Vec::with_capacity(count);
     for (lo, hi) in bounds {
@@ -244,6 +271,9 @@ fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (O
     for g in 0..boxes.len() {
         group_start[g + 1] += group_start[g];
     }
+    // The box table and the per-primitive groups are freed before the BVH is built: on a
+    // mesh of distinct boxes the table is the largest allocation here (build peak memory).
+    drop(group_of_box);
     let mut next = group_start.clone();
     let mut group_members = vec![0u32; group_start[boxes.len()] as usize];
     for (index, &g) in group_of_primitive.iter().enumerate() {
@@ -252,7 +282,19 @@ fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (O
             next[g as usize] += 1;
         }
     }
-    (BvhSpace::build(boxes), group_start, group_members)
+    drop((next, group_of_primitive));
+    let Some(mut space) = BvhSpace::build(boxes) else { return (None, group_start, group_members) };
+    // The groups in leaf order (obvhs' primitive ids); the id-to-group table is then unused.
+    let leaf_order = std::mem::take(&mut space.bvh.primitive_indices);
+    let mut leaf_start = Vec::with_capacity(leaf_order.len() + 1);
+    let mut leaf_members = Vec::with_capacity(group_members.len());
+    leaf_start.push(0);
+    for &g in &leaf_order {
+        let g = g as usize;
+        leaf_members.extend_from_slice(&group_members[group_start[g] as usize..group_start[g + 1] as usize]);
+        leaf_start.push(leaf_members.len() as u32);
+    }
+    (Some(space), leaf_start, leaf_members)
 }
 
 impl Blas {
@@ -260,18 +302,10 @@ impl Blas {
     /// Primitives with non-finite bounds are kept (indices stay valid) but can never be hit;
     /// the geometry stage reports them before this.
     pub fn new(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Blas {
-        let tri_bounds = |t: &Triangle| (t.p[0].min(t.p[1]).min(t.p[2]), t.p[0].max(t.p[1]).max(t.p[2]));
-        let mut bounds: Option<(Vec3, Vec3)> = None;
-        for (lo, hi) in triangles.iter().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds)) {
-            if lo.is_finite() && hi.is_finite() {
-                bounds = Some(bounds.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
-            }
-        }
-        let count = triangles.len() + shapes.len();
-        let (bvh, group_start, group_members) =
-            build_grouped(triangles.iter().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds)), count);
-        let positions = triangles.iter().map(|t| t.p).collect();
-        let attrs = triangles
+        // The triangles are split into what the traversal reads and what a hit reads, and
+        // freed, before the BVH is built (build peak memory).
+        let positions: Vec<[Vec3; 3]> = triangles.iter().map(|t| t.p).collect();
+        let attrs: Vec<TriangleAttrs> = triangles
             .iter()
             .map(|t| TriangleAttrs {
                 n: t.n,
@@ -281,6 +315,27 @@ impl Blas {
                 primvars: t.primvars,
             })
             .collect();
+        drop(triangles);
+        let tri_bounds = |p: &[Vec3; 3]| (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+        let mut bounds: Option<(Vec3, Vec3)> = None;
+        for (lo, hi) in positions.iter().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds)) {
+            if lo.is_finite() && hi.is_finite() {
+                bounds = Some(bounds.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
+            }
+        }
+        let count = positions.len() + shapes.len();
+        let all_bounds = positions.iter().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds));
+        let (bvh, group_start, group_members) = if count <= FLAT_PRIMITIVES {
+            // Primitives with non-finite bounds are left out, as the BVH leaves them out.
+            let finite: Vec<u32> = all_bounds
+                .enumerate()
+                .filter(|(_, (lo, hi))| lo.is_finite() && hi.is_finite())
+                .map(|(i, _)| i as u32)
+                .collect();
+            (None, vec![0, finite.len() as u32], finite)
+        } else {
+            build_grouped(all_bounds, count)
+        };
         Blas { bvh, positions, attrs, shapes, group_start, group_members, bounds }
     }
 
@@ -330,46 +385,43 @@ impl Blas {
         }
     }
 
-    /// `(t, b1, b2)` of the ray against primitive `index`.
-    #[inline]
-    fn hit_primitive(
-        &self,
-        pre: &RayPre,
-        o: Vec3,
-        d: Vec3,
-        index: u32,
-        tmin: f32,
-        tmax: f32,
-    ) -> Option<(f32, f32, f32)> {
-        let i = index as usize;
-        match self.positions.get(i) {
-            Some(p) => pre.intersect(p, tmin, tmax),
-            None => self.shapes[i - self.positions.len()].intersect(o, d, tmin, tmax).map(|t| (t, 0.0, 0.0)),
+    /// `(t, b1, b2)` of the ray against the primitive in leaf slot `k` (an index into
+    /// `group_members`).
+    #[inline(always)]
+    fn hit_slot(&self, pre: &RayPre, o: Vec3, d: Vec3, k: usize, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+        let i = self.group_members[k] as usize;
+        if let Some(p) = self.positions.get(i) {
+            pre.intersect(p, tmin, tmax)
+        } else {
+            self.shapes[i - self.positions.len()].intersect(o, d, tmin, tmax).map(|t| (t, 0.0, 0.0))
         }
     }
 
-    /// The primitives of BVH primitive `id`.
+    /// The leaf slots (indices into `group_members`) of BVH primitive `id`.
     #[inline]
-    fn group(&self, bvh: &CwBvh, id: usize) -> &[u32] {
-        let g = bvh.primitive_indices[id] as usize;
-        &self.group_members[self.group_start[g] as usize..self.group_start[g + 1] as usize]
+    fn group(&self, id: usize) -> std::ops::Range<usize> {
+        self.group_start[id] as usize..self.group_start[id + 1] as usize
+    }
+
+    /// Whether the BLAS holds no primitive that a ray can hit.
+    fn is_empty(&self) -> bool {
+        self.group_members.is_empty()
     }
 
     /// The closest hit `(t, index, b1, b2)` of `o + t d`, `t` in `(tmin, tmax)`; `d` need
     /// not be unit length (object-space rays are not), and `t` is in its units.
     #[inline]
     fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32, f32, f32)> {
-        let space = self.bvh.as_ref()?;
+        let Some(space) = self.bvh.as_ref() else { return self.intersect_flat(o, d, tmin, tmax) };
         let pre = RayPre::new(o, d);
         let (ray, k) = space.ray(o, d, tmin, tmax)?;
         let mut best = None;
-        let mut hit = RayHit::none();
-        space.bvh.ray_traverse(ray, &mut hit, |r, id| {
+        wide::closest(&space.bvh, ray, |r, id| {
             let mut closest = unscale(r.tmax, k, tmax);
             let mut found = false;
-            for &index in self.group(&space.bvh, id) {
-                if let Some((t, b1, b2)) = self.hit_primitive(&pre, o, d, index, tmin, closest) {
-                    best = Some((t, index, b1, b2));
+            for k in self.group(id) {
+                if let Some((t, b1, b2)) = self.hit_slot(&pre, o, d, k, tmin, closest) {
+                    best = Some((t, self.group_members[k], b1, b2));
                     closest = t;
                     found = true;
                 }
@@ -379,19 +431,39 @@ impl Blas {
         best
     }
 
+    /// [`Blas::intersect`] without a BVH: every primitive tested.
+    #[inline]
+    fn intersect_flat(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32, f32, f32)> {
+        if self.is_empty() {
+            return None;
+        }
+        let pre = RayPre::new(o, d);
+        let mut best = None;
+        let mut closest = tmax;
+        for k in 0..self.group_members.len() {
+            if let Some((t, b1, b2)) = self.hit_slot(&pre, o, d, k, tmin, closest) {
+                best = Some((t, self.group_members[k], b1, b2));
+                closest = t;
+            }
+        }
+        best
+    }
+
     /// Whether anything lies on `o + t d` within `(tmin, tmax)`.
     #[inline]
     fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
-        let Some(space) = self.bvh.as_ref() else { return false };
+        let Some(space) = self.bvh.as_ref() else {
+            if self.is_empty() {
+                return false;
+            }
+            let pre = RayPre::new(o, d);
+            return (0..self.group_members.len()).any(|k| self.hit_slot(&pre, o, d, k, tmin, tmax).is_some());
+        };
         let pre = RayPre::new(o, d);
         let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return false };
-        !space.bvh.ray_traverse_miss(ray, |r, id| {
+        wide::any(&space.bvh, ray, |r, id| {
             let tmax = unscale(r.tmax, k, tmax);
-            self.group(&space.bvh, id)
-                .iter()
-                .find_map(|&index| self.hit_primitive(&pre, o, d, index, tmin, tmax))
-                // Any hit occludes; 0 ends the traversal.
-                .map_or(f32::INFINITY, |_| 0.0)
+            self.group(id).any(|k| self.hit_slot(&pre, o, d, k, tmin, tmax).is_some())
         })
     }
 
@@ -499,18 +571,6 @@ pub(crate) fn tangents(p: [Vec3; 3], uv: [Vec2; 3], n: Vec3) -> (Vec3, Vec3) {
     (f.t, f.b)
 }
 
-/// A prototype placed in the world.
-#[derive(Clone, Copy, Debug)]
-pub struct InstanceDesc {
-    /// Object (prototype) space to world.
-    pub to_world: DMat4,
-    /// Index of the prototype's BLAS.
-    pub prototype: u32,
-    /// Where the instance's prim table starts in the instance prim table: prototype-local
-    /// prim `j` of this instance is the renderable prim `instance_prims[prims + j]`.
-    pub prims: u32,
-}
-
 /// An instance as the traversal uses it.
 #[derive(Clone, Copy, Debug)]
 struct Instance {
@@ -590,7 +650,7 @@ impl Accel {
 
     /// Number of bottom-level structures in use: the world's (when not empty) and the prototypes'.
     pub fn blas_count(&self) -> usize {
-        usize::from(self.world.bvh.is_some()) + self.prototypes.len()
+        usize::from(!self.world.is_empty()) + self.prototypes.len()
     }
 
     /// Number of instances in the top level.
@@ -631,9 +691,8 @@ impl Accel {
         let Some(space) = &self.tlas else { return best };
         let tmax = best.map_or(tmax, |h| h.t);
         let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return best };
-        let mut hit = RayHit::none();
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
-        space.bvh.ray_traverse(ray, &mut hit, |r, id| {
+        wide::closest(&space.bvh, ray, |r, id| {
             let i = space.bvh.primitive_indices[id];
             let inst = &self.instances[i as usize];
             let oo = inst.to_object.transform_point3(od).as_vec3();
@@ -664,16 +723,12 @@ impl Accel {
         let Some(space) = &self.tlas else { return false };
         let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return false };
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
-        !space.bvh.ray_traverse_miss(ray, |r, id| {
+        wide::any(&space.bvh, ray, |r, id| {
             let inst = &self.instances[space.bvh.primitive_indices[id] as usize];
             let oo = inst.to_object.transform_point3(od).as_vec3();
             let ob = inst.to_object.transform_vector3(dd).as_vec3();
             let finite = oo.is_finite() && ob.is_finite() && ob != Vec3::ZERO;
-            if finite && self.prototypes[inst.prototype as usize].occluded(oo, ob, tmin, unscale(r.tmax, k, tmax)) {
-                0.0
-            } else {
-                f32::INFINITY
-            }
+            finite && self.prototypes[inst.prototype as usize].occluded(oo, ob, tmin, unscale(r.tmax, k, tmax))
         })
     }
 
@@ -737,45 +792,24 @@ impl Accel {
 /// O(n log n) whatever the geometry.
 pub const PLOC_BATCH: usize = 128;
 
+/// How many PLOC batches are built in parallel before they are stitched into the tree.
+const PARALLEL_BATCHES: usize = 256;
+
 /// A BVH2 over `boxes`: median splits of the centroids along their widest axis down to
-/// [`PLOC_BATCH`] primitives, PLOC below. Also returns the largest PLOC batch.
+/// [`PLOC_BATCH`] primitives, PLOC below. Also returns the largest PLOC batch. The splits are
+/// made first; the batches, independent of each other, are then built in parallel (rayon)
+/// and stitched under their split nodes.
 fn build_batched(boxes: &[Padded]) -> (Bvh2, usize) {
+    use rayon::prelude::*;
     let mut nodes = vec![Bvh2Node::default()];
-    let mut primitive_indices: Vec<u32> = Vec::with_capacity(boxes.len());
     let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
-    let mut largest = 0;
-    let mut builder = PlocBuilder::with_capacity(PLOC_BATCH);
-    // The traversal stacks obvhs sizes from it must hold the whole depth.
-    let mut max_depth = 0;
-    // (node slot, range of `order`, depth of the slot)
+    // (node slot, range of `order`, depth of the slot) of each batch, in split order.
+    let mut batches: Vec<(usize, std::ops::Range<usize>, usize)> = Vec::new();
     let mut todo = vec![(0usize, 0..order.len(), 0usize)];
     while let Some((slot, range, depth)) = todo.pop() {
         let members = &mut order[range.clone()];
         if members.len() <= PLOC_BATCH {
-            largest = largest.max(members.len());
-            let batch: Vec<Padded> = members.iter().map(|&i| Padded(boxes[i as usize].0)).collect();
-            let sub = builder.build(
-                PlocSearchDistance::Medium,
-                &batch,
-                (0..batch.len() as u32).collect(),
-                SortPrecision::U64,
-                3,
-            );
-            // The batch's root goes to `slot`, its other nodes after the nodes so far (sibling
-            // pairs stay adjacent); its leaves index the shared primitive list.
-            max_depth = max_depth.max(depth + sub.max_depth);
-            let base = nodes.len() as u32;
-            let prim_base = primitive_indices.len() as u32;
-            let place = |j: u32| if j == 0 { slot as u32 } else { base + j - 1 };
-            primitive_indices.extend(sub.primitive_indices.iter().map(|&p| members[p as usize]));
-            let mut moved = sub.nodes.iter().map(|n| {
-                let first = if n.is_leaf() { prim_base + n.first_index } else { place(n.first_index) };
-                Bvh2Node::new(*n.aabb(), n.prim_count, first)
-            });
-            if let Some(root) = moved.next() {
-                nodes[slot] = root;
-            }
-            nodes.extend(moved);
+            batches.push((slot, range, depth));
             continue;
         }
         let mut bounds = Aabb::empty();
@@ -798,6 +832,48 @@ fn build_batched(boxes: &[Padded]) -> (Bvh2, usize) {
         todo.push((left, range.start..range.start + half, depth + 1));
         todo.push((left + 1, range.start + half..range.end, depth + 1));
     }
+    // One primitive per PLOC leaf: the tree has exactly 2n − 1 nodes, allocated once.
+    nodes.reserve_exact((2 * boxes.len()).saturating_sub(1 + nodes.len()));
+    let mut primitive_indices: Vec<u32> = Vec::with_capacity(boxes.len());
+    let mut largest = 0;
+    // The traversal stacks obvhs sizes from it must hold the whole depth.
+    let mut max_depth = 0;
+    // The batches are built in parallel a window at a time and stitched as each window ends,
+    // so the built-but-unstitched trees are a few MB, not a copy of the whole tree.
+    let built = batches.chunks(PARALLEL_BATCHES).flat_map(|window| {
+        let trees: Vec<Bvh2> = window
+            .par_iter()
+            .map_init(
+                || PlocBuilder::with_capacity(PLOC_BATCH),
+                |builder, (_, range, _)| {
+                    let batch: Vec<Padded> =
+                        order[range.clone()].iter().map(|&i| Padded(boxes[i as usize].0)).collect();
+                    let indices = (0..batch.len() as u32).collect();
+                    builder.build(PlocSearchDistance::Medium, &batch, indices, SortPrecision::U64, 3)
+                },
+            )
+            .collect();
+        window.iter().cloned().zip(trees)
+    });
+    for ((slot, range, depth), sub) in built {
+        let members = &order[range];
+        largest = largest.max(members.len());
+        // The batch's root goes to `slot`, its other nodes after the nodes so far (sibling
+        // pairs stay adjacent); its leaves index the shared primitive list.
+        max_depth = max_depth.max(depth + sub.max_depth);
+        let base = nodes.len() as u32;
+        let prim_base = primitive_indices.len() as u32;
+        let place = |j: u32| if j == 0 { slot as u32 } else { base + j - 1 };
+        primitive_indices.extend(sub.primitive_indices.iter().map(|&p| members[p as usize]));
+        let mut moved = sub.nodes.iter().map(|n| {
+            let first = if n.is_leaf() { prim_base + n.first_index } else { place(n.first_index) };
+            Bvh2Node::new(*n.aabb(), n.prim_count, first)
+        });
+        if let Some(root) = moved.next() {
+            nodes[slot] = root;
+        }
+        nodes.extend(moved);
+    }
     (Bvh2 { nodes, primitive_indices, max_depth, ..Default::default() }, largest)
 }
 
@@ -808,14 +884,6 @@ impl Boundable for Padded {
     fn aabb(&self) -> Aabb {
         self.0
     }
-}
-
-/// `γ(n) = n ε / (1 − n ε)`, ε = 2⁻²⁴ (half an f32 ULP at 1): the bound on the relative
-/// error of `n` successive f32 operations (Higham; pbrt-v4 `gamma`).
-#[inline]
-pub fn gamma(n: i32) -> f32 {
-    let e = f32::EPSILON * 0.5;
-    (n as f32 * e) / (1.0 - n as f32 * e)
 }
 
 /// Per-ray precomputation of the watertight test (pbrt-v4's, after Woop, Benthin & Wald
@@ -851,11 +919,12 @@ impl RayPre {
     #[inline]
     fn intersect(&self, p: &[Vec3; 3], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
         let [kx, ky, kz] = self.k;
-        // Translate to the ray origin, permute, shear.
+        // Translate to the ray origin, permute, shear. The permutation indexes a 4-array
+        // with indices below 4: loads, no branches and no bounds checks.
         let shear = |v: Vec3| {
-            let v = v - self.o;
-            let z = v[kz];
-            (v[kx] + self.s.x * z, v[ky] + self.s.y * z, z)
+            let v = (v - self.o).extend(0.0).to_array();
+            let z = v[kz & 3];
+            (v[kx & 3] + self.s.x * z, v[ky & 3] + self.s.y * z, z)
         };
         let (x0, y0, z0) = shear(p[0]);
         let (x1, y1, z1) = shear(p[1]);
@@ -906,264 +975,5 @@ impl RayPre {
     }
 }
 
-/// A spawn point for a ray leaving a surface point `p` whose components are uncertain by
-/// `p_error`, towards the side of the geometric normal `n` (pointing to where the ray goes):
-/// `p` moved along `n` past the error box, then rounded away from the surface (pbrt-v4's
-/// `OffsetRayOrigin`). The offset is as small as the error bound allows, at any scale.
-pub fn offset_ray_origin(p: Vec3, p_error: Vec3, n: Vec3) -> Vec3 {
-    let d = n.abs().dot(p_error);
-    let offset = n * d;
-    let mut po = p + offset;
-    for i in 0..3 {
-        if offset[i] > 0.0 {
-            po[i] = po[i].next_up();
-        } else if offset[i] < 0.0 {
-            po[i] = po[i].next_down();
-        }
-    }
-    po
-}
-
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use glam::Vec2;
-
-    fn tri(p: [Vec3; 3]) -> Triangle {
-        Triangle { p, n: [Vec3::Z; 3], uv: [Vec2::ZERO; 3], prim: 0, has_uv: false, primvars: Default::default() }
-    }
-
-    #[test]
-    fn closest_hit_and_barycentrics() {
-        let near = tri([Vec3::new(-1.0, -1.0, 1.0), Vec3::new(1.0, -1.0, 1.0), Vec3::new(-1.0, 1.0, 1.0)]);
-        let far = tri([Vec3::new(-5.0, -5.0, 3.0), Vec3::new(5.0, -5.0, 3.0), Vec3::new(-5.0, 5.0, 3.0)]);
-        let accel = Accel::new(vec![far, near], vec![]);
-        let hit = accel.intersect(Vec3::new(-0.5, -0.5, 0.0), Vec3::Z, 0.0, f32::INFINITY).unwrap();
-        assert_eq!(hit.index, 1);
-        assert!((hit.t - 1.0).abs() < 1e-6);
-        assert!((hit.b1 - 0.25).abs() < 1e-6 && (hit.b2 - 0.25).abs() < 1e-6);
-        assert!(accel.occluded(Vec3::new(-0.5, -0.5, 0.0), Vec3::Z, 0.0, 2.0));
-        assert!(!accel.occluded(Vec3::new(-0.5, -0.5, 0.0), Vec3::Z, 0.0, 0.5));
-        assert!(accel.intersect(Vec3::new(-0.5, -0.5, 0.0), -Vec3::Z, 0.0, f32::INFINITY).is_none());
-    }
-
-    /// obvhs culls boxes left within 1e-4 of the ray origin (its `EPSILON`, in whatever
-    /// units the BVH is built in); each BVH's space is scaled so that this is no distance at
-    /// any scene scale. A floor hit from 1e-5 of the scene's size above, at scales 1e-9 to
-    /// 1e5, directly and through an instance (object space at unit size, the top level at `s`).
-    #[test]
-    fn hits_close_to_the_origin_at_every_scale() {
-        for s in [1e-9f32, 1e-6, 1e-3, 1.0, 1e5] {
-            let floor = |k: f32| {
-                [
-                    tri([Vec3::new(-k, -k, 0.0), Vec3::new(k, -k, 0.0), Vec3::new(k, k, 0.0)]),
-                    tri([Vec3::new(-k, -k, 0.0), Vec3::new(k, k, 0.0), Vec3::new(-k, k, 0.0)]),
-                ]
-            };
-            let direct = Accel::new(floor(s).to_vec(), vec![]);
-            let prototype = Blas::new(floor(1.0).to_vec(), vec![]);
-            let desc =
-                InstanceDesc { to_world: DMat4::from_scale(glam::DVec3::splat(s as f64)), prototype: 0, prims: 0 };
-            let instanced = Accel::with_instances(Blas::new(vec![], vec![]), vec![prototype], &[desc], vec![0]);
-            for (name, accel) in [("direct", &direct), ("instanced", &instanced)] {
-                for h in [1e-5f32, 0.3] {
-                    let o = Vec3::new(0.1 * s, 0.2 * s, h * s);
-                    let hit = accel.intersect(o, -Vec3::Z, 0.0, f32::INFINITY);
-                    let t = hit.map(|h| h.t).unwrap_or(f32::NAN);
-                    assert!((t / (h * s) - 1.0).abs() < 1e-5, "{name}, scale {s:e}, height {h}: t = {t}");
-                    assert!(accel.occluded(o, -Vec3::Z, 0.0, 2.0 * h * s), "{name}, scale {s:e}, height {h}");
-                    assert!(!accel.occluded(o, -Vec3::Z, 0.0, 0.5 * h * s), "{name}, scale {s:e}, height {h}");
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn shared_edge_is_watertight() {
-        // Two triangles sharing the diagonal of a square; rays exactly on the diagonal must hit.
-        let a = tri([Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0)]);
-        let b = tri([Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0), Vec3::new(0.0, 1.0, 0.0)]);
-        let accel = Accel::new(vec![a, b], vec![]);
-        for i in 1..100 {
-            let x = i as f32 / 100.0;
-            let o = Vec3::new(x, x, 1.0);
-            assert!(accel.intersect(o, -Vec3::Z, 0.0, f32::INFINITY).is_some(), "leak at {x}");
-        }
-    }
-
-    #[test]
-    fn coincident_copies_build_fast_and_the_first_closest_copy_is_hit() {
-        // Copies of one triangle have identical boxes, on which PLOC merged one pair per pass:
-        // 20 000 copies took minutes. Grouped, they are one BVH primitive.
-        let t = tri([Vec3::new(-1.0, -1.0, 2.0), Vec3::new(1.0, -1.0, 2.0), Vec3::new(0.0, 1.0, 2.0)]);
-        let nearer = tri([Vec3::new(-1.0, -1.0, 1.0), Vec3::new(1.0, -1.0, 1.0), Vec3::new(0.0, 1.0, 1.0)]);
-        let mut triangles = vec![t; 20_000];
-        triangles.push(nearer);
-        triangles.extend(vec![nearer; 20_000]);
-        let accel = Accel::new(triangles, vec![]);
-        let hit = accel.intersect(Vec3::ZERO, Vec3::Z, 0.0, f32::INFINITY).expect("hit");
-        assert_eq!(hit.index, 20_000, "the first of the coincident nearest triangles");
-        assert!(accel.occluded(Vec3::ZERO, Vec3::Z, 0.0, 1.5));
-        assert!(!accel.occluded(Vec3::ZERO, Vec3::Z, 0.0, 0.5));
-    }
-
-    #[test]
-    fn non_finite_triangles_are_never_hit_and_never_reach_the_builder() {
-        let bad = tri([Vec3::new(f32::NAN, 0.0, 1.0), Vec3::new(f32::INFINITY, 0.0, 1.0), Vec3::Y]);
-        let good = tri([Vec3::new(-1.0, -1.0, 1.0), Vec3::new(1.0, -1.0, 1.0), Vec3::new(0.0, 1.0, 1.0)]);
-        let accel = Accel::new(vec![bad, good], vec![]);
-        assert_eq!(accel.intersect(Vec3::ZERO, Vec3::Z, 0.0, f32::INFINITY).map(|h| h.index), Some(1));
-        let only_bad = Accel::new(vec![bad], vec![]);
-        assert!(only_bad.intersect(Vec3::ZERO, Vec3::Z, 0.0, f32::INFINITY).is_none());
-        assert_eq!(only_bad.triangle_count(), 1);
-    }
-
-    #[test]
-    fn offset_origin_escapes_surface() {
-        let t = tri([Vec3::new(-100.0, -100.0, 7.3), Vec3::new(100.0, -100.0, 7.3), Vec3::new(0.0, 100.0, 7.3)]);
-        let accel = Accel::new(vec![t], vec![]);
-        let hit = accel.intersect(Vec3::new(0.123, 0.456, 20.0), -Vec3::Z, 0.0, f32::INFINITY).unwrap();
-        let g = accel.surface(Vec3::new(0.123, 0.456, 20.0), -Vec3::Z, &hit);
-        assert!(g.p_error.max_element() > 0.0 && g.p_error.max_element() < 1e-4, "{}", g.p_error);
-        let o = offset_ray_origin(g.p, g.p_error, Vec3::Z);
-        assert!(o.z > 7.3);
-        assert!(accel.intersect(o, Vec3::new(0.3, 0.0, 0.01).normalize(), 0.0, f32::INFINITY).is_none());
-        let below = offset_ray_origin(g.p, g.p_error, -Vec3::Z);
-        assert!(below.z < 7.3);
-        assert!(accel.intersect(below - Vec3::Z, Vec3::new(0.3, 0.0, 0.1).normalize(), 0.0, f32::INFINITY).is_some());
-    }
-
-    /// A tilted square of `4 × 4` cells (32 coplanar triangles) of side `scale` around `centre`.
-    fn tilted_plane(scale: f32, centre: Vec3) -> (Vec<Triangle>, Vec3) {
-        let (u, v) = (Vec3::new(0.8, 0.36, 0.48).normalize(), Vec3::new(-0.36, 0.93, 0.0));
-        let v = (v - u * u.dot(v)).normalize();
-        let at = |i: usize, j: usize| centre + (u * (i as f32 / 4.0 - 0.5) + v * (j as f32 / 4.0 - 0.5)) * scale;
-        let mut out = Vec::new();
-        for i in 0..4 {
-            for j in 0..4 {
-                out.push(tri([at(i, j), at(i + 1, j), at(i + 1, j + 1)]));
-                out.push(tri([at(i, j), at(i + 1, j + 1), at(i, j + 1)]));
-            }
-        }
-        (out, u.cross(v))
-    }
-
-    /// Rays that leave a surface point, from grazing (cos 1e-5 against the normal) to
-    /// straight out, on either side (`both_sides`; else outward only: into a sphere, a ray
-    /// meets its far side), never hit the surface they leave.
-    fn assert_no_self_hits(accel: &Accel, both_sides: bool, aim: impl Fn(usize) -> (Vec3, Vec3), what: &str) {
-        let mut self_hits = 0;
-        for i in 0..3000 {
-            let (o, d) = aim(i);
-            let Some(hit) = accel.intersect(o, d, 0.0, f32::INFINITY) else { continue };
-            let g = accel.surface(o, d, &hit);
-            let n = if i % 2 == 0 || !both_sides { g.ng } else { -g.ng };
-            let t = n.any_orthonormal_vector();
-            let t = (t * (i as f32 * 0.37).cos() + n.cross(t) * (i as f32 * 0.37).sin()).normalize();
-            let cos = 10f32.powf(-5.0 * (i % 60) as f32 / 59.0);
-            let out = (n * cos + t * (1.0 - cos * cos).sqrt()).normalize();
-            let start = offset_ray_origin(g.p, g.p_error, n);
-            if accel.intersect(start, out, 0.0, f32::INFINITY).is_some()
-                || accel.occluded(start, out, 0.0, f32::INFINITY)
-            {
-                self_hits += 1;
-            }
-        }
-        assert_eq!(self_hits, 0, "{what}: rays re-hit the surface they leave");
-    }
-
-    #[test]
-    fn grazing_rays_never_rehit_their_surface_at_any_scale() {
-        for (scale, centre) in [
-            (1e-3, Vec3::ZERO),
-            (1.0, Vec3::new(0.3, -0.2, 0.1)),
-            (1e5, Vec3::ZERO),
-            (1e5, Vec3::new(3e6, -1e6, 2e6)),
-            (1e-3, Vec3::new(1.0, 2.0, -3.0)),
-        ] {
-            let (plane, n) = tilted_plane(scale, centre);
-            let sphere = Shape::new(
-                crate::render::geometry::shapes::Part::Sphere {
-                    r: 1.0,
-                    cz: 0.0,
-                    zmin: f64::NEG_INFINITY,
-                    zmax: f64::INFINITY,
-                },
-                DMat4::from_scale_rotation_translation(
-                    glam::DVec3::new(1.0, 0.6, 0.8) * scale as f64 * 0.2,
-                    glam::DQuat::from_rotation_y(0.4),
-                    (centre + n * scale).as_dvec3(),
-                ),
-                0,
-            )
-            .unwrap();
-            // Flat and convex: a ray leaving either never meets it again.
-            let worlds = [Accel::new(plane.clone(), vec![]), Accel::new(vec![], vec![sphere.clone()])];
-            let sphere_at = centre + n * scale;
-            let aim = |i: usize| {
-                // Half the rays at the plane from both sides, half at the sphere.
-                let s = (i as f32 * 0.618_034).fract() - 0.5;
-                let r = (i as f32 * 0.414_214).fract() - 0.5;
-                let side = if i % 4 < 2 { 1.0 } else { -1.0 };
-                if i.is_multiple_of(3) {
-                    let target = sphere_at + Vec3::new(s, r, s * r) * (0.2 * scale);
-                    let o = sphere_at + Vec3::new(r, 1.0, s).normalize() * (3.0 * scale);
-                    (o, (target - o).normalize())
-                } else {
-                    let target = centre
-                        + n.any_orthonormal_vector() * (s * 0.8 * scale)
-                        + n.cross(n.any_orthonormal_vector()) * (r * 0.8 * scale);
-                    let o = target + (n * side + Vec3::new(r, s, 0.3) * 0.5) * scale;
-                    (o, (target - o).normalize())
-                }
-            };
-            for (k, world) in worlds.iter().enumerate() {
-                assert_no_self_hits(world, k == 0, aim, &format!("world {k}, scale {scale}, centre {centre}"));
-            }
-            // The same geometry as an instance: built around the origin at unit size, placed
-            // by a transform that scales, turns and moves it.
-            let (unit_plane, _) = tilted_plane(1.0, Vec3::ZERO);
-            let unit_sphere = Shape::new(
-                crate::render::geometry::shapes::Part::Sphere {
-                    r: 1.0,
-                    cz: 0.0,
-                    zmin: f64::NEG_INFINITY,
-                    zmax: f64::INFINITY,
-                },
-                DMat4::from_scale_rotation_translation(
-                    glam::DVec3::new(1.0, 0.6, 0.8) * 0.2,
-                    glam::DQuat::from_rotation_y(0.4),
-                    n.as_dvec3(),
-                ),
-                0,
-            )
-            .unwrap();
-            let to_world =
-                DMat4::from_translation(centre.as_dvec3()) * DMat4::from_scale(glam::DVec3::splat(scale as f64));
-            let instanced = Accel::with_instances(
-                Blas::new(Vec::new(), Vec::new()),
-                vec![Blas::new(unit_plane, vec![]), Blas::new(vec![], vec![unit_sphere.clone()])],
-                &[InstanceDesc { to_world, prototype: 0, prims: 0 }, InstanceDesc { to_world, prototype: 1, prims: 0 }],
-                vec![0],
-            );
-            assert_eq!(instanced.blas_count(), 2);
-            // Each instance alone (the other one's prototype is placed out of the way).
-            for k in 0..2 {
-                let away = DMat4::from_translation(glam::DVec3::splat(9e6));
-                let descs: Vec<InstanceDesc> = (0..2)
-                    .map(|p| InstanceDesc { to_world: if p == k { to_world } else { away }, prototype: p, prims: 0 })
-                    .collect();
-                let alone = Accel::with_instances(
-                    Blas::new(Vec::new(), Vec::new()),
-                    vec![
-                        Blas::new(tilted_plane(1.0, Vec3::ZERO).0, vec![]),
-                        Blas::new(vec![], vec![unit_sphere.clone()]),
-                    ],
-                    &descs,
-                    vec![0],
-                );
-                assert_no_self_hits(&alone, k == 0, aim, &format!("instance {k}, scale {scale}, centre {centre}"));
-            }
-        }
-    }
-}
+mod tests;
