@@ -6,6 +6,7 @@
 
 pub mod binding;
 pub mod connect;
+pub mod mtlx;
 pub mod preview;
 pub mod scene;
 pub mod slots;
