@@ -332,3 +332,58 @@ fn a_referenced_document_binds_like_usd() {
     let want = [0.8 * 0.8, 0.1 * 0.8, 0.1 * 0.8];
     assert!((0..3).all(|k| (closure.params[k] - want[k]).abs() < 1e-6), "{closure:?}");
 }
+
+/// The sRGB transfer function (IEC 61966-2-1), written out for the references below.
+fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+#[test]
+fn image_nodes_read_texels_with_their_colour_space_and_address_modes() {
+    // base.png's top-left cell is sRGB (200, 40, 30); (u, v) = (0.25, 0.75) is its centre.
+    let texel = [200.0f32, 40.0, 30.0].map(|c| srgb_to_linear(c / 255.0));
+    let image = |mode: &str| {
+        format!(
+            "    def Shader \"N\" {{\n        uniform token info:id = \"ND_image_color3\"\n        \
+             asset inputs:file = @textures/base.png@ (\n            colorSpace = \"srgb_texture\"\n        )\n        \
+             string inputs:uaddressmode = \"{mode}\"\n        color3f inputs:default = (0.1, 0.2, 0.3)\n        \
+             color3f outputs:out\n    }}"
+        )
+    };
+    let base =
+        "        float inputs:specular_weight = 0\n        color3f inputs:base_color.connect = </M/N.outputs:out>";
+    for (mode, u, want) in [
+        ("periodic", 0.25, texel),
+        ("periodic", 1.25, texel),
+        ("clamp", -3.0, texel),
+        ("constant", 1.25, [0.1, 0.2, 0.3]),
+        ("constant", 0.25, texel),
+    ] {
+        let (code, rendered) = compiled(&open_pbr(base, &image(mode)));
+        assert!(rendered.is_empty(), "{rendered}");
+        let c = closure_at(&code.expect("compiles"), u, 0.75);
+        assert!(
+            (0..3).all(|k| (c.params[k] - want[k]).abs() < 1e-4),
+            "{mode} at u = {u}: {:?} vs {want:?}",
+            &c.params[..3]
+        );
+    }
+}
+
+#[test]
+fn a_document_sublayered_under_a_usd_layer_composes_its_materials() {
+    let text = "#usda 1.0\n(\n    subLayers = [@chess_mat.mtlx@]\n)\n\
+                def Sphere \"Ball\" (prepend apiSchemas = [\"MaterialBindingAPI\"]) {\n    \
+                rel material:binding = </MaterialX/Materials/M_piece>\n}\n";
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let stage = Stage::from_text("scene.usda", text, Path::new(DIR), &mut sources, &mut diags).expect("parses");
+    let c = compose_stage(&stage, &mut sources, &mut diags);
+    let material = c.material_of("/Ball").expect("composed");
+    let code = Compiler::new(BackendKind::Jit, PassOptions::default()).compile(&c.library, material, &mut diags);
+    assert!(code.is_some() && !diags.has_errors(), "{}", diags.render(&sources));
+    // The top-left cell of metal.png is 0 (dielectric), its top-right 1 (metal).
+    let code = code.unwrap();
+    assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.25, 0.75).kind), ClosureKind::Glossy);
+    assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.75, 0.75).kind), ClosureKind::Metal);
+}

@@ -646,10 +646,8 @@ mod tests {
     fn malformed_documents_are_located() {
         let e = translate("<materialx>\n  <image name=\"a\" type=\"color3\">\n</materialx>").unwrap_err();
         assert!(e.message.starts_with("malformed MaterialX document"), "{e:?}");
-        assert_eq!(
-            &"<materialx>\n  <image name=\"a\" type=\"color3\">\n</materialx>"[..e.range.start].lines().count(),
-            3
-        );
+        let text = "<materialx>\n  <image name=\"a\" type=\"color3\">\n</materialx>";
+        assert_eq!(text[..e.range.start].matches('\n').count() + 1, 3, "line 3: {e:?}");
         let e = translate("<usd/>").unwrap_err();
         assert!(e.message.contains("root element is `<usd>`"), "{e:?}");
     }
