@@ -315,7 +315,8 @@ fn generated_sentences_parse() {
 
 #[test]
 fn repository_ash_files_parse() {
-    let mut files = vec![std::path::PathBuf::from("src/front/prelude.ash")];
+    let mut files =
+        vec![std::path::PathBuf::from("src/front/prelude.ash"), std::path::PathBuf::from("src/front/mtlx.ash")];
     for dir in ["scenes/default", "scenes/paper"] {
         for entry in std::fs::read_dir(dir).unwrap() {
             let path = entry.unwrap().path();

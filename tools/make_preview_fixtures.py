@@ -11,7 +11,8 @@
   subset.usda       a two-face mesh bound to Blue; a GeomSubset (materialBind) binds face 1 to Red.
   strength.usda     strongerThanDescendants on an ancestor vs a descendant's own binding, purposes,
                     a metallic/roughness-only material and a collection-based binding.
-  unknown_shader.usda  a Material whose surface is a shader strata does not implement.
+  unknown_shader.usda  a Material whose surface is ND_standard_surface_surfaceshader (unknown to
+                    strata before MaterialX; now its built-in standard_surface).
 Each .usda is also exported as .usdc (for the binary-USD loader).
 
 The camera looks down -z at the quad [-1, 1]^2 in the z = 0 plane from z = 5, with a 20 mm

@@ -7,6 +7,7 @@
 pub mod binding;
 pub mod collection;
 pub mod connect;
+pub mod mtlx;
 pub mod preview;
 pub mod scene;
 pub mod slots;

@@ -12,6 +12,7 @@
 
 use super::MaterialRef;
 use super::connect::{Producer, convert_input, producer};
+use super::mtlx;
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::front::ast::Product;
 use crate::front::graph::{NodeInstance, Source};
@@ -19,19 +20,17 @@ use crate::front::library::{GraphId, Library};
 use crate::front::types::{Type, Value};
 use crate::runtime::texture;
 use crate::scene::{Attribute, Prim, PrimId, Stage, Value as UsdValue};
-use std::collections::HashMap;
+use std::borrow::Cow;
+use std::collections::{HashMap, HashSet};
 
 /// The built-in substance a preview network instantiates.
 pub const PREVIEW_SUBSTANCE: &str = "UsdPreviewSurface";
-
-/// The surface shader id strata implements.
-const SURFACE_ID: &str = "UsdPreviewSurface";
 
 /// Whether a Material is shaded by a UsdShade network rather than a strata source asset: no
 /// shader below it names `info:strata:sourceAsset`, and it has an `outputs:surface`.
 pub fn is_preview_material(stage: &Stage, id: PrimId) -> bool {
     let prim = stage.prim(id);
-    prim.attribute("outputs:surface").is_some()
+    (prim.attribute("outputs:surface").is_some() || prim.attribute("outputs:mtlx:surface").is_some())
         && !stage.subtree(id).any(|(_, p)| p.attribute("info:strata:sourceAsset").is_some())
 }
 
@@ -39,6 +38,8 @@ pub fn is_preview_material(stage: &Stage, id: PrimId) -> bool {
 #[derive(Default)]
 pub struct Shared {
     by_shape: HashMap<String, GraphId>,
+    /// Shader ids already reported as not implemented (one warning per kind).
+    reported: HashSet<String>,
 }
 
 /// Builds the composed `UsdPreviewSurface` instance of the Material at `path` (bound at
@@ -53,7 +54,16 @@ pub fn instantiate(
     diags: &mut Diagnostics,
 ) -> Option<MaterialRef> {
     let material = stage.prim(stage.find(path)?);
-    let terminal = material.attribute("outputs:surface")?;
+    // A path tracer reads the MaterialX render context when it names a surface strata has,
+    // else the universal one (UsdShade's `ComputeSurfaceSource(["mtlx"])`).
+    let mtlx_surface = material.attribute("outputs:mtlx:surface").filter(|t| {
+        let mut seen = Vec::new();
+        let mut quiet = Diagnostics::new();
+        matches!(producer(stage, material, t, true, &mut seen, &mut quiet),
+            Some(Producer::Output(prim, _)) if info_id(prim).and_then(mtlx::surface_substance).is_some())
+    });
+    let terminal =
+        mtlx_surface.or(material.attribute("outputs:surface")).or(material.attribute("outputs:mtlx:surface"))?;
     let mut seen = Vec::new();
     let surface = match producer(stage, material, terminal, true, &mut seen, diags) {
         Some(Producer::Output(prim, _)) => prim,
@@ -69,7 +79,7 @@ pub fn instantiate(
         }
     };
     let id = info_id(surface);
-    if id != Some(SURFACE_ID) {
+    let Some(substance) = id.and_then(mtlx::surface_substance) else {
         diags.push(
             Diagnostic::warning(format!(
                 "shader `{}` has `info:id = \"{}\"`, which strata does not implement; `{path}` falls back to the default substance",
@@ -78,12 +88,14 @@ pub fn instantiate(
             ))
             .at(surface.attribute("info:id").map_or(surface.span, |a| a.span), "unknown shader")
             .also(binding, "bound here")
-            .note("strata implements UsdPreviewSurface, UsdUVTexture, UsdPrimvarReader_* and UsdTransform2d"),
+            .note("strata implements UsdPreviewSurface, open_pbr_surface and standard_surface (README, MaterialX)"),
         );
         return None;
-    }
-    let template = lib.builtin_graph(PREVIEW_SUBSTANCE)?;
-    let mut builder = Builder { stage, lib, nodes: Vec::new(), memo: HashMap::new(), diags };
+    };
+    let preview = substance == PREVIEW_SUBSTANCE;
+    let template = lib.builtin_graph(substance)?;
+    let mut builder =
+        Builder { stage, lib, nodes: Vec::new(), memo: HashMap::new(), diags, reported: &mut shared.reported };
     let mut graph = lib.get(template).clone();
     let mut values: Vec<(usize, Value)> = Vec::new();
     // Inputs driven by nodes, and inputs set at all (normal and displacement products stay
@@ -92,22 +104,42 @@ pub fn instantiate(
     let mut set: Vec<String> = Vec::new();
     for attr in &surface.attributes {
         let Some(usd_name) = attr.name.strip_prefix("inputs:") else { continue };
-        let name = if usd_name == "normal" { "normal_ts" } else { usd_name };
+        let name = match usd_name {
+            "normal" if preview => Cow::Borrowed("normal_ts"),
+            _ if preview => Cow::Borrowed(usd_name),
+            _ => mtlx::port_name(usd_name),
+        };
+        let name = name.as_ref();
         let Some((index, input)) = graph.input(name) else {
-            let known = graph.inputs.iter().map(|i| if i.name == "normal_ts" { "normal" } else { i.name.as_str() });
-            if let Some(d) = unknown_input("UsdPreviewSurface", usd_name, known, surface, attr) {
+            let known = graph.inputs.iter().map(|i| match i.name.as_str() {
+                "normal_ts" => "normal",
+                n => n.strip_suffix('_').unwrap_or(n),
+            });
+            if let Some(d) = unknown_input(substance, usd_name, known, surface, attr) {
                 builder.diags.push(d);
             }
             continue;
         };
         let ty = input.ty;
+        let default = Some(input.default.clone());
         let mut seen = Vec::new();
         match producer(stage, surface, attr, true, &mut seen, builder.diags) {
             None => continue,
             Some(Producer::Value(prim, value_attr)) => {
                 let Some((value, span)) = &value_attr.value else { continue };
-                match node_value(value, &value_attr.type_name, ty) {
+                match node_value(value, &value_attr.type_name, ty).and_then(|v| in_working_space(v, value_attr)) {
                     Ok(v) => {
+                        if !preview {
+                            let setting = mtlx::Setting::Value(&v);
+                            mtlx::report_surface_input(
+                                substance,
+                                usd_name,
+                                setting,
+                                default.as_ref(),
+                                attr.span,
+                                builder.diags,
+                            );
+                        }
                         values.push((index, v));
                         set.push(name.to_string());
                     }
@@ -122,12 +154,22 @@ pub fn instantiate(
                 if !from.converts_to(ty) {
                     builder.diags.push(
                         Diagnostic::error(format!(
-                            "`{}` is {from} and cannot drive UsdPreviewSurface's {ty} input `{usd_name}`",
+                            "`{}` is {from} and cannot drive {substance}'s {ty} input `{usd_name}`",
                             attribute_path(prim, output)
                         ))
                         .at(attr.span, "connected here"),
                     );
                     continue;
+                }
+                if !preview {
+                    mtlx::report_surface_input(
+                        substance,
+                        usd_name,
+                        mtlx::Setting::Driven,
+                        None,
+                        attr.span,
+                        builder.diags,
+                    );
                 }
                 driven.push((index, source));
                 set.push(name.to_string());
@@ -160,6 +202,7 @@ pub fn instantiate(
         Product::Emission => set.iter().any(|s| s == "emissiveColor"),
         _ => true,
     };
+    let keep = |p: Product| if preview { keep(p) } else { mtlx::keeps_product(substance, p, &set) };
     graph.products.retain(|p| keep(p.product));
     values.sort_by_key(|(i, _)| *i);
     let shape = format!(
@@ -170,7 +213,7 @@ pub fn instantiate(
     let graph_id = match shared.by_shape.get(&shape) {
         Some(id) => *id,
         None => {
-            graph.name = format!("{PREVIEW_SUBSTANCE}<{path}>");
+            graph.name = format!("{substance}<{path}>");
             let id = lib.add_graph(graph);
             shared.by_shape.insert(shape, id);
             id
@@ -209,6 +252,18 @@ fn node_value(value: &UsdValue, type_name: &str, to: Type) -> Result<Value, Stri
     convert_input(value, type_name, to)
 }
 
+/// A colour value authored with `colorSpace` metadata (MaterialX's `colorspace`), in the
+/// working space (linear Rec.709).
+fn in_working_space(value: Value, attr: &Attribute) -> Result<Value, String> {
+    let Some(space) = attr.meta("colorSpace").and_then(UsdValue::as_str) else { return Ok(value) };
+    match value {
+        Value::Triple(c) if attr.type_name.starts_with("color") => {
+            mtlx::to_working_space(space, c).map(Value::Triple).ok_or_else(|| format!("unknown colour space `{space}`"))
+        }
+        other => Ok(other),
+    }
+}
+
 /// Builds the nodes of one network, each shader once.
 struct Builder<'a, 's> {
     stage: &'s Stage,
@@ -218,6 +273,8 @@ struct Builder<'a, 's> {
     /// Shader prim path → its node (`None` while it is being built: a cycle).
     memo: HashMap<String, Option<usize>>,
     diags: &'a mut Diagnostics,
+    /// Shader ids reported as not implemented, across the scene's networks.
+    reported: &'a mut HashSet<String>,
 }
 
 impl<'s> Builder<'_, 's> {
@@ -268,6 +325,27 @@ impl<'s> Builder<'_, 's> {
             "UsdPrimvarReader_normal" | "UsdPrimvarReader_point" | "UsdPrimvarReader_vector" => {
                 "UsdPrimvarReader_float3"
             }
+            _ if mtlx::preview_node(id).is_some() => {
+                let node_type = mtlx::preview_node(id).unwrap_or(id);
+                return self.instance(prim, id, node_type);
+            }
+            _ if id.starts_with("ND_") => {
+                let function = mtlx::node_function(id).filter(|f| self.lib.shaders.contains_key(f.as_str()));
+                let Some(function) = function else {
+                    if self.reported.insert(id.to_string()) {
+                        self.diags.push(
+                            Diagnostic::warning(format!(
+                                "MaterialX node `{id}` is not implemented by strata; the inputs it drives take their own value or default"
+                            ))
+                            .at(prim.attribute("info:id").map_or(prim.span, |a| a.span), "unsupported node")
+                            .also(at, "connected here")
+                            .note("README, MaterialX, lists the nodes strata implements"),
+                        );
+                    }
+                    return None;
+                };
+                return self.instance(prim, id, &function);
+            }
             _ => {
                 self.diags.push(
                     Diagnostic::warning(format!(
@@ -281,17 +359,23 @@ impl<'s> Builder<'_, 's> {
                 return None;
             }
         };
+        self.instance(prim, id, node_type)
+    }
+
+    /// The node of library function `node_type` for shader `prim` (of `info:id` `id`).
+    fn instance(&mut self, prim: &'s Prim, id: &str, node_type: &str) -> Option<usize> {
         let func_id = *self.lib.shaders.get(node_type)?;
         self.memo.insert(prim.path.clone(), None);
         let func = self.lib.function(func_id);
         let mut args: Vec<Option<Source>> = vec![None; func.params.len()];
         for attr in &prim.attributes {
             let Some(usd_name) = attr.name.strip_prefix("inputs:") else { continue };
-            let name = if usd_name == "in" { "in_" } else { usd_name };
+            let name = mtlx::port_name(usd_name);
+            let name = name.as_ref();
             let func = self.lib.function(func_id);
             let Some((index, param)) = func.param(name).filter(|(_, p)| !p.output) else {
                 let known = func.params.iter().filter(|p| !p.output).map(|p| p.name.as_str());
-                let known = known.map(|n| if n == "in_" { "in" } else { n });
+                let known = known.map(|n| n.strip_suffix('_').unwrap_or(n));
                 if let Some(d) = unknown_input(id, usd_name, known, prim, attr) {
                     self.diags.push(d);
                 }
@@ -299,12 +383,16 @@ impl<'s> Builder<'_, 's> {
             };
             let ty = param.ty;
             let alpha = func.param(&format!("{name}_a")).map(|(i, _)| i);
+            let image_file = name == "file" && func.param("decode").is_some();
             let mut seen = Vec::new();
             match producer(self.stage, prim, attr, true, &mut seen, self.diags) {
                 None => {}
                 Some(Producer::Value(vprim, vattr)) => {
                     let Some((value, span)) = &vattr.value else { continue };
-                    match node_value(value, &vattr.type_name, ty) {
+                    if image_file {
+                        self.image_colour_space(func_id, vattr, *span, &mut args);
+                    }
+                    match node_value(value, &vattr.type_name, ty).and_then(|v| in_working_space(v, vattr)) {
                         Ok(v) => {
                             self.check_token(id, name, &v, *span);
                             args[index] = Some(Source::Const(v, ty));
@@ -338,7 +426,7 @@ impl<'s> Builder<'_, 's> {
                 }
             }
         }
-        if id == "UsdUVTexture" {
+        if id == "UsdUVTexture" || self.lib.function(func_id).param("decode").is_some() {
             self.load_texture(prim, func_id, &mut args);
         }
         let node = self.nodes.len();
@@ -358,7 +446,8 @@ impl<'s> Builder<'_, 's> {
     /// reads its fallback.
     fn load_texture(&mut self, prim: &Prim, func: crate::front::hir::FuncId, args: &mut [Option<Source>]) {
         let f = self.lib.function(func);
-        let (Some((file_index, _)), Some((space_index, _))) = (f.param("file"), f.param("sourceColorSpace")) else {
+        let space = f.param("sourceColorSpace").or(f.param("decode"));
+        let (Some((file_index, _)), Some((space_index, _))) = (f.param("file"), space) else {
             return;
         };
         let Some(Source::Const(Value::Str(file), _)) = &args[file_index] else { return };
@@ -383,6 +472,31 @@ impl<'s> Builder<'_, 's> {
         }
     }
 
+    /// Sets a MaterialX image node's `decode` and `colorspace` from the `colorSpace` of the
+    /// attribute its file name comes from (MaterialX's `colorspace`; none is the working space).
+    fn image_colour_space(
+        &mut self,
+        func: crate::front::hir::FuncId,
+        file: &Attribute,
+        span: Span,
+        args: &mut [Option<Source>],
+    ) {
+        let space = file.meta("colorSpace").and_then(UsdValue::as_str).unwrap_or("");
+        let f = self.lib.function(func);
+        let (Some((decode, _)), Some((colorspace, _))) = (f.param("decode"), f.param("colorspace")) else { return };
+        let Some((how, from)) = mtlx::texture_decode(space) else {
+            self.diags.push(
+                Diagnostic::warning(format!("unknown colour space `{space}`; the texture is read as linear"))
+                    .at(span, "this texture")
+                    .note("strata knows srgb_texture, lin_rec709, acescg, lin_ap1, g22_ap1, g22_rec709 and raw")
+                    .kind("unknown MaterialX colour space"),
+            );
+            return;
+        };
+        args[decode] = Some(Source::Const(Value::Str(how.into()), Type::STRING));
+        args[colorspace] = Some(Source::Const(Value::Str(from.into()), Type::STRING));
+    }
+
     /// Checks the tokens whose meaning strata must know: colour spaces (an error: the texture
     /// would decode wrongly) and wrap modes (a warning: a documented fallback).
     fn check_token(&mut self, id: &str, input: &str, value: &Value, span: Span) {
@@ -401,6 +515,21 @@ impl<'s> Builder<'_, 's> {
                     Diagnostic::warning(format!("unknown wrap mode `{token}`; strata repeats"))
                         .at(span, "this value")
                         .note("UsdUVTexture's wrap modes: black, clamp, repeat, mirror, useMetadata"),
+                );
+            }
+            (_, "filtertype") if token != "linear" => {
+                self.diags.push(
+                    Diagnostic::warning(format!("image `filtertype` `{token}` is read bilinear (as `linear`)"))
+                        .at(span, "this value")
+                        .kind("MaterialX filtertype approximated"),
+                );
+            }
+            (_, "space") if token != "world" => {
+                self.diags.push(
+                    Diagnostic::warning(format!("geometry `space` `{token}` is read in world space"))
+                        .at(span, "this value")
+                        .note("object and world space agree for prims without a transform")
+                        .kind("MaterialX space approximated"),
                 );
             }
             ("UsdUVTexture", "file") if token.contains("<UDIM>") => {

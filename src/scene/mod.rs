@@ -2,6 +2,7 @@
 //! usdz packages, [`usdc`]) into one syntax tree, typed values ([`value`]), values at a time ([`time`]) and composing
 //! layers into a renderable prim tree ([`stage`]).
 
+pub mod mtlx;
 pub mod stage;
 pub mod time;
 pub mod usda;

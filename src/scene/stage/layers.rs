@@ -5,6 +5,7 @@
 use super::count_work;
 use crate::diag::{Diagnostic, Diagnostics, OncePerKind, Severity, SourceMap, Span};
 use crate::input::normalize;
+use crate::scene::mtlx;
 use crate::scene::usda::{self, Layer, LayerOffset};
 use crate::scene::usdc::{self, LayerReadError, LayerSource};
 use crate::scene::value::AssetPath;
@@ -189,12 +190,6 @@ impl Layers {
             Ok(file) => file,
             Err(error) => {
                 let (kind, message) = match error {
-                    LayerReadError::MaterialX => (
-                        "materialx layer",
-                        format!(
-                            "`{authored}` is a MaterialX document; strata does not read MaterialX yet: its materials are absent"
-                        ),
-                    ),
                     LayerReadError::Unreadable(why) => (
                         "unreadable layer",
                         format!("cannot read layer `{authored}`: {why}; the stage is composed without it"),
@@ -249,6 +244,7 @@ impl Layers {
                 usda::parse(file, sources.text(file), &dir, &mut parsed)
             }
             LayerSource::Crate(bytes) => usdc::convert(name, &bytes, &dir, sources, &mut parsed),
+            LayerSource::MaterialX(xml) => materialx_layer(name, xml, &dir, sources, &mut parsed),
         };
         if let Some((authored, span)) = from
             && let Some(first) = parsed.items().iter().find(|d| d.severity == Severity::Error)
@@ -325,6 +321,27 @@ impl Layers {
             {
                 loaded.sublayers.push((sub, sub_offset));
             }
+        }
+    }
+}
+
+/// A MaterialX document as a layer: the XML is in the source map (its problems point at it),
+/// the USDA translation beside it as `NAME (as USD)`. A document that is not well-formed
+/// MaterialX is one error at its line and column, and an empty layer.
+fn materialx_layer(name: &str, xml: String, dir: &Path, sources: &mut SourceMap, diags: &mut Diagnostics) -> Layer {
+    let xml_file = sources.add(name, xml);
+    let at = |range: std::ops::Range<usize>| Span::new(xml_file, range.start, range.end);
+    match mtlx::translate(sources.text(xml_file)) {
+        Ok(translation) => {
+            for problem in translation.warnings {
+                diags.push(Diagnostic::warning(problem.message).at(at(problem.range), "in this element"));
+            }
+            let file = sources.add(format!("{name} (as USD)"), translation.usda);
+            usda::parse(file, sources.text(file), dir, diags)
+        }
+        Err(problem) => {
+            diags.push(Diagnostic::error(problem.message).at(at(problem.range), "here"));
+            Layer::default()
         }
     }
 }

@@ -82,6 +82,9 @@ pub enum LayerSource {
     Text(String),
     /// A crate file's bytes.
     Crate(Vec<u8>),
+    /// A MaterialX document's XML, translated as USD's MaterialX plugin does
+    /// ([`crate::scene::mtlx`]).
+    MaterialX(String),
 }
 
 /// A layer file as read: the path it is known by (for a usdz package, the package-relative
@@ -105,7 +108,10 @@ pub fn read_layer_file(path: &Path) -> Result<LayerFile, LayerReadError> {
         e => LayerReadError::Unreadable(e.to_string()),
     })?;
     if is_materialx(path, &bytes) {
-        return Err(LayerReadError::MaterialX);
+        return match String::from_utf8(bytes) {
+            Ok(xml) => Ok(LayerFile { path: path.to_path_buf(), source: LayerSource::MaterialX(xml) }),
+            Err(_) => Err(LayerReadError::Unreadable("a MaterialX document that is not UTF-8 text".into())),
+        };
     }
     read_layer_bytes(path, bytes).map_err(LayerReadError::Unreadable)
 }
@@ -113,9 +119,6 @@ pub fn read_layer_file(path: &Path) -> Result<LayerFile, LayerReadError> {
 /// Why [`read_layer_file`] could not give a layer.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum LayerReadError {
-    /// A MaterialX document (`.mtlx`, or XML content): USD reads it through its MaterialX
-    /// file-format plugin; strata does not read MaterialX yet.
-    MaterialX,
     /// Missing, unreadable, or not a USD file; the text says which.
     Unreadable(String),
 }
@@ -123,7 +126,6 @@ pub enum LayerReadError {
 impl std::fmt::Display for LayerReadError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            LayerReadError::MaterialX => f.write_str("a MaterialX document; strata does not read MaterialX yet"),
             LayerReadError::Unreadable(why) => f.write_str(why),
         }
     }

@@ -1,0 +1,326 @@
+//! MaterialX shader networks (`info:id = "ND_…"`, authored in USD by DCCs or translated from
+//! `.mtlx` documents by `scene::mtlx`) on the road preview networks take ([`super::preview`]):
+//! the surface shader is a built-in substance (`open_pbr_surface`, `standard_surface`, in
+//! `front/mtlx.ash`), every other node a built-in node function `mx_<node>_<variant>`.
+//!
+//! This module holds what is MaterialX's own: which substance a surface id names, which node
+//! function a node id names (by MaterialX's type suffixes), port names, colour spaces, and
+//! what is reported (a node strata lacks, once per kind; a surface input the single-closure
+//! approximation does not read, when a scene sets it).
+
+use crate::diag::{Diagnostic, Diagnostics, Span};
+use crate::front::types::Value;
+use std::borrow::Cow;
+
+/// The built-in substance for a MaterialX (or UsdPreviewSurface) surface shader id.
+pub fn surface_substance(id: &str) -> Option<&'static str> {
+    match id {
+        "UsdPreviewSurface" | "ND_UsdPreviewSurface_surfaceshader" => Some(super::preview::PREVIEW_SUBSTANCE),
+        "ND_open_pbr_surface_surfaceshader" => Some("open_pbr_surface"),
+        "ND_standard_surface_surfaceshader" | "ND_standard_surface_surfaceshader_100" => Some("standard_surface"),
+        _ => None,
+    }
+}
+
+/// The preview node a MaterialX definition of a UsdShade preview node names
+/// (`ND_UsdUVTexture`, `ND_UsdPrimvarReader_vector2`, ...: MaterialX's `usd` library).
+pub fn preview_node(id: &str) -> Option<&'static str> {
+    Some(match id {
+        "ND_UsdUVTexture" | "ND_UsdUVTexture_23" => "UsdUVTexture",
+        "ND_UsdPrimvarReader_float" => "UsdPrimvarReader_float",
+        "ND_UsdPrimvarReader_integer" => "UsdPrimvarReader_int",
+        "ND_UsdPrimvarReader_vector2" => "UsdPrimvarReader_float2",
+        "ND_UsdPrimvarReader_vector" | "ND_UsdPrimvarReader_vector3" | "ND_UsdPrimvarReader_color3" => {
+            "UsdPrimvarReader_float3"
+        }
+        "ND_UsdTransform2d" => "UsdTransform2d",
+        _ => return None,
+    })
+}
+
+/// MaterialX's data types, as they end node definition names (`ND_add_color3FA`).
+const TYPES: &[&str] = &[
+    "float",
+    "integer",
+    "boolean",
+    "color3",
+    "color4",
+    "vector2",
+    "vector3",
+    "vector4",
+    "matrix33",
+    "matrix44",
+    "string",
+    "filename",
+    "surfaceshader",
+    "displacementshader",
+    "volumeshader",
+    "BSDF",
+    "EDF",
+    "VDF",
+];
+
+/// Splits a node definition id into its node name and its type suffix:
+/// `ND_multiply_color3FA` → (`multiply`, `color3FA`), `ND_convert_float_color3` →
+/// (`convert`, `float_color3`), `ND_normalmap` → (`normalmap`, ``).
+pub fn split_id(id: &str) -> Option<(&str, &str)> {
+    let rest = id.strip_prefix("ND_")?;
+    for (i, _) in rest.match_indices('_') {
+        let tail = &rest[i + 1..];
+        if TYPES.iter().any(|t| tail.starts_with(t)) {
+            return Some((&rest[..i], tail));
+        }
+    }
+    Some((rest, ""))
+}
+
+/// The variant a type takes in the node library: `float`, or `color3` for the triples
+/// (color3, vector3, vector2, with or without MaterialX's `FA` float-argument suffix).
+fn variant(ty: &str) -> Option<&'static str> {
+    let ty = ty.strip_suffix("FA").unwrap_or(ty);
+    let ty = ty.split('_').next().unwrap_or(ty);
+    match ty {
+        "float" => Some("float"),
+        "color3" | "vector3" | "vector2" | "" => Some("color3"),
+        _ => None,
+    }
+}
+
+/// The node function a MaterialX node id names (`mx_image_color3` for `ND_image_vector3`),
+/// if strata's library may have it; the caller checks that it does.
+pub fn node_function(id: &str) -> Option<String> {
+    let (node, types) = split_id(id)?;
+    if node == "normalmap" {
+        // `ND_normalmap` (1.38), `ND_normalmap_float`/`_vector2` (1.39: the type of `scale`).
+        return Some("mx_normalmap_color3".into());
+    }
+    if node == "convert" {
+        let (from, to) = types.split_once('_')?;
+        return match (variant(from)?, to) {
+            ("float", to) if variant(to)? == "color3" => Some("mx_convert_float_color3".into()),
+            ("color3", "vector2") => Some("mx_convert_color3_vector2".into()),
+            ("color3", to) if variant(to)? == "color3" => Some("mx_convert_color3_color3".into()),
+            _ => None,
+        };
+    }
+    Some(format!("mx_{node}_{}", variant(types)?))
+}
+
+/// Names of the shading language that a MaterialX port may carry (`in`, `normal`,
+/// `default`): the library's ports append `_`.
+const RESERVED: &[&str] = &[
+    "in",
+    "default",
+    "normal",
+    "color",
+    "vector",
+    "point",
+    "float",
+    "int",
+    "string",
+    "closure",
+    "output",
+    "input",
+    "node",
+    "shader",
+    "substance",
+    "override",
+    "import",
+    "if",
+    "else",
+    "for",
+    "while",
+    "break",
+    "continue",
+    "return",
+    "void",
+];
+
+/// The library's name for MaterialX port `name`.
+pub fn port_name(name: &str) -> Cow<'_, str> {
+    if RESERVED.contains(&name) { Cow::Owned(format!("{name}_")) } else { Cow::Borrowed(name) }
+}
+
+/// How a texture of MaterialX colour space `space` decodes (the runtime's `sRGB` or `raw`)
+/// and the space the node converts its texels from (`""`: none). `None` for a space strata
+/// does not know.
+pub fn texture_decode(space: &str) -> Option<(&'static str, &'static str)> {
+    Some(match space {
+        "srgb_texture" => ("sRGB", "srgb_texture"),
+        "" | "lin_rec709" | "raw" => ("raw", ""),
+        "acescg" => ("raw", "acescg"),
+        "lin_ap1" => ("raw", "lin_ap1"),
+        "g22_ap1" => ("raw", "g22_ap1"),
+        "g22_rec709" => ("raw", "g22_rec709"),
+        _ => return None,
+    })
+}
+
+/// A colour value authored in `space`, in the working space (linear Rec.709), as MaterialX's
+/// colour management defines it. `None` for a space strata does not know.
+pub fn to_working_space(space: &str, c: [f32; 3]) -> Option<[f32; 3]> {
+    let srgb = |x: f32| if x <= 0.04045 { x / 12.92 } else { ((x + 0.055) / 1.055).powf(2.4) };
+    let g22 = |x: f32| x.max(0.0).powf(2.2);
+    // AP1 (ACEScg, D60) to linear Rec.709 (D65), Bradford-adapted.
+    let ap1 = |[r, g, b]: [f32; 3]| {
+        [
+            1.70505 * r - 0.62179 * g - 0.08326 * b,
+            -0.13026 * r + 1.14080 * g - 0.01055 * b,
+            -0.02400 * r - 0.12897 * g + 1.15297 * b,
+        ]
+    };
+    Some(match space {
+        "" | "lin_rec709" | "raw" => c,
+        "srgb_texture" => c.map(srgb),
+        "g22_rec709" => c.map(g22),
+        "acescg" | "lin_ap1" => ap1(c),
+        "g22_ap1" => ap1(c.map(g22)),
+        _ => return None,
+    })
+}
+
+/// Surface inputs that the single-closure surfaces do not read (or read approximately), with
+/// what strata does instead; reported when a scene drives them or sets them away from their
+/// default.
+const UNREAD_SURFACE_INPUTS: &[(&str, &str, &str)] = &[
+    ("open_pbr_surface", "base_diffuse_roughness", "the base is Lambertian (no Oren-Nayar roughness)"),
+    ("open_pbr_surface", "specular_roughness_anisotropy", "specular reflection is isotropic"),
+    ("open_pbr_surface", "transmission_depth", "transmission has no volume (a thin tinted interface)"),
+    ("open_pbr_surface", "transmission_scatter", "transmission has no volume scattering"),
+    ("open_pbr_surface", "transmission_dispersion_scale", "no dispersion"),
+    ("open_pbr_surface", "subsurface_weight", "no subsurface scattering: the base is diffuse"),
+    ("open_pbr_surface", "fuzz_weight", "no fuzz (sheen) lobe"),
+    ("open_pbr_surface", "coat_roughness_anisotropy", "the coat is isotropic"),
+    ("open_pbr_surface", "thin_film_weight", "no thin-film iridescence"),
+    ("open_pbr_surface", "geometry_thin_walled", "surfaces are never thin-walled"),
+    ("open_pbr_surface", "geometry_coat_normal", "the coat uses the geometry normal"),
+    ("open_pbr_surface", "geometry_tangent", "reflection is isotropic: tangents are not read"),
+    ("standard_surface", "diffuse_roughness", "the base is Lambertian (no Oren-Nayar roughness)"),
+    ("standard_surface", "specular_anisotropy", "specular reflection is isotropic"),
+    ("standard_surface", "transmission_depth", "transmission has no volume (a thin tinted interface)"),
+    ("standard_surface", "transmission_scatter", "transmission has no volume scattering"),
+    ("standard_surface", "transmission_dispersion", "no dispersion"),
+    ("standard_surface", "transmission_extra_roughness", "transmission uses the specular roughness"),
+    ("standard_surface", "subsurface", "no subsurface scattering: the base is diffuse"),
+    ("standard_surface", "sheen", "no sheen lobe"),
+    ("standard_surface", "coat_anisotropy", "the coat is isotropic"),
+    ("standard_surface", "coat_normal", "the coat uses the geometry normal"),
+    ("standard_surface", "coat_affect_color", "the coat does not darken the base"),
+    ("standard_surface", "coat_affect_roughness", "the coat does not roughen the base"),
+    ("standard_surface", "thin_film_thickness", "no thin-film iridescence"),
+    ("standard_surface", "thin_walled", "surfaces are never thin-walled"),
+];
+
+/// Surface inputs that choose one closure by a threshold at 0.5 instead of blending two.
+const THRESHOLD_INPUTS: &[(&str, &str)] = &[
+    ("open_pbr_surface", "base_metalness"),
+    ("open_pbr_surface", "transmission_weight"),
+    ("open_pbr_surface", "coat_weight"),
+    ("standard_surface", "metalness"),
+    ("standard_surface", "transmission"),
+    ("standard_surface", "coat"),
+];
+
+/// How a surface input is set in a network: a constant, or driven by a node.
+pub enum Setting<'v> {
+    /// An authored (or interface) value.
+    Value(&'v Value),
+    /// Connected to a node's output.
+    Driven,
+}
+
+/// Reports what the single-closure `substance` does not honour of input `input` set to
+/// `setting` against its `default`: each (substance, input) kind once per run.
+pub fn report_surface_input(
+    substance: &str,
+    input: &str,
+    setting: Setting,
+    default: Option<&Value>,
+    at: Span,
+    diags: &mut Diagnostics,
+) {
+    let away = match setting {
+        Setting::Driven => true,
+        Setting::Value(v) => default.is_none_or(|d| d != v),
+    };
+    if !away {
+        return;
+    }
+    if let Some((_, _, what)) = UNREAD_SURFACE_INPUTS.iter().find(|(s, i, _)| *s == substance && *i == input) {
+        diags.push(
+            Diagnostic::warning(format!("{substance} `{input}` is not supported: {what}"))
+                .at(at, "set here")
+                .kind(unread_kind(substance, input)),
+        );
+        return;
+    }
+    let partial = match setting {
+        Setting::Driven => true,
+        Setting::Value(Value::Float(x)) => *x > 0.0 && *x < 1.0,
+        Setting::Value(_) => false,
+    };
+    if partial && THRESHOLD_INPUTS.iter().any(|(s, i)| *s == substance && *i == input) {
+        diags.push(
+            Diagnostic::warning(format!(
+                "{substance} `{input}` between 0 and 1 is approximated: strata has one closure per layer, so each point \
+                 takes one lobe (switched at 0.5) instead of a blend of two"
+            ))
+            .at(at, "set here")
+            .kind("MaterialX surface blend approximated"),
+        );
+    }
+}
+
+/// A `'static` kind per unread input, so each is reported once per run.
+fn unread_kind(substance: &str, input: &str) -> &'static str {
+    UNREAD_SURFACE_INPUTS
+        .iter()
+        .find(|(s, i, _)| *s == substance && *i == input)
+        .map_or("unsupported MaterialX surface input", |(_, i, _)| i)
+}
+
+/// Whether the substance's `product`-driving input is set, so the product stays (a normal
+/// or emission nobody sets costs the integrator work per hit).
+pub fn keeps_product(substance: &str, product: crate::front::ast::Product, set: &[String]) -> bool {
+    use crate::front::ast::Product;
+    let is_set = |name: &str| set.iter().any(|s| s == name);
+    match (substance, product) {
+        ("open_pbr_surface", Product::Normal) => is_set("geometry_normal"),
+        ("open_pbr_surface", Product::Emission) => is_set("emission_luminance"),
+        ("standard_surface", Product::Normal) => is_set("normal_"),
+        ("standard_surface", Product::Emission) => is_set("emission"),
+        _ => true,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn node_ids_name_library_functions_by_type_suffix() {
+        assert_eq!(split_id("ND_multiply_color3FA"), Some(("multiply", "color3FA")));
+        assert_eq!(split_id("ND_open_pbr_surface_surfaceshader"), Some(("open_pbr_surface", "surfaceshader")));
+        assert_eq!(split_id("ND_normalmap"), Some(("normalmap", "")));
+        assert_eq!(node_function("ND_image_vector3").as_deref(), Some("mx_image_color3"));
+        assert_eq!(node_function("ND_add_float").as_deref(), Some("mx_add_float"));
+        assert_eq!(node_function("ND_multiply_vector2FA").as_deref(), Some("mx_multiply_color3"));
+        assert_eq!(node_function("ND_convert_float_color3").as_deref(), Some("mx_convert_float_color3"));
+        assert_eq!(node_function("ND_convert_vector3_vector2").as_deref(), Some("mx_convert_color3_vector2"));
+        assert_eq!(node_function("ND_normalmap").as_deref(), Some("mx_normalmap_color3"));
+        assert_eq!(node_function("ND_add_color4"), None);
+        assert_eq!(node_function("UsdUVTexture"), None);
+    }
+
+    #[test]
+    fn colour_spaces_match_their_definitions() {
+        // sRGB's transfer function at 0.5 and at the linear segment.
+        let c = to_working_space("srgb_texture", [0.5, 0.04, 1.0]).unwrap();
+        assert!((c[0] - 0.214_041).abs() < 1e-5 && (c[1] - 0.04 / 12.92).abs() < 1e-7 && (c[2] - 1.0).abs() < 1e-6);
+        // AP1 white is Rec.709 white (each matrix row sums to 1 within rounding).
+        let w = to_working_space("acescg", [1.0, 1.0, 1.0]).unwrap();
+        assert!(w.iter().all(|x| (x - 1.0).abs() < 1e-3), "{w:?}");
+        assert_eq!(to_working_space("g22_rec709", [0.5, 0.0, 1.0]).unwrap()[0], 0.5f32.powf(2.2));
+        assert_eq!(to_working_space("no_such_space", [0.0; 3]), None);
+    }
+}

@@ -1,0 +1,562 @@
+// ---- MaterialX standard library (https://materialx.org/Specification.html) -----------------
+// The nodes of MaterialX networks that `compose::mtlx` instantiates for `ND_<node>_<type>`
+// shaders, written from the MaterialX specification. Each node has a float variant
+// (`mx_<node>_float`) and a triple variant (`mx_<node>_color3`) that serves color3, vector3
+// and vector2 (a vector2 travels with z = 0) and the `FA` variants (a float promotes to a
+// triple). Input names follow MaterialX (`in` is `in_`: `in` is reserved here).
+
+float mx_fmod(float a, float b) {
+    return b != 0.0 ? a - b * floor(a / b) : 0.0;
+}
+
+// ---- math (float and triple variants; vector2 travels as a triple with z = 0) ----
+
+shader mx_add_float(float in1 = 0.0, float in2 = 0.0, output float out) { out = in1 + in2; }
+shader mx_add_color3(color in1 = color(0.0), color in2 = color(0.0), output color out) { out = in1 + in2; }
+shader mx_subtract_float(float in1 = 0.0, float in2 = 0.0, output float out) { out = in1 - in2; }
+shader mx_subtract_color3(color in1 = color(0.0), color in2 = color(0.0), output color out) { out = in1 - in2; }
+shader mx_multiply_float(float in1 = 0.0, float in2 = 1.0, output float out) { out = in1 * in2; }
+shader mx_multiply_color3(color in1 = color(0.0), color in2 = color(1.0), output color out) { out = in1 * in2; }
+shader mx_divide_float(float in1 = 0.0, float in2 = 1.0, output float out) { out = in2 != 0.0 ? in1 / in2 : 0.0; }
+shader mx_divide_color3(color in1 = color(0.0), color in2 = color(1.0), output color out) { out = color(in2.r != 0.0 ? in1.r / in2.r : 0.0, in2.g != 0.0 ? in1.g / in2.g : 0.0, in2.b != 0.0 ? in1.b / in2.b : 0.0); }
+shader mx_modulo_float(float in1 = 0.0, float in2 = 1.0, output float out) { out = mx_fmod(in1, in2); }
+shader mx_modulo_color3(color in1 = color(0.0), color in2 = color(1.0), output color out) { out = color(mx_fmod(in1.r, in2.r), mx_fmod(in1.g, in2.g), mx_fmod(in1.b, in2.b)); }
+shader mx_power_float(float in1 = 0.0, float in2 = 1.0, output float out) { out = pow(in1, in2); }
+shader mx_power_color3(color in1 = color(0.0), color in2 = color(1.0), output color out) { out = color(pow(in1.r, in2.r), pow(in1.g, in2.g), pow(in1.b, in2.b)); }
+shader mx_min_float(float in1 = 0.0, float in2 = 0.0, output float out) { out = min(in1, in2); }
+shader mx_min_color3(color in1 = color(0.0), color in2 = color(0.0), output color out) { out = min(in1, in2); }
+shader mx_max_float(float in1 = 0.0, float in2 = 0.0, output float out) { out = max(in1, in2); }
+shader mx_max_color3(color in1 = color(0.0), color in2 = color(0.0), output color out) { out = max(in1, in2); }
+shader mx_absval_float(float in_ = 0.0, output float out) { out = abs(in_); }
+shader mx_absval_color3(color in_ = color(0.0), output color out) { out = color(abs(in_.r), abs(in_.g), abs(in_.b)); }
+shader mx_sign_float(float in_ = 0.0, output float out) { out = sign(in_); }
+shader mx_sign_color3(color in_ = color(0.0), output color out) { out = color(sign(in_.r), sign(in_.g), sign(in_.b)); }
+shader mx_floor_float(float in_ = 0.0, output float out) { out = floor(in_); }
+shader mx_floor_color3(color in_ = color(0.0), output color out) { out = color(floor(in_.r), floor(in_.g), floor(in_.b)); }
+shader mx_ceil_float(float in_ = 0.0, output float out) { out = ceil(in_); }
+shader mx_ceil_color3(color in_ = color(0.0), output color out) { out = color(ceil(in_.r), ceil(in_.g), ceil(in_.b)); }
+shader mx_round_float(float in_ = 0.0, output float out) { out = round(in_); }
+shader mx_round_color3(color in_ = color(0.0), output color out) { out = color(round(in_.r), round(in_.g), round(in_.b)); }
+shader mx_sqrt_float(float in_ = 0.0, output float out) { out = sqrt(max(in_, 0.0)); }
+shader mx_sqrt_color3(color in_ = color(0.0), output color out) { out = color(sqrt(max(in_.r, 0.0)), sqrt(max(in_.g, 0.0)), sqrt(max(in_.b, 0.0))); }
+shader mx_exp_float(float in_ = 0.0, output float out) { out = exp(in_); }
+shader mx_exp_color3(color in_ = color(0.0), output color out) { out = color(exp(in_.r), exp(in_.g), exp(in_.b)); }
+shader mx_ln_float(float in_ = 0.0, output float out) { out = in_ > 0.0 ? log(in_) : 0.0; }
+shader mx_ln_color3(color in_ = color(0.0), output color out) { out = color(in_.r > 0.0 ? log(in_.r) : 0.0, in_.g > 0.0 ? log(in_.g) : 0.0, in_.b > 0.0 ? log(in_.b) : 0.0); }
+shader mx_sin_float(float in_ = 0.0, output float out) { out = sin(in_); }
+shader mx_sin_color3(color in_ = color(0.0), output color out) { out = color(sin(in_.r), sin(in_.g), sin(in_.b)); }
+shader mx_cos_float(float in_ = 0.0, output float out) { out = cos(in_); }
+shader mx_cos_color3(color in_ = color(0.0), output color out) { out = color(cos(in_.r), cos(in_.g), cos(in_.b)); }
+
+shader mx_clamp_float(float in_ = 0.0, float low = 0.0, float high = 1.0, output float out) { out = min(max(in_, low), high); }
+shader mx_clamp_color3(color in_ = color(0.0), color low = color(0.0), color high = color(1.0), output color out) {
+    out = color(min(max(in_.r, low.r), high.r), min(max(in_.g, low.g), high.g), min(max(in_.b, low.b), high.b));
+}
+shader mx_invert_float(float in_ = 0.0, float amount = 1.0, output float out) { out = amount - in_; }
+shader mx_invert_color3(color in_ = color(0.0), color amount = color(1.0), output color out) { out = amount - in_; }
+shader mx_dotproduct_color3(color in1 = color(0.0), color in2 = color(0.0), output float out) {
+    out = in1.r * in2.r + in1.g * in2.g + in1.b * in2.b;
+}
+shader mx_crossproduct_color3(color in1 = color(0.0), color in2 = color(0.0), output color out) {
+    out = color(cross(vector(in1), vector(in2)));
+}
+shader mx_magnitude_color3(color in_ = color(0.0), output float out) { out = length(vector(in_)); }
+shader mx_normalize_color3(color in_ = color(0.0), output color out) {
+    out = length(vector(in_)) > 0.0 ? color(normalize(vector(in_))) : color(0.0);
+}
+
+// remap: in from [inlow, inhigh] to [outlow, outhigh], not clamped (as the specification).
+float mx_remap1(float x, float inlow, float inhigh, float outlow, float outhigh) {
+    return inhigh != inlow ? outlow + (x - inlow) * (outhigh - outlow) / (inhigh - inlow) : outlow;
+}
+shader mx_remap_float(float in_ = 0.0, float inlow = 0.0, float inhigh = 1.0, float outlow = 0.0, float outhigh = 1.0,
+                      output float out) {
+    out = mx_remap1(in_, inlow, inhigh, outlow, outhigh);
+}
+shader mx_remap_color3(color in_ = color(0.0), color inlow = color(0.0), color inhigh = color(1.0), color outlow = color(0.0),
+                       color outhigh = color(1.0), output color out) {
+    out = color(mx_remap1(in_.r, inlow.r, inhigh.r, outlow.r, outhigh.r), mx_remap1(in_.g, inlow.g, inhigh.g, outlow.g, outhigh.g),
+                mx_remap1(in_.b, inlow.b, inhigh.b, outlow.b, outhigh.b));
+}
+// smoothstep: 0 below low, 1 above high, Hermite between; a step at low when high <= low.
+float mx_smoothstep1(float x, float low, float high) {
+    return high > low ? smoothstep(low, high, x) : (x >= low ? 1.0 : 0.0);
+}
+shader mx_smoothstep_float(float in_ = 0.0, float low = 0.0, float high = 1.0, output float out) {
+    out = mx_smoothstep1(in_, low, high);
+}
+shader mx_smoothstep_color3(color in_ = color(0.0), color low = color(0.0), color high = color(1.0), output color out) {
+    out = color(mx_smoothstep1(in_.r, low.r, high.r), mx_smoothstep1(in_.g, low.g, high.g), mx_smoothstep1(in_.b, low.b, high.b));
+}
+shader mx_luminance_color3(color in_ = color(0.0), color lumacoeffs = color(0.2722287, 0.6740818, 0.0536895), output color out) {
+    out = color(in_.r * lumacoeffs.r + in_.g * lumacoeffs.g + in_.b * lumacoeffs.b);
+}
+
+// ---- compositing: mix(bg, fg, mix) = fg · mix + bg · (1 − mix), per channel -----------------
+
+shader mx_mix_float(float fg = 0.0, float bg = 0.0, float mix = 0.0, output float out) { out = fg * mix + bg * (1.0 - mix); }
+shader mx_mix_color3(color fg = color(0.0), color bg = color(0.0), color mix = color(0.0), output color out) {
+    out = fg * mix + bg * (color(1.0) - mix);
+}
+shader mx_plus_float(float fg = 0.0, float bg = 0.0, float mix = 1.0, output float out) { out = mix * (fg + bg) + (1.0 - mix) * bg; }
+shader mx_plus_color3(color fg = color(0.0), color bg = color(0.0), float mix = 1.0, output color out) {
+    out = mix * (fg + bg) + (1.0 - mix) * bg;
+}
+shader mx_minus_float(float fg = 0.0, float bg = 0.0, float mix = 1.0, output float out) { out = mix * (bg - fg) + (1.0 - mix) * bg; }
+shader mx_minus_color3(color fg = color(0.0), color bg = color(0.0), float mix = 1.0, output color out) {
+    out = mix * (bg - fg) + (1.0 - mix) * bg;
+}
+shader mx_difference_float(float fg = 0.0, float bg = 0.0, float mix = 1.0, output float out) {
+    out = mix * abs(bg - fg) + (1.0 - mix) * bg;
+}
+shader mx_difference_color3(color fg = color(0.0), color bg = color(0.0), float mix = 1.0, output color out) {
+    out = mix * abs(bg - fg) + (1.0 - mix) * bg;
+}
+shader mx_screen_float(float fg = 0.0, float bg = 0.0, float mix = 1.0, output float out) {
+    out = mix * (1.0 - (1.0 - fg) * (1.0 - bg)) + (1.0 - mix) * bg;
+}
+shader mx_screen_color3(color fg = color(0.0), color bg = color(0.0), float mix = 1.0, output color out) {
+    out = mix * (color(1.0) - (color(1.0) - fg) * (color(1.0) - bg)) + (1.0 - mix) * bg;
+}
+
+// ---- conditionals ------------------------------------------------------------------------------
+
+shader mx_ifgreater_float(float value1 = 1.0, float value2 = 0.0, float in1 = 0.0, float in2 = 0.0, output float out) {
+    out = value1 > value2 ? in1 : in2;
+}
+shader mx_ifgreater_color3(float value1 = 1.0, float value2 = 0.0, color in1 = color(0.0), color in2 = color(0.0), output color out) {
+    out = value1 > value2 ? in1 : in2;
+}
+shader mx_ifgreatereq_float(float value1 = 1.0, float value2 = 0.0, float in1 = 0.0, float in2 = 0.0, output float out) {
+    out = value1 >= value2 ? in1 : in2;
+}
+shader mx_ifgreatereq_color3(float value1 = 1.0, float value2 = 0.0, color in1 = color(0.0), color in2 = color(0.0), output color out) {
+    out = value1 >= value2 ? in1 : in2;
+}
+shader mx_ifequal_float(float value1 = 0.0, float value2 = 0.0, float in1 = 0.0, float in2 = 0.0, output float out) {
+    out = value1 == value2 ? in1 : in2;
+}
+shader mx_ifequal_color3(float value1 = 0.0, float value2 = 0.0, color in1 = color(0.0), color in2 = color(0.0), output color out) {
+    out = value1 == value2 ? in1 : in2;
+}
+// switch: in<which + 1> (which is truncated; out of range reads in1 below, in5 above... as the
+// specification's "the first input when which < 1"), five inputs as MaterialX 1.38.
+shader mx_switch_float(float in1 = 0.0, float in2 = 0.0, float in3 = 0.0, float in4 = 0.0, float in5 = 0.0, float which = 0.0,
+                       output float out) {
+    int w = int(floor(which));
+    out = w <= 0 ? in1 : (w == 1 ? in2 : (w == 2 ? in3 : (w == 3 ? in4 : in5)));
+}
+shader mx_switch_color3(color in1 = color(0.0), color in2 = color(0.0), color in3 = color(0.0), color in4 = color(0.0),
+                        color in5 = color(0.0), float which = 0.0, output color out) {
+    int w = int(floor(which));
+    out = w <= 0 ? in1 : (w == 1 ? in2 : (w == 2 ? in3 : (w == 3 ? in4 : in5)));
+}
+
+// ---- channels ----------------------------------------------------------------------------------
+
+shader mx_extract_color3(color in_ = color(0.0), int index = 0, output float out) {
+    out = index <= 0 ? in_.r : (index == 1 ? in_.g : in_.b);
+}
+shader mx_combine2_float(float in1 = 0.0, float in2 = 0.0, output color out) { out = color(in1, in2, 0.0); }
+shader mx_combine3_float(float in1 = 0.0, float in2 = 0.0, float in3 = 0.0, output color out) { out = color(in1, in2, in3); }
+shader mx_separate2_color3(color in_ = color(0.0), output float outx, output float outy) {
+    outx = in_.r;
+    outy = in_.g;
+}
+shader mx_separate3_color3(color in_ = color(0.0), output float outr, output float outg, output float outb, output float outx,
+                           output float outy, output float outz) {
+    outr = in_.r;
+    outg = in_.g;
+    outb = in_.b;
+    outx = in_.r;
+    outy = in_.g;
+    outz = in_.b;
+}
+shader mx_convert_float_color3(float in_ = 0.0, output color out) { out = color(in_); }
+shader mx_convert_color3_color3(color in_ = color(0.0), output color out) { out = in_; }
+shader mx_convert_color3_vector2(color in_ = color(0.0), output color out) { out = color(in_.r, in_.g, 0.0); }
+shader mx_constant_float(float value = 0.0, output float out) { out = value; }
+shader mx_constant_color3(color value = color(0.0), output color out) { out = value; }
+shader mx_dot_float(float in_ = 0.0, output float out) { out = in_; }
+shader mx_dot_color3(color in_ = color(0.0), output color out) { out = in_; }
+
+// ---- geometry: world space (the `space` input is not read; compose reports it) ---------------
+
+shader mx_texcoord_color3(int index = 0, output color out) { out = color(u, v, 0.0); }
+shader mx_position_color3(string space = "object", output color out) { out = color(P); }
+shader mx_normal_color3(string space = "object", output color out) { out = color(N); }
+shader mx_tangent_color3(string space = "object", int index = 0, output color out) {
+    vector t = dPdu - N * dot(N, dPdu);
+    out = length(t) > 1e-8 ? color(normalize(t)) : color(0.0);
+}
+shader mx_bitangent_color3(string space = "object", int index = 0, output color out) {
+    vector t = dPdu - N * dot(N, dPdu);
+    out = length(t) > 1e-8 ? color(cross(N, normalize(t))) : color(0.0);
+}
+shader mx_geompropvalue_float(string geomprop = "", float default_ = 0.0, output float out) {
+    out = primvar_float(geomprop, default_);
+}
+shader mx_geompropvalue_color3(string geomprop = "", color default_ = color(0.0), output color out) {
+    if (geomprop == "st" || geomprop == "UV0") {
+        out = color(u, v, 0.0);
+    } else {
+        out = primvar(geomprop, default_);
+    }
+}
+
+// ---- procedural --------------------------------------------------------------------------------
+
+// noise2d/noise3d: signed Perlin noise · amplitude + pivot.
+shader mx_noise2d_float(float amplitude = 1.0, float pivot = 0.0, color texcoord = color(u, v, 0.0), output float out) {
+    out = snoise(point(texcoord.r, texcoord.g, 0.0)) * amplitude + pivot;
+}
+shader mx_noise2d_color3(color amplitude = color(1.0), float pivot = 0.0, color texcoord = color(u, v, 0.0), output color out) {
+    point p = point(texcoord.r, texcoord.g, 0.0);
+    out = color(snoise(p), snoise(p + point(19.1, 7.3, 0.0)), snoise(p + point(3.7, 41.9, 0.0))) * amplitude + color(pivot);
+}
+shader mx_noise3d_float(float amplitude = 1.0, float pivot = 0.0, color position = color(P), output float out) {
+    out = snoise(point(position)) * amplitude + pivot;
+}
+shader mx_noise3d_color3(color amplitude = color(1.0), float pivot = 0.0, color position = color(P), output color out) {
+    point p = point(position);
+    out = color(snoise(p), snoise(p + point(19.1, 7.3, 5.2)), snoise(p + point(3.7, 41.9, 13.3))) * amplitude + color(pivot);
+}
+// fractal3d: octaves of signed noise, each `lacunarity` finer and `diminish` weaker.
+shader mx_fractal3d_float(float amplitude = 1.0, int octaves = 3, float lacunarity = 2.0, float diminish = 0.5,
+                          color position = color(P), output float out) {
+    float sum = 0.0;
+    float a = 1.0;
+    point q = point(position);
+    for (int i = 0; i < clamp(octaves, 1, 12); i++) {
+        sum += a * snoise(q);
+        a *= diminish;
+        q *= lacunarity;
+    }
+    out = sum * amplitude;
+}
+shader mx_cellnoise2d_float(color texcoord = color(u, v, 0.0), output float out) {
+    out = cellnoise(point(texcoord.r, texcoord.g, 0.0));
+}
+shader mx_cellnoise3d_float(color position = color(P), output float out) { out = cellnoise(point(position)); }
+// worleynoise: distance to the nearest jittered feature point (F1, jitter fixed at 1).
+shader mx_worleynoise2d_float(color texcoord = color(u, v, 0.0), float jitter = 1.0, output float out) {
+    out = cellular(point(texcoord.r, texcoord.g, 0.0));
+}
+shader mx_worleynoise3d_float(color position = color(P), float jitter = 1.0, output float out) { out = cellular(point(position)); }
+
+// Ramps and splits along u (left to right) and v (bottom to top).
+shader mx_ramplr_float(float valuel = 0.0, float valuer = 0.0, color texcoord = color(u, v, 0.0), output float out) {
+    out = mix(valuel, valuer, clamp(texcoord.r, 0.0, 1.0));
+}
+shader mx_ramplr_color3(color valuel = color(0.0), color valuer = color(0.0), color texcoord = color(u, v, 0.0), output color out) {
+    out = mix(valuel, valuer, clamp(texcoord.r, 0.0, 1.0));
+}
+shader mx_ramptb_float(float valuet = 0.0, float valueb = 0.0, color texcoord = color(u, v, 0.0), output float out) {
+    out = mix(valueb, valuet, clamp(texcoord.g, 0.0, 1.0));
+}
+shader mx_ramptb_color3(color valuet = color(0.0), color valueb = color(0.0), color texcoord = color(u, v, 0.0), output color out) {
+    out = mix(valueb, valuet, clamp(texcoord.g, 0.0, 1.0));
+}
+shader mx_splitlr_float(float valuel = 0.0, float valuer = 0.0, float center = 0.5, color texcoord = color(u, v, 0.0),
+                        output float out) {
+    out = texcoord.r < center ? valuel : valuer;
+}
+shader mx_splitlr_color3(color valuel = color(0.0), color valuer = color(0.0), float center = 0.5, color texcoord = color(u, v, 0.0),
+                         output color out) {
+    out = texcoord.r < center ? valuel : valuer;
+}
+shader mx_splittb_float(float valuet = 0.0, float valueb = 0.0, float center = 0.5, color texcoord = color(u, v, 0.0),
+                        output float out) {
+    out = texcoord.g < center ? valueb : valuet;
+}
+shader mx_splittb_color3(color valuet = color(0.0), color valueb = color(0.0), float center = 0.5, color texcoord = color(u, v, 0.0),
+                         output color out) {
+    out = texcoord.g < center ? valueb : valuet;
+}
+
+// ---- colour management: a working-space (lin_rec709) value from `space` ----------------------
+
+float mx_srgb_to_linear(float c) {
+    return c <= 0.04045 ? c / 12.92 : pow((c + 0.055) / 1.055, 2.4);
+}
+// ACEScg (AP1 primaries, D60) to linear Rec.709 (D65, Bradford-adapted).
+color mx_ap1_to_rec709(color c) {
+    return color(1.70505 * c.r - 0.62179 * c.g - 0.08326 * c.b,
+                 -0.13026 * c.r + 1.14080 * c.g - 0.01055 * c.b,
+                 -0.02400 * c.r - 0.12897 * c.g + 1.15297 * c.b);
+}
+color mx_to_working_space(color c, string space) {
+    if (space == "srgb_texture") {
+        return color(mx_srgb_to_linear(c.r), mx_srgb_to_linear(c.g), mx_srgb_to_linear(c.b));
+    } else if (space == "acescg" || space == "lin_ap1") {
+        return mx_ap1_to_rec709(c);
+    } else if (space == "g22_ap1") {
+        return mx_ap1_to_rec709(color(pow(max(c.r, 0.0), 2.2), pow(max(c.g, 0.0), 2.2), pow(max(c.b, 0.0), 2.2)));
+    } else if (space == "g22_rec709") {
+        return color(pow(max(c.r, 0.0), 2.2), pow(max(c.g, 0.0), 2.2), pow(max(c.b, 0.0), 2.2));
+    }
+    return c;
+}
+
+// ---- textures ----------------------------------------------------------------------------------
+
+// Address modes to the runtime's wrap codes (strata_rt::texture::WRAP_*): periodic repeats,
+// clamp clamps, mirror mirrors; `constant` reads `default` outside [0, 1] (handled in
+// mx_image_lookup).
+int mx_address_code(string mode) {
+    return mode == "clamp" ? 2 : (mode == "mirror" ? 3 : (mode == "constant" ? 1 : 0));
+}
+// One image lookup: `decode` is how texels decode ("sRGB" for srgb_texture, else "raw"),
+// `colorspace` the file's MaterialX colour space (converted to the working space here).
+color mx_image_lookup(string file, string decode, string colorspace, float s, float t, string uaddressmode, string vaddressmode,
+                      color fallback) {
+    int outside = (uaddressmode == "constant" && (s < 0.0 || s > 1.0)) || (vaddressmode == "constant" && (t < 0.0 || t > 1.0))
+                      ? 1 : 0;
+    if (file == "" || outside == 1) {
+        return fallback;
+    }
+    int wrap = 16 * mx_address_code(uaddressmode) + 256 * mx_address_code(vaddressmode);
+    color c = color(texture_channel(file, decode, s, t, wrap), texture_channel(file, decode, s, t, wrap + 1),
+                    texture_channel(file, decode, s, t, wrap + 2));
+    return colorspace == "srgb_texture" ? c : mx_to_working_space(c, colorspace);
+}
+// image: texture at `texcoord` (t = 0 is the image's bottom row, as MaterialX's UV0).
+// `filtertype` closest and cubic read bilinear (compose reports it).
+shader mx_image_color3(string file = "", string decode = "raw", string colorspace = "", string layer = "",
+                       color default_ = color(0.0), color texcoord = color(u, v, 0.0), string uaddressmode = "periodic",
+                       string vaddressmode = "periodic", string filtertype = "linear", output color out) {
+    out = mx_image_lookup(file, decode, colorspace, texcoord.r, texcoord.g, uaddressmode, vaddressmode, default_);
+}
+shader mx_image_float(string file = "", string decode = "raw", string colorspace = "", string layer = "", float default_ = 0.0,
+                      color texcoord = color(u, v, 0.0), string uaddressmode = "periodic", string vaddressmode = "periodic",
+                      string filtertype = "linear", output float out) {
+    out = mx_image_lookup(file, decode, colorspace, texcoord.r, texcoord.g, uaddressmode, vaddressmode, color(default_)).r;
+}
+// tiledimage: texcoord · uvtiling − uvoffset, repeated.
+shader mx_tiledimage_color3(string file = "", string decode = "raw", string colorspace = "", color default_ = color(0.0),
+                            color texcoord = color(u, v, 0.0), color uvtiling = color(1.0, 1.0, 0.0),
+                            color uvoffset = color(0.0), string filtertype = "linear", output color out) {
+    out = mx_image_lookup(file, decode, colorspace, texcoord.r * uvtiling.r - uvoffset.r, texcoord.g * uvtiling.g - uvoffset.g,
+                          "periodic", "periodic", default_);
+}
+shader mx_tiledimage_float(string file = "", string decode = "raw", string colorspace = "", float default_ = 0.0,
+                           color texcoord = color(u, v, 0.0), color uvtiling = color(1.0, 1.0, 0.0),
+                           color uvoffset = color(0.0), string filtertype = "linear", output float out) {
+    out = mx_image_lookup(file, decode, colorspace, texcoord.r * uvtiling.r - uvoffset.r, texcoord.g * uvtiling.g - uvoffset.g,
+                          "periodic", "periodic", color(default_)).r;
+}
+
+// normalmap: a tangent-space normal in [0, 1] encoding, xy scaled by `scale`, to world space
+// (MaterialX 1.38's `in`, `scale`, `normal`, `tangent`; the frame from dPdu when no tangent
+// is connected).
+shader mx_normalmap_color3(color in_ = color(0.5, 0.5, 1.0), float scale = 1.0, color normal_ = color(N),
+                           color tangent = color(0.0), output color out) {
+    vector n = normalize(vector(normal_));
+    vector t = vector(tangent);
+    if (length(t) < 1e-8) {
+        t = dPdu;
+    }
+    t = t - n * dot(n, t);
+    if (length(t) < 1e-8) {
+        t = abs(n.x) < 0.9 ? cross(n, vector(1, 0, 0)) : cross(n, vector(0, 1, 0));
+    }
+    t = normalize(t);
+    vector b = cross(n, t);
+    vector m = vector(in_) * 2.0 - 1.0;
+    vector w = t * (m.x * scale) + b * (m.y * scale) + n * m.z;
+    out = length(w) > 1e-8 ? color(normalize(w)) : color(n);
+}
+
+// ---- open_pbr_surface (OpenPBR 1.1) and standard_surface (Autodesk Standard Surface 1.0) -----
+// Both surfaces compose their lobes in `mx_surface_closure`, the one place that turns the
+// physical parameters into a closure. strata has one closure per layer today (no weighted
+// lobe sums), so that function picks the single closure closest to the specified layering;
+// the closure algebra replaces its body alone. Per parameter:
+// - base weight · base colour: the diffuse albedo (Lambert; base_diffuse_roughness /
+//   diffuse_roughness is reported when set);
+// - metalness m ≥ 0.5: GGX conductor with normal-incidence colour mix(F0(specular IOR) ·
+//   specular colour, base, m) and the specular colour as edge tint (strata's artist-friendly
+//   conductor, close to the F82 tint); m < 0.5: the dielectric lobes with the base darkened by
+//   (1 − m) and their tint moved towards the base by m. The specifications blend the two
+//   linearly; one closure cannot, so it switches at 0.5 (as UsdPreviewSurface's metallic does);
+// - transmission ≥ 0.5 (dielectric): rough glass with the transmission colour as tint, the
+//   specular roughness and IOR; below it opaque;
+// - coat ≥ 0.5: the GGX coat (coat colour as tint, coat roughness and IOR) over the diffuse
+//   base, which then stands for the specular layer too; below it the specular layer (specular
+//   colour · weight as tint, specular roughness and IOR) over the diffuse base;
+// - specular weight 0 and no coat: the diffuse base alone;
+// - emission: the `emission` product; opacity: the layer mask.
+// Roughness is perceptual (GGX alpha = roughness²), as both specifications define it.
+closure mx_surface_closure(color base, float metalness, float specular_weight, color specular_color, float specular_roughness,
+                           float specular_ior, float transmission, color transmission_color, float coat, color coat_color,
+                           float coat_roughness, float coat_ior) {
+    color albedo = clamp(base, 0.0, 1.0);
+    float r = clamp(specular_roughness, 0.0, 1.0);
+    float m = clamp(metalness, 0.0, 1.0);
+    if (m >= 0.5) {
+        float k = (clamp(specular_ior, 1.0, 4.0) - 1.0) / (clamp(specular_ior, 1.0, 4.0) + 1.0);
+        color f0 = clamp(specular_color, 0.0, 1.0) * (k * k);
+        return metal_bsdf(clamp(mix(f0, albedo, m), 0.0, 0.999), clamp(specular_color, 0.0, 1.0), r);
+    }
+    if (transmission >= 0.5) {
+        return glass_bsdf(clamp(transmission_color, 0.0, 1.0), r, clamp(specular_ior, 1.0001, 4.0));
+    }
+    color diffuse = albedo * (1.0 - m);
+    if (coat >= 0.5) {
+        color tint = mix(clamp(coat_color, 0.0, 1.0), albedo, m);
+        return glossy_bsdf(diffuse, tint, clamp(coat_roughness, 0.0, 1.0), clamp(coat_ior, 1.0, 4.0));
+    }
+    if (specular_weight <= 0.0 && m <= 0.0) {
+        return diffuse_bsdf(albedo);
+    }
+    color tint = mix(clamp(specular_color * specular_weight, 0.0, 1.0), albedo, m);
+    return glossy_bsdf(diffuse, tint, r, clamp(specular_ior, 1.0, 4.0));
+}
+
+shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0.8, 0.8), float base_metalness = 0.0,
+                        float specular_weight = 1.0, color specular_color = color(1.0), float specular_roughness = 0.3,
+                        float specular_ior = 1.5, float transmission_weight = 0.0, color transmission_color = color(1.0),
+                        float coat_weight = 0.0, color coat_color = color(1.0), float coat_roughness = 0.0,
+                        float coat_ior = 1.6, output closure bsdf) {
+    bsdf = mx_surface_closure(base_color * base_weight, base_metalness, specular_weight, specular_color, specular_roughness,
+                              specular_ior, transmission_weight, transmission_color, coat_weight, coat_color, coat_roughness,
+                              coat_ior);
+}
+
+shader mx_standard_surface_bsdf(float base = 0.8, color base_color = color(1.0), float metalness = 0.0, float specular = 1.0,
+                                color specular_color = color(1.0), float specular_roughness = 0.2, float specular_IOR = 1.5,
+                                float transmission = 0.0, color transmission_color = color(1.0), float coat = 0.0,
+                                color coat_color = color(1.0), float coat_roughness = 0.1, float coat_IOR = 1.5,
+                                output closure bsdf) {
+    bsdf = mx_surface_closure(base_color * base, metalness, specular, specular_color, specular_roughness, specular_IOR,
+                              transmission, transmission_color, coat, coat_color, coat_roughness, coat_IOR);
+}
+
+// emission_luminance (nits) · emission_color as radiance: UsdLux intensities are nits too.
+shader mx_emission(float amount = 0.0, color tint = color(1.0), output color out) {
+    out = tint * amount;
+}
+// A world-space shading normal input (unset: the zero vector) as the normal product.
+shader mx_surface_normal(color n = color(0.0), output normal out) {
+    out = length(vector(n)) > 1e-8 ? normalize(vector(n)) : N;
+}
+shader mx_opacity(color opacity = color(1.0), output float out) {
+    out = clamp((opacity.r + opacity.g + opacity.b) / 3.0, 0.0, 1.0);
+}
+
+// Every input of the OpenPBR 1.1 specification with its default; `compose::mtlx` reports
+// those the closure does not read when a scene sets them away from the default.
+substance open_pbr_surface {
+    input float base_weight = 1.0;
+    input color base_color = color(0.8, 0.8, 0.8);
+    input float base_diffuse_roughness = 0.0;
+    input float base_metalness = 0.0;
+    input float specular_weight = 1.0;
+    input color specular_color = color(1.0, 1.0, 1.0);
+    input float specular_roughness = 0.3;
+    input float specular_ior = 1.5;
+    input float specular_roughness_anisotropy = 0.0;
+    input float transmission_weight = 0.0;
+    input color transmission_color = color(1.0, 1.0, 1.0);
+    input float transmission_depth = 0.0;
+    input color transmission_scatter = color(0.0, 0.0, 0.0);
+    input float transmission_scatter_anisotropy = 0.0;
+    input float transmission_dispersion_scale = 0.0;
+    input float transmission_dispersion_abbe_number = 20.0;
+    input float subsurface_weight = 0.0;
+    input color subsurface_color = color(0.8, 0.8, 0.8);
+    input float subsurface_radius = 1.0;
+    input color subsurface_radius_scale = color(1.0, 0.5, 0.25);
+    input float subsurface_scatter_anisotropy = 0.0;
+    input float fuzz_weight = 0.0;
+    input color fuzz_color = color(1.0, 1.0, 1.0);
+    input float fuzz_roughness = 0.5;
+    input float coat_weight = 0.0;
+    input color coat_color = color(1.0, 1.0, 1.0);
+    input float coat_roughness = 0.0;
+    input float coat_roughness_anisotropy = 0.0;
+    input float coat_ior = 1.6;
+    input float coat_darkening = 1.0;
+    input float thin_film_weight = 0.0;
+    input float thin_film_thickness = 0.5;
+    input float thin_film_ior = 1.4;
+    input float emission_luminance = 0.0;
+    input color emission_color = color(1.0, 1.0, 1.0);
+    input float geometry_opacity = 1.0;
+    input int geometry_thin_walled = 0;
+    input color geometry_normal = color(0.0, 0.0, 0.0);
+    input color geometry_coat_normal = color(0.0, 0.0, 0.0);
+    input color geometry_tangent = color(0.0, 0.0, 0.0);
+    input color geometry_coat_tangent = color(0.0, 0.0, 0.0);
+    node bsdf = mx_open_pbr_bsdf(base_weight: base_weight, base_color: base_color, base_metalness: base_metalness,
+                                 specular_weight: specular_weight, specular_color: specular_color,
+                                 specular_roughness: specular_roughness, specular_ior: specular_ior,
+                                 transmission_weight: transmission_weight, transmission_color: transmission_color,
+                                 coat_weight: coat_weight, coat_color: coat_color, coat_roughness: coat_roughness,
+                                 coat_ior: coat_ior);
+    node presence = mask(opacity: geometry_opacity);
+    node normals = mx_surface_normal(n: geometry_normal);
+    node glow = mx_emission(amount: emission_luminance, tint: emission_color);
+    surface = bsdf.bsdf;
+    mask = presence.out;
+    normal = normals.out;
+    emission = glow.out;
+}
+
+// Every input of Autodesk Standard Surface 1.0 with its default (`normal` is `normal_`).
+substance standard_surface {
+    input float base = 0.8;
+    input color base_color = color(1.0, 1.0, 1.0);
+    input float diffuse_roughness = 0.0;
+    input float metalness = 0.0;
+    input float specular = 1.0;
+    input color specular_color = color(1.0, 1.0, 1.0);
+    input float specular_roughness = 0.2;
+    input float specular_IOR = 1.5;
+    input float specular_anisotropy = 0.0;
+    input float specular_rotation = 0.0;
+    input float transmission = 0.0;
+    input color transmission_color = color(1.0, 1.0, 1.0);
+    input float transmission_depth = 0.0;
+    input color transmission_scatter = color(0.0, 0.0, 0.0);
+    input float transmission_scatter_anisotropy = 0.0;
+    input float transmission_dispersion = 0.0;
+    input float transmission_extra_roughness = 0.0;
+    input float subsurface = 0.0;
+    input color subsurface_color = color(1.0, 1.0, 1.0);
+    input color subsurface_radius = color(1.0, 1.0, 1.0);
+    input float subsurface_scale = 1.0;
+    input float subsurface_anisotropy = 0.0;
+    input float sheen = 0.0;
+    input color sheen_color = color(1.0, 1.0, 1.0);
+    input float sheen_roughness = 0.3;
+    input float coat = 0.0;
+    input color coat_color = color(1.0, 1.0, 1.0);
+    input float coat_roughness = 0.1;
+    input float coat_anisotropy = 0.0;
+    input float coat_rotation = 0.0;
+    input float coat_IOR = 1.5;
+    input color coat_normal = color(0.0, 0.0, 0.0);
+    input float coat_affect_color = 0.0;
+    input float coat_affect_roughness = 0.0;
+    input float thin_film_thickness = 0.0;
+    input float thin_film_IOR = 1.5;
+    input float emission = 0.0;
+    input color emission_color = color(1.0, 1.0, 1.0);
+    input color opacity = color(1.0, 1.0, 1.0);
+    input int thin_walled = 0;
+    input color normal_ = color(0.0, 0.0, 0.0);
+    input color tangent = color(0.0, 0.0, 0.0);
+    node bsdf = mx_standard_surface_bsdf(base: base, base_color: base_color, metalness: metalness, specular: specular,
+                                         specular_color: specular_color, specular_roughness: specular_roughness,
+                                         specular_IOR: specular_IOR, transmission: transmission,
+                                         transmission_color: transmission_color, coat: coat, coat_color: coat_color,
+                                         coat_roughness: coat_roughness, coat_IOR: coat_IOR);
+    node presence = mx_opacity(opacity: opacity);
+    node normals = mx_surface_normal(n: normal_);
+    node glow = mx_emission(amount: emission, tint: emission_color);
+    surface = bsdf.bsdf;
+    mask = presence.out;
+    normal = normals.out;
+    emission = glow.out;
+}

@@ -1,0 +1,672 @@
+//! MaterialX documents (`.mtlx`) as USD layers, translated as USD's own MaterialX file-format
+//! plugin (usdMtlx) does, into USDA text that the usda parser then reads like any layer:
+//!
+//! - every material (`<surfacematerial>`, any node of type `material`) becomes
+//!   `/MaterialX/Materials/<name>`, a `Material` whose `outputs:mtlx:surface` (and
+//!   `outputs:mtlx:displacement`) connects to its shader; the surface shader's authored values
+//!   are promoted to the Material's interface inputs (`inputs:base_color` on the Material,
+//!   connected from the shader), so a USD layer above can override them;
+//! - every node becomes a `Shader` whose `info:id` is its node definition (`ND_image_color3`,
+//!   `ND_standard_surface_surfaceshader`, the `nodedef` attribute when authored); the nodes
+//!   and node graphs a material uses are copied under it, so a reference to
+//!   `</MaterialX/Materials/M>` carries its whole network;
+//! - every `<nodegraph>` becomes `/MaterialX/NodeGraphs/<name>`, a `NodeGraph` with its
+//!   interface inputs and outputs;
+//! - `nodename`/`output`, `nodegraph`/`output` and `interfacename` become `.connect`s;
+//!   `colorspace` (inherited from the enclosing elements) becomes the `colorSpace` metadata of
+//!   colour and filename inputs; `fileprefix` is prefixed to filename values; inputs bound to a
+//!   `geomprop`/`defaultgeomprop` keep the node's default (the node library reads the geometric
+//!   property itself).
+//!
+//! The XML is read with roxmltree, which keeps every node's byte range: a malformed document
+//! is reported at its line and column, and what the translation leaves out is a warning at the
+//! XML element that authored it.
+
+use std::collections::{BTreeSet, HashMap, HashSet};
+use std::fmt::Write as _;
+use std::ops::Range;
+
+/// Something to report about a document, at a byte range of its XML text.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Problem {
+    /// Where in the XML.
+    pub range: Range<usize>,
+    /// What is wrong.
+    pub message: String,
+}
+
+/// A translated document: USDA text and what the translation could not carry.
+#[derive(Debug)]
+pub struct Translation {
+    /// The layer, as USDA text.
+    pub usda: String,
+    /// Warnings, located in the XML.
+    pub warnings: Vec<Problem>,
+}
+
+/// Elements that define or organise, not shade: they translate to nothing.
+const NON_NODES: &[&str] = &[
+    "nodedef",
+    "implementation",
+    "typedef",
+    "unittypedef",
+    "unitdef",
+    "targetdef",
+    "geompropdef",
+    "attributedef",
+    "look",
+    "lookgroup",
+    "materialassign",
+    "visibility",
+    "collection",
+    "geominfo",
+    "propertyset",
+    "propertysetassign",
+    "variant",
+    "variantset",
+    "variantassign",
+    "backdrop",
+    "comment",
+    "output",
+    "input",
+    "token",
+];
+
+/// Translates a MaterialX document. `Err` when the text is not well-formed XML or not a
+/// MaterialX document (its root is not `<materialx>`).
+pub fn translate(xml: &str) -> Result<Translation, Problem> {
+    let options = roxmltree::ParsingOptions { allow_dtd: false, ..Default::default() };
+    let doc = roxmltree::Document::parse_with_options(xml, options).map_err(|e| {
+        let at = offset_of(xml, e.pos().row as usize, e.pos().col as usize);
+        Problem { range: at..at, message: format!("malformed MaterialX document: {e}") }
+    })?;
+    let root = doc.root_element();
+    if root.tag_name().name() != "materialx" {
+        return Err(Problem {
+            range: tag_range(root),
+            message: format!(
+                "not a MaterialX document: the root element is `<{}>`, not `<materialx>`",
+                root.tag_name().name()
+            ),
+        });
+    }
+    let mut t = Translator { warnings: Vec::new(), top: HashMap::new(), outputs: HashMap::new() };
+    for child in root.children().filter(|c| c.is_element()) {
+        if let Some(name) = child.attribute("name") {
+            t.top.insert(name.to_string(), child);
+        }
+    }
+    t.collect_outputs(root);
+    let mut out = String::from("#usda 1.0\n\ndef \"MaterialX\"\n{\n    def \"Materials\"\n    {\n");
+    let mut seen = HashSet::new();
+    for child in root.children().filter(|c| c.is_element()) {
+        let Some(name) = child.attribute("name") else { continue };
+        if child.attribute("type") == Some("material") && seen.insert(identifier(name)) {
+            t.material(&mut out, child);
+        }
+    }
+    out.push_str("    }\n\n    def \"NodeGraphs\"\n    {\n");
+    for child in root.children().filter(|c| c.is_element() && c.tag_name().name() == "nodegraph") {
+        let Some(name) = child.attribute("name") else { continue };
+        t.node_graph(&mut out, child, &format!("/MaterialX/NodeGraphs/{}", identifier(name)), 2);
+    }
+    out.push_str("    }\n}\n");
+    for child in root.children().filter(|c| c.is_element()) {
+        let tag = child.tag_name().name();
+        if child.attribute("name").is_none() && !NON_NODES.contains(&tag) {
+            t.warn(child, format!("`<{tag}>` has no `name`; it is ignored"));
+        }
+    }
+    Ok(Translation { usda: out, warnings: t.warnings })
+}
+
+type Node<'a, 'i> = roxmltree::Node<'a, 'i>;
+
+struct Translator<'a, 'i> {
+    warnings: Vec<Problem>,
+    /// The document's top-level elements by name.
+    top: HashMap<String, Node<'a, 'i>>,
+    /// Outputs other elements connect to, per producing element (by its node id): its
+    /// `outputs:` to declare, with their MaterialX types.
+    outputs: HashMap<roxmltree::NodeId, Vec<(String, String)>>,
+}
+
+impl<'a, 'i> Translator<'a, 'i> {
+    fn warn(&mut self, at: Node, message: String) {
+        self.warnings.push(Problem { range: tag_range(at), message });
+    }
+
+    /// Records, for every `nodename` connection, the output it reads on its producer.
+    fn collect_outputs(&mut self, root: Node<'a, 'i>) {
+        for input in root.descendants().filter(|n| n.is_element() && matches!(n.tag_name().name(), "input" | "output"))
+        {
+            let Some(node_name) = input.attribute("nodename") else { continue };
+            let Some(owner) = input.parent_element() else { continue };
+            // An `<output>` of a graph and an `<input>` of a node both read a sibling node
+            // of the element that holds them (the graph, or the node's parent).
+            let scope = if input.tag_name().name() == "output" { Some(owner) } else { owner.parent_element() };
+            let Some(producer) = scope.and_then(|s| child_named(s, node_name)) else { continue };
+            let output = input.attribute("output").unwrap_or("out").to_string();
+            let ty = input.attribute("type").unwrap_or("float").to_string();
+            let list = self.outputs.entry(producer.id()).or_default();
+            if !list.iter().any(|(n, _)| *n == output) {
+                list.push((output, ty));
+            }
+        }
+    }
+
+    /// `/MaterialX/Materials/<name>` and the network it uses.
+    fn material(&mut self, out: &mut String, material: Node<'a, 'i>) {
+        let name = identifier(material.attribute("name").unwrap_or("material"));
+        let path = format!("/MaterialX/Materials/{name}");
+        let _ = writeln!(out, "        def Material \"{name}\"\n        {{");
+        // The nodes and graphs the material's shaders reach, each copied once under it.
+        let mut needed: Vec<Node> = Vec::new();
+        let mut terminals = Vec::new();
+        for input in inputs(material) {
+            let Some(shader_name) = input.attribute("nodename") else {
+                self.warn(
+                    input,
+                    format!("material input `{}` connects to no shader node", input.attribute("name").unwrap_or("")),
+                );
+                continue;
+            };
+            let Some(shader) = self.top.get(shader_name).copied() else {
+                self.warn(
+                    input,
+                    format!("material input names node `{shader_name}`, which the document does not define"),
+                );
+                continue;
+            };
+            let terminal = match input.attribute("type").or(shader.attribute("type")) {
+                Some("displacementshader") => "displacement",
+                Some("volumeshader") => "volume",
+                _ => "surface",
+            };
+            terminals.push((terminal, shader));
+            self.reach(shader, &mut needed);
+        }
+        // The surface shader's values become the Material's interface, as usdMtlx does.
+        let surface = terminals.iter().find(|(t, _)| *t == "surface").map(|(_, s)| *s);
+        let mut promoted = HashSet::new();
+        if let Some(shader) = surface {
+            for input in inputs(shader) {
+                let Some(input_name) = input.attribute("name") else { continue };
+                if input.attribute("value").is_some() && connection_of(input).is_none() {
+                    let decl = self.value_decl(input, &format!("inputs:{}", identifier(input_name)));
+                    if let Some(decl) = decl {
+                        let _ = writeln!(out, "            {decl}");
+                        promoted.insert(input.id());
+                    }
+                }
+            }
+        }
+        for (terminal, shader) in &terminals {
+            let shader_name = identifier(shader.attribute("name").unwrap_or(""));
+            let _ = writeln!(
+                out,
+                "            token outputs:mtlx:{terminal}.connect = <{path}/{shader_name}.outputs:{}>",
+                shader_output(*shader)
+            );
+        }
+        for node in needed {
+            if node.tag_name().name() == "nodegraph" {
+                let graph_name = identifier(node.attribute("name").unwrap_or(""));
+                self.node_graph(out, node, &format!("{path}/{graph_name}"), 3);
+            } else {
+                self.node(out, node, &path, 3, &promoted);
+            }
+        }
+        out.push_str("        }\n\n");
+    }
+
+    /// Adds `node` and the top-level nodes and graphs it reads, dependencies first, each once.
+    fn reach(&mut self, node: Node<'a, 'i>, needed: &mut Vec<Node<'a, 'i>>) {
+        let mut stack = vec![(node, false)];
+        while let Some((n, expanded)) = stack.pop() {
+            if needed.iter().any(|x| x.id() == n.id()) {
+                continue;
+            }
+            if expanded {
+                needed.push(n);
+                continue;
+            }
+            stack.push((n, true));
+            if n.tag_name().name() == "nodegraph" {
+                continue;
+            }
+            for input in inputs(n) {
+                let target = input.attribute("nodename").or(input.attribute("nodegraph"));
+                let Some(target) = target else { continue };
+                match self.top.get(target).copied() {
+                    Some(dep) if dep.id() != n.id() => stack.push((dep, false)),
+                    _ => self.warn(input, format!("input connects to `{target}`, which the document does not define")),
+                }
+            }
+        }
+    }
+
+    /// A `NodeGraph` prim at `path` for `<nodegraph>` `graph`.
+    fn node_graph(&mut self, out: &mut String, graph: Node<'a, 'i>, path: &str, depth: usize) {
+        let pad = "    ".repeat(depth);
+        let name = identifier(graph.attribute("name").unwrap_or("graph"));
+        let _ = writeln!(out, "{pad}def NodeGraph \"{name}\"\n{pad}{{");
+        for input in inputs(graph) {
+            let Some(input_name) = input.attribute("name") else { continue };
+            if let Some(decl) = self.value_decl(input, &format!("inputs:{}", identifier(input_name))) {
+                let _ = writeln!(out, "{pad}    {decl}");
+            }
+        }
+        for output in graph.children().filter(|c| c.is_element() && c.tag_name().name() == "output") {
+            let Some(output_name) = output.attribute("name") else { continue };
+            let ty = usd_type(output.attribute("type").unwrap_or("float")).unwrap_or("token");
+            match output.attribute("nodename") {
+                Some(node) if child_named(graph, node).is_some() => {
+                    let from = identifier(output.attribute("output").unwrap_or("out"));
+                    let _ = writeln!(
+                        out,
+                        "{pad}    {ty} outputs:{}.connect = <{path}/{}.outputs:{from}>",
+                        identifier(output_name),
+                        identifier(node)
+                    );
+                }
+                Some(node) => {
+                    self.warn(output, format!("graph output reads node `{node}`, which the graph does not define"))
+                }
+                None => {
+                    let _ = writeln!(out, "{pad}    {ty} outputs:{}", identifier(output_name));
+                }
+            }
+        }
+        for node in graph.children().filter(|c| c.is_element()) {
+            let tag = node.tag_name().name();
+            if NON_NODES.contains(&tag) {
+                continue;
+            }
+            if tag == "nodegraph" {
+                self.warn(node, "a node graph nested in a node graph is not supported; it is ignored".into());
+                continue;
+            }
+            if node.attribute("name").is_none() {
+                self.warn(node, format!("`<{tag}>` has no `name`; it is ignored"));
+                continue;
+            }
+            self.node(out, node, path, depth + 1, &HashSet::new());
+        }
+        let _ = writeln!(out, "{pad}}}\n");
+    }
+
+    /// A `Shader` prim for node `node`; connections resolve against `scope`, the prim it is
+    /// written under (its graph, or the material its top-level network was copied into). Inputs in
+    /// `promoted` connect to the Material's interface input of the same name.
+    fn node(
+        &mut self,
+        out: &mut String,
+        node: Node<'a, 'i>,
+        scope: &str,
+        depth: usize,
+        promoted: &HashSet<roxmltree::NodeId>,
+    ) {
+        let pad = "    ".repeat(depth);
+        let name = identifier(node.attribute("name").unwrap_or("node"));
+        let id = nodedef_id(node);
+        let _ = writeln!(out, "{pad}def Shader \"{name}\"\n{pad}{{\n{pad}    uniform token info:id = \"{id}\"");
+        for input in inputs(node) {
+            let Some(input_name) = input.attribute("name") else { continue };
+            let attr = format!("inputs:{}", identifier(input_name));
+            let ty = input.attribute("type").unwrap_or("float");
+            let Some(usd_ty) = usd_type(ty) else {
+                self.warn(
+                    input,
+                    format!("input `{input_name}` has type `{ty}`, which strata does not read; it is ignored"),
+                );
+                continue;
+            };
+            if promoted.contains(&input.id()) {
+                let _ = writeln!(out, "{pad}    {usd_ty} {attr}.connect = <{scope}.{attr}>");
+                continue;
+            }
+            match connection_of(input) {
+                Some(Connection::Node(target, output)) => {
+                    let _ = writeln!(
+                        out,
+                        "{pad}    {usd_ty} {attr}.connect = <{scope}/{}.outputs:{}>",
+                        identifier(target),
+                        identifier(output)
+                    );
+                }
+                Some(Connection::Graph(graph, output)) => {
+                    let output = output.map(str::to_string).or_else(|| self.first_output(graph));
+                    let output = output.unwrap_or_else(|| "out".into());
+                    let _ = writeln!(
+                        out,
+                        "{pad}    {usd_ty} {attr}.connect = <{scope}/{}.outputs:{}>",
+                        identifier(graph),
+                        identifier(&output)
+                    );
+                }
+                Some(Connection::Interface(interface)) => {
+                    let _ =
+                        writeln!(out, "{pad}    {usd_ty} {attr}.connect = <{scope}.inputs:{}>", identifier(interface));
+                }
+                None => {
+                    if let Some(decl) = self.value_decl(input, &attr) {
+                        let _ = writeln!(out, "{pad}    {decl}");
+                    }
+                }
+            }
+        }
+        let own = (shader_output(node).to_string(), node.attribute("type").unwrap_or("float").to_string());
+        let mut outputs: BTreeSet<(String, String)> = BTreeSet::new();
+        if own.1 != "multioutput" {
+            outputs.insert(own);
+        }
+        for o in node.children().filter(|c| c.is_element() && c.tag_name().name() == "output") {
+            if let Some(n) = o.attribute("name") {
+                outputs.insert((n.to_string(), o.attribute("type").unwrap_or("float").to_string()));
+            }
+        }
+        for (o, ty) in self.outputs.get(&node.id()).into_iter().flatten() {
+            if !outputs.iter().any(|(n, _)| n == o) {
+                outputs.insert((o.clone(), ty.clone()));
+            }
+        }
+        for (o, ty) in outputs {
+            let _ = writeln!(out, "{pad}    {} outputs:{}", usd_type(&ty).unwrap_or("token"), identifier(&o));
+        }
+        let _ = writeln!(out, "{pad}}}\n");
+    }
+
+    /// The first output of top-level graph `graph`.
+    fn first_output(&self, graph: &str) -> Option<String> {
+        let g = self.top.get(graph)?;
+        g.children()
+            .find(|c| c.is_element() && c.tag_name().name() == "output")
+            .and_then(|o| o.attribute("name"))
+            .map(str::to_string)
+    }
+
+    /// `type name = value (metadata)` for an input's authored value; `None` (after a warning
+    /// when a value was there) when it has none strata can read.
+    fn value_decl(&mut self, input: Node, attr: &str) -> Option<String> {
+        let ty = input.attribute("type").unwrap_or("float");
+        let usd_ty = usd_type(ty)?;
+        let mut meta = String::new();
+        if matches!(ty, "color3" | "color4" | "filename")
+            && let Some(space) = inherited(input, "colorspace")
+        {
+            meta = format!(" (\n    colorSpace = \"{}\"\n)", escape(space));
+        }
+        let Some(text) = input.attribute("value") else {
+            if input.attribute("geomprop").is_none() && input.attribute("defaultgeomprop").is_none() {
+                return Some(format!("{usd_ty} {attr}{meta}"));
+            }
+            return None;
+        };
+        match usd_value(ty, text, input) {
+            Ok(value) => Some(format!("{usd_ty} {attr} = {value}{meta}")),
+            Err(why) => {
+                let name = input.attribute("name").unwrap_or("");
+                self.warn(input, format!("input `{name}`: {why}; the node's default is used"));
+                None
+            }
+        }
+    }
+}
+
+/// How an input is connected.
+enum Connection<'x> {
+    /// `nodename` (+ `output`).
+    Node(&'x str, &'x str),
+    /// `nodegraph` (+ `output`).
+    Graph(&'x str, Option<&'x str>),
+    /// `interfacename`.
+    Interface(&'x str),
+}
+
+fn connection_of<'x>(input: Node<'x, '_>) -> Option<Connection<'x>> {
+    if let Some(n) = input.attribute("nodename") {
+        return Some(Connection::Node(n, input.attribute("output").unwrap_or("out")));
+    }
+    if let Some(g) = input.attribute("nodegraph") {
+        return Some(Connection::Graph(g, input.attribute("output")));
+    }
+    input.attribute("interfacename").map(Connection::Interface)
+}
+
+fn inputs<'a, 'i>(node: Node<'a, 'i>) -> impl Iterator<Item = Node<'a, 'i>> {
+    node.children().filter(|c| c.is_element() && c.tag_name().name() == "input")
+}
+
+fn child_named<'a, 'i>(parent: Node<'a, 'i>, name: &str) -> Option<Node<'a, 'i>> {
+    parent.children().find(|c| c.is_element() && c.attribute("name") == Some(name))
+}
+
+/// An attribute's value on the element or its nearest ancestor that has it (MaterialX's
+/// scoping of `colorspace` and `fileprefix`).
+fn inherited<'a>(node: Node<'a, '_>, key: &str) -> Option<&'a str> {
+    node.ancestors().find_map(|n| n.attribute(key)).filter(|v| !v.is_empty())
+}
+
+/// The output a shader node's connection reads: usdMtlx names a shader's output after its
+/// terminal (`surface`, `displacement`, `volume`), any other node's `out`.
+fn shader_output(node: Node) -> &'static str {
+    match node.attribute("type") {
+        Some("surfaceshader") => "surface",
+        Some("displacementshader") => "displacement",
+        Some("volumeshader") => "volume",
+        _ => "out",
+    }
+}
+
+/// The node definition a node uses: `nodedef` when authored, else the standard library's
+/// naming (`ND_<category>_<type>`; `FA` when a float drives a vector operation; the input's
+/// type for conversions and channel extraction).
+pub fn nodedef_id(node: Node) -> String {
+    if let Some(def) = node.attribute("nodedef") {
+        return def.to_string();
+    }
+    let category = node.tag_name().name();
+    let ty = node.attribute("type").unwrap_or("float");
+    let input_type =
+        |name: &str| inputs(node).find(|i| i.attribute("name") == Some(name)).and_then(|i| i.attribute("type"));
+    let in_ty = input_type("in").unwrap_or("float");
+    match category {
+        "convert" => format!("ND_convert_{in_ty}_{ty}"),
+        // 1.39 names normal maps by the type of `scale`.
+        "normalmap" => format!("ND_normalmap_{}", input_type("scale").unwrap_or("float")),
+        "extract" => format!("ND_extract_{in_ty}"),
+        "separate2" | "separate3" | "separate4" => format!("ND_{category}_{in_ty}"),
+        _ if ty == "multioutput" => format!("ND_{category}_{in_ty}"),
+        "add" | "subtract" | "multiply" | "divide" | "modulo" | "power" | "min" | "max" | "clamp" | "smoothstep"
+        | "remap"
+            if ty != "float"
+                && ["in2", "low", "high", "inlow", "inhigh", "outlow", "outhigh"]
+                    .iter()
+                    .any(|n| input_type(n) == Some("float")) =>
+        {
+            format!("ND_{category}_{ty}FA")
+        }
+        _ => format!("ND_{category}_{ty}"),
+    }
+}
+
+/// The USD value type of a MaterialX type, as usdMtlx writes it.
+pub fn usd_type(ty: &str) -> Option<&'static str> {
+    Some(match ty {
+        "float" => "float",
+        "integer" => "int",
+        "boolean" => "bool",
+        "color3" => "color3f",
+        "color4" => "color4f",
+        "vector2" => "float2",
+        "vector3" => "float3",
+        "vector4" => "float4",
+        "matrix33" => "matrix3d",
+        "matrix44" => "matrix4d",
+        "string" => "string",
+        "filename" => "asset",
+        "surfaceshader" | "displacementshader" | "volumeshader" | "lightshader" | "material" | "BSDF" | "EDF"
+        | "VDF" => "token",
+        _ => return None,
+    })
+}
+
+/// A MaterialX value string as USDA.
+fn usd_value(ty: &str, text: &str, input: Node) -> Result<String, String> {
+    let numbers = |n: usize| -> Result<String, String> {
+        let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+        if parts.len() != n {
+            return Err(format!("`{text}` is not a {ty} ({n} numbers separated by commas)"));
+        }
+        let mut values = Vec::with_capacity(n);
+        for p in parts {
+            match p.parse::<f64>() {
+                Ok(v) if v.is_finite() => values.push(format!("{v:?}")),
+                _ => return Err(format!("`{p}` is not a finite number")),
+            }
+        }
+        Ok(if n == 1 { values.remove(0) } else { format!("({})", values.join(", ")) })
+    };
+    match ty {
+        "float" => numbers(1),
+        "color3" | "vector3" => numbers(3),
+        "vector2" => numbers(2),
+        "color4" | "vector4" => numbers(4),
+        "integer" => {
+            text.trim().parse::<i32>().map(|v| v.to_string()).map_err(|_| format!("`{text}` is not an integer"))
+        }
+        "boolean" => match text.trim() {
+            "true" => Ok("1".into()),
+            "false" => Ok("0".into()),
+            _ => Err(format!("`{text}` is not a boolean (`true` or `false`)")),
+        },
+        "matrix33" | "matrix44" => {
+            let n = if ty == "matrix33" { 3 } else { 4 };
+            let rows = numbers(n * n)?;
+            let inner = rows.trim_start_matches('(').trim_end_matches(')');
+            let v: Vec<&str> = inner.split(", ").collect();
+            let rows: Vec<String> = v.chunks(n).map(|r| format!("({})", r.join(", "))).collect();
+            Ok(format!("({})", rows.join(", ")))
+        }
+        "filename" => {
+            let prefix = inherited(input, "fileprefix").unwrap_or("");
+            let absolute = text.starts_with('/') || text.contains("://");
+            let path = if absolute || text.is_empty() { text.to_string() } else { format!("{prefix}{text}") };
+            if path.contains('@') {
+                return Err(format!("file name `{path}` contains `@`"));
+            }
+            Ok(format!("@{path}@"))
+        }
+        "string" => Ok(format!("\"{}\"", escape(text))),
+        _ => Err(format!("values of type `{ty}` are not read")),
+    }
+}
+
+fn escape(text: &str) -> String {
+    text.replace('\\', "\\\\").replace('"', "\\\"").replace('\n', "\\n")
+}
+
+/// A MaterialX name as a USD identifier (characters outside `[A-Za-z0-9_]` become `_`).
+pub fn identifier(name: &str) -> String {
+    let mut s: String = name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '_' }).collect();
+    if s.is_empty() || s.starts_with(|c: char| c.is_ascii_digit()) {
+        s.insert(0, '_');
+    }
+    s
+}
+
+/// The start tag of an element (what a diagnostic underlines).
+fn tag_range(node: Node) -> Range<usize> {
+    let r = node.range();
+    let text = node.document().input_text();
+    let end = text[r.clone()].find('>').map_or(r.end, |i| r.start + i + 1);
+    r.start..end
+}
+
+/// The byte offset of 1-based `row`, `col` (in characters) in `text`.
+fn offset_of(text: &str, row: usize, col: usize) -> usize {
+    let line_start: usize = text.split_inclusive('\n').take(row.saturating_sub(1)).map(str::len).sum();
+    let line = text[line_start.min(text.len())..].split('\n').next().unwrap_or("");
+    line_start + line.char_indices().nth(col.saturating_sub(1)).map_or(line.len(), |(i, _)| i)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DOC: &str = r#"<?xml version="1.0"?>
+<materialx version="1.39" colorspace="lin_rec709" fileprefix="tex/">
+  <nodegraph name="NG_base">
+    <input name="scale" type="float" value="2" />
+    <image name="img" type="color3">
+      <input name="file" type="filename" value="base.png" colorspace="srgb_texture" />
+    </image>
+    <multiply name="mul" type="color3">
+      <input name="in1" type="color3" nodename="img" />
+      <input name="in2" type="float" interfacename="scale" />
+    </multiply>
+    <output name="out_color" type="color3" nodename="mul" />
+  </nodegraph>
+  <open_pbr_surface name="SR_piece" type="surfaceshader">
+    <input name="base_color" type="color3" nodegraph="NG_base" output="out_color" />
+    <input name="specular_roughness" type="float" value="0.25" />
+  </open_pbr_surface>
+  <surfacematerial name="M_piece" type="material">
+    <input name="surfaceshader" type="surfaceshader" nodename="SR_piece" />
+  </surfacematerial>
+</materialx>
+"#;
+
+    #[test]
+    fn materials_graphs_and_connections_translate_as_usdmtlx_does() {
+        let t = translate(DOC).expect("translates");
+        assert!(t.warnings.is_empty(), "{:?}", t.warnings);
+        let u = &t.usda;
+        for line in [
+            "def Material \"M_piece\"",
+            "float inputs:specular_roughness = 0.25",
+            "token outputs:mtlx:surface.connect = </MaterialX/Materials/M_piece/SR_piece.outputs:surface>",
+            "uniform token info:id = \"ND_open_pbr_surface_surfaceshader\"",
+            "float inputs:specular_roughness.connect = </MaterialX/Materials/M_piece.inputs:specular_roughness>",
+            "color3f inputs:base_color.connect = </MaterialX/Materials/M_piece/NG_base.outputs:out_color>",
+            "color3f outputs:out_color.connect = </MaterialX/Materials/M_piece/NG_base/mul.outputs:out>",
+            "uniform token info:id = \"ND_multiply_color3FA\"",
+            "float inputs:in2.connect = </MaterialX/Materials/M_piece/NG_base.inputs:scale>",
+            "asset inputs:file = @tex/base.png@ (",
+            "colorSpace = \"srgb_texture\"",
+            "def NodeGraph \"NG_base\"",
+            "color3f inputs:in1.connect = </MaterialX/NodeGraphs/NG_base/img.outputs:out>",
+        ] {
+            assert!(u.contains(line), "missing `{line}` in\n{u}");
+        }
+    }
+
+    #[test]
+    fn malformed_documents_are_located() {
+        let e = translate("<materialx>\n  <image name=\"a\" type=\"color3\">\n</materialx>").unwrap_err();
+        assert!(e.message.starts_with("malformed MaterialX document"), "{e:?}");
+        let text = "<materialx>\n  <image name=\"a\" type=\"color3\">\n</materialx>";
+        assert_eq!(text[..e.range.start].matches('\n').count() + 1, 3, "line 3: {e:?}");
+        let e = translate("<usd/>").unwrap_err();
+        assert!(e.message.contains("root element is `<usd>`"), "{e:?}");
+    }
+
+    #[test]
+    fn bad_values_and_missing_nodes_are_warnings_at_their_element() {
+        let doc = r#"<materialx>
+  <standard_surface name="S" type="surfaceshader">
+    <input name="base" type="float" value="lots" />
+    <input name="base_color" type="color3" nodename="nowhere" />
+  </standard_surface>
+  <surfacematerial name="M" type="material">
+    <input name="surfaceshader" type="surfaceshader" nodename="S" />
+  </surfacematerial>
+</materialx>"#;
+        let t = translate(doc).unwrap();
+        let messages: Vec<&str> = t.warnings.iter().map(|w| w.message.as_str()).collect();
+        assert!(messages.iter().any(|m| m.contains("`lots` is not a finite number")), "{messages:?}");
+        assert!(messages.iter().any(|m| m.contains("`nowhere`")), "{messages:?}");
+        assert!(doc[t.warnings[0].range.clone()].starts_with("<input"), "{:?}", t.warnings);
+    }
+}

@@ -1,0 +1,389 @@
+//! MaterialX: `.mtlx` documents as USD layers and `ND_*` networks as substances, on fixtures
+//! that the MaterialX Python package wrote and read (`tools/make_mtlx_fixtures.py`, in
+//! `tests/fixtures/mtlx/`). References are independent of strata: node definitions and
+//! connections as MaterialX resolves them (`chess_mat.expected`), node values by hand from the
+//! MaterialX specification, and the UsdPreviewSurface translation of the same asset.
+
+mod common;
+
+use std::path::Path;
+use std::sync::Arc;
+use strata::abi::{Closure, ClosureKind, Globals, MaterialCode};
+use strata::backend::{BackendKind, Compiler};
+use strata::compose::scene::compose_stage;
+use strata::diag::{Diagnostics, SourceMap};
+use strata::ir::wired::PassOptions;
+use strata::scene::Stage;
+
+const DIR: &str = "tests/fixtures/mtlx";
+
+/// `/Ball`'s compiled material in a scene whose other prims are `rest` (USDA, with `/Ball`
+/// bound to `</M>`), resolved against the fixture directory; and the rendered diagnostics.
+fn compiled(rest: &str) -> (Option<Arc<dyn MaterialCode>>, String) {
+    let text = format!(
+        "#usda 1.0\ndef Sphere \"Ball\" (prepend apiSchemas = [\"MaterialBindingAPI\"]) {{ rel material:binding = </M> }}\n{rest}\n"
+    );
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let stage = Stage::from_text("scene.usda", &text, Path::new(DIR), &mut sources, &mut diags).expect("parses");
+    let c = compose_stage(&stage, &mut sources, &mut diags);
+    let code = c.material_of("/Ball").and_then(|material| {
+        Compiler::new(BackendKind::Jit, PassOptions::default()).compile(&c.library, material, &mut diags)
+    });
+    (code, diags.render(&sources))
+}
+
+/// The surface closure of `code` at a shading point with texture coordinates (u, v).
+fn closure_at(code: &Arc<dyn MaterialCode>, u: f32, v: f32) -> Closure {
+    let g = Globals { n: [0.0, 0.0, 1.0], ng: [0.0, 0.0, 1.0], u, v, dpdu: [1.0, 0.0, 0.0], ..Globals::default() };
+    let mut closure = Closure::default();
+    code.surface(&g, 0, &mut closure).expect("evaluates");
+    closure
+}
+
+/// A Material `/M` whose MaterialX surface is an `ND_open_pbr_surface_surfaceshader` with
+/// `inputs` (USDA lines) and more shaders `shaders` beside it, as Houdini or Maya author it.
+fn open_pbr(inputs: &str, shaders: &str) -> String {
+    format!(
+        "def Material \"M\" {{\n    token outputs:mtlx:surface.connect = </M/S.outputs:surface>\n    \
+         def Shader \"S\" {{\n        uniform token info:id = \"ND_open_pbr_surface_surfaceshader\"\n{inputs}\n        \
+         token outputs:surface\n    }}\n{shaders}\n}}"
+    )
+}
+
+#[test]
+fn translation_names_the_node_definitions_and_connections_materialx_resolves() {
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let stage = Stage::open(Path::new(&format!("{DIR}/chess_mat.mtlx")), &mut sources, &mut diags).expect("opens");
+    assert!(diags.items().is_empty(), "{}", diags.render(&sources));
+    let expected = std::fs::read_to_string(format!("{DIR}/chess_mat.expected")).unwrap();
+    let material = "/MaterialX/Materials/M_piece";
+    // A top-level node is copied into the material; a graph's node lives in its graph.
+    let prim_path = |p: &str| format!("{material}/{p}");
+    let mut checked = 0;
+    for line in expected.lines() {
+        let words: Vec<&str> = line.split(' ').collect();
+        match words.as_slice() {
+            ["node", path, id] => {
+                let prim = stage.prim(stage.find(&prim_path(path)).unwrap_or_else(|| panic!("no prim for {path}")));
+                let got = prim.value("info:id").and_then(|v| v.as_str());
+                assert_eq!(got, Some(*id), "{path}");
+                // The shared copy under NodeGraphs names the same definitions.
+                if path.contains('/') {
+                    let shared = stage.find(&format!("/MaterialX/NodeGraphs/{path}")).expect("shared graph copy");
+                    assert_eq!(stage.prim(shared).value("info:id").and_then(|v| v.as_str()), Some(*id));
+                }
+                checked += 1;
+            }
+            ["connect", input, kind, from, output] => {
+                let (path, name) = input.split_once('.').unwrap();
+                let prim = stage.prim(stage.find(&prim_path(path)).unwrap());
+                let attr = prim.attribute(&format!("inputs:{name}")).unwrap_or_else(|| panic!("no input {input}"));
+                let scope = match (*kind, path.rsplit_once('/')) {
+                    ("node", Some((graph, _))) => format!("{material}/{graph}/{from}"),
+                    _ => format!("{material}/{from}"),
+                };
+                let want = format!("{scope}.outputs:{output}");
+                assert_eq!(
+                    attr.connections.iter().map(|(t, _)| t.as_str()).collect::<Vec<_>>(),
+                    [want.as_str()],
+                    "{input}"
+                );
+                checked += 1;
+            }
+            _ => panic!("unexpected line `{line}`"),
+        }
+    }
+    assert_eq!(checked, 11, "every node and connection MaterialX reported was checked");
+    // fileprefix and colorspace reach the image's file input.
+    let image = stage.prim(stage.find(&format!("{material}/NG_piece/img_base")).unwrap());
+    let file = image.attribute("inputs:file").unwrap();
+    assert_eq!(file.meta("colorSpace").and_then(|v| v.as_str()), Some("srgb_texture"));
+    let rendered = format!("{:?}", file.value);
+    assert!(rendered.contains("textures/base.png"), "{rendered}");
+}
+
+#[test]
+fn the_chess_piece_renders_with_open_pbr_like_its_preview_surface_translation() {
+    let settings = common::settings(32, 32, 16, 5, 3);
+    let mtlx = common::render_file(Path::new(&format!("{DIR}/chess.usda")), &settings);
+    let preview = common::render_file(Path::new(&format!("{DIR}/chess_preview.usda")), &settings);
+    let mut worst = 0.0f32;
+    for c in ["albedo.R", "albedo.G", "albedo.B"] {
+        let (a, b) = (mtlx.f32_channel(c).unwrap(), preview.f32_channel(c).unwrap());
+        // Cell centres (8 texels a cell, 16 pixels a cell): bilinear lookups stay in the cell.
+        for (x, y) in [(8, 8), (24, 8), (8, 24), (24, 24)] {
+            let i = y * 32 + x;
+            assert!((a[i] - b[i]).abs() < 1e-4, "{c} at ({x}, {y}): {} vs {}", a[i], b[i]);
+        }
+    }
+    let (mut sum_a, mut sum_b) = (0.0f64, 0.0f64);
+    for c in ["R", "G", "B"] {
+        let (a, b) = (mtlx.f32_channel(c).unwrap(), preview.f32_channel(c).unwrap());
+        for (x, y) in a.iter().zip(b) {
+            sum_a += *x as f64;
+            sum_b += *y as f64;
+            worst = worst.max((x - y).abs());
+        }
+    }
+    let relative = (sum_a - sum_b).abs() / sum_b;
+    assert!(sum_b > 0.0 && relative < 0.02, "mean beauty differs by {:.3} %", relative * 100.0);
+    eprintln!("chess: mean beauty {sum_a:.3} vs {sum_b:.3} ({:.4} %), worst pixel {worst}", relative * 100.0);
+}
+
+#[test]
+fn nodes_evaluate_to_the_specification_at_sample_points() {
+    // Each case: a node network driving base_color (specular_weight 0: the closure is the
+    // diffuse base, whose albedo is base_color) and the value the specification gives.
+    let cases: &[(&str, &str, [f32; 3])] = &[
+        // remap 0.25 from [0, 0.5] to [1, 3]: 1 + 0.5 · 2 = 2, clamped to albedo 1.
+        (
+            "ND_remap_color3FA",
+            "color3f inputs:in = (0.25, 0.1, 0)\n float inputs:inhigh = 0.5\n float inputs:outlow = 0\n float inputs:outhigh = 0.8",
+            [0.4, 0.16, 0.0],
+        ),
+        // smoothstep of 0.5 in [0, 1] is 0.5; of 0.25: 3·0.0625 − 2·0.015625 = 0.15625.
+        ("ND_smoothstep_color3FA", "color3f inputs:in = (0.5, 0.25, 2)", [0.5, 0.15625, 1.0]),
+        // mix: fg · mix + bg · (1 − mix).
+        (
+            "ND_mix_color3",
+            "color3f inputs:fg = (1, 0, 0)\n color3f inputs:bg = (0, 0, 1)\n float inputs:mix = 0.25",
+            [0.25, 0.0, 0.75],
+        ),
+        // ifgreater: value1 > value2 picks in1.
+        (
+            "ND_ifgreater_color3",
+            "float inputs:value1 = 0.3\n float inputs:value2 = 0.2\n color3f inputs:in1 = (0.1, 0.2, 0.3)\n color3f inputs:in2 = (0.9, 0.9, 0.9)",
+            [0.1, 0.2, 0.3],
+        ),
+        ("ND_multiply_color3FA", "color3f inputs:in1 = (0.2, 0.4, 0.8)\n float inputs:in2 = 0.5", [0.1, 0.2, 0.4]),
+        ("ND_power_color3FA", "color3f inputs:in1 = (0.25, 0.5, 1)\n float inputs:in2 = 2", [0.0625, 0.25, 1.0]),
+        (
+            "ND_clamp_color3FA",
+            "color3f inputs:in = (-1, 0.5, 7)\n float inputs:low = 0.1\n float inputs:high = 0.9",
+            [0.1, 0.5, 0.9],
+        ),
+        ("ND_invert_color3FA", "color3f inputs:in = (0.25, 1, 0)", [0.75, 0.0, 1.0]),
+        ("ND_convert_float_color3", "float inputs:in = 0.3", [0.3, 0.3, 0.3]),
+        // modulo follows floor: −0.25 mod 1 = 0.75.
+        ("ND_modulo_color3FA", "color3f inputs:in1 = (-0.25, 1.5, 0.5)\n float inputs:in2 = 1", [0.75, 0.5, 0.5]),
+        (
+            "ND_switch_color3",
+            "color3f inputs:in1 = (1, 0, 0)\n color3f inputs:in2 = (0, 1, 0)\n color3f inputs:in3 = (0, 0, 1)\n float inputs:which = 2",
+            [0.0, 0.0, 1.0],
+        ),
+        // texcoord at (u, v) = (0.25, 0.75).
+        ("ND_texcoord_vector2", "", [0.25, 0.75, 0.0]),
+        // ramplr at u = 0.25 from (0, 0, 0) to (1, 0.5, 0).
+        ("ND_ramplr_color3", "color3f inputs:valuer = (1, 0.5, 0)", [0.25, 0.125, 0.0]),
+    ];
+    let mut failures = Vec::new();
+    for (id, inputs, want) in cases {
+        let shaders = format!(
+            "    def Shader \"N\" {{\n        uniform token info:id = \"{id}\"\n        {}\n        color3f outputs:out\n    }}",
+            inputs.replace('\n', "\n       ")
+        );
+        let text = open_pbr(
+            "        float inputs:specular_weight = 0\n        color3f inputs:base_color.connect = </M/N.outputs:out>",
+            &shaders,
+        );
+        let (code, rendered) = compiled(&text);
+        let Some(code) = code else {
+            failures.push(format!("{id}: does not compile:\n{rendered}"));
+            continue;
+        };
+        let c = closure_at(&code, 0.25, 0.75);
+        if ClosureKind::from_u32(c.kind) != ClosureKind::Diffuse {
+            failures.push(format!("{id}: closure {c:?}"));
+            continue;
+        }
+        if (0..3).any(|k| (c.params[k] - want[k]).abs() > 1e-5) || !rendered.is_empty() {
+            failures.push(format!("{id}: got {:?}, want {want:?}\n{rendered}", &c.params[..3]));
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+#[test]
+fn open_pbr_special_cases_are_strata_closures() {
+    let closure = |inputs: &str| {
+        let (code, rendered) = compiled(&open_pbr(inputs, ""));
+        let code = code.unwrap_or_else(|| panic!("{rendered}"));
+        (closure_at(&code, 0.5, 0.5), rendered)
+    };
+    // Base only: Lambert with base_weight · base_color.
+    let (c, rendered) = closure(
+        "        float inputs:specular_weight = 0\n        float inputs:base_weight = 0.5\n        color3f inputs:base_color = (0.8, 0.4, 0.2)",
+    );
+    assert!(rendered.is_empty(), "{rendered}");
+    assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Diffuse);
+    assert_eq!(&c.params[..3], &[0.4, 0.2, 0.1]);
+    // Metalness 1: the conductor, base colour at normal incidence, specular colour as edge tint.
+    let (c, _) = closure(
+        "        float inputs:base_metalness = 1\n        color3f inputs:base_color = (0.9, 0.6, 0.2)\n        color3f inputs:specular_color = (1, 0.9, 0.8)\n        float inputs:specular_roughness = 0.4",
+    );
+    assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Metal);
+    assert_eq!(&c.params[..7], &[0.9, 0.6, 0.2, 1.0, 0.9, 0.8, 0.4]);
+    // Transmission 1: rough glass with the specular roughness and IOR.
+    let (c, _) = closure(
+        "        float inputs:transmission_weight = 1\n        float inputs:specular_roughness = 0.2\n        float inputs:specular_ior = 1.33",
+    );
+    assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Glass);
+    assert!((c.params[3] - 0.2).abs() < 1e-6 && (c.params[4] - 1.33).abs() < 1e-6, "{c:?}");
+    // Coat over diffuse: the built-in coated lobe (glossy) with the coat's roughness and IOR,
+    // exactly what strata's own `glossy` node gives.
+    let (c, _) = closure(
+        "        float inputs:coat_weight = 1\n        float inputs:coat_roughness = 0.1\n        float inputs:coat_ior = 1.5\n        color3f inputs:base_color = (0.5, 0.5, 0.5)",
+    );
+    assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Glossy);
+    assert_eq!(&c.params[..8], &[0.5, 0.5, 0.5, 1.0, 1.0, 1.0, 0.1, 1.5]);
+    // Defaults: GGX dielectric (ior 1.5, roughness 0.3) over a 0.8 grey base.
+    let (c, _) = closure("");
+    assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Glossy);
+    assert_eq!(&c.params[..8], &[0.8, 0.8, 0.8, 1.0, 1.0, 1.0, 0.3, 1.5]);
+}
+
+#[test]
+fn what_the_surfaces_approximate_is_reported_once_per_kind() {
+    let text = "def Material \"M\" (prepend references = @odd/unsupported_lobes.mtlx@</MaterialX/Materials/M>) {}";
+    let (code, rendered) = compiled(text);
+    assert!(code.is_some(), "{rendered}");
+    for want in [
+        "standard_surface `sheen` is not supported",
+        "`thin_film_thickness` is not supported",
+        "`metalness` between 0 and 1 is approximated",
+    ] {
+        assert!(rendered.contains(want), "expected `{want}` in\n{rendered}");
+    }
+    // An ND_ node strata lacks: one warning naming it, the input keeps its default.
+    let text = "def Material \"M\" (prepend references = @odd/unknown_node.mtlx@</MaterialX/Materials/M>) {}";
+    let (code, rendered) = compiled(text);
+    assert_eq!(rendered.matches("MaterialX node `ND_hsvadjust_color3` is not implemented").count(), 1, "{rendered}");
+    let c = closure_at(&code.expect("compiles"), 0.5, 0.5);
+    assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Glossy);
+    assert_eq!(&c.params[..3], &[0.8, 0.8, 0.8], "base_color falls back to OpenPBR's default");
+}
+
+#[test]
+fn odd_documents_compile_or_say_why_and_none_panics() {
+    // (document, what strata says: "" when it compiles cleanly).
+    let cases = [
+        ("unclosed", "malformed MaterialX document"),
+        ("not_materialx", "not a MaterialX document"),
+        ("entity", "malformed MaterialX document"),
+        ("empty", "that this reference targets does not exist"),
+        ("unknown_node", "`ND_hsvadjust_color3` is not implemented"),
+        ("color4", ""),
+        ("dangling", "`missing`, which the document does not define"),
+        ("unsupported_lobes", "is not supported"),
+    ];
+    let verdicts = std::fs::read_to_string(format!("{DIR}/odd/verdicts.txt")).unwrap();
+    for (name, says) in cases {
+        let text = format!("def Material \"M\" (prepend references = @odd/{name}.mtlx@</MaterialX/Materials/M>) {{}}");
+        let (_, rendered) = compiled(&text);
+        if says.is_empty() {
+            assert!(!rendered.contains("error"), "{name}:\n{rendered}");
+        } else {
+            assert!(rendered.contains(says), "{name}: expected `{says}` in\n{rendered}");
+        }
+        // What MaterialX's own reader rejects, strata reports as not readable, never silently.
+        if verdicts.lines().any(|l| l == format!("{name} rejected")) {
+            assert!(rendered.contains("is not valid USD"), "{name}:\n{rendered}");
+        }
+    }
+    // A malformed root layer is an error at the XML's line and column, quoting it.
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let stage = Stage::open(Path::new(&format!("{DIR}/odd/unclosed.mtlx")), &mut sources, &mut diags);
+    let rendered = diags.render(&sources);
+    assert!(stage.is_err() && rendered.contains("unclosed.mtlx:5:"), "{rendered}");
+    assert!(rendered.contains("</nodegraph>"), "{rendered}");
+}
+
+#[test]
+fn colour_values_in_a_colour_space_reach_the_working_space() {
+    // An sRGB-encoded 0.5 is 0.21404 linear (the sRGB transfer function).
+    let text = open_pbr(
+        "        float inputs:specular_weight = 0\n        color3f inputs:base_color = (0.5, 0.5, 1) (\n            colorSpace = \"srgb_texture\"\n        )",
+        "",
+    );
+    let (code, rendered) = compiled(&text);
+    let c = closure_at(&code.unwrap_or_else(|| panic!("{rendered}")), 0.5, 0.5);
+    assert!((c.params[0] - 0.214_041).abs() < 1e-5 && (c.params[2] - 1.0).abs() < 1e-6, "{c:?}");
+}
+
+#[test]
+fn a_referenced_document_binds_like_usd() {
+    // `Materials` references @X_mat.mtlx@</MaterialX/Materials>; `/World/Ball` binds
+    // `/World/Materials/Red`, a standard_surface with base_color (0.8, 0.1, 0.1) and base 0.8.
+    let path = Path::new("tests/fixtures/compose_around/materialx.usda");
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let stage = Stage::open(path, &mut sources, &mut diags).expect("opens");
+    let c = compose_stage(&stage, &mut sources, &mut diags);
+    let material = c.material_of("/World/Ball").expect("composed");
+    let code = Compiler::new(BackendKind::Jit, PassOptions::default())
+        .compile(&c.library, material, &mut diags)
+        .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
+    assert!(!diags.has_errors() && diags.warning_count() == 0, "{}", diags.render(&sources));
+    let closure = closure_at(&code, 0.5, 0.5);
+    assert_eq!(ClosureKind::from_u32(closure.kind), ClosureKind::Glossy);
+    let want = [0.8 * 0.8, 0.1 * 0.8, 0.1 * 0.8];
+    assert!((0..3).all(|k| (closure.params[k] - want[k]).abs() < 1e-6), "{closure:?}");
+}
+
+/// The sRGB transfer function (IEC 61966-2-1), written out for the references below.
+fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+#[test]
+fn image_nodes_read_texels_with_their_colour_space_and_address_modes() {
+    // base.png's top-left cell is sRGB (200, 40, 30); (u, v) = (0.25, 0.75) is its centre.
+    let texel = [200.0f32, 40.0, 30.0].map(|c| srgb_to_linear(c / 255.0));
+    let image = |mode: &str| {
+        format!(
+            "    def Shader \"N\" {{\n        uniform token info:id = \"ND_image_color3\"\n        \
+             asset inputs:file = @textures/base.png@ (\n            colorSpace = \"srgb_texture\"\n        )\n        \
+             string inputs:uaddressmode = \"{mode}\"\n        color3f inputs:default = (0.1, 0.2, 0.3)\n        \
+             color3f outputs:out\n    }}"
+        )
+    };
+    let base =
+        "        float inputs:specular_weight = 0\n        color3f inputs:base_color.connect = </M/N.outputs:out>";
+    for (mode, u, want) in [
+        ("periodic", 0.25, texel),
+        ("periodic", 1.25, texel),
+        ("clamp", -3.0, texel),
+        ("constant", 1.25, [0.1, 0.2, 0.3]),
+        ("constant", 0.25, texel),
+    ] {
+        let (code, rendered) = compiled(&open_pbr(base, &image(mode)));
+        assert!(rendered.is_empty(), "{rendered}");
+        let c = closure_at(&code.expect("compiles"), u, 0.75);
+        assert!(
+            (0..3).all(|k| (c.params[k] - want[k]).abs() < 1e-4),
+            "{mode} at u = {u}: {:?} vs {want:?}",
+            &c.params[..3]
+        );
+    }
+}
+
+#[test]
+fn a_document_sublayered_under_a_usd_layer_composes_its_materials() {
+    let text = "#usda 1.0\n(\n    subLayers = [@chess_mat.mtlx@]\n)\n\
+                def Sphere \"Ball\" (prepend apiSchemas = [\"MaterialBindingAPI\"]) {\n    \
+                rel material:binding = </MaterialX/Materials/M_piece>\n}\n";
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let stage = Stage::from_text("scene.usda", text, Path::new(DIR), &mut sources, &mut diags).expect("parses");
+    let c = compose_stage(&stage, &mut sources, &mut diags);
+    let material = c.material_of("/Ball").expect("composed");
+    let code = Compiler::new(BackendKind::Jit, PassOptions::default()).compile(&c.library, material, &mut diags);
+    assert!(code.is_some() && !diags.has_errors(), "{}", diags.render(&sources));
+    // The top-left cell of metal.png is 0 (dielectric), its top-right 1 (metal).
+    let code = code.unwrap();
+    assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.25, 0.75).kind), ClosureKind::Glossy);
+    assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.75, 0.75).kind), ClosureKind::Metal);
+}

@@ -1,0 +1,287 @@
+#!/usr/bin/env python3
+"""Writes strata's MaterialX fixtures into tests/fixtures/mtlx/ with the MaterialX Python package
+(pip install MaterialX) for the documents and Pixar's USD library (pip install usd-core) for the
+scenes:
+
+  textures/*.png      tiny 16 x 16 RGB textures, 2 x 2 cells of 8 x 8 texels (bilinear lookups
+                      inside a cell return the cell's value exactly): base colour (sRGB), roughness,
+                      metalness (0 or 1 per cell), tangent-space normal.
+  chess_mat.mtlx      an OpenPBR "chess piece" material: a node graph of image nodes (base colour
+                      as srgb_texture, roughness, metalness, a normal map through `normalmap`) with
+                      the document's `fileprefix` = "textures/", written by MaterialX itself.
+  chess_mat.expected  MaterialX's own reading of chess_mat.mtlx: per node its path and the node
+                      definition MaterialX resolves it to (`getNodeDef()`, the standard library
+                      loaded), and per connected input where it reads. strata's translation must
+                      name the same definitions and connections.
+  chess.usda          a quad under a camera bound to </Looks/M_piece>, `Looks` referencing
+                      @chess_mat.mtlx@</MaterialX/Materials>.
+  chess_preview.usda  the same quad with the same textures as a UsdPreviewSurface network: the
+                      translation strata must render like (within noise).
+  odd/*.mtlx          malformed and odd documents, each with MaterialX's verdict in
+                      odd/verdicts.txt (whether MaterialX's XML reader accepts it).
+
+The camera looks down -z at the quad [-1, 1]^2 in the z = 0 plane from z = 5 (20 mm aperture,
+50 mm focal length): the quad fills a square image exactly.
+
+Run it again whenever the fixtures must change; the Rust tests only read the written files.
+"""
+import os
+import struct
+import zlib
+
+import MaterialX as mx
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, Vt
+
+HERE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "fixtures", "mtlx")
+CELL = 8
+
+
+def out(*name):
+    path = os.path.join(HERE, *name)
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    return path
+
+
+def write_png(path, cells):
+    """cells[row][col]: 8-bit RGB of each 8 x 8 cell, top row first."""
+    size = len(cells) * CELL
+    raw = b""
+    for y in range(size):
+        raw += b"\x00" + b"".join(bytes(cells[y // CELL][x // CELL]) for x in range(size))
+
+    def chunk(kind, data):
+        body = kind + data
+        return struct.pack(">I", len(data)) + body + struct.pack(">I", zlib.crc32(body) & 0xFFFFFFFF)
+
+    ihdr = struct.pack(">IIBBBBB", size, size, 8, 2, 0, 0, 0)
+    with open(path, "wb") as f:
+        f.write(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+TEXTURES = {
+    "base.png": [[(200, 40, 30), (240, 230, 210)], [(30, 30, 35), (90, 160, 60)]],
+    "rough.png": [[(40, 40, 40), (200, 200, 200)], [(120, 120, 120), (20, 20, 20)]],
+    "metal.png": [[(0, 0, 0), (255, 255, 255)], [(0, 0, 0), (255, 255, 255)]],
+    "normal.png": [[(128, 128, 255), (180, 128, 230)], [(128, 80, 240), (128, 128, 255)]],
+}
+
+
+def chess_document():
+    doc = mx.createDocument()
+    doc.setFilePrefix("textures/")
+    ng = doc.addNodeGraph("NG_piece")
+    outputs = {}
+    for name, file, ty, space in [
+        ("img_base", "base.png", "color3", "srgb_texture"),
+        ("img_rough", "rough.png", "float", None),
+        ("img_metal", "metal.png", "float", None),
+        ("img_normal", "normal.png", "vector3", None),
+    ]:
+        node = ng.addNode("image", name, ty)
+        f = node.addInput("file", "filename")
+        f.setValueString(file)
+        if space:
+            f.setColorSpace(space)
+        outputs[name] = node
+    normalmap = ng.addNode("normalmap", "normalmap", "vector3")
+    normalmap.addInput("in", "vector3").setConnectedNode(outputs["img_normal"])
+    graph_outputs = {}
+    for out_name, node, ty in [
+        ("out_base", outputs["img_base"], "color3"),
+        ("out_rough", outputs["img_rough"], "float"),
+        ("out_metal", outputs["img_metal"], "float"),
+        ("out_normal", normalmap, "vector3"),
+    ]:
+        o = ng.addOutput(out_name, ty)
+        o.setConnectedNode(node)
+        graph_outputs[out_name] = o
+    sr = doc.addNode("open_pbr_surface", "SR_piece", "surfaceshader")
+    for input_name, ty, o in [
+        ("base_color", "color3", "out_base"),
+        ("specular_roughness", "float", "out_rough"),
+        ("base_metalness", "float", "out_metal"),
+        ("geometry_normal", "vector3", "out_normal"),
+    ]:
+        sr.addInput(input_name, ty).setConnectedOutput(graph_outputs[o])
+    doc.addMaterialNode("M_piece", sr)
+    return doc
+
+
+def describe(doc_path):
+    """MaterialX's reading of a document: nodes with their node definitions, and connections."""
+    doc = mx.createDocument()
+    mx.readFromXmlFile(doc, doc_path)
+    own = [e.getNamePath() for e in doc.traverseTree() if isinstance(e, mx.Node) and e.getType() != "material"]
+    stdlib = mx.createDocument()
+    mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), stdlib)
+    doc.importLibrary(stdlib)
+    valid, message = doc.validate()
+    assert valid, message
+    lines = []
+    for path in own:
+        elem = doc.getDescendant(path)
+        nd = elem.getNodeDef()
+        lines.append(f"node {path} {nd.getName() if nd else '?'}")
+        for i in elem.getInputs():
+            if i.getNodeName():
+                lines.append(f"connect {path}.{i.getName()} node {i.getNodeName()} {i.getOutputString() or 'out'}")
+            elif i.getNodeGraphString():
+                lines.append(f"connect {path}.{i.getName()} graph {i.getNodeGraphString()} {i.getOutputString()}")
+    return sorted(set(lines))
+
+
+def quad_stage(path):
+    stage = Usd.Stage.CreateNew(path)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    cam = UsdGeom.Camera.Define(stage, "/Camera")
+    cam.AddTranslateOp().Set(Gf.Vec3d(0, 0, 5))
+    cam.GetFocalLengthAttr().Set(50.0)
+    cam.GetHorizontalApertureAttr().Set(20.0)
+    cam.GetVerticalApertureAttr().Set(20.0)
+    light = UsdLux.DistantLight.Define(stage, "/Sun")
+    light.GetIntensityAttr().Set(3.0)
+    light.AddRotateXYZOp().Set(Gf.Vec3f(-20, 25, 0))
+    UsdLux.DomeLight.Define(stage, "/Sky").GetIntensityAttr().Set(0.5)
+    mesh = UsdGeom.Mesh.Define(stage, "/Piece")
+    mesh.GetPointsAttr().Set(Vt.Vec3fArray([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)]))
+    mesh.GetFaceVertexCountsAttr().Set([4])
+    mesh.GetFaceVertexIndicesAttr().Set([0, 1, 2, 3])
+    st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
+    st.Set(Vt.Vec2fArray([(0, 0), (1, 0), (1, 1), (0, 1)]))
+    return stage, mesh
+
+
+def chess_scene():
+    stage, mesh = quad_stage(out("chess.usda"))
+    looks = stage.DefinePrim("/Looks", "Scope")
+    looks.GetReferences().AddReference("./chess_mat.mtlx", "/MaterialX/Materials")
+    # usd-core ships without the usdMtlx plugin, so the material is not on its stage: the
+    # binding is authored as the relationship UsdShade would write.
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim())
+    mesh.GetPrim().CreateRelationship("material:binding").SetTargets([Sdf.Path("/Looks/M_piece")])
+    stage.GetRootLayer().Save()
+
+
+def preview_scene():
+    stage, mesh = quad_stage(out("chess_preview.usda"))
+    material = UsdShade.Material.Define(stage, "/Looks/Preview")
+    surface = UsdShade.Shader.Define(stage, "/Looks/Preview/Surface")
+    surface.CreateIdAttr("UsdPreviewSurface")
+    material.CreateSurfaceOutput().ConnectToSource(surface.ConnectableAPI(), "surface")
+    reader = UsdShade.Shader.Define(stage, "/Looks/Preview/St")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.Token).Set("st")
+    reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+    for name, file, space, channel, target, ty in [
+        ("Base", "base.png", "sRGB", "rgb", "diffuseColor", Sdf.ValueTypeNames.Color3f),
+        ("Rough", "rough.png", "raw", "r", "roughness", Sdf.ValueTypeNames.Float),
+        ("Metal", "metal.png", "raw", "r", "metallic", Sdf.ValueTypeNames.Float),
+        ("Normal", "normal.png", "raw", "rgb", "normal", Sdf.ValueTypeNames.Normal3f),
+    ]:
+        tex = UsdShade.Shader.Define(stage, f"/Looks/Preview/{name}")
+        tex.CreateIdAttr("UsdUVTexture")
+        tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(f"./textures/{file}")
+        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set(space)
+        tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(reader.ConnectableAPI(), "result")
+        if name == "Normal":
+            tex.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(2, 2, 2, 1))
+            tex.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set(Gf.Vec4f(-1, -1, -1, 0))
+        out_ty = Sdf.ValueTypeNames.Float3 if channel == "rgb" else Sdf.ValueTypeNames.Float
+        tex.CreateOutput(channel, out_ty)
+        surface.CreateInput(target, ty).ConnectToSource(tex.ConnectableAPI(), channel)
+    UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(material)
+    stage.GetRootLayer().Save()
+
+
+# Odd and malformed documents: name -> text. Each must compile or give a clear diagnostic.
+ODD = {
+    "unclosed": '<?xml version="1.0"?>\n<materialx version="1.39">\n  <nodegraph name="NG">\n    <image name="i" type="color3">\n  </nodegraph>\n</materialx>\n',
+    "not_materialx": '<?xml version="1.0"?>\n<usd version="1"/>\n',
+    "entity": '<?xml version="1.0"?>\n<!DOCTYPE materialx [<!ENTITY a "aaaaaaaa">]>\n<materialx version="1.39">&a;</materialx>\n',
+    "empty": '<?xml version="1.0"?>\n<materialx version="1.39"/>\n',
+    "unknown_node": """<?xml version="1.0"?>
+<materialx version="1.39">
+  <nodegraph name="NG">
+    <hsvadjust name="adjust" type="color3">
+      <input name="in" type="color3" value="0.5, 0.2, 0.1" />
+    </hsvadjust>
+    <output name="out" type="color3" nodename="adjust" />
+  </nodegraph>
+  <open_pbr_surface name="SR" type="surfaceshader">
+    <input name="base_color" type="color3" nodegraph="NG" output="out" />
+  </open_pbr_surface>
+  <surfacematerial name="M" type="material">
+    <input name="surfaceshader" type="surfaceshader" nodename="SR" />
+  </surfacematerial>
+</materialx>
+""",
+    "color4": """<?xml version="1.0"?>
+<materialx version="1.39">
+  <constant name="c4" type="color4">
+    <input name="value" type="color4" value="1, 0, 0, 1" />
+  </constant>
+  <standard_surface name="SR" type="surfaceshader">
+    <input name="opacity" type="color3" value="1, 1, 1" />
+  </standard_surface>
+  <surfacematerial name="M" type="material">
+    <input name="surfaceshader" type="surfaceshader" nodename="SR" />
+  </surfacematerial>
+</materialx>
+""",
+    "dangling": """<?xml version="1.0"?>
+<materialx version="1.39">
+  <standard_surface name="SR" type="surfaceshader">
+    <input name="base_color" type="color3" nodename="missing" />
+    <input name="base" type="float" value="not a number" />
+  </standard_surface>
+  <surfacematerial name="M" type="material">
+    <input name="surfaceshader" type="surfaceshader" nodename="SR" />
+  </surfacematerial>
+</materialx>
+""",
+    "unsupported_lobes": """<?xml version="1.0"?>
+<materialx version="1.39">
+  <standard_surface name="SR" type="surfaceshader">
+    <input name="sheen" type="float" value="0.5" />
+    <input name="thin_film_thickness" type="float" value="300" />
+    <input name="metalness" type="float" value="0.3" />
+  </standard_surface>
+  <surfacematerial name="M" type="material">
+    <input name="surfaceshader" type="surfaceshader" nodename="SR" />
+  </surfacematerial>
+</materialx>
+""",
+}
+
+
+def verdicts():
+    lines = []
+    for name, text in sorted(ODD.items()):
+        with open(out("odd", f"{name}.mtlx"), "w") as f:
+            f.write(text)
+        doc = mx.createDocument()
+        try:
+            mx.readFromXmlString(doc, text)
+            lines.append(f"{name} read")
+        except Exception:
+            lines.append(f"{name} rejected")
+    with open(out("odd", "verdicts.txt"), "w") as f:
+        f.write("\n".join(lines) + "\n")
+
+
+def main():
+    for name, cells in TEXTURES.items():
+        write_png(out("textures", name), cells)
+    doc = chess_document()
+    valid, message = doc.validate()
+    assert valid, message
+    mx.writeToXmlFile(doc, out("chess_mat.mtlx"))
+    with open(out("chess_mat.expected"), "w") as f:
+        f.write("\n".join(describe(out("chess_mat.mtlx"))) + "\n")
+    chess_scene()
+    preview_scene()
+    verdicts()
+
+
+if __name__ == "__main__":
+    main()
