@@ -27,7 +27,9 @@ use strata::render::{LayerMode, RenderSettings, Scene};
 use strata::runtime::{math, noise};
 use strata::session::{SceneSource, Session, SessionOptions};
 
+mod textures;
 mod update;
+pub use textures::bench_textures;
 pub use update::bench_update;
 
 /// The built-in benchmark material: three substances, composed bottom to top in this order.
@@ -384,6 +386,7 @@ pub fn sample_points(n: usize, seed: u64) -> Vec<Globals<'static>> {
                 dpdv: [n[1] * t[2] - n[2] * t[1], n[2] * t[0] - n[0] * t[2], n[0] * t[1] - n[1] * t[0]],
                 u: rng.unit(),
                 v: rng.unit(),
+                st_footprint: [0.0; 4],
                 primvars: Default::default(),
             }
         })
