@@ -47,18 +47,18 @@ fn write_sources(dir: &Path) -> Result<Vec<(&'static str, std::path::PathBuf)>, 
         image::Rgb([0, 1, 2].map(|c| u16::from(pattern(x, y, c)) * 257))
     });
     let mut out = Vec::new();
-    let png8 = dir.join("rgb8.png");
-    rgb8.save(&png8).map_err(|e| err(&e))?;
-    out.push(("PNG RGB 8-bit", png8));
-    let jpg = dir.join("rgb8.jpg");
-    rgb8.save(&jpg).map_err(|e| err(&e))?;
-    out.push(("JPEG RGB 8-bit", jpg));
-    let grey = dir.join("grey8.png");
-    grey8.save(&grey).map_err(|e| err(&e))?;
-    out.push(("PNG grey 8-bit", grey));
-    let png16 = dir.join("rgb16.png");
-    rgb16.save(&png16).map_err(|e| err(&e))?;
-    out.push(("PNG RGB 16-bit", png16));
+    let (rgb8, grey8, rgb16) =
+        (image::DynamicImage::from(rgb8), image::DynamicImage::from(grey8), image::DynamicImage::from(rgb16));
+    for (label, name, image) in [
+        ("PNG RGB 8-bit", "rgb8.png", &rgb8),
+        ("JPEG RGB 8-bit", "rgb8.jpg", &rgb8),
+        ("PNG grey 8-bit", "grey8.png", &grey8),
+        ("PNG RGB 16-bit", "rgb16.png", &rgb16),
+    ] {
+        let path = dir.join(name);
+        image.save(&path).map_err(|e| err(&e))?;
+        out.push((label, path));
+    }
     for (label, name, half) in [("EXR RGB half", "half.exr", true), ("EXR RGB float", "float.exr", false)] {
         use exr::prelude::{Encoding, WritableImage, f16};
         let path = dir.join(name);
