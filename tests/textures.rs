@@ -126,7 +126,9 @@ fn footprint_filtering_removes_aliasing_at_grazing_angles_and_changes_nothing_up
     let unfiltered = rmse(&albedo(&grazing, res, 1, Filter::Bilinear), &reference);
     let trilinear = rmse(&albedo(&grazing, res, 1, Filter::Trilinear), &reference);
     let anisotropic = rmse(&albedo(&grazing, res, 1, Filter::Anisotropic), &reference);
-    eprintln!("grazing checker, 1 spp against 1024 spp: RMSE unfiltered {unfiltered:.4}, trilinear {trilinear:.4}, anisotropic {anisotropic:.4}");
+    eprintln!(
+        "grazing checker, 1 spp against 1024 spp: RMSE unfiltered {unfiltered:.4}, trilinear {trilinear:.4}, anisotropic {anisotropic:.4}"
+    );
     assert!(unfiltered > 0.1, "the unfiltered image aliases: {unfiltered}");
     assert!(trilinear < 0.6 * unfiltered, "trilinear {trilinear} vs unfiltered {unfiltered}");
     assert!(anisotropic < 0.6 * unfiltered, "anisotropic {anisotropic} vs unfiltered {unfiltered}");

@@ -402,7 +402,11 @@ impl Context<'_> {
         s.site = FaultSite { prim: sp.prim, layer: None };
         let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
         let mut g = self.globals(sp, facing, d, &mut s.primvars);
-        g.st_footprint = st_footprint(sp, d, footprint);
+        // The footprint is that of the surface's own `st` (or parametric) coordinates: a
+        // material that reads other coordinates (a `st0` primvar) is left unfiltered.
+        if !info.primvars.iter().any(|p| p.width > 1 && p.name != "st") {
+            g.st_footprint = st_footprint(sp, d, footprint);
+        }
         s.emitted = Vec3::ZERO;
         if nl == 0 {
             s.lobes.clear();
