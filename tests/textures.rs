@@ -12,8 +12,9 @@ use strata_rt::texture::{Filter, set_filter};
 
 /// A `side × side` 8-bit grey checker of `cell`-texel cells, black and white.
 fn write_checker(path: &Path, side: u32, cell: u32) {
-    let data: Vec<u8> =
-        (0..side * side).map(|i| if ((i % side) / cell + (i / side) / cell) % 2 == 0 { 255 } else { 0 }).collect();
+    let data: Vec<u8> = (0..side * side)
+        .map(|i| if ((i % side) / cell + (i / side) / cell).is_multiple_of(2) { 255 } else { 0 })
+        .collect();
     let mut bytes = Vec::new();
     let mut encoder = png::Encoder::new(&mut bytes, side, side);
     encoder.set_color(png::ColorType::Grayscale);
