@@ -44,6 +44,12 @@ struct Args {
     /// the memory this process may use (RAM, `ulimit -v`, the cgroup's limit).
     #[arg(long, global = true, value_name = "BYTES", value_parser = parse_size)]
     max_memory: Option<u64>,
+    /// Texels resident at once, in bytes (K, M and G suffixes): textures are decoded when a
+    /// lookup first reaches them and their least recently used mip levels are evicted past
+    /// this; any budget renders the same image, a small one more slowly. Default: half the
+    /// memory budget (`--max-memory`).
+    #[arg(long, global = true, value_name = "BYTES", value_parser = parse_size)]
+    texture_memory: Option<u64>,
 }
 
 #[derive(Subcommand)]
@@ -280,6 +286,18 @@ enum BenchCommand {
         #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=1000))]
         repeats: u32,
     },
+    /// Textures at their source precision: bytes per texel by source kind, setup (header and
+    /// decode) time, lookup cost (nearest, trilinear, anisotropic) on one and all cores, and a
+    /// render's time and cache hit rate with the texture memory at 100 %, 25 % and 5 % of the
+    /// textures' size.
+    Textures {
+        /// Samples per pixel of the timed renders.
+        #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=4096))]
+        spp: u32,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "160x120", value_parser = parse_resolution)]
+        res: (usize, usize),
+    },
     /// Measure and draw every chart of README's Charts section and docs/STABILITY.md as SVG:
     /// error vs time of stochastic vs weighted layering (1-64 layers; constant, noise and thin
     /// masks), JIT vs interpreter, strata vs Mitsuba 3 (from the committed CSV), per-point
@@ -311,6 +329,7 @@ fn main() -> ExitCode {
         max_texture_pixels: args.max_texture_pixels.unwrap_or(defaults.max_texture_pixels),
         max_memory_bytes: args.max_memory,
     });
+    strata::runtime::texture::set_memory_budget(args.texture_memory);
     let result = match args.command {
         Command::Layers { scene, json, time } => cli::layers(scene.as_deref(), json, time),
         Command::Ir { scene, prim, no_optimize, stats, lowered } => {
@@ -379,6 +398,7 @@ fn main() -> ExitCode {
                 BenchCommand::Displacement { spp, res } => cli::bench::bench_displacement(res, spp),
                 BenchCommand::Features { spp, res } => cli::bench::bench_features(res, spp, 7),
                 BenchCommand::Update { spp, res, repeats } => cli::bench::bench_update(res, spp, repeats as usize),
+                BenchCommand::Textures { spp, res } => cli::bench::bench_textures(res, spp),
                 BenchCommand::Charts { plot, mitsuba_csv, quick } => {
                     let options =
                         if quick { cli::bench::ChartOptions::quick() } else { cli::bench::ChartOptions::default() };

@@ -114,6 +114,7 @@ fn points(count: usize) -> Vec<Globals<'static>> {
             dpdv: v3(&mut f),
             u: f(),
             v: f(),
+            st_footprint: [f(), f(), f(), f()],
             primvars: Default::default(),
         });
     }

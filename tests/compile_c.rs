@@ -38,6 +38,7 @@ fn point(i: usize) -> Globals<'static> {
         dpdv: [0.0, 0.0, 1.0],
         u: (t * 0.013) % 1.0,
         v: (t * 0.029) % 1.0,
+        st_footprint: [0.0; 4],
         primvars: Default::default(),
     }
 }

@@ -143,6 +143,7 @@ fn points(count: usize, seed: u64) -> Vec<Globals<'static>> {
                 dpdv: b.to_array(),
                 u: next() * 0.5 + 0.5,
                 v: next() * 0.5 + 0.5,
+                st_footprint: [0.0; 4],
                 primvars: Default::default(),
             }
         })

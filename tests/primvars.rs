@@ -269,6 +269,7 @@ fn primvar_nodes_agree_across_backends_bit_for_bit() {
             n: [0.0, 0.0, 1.0],
             ng: [0.0, 0.0, 1.0],
             i: [0.0, 0.0, -1.0],
+            st_footprint: [0.0; 4],
             primvars: PrimvarValues::new(values),
             ..Globals::default()
         };

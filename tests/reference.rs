@@ -157,6 +157,7 @@ fn displacement_rules_give_the_analytic_normal() {
                 dpdv: [0.0, 0.0, 1.0],
                 u: 0.5,
                 v: 0.5,
+                st_footprint: [0.0; 4],
                 primvars: Default::default(),
             };
             let state = shading_state(code.as_ref(), &g).expect("shades");

@@ -78,6 +78,10 @@ pub struct Globals<'a> {
     pub u: f32,
     /// Texture coordinate `v` (t).
     pub v: f32,
+    /// The ray's footprint in texture (st) space, the axes of the ray cone's ellipse on the
+    /// surface as diameters: (ds, dt) across the cone and (ds, dt) along the ray's projection.
+    /// Texture lookups filter over it (zeros: unfiltered, the finest level bilinearly).
+    pub st_footprint: [f32; 4],
     /// The primvars the material reads, interpolated at this point, laid out as
     /// [`MaterialInfo::primvars`] says (empty: every primvar reads its fallback).
     pub primvars: PrimvarValues<'a>,

@@ -37,8 +37,8 @@ pub fn run(func: &Function, globals: &abi::Globals, out: &mut [u32]) -> Status {
     })
 }
 
-fn globals_words(g: &abi::Globals) -> [u32; 20] {
-    let mut w = [0u32; 20];
+fn globals_words(g: &abi::Globals) -> [u32; 24] {
+    let mut w = [0u32; 24];
     let fields = [g.p, g.n, g.ng, g.i, g.dpdu, g.dpdv];
     for (f, v) in fields.iter().enumerate() {
         for k in 0..3 {
@@ -47,6 +47,9 @@ fn globals_words(g: &abi::Globals) -> [u32; 20] {
     }
     w[18] = g.u.to_bits();
     w[19] = g.v.to_bits();
+    for (k, v) in g.st_footprint.iter().enumerate() {
+        w[20 + k] = v.to_bits();
+    }
     w
 }
 

@@ -380,8 +380,10 @@ pub mod globals {
     pub const U: u32 = 18;
     /// `v`
     pub const V: u32 = 19;
+    /// `st_footprint[0]` (ds/dx, dt/dx, ds/dy, dt/dy follow in order).
+    pub const ST_FOOTPRINT: u32 = 20;
     /// Words in the struct.
-    pub const WORDS: u32 = 20;
+    pub const WORDS: u32 = 24;
 }
 
 fn global_name(offset: u32) -> String {
@@ -612,7 +614,7 @@ impl Builder {
         let word = match &inst {
             Inst::FConst(x) => Some(x.to_bits()),
             Inst::IConst(i) => Some(*i as u32),
-            Inst::Call(crate::runtime::rt::RtFn::Texture, _) => None,
+            Inst::Call(crate::runtime::rt::RtFn::Texture | crate::runtime::rt::RtFn::TextureFiltered, _) => None,
             Inst::Unary(..) | Inst::Binary(..) | Inst::Cmp(..) | Inst::Select(..) | Inst::Call(..) => {
                 let mut all = true;
                 for_each_operand(&inst, |v| all &= self.known(v).is_some());
@@ -800,7 +802,7 @@ pub fn eval_pure(f: &Function, inst: &Inst, operand: impl Fn(Value) -> u32) -> O
             }
         }
         Inst::Call(func, args) => {
-            let mut words = [0u32; 4];
+            let mut words = [0u32; 8];
             for (w, a) in words.iter_mut().zip(args) {
                 *w = operand(*a);
             }
@@ -966,7 +968,7 @@ fn simplify_round(f: &mut Function, constant_vars: &std::collections::HashMap<Va
                 _ => {}
             }
             let foldable = match &data.inst {
-                Inst::Call(RtFn::Texture, _) => false,
+                Inst::Call(RtFn::Texture | RtFn::TextureFiltered, _) => false,
                 Inst::Unary(_, a) => constant[a.0 as usize].is_some(),
                 Inst::Binary(_, a, b) | Inst::Cmp(_, a, b) => {
                     constant[a.0 as usize].is_some() && constant[b.0 as usize].is_some()

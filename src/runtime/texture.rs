@@ -1,10 +1,13 @@
-//! Texture files: decoding images for the runtime's texture registry
-//! ([`strata_rt::texture`]), once per file, at compile time.
+//! Texture files for the runtime's texture registry ([`strata_rt::texture`]): registered at
+//! compile time from their header alone (size, channels, precision and colour space are
+//! checked there, so `strata check` never decodes a pixel), decoded at their own precision
+//! when a lookup first reaches them ([`decode_image`]). Dome maps still decode to RGBA floats
+//! ([`decode_texture_budgeted`]): their sampling tables need every texel.
 
 use crate::input;
 use std::io::Cursor;
 use std::path::Path;
-pub use strata_rt::texture::{Texture, lookup, register};
+pub use strata_rt::texture::{Image, Texels, Texture, lookup, lookup_filtered, register};
 
 /// An RGB image decoded from an EXR file: width, height and row-major texels, top row first.
 pub type RgbImage = (usize, usize, Vec<[f32; 3]>);
@@ -246,9 +249,193 @@ pub fn decode_texture_budgeted(
     Ok(Texture { width, height, texels })
 }
 
-/// Loads `path` (once per process and colour space) into the registry and returns its id.
-/// The file is read through [`input::read_bytes`] (size limit, package paths); its header
-/// is checked against [`input::limits`] before decoding.
+/// Sets the bytes of texels resident at once (`--texture-memory`); `None`: half of
+/// [`input::memory_budget`] (which `--max-memory` sets, else half of what the process may use).
+pub fn set_memory_budget(bytes: Option<u64>) {
+    strata_rt::texture::set_memory_budget(bytes.unwrap_or_else(|| input::memory_budget() / 2).max(1));
+}
+
+/// What a texture file's header says, read without decoding a pixel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TextureHeader {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Channels kept (1..=4).
+    pub channels: usize,
+    /// Bytes per channel as kept: 1 (8-bit), 2 (16-bit or half), 4 (float).
+    pub bytes_per_channel: usize,
+    /// Whether the colour channels are sRGB-decoded at lookup.
+    pub srgb: bool,
+}
+
+impl TextureHeader {
+    /// Bytes of the finest level and every mip level below it (a third more).
+    pub fn resident_bytes(&self) -> u64 {
+        let finest = u64::from(self.width) * u64::from(self.height) * (self.channels * self.bytes_per_channel) as u64;
+        finest.saturating_add(finest / 3)
+    }
+}
+
+/// Whether `space` sRGB-decodes an image of this kind (UsdUVTexture's `sourceColorSpace`).
+fn decodes_srgb(space: ColorSpace, float: bool, eight_bit: bool, has_color: bool) -> bool {
+    match space {
+        ColorSpace::Raw => false,
+        ColorSpace::Srgb => !float,
+        ColorSpace::Auto => eight_bit && has_color,
+    }
+}
+
+/// The EXR layer strata reads (the first with R, G and B, else the first) and whether its
+/// colour channels are all half floats.
+fn exr_layer(meta: &exr::meta::MetaData) -> Option<(&exr::meta::header::Header, bool)> {
+    let has = |h: &exr::meta::header::Header, name: &str| h.channels.list.iter().any(|c| c.name.eq(name));
+    let header = meta.headers.iter().find(|h| ["R", "G", "B"].iter().all(|c| has(h, c))).or(meta.headers.first())?;
+    let half = ["R", "G", "B"].iter().all(|name| {
+        header.channels.list.iter().any(|c| c.name.eq(name) && c.sample_type == exr::meta::attribute::SampleType::F16)
+    });
+    Some((header, half))
+}
+
+/// Reads and checks a texture's header: its size against `max_pixels`, its format, its
+/// channels, and the memory its texels and mip levels will take against the memory budget
+/// (`--max-memory`). Nothing is decoded.
+pub fn read_header(
+    bytes: &[u8],
+    name: Option<&Path>,
+    space: ColorSpace,
+    max_pixels: u64,
+) -> Result<TextureHeader, String> {
+    use image::ImageDecoder;
+    let header = if is_exr(bytes) {
+        check_exr_header(bytes, max_pixels)?;
+        let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).map_err(|e| e.to_string())?;
+        let (layer, half) = exr_layer(&meta).ok_or("the image has no layers")?;
+        let size = layer.layer_size;
+        let (width, height) = (u32::try_from(size.width()), u32::try_from(size.height()));
+        let (Ok(width), Ok(height)) = (width, height) else { return Err("the image is too large".into()) };
+        TextureHeader { width, height, channels: 3, bytes_per_channel: if half { 2 } else { 4 }, srgb: false }
+    } else {
+        let decoder = image_reader(bytes, name)?.into_decoder().map_err(|e| e.to_string())?;
+        let (width, height) = decoder.dimensions();
+        let pixels = u64::from(width) * u64::from(height);
+        if pixels > max_pixels {
+            return Err(format!(
+                "the image is {width} x {height} = {pixels} pixels, more than the texture limit of {max_pixels} pixels \
+                 (raise it with --max-texture-pixels)"
+            ));
+        }
+        let color = decoder.color_type();
+        let float = matches!(color, image::ColorType::Rgb32F | image::ColorType::Rgba32F);
+        let channels = usize::from(color.channel_count());
+        let bytes_per_channel = usize::from(color.bytes_per_pixel()) / channels.max(1);
+        let eight_bit = bytes_per_channel == 1;
+        let srgb = decodes_srgb(space, float, eight_bit, color.has_color());
+        TextureHeader { width, height, channels, bytes_per_channel, srgb }
+    };
+    if header.width == 0 || header.height == 0 {
+        return Err("the image is empty".into());
+    }
+    if !(1..=4).contains(&header.channels) {
+        return Err(format!("the image has {} channels (textures have 1 to 4)", header.channels));
+    }
+    input::check_memory(&format!("decoding the {} x {} image", header.width, header.height), header.resident_bytes())?;
+    Ok(header)
+}
+
+/// Decodes a texture at its source precision: 8-bit and 16-bit integers, half or float, one to
+/// four channels as the file has them (EXR: its RGB channels), never through a full-size float
+/// copy. Non-finite float texels become 0.
+pub fn decode_image(bytes: &[u8], name: Option<&Path>, space: ColorSpace, max_pixels: u64) -> Result<Image, String> {
+    use exr::prelude::{ReadChannels, ReadLayers, f16};
+    let header = read_header(bytes, name, space, max_pixels)?;
+    let (width, height) = (header.width as usize, header.height as usize);
+    if is_exr(bytes) {
+        let texels = if header.bytes_per_channel == 2 {
+            type Half = (usize, Vec<u16>);
+            let image = exr::prelude::read()
+                .no_deep_data()
+                .largest_resolution_level()
+                .rgba_channels(
+                    |size, _| (size.width(), vec![0u16; size.area() * 3]),
+                    |(w, px): &mut Half, pos, (r, g, b, _a): (f16, f16, f16, f16)| {
+                        let i = (pos.y() * *w + pos.x()) * 3;
+                        px[i..i + 3].copy_from_slice(&[r.to_bits(), g.to_bits(), b.to_bits()]);
+                    },
+                )
+                .first_valid_layer()
+                .all_attributes()
+                .from_buffered(Cursor::new(bytes))
+                .map_err(|e| e.to_string())?;
+            Texels::F16(image.layer_data.channel_data.pixels.1)
+        } else {
+            let (_, _, rgb) = decode_rgb_exr(bytes, max_pixels)?;
+            Texels::F32(rgb.into_iter().flatten().map(|c| if c.is_finite() { c } else { 0.0 }).collect())
+        };
+        return Ok(Image { width, height, channels: 3, srgb: false, texels });
+    }
+    let mut reader = image_reader(bytes, name)?;
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(input::memory_budget().saturating_sub(header.resident_bytes()).max(1 << 20));
+    reader.limits(limits);
+    use image::DynamicImage as D;
+    let decoded = reader.decode().map_err(|e| e.to_string())?;
+    let (channels, texels) = match decoded {
+        D::ImageLuma8(b) => (1, Texels::U8(b.into_raw())),
+        D::ImageLumaA8(b) => (2, Texels::U8(b.into_raw())),
+        D::ImageRgb8(b) => (3, Texels::U8(b.into_raw())),
+        D::ImageRgba8(b) => (4, Texels::U8(b.into_raw())),
+        D::ImageLuma16(b) => (1, Texels::U16(b.into_raw())),
+        D::ImageLumaA16(b) => (2, Texels::U16(b.into_raw())),
+        D::ImageRgb16(b) => (3, Texels::U16(b.into_raw())),
+        D::ImageRgba16(b) => (4, Texels::U16(b.into_raw())),
+        D::ImageRgb32F(b) => (3, Texels::F32(b.into_raw())),
+        other => (4, Texels::F32(other.into_rgba32f().into_raw())),
+    };
+    let texels = match texels {
+        Texels::F32(mut v) => {
+            v.iter_mut().filter(|c| !c.is_finite()).for_each(|c| *c = 0.0);
+            Texels::F32(v)
+        }
+        other => other,
+    };
+    let srgb = header.srgb && !matches!(texels, Texels::F32(_));
+    let image = Image { width, height, channels, srgb, texels };
+    Ok(image)
+}
+
+/// A texture file decoded when a lookup first reaches it (and again after eviction).
+struct FileSource {
+    /// The file as read (canonical, package paths included).
+    canonical: std::path::PathBuf,
+    /// The name it was given (its extension tells formats without a signature).
+    name: std::path::PathBuf,
+    space: ColorSpace,
+    max_pixels: u64,
+}
+
+impl strata_rt::texture::TexelSource for FileSource {
+    fn decode(&self) -> Result<Image, String> {
+        let bytes = input::read_bytes(&self.canonical).map_err(|e| e.to_string())?;
+        decode_image(&bytes, Some(&self.name), self.space, self.max_pixels)
+    }
+}
+
+/// Reads `path`'s header (checked against [`input::limits`]) and a source that decodes it.
+fn open_file(path: &Path, canonical: &Path, space: ColorSpace) -> Result<(TextureHeader, FileSource), String> {
+    let max_pixels = input::limits().max_texture_pixels;
+    let header = input::read_bytes(canonical)
+        .map_err(|e| e.to_string())
+        .and_then(|bytes| read_header(&bytes, Some(path), space, max_pixels))
+        .map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
+    let source = FileSource { canonical: canonical.to_path_buf(), name: path.to_path_buf(), space, max_pixels };
+    Ok((header, source))
+}
+
+/// Registers `path` (once per process and colour space) and returns its id. Only its header
+/// is read now (through [`input::read_bytes`]: size limit, package paths; checked against
+/// [`input::limits`]); its pixels are decoded when a lookup first reaches them.
 pub fn register_file(path: &Path) -> Result<i32, String> {
     register_file_as(path, ColorSpace::Auto)
 }
@@ -264,11 +451,8 @@ pub fn register_file_as(path: &Path, space: ColorSpace) -> Result<i32, String> {
     if let Some(id) = strata_rt::texture::find(&key) {
         return Ok(id);
     }
-    let texture = input::read_bytes(&canonical)
-        .map_err(|e| e.to_string())
-        .and_then(|bytes| decode_texture_named(&bytes, Some(path), space, input::limits().max_texture_pixels))
-        .map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
-    register(key, texture)
+    let (header, source) = open_file(path, &canonical, space)?;
+    strata_rt::texture::register_source(key, header.width as usize, header.height as usize, Box::new(source))
 }
 
 /// Whether a texture was registered under a name starting with `prefix` (a canonical path
@@ -277,9 +461,10 @@ pub fn registered_from(prefix: &str) -> bool {
     strata_rt::texture::names().iter().any(|n| n.to_string_lossy().starts_with(prefix))
 }
 
-/// Reads `path` again into every registry entry loaded from it (one per colour space), so
-/// materials compiled against those ids see the new texels without recompiling. Returns how
-/// many entries were replaced: 0 when no texture was loaded from `path`.
+/// Points every registry entry loaded from `path` (one per colour space) at the file as it is
+/// now (its header read again), so materials compiled against those ids see the new texels
+/// without recompiling. Returns how many entries were replaced: 0 when no texture was loaded
+/// from `path`.
 pub fn reload_file(path: &Path) -> Result<usize, String> {
     let Ok(canonical) = crate::input::canonicalize(path) else { return Ok(0) };
     let mut replaced = 0;
@@ -291,11 +476,8 @@ pub fn reload_file(path: &Path) -> Result<usize, String> {
         else {
             continue;
         };
-        let texture = input::read_bytes(&canonical)
-            .map_err(|e| e.to_string())
-            .and_then(|bytes| decode_texture_named(&bytes, Some(path), space, input::limits().max_texture_pixels))
-            .map_err(|e| format!("cannot read texture `{}`: {e}", path.display()))?;
-        strata_rt::texture::replace(id as i32, texture)?;
+        let (header, source) = open_file(path, &canonical, space)?;
+        strata_rt::texture::replace_source(id as i32, header.width as usize, header.height as usize, Box::new(source))?;
         replaced += 1;
     }
     Ok(replaced)
@@ -431,5 +613,78 @@ pub(crate) mod tests {
         // EXR still goes through its own header check.
         assert!(decode_texture(&small_exr(3, 2), ColorSpace::Auto, 5).unwrap_err().contains("3 x 2 = 6"));
         assert_eq!(decode_texture(&small_exr(3, 2), ColorSpace::Srgb, 6).unwrap().texels[5], [2.0, 1.0, 0.5, 1.0]);
+    }
+
+    /// A 16-bit PNG in memory (big-endian samples, as PNG stores them).
+    fn png16(width: u32, height: u32, color: png::ColorType, samples: &[u16]) -> Vec<u8> {
+        let mut bytes = Vec::new();
+        let mut encoder = png::Encoder::new(&mut bytes, width, height);
+        encoder.set_color(color);
+        encoder.set_depth(png::BitDepth::Sixteen);
+        let mut writer = encoder.write_header().expect("header");
+        writer.write_image_data(&samples.iter().flat_map(|s| s.to_be_bytes()).collect::<Vec<_>>()).expect("data");
+        writer.finish().expect("finish");
+        bytes
+    }
+
+    #[test]
+    fn textures_keep_their_source_precision_and_channels() {
+        let rgb8 = small_png(2, 1, png::ColorType::Rgb, &[255, 128, 0, 1, 2, 3]);
+        let image = decode_image(&rgb8, None, ColorSpace::Auto, 100).unwrap();
+        assert_eq!((image.channels, image.srgb), (3, true));
+        assert_eq!(image.texels, Texels::U8(vec![255, 128, 0, 1, 2, 3]));
+        let grey =
+            decode_image(&small_png(1, 1, png::ColorType::Grayscale, &[9]), None, ColorSpace::Auto, 100).unwrap();
+        assert_eq!((grey.channels, grey.srgb, grey.texels), (1, false, Texels::U8(vec![9])), "grey is data");
+        let deep =
+            decode_image(&png16(1, 1, png::ColorType::Rgba, &[1, 2, 65535, 3]), None, ColorSpace::Raw, 100).unwrap();
+        assert_eq!((deep.channels, deep.texels), (4, Texels::U16(vec![1, 2, 65535, 3])));
+        // EXR half stays half (the writer's RGB channels are f32 here: float stays float).
+        let exr = decode_image(&small_exr(3, 2), None, ColorSpace::Auto, 100).unwrap();
+        assert_eq!((exr.channels, &exr.texels.bytes_per_value()), (3, &4));
+    }
+
+    #[test]
+    fn half_exr_textures_stay_half() {
+        let layer = exr::prelude::Layer::new(
+            (2, 1),
+            exr::prelude::LayerAttributes::default(),
+            Encoding::UNCOMPRESSED,
+            exr::prelude::SpecificChannels::rgb(|pos: exr::prelude::Vec2<usize>| {
+                let v = exr::prelude::f16::from_f32(pos.x() as f32 + 0.5);
+                (v, v, exr::prelude::f16::from_f32(f32::NAN))
+            }),
+        );
+        let mut bytes = Cursor::new(Vec::new());
+        exr::prelude::Image::from_layer(layer).write().to_buffered(&mut bytes).unwrap();
+        let bytes = bytes.into_inner();
+        let header = read_header(&bytes, None, ColorSpace::Auto, 100).unwrap();
+        assert_eq!((header.channels, header.bytes_per_channel), (3, 2));
+        let image = decode_image(&bytes, None, ColorSpace::Auto, 100).unwrap();
+        let Texels::F16(v) = &image.texels else { panic!("{:?}", image.texels) };
+        assert_eq!((v[3], v[4]), (0x3e00, 0x3e00), "1.5 in binary16");
+        let id = strata_rt::texture::register_image("test:half-exr".into(), image).unwrap();
+        assert_eq!(lookup(id, 0.75, 0.5, 0), 1.5);
+        assert_eq!(lookup(id, 0.75, 0.5, 2), 0.0, "NaN reads 0");
+    }
+
+    #[test]
+    fn headers_are_read_without_decoding_pixels() {
+        // A PNG cut inside its pixel data: the header reads, the pixels do not.
+        let png = small_png(64, 32, png::ColorType::Rgba, &[200; 64 * 32 * 4]);
+        let cut = &png[..png.len() - 20];
+        let header = read_header(cut, None, ColorSpace::Auto, 1 << 20).unwrap();
+        assert_eq!(header, TextureHeader { width: 64, height: 32, channels: 4, bytes_per_channel: 1, srgb: true });
+        assert!(decode_image(cut, None, ColorSpace::Auto, 1 << 20).is_err());
+        // Registering reads the header only: the cut file registers, and its lookups read 0.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cut.png");
+        std::fs::write(&path, cut).unwrap();
+        let id = register_file(&path).expect("the header is valid");
+        assert_eq!(lookup(id, 0.5, 0.5, 0), 0.0);
+        // A whole file reads its texels once reached, and reloads under the same id.
+        std::fs::write(&path, &png).unwrap();
+        assert_eq!(reload_file(&path), Ok(1));
+        assert!((lookup(id, 0.5, 0.5, 3) - 200.0 / 255.0).abs() < 1e-6);
     }
 }

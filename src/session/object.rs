@@ -29,6 +29,8 @@ const C_HEADER_PRELUDE: &str = "\
 typedef struct StrataGlobals {
     float p[3], n[3], ng[3], i[3], dpdu[3], dpdv[3];
     float u, v;
+    /* The ray's footprint in texture space: ds/dx, dt/dx, ds/dy, dt/dy (zeros: unfiltered). */
+    float st_footprint[4];
     /* The primvars the material reads (see the material's primvar table); NULL, 0: none. */
     const float *primvars;
     uint32_t primvar_len;

@@ -96,4 +96,7 @@ runtime! {
     Cellnoise = strata_rt_cellnoise(x: f32, y: f32, z: f32) { noise::cellnoise3(x, y, z) },
     Cellular = strata_rt_cellular(x: f32, y: f32, z: f32) { noise::cellular3(x, y, z) },
     Texture = strata_rt_texture(id: i32, s: f32, t: f32, mode: i32) { texture::lookup(id, s, t, mode) },
+    TextureFiltered = strata_rt_texture_filtered(id: i32, s: f32, t: f32, mode: i32, dsdx: f32, dtdx: f32, dsdy: f32, dtdy: f32) {
+        texture::lookup_filtered(id, s, t, mode, dsdx, dtdx, dsdy, dtdy)
+    },
 }

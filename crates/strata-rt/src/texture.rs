@@ -1,6 +1,21 @@
-//! Texture lookups for compiled shaders: a process-wide registry of decoded images, addressed
-//! by small integer ids that code generation bakes into the call. Images are registered once,
-//! at compile time; a lookup only reads (no allocation, no I/O on the shading path).
+//! Texture lookups for compiled shaders: a process-wide registry of images, addressed by small
+//! integer ids that code generation bakes into the call.
+//!
+//! **Pipeline.** A texture is registered at compile time from its header alone (size): a
+//! [`TexelSource`] decodes its pixels on the first lookup that reaches it, at the file's own
+//! precision ([`Texels`]: 8-bit stays 8-bit with sRGB decoded through a table at lookup, 16-bit,
+//! half and float as they are; one to four channels), and a box-filtered mip chain is built
+//! from it. Each mip level is a unit of residency: the levels resident at once are bounded by
+//! [`set_memory_budget`], the least recently used evicted first; an evicted level is decoded
+//! again when reached, so any budget (smaller than one texture included) renders the same
+//! image. Lookups take a per-texture and a per-level read lock, never a global one; only a
+//! miss (decode, eviction) takes the residency lock.
+//!
+//! **Filtering.** [`lookup_filtered`] receives the ray's footprint in texture space (the ray
+//! cone's two axes mapped through the surface's st Jacobian, see `abi::Globals::st_footprint`)
+//! and filters trilinearly, or anisotropically with up to [`MAX_ANISOTROPY`] trilinear probes
+//! along the footprint's major axis ([`set_filter`]). A footprint below one texel reads the
+//! finest level bilinearly, exactly as [`lookup`] does.
 //!
 //! The `channel` argument of [`lookup`] carries the wrap modes too, so the C symbol keeps its
 //! four-argument signature: `channel + 16 · wrap_s + 256 · wrap_t`, with the channel in 0..=3
@@ -8,7 +23,8 @@
 //! channel get repeat wrapping, as before.
 
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, RwLock};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, LazyLock, Mutex, OnceLock, RwLock};
 
 /// Wrap mode: tile the image (the default).
 pub const WRAP_REPEAT: i32 = 0;
@@ -74,50 +90,707 @@ impl Texture {
     }
 }
 
-struct Registry {
-    /// Loaded textures by id, with the name each was registered under.
-    textures: Vec<(PathBuf, Arc<Texture>)>,
+/// Texels at the precision of their source, row-major, top row first, channels interleaved.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Texels {
+    /// 8-bit, normalised by 255 (sRGB-encoded colour channels when [`Image::srgb`]).
+    U8(Vec<u8>),
+    /// 16-bit, normalised by 65535 (sRGB-encoded colour channels when [`Image::srgb`]).
+    U16(Vec<u16>),
+    /// IEEE half floats, as their bits.
+    F16(Vec<u16>),
+    /// Floats.
+    F32(Vec<f32>),
 }
 
-static REGISTRY: RwLock<Registry> = RwLock::new(Registry { textures: Vec::new() });
+impl Texels {
+    /// Bytes per stored value.
+    pub fn bytes_per_value(&self) -> usize {
+        match self {
+            Texels::U8(_) => 1,
+            Texels::U16(_) | Texels::F16(_) => 2,
+            Texels::F32(_) => 4,
+        }
+    }
+
+    fn len(&self) -> usize {
+        match self {
+            Texels::U8(v) => v.len(),
+            Texels::U16(v) | Texels::F16(v) => v.len(),
+            Texels::F32(v) => v.len(),
+        }
+    }
+}
+
+/// One image (a mip level) at its source precision.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    /// Width in texels (≥ 1).
+    pub width: usize,
+    /// Height in texels (≥ 1).
+    pub height: usize,
+    /// Channels per texel, 1..=4: grey, grey + alpha, RGB, RGBA.
+    pub channels: usize,
+    /// Whether the colour channels (every channel but alpha) of integer texels are
+    /// sRGB-encoded, decoded to linear at lookup.
+    pub srgb: bool,
+    /// `width * height * channels` values.
+    pub texels: Texels,
+}
+
+/// sRGB-encoded 8-bit values to linear (IEC 61966-2-1), the table 8-bit lookups read.
+static SRGB_U8: LazyLock<[f32; 256]> = LazyLock::new(|| std::array::from_fn(|i| srgb_decode(i as f32 / 255.0)));
+
+/// The sRGB transfer function inverted: an encoded value in [0, 1] to linear.
+fn srgb_decode(c: f32) -> f32 {
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+/// The sRGB transfer function: linear in [0, 1] to encoded.
+fn srgb_encode(l: f32) -> f32 {
+    if l <= 0.003_130_8 { l * 12.92 } else { 1.055 * l.powf(1.0 / 2.4) - 0.055 }
+}
+
+/// A half float's bits to f32; infinities and NaNs read 0 (texels must be finite).
+pub fn f16_to_f32(bits: u16) -> f32 {
+    let sign = if bits & 0x8000 != 0 { -1.0 } else { 1.0 };
+    let exponent = i32::from((bits >> 10) & 0x1f);
+    let mantissa = f32::from(bits & 0x3ff);
+    match exponent {
+        0 => sign * mantissa * (-24f32).exp2(),
+        31 => 0.0,
+        e => sign * (1.0 + mantissa / 1024.0) * ((e - 15) as f32).exp2(),
+    }
+}
+
+/// An f32 to half-float bits, rounded to nearest; beyond the half range it saturates to the
+/// largest finite half, non-finite values become 0.
+pub fn f32_to_f16(value: f32) -> u16 {
+    if !value.is_finite() {
+        return 0;
+    }
+    let sign = if value.is_sign_negative() { 0x8000u16 } else { 0 };
+    let a = value.abs().min(65504.0);
+    if a < (-14f32).exp2() {
+        // Subnormal (or zero): units of 2^-24.
+        return sign | (a * 24f32.exp2()).round() as u16;
+    }
+    let exponent = a.log2().floor() as i32;
+    let exponent = if (exponent as f32).exp2() > a { exponent - 1 } else { exponent };
+    let mantissa = (a / (exponent as f32).exp2() - 1.0) * 1024.0;
+    let (mut e, mut m) = (exponent + 15, mantissa.round() as u32);
+    if m == 1024 {
+        (e, m) = (e + 1, 0);
+    }
+    if e >= 31 {
+        return sign | 0x7bff;
+    }
+    sign | ((e as u16) << 10) | m as u16
+}
+
+impl Image {
+    /// An image of `width × height` RGBA float texels (`Texture`'s layout).
+    pub fn from_texture(texture: &Texture) -> Image {
+        let texels = texture.texels.iter().flat_map(|t| t.map(|c| if c.is_finite() { c } else { 0.0 })).collect();
+        Image { width: texture.width, height: texture.height, channels: 4, srgb: false, texels: Texels::F32(texels) }
+    }
+
+    /// Bytes its texels take.
+    pub fn bytes(&self) -> u64 {
+        (self.texels.len() * self.texels.bytes_per_value()) as u64
+    }
+
+    /// Whether the sizes agree with the texels (a [`TexelSource`] is trusted with no more).
+    fn is_consistent(&self) -> bool {
+        self.width >= 1
+            && self.height >= 1
+            && (1..=4).contains(&self.channels)
+            && self.width.checked_mul(self.height).and_then(|n| n.checked_mul(self.channels)) == Some(self.texels.len())
+    }
+
+    /// Where logical channel `channel` (0..=3: r, g, b, a) is stored, or `None` when the image
+    /// has no alpha (it reads 1). Grey images give their one value to r, g and b.
+    #[inline]
+    fn stored_channel(&self, channel: usize) -> Option<usize> {
+        match (self.channels, channel) {
+            (1 | 2, 0..=2) => Some(0),
+            (2, _) => Some(1),
+            (3, 3) | (1, _) => None,
+            (_, c) => Some(c),
+        }
+    }
+
+    /// Whether stored channel `stored` is a colour channel (sRGB applies) rather than alpha.
+    #[inline]
+    fn is_colour(&self, stored: usize) -> bool {
+        !matches!((self.channels, stored), (2, 1) | (4, 3))
+    }
+
+    /// Stored value `index` (of channel `stored`) as a linear float.
+    #[inline]
+    fn value(&self, index: usize, stored: usize) -> f32 {
+        let srgb = self.srgb && self.is_colour(stored);
+        match &self.texels {
+            Texels::U8(v) => {
+                if srgb {
+                    SRGB_U8[v[index] as usize]
+                } else {
+                    f32::from(v[index]) * (1.0 / 255.0)
+                }
+            }
+            Texels::U16(v) => {
+                let x = f32::from(v[index]) * (1.0 / 65535.0);
+                if srgb { srgb_decode(x) } else { x }
+            }
+            Texels::F16(v) => f16_to_f32(v[index]),
+            Texels::F32(v) => v[index],
+        }
+    }
+
+    /// Nearest-texel lookup at texel coordinates (x, y) (texel centres at half integers).
+    #[inline]
+    fn nearest(&self, x: f32, y: f32, channel: usize, wrap_s: i32, wrap_t: i32) -> f32 {
+        let (xi, yi) = (x.floor() as i64, y.floor() as i64);
+        match (wrap_index(xi, self.width, wrap_s), wrap_index(yi, self.height, wrap_t)) {
+            (Some(xi), Some(yi)) => match self.stored_channel(channel) {
+                Some(k) => self.value((yi * self.width + xi) * self.channels + k, k),
+                None => 1.0,
+            },
+            _ => 0.0,
+        }
+    }
+
+    /// Bilinear lookup at texel coordinates (x, y) (texel centres at half integers).
+    #[inline]
+    fn bilinear(&self, x: f32, y: f32, channel: usize, wrap_s: i32, wrap_t: i32) -> f32 {
+        let (x, y) = (f64::from(x) - 0.5, f64::from(y) - 0.5);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+        let stored = self.stored_channel(channel);
+        let at = |xi: i64, yi: i64| match (wrap_index(xi, self.width, wrap_s), wrap_index(yi, self.height, wrap_t)) {
+            (Some(xi), Some(yi)) => match stored {
+                Some(k) => self.value((yi * self.width + xi) * self.channels + k, k),
+                None => 1.0,
+            },
+            _ => 0.0,
+        };
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let (a, b, c, d) = (at(x0, y0), at(x0 + 1, y0), at(x0, y0 + 1), at(x0 + 1, y0 + 1));
+        let top = a + (b - a) * fx;
+        let bottom = c + (d - c) * fx;
+        top + (bottom - top) * fy
+    }
+
+    /// The next coarser mip level: each texel the mean of (up to) 2×2 texels, averaged in
+    /// linear (sRGB decoded, then encoded again), stored at this image's precision (written
+    /// texel by texel: no float copy of the level).
+    pub fn downsample(&self) -> Image {
+        let (w, h) = ((self.width / 2).max(1), (self.height / 2).max(1));
+        let c = self.channels;
+        let n = w * h * c;
+        let mut texels = match &self.texels {
+            Texels::U8(_) => Texels::U8(Vec::with_capacity(n)),
+            Texels::U16(_) => Texels::U16(Vec::with_capacity(n)),
+            Texels::F16(_) => Texels::F16(Vec::with_capacity(n)),
+            Texels::F32(_) => Texels::F32(Vec::with_capacity(n)),
+        };
+        for y in 0..h {
+            let rows = [(2 * y).min(self.height - 1), (2 * y + 1).min(self.height - 1)];
+            for x in 0..w {
+                let cols = [(2 * x).min(self.width - 1), (2 * x + 1).min(self.width - 1)];
+                for k in 0..c {
+                    let mut sum = 0.0;
+                    for &yy in &rows {
+                        for &xx in &cols {
+                            sum += self.value((yy * self.width + xx) * c + k, k);
+                        }
+                    }
+                    let v = 0.25 * sum;
+                    let srgb = self.srgb && self.is_colour(k);
+                    match &mut texels {
+                        Texels::U8(out) if srgb => out.push(nearest_srgb_u8(v)),
+                        Texels::U8(out) => out.push((v.clamp(0.0, 1.0) * 255.0).round() as u8),
+                        Texels::U16(out) => {
+                            let v = v.clamp(0.0, 1.0);
+                            out.push((if srgb { srgb_encode(v) } else { v } * 65535.0).round() as u16)
+                        }
+                        Texels::F16(out) => out.push(f32_to_f16(v)),
+                        Texels::F32(out) => out.push(v),
+                    }
+                }
+            }
+        }
+        Image { width: w, height: h, channels: c, srgb: self.srgb, texels }
+    }
+}
+
+/// The 8-bit sRGB code whose table entry is nearest linear `v` (what the lookup reads back).
+fn nearest_srgb_u8(v: f32) -> u8 {
+    let table = &*SRGB_U8;
+    let above = table.partition_point(|&t| t < v).min(255);
+    let below = above.saturating_sub(1);
+    (if (table[above] - v).abs() < (v - table[below]).abs() { above } else { below }) as u8
+}
+
+/// The number of mip levels of a `width × height` image: down to 1×1.
+pub fn level_count(width: usize, height: usize) -> usize {
+    (usize::BITS - width.max(height).max(1).leading_zeros()) as usize
+}
+
+/// Decodes a texture's pixels when a lookup first reaches them (and again after eviction).
+pub trait TexelSource: Send + Sync {
+    /// The finest level, at the source's precision, of the size the texture was registered
+    /// with.
+    fn decode(&self) -> Result<Image, String>;
+}
+
+/// An image held in memory (tests, generated images): decoding copies it.
+struct InMemory(Image);
+
+impl TexelSource for InMemory {
+    fn decode(&self) -> Result<Image, String> {
+        Ok(self.0.clone())
+    }
+}
+
+/// One mip level's residency.
+struct Level {
+    image: RwLock<Option<Arc<Image>>>,
+    /// The residency clock when last read (an epoch, advanced per miss, not per lookup, so
+    /// lookups write it only when it changed).
+    last_use: AtomicU64,
+}
+
+/// A texture's pixels: where they come from and which levels are resident.
+struct Content {
+    source: Box<dyn TexelSource>,
+    width: usize,
+    height: usize,
+    levels: Box<[Level]>,
+    /// Held while decoding, so threads that miss together decode once.
+    decoding: Mutex<()>,
+    /// Set when decoding failed: the texture reads 0 (no retry per lookup).
+    failed: AtomicBool,
+}
+
+impl Content {
+    fn new(width: usize, height: usize, source: Box<dyn TexelSource>) -> Content {
+        let levels = (0..level_count(width, height))
+            .map(|_| Level { image: RwLock::new(None), last_use: AtomicU64::new(0) })
+            .collect();
+        Content {
+            source,
+            width: width.max(1),
+            height: height.max(1),
+            levels,
+            decoding: Mutex::new(()),
+            failed: AtomicBool::new(false),
+        }
+    }
+}
+
+struct Entry {
+    name: PathBuf,
+    content: RwLock<Arc<Content>>,
+}
+
+/// Registry slots: an append-only table of segments, so a lookup finds its entry without a
+/// lock (a `OnceLock` read per level).
+const SEGMENT: usize = 1024;
+const SEGMENTS: usize = 1024;
+static SLOTS: [OnceLock<Box<[OnceLock<Entry>]>>; SEGMENTS] = [const { OnceLock::new() }; SEGMENTS];
+/// Registered entries (their slots are filled in order).
+static COUNT: AtomicUsize = AtomicUsize::new(0);
+/// Serialises registration.
+static REGISTER: Mutex<()> = Mutex::new(());
+
+fn entry(id: i32) -> Option<&'static Entry> {
+    let i = usize::try_from(id).ok()?;
+    SLOTS.get(i / SEGMENT)?.get()?.get(i % SEGMENT)?.get()
+}
+
+/// Every registered entry, by id.
+fn entries() -> impl Iterator<Item = &'static Entry> {
+    (0..COUNT.load(Ordering::Acquire)).filter_map(|i| entry(i as i32))
+}
+
+/// Residency bookkeeping, touched only on a miss.
+struct Residency {
+    resident: u64,
+}
+
+static RESIDENCY: Mutex<Residency> = Mutex::new(Residency { resident: 0 });
+/// `--texture-memory`: the bytes of texels resident at once (0: the default, 1 GiB).
+static BUDGET: AtomicU64 = AtomicU64::new(0);
+/// The residency clock (see [`Level::last_use`]).
+static CLOCK: AtomicU64 = AtomicU64::new(1);
+static MISSES: AtomicU64 = AtomicU64::new(0);
+static DECODES: AtomicU64 = AtomicU64::new(0);
+static EVICTIONS: AtomicU64 = AtomicU64::new(0);
+
+/// Level reads, counted in per-thread shards (one cache line each) so counting does not make
+/// threads contend.
+#[repr(align(128))]
+struct Shard(AtomicU64);
+const SHARDS: usize = 64;
+static FETCHES: [Shard; SHARDS] = [const { Shard(AtomicU64::new(0)) }; SHARDS];
+static NEXT_SHARD: AtomicUsize = AtomicUsize::new(0);
+thread_local! {
+    static MY_SHARD: usize = NEXT_SHARD.fetch_add(1, Ordering::Relaxed) % SHARDS;
+}
+
+/// The budget when none was set: 1 GiB.
+pub const DEFAULT_MEMORY_BUDGET: u64 = 1 << 30;
+
+/// Bounds the bytes of texels resident at once (`--texture-memory`); 0 restores the default.
+/// Levels beyond it are evicted on the next miss.
+pub fn set_memory_budget(bytes: u64) {
+    BUDGET.store(bytes, Ordering::Relaxed);
+}
+
+/// The residency budget in bytes.
+pub fn memory_budget() -> u64 {
+    match BUDGET.load(Ordering::Relaxed) {
+        0 => DEFAULT_MEMORY_BUDGET,
+        b => b,
+    }
+}
+
+/// The texture cache's counters since the last [`reset_stats`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CacheStats {
+    /// Bytes of texels resident now.
+    pub resident_bytes: u64,
+    /// Mip-level reads by lookups.
+    pub fetches: u64,
+    /// Reads that found their level not resident.
+    pub misses: u64,
+    /// Source decodes (a miss decodes unless another thread just did).
+    pub decodes: u64,
+    /// Levels evicted to stay within the budget.
+    pub evictions: u64,
+}
+
+impl CacheStats {
+    /// The fraction of level reads served from resident texels (1 with no reads).
+    pub fn hit_rate(&self) -> f64 {
+        if self.fetches == 0 { 1.0 } else { 1.0 - self.misses as f64 / self.fetches as f64 }
+    }
+}
+
+/// The cache's counters.
+pub fn stats() -> CacheStats {
+    CacheStats {
+        resident_bytes: RESIDENCY.lock().map(|r| r.resident).unwrap_or(0),
+        fetches: FETCHES.iter().map(|s| s.0.load(Ordering::Relaxed)).sum(),
+        misses: MISSES.load(Ordering::Relaxed),
+        decodes: DECODES.load(Ordering::Relaxed),
+        evictions: EVICTIONS.load(Ordering::Relaxed),
+    }
+}
+
+/// Zeroes the counters of [`stats`] (not the residency).
+pub fn reset_stats() {
+    for shard in &FETCHES {
+        shard.0.store(0, Ordering::Relaxed);
+    }
+    for counter in [&MISSES, &DECODES, &EVICTIONS] {
+        counter.store(0, Ordering::Relaxed);
+    }
+}
+
+/// Drops every resident level (benchmarks start cold with it).
+pub fn evict_all() {
+    let Ok(mut residency) = RESIDENCY.lock() else { return };
+    for entry in entries() {
+        let Ok(content) = entry.content.read() else { continue };
+        for level in content.levels.iter() {
+            if let Ok(mut image) = level.image.write()
+                && let Some(old) = image.take()
+            {
+                residency.resident = residency.resident.saturating_sub(old.bytes());
+            }
+        }
+    }
+}
+
+/// Evicts least recently used levels until `incoming` more bytes fit the budget (or nothing
+/// is left to evict). Entries being replaced are skipped (`try_read`), so eviction never
+/// waits on a writer while holding the residency lock.
+fn make_room(residency: &mut Residency, incoming: u64) {
+    let budget = memory_budget();
+    while residency.resident.saturating_add(incoming) > budget {
+        // The oldest level; among equally old ones the largest (so a texture that does not
+        // fit keeps its coarse levels).
+        let mut victim: Option<(u64, u64, &Level)> = None;
+        let guards: Vec<_> = entries().filter_map(|e| e.content.try_read().ok().map(|c| Arc::clone(&c))).collect();
+        for content in &guards {
+            for level in content.levels.iter() {
+                let Ok(image) = level.image.try_read() else { continue };
+                let Some(image) = image.as_ref() else { continue };
+                let key = (level.last_use.load(Ordering::Relaxed), u64::MAX - image.bytes());
+                if victim.is_none_or(|(t, b, _)| key < (t, b)) {
+                    victim = Some((key.0, key.1, level));
+                }
+            }
+        }
+        let Some((_, _, level)) = victim else { return };
+        if let Ok(mut image) = level.image.write()
+            && let Some(old) = image.take()
+        {
+            residency.resident = residency.resident.saturating_sub(old.bytes());
+            EVICTIONS.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// Level `index` of `content`, decoding the source when it is not resident. `None` when the
+/// source fails.
+#[cold]
+fn load_level(content: &Content, index: usize) -> Option<Arc<Image>> {
+    MISSES.fetch_add(1, Ordering::Relaxed);
+    let _decoding = content.decoding.lock().ok()?;
+    if let Some(image) = content.levels[index].image.read().ok()?.as_ref() {
+        return Some(Arc::clone(image)); // another thread decoded it meanwhile
+    }
+    if content.failed.load(Ordering::Relaxed) {
+        return None;
+    }
+    DECODES.fetch_add(1, Ordering::Relaxed);
+    let finest = match content.source.decode() {
+        Ok(image) if image.is_consistent() && (image.width, image.height) == (content.width, content.height) => image,
+        _ => {
+            content.failed.store(true, Ordering::Relaxed);
+            return None;
+        }
+    };
+    // The chain is built from the finest level each time: formats without tiles decode
+    // whole, so every level costs one decode anyway.
+    let mut chain = Vec::with_capacity(content.levels.len());
+    chain.push(Arc::new(finest));
+    while chain.len() < content.levels.len() {
+        let next = chain[chain.len() - 1].downsample();
+        chain.push(Arc::new(next));
+    }
+    let wanted = Arc::clone(&chain[index]);
+    let mut residency = RESIDENCY.lock().ok()?;
+    let now = CLOCK.fetch_add(1, Ordering::Relaxed) + 1;
+    // Coarsest first: when the budget is small the coarse levels stay.
+    for (level, image) in content.levels.iter().zip(chain).rev() {
+        let Ok(slot) = level.image.write() else { continue };
+        if slot.is_some() {
+            continue;
+        }
+        drop(slot);
+        make_room(&mut residency, image.bytes());
+        if residency.resident.saturating_add(image.bytes()) > memory_budget() {
+            continue; // does not fit even alone: used for this lookup, not kept
+        }
+        let Ok(mut reacquired) = level.image.write() else { continue };
+        residency.resident += image.bytes();
+        level.last_use.store(now, Ordering::Relaxed);
+        *reacquired = Some(image);
+    }
+    Some(wanted)
+}
+
+/// Runs `read` on level `index` of `content`, loading it on a miss; `None` when it cannot be
+/// loaded.
+#[inline]
+fn with_level<R>(content: &Content, index: usize, read: impl FnOnce(&Image) -> R) -> Option<R> {
+    MY_SHARD.with(|&shard| FETCHES[shard].0.fetch_add(1, Ordering::Relaxed));
+    let level = &content.levels[index];
+    if let Ok(image) = level.image.read()
+        && let Some(image) = image.as_ref()
+    {
+        let now = CLOCK.load(Ordering::Relaxed);
+        if level.last_use.load(Ordering::Relaxed) != now {
+            level.last_use.store(now, Ordering::Relaxed);
+        }
+        return Some(read(image));
+    }
+    load_level(content, index).map(|image| read(&image))
+}
 
 /// The id of the texture registered under `name`, if any.
 pub fn find(name: &Path) -> Option<i32> {
-    REGISTRY.read().ok().and_then(|r| r.textures.iter().position(|(p, _)| p == name)).map(|i| i as i32)
+    let _registering = REGISTER.lock().ok()?;
+    entries().position(|e| e.name == name).map(|i| i as i32)
 }
 
 /// The names of every registered texture, by id.
 pub fn names() -> Vec<PathBuf> {
-    REGISTRY.read().map(|r| r.textures.iter().map(|(p, _)| p.clone()).collect()).unwrap_or_default()
+    entries().map(|e| e.name.clone()).collect()
 }
 
-/// Replaces the texels of texture `id` (its file changed): code compiled against the id reads
-/// the new texels from the next lookup on. Lookups already running keep the old texels.
-pub fn replace(id: i32, texture: Texture) -> Result<(), String> {
-    let mut registry = REGISTRY.write().map_err(|_| "texture registry poisoned".to_string())?;
-    let entry = usize::try_from(id).ok().and_then(|i| registry.textures.get_mut(i)).ok_or("no such texture")?;
-    entry.1 = Arc::new(texture);
-    Ok(())
+/// Registers a `width × height` texture whose pixels `source` decodes when first reached.
+pub fn register_source(
+    name: PathBuf,
+    width: usize,
+    height: usize,
+    source: Box<dyn TexelSource>,
+) -> Result<i32, String> {
+    let _registering = REGISTER.lock().map_err(|_| "texture registry poisoned".to_string())?;
+    let id = COUNT.load(Ordering::Acquire);
+    let segment = SLOTS.get(id / SEGMENT).ok_or("too many textures")?;
+    let segment = segment.get_or_init(|| (0..SEGMENT).map(|_| OnceLock::new()).collect());
+    let content = RwLock::new(Arc::new(Content::new(width, height, source)));
+    segment[id % SEGMENT].set(Entry { name, content }).map_err(|_| "texture slot taken".to_string())?;
+    COUNT.store(id + 1, Ordering::Release);
+    Ok(id as i32)
 }
 
 /// Registers an in-memory texture under a name (tests, generated images).
 pub fn register(name: PathBuf, texture: Texture) -> Result<i32, String> {
-    let mut registry = REGISTRY.write().map_err(|_| "texture registry poisoned".to_string())?;
-    registry.textures.push((name, Arc::new(texture)));
-    Ok(registry.textures.len() as i32 - 1)
+    register_image(name, Image::from_texture(&texture))
+}
+
+/// Registers an in-memory image at its own precision under a name.
+pub fn register_image(name: PathBuf, mut image: Image) -> Result<i32, String> {
+    if !image.is_consistent() {
+        return Err("the image's sizes do not match its texels".into());
+    }
+    if let Texels::F32(values) = &mut image.texels {
+        values.iter_mut().filter(|v| !v.is_finite()).for_each(|v| *v = 0.0);
+    }
+    let (w, h) = (image.width, image.height);
+    register_source(name, w, h, Box::new(InMemory(image)))
+}
+
+/// Points texture `id` at a new source (its file changed): code compiled against the id reads
+/// the new texels from the next lookup on; its old levels leave the cache. Lookups already
+/// running keep the old texels.
+pub fn replace_source(id: i32, width: usize, height: usize, source: Box<dyn TexelSource>) -> Result<(), String> {
+    let entry = entry(id).ok_or("no such texture")?;
+    let fresh = Arc::new(Content::new(width, height, source));
+    let old = std::mem::replace(&mut *entry.content.write().map_err(|_| "texture registry poisoned")?, fresh);
+    if let Ok(mut residency) = RESIDENCY.lock() {
+        for level in old.levels.iter() {
+            if let Ok(mut image) = level.image.write()
+                && let Some(image) = image.take()
+            {
+                residency.resident = residency.resident.saturating_sub(image.bytes());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Replaces the texels of texture `id` with an in-memory image (see [`replace_source`]).
+pub fn replace(id: i32, texture: Texture) -> Result<(), String> {
+    let image = Image::from_texture(&texture);
+    replace_source(id, image.width, image.height, Box::new(InMemory(image)))
+}
+
+/// How [`lookup_filtered`] filters a footprint wider than a texel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Filter {
+    /// The nearest texel of the finest level, footprint ignored (benchmarks' baseline).
+    Nearest,
+    /// Bilinear at the finest level, footprint ignored (the lookup before mip-maps).
+    Bilinear,
+    /// Trilinear: the mip level whose texels match the footprint's major axis.
+    Trilinear,
+    /// Up to [`MAX_ANISOTROPY`] trilinear probes along the major axis, each at the level of
+    /// the minor axis.
+    Anisotropic,
+}
+
+/// The most probes an anisotropic lookup takes.
+pub const MAX_ANISOTROPY: usize = 8;
+
+static FILTER: AtomicU8 = AtomicU8::new(3);
+
+/// Sets the filter every [`lookup_filtered`] uses (default [`Filter::Anisotropic`]).
+pub fn set_filter(filter: Filter) {
+    FILTER.store(filter as u8, Ordering::Relaxed);
+}
+
+/// The filter [`lookup_filtered`] uses.
+pub fn filter() -> Filter {
+    match FILTER.load(Ordering::Relaxed) {
+        0 => Filter::Nearest,
+        1 => Filter::Bilinear,
+        2 => Filter::Trilinear,
+        _ => Filter::Anisotropic,
+    }
 }
 
 /// Channel `mode % 16` (0..=3: r, g, b, a) of texture `id` at (s, t), wrapped by
-/// `(mode / 16) % 16` along s and `mode / 256` along t (`WRAP_*`); 0 for an unknown id or
-/// channel.
+/// `(mode / 16) % 16` along s and `mode / 256` along t (`WRAP_*`), bilinear at the finest
+/// level; 0 for an unknown id or channel.
 pub fn lookup(id: i32, s: f32, t: f32, mode: i32) -> f32 {
-    let Ok(registry) = REGISTRY.read() else { return 0.0 };
-    let (channel, wrap_s, wrap_t) = (mode & 15, (mode >> 4) & 15, (mode >> 8) & 15);
-    match (usize::try_from(id).ok().and_then(|i| registry.textures.get(i)), channel) {
-        (Some((_, tex)), 0..=3) if (0..4096).contains(&mode) => {
-            tex.sample_wrapped(s, t, channel as usize, wrap_s, wrap_t)
+    lookup_filtered(id, s, t, mode, 0.0, 0.0, 0.0, 0.0)
+}
+
+/// [`lookup`] filtered over a footprint: its two axes (ds/dx, dt/dx) and (ds/dy, dt/dy) in
+/// texture coordinates (the ray cone's width across the surface, as diameters). A footprint
+/// under one texel reads like [`lookup`]; non-finite axes count as 0.
+#[allow(clippy::too_many_arguments)]
+pub fn lookup_filtered(id: i32, s: f32, t: f32, mode: i32, dsdx: f32, dtdx: f32, dsdy: f32, dtdy: f32) -> f32 {
+    lookup_with(filter(), id, s, t, mode, [dsdx, dtdx, dsdy, dtdy])
+}
+
+/// [`lookup_filtered`] with a given filter and the footprint as `[ds/dx, dt/dx, ds/dy, dt/dy]`.
+pub fn lookup_with(filter: Filter, id: i32, s: f32, t: f32, mode: i32, footprint: [f32; 4]) -> f32 {
+    let [dsdx, dtdx, dsdy, dtdy] = footprint;
+    let (channel, wrap_s, wrap_t) = ((mode & 15) as usize, (mode >> 4) & 15, (mode >> 8) & 15);
+    if !(0..4096).contains(&mode) || channel > 3 || !s.is_finite() || !t.is_finite() {
+        return 0.0;
+    }
+    let Some(entry) = entry(id) else { return 0.0 };
+    let Ok(content) = entry.content.read() else { return 0.0 };
+    // Far coordinates lose all precision in f32 anyway; keep the integer maths in range.
+    let (s, t) = (s.clamp(-1e7, 1e7), 1.0 - t.clamp(-1e7, 1e7));
+    let (w, h) = (content.width as f32, content.height as f32);
+    let finite = |v: f32| if v.is_finite() { v } else { 0.0 };
+    // The axes in texels of the finest level (t runs down the rows: its sign is irrelevant).
+    let (ax, ay) = ((finite(dsdx) * w, finite(dtdx) * h), (finite(dsdy) * w, finite(dtdy) * h));
+    let (la, lb) = (ax.0.hypot(ax.1), ay.0.hypot(ay.1));
+    let (major_axis, major, minor) = if la >= lb { (ax, la, lb) } else { (ay, lb, la) };
+    let sample_level = |level: usize, s: f32, t: f32| {
+        with_level(&content, level, |image| {
+            image.bilinear(s * image.width as f32, t * image.height as f32, channel, wrap_s, wrap_t)
+        })
+        .unwrap_or(0.0)
+    };
+    let last = content.levels.len() - 1;
+    let trilinear = |lod: f32, s: f32, t: f32| {
+        if lod <= 0.0 {
+            return sample_level(0, s, t);
         }
-        _ => 0.0,
+        let lod = lod.min(last as f32);
+        let fine = lod.floor() as usize;
+        let frac = lod - fine as f32;
+        let a = sample_level(fine, s, t);
+        if frac <= 0.0 || fine >= last { a } else { a + (sample_level(fine + 1, s, t) - a) * frac }
+    };
+    match filter {
+        Filter::Nearest => {
+            with_level(&content, 0, |image| image.nearest(s * w, t * h, channel, wrap_s, wrap_t)).unwrap_or(0.0)
+        }
+        Filter::Bilinear => sample_level(0, s, t),
+        Filter::Trilinear => trilinear(major.max(1.0).log2(), s, t),
+        Filter::Anisotropic => {
+            // Probes enough that each covers at most the minor axis (up to the maximum), at
+            // the level of the width each probe covers.
+            let probes =
+                if major <= 1.0 { 1.0 } else { (major / minor.max(1e-6)).ceil().clamp(1.0, MAX_ANISOTROPY as f32) };
+            let width = major / probes;
+            let lod = width.max(minor).max(1.0).log2();
+            if probes <= 1.0 {
+                return trilinear(lod, s, t);
+            }
+            let n = probes as usize;
+            // The major axis in st units, t flipped to run down the rows as `t` above.
+            let (ds, dt) = (major_axis.0 / w, -major_axis.1 / h);
+            let mut sum = 0.0;
+            for k in 0..n {
+                let offset = (k as f32 + 0.5) / probes - 0.5;
+                sum += trilinear(lod, s + ds * offset, t + dt * offset);
+            }
+            sum / probes
+        }
     }
 }
 
@@ -158,5 +831,100 @@ mod tests {
         let id = register("test:wrap".into(), tex).unwrap();
         assert_eq!(lookup(id, 1.25, 0.5, 16 * WRAP_CLAMP), 0.0);
         assert_eq!(lookup(id, 1.25, 0.5, 0), 1.0);
+    }
+
+    /// A `w × h` image of one 8-bit channel with `value(x, y)` per texel (raw, not sRGB).
+    fn grey(w: usize, h: usize, value: impl Fn(usize, usize) -> u8) -> Image {
+        let texels = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| value(x, y)).collect();
+        Image { width: w, height: h, channels: 1, srgb: false, texels: Texels::U8(texels) }
+    }
+
+    #[test]
+    fn half_floats_round_trip_every_finite_value() {
+        // Independent values: IEEE 754 binary16 encodings.
+        assert_eq!((f32_to_f16(1.0), f32_to_f16(0.5), f32_to_f16(-2.0)), (0x3c00, 0x3800, 0xc000));
+        assert_eq!((f32_to_f16(65504.0), f32_to_f16(1e9), f32_to_f16(f32::NAN)), (0x7bff, 0x7bff, 0));
+        assert_eq!((f16_to_f32(0x0001), f16_to_f32(0x7c00), f16_to_f32(0x7e00)), ((-24f32).exp2(), 0.0, 0.0));
+        for bits in (0..=u16::MAX).filter(|b| (b >> 10) & 0x1f != 31) {
+            assert_eq!(f32_to_f16(f16_to_f32(bits)), bits, "{bits:#06x}");
+        }
+    }
+
+    #[test]
+    fn eight_bit_textures_with_mips_take_under_1_4_bytes_per_texel_and_channel() {
+        for (w, h, c) in [(1000, 600, 3), (4096, 512, 1), (33, 77, 4), (1, 1, 2)] {
+            let mut level =
+                Image { width: w, height: h, channels: c, srgb: true, texels: Texels::U8(vec![7; w * h * c]) };
+            let mut bytes = level.bytes();
+            for _ in 1..level_count(w, h) {
+                level = level.downsample();
+                bytes += level.bytes();
+            }
+            assert_eq!((level.width, level.height), (1, 1), "the chain ends at 1x1");
+            let per = bytes as f64 / (w * h * c) as f64;
+            assert!(per <= 1.4, "{w}x{h}x{c}: {per} bytes per texel and channel");
+        }
+    }
+
+    #[test]
+    fn mip_levels_average_in_linear_light() {
+        // sRGB 0 and 255 average to linear 0.5; raw 0 and 255 to 127.5 (stored 128).
+        let srgb = Image { width: 2, height: 1, channels: 1, srgb: true, texels: Texels::U8(vec![0, 255]) };
+        let half = srgb.downsample();
+        let Texels::U8(v) = &half.texels else { panic!() };
+        assert!((srgb_decode(f32::from(v[0]) / 255.0) - 0.5).abs() < 0.003, "{v:?}");
+        assert_eq!(v[0], 188, "the sRGB code of linear 0.5");
+        let raw = grey(2, 2, |x, _| if x == 0 { 0 } else { 255 }).downsample();
+        assert_eq!(raw.texels, Texels::U8(vec![128]));
+        let float =
+            Image { width: 2, height: 2, channels: 1, srgb: false, texels: Texels::F32(vec![1.0, 2.0, 3.0, 6.0]) };
+        assert_eq!(float.downsample().texels, Texels::F32(vec![3.0]));
+    }
+
+    #[test]
+    fn a_footprint_below_a_texel_reads_like_bilinear() {
+        let id = register_image("test:sub-texel".into(), grey(64, 64, |x, y| ((x * 37 + y * 91) % 256) as u8)).unwrap();
+        for k in 0..200 {
+            let (s, t) = ((k as f32 * 0.618).fract(), (k as f32 * 0.377).fract());
+            let bilinear = lookup(id, s, t, 0);
+            // Axes of 0.9 texels, any orientation.
+            let f = 0.9 / 64.0;
+            let footprint = [f * 0.6, f * 0.8, -f * 0.8, f * 0.6];
+            for filter in [Filter::Trilinear, Filter::Anisotropic] {
+                assert_eq!(lookup_with(filter, id, s, t, 0, footprint), bilinear, "{filter:?} at ({s}, {t})");
+            }
+        }
+    }
+
+    #[test]
+    fn wide_footprints_average_and_anisotropy_keeps_the_minor_axis_sharp() {
+        // Rows alternate 0 and 255 (stripes along s): a footprint 8 texels along s and one
+        // across keeps the row's value anisotropically; trilinear blurs it to the mean.
+        let id = register_image("test:stripes".into(), grey(64, 64, |_, y| if y % 2 == 0 { 255 } else { 0 })).unwrap();
+        let (s, t) = (0.3, 1.0 - 10.5 / 64.0); // row 10: 255
+        let footprint = [8.0 / 64.0, 0.0, 0.0, 1.0 / 64.0];
+        let aniso = lookup_with(Filter::Anisotropic, id, s, t, 0, footprint);
+        let tri = lookup_with(Filter::Trilinear, id, s, t, 0, footprint);
+        assert!((aniso - 1.0).abs() < 1e-6, "anisotropic: {aniso}");
+        // 8-bit levels: the mean is stored as 128 / 255.
+        assert!((tri - 0.5).abs() < 1.0 / 255.0, "trilinear: {tri}");
+        // A footprint wider than the image reads its mean from the 1x1 level.
+        let whole = lookup_with(Filter::Trilinear, id, s, t, 0, [4.0, 0.0, 0.0, 4.0]);
+        assert!((whole - 0.5).abs() < 1.0 / 255.0, "{whole}");
+        assert_eq!(lookup_with(Filter::Nearest, id, s, t, 0, footprint), 1.0);
+        // Non-finite axes read as no footprint.
+        assert_eq!(
+            lookup_with(Filter::Trilinear, id, s, t, 0, [f32::NAN, f32::INFINITY, 0.0, 0.0]),
+            lookup(id, s, t, 0)
+        );
+    }
+
+    #[test]
+    fn replacing_a_source_reads_the_new_texels() {
+        let id = register_image("test:replace".into(), grey(4, 4, |_, _| 0)).unwrap();
+        assert_eq!(lookup(id, 0.5, 0.5, 0), 0.0);
+        replace(id, Texture { width: 1, height: 1, texels: vec![[0.25, 0.5, 0.75, 1.0]] }).unwrap();
+        assert_eq!(lookup(id, 0.5, 0.5, 2), 0.75);
+        assert!(replace(1 << 30, Texture { width: 1, height: 1, texels: vec![[0.0; 4]] }).is_err());
     }
 }

@@ -37,6 +37,7 @@ mod features;
 mod render;
 mod scale;
 mod shade;
+mod textures;
 mod update;
 pub use charts::*;
 pub use displacement::*;
@@ -44,6 +45,7 @@ pub use features::*;
 pub use render::*;
 pub use scale::*;
 pub use shade::*;
+pub use textures::bench_textures;
 pub use update::bench_update;
 
 // ---- Helpers ----------------------------------------------------------------------------------
@@ -90,6 +92,7 @@ pub fn sample_points(n: usize, seed: u64) -> Vec<Globals<'static>> {
                 dpdv: [n[1] * t[2] - n[2] * t[1], n[2] * t[0] - n[0] * t[2], n[0] * t[1] - n[1] * t[0]],
                 u: rng.unit(),
                 v: rng.unit(),
+                st_footprint: [0.0; 4],
                 primvars: Default::default(),
             }
         })

@@ -237,7 +237,13 @@ impl FnLower<'_> {
             _ => -1,
         };
         let id = self.b.iconst(id);
-        Lv::Scalars(vec![self.b.call(RtFn::Texture, vec![id, s, t, mode])])
+        let footprint = self.st_footprint();
+        Lv::Scalars(vec![self.b.call(RtFn::TextureFiltered, [vec![id, s, t, mode], footprint].concat())])
+    }
+
+    /// The four words of `abi::Globals::st_footprint`: what texture lookups filter over.
+    fn st_footprint(&mut self) -> Vec<ssa::Value> {
+        (0..4).map(|k| self.b.value(Inst::Global(ssa::globals::ST_FOOTPRINT + k), Ty::F32)).collect()
     }
 
     /// `primvar*(name, fallback)`: the name must be known when compiling; it gets a place in
@@ -301,11 +307,12 @@ impl FnLower<'_> {
             },
         };
         let id = self.b.iconst(id);
+        let footprint = self.st_footprint();
         Lv::Scalars(
             (0..3)
                 .map(|c| {
                     let c = self.b.iconst(c);
-                    self.b.call(RtFn::Texture, vec![id, s, t, c])
+                    self.b.call(RtFn::TextureFiltered, [vec![id, s, t, c], footprint.clone()].concat())
                 })
                 .collect(),
         )

@@ -337,6 +337,7 @@ impl Base {
             i: (-v.n).to_array(),
             dpdu: dpdu.to_array(),
             dpdv: dpdv.to_array(),
+            st_footprint: [0.0; 4],
             u: v.uv.x,
             v: v.uv.y,
             primvars: Default::default(),

@@ -378,6 +378,7 @@ impl Context<'_> {
             dpdv: to_arr(sp.dpdv),
             u: sp.uv.x,
             v: sp.uv.y,
+            st_footprint: [0.0; 4],
             primvars: PrimvarValues::new(&primvars[..used]),
         }
     }
@@ -401,6 +402,11 @@ impl Context<'_> {
         s.site = FaultSite { prim: sp.prim, layer: None };
         let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
         let mut g = self.globals(sp, facing, d, &mut s.primvars);
+        // The footprint is that of the surface's own `st` (or parametric) coordinates: a
+        // material that reads other coordinates (a `st0` primvar) is left unfiltered.
+        if !info.primvars.iter().any(|p| p.width > 1 && p.name != "st") {
+            g.st_footprint = st_footprint(sp, d, footprint);
+        }
         s.emitted = Vec3::ZERO;
         if nl == 0 {
             s.lobes.clear();
@@ -829,6 +835,9 @@ impl Context<'_> {
         // (pass-throughs and bounces alike): at a hit its width is `pixel_spread` times this
         // plus the hit distance.
         let mut cone_length = 0.0f32;
+        // Rough bounces widen the cone (textures read there need no detail): the spread they
+        // added, and the width it has grown to at the current ray's origin.
+        let (mut bounce_spread, mut bounce_width) = (0.0f32, 0.0f32);
         // The product of the radiance compressions `η'²` of the refractions so far: inside
         // glass the throughput is 1/η² of what it will be once the path leaves again.
         let mut compression = 1.0f32;
@@ -851,7 +860,7 @@ impl Context<'_> {
                 (_, 0) => sampler.get1(Slot::LayerPick),
                 _ => sampler.pass_pick(vertex_passes),
             };
-            let footprint = self.pixel_spread * (cone_length + hit.t);
+            let footprint = self.pixel_spread * (cone_length + hit.t) + bounce_width + bounce_spread * hit.t;
             let shaded = self.shade(&sp, d, u_layer, footprint, s, first)?;
             if s.emitted != Vec3::ZERO {
                 let weight = match from.pdf {
@@ -874,6 +883,7 @@ impl Context<'_> {
                 let advanced = (next - o).dot(d);
                 travelled += advanced;
                 cone_length += advanced;
+                bounce_width += bounce_spread * advanced;
                 tmax = (tmax - advanced).max(0.0);
                 tmin = 0.0;
                 o = next;
@@ -923,6 +933,8 @@ impl Context<'_> {
             }
             let side = if sp.ng.dot(wi) > 0.0 { sp.ng } else { -sp.ng };
             cone_length += hit.t;
+            bounce_width += bounce_spread * hit.t;
+            bounce_spread = (bounce_spread + bounce_widening(next.pdf)).min(MAX_BOUNCE_SPREAD);
             o = offset_ray_origin(sp.p, sp.p_error, side);
             d = wi;
             tmin = 0.0;
@@ -1011,6 +1023,48 @@ pub(crate) fn bump_step(p: Vec3, footprint: f32) -> f32 {
     let floor = (BUMP_MIN_ULPS * f32::EPSILON * p.abs().max_element()).max(f32::MIN_POSITIVE);
     let h = 0.5 * footprint;
     if h > floor && h.is_finite() { h } else { floor }
+}
+
+/// The most a path's bounces widen its ray cone (radians): about a diffuse bounce's.
+const MAX_BOUNCE_SPREAD: f32 = 1.0;
+
+/// The spread (radians) a bounce adds to the ray cone, from the pdf of the direction it
+/// sampled: the cone whose solid angle is that sample's share, `1/pdf` (`π α²` for a cone of
+/// half-angle α). Specular bounces (no pdf) keep the cone; a diffuse bounce opens it to about
+/// a radian, a smooth glossy one barely.
+fn bounce_widening(pdf: Option<f32>) -> f32 {
+    match pdf {
+        Some(pdf) if pdf > 0.0 => (2.0 * (std::f32::consts::FRAC_1_PI / pdf).sqrt()).min(MAX_BOUNCE_SPREAD),
+        _ => 0.0,
+    }
+}
+
+/// The largest anisotropy [`st_footprint`] gives a footprint (grazing rays past it blur).
+const MAX_FOOTPRINT_ELONGATION: f32 = 64.0;
+
+/// The ray cone's footprint at `sp` in texture (st) space (`abi::Globals::st_footprint`): the
+/// cone of diameter `width` arriving along `d` cuts the surface in an ellipse whose minor axis
+/// (across the ray) is `width` long and whose major axis (along the ray's projection) is
+/// `width / cos θ`; both are mapped to (ds, dt) through the least-squares inverse of the st
+/// Jacobian `(dPdu, dPdv)`. Zeros where the Jacobian is degenerate (the lookup is unfiltered).
+fn st_footprint(sp: &SurfacePoint, d: Vec3, width: f32) -> [f32; 4] {
+    let n = sp.ng;
+    let across = d.cross(n).normalize_or_zero();
+    let along = n.cross(across);
+    let cos = d.dot(n).abs().max(1.0 / MAX_FOOTPRINT_ELONGATION);
+    let (a, b, c) = (sp.dpdu.length_squared(), sp.dpdu.dot(sp.dpdv), sp.dpdv.length_squared());
+    let det = a * c - b * b;
+    if !(width.is_finite() && det > 1e-20 * a * c && across != Vec3::ZERO) {
+        return [0.0; 4];
+    }
+    let to_st = |v: Vec3| {
+        let (pu, pv) = (v.dot(sp.dpdu), v.dot(sp.dpdv));
+        ((c * pu - b * pv) / det, (a * pv - b * pu) / det)
+    };
+    let (ds_x, dt_x) = to_st(across * width);
+    let (ds_y, dt_y) = to_st(along * (width / cos));
+    let footprint = [ds_x, dt_x, ds_y, dt_y];
+    if footprint.iter().all(|v| v.is_finite()) { footprint } else { [0.0; 4] }
 }
 
 /// Layer `layer`'s emitted radiance, clamped at 0 (negative light is no light).

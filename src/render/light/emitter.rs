@@ -167,6 +167,7 @@ impl Emitters {
                     i: (-geom.ng).to_array(),
                     dpdu: geom.dpdu.to_array(),
                     dpdv: geom.dpdv.to_array(),
+                    st_footprint: [0.0; 4],
                     u: geom.uv.x,
                     v: geom.uv.y,
                     // The power estimate reads primvars at their fallbacks.
