@@ -27,7 +27,10 @@ use strata::render::{LayerMode, RenderSettings, Scene};
 use strata::runtime::{math, noise};
 use strata::session::{SceneSource, Session, SessionOptions};
 
+mod layer;
 mod update;
+
+pub use layer::bench_layer;
 pub use update::bench_update;
 
 /// The built-in benchmark material: three substances, composed bottom to top in this order.

@@ -475,6 +475,7 @@ fn intrinsic_value(i: Intrinsic, a: &[Value]) -> Result<Value, Stop> {
             Value::Float(noise::cellular3(p[0], p[1], p[2]))
         }
         Texture | TextureChannel | Primvar | PrimvarFloat | PrimvarVector | DiffuseBsdf | GlossyBsdf | MetalBsdf
-        | GlassBsdf => return Err(Stop::NotConstant),
+        | GlassBsdf | ConductorBsdf | DielectricBsdf | GeneralizedSchlickBsdf | OrenNayarDiffuseBsdf
+        | BurleyDiffuseBsdf | SheenBsdf | Layer => return Err(Stop::NotConstant),
     })
 }

@@ -8,6 +8,7 @@
 pub mod cryptomatte;
 pub mod output;
 
+use crate::render::material::closure::LayeringMode;
 use crate::abi::ChannelKind;
 use crate::abi::{MaterialCode, ShaderError};
 use crate::render::integrator::{
@@ -40,6 +41,8 @@ pub struct RenderSettings {
     pub mode: LayerMode,
     /// How each decision's numbers are spread over a pixel's samples.
     pub sampler: SamplerKind,
+    /// How closures' `layer(top, base)` is rendered.
+    pub layering: LayeringMode,
 }
 
 impl Default for RenderSettings {
@@ -53,6 +56,7 @@ impl Default for RenderSettings {
             max_depth: 8,
             mode: LayerMode::Auto,
             sampler: SamplerKind::default(),
+            layering: LayeringMode::default(),
         }
     }
 }
@@ -448,7 +452,12 @@ pub fn render(
         scene,
         materials,
         channel_map: &channel_map,
-        params: PathParams { max_depth: settings.max_depth, rr_depth: 3, mode: settings.mode },
+        params: PathParams {
+            max_depth: settings.max_depth,
+            rr_depth: 3,
+            mode: settings.mode,
+            layering: settings.layering,
+        },
         all_opaque: materials.iter().all(|m| crate::render::integrator::is_opaque(*m)),
         light_selection: crate::render::light::LightSelection::with_emitters(
             &scene.lights,
