@@ -462,7 +462,8 @@ fn main() -> ExitCode {
 
 /// Parses `WIDTHxHEIGHT` (each 1 to 16384).
 fn parse_layering(text: &str) -> Result<LayeringMode, String> {
-    LayeringMode::from_name(text).ok_or_else(|| format!("`{text}` is not a layering mode (albedo-scaling, random-walk)"))
+    LayeringMode::from_name(text)
+        .ok_or_else(|| format!("`{text}` is not a layering mode (albedo-scaling, random-walk)"))
 }
 
 fn parse_sampler(text: &str) -> Result<SamplerKind, String> {

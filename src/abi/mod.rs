@@ -373,8 +373,9 @@ pub trait MaterialCode: Send + Sync {
     fn mask(&self, g: &Globals, layer: usize) -> Result<f32, ShaderError>;
     /// Evaluates one layer's surface closure, or its first term when it is a sum of several.
     fn surface(&self, g: &Globals, layer: usize, out: &mut Closure) -> Result<(), ShaderError>;
-    /// Evaluates one layer's full closure value (what the renderer shades with). The default
-    /// wraps [`MaterialCode::surface`]: a single lobe of unit weight.
+    /// Evaluates one layer's full closure value (what the renderer shades with; every term
+    /// past those the shader may fill is empty). The default wraps [`MaterialCode::surface`]:
+    /// a single lobe of unit weight.
     fn surface_sum(&self, g: &Globals, layer: usize, out: &mut ClosureSum) -> Result<(), ShaderError> {
         let mut single = Closure::default();
         self.surface(g, layer, &mut single)?;

@@ -148,6 +148,8 @@ impl<R: Runner> MaterialCode for Material<R> {
     fn surface_sum(&self, g: &Globals, layer: usize, out: &mut ClosureSum) -> Result<(), ShaderError> {
         match self.entries.surface.get(layer).copied().flatten() {
             Some(e) => {
+                // The entry writes the terms that may be non-empty; the rest must read empty.
+                *out = ClosureSum::default();
                 // SAFETY: `ClosureSum` is repr(C) of `ClosureTerm`s, each u32 and f32 fields
                 // only: `ClosureSum::WORDS` 4-byte words.
                 let w = unsafe {

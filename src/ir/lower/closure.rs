@@ -88,7 +88,7 @@ impl FnLower<'_> {
     }
 
     /// Terms of `c` that may be non-empty: one past the last whose kind is not a known `None`.
-    fn live_terms(&self, c: &[ssa::Value]) -> usize {
+    pub(super) fn live_terms(&self, c: &[ssa::Value]) -> usize {
         (0..MAX_CLOSURE_TERMS).rev().find(|&t| self.b.known(c[t * TERM_WORDS + KIND]) != Some(0)).map_or(0, |t| t + 1)
     }
 
@@ -106,13 +106,7 @@ impl FnLower<'_> {
 
     /// `top` followed by `base`; with `layered`, `base`'s terms lie under every term of `top`.
     /// A result past [`MAX_CLOSURE_TERMS`] is reported at `span` (the operator).
-    pub(super) fn closure_concat(
-        &mut self,
-        top: &[ssa::Value],
-        base: &[ssa::Value],
-        layered: bool,
-        span: Span,
-    ) -> Lv {
+    pub(super) fn closure_concat(&mut self, top: &[ssa::Value], base: &[ssa::Value], layered: bool, span: Span) -> Lv {
         let (nt, nb) = (self.live_terms(top), self.live_terms(base));
         if nt + nb > MAX_CLOSURE_TERMS {
             self.diags.push(

@@ -163,8 +163,15 @@ impl FnLower<'_> {
                 params.push(self.b.fconst(code as f32));
                 self.lobe(abi::ClosureKind::Dielectric, &params)
             }
-            DiffuseBsdf | GlossyBsdf | MetalBsdf | GlassBsdf | ConductorBsdf | GeneralizedSchlickBsdf
-            | OrenNayarDiffuseBsdf | BurleyDiffuseBsdf | SheenBsdf => {
+            DiffuseBsdf
+            | GlossyBsdf
+            | MetalBsdf
+            | GlassBsdf
+            | ConductorBsdf
+            | GeneralizedSchlickBsdf
+            | OrenNayarDiffuseBsdf
+            | BurleyDiffuseBsdf
+            | SheenBsdf => {
                 let kind = i.closure_kind().expect("a BSDF constructor");
                 let params: Vec<ssa::Value> = a.iter().flatten().copied().collect();
                 self.lobe(kind, &params)

@@ -55,7 +55,6 @@ pub const MAX_LOCAL_ARRAY_BYTES: usize = 256 << 10;
 /// spends 6 % of it).
 const WORDS_PER_BUDGET_UNIT: u32 = 1;
 
-
 /// How to lower.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct LowerOptions {
@@ -104,8 +103,11 @@ fn lower_here(lib: &Library, wired: &WiredMaterial, options: LowerOptions, diags
     for (l, layer) in wired.layers.iter().enumerate() {
         if let Some(surface) = &layer.surface {
             functions.push(cx.entry(EntryKind::Surface(l), closure::CLOSURE_WORDS as u32, |f| {
-                let closure = f.operand(surface, Type::CLOSURE);
-                f.out_words(0, &closure.scalars());
+                // Only the terms that may be non-empty are written; the caller clears the rest
+                // (`MaterialCode::surface_sum`), so a single lobe costs 16 words, not 128.
+                let closure = f.operand(surface, Type::CLOSURE).scalars();
+                let live = f.live_terms(&closure);
+                f.out_words(0, &closure[..live * closure::TERM_WORDS]);
             }));
         }
     }

@@ -8,12 +8,12 @@
 pub mod cryptomatte;
 pub mod output;
 
-use crate::render::material::closure::LayeringMode;
 use crate::abi::ChannelKind;
 use crate::abi::{MaterialCode, ShaderError};
 use crate::render::integrator::{
     ChannelMap, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams, Scratch,
 };
+use crate::render::material::closure::LayeringMode;
 use crate::render::sampling::sampler::{PathSampler, SamplerKind, Slot};
 use crate::render::scene::Scene;
 use glam::{Vec2, Vec3};

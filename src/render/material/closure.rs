@@ -69,12 +69,10 @@ pub(crate) struct Term {
 }
 
 /// Points of the 8-point Gauss–Legendre rule on [0, 1] and their weights (summing to 1).
-const GAUSS_X: [f32; 8] = [
-    0.019_855_07, 0.101_666_76, 0.237_233_8, 0.408_282_68, 0.591_717_3, 0.762_766_2, 0.898_333_24, 0.980_144_9,
-];
-const GAUSS_W: [f32; 8] = [
-    0.050_614_27, 0.111_190_52, 0.156_853_32, 0.181_341_89, 0.181_341_89, 0.156_853_32, 0.111_190_52, 0.050_614_27,
-];
+const GAUSS_X: [f32; 8] =
+    [0.019_855_07, 0.101_666_76, 0.237_233_8, 0.408_282_68, 0.591_717_3, 0.762_766_2, 0.898_333_24, 0.980_144_9];
+const GAUSS_W: [f32; 8] =
+    [0.050_614_27, 0.111_190_52, 0.156_853_32, 0.181_341_89, 0.181_341_89, 0.156_853_32, 0.111_190_52, 0.050_614_27];
 
 /// The BSDF of one closure value. Copy and allocation-free; a single unit-weight term behaves
 /// exactly as its lobe alone.
@@ -124,13 +122,8 @@ impl ClosureBsdf {
 
     /// Builds the BSDF of `(lobe, weight, above)` terms (at most [`MAX_CLOSURE_TERMS`]).
     pub fn from_lobes(lobes: &[(Lobe, Vec3, u8)], mode: LayeringMode) -> ClosureBsdf {
-        let empty = Term {
-            lobe: Lobe::Bsdf(Bsdf::Black),
-            weight: Vec3::ZERO,
-            above: 0,
-            inv_norm: Vec3::ZERO,
-            importance: 0.0,
-        };
+        let empty =
+            Term { lobe: Lobe::Bsdf(Bsdf::Black), weight: Vec3::ZERO, above: 0, inv_norm: Vec3::ZERO, importance: 0.0 };
         let mut b = ClosureBsdf { terms: [empty; MAX_CLOSURE_TERMS], len: 0, layered: false, mode };
         let mut covered = 0u8;
         for &(_, _, above) in lobes {

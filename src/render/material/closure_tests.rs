@@ -99,7 +99,10 @@ fn single_closures_are_their_bsdf_bit_for_bit() {
             assert_eq!(b.eval(wo, wi), cb.eval(wo, wi));
             assert_eq!(b.pdf(wo, wi).to_bits(), cb.pdf(wo, wi).to_bits());
             let (s, t) = (b.sample(wo, uc, u), cb.sample(wo, uc, u));
-            assert_eq!(s.map(|s| (s.wi, s.f, s.pdf.to_bits(), s.delta)), t.map(|s| (s.wi, s.f, s.pdf.to_bits(), s.delta)));
+            assert_eq!(
+                s.map(|s| (s.wi, s.f, s.pdf.to_bits(), s.delta)),
+                t.map(|s| (s.wi, s.f, s.pdf.to_bits(), s.delta))
+            );
         }
     }
 }
@@ -149,7 +152,11 @@ fn diffuse_models_furnace() {
                 std::f32::consts::FRAC_1_PI * (a + a * b * s / t) * wi.z
             };
             let q = sphere_integral(single, &[]);
-            assert!((q - fon_albedo(mu, sigma) as f64).abs() < 2e-3, "E_FON(σ={sigma}, μ={mu}) = {} vs {q}", fon_albedo(mu, sigma));
+            assert!(
+                (q - fon_albedo(mu, sigma) as f64).abs() < 2e-3,
+                "E_FON(σ={sigma}, μ={mu}) = {} vs {q}",
+                fon_albedo(mu, sigma)
+            );
             let (e, se) = furnace(&one(oren_nayar(1.0, sigma, true)), wo, 20_000, 2);
             assert!((e - 1.0).abs() < 0.01 + 4.0 * se, "EON σ={sigma} μ={mu}: E = {e} ± {se}");
             let (e, se) = furnace(&one(oren_nayar(1.0, sigma, false)), wo, 20_000, 3);
@@ -319,7 +326,10 @@ fn closures_are_reciprocal_and_consistent() {
         for _ in 0..2000 {
             let (wo, wi) = (rng.dir(), rng.dir());
             let (f, g) = (b.eval(wo, wi), b.eval(wi, wo));
-            assert!((f - g).abs().max_element() <= 1e-3 * f.max(g).max_element() + 1e-6, "{name} {wo} {wi}: {f} vs {g}");
+            assert!(
+                (f - g).abs().max_element() <= 1e-3 * f.max(g).max_element() + 1e-6,
+                "{name} {wo} {wi}: {f} vs {g}"
+            );
             let (uc, u) = (rng.f32(), rng.vec2());
             if let Some(s) = b.sample(wo, uc, u) {
                 assert!(s.pdf > 0.0 && s.f.is_finite() && s.f.min_element() >= 0.0, "{name}: {s:?}");

@@ -12,9 +12,7 @@ use crate::render::material::bsdf::{
     Bsdf, BsdfSample, colour, cosine_hemisphere, finish, flip_z, ior, microfacet_reflection_pdf, reflect, roughness,
     sanitize, upper,
 };
-use crate::render::material::microfacet::{
-    Ggx, fresnel_conductor3, fresnel_dielectric, hemispherical_average,
-};
+use crate::render::material::microfacet::{Ggx, fresnel_conductor3, fresnel_dielectric, hemispherical_average};
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
 

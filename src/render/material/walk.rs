@@ -287,7 +287,8 @@ pub(crate) fn sample(b: &ClosureBsdf, wo: Vec3, uc: f32, u: Vec2) -> Option<Bsdf
         }
     }
     let base_rest = (1.0 - w) * b.terms().iter().enumerate().filter(|(i, _)| s.base & (1 << i) != 0).count() as f32;
-    let p_stack = if beside_importance + base_rest <= 0.0 { 1.0 } else { (w / (w + beside_importance + base_rest)).max(0.1) };
+    let p_stack =
+        if beside_importance + base_rest <= 0.0 { 1.0 } else { (w / (w + beside_importance + base_rest)).max(0.1) };
     let flip = wo.z < 0.0;
     let wo_up = if flip { flip_z(wo) } else { wo };
     let mut rng = Rng::seeded(wo, Vec3::new(uc, u.x, u.y), 0xa7);
