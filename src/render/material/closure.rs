@@ -181,10 +181,9 @@ impl ClosureBsdf {
                 continue;
             }
             let mut att = Vec3::ONE;
-            for j in 0..i {
+            for (j, (t, a_j)) in self.terms[..i].iter().zip(&a[..i]).enumerate() {
                 if above & (1 << j) != 0 {
-                    let t = &self.terms[j];
-                    att -= t.weight * a[j] * t.lobe.directional_albedo(mu);
+                    att -= t.weight * *a_j * t.lobe.directional_albedo(mu);
                 }
             }
             a[i] = att.max(Vec3::ZERO);

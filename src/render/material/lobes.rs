@@ -367,7 +367,7 @@ impl Lobe {
                 fresnel_conductor3(mu, eta, k) * albedo::ggx_reflection(mu, ggx.alpha.sqrt())
             }
             Lobe::Bsdf(Bsdf::Diffuse { albedo }) => albedo,
-            Lobe::OrenNayar { albedo, roughness, compensated: false } if roughness == 0.0 => albedo,
+            Lobe::OrenNayar { albedo, roughness: 0.0, compensated: false } => albedo,
             Lobe::Sheen { color, roughness } => color * albedo::sheen(mu, roughness).min(1.0),
             _ => self.albedo(),
         }
