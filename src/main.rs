@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use strata::backend::BackendKind;
+use strata::render::material::closure::LayeringMode;
 use strata::render::sampling::sampler::SamplerKind;
 use strata::render::{LayerMode, RenderSettings};
 
@@ -138,6 +139,10 @@ enum Command {
         /// (Owen-scrambled, the default) or `independent` (plain Monte Carlo, for comparison).
         #[arg(long, default_value = "sobol", value_parser = parse_sampler)]
         sampler: SamplerKind,
+        /// How closures' `layer(top, base)` is rendered: albedo-scaling (fast) or random-walk
+        /// (the stochastic reference).
+        #[arg(long, default_value = "albedo-scaling", value_parser = parse_layering)]
+        layering: LayeringMode,
         /// Skip constant folding and layer pruning (for comparison).
         #[arg(long)]
         no_optimize: bool,
@@ -298,6 +303,17 @@ enum BenchCommand {
         #[arg(long, default_value = "160x120", value_parser = parse_resolution)]
         res: (usize, usize),
     },
+    /// The two modes of closures' `layer(top, base)`, albedo scaling and the random walk: the
+    /// albedo each renders for a coat over a diffuse base per roughness and angle, their gap,
+    /// and the time per sample of each, charted as `layer_modes.svg`.
+    Layer {
+        /// The directory to write the SVG into (created if missing).
+        #[arg(long, value_name = "DIR", default_value = "docs/charts")]
+        plot: PathBuf,
+        /// Few samples: checks that everything draws, in seconds.
+        #[arg(long)]
+        quick: bool,
+    },
     /// Measure and draw every chart of README's Charts section and docs/STABILITY.md as SVG:
     /// error vs time of stochastic vs weighted layering (1-64 layers; constant, noise and thin
     /// masks), JIT vs interpreter, strata vs Mitsuba 3 (from the committed CSV), per-point
@@ -351,6 +367,7 @@ fn main() -> ExitCode {
             weighted,
             stochastic,
             sampler,
+            layering,
             no_optimize,
             stats,
             no_default_lights,
@@ -372,6 +389,7 @@ fn main() -> ExitCode {
                     _ => LayerMode::Auto,
                 },
                 sampler,
+                layering,
             },
             backend,
             optimize: !no_optimize,
@@ -399,6 +417,7 @@ fn main() -> ExitCode {
                 BenchCommand::Features { spp, res } => cli::bench::bench_features(res, spp, 7),
                 BenchCommand::Update { spp, res, repeats } => cli::bench::bench_update(res, spp, repeats as usize),
                 BenchCommand::Textures { spp, res } => cli::bench::bench_textures(res, spp),
+                BenchCommand::Layer { plot, quick } => cli::bench::bench_layer(&plot, quick),
                 BenchCommand::Charts { plot, mitsuba_csv, quick } => {
                     let options =
                         if quick { cli::bench::ChartOptions::quick() } else { cli::bench::ChartOptions::default() };
@@ -462,6 +481,11 @@ fn main() -> ExitCode {
 }
 
 /// Parses `WIDTHxHEIGHT` (each 1 to 16384).
+fn parse_layering(text: &str) -> Result<LayeringMode, String> {
+    LayeringMode::from_name(text)
+        .ok_or_else(|| format!("`{text}` is not a layering mode (albedo-scaling, random-walk)"))
+}
+
 fn parse_sampler(text: &str) -> Result<SamplerKind, String> {
     SamplerKind::from_name(text).ok_or_else(|| format!("`{text}` is not a sampler (sobol, independent)"))
 }

@@ -49,8 +49,8 @@ const HARNESS: &str = r#"
 #include "default.h"
 
 static void dump_closure(const char *name, uint32_t status, const StrataClosure *c) {
-    printf("%s %u %u", name, status, c->kind);
-    for (int k = 0; k < 8; k++) { uint32_t w; memcpy(&w, &c->params[k], 4); printf(" %08x", w); }
+    printf("%s %u %u", name, status, c->terms[0].kind);
+    for (int k = 0; k < 8; k++) { uint32_t w; memcpy(&w, &c->terms[0].params[k], 4); printf(" %08x", w); }
     printf("\n");
 }
 
@@ -60,10 +60,10 @@ int main(void) {
     while (fread(&g, sizeof g, 1, stdin) == 1) {
         StrataClosure c;
         float m; uint32_t s, w;
-        s = clay_surface(&g, &c); dump_closure("clay", s, &c);
-        s = floor_surface(&g, &c); dump_closure("floor", s, &c);
-        s = brushed_metal_surface(&g, &c); dump_closure("brushed_metal", s, &c);
-        s = dirt_surface(&g, &c); dump_closure("dirt", s, &c);
+        memset(&c, 0, sizeof c); s = clay_surface(&g, &c); dump_closure("clay", s, &c);
+        memset(&c, 0, sizeof c); s = floor_surface(&g, &c); dump_closure("floor", s, &c);
+        memset(&c, 0, sizeof c); s = brushed_metal_surface(&g, &c); dump_closure("brushed_metal", s, &c);
+        memset(&c, 0, sizeof c); s = dirt_surface(&g, &c); dump_closure("dirt", s, &c);
         s = dirt_mask(&g, &m); memcpy(&w, &m, 4); printf("dirt_mask %u %08x\n", s, w);
         s = clay_mask(&g, &m); memcpy(&w, &m, 4); printf("clay_mask %u %08x\n", s, w);
     }

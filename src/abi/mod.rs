@@ -161,6 +161,20 @@ pub enum ClosureKind {
     Metal = 3,
     /// Rough dielectric: `[tint rgb, roughness, ior]`.
     Glass = 4,
+    /// GGX conductor from its complex index: `[eta rgb, k rgb, roughness]`.
+    Conductor = 5,
+    /// GGX dielectric interface: `[tint rgb, ior, roughness, scatter]`, scatter 0 reflects
+    /// only (a coat), 1 transmits only, 2 does both.
+    Dielectric = 6,
+    /// GGX reflection with the generalized Schlick Fresnel and F82 tint:
+    /// `[color0 rgb, color82 rgb, color90 rgb, exponent, roughness]`.
+    GeneralizedSchlick = 7,
+    /// Oren–Nayar diffuse: `[albedo rgb, roughness, energy_compensation (0 or 1)]`.
+    OrenNayar = 8,
+    /// Burley (Disney) diffuse: `[albedo rgb, roughness]`.
+    Burley = 9,
+    /// Charlie sheen (Estevez and Kulla 2017): `[color rgb, roughness]`.
+    Sheen = 10,
 }
 
 impl ClosureKind {
@@ -171,12 +185,20 @@ impl ClosureKind {
             2 => ClosureKind::Glossy,
             3 => ClosureKind::Metal,
             4 => ClosureKind::Glass,
+            5 => ClosureKind::Conductor,
+            6 => ClosureKind::Dielectric,
+            7 => ClosureKind::GeneralizedSchlick,
+            8 => ClosureKind::OrenNayar,
+            9 => ClosureKind::Burley,
+            10 => ClosureKind::Sheen,
             _ => ClosureKind::None,
         }
     }
 }
 
-/// A BSDF closure value as compiled code returns it.
+/// One lobe with unit weight: the closure of the kinds whose parameters fit in eight words
+/// (every kind but [`ClosureKind::GeneralizedSchlick`]). What [`MaterialCode::surface`]
+/// returns; a material's full closure value is a [`ClosureSum`].
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Closure {
@@ -184,6 +206,68 @@ pub struct Closure {
     pub kind: u32,
     /// Parameters; meaning per kind (see [`ClosureKind`]). Unused entries are 0.
     pub params: [f32; 8],
+}
+
+/// Most terms one closure value holds; a closure expression that could need more is a
+/// compile-time error at the operator that overflows, never a silent drop.
+pub const MAX_CLOSURE_TERMS: usize = 8;
+/// Parameter words of one [`ClosureTerm`].
+pub const TERM_PARAMS: usize = 11;
+
+/// One weighted lobe of a [`ClosureSum`]. Field order is the C ABI (16 words).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ClosureTerm {
+    /// A [`ClosureKind`] as `u32` (`None`: an empty term).
+    pub kind: u32,
+    /// Vertical layering: bit `j` set when term `j` lies above this one (`layer(top, base)`
+    /// sets the bits of `top`'s terms in each of `base`'s). Only lower indices can be set.
+    pub above: u32,
+    /// Colour weight (`closure * color`, `mix`); the lobe's own parameters are unweighted.
+    pub weight: [f32; 3],
+    /// Parameters; meaning per kind (see [`ClosureKind`]). Unused entries are 0.
+    pub params: [f32; TERM_PARAMS],
+}
+
+impl ClosureTerm {
+    /// A single closure with unit weight.
+    pub fn from_closure(c: &Closure) -> ClosureTerm {
+        let mut params = [0.0; TERM_PARAMS];
+        params[..8].copy_from_slice(&c.params);
+        ClosureTerm { kind: c.kind, above: 0, weight: [1.0; 3], params }
+    }
+}
+
+/// A material's closure value as compiled code returns it: a weighted sum of lobes with
+/// vertical layering (OSL-style closure algebra: `closure * color`, `closure + closure`,
+/// `mix(a, b, t)`, `layer(top, base)`). Term positions are fixed when compiling, so a term
+/// of kind `None` (empty) may sit between others. Field order is the C ABI.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ClosureSum {
+    /// The terms, top layers first.
+    pub terms: [ClosureTerm; MAX_CLOSURE_TERMS],
+}
+
+impl ClosureSum {
+    /// 4-byte words of a closure value (what compiled code writes).
+    pub const WORDS: usize = std::mem::size_of::<ClosureSum>() / 4;
+
+    /// The sum holding `c` alone with unit weight.
+    pub fn single(c: &Closure) -> ClosureSum {
+        let mut sum = ClosureSum::default();
+        sum.terms[0] = ClosureTerm::from_closure(c);
+        sum
+    }
+
+    /// The first non-empty term as a single closure (parameters past the eighth dropped), or
+    /// the default (`None`) closure.
+    pub fn first(&self) -> Closure {
+        let Some(t) = self.terms.iter().find(|t| t.kind != ClosureKind::None as u32) else { return Closure::default() };
+        let mut params = [0.0; 8];
+        params.copy_from_slice(&t.params[..8]);
+        Closure { kind: t.kind, params }
+    }
 }
 
 /// Status returned by every entry point.
@@ -291,8 +375,17 @@ pub trait MaterialCode: Send + Sync {
     /// the stack from the top and stops at the picked layer (paper 5.3), so its cost does not
     /// grow with the layers below.
     fn mask(&self, g: &Globals, layer: usize) -> Result<f32, ShaderError>;
-    /// Evaluates one layer's surface closure.
+    /// Evaluates one layer's surface closure, or its first term when it is a sum of several.
     fn surface(&self, g: &Globals, layer: usize, out: &mut Closure) -> Result<(), ShaderError>;
+    /// Evaluates one layer's full closure value (what the renderer shades with; every term
+    /// past those the shader may fill is empty). The default wraps [`MaterialCode::surface`]:
+    /// a single lobe of unit weight.
+    fn surface_sum(&self, g: &Globals, layer: usize, out: &mut ClosureSum) -> Result<(), ShaderError> {
+        let mut single = Closure::default();
+        self.surface(g, layer, &mut single)?;
+        *out = ClosureSum::single(&single);
+        Ok(())
+    }
     /// Writes each layer's displacement height (0 without a displacement product).
     fn displacement(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError>;
     /// Writes one layer's shading normal (`g.n` without a normal product).

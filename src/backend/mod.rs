@@ -14,7 +14,7 @@ pub mod interp;
 pub mod jit;
 pub mod object;
 
-use crate::abi::{Closure, Globals, MaterialCode, MaterialInfo, ShaderError, Status};
+use crate::abi::{Closure, ClosureSum, Globals, MaterialCode, MaterialInfo, ShaderError, Status};
 use crate::compose::ComposedMaterial;
 use crate::diag::Diagnostics;
 use crate::front::library::Library;
@@ -139,14 +139,26 @@ impl<R: Runner> MaterialCode for Material<R> {
     }
 
     fn surface(&self, g: &Globals, layer: usize, out: &mut Closure) -> Result<(), ShaderError> {
+        let mut sum = ClosureSum::default();
+        self.surface_sum(g, layer, &mut sum)?;
+        *out = sum.first();
+        Ok(())
+    }
+
+    fn surface_sum(&self, g: &Globals, layer: usize, out: &mut ClosureSum) -> Result<(), ShaderError> {
         match self.entries.surface.get(layer).copied().flatten() {
             Some(e) => {
-                // SAFETY: `Closure` is repr(C): a u32 and eight f32, nine 4-byte words.
-                let w = unsafe { std::slice::from_raw_parts_mut((out as *mut Closure).cast::<u32>(), 9) };
+                // The entry writes the terms that may be non-empty; the rest must read empty.
+                *out = ClosureSum::default();
+                // SAFETY: `ClosureSum` is repr(C) of `ClosureTerm`s, each u32 and f32 fields
+                // only: `ClosureSum::WORDS` 4-byte words.
+                let w = unsafe {
+                    std::slice::from_raw_parts_mut((out as *mut ClosureSum).cast::<u32>(), ClosureSum::WORDS)
+                };
                 ShaderError::check(self.runner.run(e, g, w))
             }
             None => {
-                *out = Closure::default();
+                *out = ClosureSum::default();
                 Ok(())
             }
         }

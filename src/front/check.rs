@@ -631,6 +631,19 @@ impl Checker<'_> {
                     span,
                 })
             }
+            Add | Mul if l.ty == Type::CLOSURE || r.ty == Type::CLOSURE => {
+                // Closure algebra: closure + closure, closure * (float|color) either way round.
+                let (l, r) = match (op, l.ty == Type::CLOSURE, r.ty == Type::CLOSURE) {
+                    (Add, true, true) => (l, r),
+                    (Mul, true, false) if r.ty.converts_to(Type::COLOR) => (l, r.convert_to(Type::COLOR)),
+                    (Mul, false, true) if l.ty.converts_to(Type::COLOR) => (r, l.convert_to(Type::COLOR)),
+                    _ => {
+                        mismatch(self, &l, &r);
+                        return None;
+                    }
+                };
+                Some(Expr { kind: ExprKind::Binary(op, Box::new(l), Box::new(r)), ty: Type::CLOSURE, span })
+            }
             Add | Sub | Mul | Div | Rem => {
                 let Some(common) = arithmetic_type(l.ty, r.ty) else {
                     mismatch(self, &l, &r);

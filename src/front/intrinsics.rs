@@ -110,6 +110,17 @@ intrinsics! {
     GlossyBsdf = "glossy_bsdf": Fixed(&[C, C, F, F], CL),
     MetalBsdf = "metal_bsdf": Fixed(&[C, C, F], CL),
     GlassBsdf = "glass_bsdf": Fixed(&[C, F, F], CL),
+    // The MaterialX pbrlib lobes (README, "Closures"); `weight` inputs are `closure * w`.
+    ConductorBsdf = "conductor_bsdf": Fixed(&[C, C, F], CL),
+    // dielectric_bsdf(tint, ior, roughness, scatter_mode): scatter_mode "R", "T" or "RT",
+    // known when compiling.
+    DielectricBsdf = "dielectric_bsdf": Fixed(&[C, F, F, S], CL),
+    GeneralizedSchlickBsdf = "generalized_schlick_bsdf": Fixed(&[C, C, C, F, F], CL),
+    OrenNayarDiffuseBsdf = "oren_nayar_diffuse_bsdf": Fixed(&[C, F, F], CL),
+    BurleyDiffuseBsdf = "burley_diffuse_bsdf": Fixed(&[C, F], CL),
+    SheenBsdf = "sheen_bsdf": Fixed(&[C, F], CL),
+    // layer(top, base): `top` over `base`, energy-conserving (the renderer's layering mode).
+    Layer = "layer": Fixed(&[CL, CL], CL),
 }
 
 impl Intrinsic {
@@ -131,9 +142,28 @@ impl Intrinsic {
         )
     }
 
-    /// Whether this builds a BSDF closure.
+    /// Whether this builds or combines BSDF closures.
     pub fn is_closure(self) -> bool {
-        matches!(self, Intrinsic::DiffuseBsdf | Intrinsic::GlossyBsdf | Intrinsic::MetalBsdf | Intrinsic::GlassBsdf)
+        self.closure_kind().is_some() || self == Intrinsic::Layer
+    }
+
+    /// The lobe a BSDF constructor builds (its arguments, flattened, are the lobe's
+    /// parameters in order; see [`crate::abi::ClosureKind`]).
+    pub fn closure_kind(self) -> Option<crate::abi::ClosureKind> {
+        use crate::abi::ClosureKind as K;
+        Some(match self {
+            Intrinsic::DiffuseBsdf => K::Diffuse,
+            Intrinsic::GlossyBsdf => K::Glossy,
+            Intrinsic::MetalBsdf => K::Metal,
+            Intrinsic::GlassBsdf => K::Glass,
+            Intrinsic::ConductorBsdf => K::Conductor,
+            Intrinsic::DielectricBsdf => K::Dielectric,
+            Intrinsic::GeneralizedSchlickBsdf => K::GeneralizedSchlick,
+            Intrinsic::OrenNayarDiffuseBsdf => K::OrenNayar,
+            Intrinsic::BurleyDiffuseBsdf => K::Burley,
+            Intrinsic::SheenBsdf => K::Sheen,
+            _ => return None,
+        })
     }
 
     /// Resolves the parameter types and result type for the given argument types, or explains
@@ -161,6 +191,20 @@ impl Intrinsic {
                 let common = common_generic(args).ok_or_else(|| self.generic_error(args))?;
                 Ok((vec![common; arity], common))
             }
+            Mix if args[..2].iter().any(|a| a.base == BaseType::Closure) => {
+                // mix(a, b, t) of closures: a·(1 − t) + b·t, t a float or colour.
+                if args[0] != Type::CLOSURE || args[1] != Type::CLOSURE {
+                    return Err(self.generic_error(args));
+                }
+                let t = if args[2].converts_to(Type::FLOAT) {
+                    Type::FLOAT
+                } else if args[2].converts_to(Type::COLOR) {
+                    Type::COLOR
+                } else {
+                    return Err(self.generic_error(args));
+                };
+                Ok((vec![Type::CLOSURE, Type::CLOSURE, t], Type::CLOSURE))
+            }
             Mix => {
                 let common = common_generic(&args[..2]).ok_or_else(|| self.generic_error(args))?;
                 let t = if args[2].converts_to(Type::FLOAT) {
@@ -177,7 +221,12 @@ impl Intrinsic {
 
     fn generic_error(self, args: &[Type]) -> String {
         let found: Vec<String> = args.iter().map(|t| t.to_string()).collect();
-        format!("`{}` takes float or triple arguments of one type, found ({})", self.name(), found.join(", "))
+        let what = if self == Intrinsic::Mix {
+            "float or triple arguments of one type, or two closures and a float or colour"
+        } else {
+            "float or triple arguments of one type"
+        };
+        format!("`{}` takes {what}, found ({})", self.name(), found.join(", "))
     }
 }
 

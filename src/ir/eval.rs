@@ -474,7 +474,21 @@ fn intrinsic_value(i: Intrinsic, a: &[Value]) -> Result<Value, Stop> {
             let p = v3(0)?;
             Value::Float(noise::cellular3(p[0], p[1], p[2]))
         }
-        Texture | TextureChannel | Primvar | PrimvarFloat | PrimvarVector | DiffuseBsdf | GlossyBsdf | MetalBsdf
-        | GlassBsdf => return Err(Stop::NotConstant),
+        Texture
+        | TextureChannel
+        | Primvar
+        | PrimvarFloat
+        | PrimvarVector
+        | DiffuseBsdf
+        | GlossyBsdf
+        | MetalBsdf
+        | GlassBsdf
+        | ConductorBsdf
+        | DielectricBsdf
+        | GeneralizedSchlickBsdf
+        | OrenNayarDiffuseBsdf
+        | BurleyDiffuseBsdf
+        | SheenBsdf
+        | Layer => return Err(Stop::NotConstant),
     })
 }

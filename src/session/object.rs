@@ -36,10 +36,20 @@ typedef struct StrataGlobals {
     uint32_t primvar_len;
 } StrataGlobals;
 
-/* A BSDF closure (abi::Closure): kind 0 none, 1 diffuse, 2 glossy, 3 metal, 4 glass. */
-typedef struct StrataClosure {
+/* One weighted lobe of a closure (abi::ClosureTerm): kind 0 none, 1 diffuse, 2 glossy,
+   3 metal, 4 glass, 5 conductor, 6 dielectric, 7 generalized Schlick, 8 Oren-Nayar, 9 Burley,
+   10 sheen; bit j of `above` set when term j lies above this one (layer). */
+typedef struct StrataClosureTerm {
     uint32_t kind;
-    float params[8];
+    uint32_t above;
+    float weight[3];
+    float params[11];
+} StrataClosureTerm;
+
+/* A closure value (abi::ClosureSum). Zero it before calling a surface entry: the entry writes
+   only the terms the shader may fill. */
+typedef struct StrataClosure {
+    StrataClosureTerm terms[8];
 } StrataClosure;
 
 /* Every function returns a status: 0 ok, 1 loop budget exceeded, 2 index out of bounds. */

@@ -37,6 +37,7 @@ mod features;
 mod render;
 mod scale;
 mod shade;
+mod layer;
 mod textures;
 mod update;
 pub use charts::*;
@@ -45,6 +46,7 @@ pub use features::*;
 pub use render::*;
 pub use scale::*;
 pub use shade::*;
+pub use layer::bench_layer;
 pub use textures::bench_textures;
 pub use update::bench_update;
 

@@ -30,7 +30,11 @@ impl FnLower<'_> {
                 return self.placeholder(e.ty);
             }
             acc = match &node.kind {
-                ExprKind::Binary(op, _, b) => self.binary(*op, acc, acc_ty, b, frame),
+                ExprKind::Binary(op, _, b) => {
+                    // Where a closure sum past its capacity is reported.
+                    self.here = node.span;
+                    self.binary(*op, acc, acc_ty, b, frame)
+                }
                 _ => self.convert(acc, acc_ty, node.ty),
             };
             acc_ty = node.ty;
@@ -204,8 +208,13 @@ impl FnLower<'_> {
             self.b.jump_to(join);
             return Lv::Scalars(vec![self.b.value(Inst::Get(result), Ty::I32)]);
         }
+        let at = self.here;
         let x = lhs.scalars();
         let y = self.expr(b, frame).scalars();
+        if lhs_ty == Type::CLOSURE {
+            // The checker puts the closure on the left: `c + d` or `c * weight`.
+            return if op == Add { self.closure_concat(&x, &y, false, at) } else { self.closure_scale(&x, &y) };
+        }
         let int = lhs_ty.base == BaseType::Int || lhs_ty.base == BaseType::String;
         if matches!(op, Eq | Ne | Lt | Le | Gt | Ge) {
             let cmp = match op {

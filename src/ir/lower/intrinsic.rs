@@ -1,10 +1,11 @@
 //! Lowering intrinsics: math, noise and patterns (runtime calls), texture reads and primvars.
 
-use super::{CLOSURE_WORDS, FnLower, Frame, Lv};
+use super::{FnLower, Frame, Lv};
 use crate::abi::{self, PrimvarInfo};
 use crate::diag::Diagnostic;
 use crate::front::hir::Expr;
 use crate::front::intrinsics::Intrinsic;
+use crate::front::types::Type;
 use crate::ir::ssa::{self, BinOp, CmpOp, Inst, Ty, UnOp};
 use crate::runtime::rt::RtFn;
 use crate::runtime::texture;
@@ -22,7 +23,12 @@ impl FnLower<'_> {
         if matches!(i, Primvar | PrimvarFloat | PrimvarVector) {
             return self.primvar(args, frame);
         }
+        // The call, where a closure past its capacity is reported (lowering arguments moves `here`).
+        let at = self.here;
         let a: Vec<Vec<ssa::Value>> = args.iter().map(|x| self.expr(x, frame).scalars()).collect();
+        if i == Mix && args[0].ty == Type::CLOSURE {
+            return self.closure_mix(&a[0], &a[1], &a[2], at);
+        }
         let rt1 = |f: RtFn| move |s: &mut Self, l: &[ssa::Value]| s.b.call(f, vec![l[0]]);
         let un = |op: UnOp| move |s: &mut Self, l: &[ssa::Value]| s.b.unary(op, l[0]);
         match i {
@@ -140,19 +146,35 @@ impl FnLower<'_> {
             Snoise => Lv::Scalars(vec![self.b.call(RtFn::Snoise, a[0].clone())]),
             Cellnoise => Lv::Scalars(vec![self.b.call(RtFn::Cellnoise, a[0].clone())]),
             Cellular => Lv::Scalars(vec![self.b.call(RtFn::Cellular, a[0].clone())]),
-            DiffuseBsdf | GlossyBsdf | MetalBsdf | GlassBsdf => {
-                let kind = match i {
-                    DiffuseBsdf => abi::ClosureKind::Diffuse,
-                    GlossyBsdf => abi::ClosureKind::Glossy,
-                    MetalBsdf => abi::ClosureKind::Metal,
-                    _ => abi::ClosureKind::Glass,
+            Layer => self.closure_concat(&a[0], &a[1], true, at),
+            DielectricBsdf => {
+                // The scatter mode string becomes the lobe's last parameter: 0 R, 1 T, 2 RT.
+                let Some(mode) = self.constant_string(&args[3], frame, "the scatter mode") else {
+                    return self.lobe(abi::ClosureKind::None, &[]);
                 };
-                let mut scalars = vec![self.b.iconst(kind as i32)];
-                scalars.extend(a.iter().flatten().copied());
-                while scalars.len() < CLOSURE_WORDS as usize {
-                    scalars.push(self.b.fconst(0.0));
-                }
-                Lv::Scalars(scalars)
+                let Some(code) = ["R", "T", "RT"].iter().position(|m| *m == mode) else {
+                    self.diags.push(
+                        Diagnostic::error(format!("unknown scatter mode `{mode}`"))
+                            .at(args[3].span, "expected \"R\", \"T\" or \"RT\""),
+                    );
+                    return self.lobe(abi::ClosureKind::None, &[]);
+                };
+                let mut params: Vec<ssa::Value> = a[..3].iter().flatten().copied().collect();
+                params.push(self.b.fconst(code as f32));
+                self.lobe(abi::ClosureKind::Dielectric, &params)
+            }
+            DiffuseBsdf
+            | GlossyBsdf
+            | MetalBsdf
+            | GlassBsdf
+            | ConductorBsdf
+            | GeneralizedSchlickBsdf
+            | OrenNayarDiffuseBsdf
+            | BurleyDiffuseBsdf
+            | SheenBsdf => {
+                let kind = i.closure_kind().expect("a BSDF constructor");
+                let params: Vec<ssa::Value> = a.iter().flatten().copied().collect();
+                self.lobe(kind, &params)
             }
             Texture | TextureChannel | Primvar | PrimvarFloat | PrimvarVector => unreachable!("handled above"),
         }

@@ -2,7 +2,7 @@
 //!
 //! Each entry function evaluates, in the wired IR's topological order, exactly the nodes its
 //! roots depend on, inlining node bodies and user functions. Triples become three f32 values,
-//! closures a kind word plus eight parameters, strings interned i32 ids, arrays slots. Loops
+//! closures fixed arrays of weighted terms ([`closure`]), strings interned i32 ids, arrays slots. Loops
 //! spend a per-call iteration budget and array or component indexing is bounds-checked; either
 //! failure returns a status code instead of hanging or corrupting memory.
 //!
@@ -23,6 +23,7 @@ use crate::front::library::Library;
 use crate::front::types::{Type, Value};
 use std::collections::HashMap;
 
+mod closure;
 mod expr;
 mod intrinsic;
 mod stmt;
@@ -53,9 +54,6 @@ pub const MAX_LOCAL_ARRAY_BYTES: usize = 256 << 10;
 /// budget bounds a call's array traffic as it bounds its iterations (a 65 536-element fill
 /// spends 6 % of it).
 const WORDS_PER_BUDGET_UNIT: u32 = 1;
-
-/// Words of a closure in an output buffer: kind + 8 parameters.
-const CLOSURE_WORDS: u32 = 9;
 
 /// How to lower.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -104,9 +102,12 @@ fn lower_here(lib: &Library, wired: &WiredMaterial, options: LowerOptions, diags
     }
     for (l, layer) in wired.layers.iter().enumerate() {
         if let Some(surface) = &layer.surface {
-            functions.push(cx.entry(EntryKind::Surface(l), CLOSURE_WORDS, |f| {
-                let closure = f.operand(surface, Type::CLOSURE);
-                f.out_words(0, &closure.scalars());
+            functions.push(cx.entry(EntryKind::Surface(l), closure::CLOSURE_WORDS as u32, |f| {
+                // Only the terms that may be non-empty are written; the caller clears the rest
+                // (`MaterialCode::surface_sum`), so a single lobe costs 16 words, not 128.
+                let closure = f.operand(surface, Type::CLOSURE).scalars();
+                let live = f.live_terms(&closure);
+                f.out_words(0, &closure[..live * closure::TERM_WORDS]);
             }));
         }
     }
@@ -209,6 +210,8 @@ impl Context<'_> {
             inlining: Vec::new(),
             array_bytes: 0,
             failed: false,
+            loop_nesting: 0,
+            closure_bounds: HashMap::new(),
             here: Span::default(),
         };
         body(&mut f);
@@ -227,7 +230,7 @@ impl Context<'_> {
     }
 }
 
-/// A lowered value: scalars (1 for float/int/string, 3 for triples, 9 for closures) or an
+/// A lowered value: scalars (1 for float/int/string, 3 for triples, a closure's terms) or an
 /// array in a slot.
 #[derive(Clone, Debug)]
 enum Lv {
@@ -271,11 +274,7 @@ fn layout(ty: Type) -> Vec<Ty> {
         BaseType::Float => vec![Ty::F32],
         BaseType::Int | BaseType::String => vec![Ty::I32],
         BaseType::Color | BaseType::Point | BaseType::Vector | BaseType::Normal => vec![Ty::F32; 3],
-        BaseType::Closure => {
-            let mut v = vec![Ty::I32];
-            v.extend([Ty::F32; 8]);
-            v
-        }
+        BaseType::Closure => closure::closure_layout(),
         BaseType::Void => Vec::new(),
     }
 }
@@ -311,6 +310,11 @@ struct FnLower<'a> {
     inlining: Vec<Inlined>,
     /// Bytes of slots allocated so far (for [`MAX_LOCAL_ARRAY_BYTES`]).
     array_bytes: usize,
+    /// Loops the statement being lowered is in (across inlined bodies).
+    loop_nesting: u32,
+    /// Per closure variable (by its first `Var`), the terms any assignment so far may have
+    /// filled: reads see the terms past it as empty (see `closure`).
+    closure_bounds: HashMap<u32, closure::TermBound>,
     /// A budget was exceeded and reported: stop emitting code (the entry is discarded).
     failed: bool,
     /// The expression being lowered (where arrays without a declaration are reported).
@@ -499,6 +503,9 @@ impl FnLower<'_> {
     fn store(&mut self, storage: &Storage, value: Lv) {
         match (storage, value) {
             (Storage::Vars(vars), Lv::Scalars(values)) => {
+                if values.len() == closure::CLOSURE_WORDS {
+                    self.closure_stored(vars[0], &values);
+                }
                 for (var, v) in vars.iter().zip(values) {
                     self.b.effect(Inst::Set(*var, v));
                 }
@@ -625,7 +632,12 @@ impl FnLower<'_> {
     fn load(&mut self, storage: &Storage) -> Lv {
         match storage {
             Storage::Vars(vars) => {
-                Lv::Scalars(vars.iter().map(|v| self.b.value(Inst::Get(*v), self.b.func.vars[v.0 as usize])).collect())
+                let mut values: Vec<ssa::Value> =
+                    vars.iter().map(|v| self.b.value(Inst::Get(*v), self.b.func.vars[v.0 as usize])).collect();
+                if values.len() == closure::CLOSURE_WORDS {
+                    self.closure_loaded(vars[0], &mut values);
+                }
+                Lv::Scalars(values)
             }
             Storage::Array { slot, elem, len } => Lv::Array { slot: *slot, elem: *elem, len: *len },
             Storage::Known(values) => Lv::Scalars(values.clone()),

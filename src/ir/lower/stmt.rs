@@ -75,8 +75,10 @@ impl FnLower<'_> {
                 // The iteration budget: a runaway loop returns a status instead of hanging.
                 self.spend_budget(1);
                 frame.loops.push((exit, step_b));
+                self.loop_nesting += 1;
                 self.block(body, frame);
                 frame.loops.pop();
+                self.loop_nesting -= 1;
                 self.b.jump_to(step_b);
                 self.block(step, frame);
                 self.b.terminate(Terminator::Jump(header));

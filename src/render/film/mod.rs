@@ -15,6 +15,7 @@ use crate::abi::{MaterialCode, ShaderError};
 use crate::render::integrator::{
     ChannelMap, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams, Scratch,
 };
+use crate::render::material::closure::LayeringMode;
 use crate::render::sampling::sampler::{PathSampler, SamplerKind, Slot};
 use crate::render::scene::Scene;
 use glam::{Vec2, Vec3};
@@ -44,6 +45,8 @@ pub struct RenderSettings {
     pub mode: LayerMode,
     /// How each decision's numbers are spread over a pixel's samples.
     pub sampler: SamplerKind,
+    /// How closures' `layer(top, base)` is rendered.
+    pub layering: LayeringMode,
 }
 
 impl Default for RenderSettings {
@@ -57,6 +60,7 @@ impl Default for RenderSettings {
             max_depth: 8,
             mode: LayerMode::Auto,
             sampler: SamplerKind::default(),
+            layering: LayeringMode::default(),
         }
     }
 }
@@ -746,7 +750,12 @@ fn render_impl(
         scene,
         materials,
         channel_map: &channel_map,
-        params: PathParams { max_depth: settings.max_depth, rr_depth: 3, mode: settings.mode },
+        params: PathParams {
+            max_depth: settings.max_depth,
+            rr_depth: 3,
+            mode: settings.mode,
+            layering: settings.layering,
+        },
         all_opaque: materials.iter().all(|m| crate::render::integrator::is_opaque(*m)),
         light_selection: crate::render::light::LightSelection::with_emitters(
             &scene.lights,

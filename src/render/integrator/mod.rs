@@ -15,12 +15,13 @@
 mod reference;
 
 use crate::abi::layering::{self, Relief};
-use crate::abi::{Closure, ClosureKind, Globals, MaterialCode, PrimvarValues, ShaderError};
+use crate::abi::{Closure, ClosureSum, Globals, MaterialCode, PrimvarValues, ShaderError};
 use crate::render::geometry::accel::{Accel, Hit, WORLD, offset_ray_origin};
 use crate::render::geometry::primvars::{PrimvarRef, PrimvarSlot};
 use crate::render::light::emitter::Emitter;
 use crate::render::light::{Light, LightSample, LightSelection};
-use crate::render::material::bsdf::{Bsdf, Frame};
+use crate::render::material::bsdf::Frame;
+use crate::render::material::closure::{ClosureBsdf, LayeringMode};
 use crate::render::sampling::power_heuristic;
 use crate::render::sampling::sampler::{PathSampler, Slot};
 use crate::render::scene::Scene;
@@ -75,6 +76,8 @@ pub struct PathParams {
     /// Layer evaluation mode as requested ([`Context::layer_modes`] holds what each
     /// material gets).
     pub mode: LayerMode,
+    /// How closures' `layer(top, base)` is rendered.
+    pub layering: LayeringMode,
 }
 
 /// Everything one camera sample produced (AOVs are those of the first visible hit).
@@ -122,7 +125,7 @@ pub struct FaultSite {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Lobe {
     pub(crate) weight: f32,
-    pub(crate) bsdf: Bsdf,
+    pub(crate) bsdf: ClosureBsdf,
     pub(crate) frame: Frame,
     pub(crate) layer: usize,
 }
@@ -136,7 +139,7 @@ pub(crate) struct LobeSample {
     /// The mixture's solid-angle pdf for MIS, `None` after a delta lobe.
     pub(crate) pdf: Option<f32>,
     /// The radiance compression `η'²` of the sampled lobe's refraction (1 for reflection):
-    /// see [`Bsdf::compression`].
+    /// see [`ClosureBsdf::compression`].
     pub(crate) compression: f32,
 }
 
@@ -229,7 +232,7 @@ pub struct Scratch {
     /// picked layer emits and the ray hit the front).
     emitted: Vec3,
     /// The last BSDF whose albedo the AOV took, and that albedo.
-    albedo_memo: Option<(Bsdf, Vec3)>,
+    albedo_memo: Option<(ClosureBsdf, Vec3)>,
     /// Where the last shader ran: read after a sample fails.
     pub site: FaultSite,
     /// Entry points called so far on this thread (the film resets and collects it per row).
@@ -573,21 +576,22 @@ impl Context<'_> {
         weight: f32,
     ) -> Result<Lobe, Invalid> {
         let n = layer_normal(material, g, layer)?;
-        let mut closure = Closure::default();
-        material.surface(g, layer, &mut closure).map_err(Invalid::Shader)?;
-        if closure.params.iter().any(|p| !p.is_finite()) {
+        let mut closure = ClosureSum::default();
+        material.surface_sum(g, layer, &mut closure).map_err(Invalid::Shader)?;
+        if closure.terms.iter().any(|t| t.params.iter().chain(&t.weight).any(|p| !p.is_finite())) {
             return Err(Invalid::NonFiniteClosure);
         }
+        let bsdf = ClosureBsdf::from_sum(&closure, self.params.layering);
         // Glass needs to know inside from outside, so its frame keeps the outward side
         // (wo.z < 0 means the ray travels inside); every other closure faces the ray.
-        let n = if ClosureKind::from_u32(closure.kind) == ClosureKind::Glass {
+        let n = if bsdf.oriented() {
             if n.dot(sp.ng) < 0.0 { -n } else { n }
         } else if n.dot(d) > 0.0 {
             -n
         } else {
             n
         };
-        Ok(Lobe { weight, bsdf: Bsdf::from_closure(&closure), frame: Frame::from_normal(n), layer })
+        Ok(Lobe { weight, bsdf, frame: Frame::from_normal(n), layer })
     }
 
     /// `(f · |cos|, pdf)` of the evaluated lobes for directions `wo`, `wi` (world).

@@ -4,10 +4,10 @@ use crate::render::material::bsdf::BsdfSample;
 use crate::render::material::chi2::{CHI2_SAMPLES, Pcg32, SIGNIFICANCE, chi2_test, dir};
 use std::f64::consts::PI;
 
-fn bsdf(kind: ClosureKind, params: &[f32]) -> Bsdf {
+fn bsdf(kind: ClosureKind, params: &[f32]) -> ClosureBsdf {
     let mut c = Closure { kind: kind as u32, params: [0.0; 8] };
     c.params[..params.len()].copy_from_slice(params);
-    Bsdf::from_closure(&c)
+    crate::render::material::bsdf::Bsdf::from_closure(&c).into()
 }
 
 /// A composed three-layer stack as the weighted mode sees it: diffuse, glossy and metal

@@ -88,33 +88,33 @@ pub enum Bsdf {
 const MAX_IOR: f32 = 4.0;
 
 /// NaN → `default`, ±Inf and everything else clamped to [lo, hi].
-fn sanitize(x: f32, lo: f32, hi: f32, default: f32) -> f32 {
+pub(crate) fn sanitize(x: f32, lo: f32, hi: f32, default: f32) -> f32 {
     if x.is_nan() { default } else { x.clamp(lo, hi) }
 }
 
 /// A colour parameter: NaN channels are black (a broken shader must not look plausible), the
 /// rest is clamped to [0, 1] so that no BSDF can create energy.
-fn colour(p: &[f32]) -> Vec3 {
+pub(crate) fn colour(p: &[f32]) -> Vec3 {
     Vec3::new(sanitize(p[0], 0.0, 1.0, 0.0), sanitize(p[1], 0.0, 1.0, 0.0), sanitize(p[2], 0.0, 1.0, 0.0))
 }
 
-fn roughness(x: f32) -> Ggx {
+pub(crate) fn roughness(x: f32) -> Ggx {
     Ggx::from_roughness(sanitize(x, 0.0, 1.0, 0.5))
 }
 
-fn ior(x: f32) -> f32 {
+pub(crate) fn ior(x: f32) -> f32 {
     sanitize(x, 1.0, MAX_IOR, 1.5)
 }
 
 /// Mirrors `v` through the xy-plane.
 #[inline]
-fn flip_z(v: Vec3) -> Vec3 {
+pub(crate) fn flip_z(v: Vec3) -> Vec3 {
     Vec3::new(v.x, v.y, -v.z)
 }
 
 /// Mirror reflection of `wo` about `m`.
 #[inline]
-fn reflect(wo: Vec3, m: Vec3) -> Vec3 {
+pub(crate) fn reflect(wo: Vec3, m: Vec3) -> Vec3 {
     2.0 * wo.dot(m) * m - wo
 }
 
@@ -122,7 +122,7 @@ fn reflect(wo: Vec3, m: Vec3) -> Vec3 {
 /// Returns the transmitted direction and the relative index η (transmitted over incident), or
 /// `None` under total internal reflection.
 #[inline]
-fn refract(wo: Vec3, m: Vec3, eta: f32) -> Option<(Vec3, f32)> {
+pub(crate) fn refract(wo: Vec3, m: Vec3, eta: f32) -> Option<(Vec3, f32)> {
     let mut cos_i = wo.dot(m);
     let (mut eta, mut n) = (eta, m);
     if cos_i < 0.0 {
@@ -140,7 +140,7 @@ fn refract(wo: Vec3, m: Vec3, eta: f32) -> Option<(Vec3, f32)> {
 
 /// Cosine-weighted hemisphere sample via Shirley–Chiu's concentric disk.
 #[inline]
-fn cosine_hemisphere(u: Vec2) -> Vec3 {
+pub(crate) fn cosine_hemisphere(u: Vec2) -> Vec3 {
     let o = 2.0 * u - Vec2::ONE;
     let d = if o.x == 0.0 && o.y == 0.0 {
         Vec2::ZERO
@@ -160,7 +160,7 @@ fn finite3(v: Vec3) -> bool {
 
 /// Builds the sample after the checks every lobe needs: a usable pdf and finite values.
 #[inline]
-fn finish(wi: Vec3, f: Vec3, pdf: f32, delta: bool) -> Option<BsdfSample> {
+pub(crate) fn finish(wi: Vec3, f: Vec3, pdf: f32, delta: bool) -> Option<BsdfSample> {
     (pdf > 0.0 && pdf.is_finite() && finite3(f) && finite3(wi) && wi.z != 0.0).then_some(BsdfSample {
         wi,
         f: f.max(Vec3::ZERO),
@@ -202,6 +202,17 @@ impl Bsdf {
                 }
                 Bsdf::Glass { tint: colour(&p[0..3]), ggx: roughness(p[3]), eta }
             }
+            ClosureKind::Conductor => {
+                let eta = Vec3::from_array([0, 1, 2].map(|i| sanitize(p[i], 0.01, 20.0, 1.0)));
+                let k = Vec3::from_array([3, 4, 5].map(|i| sanitize(p[i], 0.0, 20.0, 0.0)));
+                Bsdf::Metal { reflectivity: fresnel_conductor3(1.0, eta, k), eta, k, ggx: roughness(p[6]) }
+            }
+            // The MaterialX lobes live in `material::lobes`, which decodes them itself.
+            ClosureKind::Dielectric
+            | ClosureKind::GeneralizedSchlick
+            | ClosureKind::OrenNayar
+            | ClosureKind::Burley
+            | ClosureKind::Sheen => Bsdf::Black,
         }
     }
 
@@ -407,13 +418,13 @@ impl Bsdf {
 /// Both directions moved to the upper hemisphere for a two-sided reflection lobe, or `None`
 /// when they are on different sides (or one is tangent).
 #[inline]
-fn upper(wo: Vec3, wi: Vec3) -> Option<(Vec3, Vec3)> {
+pub(crate) fn upper(wo: Vec3, wi: Vec3) -> Option<(Vec3, Vec3)> {
     if wo.z * wi.z > 0.0 { Some(if wo.z < 0.0 { (flip_z(wo), flip_z(wi)) } else { (wo, wi) }) } else { None }
 }
 
 /// Pdf of a VNDF-sampled microfacet reflection, `D_wo(m) / (4 wo·m)`, for `wo`, `wi` up.
 #[inline]
-fn microfacet_reflection_pdf(ggx: Ggx, wo: Vec3, wi: Vec3) -> f32 {
+pub(crate) fn microfacet_reflection_pdf(ggx: Ggx, wo: Vec3, wi: Vec3) -> f32 {
     let Some(m) = (wo + wi).try_normalize() else { return 0.0 };
     let dot = wo.dot(m);
     if dot <= 0.0 {

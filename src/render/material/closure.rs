@@ -1,0 +1,362 @@
+//! The BSDF of a closure value ([`ClosureSum`]): a weighted sum of lobes with vertical
+//! layering, sampled and evaluated as pbrt and Cycles do a lobe list: one term is chosen for
+//! sampling by its weight × estimated albedo (× the attenuation of the layers above it), and the
+//! whole sum is evaluated for the sample's value and pdf, so MIS sees one BSDF.
+//!
+//! **Layering.** Term `i` lies under the terms whose bits are set in its `above` mask
+//! (`layer(top, base)`). In the default mode, [`LayeringMode::AlbedoScaling`], the light that
+//! reaches it is what the terms above did not reflect, as OpenPBR and MaterialX define `layer`:
+//! with `a_i(μ) = 1 − Σ_{j above i} w_j a_j(μ) E_j(μ)` (`E_j` the directional albedo of term
+//! `j`, [`Lobe::directional_albedo`]; the sum telescopes to `Π (1 − E_layer)` for nested layers),
+//! term `i` contributes
+//!
+//! `w_i f_i(ωo, ωi) a_i(μo) a_i(μi) / N_i`,
+//!
+//! which is reciprocal (the one-sided OpenPBR form `a_i(μo) f_i` is not). The normalisation
+//! `N_i` is the cosine-weighted average of `a_i` for diffuse bases (Kulla and Conty's form: a
+//! white Lambert base under a white coat reflects exactly what the coat transmits) and its
+//! maximum for the others (a glossy base then never reflects more than under the one-sided
+//! form, so energy stays ≤ 1). A transmitting lobe with something under it keeps only its
+//! reflection ([`Lobe::covering`]): its transmission is what reaches the base.
+//!
+//! [`LayeringMode::RandomWalk`] instead follows light between the top and base interfaces
+//! (`walk`), the position-free stochastic reference of Guo et al. 2018 and pbrt-v4's
+//! `LayeredBxDF`.
+
+use crate::abi::{ClosureKind, ClosureSum, MAX_CLOSURE_TERMS};
+use crate::render::material::bsdf::{Bsdf, BsdfSample, finish};
+use crate::render::material::lobes::Lobe;
+use crate::render::material::walk;
+use glam::{Vec2, Vec3};
+
+/// How `layer(top, base)` is rendered.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum LayeringMode {
+    /// Reciprocal albedo scaling with tabulated top albedos (fast, deterministic).
+    #[default]
+    AlbedoScaling,
+    /// A stochastic random walk between the interfaces (the reference; noisier and slower).
+    RandomWalk,
+}
+
+impl LayeringMode {
+    /// The mode's name in settings (`albedo-scaling`, `random-walk`).
+    pub fn name(self) -> &'static str {
+        match self {
+            LayeringMode::AlbedoScaling => "albedo-scaling",
+            LayeringMode::RandomWalk => "random-walk",
+        }
+    }
+
+    /// Parses a [`LayeringMode::name`].
+    pub fn from_name(name: &str) -> Option<LayeringMode> {
+        [LayeringMode::AlbedoScaling, LayeringMode::RandomWalk].into_iter().find(|m| m.name() == name)
+    }
+}
+
+/// One term of a [`ClosureBsdf`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Term {
+    pub(crate) lobe: Lobe,
+    /// Colour weight, each channel in [0, 1].
+    pub(crate) weight: Vec3,
+    /// Bits of the terms above this one (indices below it).
+    pub(crate) above: u8,
+    /// `1 / N_i` per channel (see the module docs); unused without `above`.
+    inv_norm: Vec3,
+    /// Estimated albedo × weight (max channel): the term's share of samples before layering.
+    importance: f32,
+}
+
+/// Points of the 8-point Gauss–Legendre rule on [0, 1] and their weights (summing to 1).
+const GAUSS_X: [f32; 8] =
+    [0.019_855_07, 0.101_666_76, 0.237_233_8, 0.408_282_68, 0.591_717_3, 0.762_766_2, 0.898_333_24, 0.980_144_9];
+const GAUSS_W: [f32; 8] =
+    [0.050_614_27, 0.111_190_52, 0.156_853_32, 0.181_341_89, 0.181_341_89, 0.156_853_32, 0.111_190_52, 0.050_614_27];
+
+/// The BSDF of one closure value. Copy and allocation-free; a single unit-weight term behaves
+/// exactly as its lobe alone.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClosureBsdf {
+    pub(crate) terms: [Term; MAX_CLOSURE_TERMS],
+    pub(crate) len: usize,
+    /// Whether any term lies under another.
+    pub(crate) layered: bool,
+    pub(crate) mode: LayeringMode,
+}
+
+impl From<Bsdf> for ClosureBsdf {
+    fn from(b: Bsdf) -> ClosureBsdf {
+        ClosureBsdf::from_lobes(&[(Lobe::Bsdf(b), Vec3::ONE, 0)], LayeringMode::default())
+    }
+}
+
+/// Attenuations `a_i(μ)` of every term (see the module docs).
+type Attenuation = [Vec3; MAX_CLOSURE_TERMS];
+
+impl ClosureBsdf {
+    /// Decodes a closure value: empty terms (kind `None`, zero or non-finite weight) are
+    /// skipped, weights clamped to [0, 1] per channel, parameters sanitised per lobe.
+    pub fn from_sum(sum: &ClosureSum, mode: LayeringMode) -> ClosureBsdf {
+        let mut lobes = [(Lobe::Bsdf(Bsdf::Black), Vec3::ZERO, 0u8); MAX_CLOSURE_TERMS];
+        let mut position = [usize::MAX; MAX_CLOSURE_TERMS];
+        let mut len = 0;
+        for (k, t) in sum.terms.iter().enumerate() {
+            let weight = Vec3::from_array(t.weight.map(|w| if w.is_nan() { 0.0 } else { w.clamp(0.0, 1.0) }));
+            if t.kind == ClosureKind::None as u32 || weight == Vec3::ZERO {
+                continue;
+            }
+            // Bits of terms that were skipped, or are not above, drop out when renumbering.
+            let mut above = 0u8;
+            for (j, &p) in position.iter().enumerate().take(k) {
+                if t.above & (1 << j) != 0 && p != usize::MAX {
+                    above |= 1 << p;
+                }
+            }
+            position[k] = len;
+            lobes[len] = (Lobe::from_term(t), weight, above);
+            len += 1;
+        }
+        ClosureBsdf::from_lobes(&lobes[..len], mode)
+    }
+
+    /// Builds the BSDF of `(lobe, weight, above)` terms (at most [`MAX_CLOSURE_TERMS`]).
+    pub fn from_lobes(lobes: &[(Lobe, Vec3, u8)], mode: LayeringMode) -> ClosureBsdf {
+        let empty =
+            Term { lobe: Lobe::Bsdf(Bsdf::Black), weight: Vec3::ZERO, above: 0, inv_norm: Vec3::ZERO, importance: 0.0 };
+        let mut b = ClosureBsdf { terms: [empty; MAX_CLOSURE_TERMS], len: 0, layered: false, mode };
+        let mut covered = 0u8;
+        for &(_, _, above) in lobes {
+            covered |= above;
+        }
+        for (i, &(lobe, weight, above)) in lobes.iter().take(MAX_CLOSURE_TERMS).enumerate() {
+            let lobe = if covered & (1 << i) != 0 { lobe.covering() } else { lobe };
+            let above = above & ((1u16 << i) - 1) as u8;
+            b.layered |= above != 0;
+            b.terms[i] = Term { lobe, weight, above, inv_norm: Vec3::ONE, importance: 0.0 };
+            b.len = i + 1;
+        }
+        if b.len == 1 && b.terms[0].weight == Vec3::ONE {
+            // A single lobe samples itself; its albedo is not needed.
+            b.terms[0].importance = 1.0;
+            return b;
+        }
+        for i in 0..b.len {
+            let t = &mut b.terms[i];
+            t.importance = (t.weight * t.lobe.albedo()).max_element().max(1e-4 * t.weight.max_element());
+        }
+        if b.layered {
+            // N_i by quadrature over μ (average) and at the nodes and μ = 1 (maximum).
+            let mut average = [Vec3::ZERO; MAX_CLOSURE_TERMS];
+            let mut maximum = b.attenuation(1.0);
+            for (x, w) in GAUSS_X.iter().zip(GAUSS_W) {
+                let a = b.attenuation(*x);
+                for i in 0..b.len {
+                    average[i] += 2.0 * w * x * a[i];
+                    maximum[i] = maximum[i].max(a[i]);
+                }
+            }
+            for i in 0..b.len {
+                let t = &mut b.terms[i];
+                let norm = if t.lobe.is_diffuse() { average[i] } else { maximum[i] };
+                t.inv_norm = Vec3::select(norm.cmpgt(Vec3::splat(1e-6)), norm.recip(), Vec3::ZERO);
+            }
+        }
+        b
+    }
+
+    /// The terms.
+    pub(crate) fn terms(&self) -> &[Term] {
+        &self.terms[..self.len]
+    }
+
+    /// `a_i(μ)` of every term.
+    #[inline]
+    fn attenuation(&self, mu: f32) -> Attenuation {
+        let mut a = [Vec3::ONE; MAX_CLOSURE_TERMS];
+        let mu = mu.abs().min(1.0);
+        for i in 0..self.len {
+            let above = self.terms[i].above;
+            if above == 0 {
+                continue;
+            }
+            let mut att = Vec3::ONE;
+            for (j, (t, a_j)) in self.terms[..i].iter().zip(&a[..i]).enumerate() {
+                if above & (1 << j) != 0 {
+                    att -= t.weight * *a_j * t.lobe.directional_albedo(mu);
+                }
+            }
+            a[i] = att.max(Vec3::ZERO);
+        }
+        a
+    }
+
+    /// Whether the closure is a single unit-weight lobe (every method then delegates to it).
+    #[inline]
+    fn single(&self) -> Option<&Lobe> {
+        (self.len == 1 && self.terms[0].weight == Vec3::ONE).then_some(&self.terms[0].lobe)
+    }
+
+    /// The factor `w_i a_i(μo) a_i(μi) / N_i` of term `i`.
+    #[inline]
+    fn factor(&self, i: usize, ao: &Attenuation, ai: &Attenuation) -> Vec3 {
+        let t = &self.terms[i];
+        if t.above == 0 { t.weight } else { t.weight * ao[i] * ai[i] * t.inv_norm }
+    }
+
+    /// Probabilities of sampling each term from `wo`: importance × attenuation at `μo`.
+    #[inline]
+    fn probabilities(&self, ao: &Attenuation) -> [f32; MAX_CLOSURE_TERMS] {
+        let mut p = [0.0; MAX_CLOSURE_TERMS];
+        let mut total = 0.0;
+        for i in 0..self.len {
+            let t = &self.terms[i];
+            p[i] = if t.above == 0 { t.importance } else { t.importance * ao[i].max_element() };
+            total += p[i];
+        }
+        if total > 0.0 {
+            for x in &mut p[..self.len] {
+                *x /= total;
+            }
+        }
+        p
+    }
+
+    /// f(wo, wi), local frame, not multiplied by cos; 0 for delta lobes.
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        if let Some(lobe) = self.single() {
+            return lobe.eval(wo, wi);
+        }
+        if self.layered && self.mode == LayeringMode::RandomWalk {
+            return walk::eval(self, wo, wi);
+        }
+        self.eval_scaled(wo, wi)
+    }
+
+    /// The albedo-scaling sum (see the module docs).
+    pub(crate) fn eval_scaled(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        let (ao, ai) = self.attenuations(wo, wi);
+        let mut f = Vec3::ZERO;
+        for i in 0..self.len {
+            f += self.terms[i].lobe.eval(wo, wi) * self.factor(i, &ao, &ai);
+        }
+        f
+    }
+
+    #[inline]
+    fn attenuations(&self, wo: Vec3, wi: Vec3) -> (Attenuation, Attenuation) {
+        if self.layered {
+            (self.attenuation(wo.z), self.attenuation(wi.z))
+        } else {
+            ([Vec3::ONE; MAX_CLOSURE_TERMS], [Vec3::ONE; MAX_CLOSURE_TERMS])
+        }
+    }
+
+    /// Solid-angle pdf of [`ClosureBsdf::sample`] (non-delta part).
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        if let Some(lobe) = self.single() {
+            return lobe.pdf(wo, wi);
+        }
+        if self.layered && self.mode == LayeringMode::RandomWalk {
+            return walk::pdf(self, wo, wi);
+        }
+        self.pdf_mixture(wo, wi)
+    }
+
+    /// `Σ p_i pdf_i`: the pdf of choosing a term and sampling it.
+    pub(crate) fn pdf_mixture(&self, wo: Vec3, wi: Vec3) -> f32 {
+        let ao = if self.layered { self.attenuation(wo.z) } else { [Vec3::ONE; MAX_CLOSURE_TERMS] };
+        let p = self.probabilities(&ao);
+        (0..self.len).filter(|&i| p[i] > 0.0).map(|i| p[i] * self.terms[i].lobe.pdf(wo, wi)).sum()
+    }
+
+    /// Samples wi: `uc` picks the term (then, rescaled, the term's own component), `u` the
+    /// direction. A delta term's sample carries that term alone; otherwise the whole sum is
+    /// evaluated.
+    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2) -> Option<BsdfSample> {
+        if let Some(lobe) = self.single() {
+            return lobe.sample(wo, uc, u);
+        }
+        if !(uc.is_finite() && wo.is_finite() && wo.z != 0.0) {
+            return None;
+        }
+        if self.layered && self.mode == LayeringMode::RandomWalk {
+            return walk::sample(self, wo, uc, u);
+        }
+        self.sample_scaled(wo, uc, u)
+    }
+
+    /// Albedo scaling's sampling: a term by [`ClosureBsdf::probabilities`], then the sum.
+    pub(crate) fn sample_scaled(&self, wo: Vec3, uc: f32, u: Vec2) -> Option<BsdfSample> {
+        let ao = if self.layered { self.attenuation(wo.z) } else { [Vec3::ONE; MAX_CLOSURE_TERMS] };
+        let p = self.probabilities(&ao);
+        let (k, uc) = pick(&p[..self.len], uc)?;
+        let s = self.terms[k].lobe.sample(wo, uc, u)?;
+        if s.delta {
+            let ai = if self.layered { self.attenuation(s.wi.z) } else { [Vec3::ONE; MAX_CLOSURE_TERMS] };
+            return finish(s.wi, s.f * self.factor(k, &ao, &ai), s.pdf * p[k], true);
+        }
+        finish(s.wi, self.eval_scaled(wo, s.wi), self.pdf_mixture(wo, s.wi), false)
+    }
+
+    /// Approximate hemispherical albedo colour (the "albedo" AOV): the weighted sum of the
+    /// terms' albedos, layered terms scaled by their average attenuation.
+    pub fn albedo(&self) -> Vec3 {
+        if let Some(lobe) = self.single() {
+            return lobe.albedo();
+        }
+        let mut average = [Vec3::ZERO; MAX_CLOSURE_TERMS];
+        if self.layered {
+            for (x, w) in GAUSS_X.iter().zip(GAUSS_W) {
+                let a = self.attenuation(*x);
+                for i in 0..self.len {
+                    average[i] += 2.0 * w * x * a[i];
+                }
+            }
+        }
+        let mut albedo = Vec3::ZERO;
+        for (i, t) in self.terms().iter().enumerate() {
+            let scale = if t.above == 0 { Vec3::ONE } else { average[i] };
+            albedo += t.weight * scale * t.lobe.albedo();
+        }
+        albedo.clamp(Vec3::ZERO, Vec3::ONE)
+    }
+
+    /// Whether a non-delta term transmits (light sampling must then cover both sides).
+    pub fn transmits(&self) -> bool {
+        self.terms().iter().any(|t| t.lobe.transmits())
+    }
+
+    /// Whether a term tells inside from outside, so the shading frame keeps the outward side.
+    pub fn oriented(&self) -> bool {
+        self.terms().iter().any(|t| t.lobe.oriented())
+    }
+
+    /// The radiance compression of `wi` (see [`Bsdf::compression`]): the first transmitting
+    /// term's for a transmitted direction, 1 for reflection.
+    pub fn compression(&self, wo: Vec3, wi: Vec3) -> f32 {
+        match self.terms().iter().find(|t| t.lobe.oriented()) {
+            Some(t) => t.lobe.compression(wo, wi),
+            None => 1.0,
+        }
+    }
+
+    /// True when no term has a non-delta part (NEE cannot contribute).
+    pub fn is_delta(&self) -> bool {
+        self.terms().iter().all(|t| t.lobe.is_delta())
+    }
+}
+
+/// Picks an index by the probabilities `p` with `uc`, and rescales `uc` to [0, 1) within it.
+#[inline]
+pub(crate) fn pick(p: &[f32], uc: f32) -> Option<(usize, f32)> {
+    let mut start = 0.0;
+    let last = p.iter().rposition(|&x| x > 0.0)?;
+    for (i, &x) in p.iter().enumerate() {
+        if x > 0.0 && (uc < start + x || i == last) {
+            return Some((i, ((uc - start) / x).clamp(0.0, 1.0 - f32::EPSILON / 2.0)));
+        }
+        start += x;
+    }
+    None
+}

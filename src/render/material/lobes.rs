@@ -1,0 +1,432 @@
+//! The lobes a closure term can be: [`Bsdf`]'s kinds plus the MaterialX pbrlib lobes
+//! (`dielectric_bsdf`, `generalized_schlick_bsdf`, `oren_nayar_diffuse_bsdf`,
+//! `burley_diffuse_bsdf`, `sheen_bsdf`), with what `layer` needs of a lobe on top: its
+//! directional albedo `E(μ)`.
+//!
+//! Conventions are [`crate::render::material::bsdf`]'s: local frame, `eval` without the cosine,
+//! reflection lobes two-sided, transmitting ones oriented (`wo.z < 0` is inside).
+
+use crate::abi::{ClosureKind, ClosureTerm};
+use crate::render::material::albedo;
+use crate::render::material::bsdf::{
+    Bsdf, BsdfSample, colour, cosine_hemisphere, finish, flip_z, ior, microfacet_reflection_pdf, reflect, roughness,
+    sanitize, upper,
+};
+use crate::render::material::microfacet::{Ggx, fresnel_conductor3, fresnel_dielectric, hemispherical_average};
+use glam::{Vec2, Vec3};
+use std::f32::consts::{FRAC_1_PI, PI};
+
+/// The Fresnel curve of a [`Lobe::Specular`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Fresnel {
+    /// A dielectric of index `eta` (seen from outside).
+    Dielectric {
+        /// Index of refraction in [1, 4].
+        eta: f32,
+    },
+    /// MaterialX's generalized Schlick with Hoffman's F82 tint.
+    Schlick {
+        /// Reflectance at normal incidence.
+        color0: Vec3,
+        /// The tint at cos θ = 1/7 (82°).
+        color82: Vec3,
+        /// Reflectance at grazing incidence.
+        color90: Vec3,
+        /// Exponent of the Schlick curve.
+        exponent: f32,
+    },
+}
+
+/// cos θ where the F82 tint applies (MaterialX `mx_fresnel_hoffman_schlick`).
+const COS_F82: f32 = 1.0 / 7.0;
+
+impl Fresnel {
+    /// Reflectance at `cos θ` (clamped to [0, 1]).
+    #[inline]
+    pub fn eval(&self, cos: f32) -> Vec3 {
+        match *self {
+            Fresnel::Dielectric { eta } => Vec3::splat(fresnel_dielectric(cos, eta)),
+            Fresnel::Schlick { color0, color82, color90, exponent } => {
+                let x = cos.clamp(0.0, 1.0);
+                let factor = 1.0 / (COS_F82 * (1.0 - COS_F82).powi(6));
+                let a = color0.lerp(color90, (1.0 - COS_F82).powf(exponent)) * (Vec3::ONE - color82) * factor;
+                let f = color0.lerp(color90, (1.0 - x).powf(exponent)) - a * (x * (1.0 - x).powi(6));
+                f.clamp(Vec3::ZERO, Vec3::ONE)
+            }
+        }
+    }
+}
+
+/// One lobe of a closure term; Copy, sanitised, allocation-free like [`Bsdf`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Lobe {
+    /// Diffuse, glossy, metal, conductor or glass.
+    Bsdf(Bsdf),
+    /// `dielectric_bsdf` with transmission: a rough glass interface ([`Bsdf::Glass`]) whose
+    /// reflection is tinted too, or dropped (`reflect == false`, scatter mode "T").
+    Interface {
+        /// A [`Bsdf::Glass`].
+        glass: Bsdf,
+        /// Tint of the reflection.
+        tint: Vec3,
+        /// Whether the interface reflects.
+        reflect: bool,
+    },
+    /// GGX reflection with a Fresnel curve: `dielectric_bsdf` "R" (a coat) and
+    /// `generalized_schlick_bsdf`.
+    Specular {
+        /// The Fresnel curve.
+        fresnel: Fresnel,
+        /// Colour the reflection is multiplied by.
+        tint: Vec3,
+        /// Roughness.
+        ggx: Ggx,
+    },
+    /// Oren–Nayar: MaterialX's qualitative model, or with `compensated` the energy-preserving
+    /// EON model (Portsmouth et al. 2024: Fujii's Oren–Nayar plus a multiple-scattering term).
+    OrenNayar {
+        /// Reflectance.
+        albedo: Vec3,
+        /// Roughness σ in [0, 1].
+        roughness: f32,
+        /// EON rather than the qualitative model.
+        compensated: bool,
+    },
+    /// Burley's (Disney) diffuse with its grazing retro-reflection.
+    Burley {
+        /// Reflectance.
+        albedo: Vec3,
+        /// Roughness in [0, 1].
+        roughness: f32,
+    },
+    /// The Charlie sheen (Estevez and Kulla 2017) with Neubelt and Pettineo's visibility,
+    /// divided by its albedo where that exceeds 1 (smooth sheen at grazing angles).
+    Sheen {
+        /// Colour.
+        color: Vec3,
+        /// Roughness in [0, 1].
+        roughness: f32,
+    },
+}
+
+/// EON's constants (Portsmouth et al. 2024, listing 1).
+const FON_1: f32 = 0.5 - 2.0 / (3.0 * PI);
+const FON_2: f32 = 2.0 / 3.0 - 28.0 / (15.0 * PI);
+
+/// Fujii's Oren–Nayar coefficients `(A, B)` for roughness σ.
+#[inline]
+fn fon_coefficients(sigma: f32) -> (f32, f32) {
+    let a = 1.0 / (1.0 + FON_1 * sigma);
+    (a, sigma * a)
+}
+
+/// Exact directional albedo of Fujii's Oren–Nayar lobe (white).
+#[inline]
+pub fn fon_albedo(mu: f32, sigma: f32) -> f32 {
+    let (a, b) = fon_coefficients(sigma);
+    let mu = mu.clamp(1e-4, 1.0);
+    let si = (1.0 - mu * mu).max(0.0).sqrt();
+    let g = si * (mu.acos() - si * mu) + (2.0 / 3.0) * ((si / mu) * (1.0 - si * si * si) - si);
+    a + b * FRAC_1_PI * g
+}
+
+/// Sheen roughness below this is this (the lobe's grazing peak is then already narrower than
+/// its tables resolve).
+pub const MIN_SHEEN_ROUGHNESS: f32 = 0.1;
+
+/// The Charlie sheen of white colour, `f(ωo, ωi)` for both directions up, unnormalised: its
+/// albedo exceeds 1 at grazing angles when smooth ([`Lobe::Sheen`] divides that out).
+#[inline]
+pub fn sheen_eval(roughness: f32, wo: Vec3, wi: Vec3) -> f32 {
+    if wo.z <= 0.0 || wi.z <= 0.0 {
+        return 0.0;
+    }
+    let Some(h) = (wo + wi).try_normalize() else { return 0.0 };
+    let inv_alpha = 1.0 / roughness.clamp(MIN_SHEEN_ROUGHNESS, 1.0);
+    let sin2 = (1.0 - h.z * h.z).max(0.0);
+    let d = (2.0 + inv_alpha) * sin2.powf(0.5 * inv_alpha) / (2.0 * PI);
+    d / (4.0 * (wi.z + wo.z - wi.z * wo.z))
+}
+
+impl Lobe {
+    /// Decodes a closure term's kind and parameters (layouts in [`ClosureKind`]), sanitised as
+    /// [`Bsdf::from_closure`] does.
+    pub fn from_term(t: &ClosureTerm) -> Lobe {
+        let p = &t.params;
+        let kind = ClosureKind::from_u32(t.kind);
+        match kind {
+            ClosureKind::Dielectric => {
+                let (tint, eta, ggx) = (colour(&p[0..3]), ior(p[3]), roughness(p[4]));
+                match sanitize(p[5], 0.0, 2.0, 2.0).round() as u32 {
+                    0 => Lobe::Specular { fresnel: Fresnel::Dielectric { eta }, tint, ggx },
+                    mode => {
+                        let mut closure = crate::abi::Closure { kind: ClosureKind::Glass as u32, params: [0.0; 8] };
+                        closure.params[..3].copy_from_slice(&p[0..3]);
+                        (closure.params[3], closure.params[4]) = (p[4], p[3]);
+                        Lobe::Interface { glass: Bsdf::from_closure(&closure), tint, reflect: mode == 2 }
+                    }
+                }
+            }
+            ClosureKind::GeneralizedSchlick => Lobe::Specular {
+                fresnel: Fresnel::Schlick {
+                    color0: colour(&p[0..3]),
+                    color82: colour(&p[3..6]),
+                    color90: colour(&p[6..9]),
+                    exponent: sanitize(p[9], 0.0, 100.0, 5.0),
+                },
+                tint: Vec3::ONE,
+                ggx: roughness(p[10]),
+            },
+            ClosureKind::OrenNayar => Lobe::OrenNayar {
+                albedo: colour(&p[0..3]),
+                roughness: sanitize(p[3], 0.0, 1.0, 0.0),
+                compensated: sanitize(p[4], 0.0, 1.0, 0.0) >= 0.5,
+            },
+            ClosureKind::Burley => Lobe::Burley { albedo: colour(&p[0..3]), roughness: sanitize(p[3], 0.0, 1.0, 0.0) },
+            ClosureKind::Sheen => Lobe::Sheen { color: colour(&p[0..3]), roughness: sanitize(p[3], 0.0, 1.0, 0.3) },
+            _ => {
+                let mut closure = crate::abi::Closure { kind: t.kind, params: [0.0; 8] };
+                closure.params.copy_from_slice(&p[..8]);
+                Lobe::Bsdf(Bsdf::from_closure(&closure))
+            }
+        }
+    }
+
+    /// The lobe as a layer on top of others: its transmission is what reaches them, so a
+    /// transmitting dielectric keeps only its reflection.
+    pub fn covering(self) -> Lobe {
+        match self {
+            Lobe::Bsdf(Bsdf::Glass { ggx, eta, .. }) => {
+                Lobe::Specular { fresnel: Fresnel::Dielectric { eta }, tint: Vec3::ONE, ggx }
+            }
+            Lobe::Interface { glass: Bsdf::Glass { ggx, eta, .. }, tint, reflect } => Lobe::Specular {
+                fresnel: Fresnel::Dielectric { eta },
+                tint: if reflect { tint } else { Vec3::ZERO },
+                ggx,
+            },
+            other => other,
+        }
+    }
+
+    /// f(wo, wi), local frame, without the cosine; 0 for delta lobes.
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        let f = match *self {
+            Lobe::Bsdf(b) => return b.eval(wo, wi),
+            Lobe::Interface { glass, tint, reflect } => {
+                let f = glass.eval(wo, wi);
+                match (wo.z * wi.z > 0.0, reflect) {
+                    (false, _) => f,
+                    (true, true) => f * tint,
+                    (true, false) => Vec3::ZERO,
+                }
+            }
+            _ => match upper(wo, wi) {
+                Some((wo, wi)) => self.eval_up(wo, wi),
+                None => Vec3::ZERO,
+            },
+        };
+        if f.is_finite() { f.max(Vec3::ZERO) } else { Vec3::ZERO }
+    }
+
+    /// Solid-angle pdf of [`Lobe::sample`] (non-delta part).
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        let p = match *self {
+            Lobe::Bsdf(b) => return b.pdf(wo, wi),
+            Lobe::Interface { glass, reflect, .. } => {
+                if wo.z * wi.z > 0.0 && !reflect {
+                    0.0
+                } else {
+                    glass.pdf(wo, wi)
+                }
+            }
+            Lobe::Specular { ggx, .. } => match upper(wo, wi) {
+                Some((wo, wi)) if !ggx.is_smooth() => microfacet_reflection_pdf(ggx, wo, wi),
+                _ => 0.0,
+            },
+            _ => match upper(wo, wi) {
+                Some((_, wi)) => wi.z * FRAC_1_PI,
+                None => 0.0,
+            },
+        };
+        if p.is_finite() { p.max(0.0) } else { 0.0 }
+    }
+
+    /// Samples wi (`uc` picks a component, `u` the direction); `None` when nothing is
+    /// scattered or the sample is invalid.
+    pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2) -> Option<BsdfSample> {
+        match *self {
+            Lobe::Bsdf(b) => b.sample(wo, uc, u),
+            Lobe::Interface { glass, tint, reflect } => {
+                let mut s = glass.sample(wo, uc, u)?;
+                if s.wi.z * wo.z > 0.0 {
+                    if !reflect {
+                        return None;
+                    }
+                    s.f *= tint;
+                }
+                Some(s)
+            }
+            _ => {
+                if !(wo.z != 0.0 && wo.is_finite() && u.is_finite()) {
+                    return None;
+                }
+                let u = u.clamp(Vec2::ZERO, Vec2::splat(1.0 - f32::EPSILON / 2.0));
+                let below = wo.z < 0.0;
+                let wo_up = if below { flip_z(wo) } else { wo };
+                let mut s = self.sample_up(wo_up, u)?;
+                if below {
+                    s.wi = flip_z(s.wi);
+                }
+                Some(s)
+            }
+        }
+    }
+
+    /// The reflection lobes (not `Bsdf`, not `Interface`) with both directions up.
+    #[inline]
+    fn eval_up(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        match *self {
+            Lobe::Specular { fresnel, tint, ggx } => {
+                if ggx.is_smooth() {
+                    return Vec3::ZERO;
+                }
+                let Some(m) = (wo + wi).try_normalize() else { return Vec3::ZERO };
+                fresnel.eval(wo.dot(m)) * tint * (ggx.d(m) * ggx.g2(wo, wi) / (4.0 * wo.z * wi.z))
+            }
+            Lobe::OrenNayar { albedo, roughness, compensated } => {
+                let s = wi.dot(wo) - wi.z * wo.z;
+                if compensated {
+                    let (a, b) = fon_coefficients(roughness);
+                    let t = if s > 0.0 { wi.z.max(wo.z) } else { 1.0 };
+                    let single = albedo * (FRAC_1_PI * (a + b * s / t));
+                    let avg = a * (1.0 + FON_2 * roughness);
+                    let multiple_albedo = albedo * albedo * avg / (Vec3::ONE - albedo * (1.0 - avg));
+                    let (eo, ei) = (fon_albedo(wo.z, roughness), fon_albedo(wi.z, roughness));
+                    let eps = 1e-7;
+                    let ms = (1.0 - eo).max(eps) * (1.0 - ei).max(eps) / (1.0 - avg).max(eps);
+                    single + multiple_albedo * (FRAC_1_PI * ms)
+                } else {
+                    let sigma2 = roughness * roughness;
+                    let a = 1.0 - 0.5 * sigma2 / (sigma2 + 0.33);
+                    let b = 0.45 * sigma2 / (sigma2 + 0.09);
+                    let stinv = if s > 0.0 { s / wi.z.max(wo.z) } else { 0.0 };
+                    albedo * (FRAC_1_PI * (a + b * stinv))
+                }
+            }
+            Lobe::Burley { albedo, roughness } => {
+                let Some(h) = (wo + wi).try_normalize() else { return Vec3::ZERO };
+                let cos_d = wi.dot(h);
+                let f90 = 0.5 + 2.0 * roughness * cos_d * cos_d;
+                let schlick = |mu: f32| 1.0 + (f90 - 1.0) * (1.0 - mu).powi(5);
+                albedo * (FRAC_1_PI * schlick(wi.z) * schlick(wo.z))
+            }
+            Lobe::Sheen { color, roughness } => {
+                // Dividing by the larger albedo of the two directions (when above 1) keeps the
+                // lobe reciprocal and its albedo ≤ 1.
+                let excess = albedo::sheen(wo.z, roughness).max(albedo::sheen(wi.z, roughness)).max(1.0);
+                color * (sheen_eval(roughness, wo, wi) / excess)
+            }
+            Lobe::Bsdf(_) | Lobe::Interface { .. } => Vec3::ZERO,
+        }
+    }
+
+    #[inline]
+    fn sample_up(&self, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
+        let non_delta = |wi: Vec3| {
+            if wi.z <= 0.0 {
+                return None;
+            }
+            finish(wi, self.eval_up(wo, wi), self.pdf(wo, wi), false)
+        };
+        match *self {
+            Lobe::Specular { fresnel, tint, ggx } => {
+                if ggx.is_smooth() {
+                    let wi = Vec3::new(-wo.x, -wo.y, wo.z);
+                    finish(wi, fresnel.eval(wo.z) * tint / wi.z, 1.0, true)
+                } else {
+                    non_delta(reflect(wo, ggx.sample_visible(wo, u)?))
+                }
+            }
+            _ => non_delta(cosine_hemisphere(u)),
+        }
+    }
+
+    /// Directional albedo `E(μ)` (cos θo = μ ≥ 0) of the lobe as a layer on top: tabulated for
+    /// GGX reflection and sheen, exact for Lambert and Fujii's Oren–Nayar, the albedo estimate
+    /// of [`Lobe::albedo`] for the rest.
+    pub fn directional_albedo(&self, mu: f32) -> Vec3 {
+        match *self {
+            Lobe::Specular { fresnel, tint, ggx } => {
+                let r = ggx.alpha.sqrt();
+                tint * match fresnel {
+                    Fresnel::Dielectric { eta } => Vec3::splat(albedo::dielectric_reflection(mu, r, eta)),
+                    Fresnel::Schlick { .. } => fresnel.eval(mu) * albedo::ggx_reflection(mu, r),
+                }
+            }
+            Lobe::Bsdf(Bsdf::Metal { eta, k, ggx, .. }) => {
+                fresnel_conductor3(mu, eta, k) * albedo::ggx_reflection(mu, ggx.alpha.sqrt())
+            }
+            Lobe::Bsdf(Bsdf::Diffuse { albedo }) => albedo,
+            Lobe::OrenNayar { albedo, roughness: 0.0, compensated: false } => albedo,
+            Lobe::Sheen { color, roughness } => color * albedo::sheen(mu, roughness).min(1.0),
+            _ => self.albedo(),
+        }
+    }
+
+    /// Approximate hemispherical albedo colour (the "albedo" AOV; sampling weights).
+    pub fn albedo(&self) -> Vec3 {
+        match *self {
+            Lobe::Bsdf(b) => b.albedo(),
+            Lobe::Interface { glass, tint, reflect } => {
+                let Bsdf::Glass { eta, tint: transmitted, .. } = glass else { return Vec3::ZERO };
+                let fav = hemispherical_average(|mu| fresnel_dielectric(mu, eta));
+                let r = if reflect { tint * fav } else { Vec3::ZERO };
+                (r + (1.0 - fav) * transmitted).min(Vec3::ONE)
+            }
+            Lobe::Specular { .. } | Lobe::Sheen { .. } => {
+                let mut a = Vec3::ZERO;
+                for c in 0..3 {
+                    a[c] = hemispherical_average(|mu| self.directional_albedo(mu)[c]);
+                }
+                a.min(Vec3::ONE)
+            }
+            Lobe::OrenNayar { albedo, .. } | Lobe::Burley { albedo, .. } => albedo,
+        }
+    }
+
+    /// Whether the lobe has a non-delta part that transmits.
+    pub fn transmits(&self) -> bool {
+        match *self {
+            Lobe::Bsdf(b) | Lobe::Interface { glass: b, .. } => b.transmits(),
+            _ => false,
+        }
+    }
+
+    /// Whether the lobe tells inside from outside (its frame keeps the outward side).
+    pub fn oriented(&self) -> bool {
+        matches!(self, Lobe::Bsdf(Bsdf::Glass { .. }) | Lobe::Interface { .. })
+    }
+
+    /// The radiance compression of a transmitted direction ([`Bsdf::compression`]).
+    pub fn compression(&self, wo: Vec3, wi: Vec3) -> f32 {
+        match *self {
+            Lobe::Bsdf(b) | Lobe::Interface { glass: b, .. } => b.compression(wo, wi),
+            _ => 1.0,
+        }
+    }
+
+    /// Whether the lobe has no non-delta part.
+    pub fn is_delta(&self) -> bool {
+        match *self {
+            Lobe::Bsdf(b) | Lobe::Interface { glass: b, .. } => b.is_delta(),
+            Lobe::Specular { ggx, .. } => ggx.is_smooth(),
+            _ => false,
+        }
+    }
+
+    /// Whether the lobe scatters like a diffuse surface (its layering normalisation is the
+    /// cosine-weighted average attenuation; see `closure`).
+    pub fn is_diffuse(&self) -> bool {
+        matches!(self, Lobe::Bsdf(Bsdf::Diffuse { .. }) | Lobe::OrenNayar { .. } | Lobe::Burley { .. })
+    }
+}
