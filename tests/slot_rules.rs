@@ -8,7 +8,7 @@ use std::path::Path;
 use strata::compose::binding::binding_tree;
 use strata::compose::scene::compose_stage;
 use strata::compose::slots::{LayerBinding, PrimStack, resolve_stacks};
-use strata::diag::{Diagnostics, Severity, SourceMap};
+use strata::diag::{Diagnostics, SourceMap};
 use strata::scene::Stage;
 
 /// One layer as `slot=material@bound_at`, `~collection` when a collection bound it,
@@ -345,7 +345,7 @@ fn composed(bindings: &str) -> (strata::compose::scene::SceneComposition, String
 }
 
 #[test]
-fn composed_materials_carry_vertical_layers_and_warn_they_are_not_yet_rendered() {
+fn composed_materials_carry_vertical_layers() {
     let (scene, rendered, diags) = composed(
         r#"
 def Mesh "a" {
@@ -366,7 +366,76 @@ def Mesh "c" { rel material:slotBinding:_000 = </L/SubstanceA> }
     assert_eq!(a.layers[0].vertical[0].slot.name(), "000|010");
     // The coat makes a different material: three prims, three materials.
     assert_eq!(scene.materials.len(), 3);
-    let warnings: Vec<_> = diags.items().iter().filter(|d| d.severity == Severity::Warning).collect();
-    assert_eq!(warnings.len(), 1, "one warning per vertical slot: {rendered}");
-    assert!(rendered.contains("vertical slot 000|010 composed but not yet rendered: 2 prim(s)"), "{rendered}");
+    assert!(!rendered.contains("not yet rendered"), "{rendered}");
+}
+
+/// Rule 3b through the compiler: a vertical slot lays its substance over the slot below by
+/// `layer(top, base)` with its mask as coverage, so a prim with `000` = paint and
+/// `000|010` = a half-covering clear coat compiles to the closure a single substance writes
+/// by hand as `layer(coat * 0.5, paint)` — term for term, at every shading point — and
+/// differs from the prim without the coat.
+#[test]
+fn a_vertical_slot_compiles_to_the_layer_operator_over_its_base() {
+    use strata::abi::{ClosureSum, Globals};
+    use strata::session::{SceneSource, Session, SessionOptions};
+    let dir = std::env::temp_dir().join(format!("strata-vertical-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("coat.ash"),
+        r#"
+shader clear(float roughness = 0.2, output closure bsdf) { bsdf = dielectric_bsdf(color(1.0), roughness, 1.5, "R"); }
+substance paint { node d = diffuse(albedo: color(0.6, 0.4, 0.2)); surface = d.bsdf; }
+substance coat {
+    input float cover = 0.5;
+    node c = clear();
+    node m = mask(opacity: cover);
+    surface = c.bsdf;
+    mask = m.out;
+}
+substance by_hand {
+    node d = diffuse(albedo: color(0.6, 0.4, 0.2));
+    node c = clear();
+    node v = vertical_layer(base: d.bsdf, top: c.bsdf, coverage: 0.5);
+    surface = v.bsdf;
+}
+"#,
+    )
+    .unwrap();
+    let material = |name: &str| {
+        format!(
+            "def Material \"{name}\" {{ def Shader \"S\" {{ uniform token info:implementationSource = \"sourceAsset\"\n\
+             uniform asset info:strata:sourceAsset = @coat.ash@\n uniform token info:strata:sourceAsset:subIdentifier = \"{name}\" }} }}\n"
+        )
+    };
+    let scene = format!(
+        "#usda 1.0\ndef Scope \"L\" {{\n{}{}{}}}\n\
+         def Sphere \"coated\" {{ rel material:slotBinding:_000 = </L/paint>\n rel material:slotBinding:_000:vertical:_010 = </L/coat> }}\n\
+         def Sphere \"by_hand\" {{ rel material:slotBinding:_000 = </L/by_hand> }}\n\
+         def Sphere \"bare\" {{ rel material:slotBinding:_000 = </L/paint> }}\n",
+        material("paint"),
+        material("coat"),
+        material("by_hand")
+    );
+    let path = dir.join("vertical.usda");
+    std::fs::write(&path, scene).unwrap();
+    let mut session = Session::open(SceneSource::File(path), SessionOptions::default());
+    let compiled = match session.compile_or_report() {
+        Ok(c) => c,
+        Err(report) => panic!("{report}"),
+    };
+    let closure = |prim: &str, g: &Globals| {
+        let material = &compiled.materials[compiled.prim_material[prim]];
+        let mut out = ClosureSum::default();
+        material.surface_sum(g, 0, &mut out).expect("shades");
+        out
+    };
+    for (u, v) in [(0.1, 0.2), (0.5, 0.5), (0.9, 0.3)] {
+        let g = Globals { u, v, n: [0.0, 0.0, 1.0], ng: [0.0, 0.0, 1.0], ..Globals::default() };
+        let coated = closure("/coated", &g);
+        assert_eq!(coated, closure("/by_hand", &g), "at ({u}, {v})");
+        assert_ne!(coated, closure("/bare", &g), "the coat changed nothing");
+    }
+    let rendered = session.diagnostics().render(session.sources());
+    assert!(!rendered.contains("vertical"), "{rendered}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

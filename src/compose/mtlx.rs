@@ -15,7 +15,7 @@ use std::borrow::Cow;
 /// The built-in substance for a MaterialX (or UsdPreviewSurface) surface shader id.
 pub fn surface_substance(id: &str) -> Option<&'static str> {
     match id {
-        "UsdPreviewSurface" | "ND_UsdPreviewSurface_surfaceshader" => Some(super::preview::PREVIEW_SUBSTANCE),
+        "UsdPreviewSurface" | "ND_UsdPreviewSurface_surfaceshader" => Some("UsdPreviewSurface"),
         "ND_open_pbr_surface_surfaceshader" => Some("open_pbr_surface"),
         "ND_standard_surface_surfaceshader" | "ND_standard_surface_surfaceshader_100" => Some("standard_surface"),
         _ => None,

@@ -106,7 +106,6 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
     let mut displaced_vertical = OncePerKind::new();
     // Vertical layers are composed but not lowered yet: each slot reported once, at its first
     // binding, with the number of prims it reaches.
-    let mut pending_vertical: Vec<(String, Span, usize)> = Vec::new();
     for stack in &stacks {
         let mut composed = ComposedMaterial::default();
         let mut resolve = |path: &str, span: Span, kind: GraphKind, diags: &mut Diagnostics| {
@@ -151,11 +150,6 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
                         .also(product.span, "displacement"),
                     );
                 }
-                let name = vertical.slot.name();
-                match pending_vertical.iter_mut().find(|(slot, _, _)| *slot == name) {
-                    Some((_, _, prims)) => *prims += 1,
-                    None => pending_vertical.push((name, vertical.substance.span, 1)),
-                }
                 horizontal.vertical.push(vertical);
             }
             composed.layers.push(horizontal);
@@ -168,9 +162,6 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
             materials.len() - 1
         });
         prim_material.push(index);
-    }
-    for (slot, span, prims) in pending_vertical {
-        diags.push(vertical_not_yet_rendered(&slot, span, prims));
     }
     displaced_vertical.report(diags);
     SceneComposition { stacks, library, materials, prim_material }
@@ -191,18 +182,6 @@ fn compose_layer(
         }
     }
     Some(ComposedLayer::new(layer.slot.clone(), MaterialRef { span: layer.applied.span, ..substance }, overrides))
-}
-
-/// The warning for a vertical layer that composition keeps (in the material, its identity
-/// and its content hash) but lowering leaves out until the `layer(top, base)` closure
-/// operator lands: the prim renders without its coat, and says so. This is the one place
-/// to remove when vertical layers are lowered.
-fn vertical_not_yet_rendered(slot: &str, binding: Span, prims: usize) -> Diagnostic {
-    Diagnostic::warning(format!(
-        "vertical slot {slot} composed but not yet rendered: {prims} prim(s) render without it"
-    ))
-    .at(binding, "bound here")
-    .note("vertical layers need the `layer(top, base)` closure operator, which is not merged yet")
 }
 
 /// The display primvars renderable prim `path` authors (a GeomSubset: its mesh's).

@@ -27,6 +27,14 @@ shader glass(color tint = 1.0, float roughness = 0.0, float ior = 1.5, output cl
 
 // ---- Products --------------------------------------------------------------------------------
 
+// A vertical layer (DESIGN.md rule 3b): `top` lies over `base`, covering a fraction `coverage`
+// (the vertical slot's mask). `layer(top * m, base)` is `mix(base, layer(top, base), m)`: a
+// top's weight is linear in both layer modes, and the base's terms are not repeated.
+// Composition instantiates it for every vertical slot; substances may call it too.
+shader vertical_layer(closure base, closure top, float coverage = 1.0, output closure bsdf) {
+    bsdf = layer(top * clamp(coverage, 0.0, 1.0), base);
+}
+
 shader mask(float opacity = 1.0, output float out) {
     out = clamp(opacity, 0.0, 1.0);
 }

@@ -9,8 +9,8 @@ use std::fmt::Write;
 use std::path::Path;
 use std::time::Instant;
 use strata::abi::{ClosureKind, ClosureSum, ClosureTerm};
+use strata::render::material::closure::walk::directional_albedo;
 use strata::render::material::closure::{ClosureBsdf, LayeringMode};
-use strata::render::material::walk::directional_albedo;
 
 /// Coat roughnesses charted.
 const ROUGHNESS: [f32; 5] = [0.0, 0.2, 0.5, 0.8, 1.0];

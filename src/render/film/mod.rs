@@ -24,7 +24,8 @@ use std::fmt;
 use std::ops::Range;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use sum::ExactSum;
+use sum::add_coverage;
+pub use sum::{ExactSum, PixelSums, WindowSums};
 
 /// What to render.
 #[derive(Clone, Debug)]
@@ -426,98 +427,6 @@ pub const BUILTIN_CHANNELS: [&str; 14] =
 /// `Z < 1e9` test separates geometry from background.
 pub const DEPTH_MISS: f32 = 1.0e10;
 
-/// One pixel's samples so far, summed exactly ([`ExactSum`]), so the pixel does not depend
-/// on how its samples were split.
-#[derive(Clone, Debug, PartialEq)]
-pub struct PixelSums {
-    /// Samples traced, valid or not (invalid ones count as black): the divisor of the means.
-    pub samples: u32,
-    /// `R G B A albedo.RGB` over all samples, then `N.xyz P.xyz` over the hits.
-    pub builtin: [ExactSum; 13],
-    /// Samples that reached a non-transparent surface.
-    pub hits: u32,
-    /// The nearest first hit's camera-space depth ([`DEPTH_MISS`]: none).
-    pub depth: f32,
-    /// The valid sample nearest the pixel centre: squared distance, then sample index.
-    pub nearest: (f32, u32),
-    /// Custom channel floats: sums, or for integer channels the nearest sample's value.
-    pub channels: Vec<ExactSum>,
-    /// Cryptomatte: each prim's summed alpha.
-    pub objects: Vec<(u32, ExactSum)>,
-    /// Cryptomatte: each composed material's summed alpha.
-    pub materials: Vec<(u32, ExactSum)>,
-}
-
-impl Default for PixelSums {
-    fn default() -> PixelSums {
-        PixelSums {
-            samples: 0,
-            builtin: [ExactSum::default(); 13],
-            hits: 0,
-            depth: DEPTH_MISS,
-            nearest: (f32::INFINITY, u32::MAX),
-            channels: Vec::new(),
-            objects: Vec::new(),
-            materials: Vec::new(),
-        }
-    }
-}
-
-impl PixelSums {
-    /// Starts a pixel with `channel_floats` custom floats, keeping the allocations.
-    pub fn reset(&mut self, channel_floats: usize) {
-        let (mut channels, mut objects, mut materials) = (
-            std::mem::take(&mut self.channels),
-            std::mem::take(&mut self.objects),
-            std::mem::take(&mut self.materials),
-        );
-        channels.clear();
-        channels.resize(channel_floats, ExactSum::default());
-        objects.clear();
-        materials.clear();
-        *self = PixelSums { channels, objects, materials, ..PixelSums::default() };
-    }
-
-    /// Adds the samples of `other` (the same pixel, other samples). `integer[k]` says which
-    /// custom floats are integer channels: those keep the nearest sample's value. The result
-    /// is the same whatever the split and the order of merging.
-    pub fn merge(&mut self, other: &PixelSums, integer: &[bool]) {
-        self.samples += other.samples;
-        for (a, b) in self.builtin.iter_mut().zip(&other.builtin) {
-            a.merge(*b);
-        }
-        self.hits += other.hits;
-        self.depth = self.depth.min(other.depth);
-        let nearer = other.nearest < self.nearest;
-        for (k, (a, b)) in self.channels.iter_mut().zip(&other.channels).enumerate() {
-            if !integer.get(k).copied().unwrap_or(false) {
-                a.merge(*b);
-            } else if nearer {
-                *a = *b;
-            }
-        }
-        if nearer {
-            self.nearest = other.nearest;
-        }
-        for (list, more) in [(&mut self.objects, &other.objects), (&mut self.materials, &other.materials)] {
-            for &(index, alpha) in more {
-                match list.iter_mut().find(|(i, _)| *i == index) {
-                    Some((_, sum)) => sum.merge(alpha),
-                    None => list.push((index, alpha)),
-                }
-            }
-        }
-    }
-}
-
-/// Adds `alpha` to the coverage of ID `index`.
-fn add_coverage(list: &mut Vec<(u32, ExactSum)>, index: u32, alpha: f32) {
-    match list.iter_mut().find(|(i, _)| *i == index) {
-        Some((_, sum)) => sum.add(alpha),
-        None => list.push((index, ExactSum::of(alpha))),
-    }
-}
-
 /// Per-row accumulation buffers.
 struct Row {
     rgba: Vec<[f32; 4]>,
@@ -676,42 +585,6 @@ fn crypto_ids(scene: &Scene, materials: &[&dyn MaterialCode]) -> (Vec<f32>, Vec<
         Vec::new()
     };
     (objects, materials)
-}
-
-/// Each pixel's exact sums over a window's samples ([`render_sums`]).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct WindowSums {
-    /// The pixels, in the whole image.
-    pub region: Region,
-    /// The samples summed: the ranges merged so far, in order.
-    pub samples: Vec<Range<u32>>,
-    /// Row-major, top row first.
-    pub pixels: Vec<PixelSums>,
-    /// Which custom-channel floats are integer channels.
-    pub integer: Vec<bool>,
-}
-
-impl WindowSums {
-    /// Adds the sums of `other`, the same pixels over other samples. The result is the same
-    /// whatever the split of the samples and the order of merging.
-    pub fn merge(&mut self, other: &WindowSums) -> Result<(), String> {
-        if other.region != self.region || other.integer != self.integer || other.pixels.len() != self.pixels.len() {
-            return Err(format!(
-                "windows {:?} and {:?} do not cover the same pixels and channels",
-                self.region, other.region
-            ));
-        }
-        let overlaps = |a: &Range<u32>, b: &Range<u32>| a.start < b.end && b.start < a.end;
-        if let Some(r) = other.samples.iter().find(|r| self.samples.iter().any(|s| overlaps(r, s))) {
-            return Err(format!("samples {}..{} are in both windows", r.start, r.end));
-        }
-        for (a, b) in self.pixels.iter_mut().zip(&other.pixels) {
-            a.merge(b, &self.integer);
-        }
-        self.samples.extend(other.samples.iter().cloned());
-        self.samples.sort_by_key(|r| r.start);
-        Ok(())
-    }
 }
 
 fn render_impl(

@@ -7,7 +7,7 @@
 //! the Charlie sheen per roughness and `cos θo`.
 
 use crate::render::material::bsdf::reflect;
-use crate::render::material::lobes::sheen_eval;
+use crate::render::material::microfacet::sheen_eval;
 use crate::render::material::microfacet::{Ggx, fresnel_dielectric};
 use glam::{Vec2, Vec3};
 use std::sync::OnceLock;

@@ -12,7 +12,9 @@ use crate::render::material::bsdf::{
     Bsdf, BsdfSample, colour, cosine_hemisphere, finish, flip_z, ior, microfacet_reflection_pdf, reflect, roughness,
     sanitize, upper,
 };
-use crate::render::material::microfacet::{Ggx, fresnel_conductor3, fresnel_dielectric, hemispherical_average};
+use crate::render::material::microfacet::{
+    Ggx, fresnel_conductor3, fresnel_dielectric, hemispherical_average, sheen_eval,
+};
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
 
@@ -128,24 +130,6 @@ pub fn fon_albedo(mu: f32, sigma: f32) -> f32 {
     let si = (1.0 - mu * mu).max(0.0).sqrt();
     let g = si * (mu.acos() - si * mu) + (2.0 / 3.0) * ((si / mu) * (1.0 - si * si * si) - si);
     a + b * FRAC_1_PI * g
-}
-
-/// Sheen roughness below this is this (the lobe's grazing peak is then already narrower than
-/// its tables resolve).
-pub const MIN_SHEEN_ROUGHNESS: f32 = 0.1;
-
-/// The Charlie sheen of white colour, `f(ωo, ωi)` for both directions up, unnormalised: its
-/// albedo exceeds 1 at grazing angles when smooth ([`Lobe::Sheen`] divides that out).
-#[inline]
-pub fn sheen_eval(roughness: f32, wo: Vec3, wi: Vec3) -> f32 {
-    if wo.z <= 0.0 || wi.z <= 0.0 {
-        return 0.0;
-    }
-    let Some(h) = (wo + wi).try_normalize() else { return 0.0 };
-    let inv_alpha = 1.0 / roughness.clamp(MIN_SHEEN_ROUGHNESS, 1.0);
-    let sin2 = (1.0 - h.z * h.z).max(0.0);
-    let d = (2.0 + inv_alpha) * sin2.powf(0.5 * inv_alpha) / (2.0 * PI);
-    d / (4.0 * (wi.z + wo.z - wi.z * wo.z))
 }
 
 impl Lobe {

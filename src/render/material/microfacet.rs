@@ -229,6 +229,24 @@ impl std::ops::Div for C {
     }
 }
 
+/// Sheen roughness below this is this (the lobe's grazing peak is then already narrower than
+/// its tables resolve).
+pub const MIN_SHEEN_ROUGHNESS: f32 = 0.1;
+
+/// The Charlie sheen of white colour, `f(ωo, ωi)` for both directions up, unnormalised: its
+/// albedo exceeds 1 at grazing angles when smooth (`lobes::Lobe::Sheen` divides that out).
+#[inline]
+pub fn sheen_eval(roughness: f32, wo: Vec3, wi: Vec3) -> f32 {
+    if wo.z <= 0.0 || wi.z <= 0.0 {
+        return 0.0;
+    }
+    let Some(h) = (wo + wi).try_normalize() else { return 0.0 };
+    let inv_alpha = 1.0 / roughness.clamp(MIN_SHEEN_ROUGHNESS, 1.0);
+    let sin2 = (1.0 - h.z * h.z).max(0.0);
+    let d = (2.0 + inv_alpha) * sin2.powf(0.5 * inv_alpha) / (2.0 * PI);
+    d / (4.0 * (wi.z + wo.z - wi.z * wo.z))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

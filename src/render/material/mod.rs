@@ -1,6 +1,6 @@
 //! What a compiled material's closures mean to light: the BSDFs ([`bsdf`]) and the MaterialX
 //! lobes ([`lobes`]), a closure value's weighted, layered sum of them ([`closure`], layered by
-//! albedo scaling with the tables of [`albedo`] or by the random walk of `walk`), their GGX
+//! albedo scaling with the tables of [`albedo`] or by the random walk of `closure::walk`), their GGX
 //! microfacet distribution and Fresnel terms ([`microfacet`]), the shading frames they work in
 //! ([`frame`]), and the χ² statistics the BSDF and layering tests share ([`chi2`]).
 
@@ -14,4 +14,3 @@ mod closure_tests;
 pub mod frame;
 pub mod lobes;
 pub mod microfacet;
-pub mod walk;

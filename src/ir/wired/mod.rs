@@ -189,7 +189,15 @@ fn build_here(
     }
     for (index, layer) in material.layers.iter().enumerate() {
         let overrides: Vec<(String, &MaterialRef)> = layer.overrides.iter().map(|(s, m)| (s.name(), m)).collect();
-        layers.push(b.layer(index, &layer.slot.name(), &layer.substance, &overrides));
+        let mut wired = b.layer(index, &layer.slot.name(), &layer.substance, &overrides);
+        // Vertical layers (DESIGN.md rule 3b), the first lying directly on the surface.
+        for vertical in &layer.vertical {
+            let overrides: Vec<(String, &MaterialRef)> =
+                vertical.overrides.iter().map(|(s, m)| (s.name(), m)).collect();
+            let top = b.layer(index, &vertical.slot.name(), &vertical.substance, &overrides);
+            b.lay_over(index, &mut wired, top, vertical.substance.span);
+        }
+        layers.push(wired);
     }
     let nodes = b.nodes;
     let mut wired = WiredMaterial { layers, nodes: Vec::new(), channels: Vec::new(), stats: Stats::default() };
@@ -363,6 +371,59 @@ impl Builder<'_> {
             channels: sub_channels,
             pruned: None,
         }
+    }
+
+    /// Lays vertical layer `top` over horizontal layer `base` (DESIGN.md rule 3b): `base`'s
+    /// surface becomes the prelude's `vertical_layer(base, top, coverage)`, which is
+    /// `layer(top · m, base)` — equal to `mix(base, layer(top, base), m)` because a top's
+    /// weight is linear in both layer modes, without repeating the base's closure terms. The
+    /// top's channels join the layer (sampled with it, rule 7); its displacement is ignored
+    /// (composition reports it); a normal or emission it has is reported and ignored.
+    fn lay_over(&mut self, index: usize, base: &mut Layer, top: Layer, binding: Span) {
+        base.channels.extend(top.channels);
+        for (what, present) in [("normal", top.normal.is_some()), ("emission", top.emission.is_some())] {
+            if present {
+                self.diags.push(
+                    Diagnostic::warning(format!(
+                        "vertical layer `{}` (`{}`) has a {what}, which strata does not render on a vertical layer yet: ignored",
+                        top.slot, top.material
+                    ))
+                    .kind("vertical layer product ignored")
+                    .at(binding, "bound here"),
+                );
+            }
+        }
+        let Some(top_surface) = top.surface else { return };
+        let Some(base_surface) = base.surface.take() else {
+            self.diags.push(
+                Diagnostic::warning(format!(
+                    "vertical layer `{}` lies on slot `{}`, whose substance `{}` has no surface: ignored",
+                    top.slot, base.slot, base.substance
+                ))
+                .kind("vertical layer without a surface below")
+                .at(binding, "bound here"),
+            );
+            return;
+        };
+        let Some(&func) = self.lib.shaders.get("vertical_layer") else {
+            self.diags.push(Diagnostic::error(
+                "internal compiler error: the built-in library has no `vertical_layer` to lay vertical slots with",
+            ));
+            base.surface = Some(base_surface);
+            return;
+        };
+        let function = self.lib.function(func);
+        let mut args = vec![Operand::Default; function.params.len()];
+        let coverage = top.mask.unwrap_or(Operand::Const(Value::Float(1.0), Type::FLOAT));
+        for (name, operand) in [("base", base_surface), ("top", top_surface), ("coverage", coverage)] {
+            if let Some((i, _)) = function.param(name) {
+                args[i] = operand;
+            }
+        }
+        let output = function.param("bsdf").map_or(0, |(i, _)| i);
+        let id = NodeId(self.nodes.len() as u32);
+        self.nodes.push(Node { func, label: format!("{}/vertical", top.slot), args, layer: index });
+        base.surface = Some(Operand::Node { node: id, param: output });
     }
 
     fn channels(&self, graph: &Graph, instance: &Instance) -> Vec<Channel> {
@@ -791,181 +852,4 @@ fn show_path(path: &str) -> &str {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::compose::{ComposedLayer, Slot};
-    use crate::diag::SourceMap;
-
-    const SOURCE: &str = r#"
-        substance plastic {
-            input color base_color = color(0.8, 0.8, 0.8);
-            input float roughness = 0.4;
-            node unused = noise(scale: 3.0);
-            node g = glossy(albedo: base_color, roughness: roughness);
-            surface = g.bsdf;
-        }
-        substance dirt {
-            input float amount = 0.5;
-            node n = fbm(scale: 4.0);
-            node m = mask(opacity: n.out);
-            node d = diffuse(albedo: color(0.3, 0.2, 0.1));
-            surface = d.bsdf;
-            mask = m.out;
-        }
-        substance opaque {
-            node d = diffuse();
-            surface = d.bsdf;
-        }
-        substance sheet {
-            node m = mask(opacity: 1.0);
-            node d = diffuse();
-            surface = d.bsdf;
-            mask = m.out;
-        }
-        override red {
-            output color base_color = color(1.0, 0.0, 0.0);
-            node aov = customChannelColor(name: "red_marker", value: color(1.0, 1.0, 1.0));
-        }
-        override rough {
-            input float r = 0.9;
-            node half = math(a: r, b: 2.0, op: "div");
-            output float roughness = half.out;
-            output color base_color = color(0.0, 0.0, 1.0);
-        }
-        override wrong {
-            output int roughness = 2;
-            output string base_color = "red";
-        }
-    "#;
-
-    fn setup() -> (Library, SourceMap) {
-        let mut sources = SourceMap::new();
-        let mut diags = Diagnostics::new();
-        let (lib, _) = Library::from_text("test.ash", SOURCE, &mut sources, &mut diags);
-        assert!(!diags.has_errors(), "{}", diags.render(&sources));
-        (lib, sources)
-    }
-
-    fn mref(lib: &Library, name: &str) -> MaterialRef {
-        MaterialRef {
-            path: format!("/Looks/{name}"),
-            graph: lib.graph_by_name(name).unwrap(),
-            values: Vec::new(),
-            span: Span::default(),
-        }
-    }
-
-    fn layer(lib: &Library, slot: &str, name: &str, overrides: &[(&str, &str)]) -> ComposedLayer {
-        ComposedLayer {
-            slot: Slot::parse(slot).unwrap(),
-            substance: mref(lib, name),
-            overrides: overrides.iter().map(|(s, n)| (Slot::parse(s).unwrap(), mref(lib, n))).collect(),
-            vertical: Vec::new(),
-        }
-    }
-
-    #[test]
-    fn highest_override_wins_and_channels_join() {
-        let (lib, _) = setup();
-        let material = ComposedMaterial {
-            layers: vec![layer(&lib, "000", "plastic", &[("000::010", "red"), ("000::020", "rough")])],
-            ..Default::default()
-        };
-        let mut diags = Diagnostics::new();
-        let wired = build(&lib, &material, PassOptions::default(), &mut diags);
-        assert!(!diags.has_errors());
-        let text = wired.to_text(&lib);
-        // 000::020 (rough) beats 000::010 (red) for base_color; roughness folds 0.9 / 2.
-        assert!(text.contains("albedo: (0.0, 0.0, 1.0)"), "{text}");
-        assert!(text.contains("roughness: 0.45"), "{text}");
-        assert!(text.contains("channel red_marker = (1.0, 1.0, 1.0)"), "{text}");
-        assert!(!text.contains("unused"), "dead pattern node removed: {text}");
-        assert!(!text.contains("math"), "folded node removed: {text}");
-    }
-
-    #[test]
-    fn incompatible_override_is_an_error() {
-        let (lib, _) = setup();
-        let material = ComposedMaterial {
-            layers: vec![layer(&lib, "000", "plastic", &[("000::010", "wrong")])],
-            ..Default::default()
-        };
-        let mut diags = Diagnostics::new();
-        build(&lib, &material, PassOptions::default(), &mut diags);
-        assert_eq!(diags.error_count(), 1, "int → float converts; string → color does not");
-    }
-
-    #[test]
-    fn opaque_layer_hides_lower_layers() {
-        let (lib, _) = setup();
-        let material = ComposedMaterial {
-            layers: vec![
-                layer(&lib, "000", "plastic", &[]),
-                layer(&lib, "010", "opaque", &[]),
-                layer(&lib, "050", "dirt", &[]),
-            ],
-            ..Default::default()
-        };
-        let mut diags = Diagnostics::new();
-        let wired = build(&lib, &material, PassOptions::default(), &mut diags);
-        assert_eq!(wired.stats.layers_pruned, 1);
-        assert_eq!(wired.layers[0].pruned.as_deref(), Some("hidden under slot 010"));
-        assert!(wired.layers[2].surface.is_some());
-        let unoptimised = build(&lib, &material, PassOptions { optimize: false }, &mut diags);
-        assert_eq!(unoptimised.stats.layers_pruned, 0);
-        assert!(unoptimised.nodes.len() > wired.nodes.len());
-    }
-
-    /// A literal mask is a constant at every optimisation level (liveness, and with it what
-    /// is diced and picked, must not depend on the optimiser); unoptimised, nothing else is
-    /// folded or pruned.
-    #[test]
-    fn literal_masks_are_constant_at_every_optimisation_level() {
-        let (lib, _) = setup();
-        let material = ComposedMaterial {
-            layers: vec![
-                layer(&lib, "000", "plastic", &[]),
-                layer(&lib, "010", "sheet", &[]),
-                layer(&lib, "050", "dirt", &[]),
-            ],
-            ..Default::default()
-        };
-        let mut diags = Diagnostics::new();
-        for optimize in [true, false] {
-            let wired = build(&lib, &material, PassOptions { optimize }, &mut diags);
-            let masks: Vec<Option<f32>> = wired.layers.iter().map(Layer::constant_mask).collect();
-            assert_eq!(masks, [Some(1.0), Some(1.0), None], "optimise {optimize}");
-            assert_eq!(wired.layers[0].surface.is_none(), optimize, "optimise {optimize}: plastic under the sheet");
-        }
-    }
-
-    #[test]
-    fn validator_rejects_broken_wiring() {
-        let (lib, _) = setup();
-        let material = ComposedMaterial { layers: vec![layer(&lib, "050", "dirt", &[])], ..Default::default() };
-        let mut diags = Diagnostics::new();
-        let wired = build(&lib, &material, PassOptions::default(), &mut diags);
-        assert_eq!(wired.validate(&lib), Ok(()));
-        // A node reading a later node breaks the topological order lowering relies on.
-        let mut backwards = wired.clone();
-        let last = NodeId(backwards.nodes.len() as u32 - 1);
-        let first = &mut backwards.nodes[0];
-        let input = lib.function(first.func).inputs().next().unwrap().0;
-        first.args[input] = Operand::Node { node: last, param: 0 };
-        assert!(backwards.validate(&lib).unwrap_err().contains("not evaluated before it"));
-        // A closure where a mask belongs is a type error.
-        let mut mistyped = wired.clone();
-        mistyped.layers[0].mask = mistyped.layers[0].surface.clone();
-        assert!(mistyped.validate(&lib).unwrap_err().contains("closure does not convert to float"));
-    }
-
-    #[test]
-    fn default_substance_when_no_layers() {
-        let (lib, _) = setup();
-        let mut diags = Diagnostics::new();
-        let wired = build(&lib, &ComposedMaterial::default(), PassOptions::default(), &mut diags);
-        let text = wired.to_text(&lib);
-        assert!(text.contains("substance default_substance"), "{text}");
-        assert!(text.contains("albedo: (1.0, 1.0, 1.0)"), "{text}");
-    }
-}
+mod tests;
