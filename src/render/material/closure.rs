@@ -360,7 +360,6 @@ pub(crate) fn pick(p: &[f32], uc: f32) -> Option<(usize, f32)> {
     None
 }
 
-/// The reference mode of `layer`: a random walk between the interfaces (its own docs below).
 pub mod walk {
     //! `layer(top, base)` by a stochastic random walk between the two interfaces: the
     //! position-free layered BSDF of Guo et al. 2018 as pbrt-v4's `LayeredBxDF` computes it (no
