@@ -578,7 +578,7 @@ impl Context<'_> {
         let n = layer_normal(material, g, layer)?;
         let mut closure = ClosureSum::default();
         material.surface_sum(g, layer, &mut closure).map_err(Invalid::Shader)?;
-        if closure.terms.iter().any(|t| t.params.iter().chain(&t.weight).any(|p| !p.is_finite())) {
+        if closure.has_non_finite() {
             return Err(Invalid::NonFiniteClosure);
         }
         let bsdf = ClosureBsdf::from_sum(&closure, self.params.layering);

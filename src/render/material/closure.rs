@@ -23,7 +23,7 @@
 //! (`walk`), the position-free stochastic reference of Guo et al. 2018 and pbrt-v4's
 //! `LayeredBxDF`.
 
-use crate::abi::{ClosureKind, ClosureSum, MAX_CLOSURE_TERMS};
+use crate::abi::{ClosureKind, ClosureSum, ClosureTerm, MAX_CLOSURE_TERMS};
 use crate::render::material::bsdf::{Bsdf, BsdfSample, finish};
 use crate::render::material::lobes::Lobe;
 use glam::{Vec2, Vec3};
@@ -75,13 +75,24 @@ const GAUSS_W: [f32; 8] =
 
 /// The BSDF of one closure value. Copy and allocation-free; a single unit-weight term behaves
 /// exactly as its lobe alone.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug)]
 pub struct ClosureBsdf {
     pub(crate) terms: [Term; MAX_CLOSURE_TERMS],
     pub(crate) len: usize,
     /// Whether any term lies under another.
     pub(crate) layered: bool,
     pub(crate) mode: LayeringMode,
+}
+
+/// Equal when the used terms are: the unused ones are all empty, and comparing them would cost
+/// the integrator's albedo memo a scan of every slot at each first hit.
+impl PartialEq for ClosureBsdf {
+    fn eq(&self, other: &ClosureBsdf) -> bool {
+        self.len == other.len
+            && self.layered == other.layered
+            && self.mode == other.mode
+            && self.terms() == other.terms()
+    }
 }
 
 impl From<Bsdf> for ClosureBsdf {
@@ -97,14 +108,30 @@ impl ClosureBsdf {
     /// Decodes a closure value: empty terms (kind `None`, zero or non-finite weight) are
     /// skipped, weights clamped to [0, 1] per channel, parameters sanitised per lobe.
     pub fn from_sum(sum: &ClosureSum, mode: LayeringMode) -> ClosureBsdf {
+        let clamped =
+            |t: &ClosureTerm| Vec3::from_array(t.weight.map(|w| if w.is_nan() { 0.0 } else { w.clamp(0.0, 1.0) }));
+        // The terms that are not empty; most materials have one, decoded without the general
+        // renumbering below.
+        let mut live = 0u32;
+        for (k, t) in sum.terms.iter().enumerate() {
+            if t.kind != ClosureKind::None as u32 && clamped(t) != Vec3::ZERO {
+                live |= 1 << k;
+            }
+        }
+        if live.count_ones() <= 1 {
+            let Some(t) = sum.terms.get(live.trailing_zeros() as usize) else {
+                return ClosureBsdf::from_lobes(&[], mode);
+            };
+            return ClosureBsdf::from_lobes(&[(Lobe::from_term(t), clamped(t), 0)], mode);
+        }
         let mut lobes = [(Lobe::Bsdf(Bsdf::Black), Vec3::ZERO, 0u8); MAX_CLOSURE_TERMS];
         let mut position = [usize::MAX; MAX_CLOSURE_TERMS];
         let mut len = 0;
         for (k, t) in sum.terms.iter().enumerate() {
-            let weight = Vec3::from_array(t.weight.map(|w| if w.is_nan() { 0.0 } else { w.clamp(0.0, 1.0) }));
-            if t.kind == ClosureKind::None as u32 || weight == Vec3::ZERO {
+            if live & (1 << k) == 0 {
                 continue;
             }
+            let weight = clamped(t);
             // Bits of terms that were skipped, or are not above, drop out when renumbering.
             let mut above = 0u8;
             for (j, &p) in position.iter().enumerate().take(k) {
