@@ -130,6 +130,46 @@ pub(crate) struct Lobe {
     pub(crate) layer: usize,
 }
 
+/// The lobes of the current shading point, decoded in place: slots are kept between shading
+/// points, so a closure of [`crate::abi::MAX_CLOSURE_TERMS`] terms is written once rather
+/// than built and moved (a few hundred bytes a move). Derefs to the current lobes.
+pub(crate) struct Lobes {
+    slots: Vec<Lobe>,
+    len: usize,
+}
+
+impl Lobes {
+    fn new() -> Lobes {
+        Lobes { slots: Vec::new(), len: 0 }
+    }
+
+    fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// A slot for one more lobe (its old contents left to overwrite), counted as current.
+    fn push_slot(&mut self) -> &mut Lobe {
+        if self.len == self.slots.len() {
+            // Grows once per slot per thread: Scratch::new reserves every material's layers.
+            self.slots.push(Lobe {
+                weight: 0.0,
+                bsdf: ClosureBsdf::empty(LayeringMode::default()),
+                frame: Frame::from_normal(Vec3::Z),
+                layer: 0,
+            });
+        }
+        self.len += 1;
+        &mut self.slots[self.len - 1]
+    }
+}
+
+impl std::ops::Deref for Lobes {
+    type Target = [Lobe];
+    fn deref(&self) -> &[Lobe] {
+        &self.slots[..self.len]
+    }
+}
+
 /// A direction sampled from the lobes of a shading point.
 pub(crate) struct LobeSample {
     /// The new direction (world).
@@ -222,7 +262,9 @@ pub struct Scratch {
     masks_dv: Vec<f32>,
     disp: Vec<f32>,
     weights: Vec<f32>,
-    lobes: Vec<Lobe>,
+    lobes: Lobes,
+    /// The closure value a surface entry point writes.
+    closure: ClosureSum,
     material_channels: Vec<f32>,
     /// The shading point's primvar values (`abi::Globals::primvars`).
     primvars: Vec<f32>,
@@ -251,7 +293,13 @@ impl Scratch {
             masks_dv: vec![0.0; layers],
             disp: vec![0.0; layers],
             weights: vec![0.0; layers],
-            lobes: Vec::with_capacity(layers),
+            lobes: {
+                let mut lobes = Lobes::new();
+                (0..layers).for_each(|_| _ = lobes.push_slot());
+                lobes.clear();
+                lobes
+            },
+            closure: ClosureSum::default(),
             material_channels: vec![0.0; floats],
             primvars: vec![0.0; primvar_floats],
             channels: vec![0.0; global_channels],
@@ -485,8 +533,7 @@ impl Context<'_> {
                 s.site.layer = Some(i as u32);
                 s.counts.surfaces += 1;
                 s.counts.normals += u64::from(info.layers[i].has_normal);
-                let lobe = self.lobe(material, &g, sp, d, i, 1.0)?;
-                s.lobes.push(lobe);
+                self.lobe(material, &g, sp, d, i, 1.0, &mut s.closure, &mut s.lobes)?;
             }
             None => {
                 let opaque: f32 = s.weights[..nl].iter().sum();
@@ -495,8 +542,8 @@ impl Context<'_> {
                         s.site.layer = Some(i as u32);
                         s.counts.surfaces += 1;
                         s.counts.normals += u64::from(info.layers[i].has_normal);
-                        let lobe = self.lobe(material, &g, sp, d, i, s.weights[i] / opaque)?;
-                        s.lobes.push(lobe);
+                        let weight = s.weights[i] / opaque;
+                        self.lobe(material, &g, sp, d, i, weight, &mut s.closure, &mut s.lobes)?;
                     }
                 }
             }
@@ -509,7 +556,7 @@ impl Context<'_> {
             // meet the same closure (a material with constant parameters) compute it once.
             // (`trace` has cleared `s.channels`.)
             let mut best = -1.0;
-            for lobe in &s.lobes {
+            for lobe in s.lobes.iter() {
                 let a = match s.albedo_memo {
                     Some((bsdf, a)) if bsdf == lobe.bsdf => a,
                     _ => {
@@ -566,6 +613,9 @@ impl Context<'_> {
         Ok(Some((albedo, normal)))
     }
 
+    /// Evaluates layer `layer`'s closure at `g` into a new lobe of `lobes` (`closure` is
+    /// scratch for the entry point's output).
+    #[allow(clippy::too_many_arguments)]
     fn lobe(
         &self,
         material: &dyn MaterialCode,
@@ -574,24 +624,27 @@ impl Context<'_> {
         d: Vec3,
         layer: usize,
         weight: f32,
-    ) -> Result<Lobe, Invalid> {
+        closure: &mut ClosureSum,
+        lobes: &mut Lobes,
+    ) -> Result<(), Invalid> {
         let n = layer_normal(material, g, layer)?;
-        let mut closure = ClosureSum::default();
-        material.surface_sum(g, layer, &mut closure).map_err(Invalid::Shader)?;
+        material.surface_sum(g, layer, closure).map_err(Invalid::Shader)?;
         if closure.has_non_finite() {
             return Err(Invalid::NonFiniteClosure);
         }
-        let bsdf = ClosureBsdf::from_sum(&closure, self.params.layering);
+        let lobe = lobes.push_slot();
+        lobe.bsdf.set_sum(closure, self.params.layering);
         // Glass needs to know inside from outside, so its frame keeps the outward side
         // (wo.z < 0 means the ray travels inside); every other closure faces the ray.
-        let n = if bsdf.oriented() {
+        let n = if lobe.bsdf.oriented() {
             if n.dot(sp.ng) < 0.0 { -n } else { n }
         } else if n.dot(d) > 0.0 {
             -n
         } else {
             n
         };
-        Ok(Lobe { weight, bsdf, frame: Frame::from_normal(n), layer })
+        (lobe.weight, lobe.frame, lobe.layer) = (weight, Frame::from_normal(n), layer);
+        Ok(())
     }
 
     /// `(f · |cos|, pdf)` of the evaluated lobes for directions `wo`, `wi` (world).

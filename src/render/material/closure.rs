@@ -101,6 +101,10 @@ impl From<Bsdf> for ClosureBsdf {
     }
 }
 
+/// An unused slot of [`ClosureBsdf::terms`].
+const EMPTY_TERM: Term =
+    Term { lobe: Lobe::Bsdf(Bsdf::Black), weight: Vec3::ZERO, above: 0, inv_norm: Vec3::ZERO, importance: 0.0 };
+
 /// Attenuations `a_i(μ)` of every term (see the module docs).
 type Attenuation = [Vec3; MAX_CLOSURE_TERMS];
 
@@ -108,6 +112,14 @@ impl ClosureBsdf {
     /// Decodes a closure value: empty terms (kind `None`, zero or non-finite weight) are
     /// skipped, weights clamped to [0, 1] per channel, parameters sanitised per lobe.
     pub fn from_sum(sum: &ClosureSum, mode: LayeringMode) -> ClosureBsdf {
+        let mut b = ClosureBsdf::empty(mode);
+        b.set_sum(sum, mode);
+        b
+    }
+
+    /// [`ClosureBsdf::from_sum`] in place: the integrator decodes each shading point's closure
+    /// into the slot it keeps, rather than moving a value of all [`MAX_CLOSURE_TERMS`] terms.
+    pub fn set_sum(&mut self, sum: &ClosureSum, mode: LayeringMode) {
         let clamped =
             |t: &ClosureTerm| Vec3::from_array(t.weight.map(|w| if w.is_nan() { 0.0 } else { w.clamp(0.0, 1.0) }));
         // The terms that are not empty; most materials have one, decoded without the general
@@ -119,10 +131,11 @@ impl ClosureBsdf {
             }
         }
         if live.count_ones() <= 1 {
-            let Some(t) = sum.terms.get(live.trailing_zeros() as usize) else {
-                return ClosureBsdf::from_lobes(&[], mode);
-            };
-            return ClosureBsdf::from_lobes(&[(Lobe::from_term(t), clamped(t), 0)], mode);
+            match sum.terms.get(live.trailing_zeros() as usize) {
+                Some(t) => self.set_lobes(&[(Lobe::from_term(t), clamped(t), 0)], mode),
+                None => self.set_lobes(&[], mode),
+            }
+            return;
         }
         let mut lobes = [(Lobe::Bsdf(Bsdf::Black), Vec3::ZERO, 0u8); MAX_CLOSURE_TERMS];
         let mut position = [usize::MAX; MAX_CLOSURE_TERMS];
@@ -143,14 +156,27 @@ impl ClosureBsdf {
             lobes[len] = (Lobe::from_term(t), weight, above);
             len += 1;
         }
-        ClosureBsdf::from_lobes(&lobes[..len], mode)
+        self.set_lobes(&lobes[..len], mode)
+    }
+
+    /// The closure with no terms (black).
+    pub fn empty(mode: LayeringMode) -> ClosureBsdf {
+        ClosureBsdf { terms: [EMPTY_TERM; MAX_CLOSURE_TERMS], len: 0, layered: false, mode }
     }
 
     /// Builds the BSDF of `(lobe, weight, above)` terms (at most [`MAX_CLOSURE_TERMS`]).
     pub fn from_lobes(lobes: &[(Lobe, Vec3, u8)], mode: LayeringMode) -> ClosureBsdf {
-        let empty =
-            Term { lobe: Lobe::Bsdf(Bsdf::Black), weight: Vec3::ZERO, above: 0, inv_norm: Vec3::ZERO, importance: 0.0 };
-        let mut b = ClosureBsdf { terms: [empty; MAX_CLOSURE_TERMS], len: 0, layered: false, mode };
+        let mut b = ClosureBsdf::empty(mode);
+        b.set_lobes(lobes, mode);
+        b
+    }
+
+    /// [`ClosureBsdf::from_lobes`] in place. Only the slots in use before or after are
+    /// written: the unused ones stay empty.
+    pub fn set_lobes(&mut self, lobes: &[(Lobe, Vec3, u8)], mode: LayeringMode) {
+        let b = self;
+        let old_len = b.len;
+        (b.len, b.layered, b.mode) = (0, false, mode);
         let mut covered = 0u8;
         for &(_, _, above) in lobes {
             covered |= above;
@@ -162,10 +188,13 @@ impl ClosureBsdf {
             b.terms[i] = Term { lobe, weight, above, inv_norm: Vec3::ONE, importance: 0.0 };
             b.len = i + 1;
         }
+        for t in b.terms.iter_mut().take(old_len).skip(b.len) {
+            *t = EMPTY_TERM;
+        }
         if b.len == 1 && b.terms[0].weight == Vec3::ONE {
             // A single lobe samples itself; its albedo is not needed.
             b.terms[0].importance = 1.0;
-            return b;
+            return;
         }
         for i in 0..b.len {
             let t = &mut b.terms[i];
@@ -188,7 +217,6 @@ impl ClosureBsdf {
                 t.inv_norm = Vec3::select(norm.cmpgt(Vec3::splat(1e-6)), norm.recip(), Vec3::ZERO);
             }
         }
-        b
     }
 
     /// The terms.
