@@ -261,18 +261,14 @@ impl ClosureSum {
     }
 
     /// Whether a non-empty term (kind not `None`) has a NaN or infinite weight or parameter.
-    /// Empty terms are skipped, as every reader skips them. Branch-free per term: the
-    /// integrator asks this at every shading point.
+    /// Empty terms are skipped, as every reader skips them (most of a material's are empty).
     #[inline]
     pub fn has_non_finite(&self) -> bool {
-        let mut bad = false;
-        for t in &self.terms {
-            // Exponent bits all set: infinite or NaN.
-            let non_finite = |m: bool, x: &f32| m | (x.to_bits() & 0x7f80_0000 == 0x7f80_0000);
-            let term_bad = t.weight.iter().fold(false, non_finite) | t.params.iter().fold(false, non_finite);
-            bad |= term_bad & (t.kind != ClosureKind::None as u32);
-        }
-        bad
+        self.terms.iter().filter(|t| t.kind != ClosureKind::None as u32).any(|t| {
+            // The largest magnitude's bits: at or above the exponent's all-ones, infinite or NaN.
+            let magnitude = |m: u32, x: &f32| m.max(x.to_bits() & 0x7fff_ffff);
+            t.weight.iter().fold(0, magnitude).max(t.params.iter().fold(0, magnitude)) >= 0x7f80_0000
+        })
     }
 
     /// The first non-empty term as a single closure (parameters past the eighth dropped), or
