@@ -127,17 +127,17 @@ fn usdc_composes_like_its_usda_twin() {
     assert_eq!(v("aColor"), Value::Tuple(vec![0.8, 0.1, 0.05]));
     assert_eq!(v("aFloat"), Value::Float(0.1), "a float reads as the decimal USD wrote for it");
     assert_eq!(v("aToken"), Value::Token("faceVarying".into()));
-    assert_eq!(v("aInts"), Value::IntArray(vec![1, -2, 3, 2147483647]));
+    assert_eq!(v("aInts"), Value::IntArray(vec![1, -2, 3, 2147483647].into()));
     assert_eq!(v("aUint"), Value::Int(4000000000));
     assert_eq!(v("aInt64"), Value::Int(-9007199254740993));
     assert_eq!(
         v("aMatrix"),
         Value::Matrix([2.0, 0.0, 0.0, 0.0, 0.0, 3.0, 0.0, 0.0, 0.0, 0.0, 4.0, 0.0, 1.0, 2.0, 3.0, 1.0])
     );
-    assert_eq!(v("aQuats"), Value::TupleArray { width: 4, data: vec![1.0, 0.0, 0.0, 0.0, 0.5, 0.5, 0.5, 0.5] });
+    assert_eq!(v("aQuats"), Value::TupleArray { width: 4, data: vec![1.0, 0.0, 0.0, 0.0, 0.5, 0.5, 0.5, 0.5].into() });
     assert_eq!(v("aQuatd"), Value::Tuple(vec![0.25, 0.5, 0.75, 1.0]), "quaternions are (real, i, j, k)");
-    assert_eq!(v("aTexCoords"), Value::TupleArray { width: 2, data: vec![0.0, 0.5, 0.25, 1.0] });
-    assert_eq!(v("aEmpty"), Value::TupleArray { width: 3, data: vec![] });
+    assert_eq!(v("aTexCoords"), Value::TupleArray { width: 2, data: vec![0.0, 0.5, 0.25, 1.0].into() });
+    assert_eq!(v("aEmpty"), Value::TupleArray { width: 3, data: Default::default() });
     let asset = v("aAsset");
     let asset = asset.as_asset().unwrap();
     assert_eq!(asset.authored, "tex/checker.exr");

@@ -235,6 +235,70 @@ impl Scene {
         options: &SceneOptions,
         diags: &mut Diagnostics,
     ) -> Option<Scene> {
+        let parts = Parts::gather(stage, material_of_prim, materials, options, diags)?;
+        let Parts { geometry, prim_material, lights, camera, camera_path, default_lit, displaced, bounds } = parts;
+        let accel = Accel::with_instances(
+            Blas::new(geometry.triangles, geometry.shapes),
+            geometry.prototypes.into_iter().map(|p| Blas::new(p.triangles, p.shapes)).collect(),
+            &geometry.instances,
+            geometry.instance_prims,
+        );
+        let scene_radius = (bounds.1 - bounds.0).length() / 2.0;
+        let light_power: f32 = lights.iter().filter(|l| !l.is_infinite()).map(|l| l.power(scene_radius)).sum();
+        let emitters = Emitters::build(&accel, geometry.prims.len(), &prim_material, materials, light_power);
+        Some(Scene {
+            displaced: displaced.prims,
+            displacement: displaced.stats,
+            default_lights: default_lit,
+            degenerate_triangles: geometry.degenerate,
+            accel,
+            prims: geometry.prims,
+            primvars: geometry.primvars,
+            prim_material,
+            lights,
+            emitters,
+            camera,
+            camera_path,
+            material_names: Vec::new(),
+            bounds,
+        })
+    }
+
+    /// Everything [`Scene::from_stage`] reports — geometry, materials of prims, lights,
+    /// camera — without building the BVHs or the emitters, which report nothing (`strata
+    /// check`). Returns the number of renderable prims, `None` when an error was found.
+    pub fn validate(
+        stage: &Stage,
+        material_of_prim: &dyn Fn(&str) -> Option<usize>,
+        diags: &mut Diagnostics,
+    ) -> Option<usize> {
+        Parts::gather(stage, material_of_prim, &[], &SceneOptions::default(), diags).map(|p| p.geometry.prims.len())
+    }
+}
+
+/// What a render scene is built from, before its BVHs: gathered and checked by
+/// [`Parts::gather`].
+struct Parts {
+    geometry: geometry::Geometry,
+    prim_material: Vec<usize>,
+    lights: Vec<Light>,
+    camera: Camera,
+    camera_path: Option<String>,
+    default_lit: bool,
+    displaced: crate::render::geometry::displace::Displaced,
+    bounds: (Vec3, Vec3),
+}
+
+impl Parts {
+    /// The geometry (diced and displaced where `materials` move it), the prims' materials,
+    /// the lights and the camera of `stage`; `None` when any error was reported.
+    fn gather(
+        stage: &Stage,
+        material_of_prim: &dyn Fn(&str) -> Option<usize>,
+        materials: &[&dyn MaterialCode],
+        options: &SceneOptions,
+        diags: &mut Diagnostics,
+    ) -> Option<Parts> {
         let errors = diags.error_count();
         let xforms = world_transforms(stage, diags);
         let mut read: Vec<String> =
@@ -292,31 +356,7 @@ impl Scene {
         }
         // Displaced surfaces may reach past the undisplaced bounds (the camera stays framed on those).
         let bounds = geometry.bounds().unwrap_or(bounds);
-        let accel = Accel::with_instances(
-            Blas::new(geometry.triangles, geometry.shapes),
-            geometry.prototypes.into_iter().map(|p| Blas::new(p.triangles, p.shapes)).collect(),
-            &geometry.instances,
-            geometry.instance_prims,
-        );
-        let scene_radius = (bounds.1 - bounds.0).length() / 2.0;
-        let light_power: f32 = lights.iter().filter(|l| !l.is_infinite()).map(|l| l.power(scene_radius)).sum();
-        let emitters = Emitters::build(&accel, geometry.prims.len(), &prim_material, materials, light_power);
-        Some(Scene {
-            displaced: displaced.prims,
-            displacement: displaced.stats,
-            default_lights: default_lit,
-            degenerate_triangles: geometry.degenerate,
-            accel,
-            prims: geometry.prims,
-            primvars: geometry.primvars,
-            prim_material,
-            lights,
-            emitters,
-            camera,
-            camera_path,
-            material_names: Vec::new(),
-            bounds,
-        })
+        Some(Parts { geometry, prim_material, lights, camera, camera_path, default_lit, displaced, bounds })
     }
 }
 

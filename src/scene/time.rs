@@ -78,12 +78,12 @@ pub fn value_at(default: Option<&Value>, samples: &[(f64, Value)], type_name: &s
 
 /// `value` with `f` applied to each of its floating-point numbers.
 fn map_numbers(value: Value, f: fn(f64) -> f64) -> Value {
-    let all = |v: Vec<f64>| v.into_iter().map(f).collect();
+    let all = |v: &[f64]| -> Vec<f64> { v.iter().map(|&x| f(x)).collect() };
     match value {
         Value::Float(x) => Value::Float(f(x)),
-        Value::Tuple(v) => Value::Tuple(all(v)),
-        Value::FloatArray(v) => Value::FloatArray(all(v)),
-        Value::TupleArray { width, data } => Value::TupleArray { width, data: all(data) },
+        Value::Tuple(v) => Value::Tuple(all(&v)),
+        Value::FloatArray(v) => Value::FloatArray(all(&v).into()),
+        Value::TupleArray { width, data } => Value::TupleArray { width, data: all(&data).into() },
         other => other,
     }
 }
@@ -135,7 +135,7 @@ fn interpolate(a: &Value, b: &Value, alpha: f64, quaternion: bool) -> Option<Val
         (Value::Matrix2(x), Value::Matrix2(y)) => Value::Matrix2(lerp(x, y).try_into().ok()?),
         (Value::Matrix3(x), Value::Matrix3(y)) => Value::Matrix3(lerp(x, y).try_into().ok()?),
         (Value::Matrix(x), Value::Matrix(y)) => Value::Matrix(lerp(x, y).try_into().ok()?),
-        (Value::FloatArray(x), Value::FloatArray(y)) if x.len() == y.len() => Value::FloatArray(lerp(x, y)),
+        (Value::FloatArray(x), Value::FloatArray(y)) if x.len() == y.len() => Value::FloatArray(lerp(x, y).into()),
         (Value::TupleArray { width: w, data: x }, Value::TupleArray { width: v, data: y })
             if w == v && x.len() == y.len() =>
         {
@@ -144,7 +144,7 @@ fn interpolate(a: &Value, b: &Value, alpha: f64, quaternion: bool) -> Option<Val
             } else {
                 lerp(x, y)
             };
-            Value::TupleArray { width: *w, data }
+            Value::TupleArray { width: *w, data: std::sync::Arc::new(data) }
         }
         _ => return None,
     })
@@ -197,8 +197,8 @@ mod tests {
     fn non_interpolating_values_are_held() {
         let s = vec![(0.0, Value::Int(1)), (10.0, Value::Int(5))];
         assert_eq!(value_at(None, &s, "int", TimeCode::At(9.0)), Some(Value::Int(1)));
-        let a = vec![(0.0, Value::FloatArray(vec![0.0])), (10.0, Value::FloatArray(vec![1.0, 2.0]))];
-        assert_eq!(value_at(None, &a, "float[]", TimeCode::At(5.0)), Some(Value::FloatArray(vec![0.0])));
+        let a = vec![(0.0, Value::FloatArray(vec![0.0].into())), (10.0, Value::FloatArray(vec![1.0, 2.0].into()))];
+        assert_eq!(value_at(None, &a, "float[]", TimeCode::At(5.0)), Some(Value::FloatArray(vec![0.0].into())));
     }
 
     #[test]

@@ -7,6 +7,7 @@
 //! as written into the shape that type needs.
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// An asset path as authored, plus its resolution against the authoring layer's directory.
 #[derive(Clone, Debug, PartialEq)]
@@ -60,16 +61,18 @@ pub enum Value {
     Matrix([f64; 16]),
     /// `bool[]`.
     BoolArray(Vec<bool>),
-    /// Arrays of any integer type.
-    IntArray(Vec<i64>),
+    /// Arrays of any integer type. (The numeric arrays are shared, not copied, between a
+    /// layer's opinion and the composed stage's value and default: a mesh's arrays are
+    /// held once.)
+    IntArray(Arc<Vec<i64>>),
     /// Arrays of `half`, `float`, `double`.
-    FloatArray(Vec<f64>),
+    FloatArray(Arc<Vec<f64>>),
     /// Arrays of tuples or matrices, flat: element `i` is `data[i*width..(i+1)*width]`.
     TupleArray {
         /// Components per element (3 for `point3f[]`, 16 for `matrix4d[]`).
         width: usize,
         /// All components, element after element.
-        data: Vec<f64>,
+        data: Arc<Vec<f64>>,
     },
     /// `string[]`.
     StringArray(Vec<String>),
@@ -167,7 +170,7 @@ impl Value {
     /// An integer array.
     pub fn as_int_array(&self) -> Option<&[i64]> {
         match self {
-            Value::IntArray(a) => Some(a),
+            Value::IntArray(a) => Some(a.as_slice()),
             _ => None,
         }
     }
@@ -175,7 +178,7 @@ impl Value {
     /// A float array.
     pub fn as_float_array(&self) -> Option<&[f64]> {
         match self {
-            Value::FloatArray(a) => Some(a),
+            Value::FloatArray(a) => Some(a.as_slice()),
             _ => None,
         }
     }
@@ -183,7 +186,7 @@ impl Value {
     /// A flat tuple array and its element width.
     pub fn as_tuple_array(&self) -> Option<(usize, &[f64])> {
         match self {
-            Value::TupleArray { width, data } => Some((*width, data)),
+            Value::TupleArray { width, data } => Some((*width, data.as_slice())),
             _ => None,
         }
     }
@@ -338,7 +341,9 @@ fn coerce_array(value: Value, scalar: ScalarType) -> Result<Value, String> {
         (ScalarType::Bool, Value::IntArray(a)) => Ok(Value::BoolArray(a.iter().map(|&i| i != 0).collect())),
         (ScalarType::Bool, v @ Value::BoolArray(_)) => Ok(v),
         (ScalarType::Int, v @ Value::IntArray(_)) => Ok(v),
-        (ScalarType::Float, Value::IntArray(a)) => Ok(Value::FloatArray(a.iter().map(|&i| i as f64).collect())),
+        (ScalarType::Float, Value::IntArray(a)) => {
+            Ok(Value::FloatArray(Arc::new(a.iter().map(|&i| i as f64).collect())))
+        }
         (ScalarType::Float, v @ Value::FloatArray(_)) => Ok(v),
         (ScalarType::Tuple(n), v @ Value::TupleArray { width, .. }) if width == n => Ok(v),
         (ScalarType::Matrix(n), v @ Value::TupleArray { width, .. }) if width == n * n => Ok(v),
@@ -352,7 +357,7 @@ fn coerce_array(value: Value, scalar: ScalarType) -> Result<Value, String> {
                     _ => return fail(item),
                 }
             }
-            Ok(Value::TupleArray { width: n * n, data })
+            Ok(Value::TupleArray { width: n * n, data: Arc::new(data) })
         }
         (ScalarType::String, v @ Value::StringArray(_)) => Ok(v),
         (ScalarType::String, Value::TokenArray(a)) => Ok(Value::StringArray(a)),
@@ -366,10 +371,10 @@ fn coerce_array(value: Value, scalar: ScalarType) -> Result<Value, String> {
 fn empty_array(scalar: ScalarType) -> Value {
     match scalar {
         ScalarType::Bool => Value::BoolArray(Vec::new()),
-        ScalarType::Int => Value::IntArray(Vec::new()),
-        ScalarType::Float => Value::FloatArray(Vec::new()),
-        ScalarType::Tuple(n) => Value::TupleArray { width: n, data: Vec::new() },
-        ScalarType::Matrix(n) => Value::TupleArray { width: n * n, data: Vec::new() },
+        ScalarType::Int => Value::IntArray(Arc::default()),
+        ScalarType::Float => Value::FloatArray(Arc::default()),
+        ScalarType::Tuple(n) => Value::TupleArray { width: n, data: Arc::default() },
+        ScalarType::Matrix(n) => Value::TupleArray { width: n * n, data: Arc::default() },
         ScalarType::String => Value::StringArray(Vec::new()),
         ScalarType::Token => Value::TokenArray(Vec::new()),
         ScalarType::Asset => Value::AssetArray(Vec::new()),
@@ -497,8 +502,14 @@ mod tests {
         let ty = |n: &str, a: bool| ValueType::parse(n, a);
         assert_eq!(Value::Int(1).coerce(&ty("float", false)), Ok(Value::Float(1.0)));
         assert_eq!(Value::Int(0).coerce(&ty("bool", false)), Ok(Value::Bool(false)));
-        assert_eq!(Value::IntArray(vec![1, 2]).coerce(&ty("float", true)), Ok(Value::FloatArray(vec![1.0, 2.0])));
-        assert_eq!(Value::List(vec![]).coerce(&ty("point3f", true)), Ok(Value::TupleArray { width: 3, data: vec![] }));
+        assert_eq!(
+            Value::IntArray(vec![1, 2].into()).coerce(&ty("float", true)),
+            Ok(Value::FloatArray(vec![1.0, 2.0].into()))
+        );
+        assert_eq!(
+            Value::List(vec![]).coerce(&ty("point3f", true)),
+            Ok(Value::TupleArray { width: 3, data: Arc::default() })
+        );
         assert_eq!(Value::String("a".into()).coerce(&ty("token", false)), Ok(Value::Token("a".into())));
         assert!(Value::String("a".into()).coerce(&ty("float", false)).is_err());
         assert!(Value::Tuple(vec![1.0, 2.0]).coerce(&ty("float3", false)).is_err());
@@ -519,7 +530,7 @@ mod tests {
         let a = AssetPath::new("./tex/../a.png", Path::new("/scenes/x"));
         assert_eq!(a.resolved, PathBuf::from("/scenes/x/a.png"));
         assert_eq!(AssetPath::new("/abs.usda", Path::new("/d")).resolved, PathBuf::from("/abs.usda"));
-        let arr = Value::TupleArray { width: 3, data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0] };
+        let arr = Value::TupleArray { width: 3, data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0].into() };
         assert_eq!(arr.as_vec3_array(), Some(vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]));
     }
 }

@@ -643,7 +643,8 @@ impl Session {
         for material in &composed.materials {
             distinct.insert(compiler.lower(&composed.library, material, &mut self.diags).to_text());
         }
-        crate::render::Scene::from_stage(stage, &|_| Some(0), &mut self.diags);
+        // Geometry, lights and camera are validated; no BVH is built (it reports nothing).
+        crate::render::Scene::validate(stage, &|_| Some(0), &mut self.diags);
         Some((composed.stacks.len(), distinct.len()))
     }
 

@@ -285,6 +285,14 @@ impl Image {
     /// linear (sRGB decoded, then encoded again), stored at this image's precision (written
     /// texel by texel: no float copy of the level).
     pub fn downsample(&self) -> Image {
+        match &self.texels {
+            Texels::U8(source) => self.downsample_u8(source),
+            _ => self.downsample_texel_by_texel(),
+        }
+    }
+
+    /// [`Image::downsample`] at any precision, each texel read through [`Image::value`].
+    fn downsample_texel_by_texel(&self) -> Image {
         let (w, h) = ((self.width / 2).max(1), (self.height / 2).max(1));
         let c = self.channels;
         let n = w * h * c;
@@ -322,12 +330,71 @@ impl Image {
         }
         Image { width: w, height: h, channels: c, srgb: self.srgb, texels }
     }
+
+    /// [`Image::downsample`] of 8-bit texels, bit for bit: the same sums of the same linear
+    /// values in the same order, read through one table per channel instead of
+    /// [`Image::value`]'s per-texel dispatch (mip chains of 8-bit textures were most of a
+    /// textured scene's preparation).
+    fn downsample_u8(&self, source: &[u8]) -> Image {
+        let (w, h) = ((self.width / 2).max(1), (self.height / 2).max(1));
+        let c = self.channels;
+        let raw: [f32; 256] = std::array::from_fn(|i| f32::from(i as u8) * (1.0 / 255.0));
+        let srgb_of: [bool; 4] = std::array::from_fn(|k| self.srgb && self.is_colour(k));
+        let tables: [&[f32; 256]; 4] = srgb_of.map(|srgb| if srgb { &*SRGB_U8 } else { &raw });
+        let row = self.width * c;
+        let mut out = Vec::with_capacity(w * h * c);
+        for y in 0..h {
+            let rows = [(2 * y).min(self.height - 1) * row, (2 * y + 1).min(self.height - 1) * row];
+            for x in 0..w {
+                let cols = [(2 * x).min(self.width - 1) * c, (2 * x + 1).min(self.width - 1) * c];
+                for k in 0..c {
+                    let table = tables[k];
+                    let mut sum = 0.0;
+                    for &r in &rows {
+                        for &col in &cols {
+                            sum += table[usize::from(source[r + col + k])];
+                        }
+                    }
+                    let v = 0.25 * sum;
+                    out.push(if srgb_of[k] { nearest_srgb_u8(v) } else { round_unit_to_u8(v) });
+                }
+            }
+        }
+        Image { width: w, height: h, channels: c, srgb: self.srgb, texels: Texels::U8(out) }
+    }
 }
+
+/// `(v.clamp(0, 1) * 255).round() as u8` exactly, without a call to `roundf`: the scaled
+/// value lies in `[0, 255]`, where its fraction is exact.
+#[inline]
+fn round_unit_to_u8(v: f32) -> u8 {
+    let x = v.clamp(0.0, 1.0) * 255.0;
+    let whole = x as u8;
+    if x - f32::from(whole) >= 0.5 { whole + 1 } else { whole }
+}
+
+/// Buckets of linear `[0, 1]` in [`SRGB_U8_FIRST_AT_LEAST`].
+const SRGB_BUCKETS: usize = 4096;
+
+/// Per bucket `j` of linear `[0, 1]`, the first 8-bit sRGB code whose linear value is at least
+/// `j / SRGB_BUCKETS`: where [`nearest_srgb_u8`]'s search starts (a step or two from its end).
+static SRGB_U8_FIRST_AT_LEAST: LazyLock<[u8; SRGB_BUCKETS]> = LazyLock::new(|| {
+    std::array::from_fn(|j| SRGB_U8.partition_point(|&t| t < j as f32 / SRGB_BUCKETS as f32).min(255) as u8)
+});
 
 /// The 8-bit sRGB code whose table entry is nearest linear `v` (what the lookup reads back).
 fn nearest_srgb_u8(v: f32) -> u8 {
     let table = &*SRGB_U8;
-    let above = table.partition_point(|&t| t < v).min(255);
+    // The first entry not below `v` (`partition_point`), searched from its bucket's.
+    let above = if (0.0..1.0).contains(&v) {
+        let mut i = usize::from(SRGB_U8_FIRST_AT_LEAST[(v * SRGB_BUCKETS as f32) as usize % SRGB_BUCKETS]);
+        while i < 255 && table[i] < v {
+            i += 1;
+        }
+        i
+    } else {
+        table.partition_point(|&t| t < v).min(255)
+    };
     let below = above.saturating_sub(1);
     (if (table[above] - v).abs() < (v - table[below]).abs() { above } else { below }) as u8
 }
@@ -863,6 +930,50 @@ mod tests {
             assert_eq!((level.width, level.height), (1, 1), "the chain ends at 1x1");
             let per = bytes as f64 / (w * h * c) as f64;
             assert!(per <= 1.4, "{w}x{h}x{c}: {per} bytes per texel and channel");
+        }
+    }
+
+    #[test]
+    fn eight_bit_mips_are_bit_identical_to_texel_by_texel_averaging() {
+        let mut seed = 12345u32;
+        for (w, h) in [(7, 5), (64, 33), (1, 9), (2, 2)] {
+            for c in 1..=4 {
+                for srgb in [false, true] {
+                    let texels = (0..w * h * c)
+                        .map(|_| {
+                            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                            (seed >> 24) as u8
+                        })
+                        .collect();
+                    let image = Image { width: w, height: h, channels: c, srgb, texels: Texels::U8(texels) };
+                    assert_eq!(
+                        image.downsample().texels,
+                        image.downsample_texel_by_texel().texels,
+                        "{w}x{h}x{c} {srgb}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bucketed_srgb_encoding_matches_a_full_binary_search_and_rounding() {
+        let searched = |v: f32| {
+            let table = &*SRGB_U8;
+            let above = table.partition_point(|&t| t < v).min(255);
+            let below = above.saturating_sub(1);
+            (if (table[above] - v).abs() < (v - table[below]).abs() { above } else { below }) as u8
+        };
+        let entries = SRGB_U8
+            .iter()
+            .flat_map(|&t| [t, f32::from_bits(t.to_bits() + 1), f32::from_bits(t.to_bits().wrapping_sub(1))]);
+        let midpoints = SRGB_U8.windows(2).map(|w| 0.5 * (w[0] + w[1]));
+        let grid = (0..=100_000).map(|i| i as f32 / 100_000.0);
+        for v in entries.chain(midpoints).chain(grid).chain([-0.5, 0.0, 1.0, 1.5, f32::NAN]) {
+            assert_eq!(nearest_srgb_u8(v), searched(v), "{v}");
+        }
+        for v in (0..=255 * 64).map(|i| i as f32 / (255.0 * 64.0)).chain([-1.0, 2.0, f32::NAN]) {
+            assert_eq!(round_unit_to_u8(v), (v.clamp(0.0, 1.0) * 255.0).round() as u8, "{v}");
         }
     }
 

@@ -105,8 +105,17 @@ pub fn bench_scale() -> Result<String, String> {
         mode: LayerMode::Stochastic,
         ..Default::default()
     };
+    // Composition alone (parse, stage, bindings), per prim, for the linearity line.
+    let mut compose_us_per_prim = Vec::new();
     for count in [200usize, 2000, 20000] {
         let path = write(&format!("spheres{count}.usda"), &scale_scene(count, compositions, "m.ash"))?;
+        let start = Instant::now();
+        let mut session = Session::open_default(SceneSource::File(path.clone()));
+        if session.composition().is_none() {
+            return Err(diag_error("cannot compose the spheres", session.diagnostics(), session.sources()));
+        }
+        compose_us_per_prim.push(ms_since(start) * 1e3 / count as f64);
+        drop(session);
         let start = Instant::now();
         let loaded = load_scene(&path)?;
         let load_ms = ms_since(start);
@@ -119,6 +128,13 @@ pub fn bench_scale() -> Result<String, String> {
             render_s * 1e3,
             ms_since(start),
             peak_rss_mib()
+        );
+    }
+    if let [_, two_thousand, twenty_thousand] = compose_us_per_prim[..] {
+        let _ = writeln!(
+            out,
+            "  composition (parse, stage, bindings) per prim: {two_thousand:.1} us at 2000, {twenty_thousand:.1} us at 20000 (ratio {:.2}; 1 is linear)",
+            twenty_thousand / two_thousand
         );
     }
     let n = 700;

@@ -119,7 +119,7 @@ impl<'g> Emitter<'g> {
             *self.degenerate += 1;
             return;
         }
-        let ng = (cross / len2.sqrt()).as_vec3();
+        let ng = flat_normal(wp);
         let longest = (b - a).length().max((c - b).length()).max((a - c).length());
         if longest < MIN_TRIANGLE_EDGE {
             let entry = self.too_small.get_or_insert((0, a, longest));

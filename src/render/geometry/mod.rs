@@ -121,6 +121,17 @@ impl Triangle {
     }
 }
 
+/// The unit normal of the triangle `p` by its winding, computed in f64 (differences and
+/// products of f32 values are exact there; an f32 cross product underflows for edges below
+/// ~1e-10 units): a triangle without shading normals has it at every corner. Not finite when
+/// `p` is degenerate.
+#[inline]
+pub fn flat_normal(p: [Vec3; 3]) -> Vec3 {
+    let [a, b, c] = p.map(|p| p.as_dvec3());
+    let cross = (b - a).cross(c - a);
+    (cross / cross.length_squared().sqrt()).as_vec3()
+}
+
 /// A renderable prim that produced triangles.
 #[derive(Clone, Debug)]
 pub struct GeomPrim {

@@ -53,7 +53,10 @@ pub fn posed_prim(
     let to_local = world.inverse() * posed.to_world;
     let normal_to_local = DMat3::from_mat4(to_local).inverse().transpose();
     let mut out = prim.clone();
-    let flat = |v: &[DVec3]| Value::TupleArray { width: 3, data: v.iter().flat_map(|p| p.to_array()).collect() };
+    let flat = |v: &[DVec3]| Value::TupleArray {
+        width: 3,
+        data: std::sync::Arc::new(v.iter().flat_map(|p| p.to_array()).collect()),
+    };
     let points: Vec<DVec3> = posed.points.iter().map(|&p| to_local.transform_point3(p)).collect();
     for attr in out.attributes.iter_mut() {
         if attr.name == "points" {

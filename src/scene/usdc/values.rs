@@ -55,7 +55,7 @@ pub(super) fn flat<E: Copy, const N: usize, T: Into<[E; N]> + Copy>(items: &[T],
         let parts: [E; N] = (*item).into();
         data.extend(parts.iter().map(|&e| f(e)));
     }
-    Value::TupleArray { width: N, data }
+    Value::TupleArray { width: N, data: data.into() }
 }
 
 pub(super) fn tuple<E: Copy, const N: usize, T: Into<[E; N]> + Copy>(item: &T, f: impl Fn(E) -> f64) -> Value {
@@ -80,24 +80,24 @@ pub(super) fn convert_value(value: &sdf::Value, base_dir: &Path, metadata: bool)
         S::Uint(x) => int(i64::from(*x)),
         S::Int64(x) => int(*x),
         S::Uint64(x) => int(i64::try_from(*x).map_err(|_| "uint64 beyond the int64 range")?),
-        S::UcharVec(v) => Value::IntArray(v.iter().map(|&x| i64::from(x)).collect()),
-        S::IntVec(v) => Value::IntArray(v.iter().map(|&x| i64::from(x)).collect()),
-        S::UintVec(v) => Value::IntArray(v.iter().map(|&x| i64::from(x)).collect()),
-        S::Int64Vec(v) => Value::IntArray(v.clone()),
-        S::Uint64Vec(v) => Value::IntArray(
+        S::UcharVec(v) => Value::IntArray(std::sync::Arc::new(v.iter().map(|&x| i64::from(x)).collect())),
+        S::IntVec(v) => Value::IntArray(std::sync::Arc::new(v.iter().map(|&x| i64::from(x)).collect())),
+        S::UintVec(v) => Value::IntArray(std::sync::Arc::new(v.iter().map(|&x| i64::from(x)).collect())),
+        S::Int64Vec(v) => Value::IntArray(std::sync::Arc::new(v.clone())),
+        S::Uint64Vec(v) => Value::IntArray(std::sync::Arc::new(
             v.iter()
                 .map(|&x| i64::try_from(x))
                 .collect::<Result<_, _>>()
                 .map_err(|_| "uint64 beyond the int64 range")?,
-        ),
+        )),
         S::Half(x) => Value::Float(h(*x)),
         S::Float(x) => Value::Float(f(*x)),
         S::Double(x) => Value::Float(*x),
-        S::HalfVec(v) => Value::FloatArray(v.iter().map(|&x| h(x)).collect()),
-        S::FloatVec(v) => Value::FloatArray(v.iter().map(|&x| f(x)).collect()),
-        S::DoubleVec(v) => Value::FloatArray(v.clone()),
+        S::HalfVec(v) => Value::FloatArray(std::sync::Arc::new(v.iter().map(|&x| h(x)).collect())),
+        S::FloatVec(v) => Value::FloatArray(std::sync::Arc::new(v.iter().map(|&x| f(x)).collect())),
+        S::DoubleVec(v) => Value::FloatArray(std::sync::Arc::new(v.clone())),
         S::TimeCode(t) => Value::Float(t.0),
-        S::TimeCodeVec(v) => Value::FloatArray(v.iter().map(|t| t.0).collect()),
+        S::TimeCodeVec(v) => Value::FloatArray(std::sync::Arc::new(v.iter().map(|t| t.0).collect())),
         S::String(s) => Value::String(s.clone()),
         S::StringVec(v) => Value::StringArray(v.clone()),
         S::Token(t) if metadata => Value::String(t.as_str().to_string()),
@@ -142,9 +142,15 @@ pub(super) fn convert_value(value: &sdf::Value, base_dir: &Path, metadata: bool)
         S::Matrix2d(m) => Value::Matrix2(m.0),
         S::Matrix3d(m) => Value::Matrix3(m.0),
         S::Matrix4d(m) => Value::Matrix(m.0),
-        S::Matrix2dVec(v) => Value::TupleArray { width: 4, data: v.iter().flat_map(|m| m.0).collect() },
-        S::Matrix3dVec(v) => Value::TupleArray { width: 9, data: v.iter().flat_map(|m| m.0).collect() },
-        S::Matrix4dVec(v) => Value::TupleArray { width: 16, data: v.iter().flat_map(|m| m.0).collect() },
+        S::Matrix2dVec(v) => {
+            Value::TupleArray { width: 4, data: std::sync::Arc::new(v.iter().flat_map(|m| m.0).collect()) }
+        }
+        S::Matrix3dVec(v) => {
+            Value::TupleArray { width: 9, data: std::sync::Arc::new(v.iter().flat_map(|m| m.0).collect()) }
+        }
+        S::Matrix4dVec(v) => {
+            Value::TupleArray { width: 16, data: std::sync::Arc::new(v.iter().flat_map(|m| m.0).collect()) }
+        }
         S::Dictionary(map) => {
             // Sorted by key: USD's dictionaries are ordered maps, and usda lists them so.
             let mut entries: Vec<(String, Value)> = Vec::with_capacity(map.len());

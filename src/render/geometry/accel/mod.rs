@@ -38,7 +38,10 @@ use obvhs::{Boundable, BvhBuildParams};
 use std::collections::HashMap;
 use std::time::Duration;
 
+mod attrs;
 mod wide;
+
+use attrs::AttrTable;
 
 // Defined below the BVH (geometry produces instances; shapes bound their own hit points), so
 // the render modules import in one direction: accel → geometry → shapes.
@@ -61,17 +64,6 @@ pub struct Hit {
     pub b1: f32,
     /// Barycentric weight of vertex 2 (triangles only).
     pub b2: f32,
-}
-
-/// What a triangle needs only after it was hit: kept apart from the positions, so the
-/// intersection loop reads 36 bytes per triangle.
-#[derive(Clone, Copy, Debug)]
-struct TriangleAttrs {
-    n: [Vec3; 3],
-    uv: [Vec2; 3],
-    /// The prim: a global prim index in the world BLAS, a prototype-local one in a prototype's.
-    prim: u32,
-    primvars: PrimvarRef,
 }
 
 /// Surface geometry at a hit, in world space.
@@ -211,7 +203,8 @@ pub struct Blas {
     /// copy in the BVH's leaf order, so a leaf's triangles are adjacent as in Embree's leaves,
     /// measured no faster beyond noise on 3·10⁵ triangles, at 36 more bytes per triangle.)
     positions: Vec<[Vec3; 3]>,
-    attrs: Vec<TriangleAttrs>,
+    /// What a hit reads besides the positions.
+    attrs: AttrTable,
     shapes: Vec<Shape>,
     /// The BVH's primitives are groups of primitives with bit-identical bounding boxes:
     /// BVH primitive `id` holds `group_members[group_start[id]..group_start[id + 1]]`,
@@ -304,18 +297,7 @@ impl Blas {
     pub fn new(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Blas {
         // The triangles are split into what the traversal reads and what a hit reads, and
         // freed, before the BVH is built (build peak memory).
-        let positions: Vec<[Vec3; 3]> = triangles.iter().map(|t| t.p).collect();
-        let attrs: Vec<TriangleAttrs> = triangles
-            .iter()
-            .map(|t| TriangleAttrs {
-                n: t.n,
-                // Parametric coordinates when the prim has none: (0,0), (1,0), (0,1).
-                uv: if t.has_uv { t.uv } else { [Vec2::ZERO, Vec2::X, Vec2::Y] },
-                prim: t.prim,
-                primvars: t.primvars,
-            })
-            .collect();
-        drop(triangles);
+        let (positions, attrs) = AttrTable::take(triangles);
         let tri_bounds = |p: &[Vec3; 3]| (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
         let mut bounds: Option<(Vec3, Vec3)> = None;
         for (lo, hi) in positions.iter().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds)) {
@@ -370,7 +352,7 @@ impl Blas {
         use std::mem::size_of;
         let bvh = self.bvh.as_ref().map_or(0, BvhSpace::bytes);
         self.positions.len() * size_of::<[Vec3; 3]>()
-            + self.attrs.len() * size_of::<TriangleAttrs>()
+            + self.attrs.bytes()
             + self.shapes.len() * size_of::<Shape>()
             + (self.group_start.len() + self.group_members.len()) * 4
             + bvh
@@ -379,8 +361,8 @@ impl Blas {
     /// The prim of primitive `index` (BLAS-local numbering in a prototype).
     fn prim_of(&self, index: u32) -> u32 {
         let i = index as usize;
-        match self.attrs.get(i) {
-            Some(a) => a.prim,
+        match self.attrs.prim(i) {
+            Some(prim) => prim,
             None => self.shapes[i - self.attrs.len()].prim,
         }
     }
@@ -473,7 +455,7 @@ impl Blas {
         let i = index as usize;
         match self.positions.get(i) {
             Some(&p) => {
-                let a = &self.attrs[i];
+                let a = self.attrs.get(i, p);
                 let b0 = 1.0 - b1 - b2;
                 let pos = p[0] * b0 + p[1] * b1 + p[2] * b2;
                 let err = (p[0] * b0).abs() + (p[1] * b1).abs() + (p[2] * b2).abs();
@@ -766,7 +748,7 @@ impl Accel {
                 } else {
                     ng
                 };
-                let a = &blas.attrs[hit.index as usize];
+                let a = blas.attrs.get(hit.index as usize, v);
                 let b0 = 1.0 - hit.b1 - hit.b2;
                 let ns = shading_normal(normal(a.n[0] * b0 + a.n[1] * hit.b1 + a.n[2] * hit.b2), ng);
                 let (dpdu, dpdv) = tangents(w, a.uv, ns);

@@ -66,7 +66,7 @@ startTimeCode = 1
     assert_eq!(m.other.len(), 2);
     let custom = m.other[0].value.as_dictionary().unwrap();
     assert_eq!(custom[0], ("tool".to_string(), Value::String("x".into())));
-    assert_eq!(custom[1].1.as_dictionary().unwrap()[0].1, Value::IntArray(vec![1, 2]));
+    assert_eq!(custom[1].1.as_dictionary().unwrap()[0].1, Value::IntArray(vec![1, 2].into()));
 }
 
 use std::path::PathBuf;
@@ -157,7 +157,7 @@ int2 i2 = (1, 2)
     let m = &layer.prims[0];
     assert_eq!(attr(m, "doubleSided").default.as_ref().unwrap().0, Value::Bool(true));
     assert!(attr(m, "doubleSided").uniform);
-    assert_eq!(attr(m, "faceVertexCounts").default.as_ref().unwrap().0, Value::IntArray(vec![4]));
+    assert_eq!(attr(m, "faceVertexCounts").default.as_ref().unwrap().0, Value::IntArray(vec![4].into()));
     let points = &attr(m, "points").default.as_ref().unwrap().0;
     assert_eq!(points.as_tuple_array().map(|(w, d)| (w, d.len(), d[8])), Some((3, 12, 100.0)));
     let st = attr(m, "primvars:st");
@@ -177,7 +177,7 @@ int2 i2 = (1, 2)
     assert_eq!(xf.map(|x| (x[0], x[13], x[14])), Some((1.0, 1.0, 5.0)));
     assert_eq!(attr(m, "q").default.as_ref().unwrap().0.as_vec4(), Some([1.0, 0.0, 0.0, 0.0]));
     assert_eq!(attr(m, "c").default.as_ref().unwrap().0.as_vec3(), Some([0.8, 0.1, 0.1]));
-    assert_eq!(attr(m, "empty").default.as_ref().unwrap().0, Value::FloatArray(vec![]));
+    assert_eq!(attr(m, "empty").default.as_ref().unwrap().0, Value::FloatArray(Default::default()));
     assert_eq!(
         attr(m, "ops").default.as_ref().unwrap().0,
         Value::TokenArray(vec!["xformOp:translate".into(), "xformOp:scale".into()])

@@ -251,10 +251,10 @@ impl ArrayAcc {
     pub(super) fn finish(self) -> Value {
         match self {
             ArrayAcc::Empty => Value::List(Vec::new()),
-            ArrayAcc::Ints(a) => Value::IntArray(a),
-            ArrayAcc::Floats(a) => Value::FloatArray(a),
+            ArrayAcc::Ints(a) => Value::IntArray(a.into()),
+            ArrayAcc::Floats(a) => Value::FloatArray(a.into()),
             ArrayAcc::Bools(a) => Value::BoolArray(a),
-            ArrayAcc::Tuples { width, data } => Value::TupleArray { width, data },
+            ArrayAcc::Tuples { width, data } => Value::TupleArray { width, data: data.into() },
             ArrayAcc::Strings(a) => Value::StringArray(a),
             ArrayAcc::Assets(a) => Value::AssetArray(a),
             ArrayAcc::Paths(a) => Value::PathArray(a),
