@@ -226,14 +226,10 @@ pub fn merge(output: &Path, parts: &[PathBuf]) -> Result<(), Failure> {
         resource_failure()
     })?;
     let start = std::time::Instant::now();
-    let read: Vec<Partial> = parts
-        .iter()
-        .map(|p| partial::read_partial(p))
-        .collect::<Result<_, _>>()
-        .map_err(|e| {
-            eprintln!("error: {e}");
-            Failure
-        })?;
+    let read: Vec<Partial> = parts.iter().map(|p| partial::read_partial(p)).collect::<Result<_, _>>().map_err(|e| {
+        eprintln!("error: {e}");
+        Failure
+    })?;
     let merged = partial::merge(&read).map_err(|e| {
         eprintln!("error: {e}");
         Failure

@@ -228,9 +228,11 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
             Some(outputs) => outputs,
             None => prepare(&output)?,
         };
-        let update = frame.map(|f| session.set_time(TimeCode::At(f as f64)));
         let frame_start = std::time::Instant::now();
-        let rendered = render_frame(args, &mut session, outputs, frame, compile_start)?;
+        let update = frame.map(|f| session.set_time(TimeCode::At(f as f64)));
+        // A later frame's "compile" is its update: new time, recompiled materials, rebuilt scene.
+        let prepare_start = if k == 0 { compile_start } else { frame_start };
+        let rendered = render_frame(args, &mut session, outputs, frame, prepare_start)?;
         if let (Some(frame), Some(update)) = (frame, update) {
             let what = if k == 0 {
                 "first frame: everything built".to_string()
@@ -366,7 +368,14 @@ fn render_frame(
             let r = split.region;
             eprintln!(
                 "error: the split (tile {},{},{},{}, samples {}..{}) is empty or outside the {}x{} image at {} spp",
-                r.x, r.y, r.width, r.height, split.samples.start, split.samples.end, settings.width, settings.height,
+                r.x,
+                r.y,
+                r.width,
+                r.height,
+                split.samples.start,
+                split.samples.end,
+                settings.width,
+                settings.height,
                 settings.spp
             );
             return Err(Failure);

@@ -265,8 +265,7 @@ fn encode_exr(image: &Image, options: &ExrOptions, out: &mut BufWriter<&File>) -
             channel
         })
         .collect();
-    let ((x, y), (display_width, display_height)) =
-        options.placement.unwrap_or(((0, 0), (image.width, image.height)));
+    let ((x, y), (display_width, display_height)) = options.placement.unwrap_or(((0, 0), (image.width, image.height)));
     let mut layer_attributes = LayerAttributes {
         layer_position: Vec2(x as i32, y as i32),
         software_name: Some(exr_text(&format!("strata {}", env!("CARGO_PKG_VERSION")))),
@@ -288,7 +287,8 @@ fn encode_exr(image: &Image, options: &ExrOptions, out: &mut BufWriter<&File>) -
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels.into_iter().collect()),
     );
-    let mut image_attributes = ImageAttributes::new(IntegerBounds::new(Vec2(0, 0), Vec2(display_width, display_height)));
+    let mut image_attributes =
+        ImageAttributes::new(IntegerBounds::new(Vec2(0, 0), Vec2(display_width, display_height)));
     // Rec.709 / sRGB primaries with a D65 white point: what strata's linear radiance is in.
     image_attributes.chromaticities = Some(Chromaticities {
         red: Vec2(0.64, 0.33),

@@ -119,7 +119,8 @@ pub fn write_partial(
     options: &ExrOptions,
 ) -> Result<(), OutputError> {
     let r = split.region;
-    if sums.region != r || sums.pixels.len() != r.width * r.height || (image.width, image.height) != (r.width, r.height) {
+    if sums.region != r || sums.pixels.len() != r.width * r.height || (image.width, image.height) != (r.width, r.height)
+    {
         return Err(OutputError { path: path.to_path_buf(), message: "the sums are not the split's pixels".into() });
     }
     let mut file = image.clone();
@@ -315,15 +316,19 @@ pub fn read_partial(path: &Path) -> Result<Partial, String> {
             _ => Err(fail(format!("no FLOAT channel `{SUM}{name}`"))),
         }
     };
-    let limbs = |name: &str| -> Result<Vec<&[u32]>, String> { (0..LIMBS).map(|k| u32s(&format!("{name}.{k}"))).collect() };
+    let limbs =
+        |name: &str| -> Result<Vec<&[u32]>, String> { (0..LIMBS).map(|k| u32s(&format!("{name}.{k}"))).collect() };
     let sum_at = |limbs: &[&[u32]], i: usize| {
-        ExactSum::from_bits(limbs.iter().enumerate().fold(0u128, |acc, (k, l)| acc | (u128::from(l[i]) << (32 * k))) as i128)
+        ExactSum::from_bits(
+            limbs.iter().enumerate().fold(0u128, |acc, (k, l)| acc | (u128::from(l[i]) << (32 * k))) as i128
+        )
     };
     let (counts, hits, depth) = (u32s("samples")?, u32s("hits")?, f32s("depth")?);
     let (distance, nearest_sample) = (f32s("nearest.distance")?, u32s("nearest.sample")?);
     let builtin: Vec<Vec<&[u32]>> = BUILTIN_SUMS.iter().map(|n| limbs(n)).collect::<Result<_, _>>()?;
     let integer = layout.integer();
-    let custom: Vec<Vec<&[u32]>> = (0..integer.len()).map(|k| limbs(&format!("channel{k}"))).collect::<Result<_, _>>()?;
+    let custom: Vec<Vec<&[u32]>> =
+        (0..integer.len()).map(|k| limbs(&format!("channel{k}"))).collect::<Result<_, _>>()?;
     let coverage_lists = |layer: &str| -> Result<Vec<(&[u32], Vec<&[u32]>)>, String> {
         let mut lists = Vec::new();
         while find(&format!("{layer}.{}.index", lists.len())).is_some() {
@@ -373,7 +378,11 @@ fn single_run_options(
         .filter_map(|k| text(&k).map(|v| (k, v)))
         .collect();
     strings.sort();
-    let half = layer.channel_data.list.iter().any(|c| c.name.to_string() == "R" && matches!(c.sample_data, FlatSamples::F16(_)));
+    let half = layer
+        .channel_data
+        .list
+        .iter()
+        .any(|c| c.name.to_string() == "R" && matches!(c.sample_data, FlatSamples::F16(_)));
     let a = &layer.attributes;
     ExrOptions {
         half,
@@ -431,7 +440,9 @@ pub fn merge(parts: &[Partial]) -> Result<Merged, String> {
                 s.fingerprint
             ));
         }
-        if part.layout.channels != layout.channels || part.layout.material_ids.is_some() != layout.material_ids.is_some() {
+        if part.layout.channels != layout.channels
+            || part.layout.material_ids.is_some() != layout.material_ids.is_some()
+        {
             return Err(format!("`{}` has other channels than `{}`", part.path.display(), first.path.display()));
         }
         join_ids(&mut layout.object_ids, &part.layout.object_ids)
@@ -485,7 +496,8 @@ pub fn merge(parts: &[Partial]) -> Result<Merged, String> {
             pixels[(r.y + i / r.width) * w + r.x + i % r.width].merge(px, &integer);
         }
     }
-    let sums = WindowSums { region: Region { x: 0, y: 0, width: w, height: h }, samples: vec![0..spp], pixels, integer };
+    let sums =
+        WindowSums { region: Region { x: 0, y: 0, width: w, height: h }, samples: vec![0..spp], pixels, integer };
     let image = image_from_layout(&layout, &sums);
     Ok(Merged { image, options: first.options.clone(), sums })
 }
