@@ -158,8 +158,38 @@ enum Command {
         strict: bool,
         /// The time code to read animated attributes at: a number or `default` (default: the
         /// stage's startTimeCode when it has time samples, else the default time).
-        #[arg(long, value_name = "TIME")]
+        #[arg(long, value_name = "TIME", conflicts_with = "frames")]
         time: Option<strata::scene::TimeCode>,
+        /// Render only samples A..B (half-open) of each pixel's `--spp`: writes a partial EXR
+        /// that `strata merge` combines with the other parts, bit for bit.
+        #[arg(long, value_name = "A..B", value_parser = parse_sample_range)]
+        samples: Option<std::ops::Range<u32>>,
+        /// Render only the pixels of a region, X,Y,W,H from the top-left corner: writes a
+        /// partial EXR that `strata merge` combines with the other parts.
+        #[arg(long, value_name = "X,Y,W,H", value_parser = parse_tile)]
+        tile: Option<strata::render::Region>,
+        /// Render in passes of this many samples per pixel and write a checkpoint
+        /// (`OUT.checkpoint.exr`) after each; `--resume` continues from it.
+        #[arg(long, value_name = "SAMPLES", value_parser = clap::value_parser!(u32).range(1..))]
+        checkpoint: Option<u32>,
+        /// Continue from the checkpoint beside the output, if there is one; the result is the
+        /// image an uninterrupted run writes.
+        #[arg(long)]
+        resume: bool,
+        /// Render frames FIRST-LAST[xSTEP] (e.g. 1001-1100x2) with one preparation; `-o`
+        /// numbers each frame with its run of `#` (`shot.####.exr`).
+        #[arg(long, value_name = "FIRST-LAST[xSTEP]", value_parser = cli::farm::Frames::parse)]
+        frames: Option<cli::farm::Frames>,
+    },
+    /// Merge partial EXRs (`strata render --samples`/`--tile`) into the EXR and PNG one run
+    /// writes, bit for bit; refuses parts of other renders, overlapping or missing parts.
+    Merge {
+        /// The EXR to write (the PNG preview goes beside it).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// The partial EXRs.
+        #[arg(required = true)]
+        parts: Vec<PathBuf>,
     },
     /// Measure shading and rendering cost: JIT vs interpreter vs hand-written Rust, compile
     /// time vs graph size, render time and error vs layer count.
@@ -337,7 +367,7 @@ fn main() -> ExitCode {
     // signal-killed process would. ctrlc runs this on its own thread, not in the handler.
     let _ = ctrlc::set_handler(|| {
         strata::render::film::output::remove_temporary_files();
-        std::process::exit(130);
+        std::process::exit(i32::from(cli::EXIT_INTERRUPTED));
     });
     let defaults = strata::input::InputLimits::default();
     strata::input::set_limits(strata::input::InputLimits {
@@ -373,6 +403,11 @@ fn main() -> ExitCode {
             no_default_lights,
             strict,
             time,
+            samples,
+            tile,
+            checkpoint,
+            resume,
+            frames,
         } => cli::render(&cli::RenderArgs {
             scene,
             output,
@@ -406,7 +441,13 @@ fn main() -> ExitCode {
             },
             strict,
             time,
+            samples,
+            tile,
+            checkpoint,
+            resume,
+            frames,
         }),
+        Command::Merge { output, parts } => cli::farm::merge(&output, &parts),
         Command::Compile { file, output } => cli::compile(&file, &output),
         Command::Bench { what } => {
             let report = match what {
@@ -476,7 +517,28 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(cli::Failure) => ExitCode::FAILURE,
+        Err(cli::Failure) => ExitCode::from(cli::exit_code()),
+    }
+}
+
+/// Parses `A..B`, a half-open range of sample indices.
+fn parse_sample_range(text: &str) -> Result<std::ops::Range<u32>, String> {
+    let (a, b) = text.split_once("..").ok_or("expected A..B, e.g. 0..32")?;
+    let parse = |s: &str| s.trim().parse::<u32>().map_err(|_| format!("`{s}` is not a sample index"));
+    let (a, b) = (parse(a)?, parse(b)?);
+    if a < b { Ok(a..b) } else { Err(format!("the range {a}..{b} is empty")) }
+}
+
+/// Parses `X,Y,W,H` (a region of pixels; width and height at least 1).
+fn parse_tile(text: &str) -> Result<strata::render::Region, String> {
+    let numbers: Vec<usize> = text
+        .split(',')
+        .map(|s| s.trim().parse::<usize>().map_err(|_| format!("`{s}` is not a whole number")))
+        .collect::<Result<_, _>>()?;
+    match numbers[..] {
+        [x, y, width, height] if width > 0 && height > 0 => Ok(strata::render::Region { x, y, width, height }),
+        [_, _, _, _] => Err("the tile is empty".into()),
+        _ => Err("expected X,Y,W,H, e.g. 0,0,320,240".into()),
     }
 }
 

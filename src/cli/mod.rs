@@ -35,9 +35,33 @@ macro_rules! println {
     }};
 }
 
+// After the print macros, which it uses.
+pub mod farm;
+
 /// A command failed; its diagnostics were already printed.
 #[derive(Debug)]
 pub struct Failure;
+
+/// Exit code of bad input: a scene, substance or setting with errors, parts that do not merge.
+pub const EXIT_BAD_INPUT: u8 = 1;
+/// Exit code of a resource failure: an output or checkpoint that cannot be written.
+pub const EXIT_RESOURCE: u8 = 3;
+/// Exit code of an interrupted run (SIGINT, SIGTERM, SIGHUP): as a shell reports SIGINT.
+pub const EXIT_INTERRUPTED: u8 = 130;
+
+/// Set when a failure was the machine's, not the input's ([`EXIT_RESOURCE`]).
+static RESOURCE_FAILED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// A failure of the machine (disk, threads) rather than of the input: exits [`EXIT_RESOURCE`].
+pub fn resource_failure() -> Failure {
+    RESOURCE_FAILED.store(true, std::sync::atomic::Ordering::Relaxed);
+    Failure
+}
+
+/// The exit code of a failed command.
+pub fn exit_code() -> u8 {
+    if RESOURCE_FAILED.load(std::sync::atomic::Ordering::Relaxed) { EXIT_RESOURCE } else { EXIT_BAD_INPUT }
+}
 
 /// Prints diagnostics to stderr and fails if any is an error.
 fn report(diags: &Diagnostics, sources: &SourceMap) -> Result<(), Failure> {
@@ -146,9 +170,21 @@ pub struct RenderArgs {
     pub strict: bool,
     /// The time code to render (`--time`; `None`: [`Stage::opening_time`]).
     pub time: Option<TimeCode>,
+    /// Render only these samples of each pixel (`--samples A..B`): a partial file.
+    pub samples: Option<std::ops::Range<u32>>,
+    /// Render only this region (`--tile X,Y,W,H`): a partial file.
+    pub tile: Option<strata::render::Region>,
+    /// Render in passes of this many samples, each followed by a checkpoint (`--checkpoint`).
+    pub checkpoint: Option<u32>,
+    /// Continue from the checkpoint beside the output (`--resume`).
+    pub resume: bool,
+    /// Render these frames (`--frames`), the output's `#` run numbering each.
+    pub frames: Option<farm::Frames>,
 }
 
-/// `strata render [SCENE] -o OUT.exr …`
+/// `strata render [SCENE] -o OUT.exr …`: one image, a split of it (`--samples`, `--tile`:
+/// a partial file), in checkpointed passes (`--checkpoint`, `--resume`), or a frame range
+/// (`--frames`, one session for every frame).
 pub fn render(args: &RenderArgs) -> Result<(), Failure> {
     // Only ever write `.exr` (and its `.png` beside it), so a slip of `-o` cannot replace the
     // scene or a substance file.
@@ -156,31 +192,113 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         eprintln!("error: the output must be an .exr file, not `{}`", args.output.display());
         return Err(Failure);
     }
+    let frames: Vec<Option<i64>> = match &args.frames {
+        Some(frames) => frames.list().into_iter().map(Some).collect(),
+        None => vec![None],
+    };
+    let output_of = |frame: Option<i64>| match frame {
+        Some(frame) => farm::frame_path(&args.output, frame),
+        None => Some(args.output.clone()),
+    };
+    let Some(first_output) = output_of(frames[0]) else {
+        eprintln!("error: with --frames the output needs a `#` run for the frame number, e.g. `shot.####.exr`");
+        return Err(Failure);
+    };
     // Both outputs' temporaries are created before anything else: an unwritable directory,
     // or an `OUT.png` that is a directory, fails now rather than after the render.
-    let outputs = match strata::render::prepare_outputs(&args.output) {
-        Ok(outputs) => outputs,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return Err(Failure);
-        }
-    };
+    let mut first_outputs = Some(prepare(&first_output)?);
     let compile_start = std::time::Instant::now();
+    let time = frames[0].map(|f| TimeCode::At(f as f64)).or(args.time);
     let options = SessionOptions {
         backend: args.backend,
         passes: PassOptions { optimize: args.optimize },
-        time: args.time,
+        time,
         strict: args.strict,
         limits: None,
     };
     let mut session = Session::open(SceneSource::from_path(args.scene.as_deref()), options);
-    let mut settings = args.settings.clone();
-    let mut prepared = false;
-    let compiled = session.compile().is_some();
-    if compiled {
+    if session.compile().is_some() {
         session.lint_slots();
     }
-    if compiled && let Some(view) = session.view(args.camera.as_deref()) {
+    let start = std::time::Instant::now();
+    let before = session.stats().clone();
+    for (k, &frame) in frames.iter().enumerate() {
+        let output = output_of(frame).unwrap_or_else(|| args.output.clone());
+        let outputs = match first_outputs.take() {
+            Some(outputs) => outputs,
+            None => prepare(&output)?,
+        };
+        let frame_start = std::time::Instant::now();
+        let update = frame.map(|f| session.set_time(TimeCode::At(f as f64)));
+        // A later frame's "compile" is its update: new time, recompiled materials, rebuilt scene.
+        let prepare_start = if k == 0 { compile_start } else { frame_start };
+        let rendered = render_frame(args, &mut session, outputs, frame, prepare_start)?;
+        if let (Some(frame), Some(update)) = (frame, update) {
+            let what = if k == 0 {
+                "first frame: everything built".to_string()
+            } else if !update.recomposed {
+                "nothing animated changed".to_string()
+            } else {
+                format!(
+                    "{} material(s) recompiled, scene {}",
+                    update.recompiled,
+                    if update.geometry_rebuilt || rendered.rebuilt { "rebuilt (geometry, BVH)" } else { "kept" }
+                )
+            };
+            eprintln!(
+                "frame {frame} ({}/{}): {} in {:.2} s ({what})",
+                k + 1,
+                frames.len(),
+                output.display(),
+                frame_start.elapsed().as_secs_f64()
+            );
+        }
+    }
+    if frames.len() > 1 {
+        let after = session.stats();
+        let seconds = start.elapsed().as_secs_f64();
+        eprintln!(
+            "rendered {} frames in {seconds:.2} s ({:.2} s a frame): stage read {} time(s), {} material(s) compiled, \
+             render scene built {} time(s) and rebound {} time(s)",
+            frames.len(),
+            seconds / frames.len() as f64,
+            after.stage_reads,
+            after.materials_compiled,
+            after.scene_builds - before.scene_builds,
+            after.scene_rebinds - before.scene_rebinds
+        );
+    }
+    Ok(())
+}
+
+/// The outputs of `path`, or the failure to create them (a resource failure).
+fn prepare(path: &Path) -> Result<strata::render::PreparedOutputs, Failure> {
+    strata::render::prepare_outputs(path).map_err(|e| {
+        eprintln!("error: {e}");
+        resource_failure()
+    })
+}
+
+/// What one frame's render did.
+struct Rendered {
+    /// The render scene was built again because the view (an animated camera) changed.
+    rebuilt: bool,
+}
+
+/// Renders the session's current time into `outputs` (a partial file for a split).
+fn render_frame(
+    args: &RenderArgs,
+    session: &mut Session,
+    outputs: strata::render::PreparedOutputs,
+    frame: Option<i64>,
+    compile_start: std::time::Instant,
+) -> Result<Rendered, Failure> {
+    let mut settings = args.settings.clone();
+    let mut prepared = false;
+    let builds = session.stats().scene_builds;
+    if session.compile().is_some()
+        && let Some(view) = session.view(args.camera.as_deref())
+    {
         if let (false, Some((w, h))) = (args.resolution_given, view.resolution) {
             (settings.width, settings.height) = (w, h);
         }
@@ -196,6 +314,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         };
         prepared = session.prepare(&options).is_some();
     }
+    let rebuilt = session.stats().scene_builds > builds && builds > 0;
     let time = session.stage().map_or(TimeCode::Default, |s| s.time());
     let diags = session.take_diagnostics();
     report(&diags, session.sources())?;
@@ -213,47 +332,120 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
             eprintln!("{displacement}; BVHs and triangles {:.1} MiB", world as f64 / (1024.0 * 1024.0));
         }
     }
-    let exr_options = exr_options(args, &settings, scene, warnings, time);
+    let mut exr_options = exr_options(args, &settings, scene, warnings, time);
+    if let Some(frame) = frame {
+        exr_options.strings.push(("strata/frame".into(), frame.to_string()));
+    }
     let bar = progress_bar(settings.height as u64);
     let start = std::time::Instant::now();
     let log = LogProgress::new(start);
     let progress = |done: usize, total: usize| match &bar {
-        Some(bar) => bar.set_position(done as u64),
+        Some(bar) => bar.set_position((done * settings.height / total.max(1)) as u64),
         None => log.update(done, total),
     };
-    let pass = Pass::full(settings.clone());
-    let (image, stats) = match session.render(&pass, Some(&progress)) {
-        Ok(result) => result,
-        Err(e) => {
-            eprintln!("error: {e}");
+    let window = strata::render::Window { region: args.tile, samples: args.samples.clone() };
+    let split = window != strata::render::Window::FULL;
+    let exr_path = outputs.exr_path().to_path_buf();
+    let (image, stats, sums) = if split || args.checkpoint.is_some() || args.resume {
+        let fingerprint = session.fingerprint(&settings).ok_or(Failure)?;
+        let layout = session.sums_layout().ok_or(Failure)?;
+        let full = strata::render::Region { x: 0, y: 0, width: settings.width, height: settings.height };
+        let split = strata::render::film::partial::Split {
+            fingerprint: strata::render::film::partial::split_fingerprint(fingerprint, &exr_options),
+            width: settings.width,
+            height: settings.height,
+            spp: settings.spp,
+            region: args.tile.unwrap_or(full),
+            samples: args.samples.clone().unwrap_or(0..settings.spp),
+        };
+        if split.region.x + split.region.width > settings.width
+            || split.region.y + split.region.height > settings.height
+            || split.region.width == 0
+            || split.region.height == 0
+            || split.samples.is_empty()
+            || split.samples.end > settings.spp
+        {
+            let r = split.region;
+            eprintln!(
+                "error: the split (tile {},{},{},{}, samples {}..{}) is empty or outside the {}x{} image at {} spp",
+                r.x,
+                r.y,
+                r.width,
+                r.height,
+                split.samples.start,
+                split.samples.end,
+                settings.width,
+                settings.height,
+                settings.spp
+            );
             return Err(Failure);
         }
+        let passes = farm::Passes {
+            settings: &settings,
+            window,
+            every: args.checkpoint,
+            resume: args.resume,
+            checkpoint: farm::checkpoint_path(outputs.exr_path()),
+            split,
+            layout: &layout,
+            options: &exr_options,
+        };
+        let (image, stats, sums) = farm::render_passes(session, &passes, &progress)?;
+        (image, stats, Some((sums, passes.split.clone(), layout.clone(), passes.checkpoint.clone())))
+    } else {
+        let pass = Pass::full(settings.clone());
+        let (image, stats) = match session.render(&pass, Some(&progress)) {
+            Ok(result) => result,
+            Err(e) => {
+                eprintln!("error: {e}");
+                return Err(Failure);
+            }
+        };
+        (image, stats, None)
     };
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }
     let seconds = start.elapsed().as_secs_f64();
     let write_start = std::time::Instant::now();
-    let png = match outputs.write_with(&image, &exr_options) {
-        Ok(png) => png,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return Err(Failure);
+    let written = match &sums {
+        Some((sums, split_info, layout, _)) if split => {
+            // A partial file only: the PNG of a split would be a fragment.
+            drop(outputs);
+            strata::render::film::partial::write_partial(&exr_path, &image, sums, layout, split_info, &exr_options)
+                .map(|()| "no PNG for a split".to_string())
         }
+        _ => outputs.write_with(&image, &exr_options).map(|png| png.display().to_string()),
     };
+    let png = written.map_err(|e| {
+        eprintln!("error: {e}");
+        resource_failure()
+    })?;
+    if let Some((_, _, _, checkpoint)) = &sums {
+        // The output is whole: its checkpoint is no longer needed.
+        let _ = std::fs::remove_file(checkpoint);
+    }
     let write_ms = write_start.elapsed().as_secs_f64() * 1e3;
     let s = &settings;
+    let what = match (&args.tile, &args.samples) {
+        (None, None) => String::new(),
+        (tile, samples) => format!(
+            " (split: {}samples {}..{})",
+            tile.map_or(String::new(), |r| format!("tile {},{},{},{}, ", r.x, r.y, r.width, r.height)),
+            samples.as_ref().map_or(0, |r| r.start),
+            samples.as_ref().map_or(s.spp, |r| r.end)
+        ),
+    };
     // One line that always reaches the log, whatever stderr is.
     eprintln!(
-        "rendered {}x{} at {} spp in {seconds:.2} s ({} backend; compile {compile_seconds:.2} s, render {seconds:.2} s, \
-         {} samples/s): {} and {}",
+        "rendered {}x{} at {} spp{what} in {seconds:.2} s ({} backend; compile {compile_seconds:.2} s, render \
+         {seconds:.2} s, {} samples/s): {} and {png}",
         s.width,
         s.height,
         s.spp,
         args.backend,
         samples_per_second(stats.samples, seconds),
-        args.output.display(),
-        png.display()
+        exr_path.display(),
     );
     if args.stats || stats.invalid_samples() > 0 {
         eprintln!("{stats}");
@@ -271,7 +463,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
             seconds * 1e3
         );
     }
-    Ok(())
+    Ok(Rendered { rebuilt })
 }
 
 /// Fails if any of `outputs` is a file this process read as an input: `-o` naming the
@@ -345,6 +537,7 @@ fn exr_options(
             scene.material_names.iter().map(String::as_str),
         ))
         .collect(),
+        placement: None,
     }
 }
 

@@ -1,7 +1,7 @@
 //! Content hashes that decide what an update redoes: a composed material's (what its code is
 //! compiled from) and the stage's geometry (what the render scene's triangles and BVH are
-//! built from). Equal hashes mean the cached result is reused; they are never compared
-//! across processes.
+//! built from). Equal hashes mean the cached result is reused. `DefaultHasher::new()` has
+//! fixed keys, so processes of the same build agree: `Session::fingerprint` relies on it.
 
 use crate::compose::{ComposedMaterial, MaterialRef};
 use crate::front::ast::Item;

@@ -596,17 +596,52 @@ impl Session {
         Ok(crate::render::image_from_sums(&prepared.scene, &compiled.refs(), sums))
     }
 
+    /// The layout of this session's images besides their sums (custom channels, Cryptomatte
+    /// IDs): with it, sums become an image without the scene ([`crate::render::film::partial`]).
+    pub fn sums_layout(&self) -> Option<crate::render::film::SumsLayout> {
+        let (prepared, compiled) = (self.prepared.as_ref()?, self.compiled.as_ref()?);
+        Some(crate::render::film::sums_layout(&prepared.scene, &compiled.refs()))
+    }
+
+    /// A hash of what the pixels of `settings`' image depend on: the stage's geometry,
+    /// lights and camera at its time, every material's content, the scene options, the
+    /// backend and passes, and the settings but for threads. Equal in every process of the
+    /// same build that renders the same image, so a farm's parts can be checked to belong
+    /// together. Texture texels are not hashed (only the files' names, in the materials).
+    pub fn fingerprint(&self, settings: &RenderSettings) -> Option<u64> {
+        use std::hash::{DefaultHasher, Hash, Hasher};
+        let (prepared, compiled) = (self.prepared.as_ref()?, self.compiled.as_ref()?);
+        let mut hasher = DefaultHasher::new();
+        prepared.geometry.hash(&mut hasher);
+        self.compiled_hashes.hash(&mut hasher);
+        compiled.material_names.hash(&mut hasher);
+        let settings = RenderSettings { threads: None, ..settings.clone() };
+        format!("{:?}{settings:?}{:?}{:?}", prepared.options, self.options.backend, self.options.passes)
+            .hash(&mut hasher);
+        Some(hasher.finish())
+    }
+
     /// Moves the stage to `time` (if given and different), redoing what depends on it.
     fn render_at(&mut self, time: Option<TimeCode>) {
-        if let Some(time) = time
-            && self.stage.as_ref().is_some_and(|s| s.time() != time)
-        {
-            self.options.time = Some(time);
-            if let Some(stage) = &mut self.stage {
-                stage.set_time(time);
-            }
-            self.redo_from_composition(ChangeKind::Value, Instant::now());
+        if let Some(time) = time {
+            self.set_time(time);
         }
+    }
+
+    /// Moves the stage to `time` (a frame of a shot), redoing only what depends on it, as a
+    /// change would: animated values are read again, compositions whose content changed are
+    /// recompiled, and the render scene is rebound when no geometry, light or camera moved,
+    /// rebuilt (BVH included) when one did. Nothing happens when the stage is at `time`.
+    pub fn set_time(&mut self, time: TimeCode) -> UpdateReport {
+        let start = Instant::now();
+        if !self.stage.as_ref().is_some_and(|s| s.time() != time) {
+            return UpdateReport::nothing(ChangeKind::Value);
+        }
+        self.options.time = Some(time);
+        if let Some(stage) = &mut self.stage {
+            stage.set_time(time);
+        }
+        self.redo_from_composition(ChangeKind::Value, start)
     }
 
     /// The wired IR of renderable prim `prim`'s material (`strata ir`), or with `lowered`

@@ -8,6 +8,7 @@
 
 pub mod cryptomatte;
 pub mod output;
+pub mod partial;
 pub mod sum;
 
 use crate::abi::ChannelKind;
@@ -558,21 +559,73 @@ pub fn render_sums(
 /// The image of merged window sums (see [`render`] for the channels): `scene` and `materials`
 /// must be those the sums were rendered with.
 pub fn image_from_sums(scene: &Scene, materials: &[&dyn MaterialCode], sums: &WindowSums) -> Image {
-    let (channels, channel_floats, _) = channel_layout(materials, &mut Vec::new());
+    image_from_layout(&sums_layout(scene, materials), sums)
+}
+
+/// What turns a window's sums into its image besides the sums themselves: the custom
+/// channels and the Cryptomatte IDs. A farm's partial files carry it, so merging them needs
+/// no scene ([`partial`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SumsLayout {
+    /// The custom channels, sorted by name, as the image lists them.
+    pub channels: Vec<(String, ChannelKind)>,
+    /// Each prim index's Cryptomatte ID (only the indices the sums name need be right).
+    pub object_ids: Vec<f32>,
+    /// Each material index's ID, when the image has a material Cryptomatte layer.
+    pub material_ids: Option<Vec<f32>>,
+}
+
+impl SumsLayout {
+    /// Custom-channel floats per pixel.
+    pub fn channel_floats(&self) -> usize {
+        self.channels.iter().map(|(_, kind)| width(*kind)).sum()
+    }
+
+    /// Which custom-channel floats belong to integer channels.
+    pub fn integer(&self) -> Vec<bool> {
+        self.channels.iter().flat_map(|(_, kind)| vec![*kind == ChannelKind::Integer; width(*kind)]).collect()
+    }
+}
+
+/// The layout of the images `scene` renders through `materials`.
+pub fn sums_layout(scene: &Scene, materials: &[&dyn MaterialCode]) -> SumsLayout {
+    let (channels, _, _) = channel_layout(materials, &mut Vec::new());
     let (object_ids, material_ids) = crypto_ids(scene, materials);
+    SumsLayout {
+        channels: channels.into_iter().map(|c| (c.name, c.kind)).collect(),
+        object_ids,
+        material_ids: (!material_ids.is_empty()).then_some(material_ids),
+    }
+}
+
+/// The image of merged window sums with `layout`'s channels and IDs.
+pub fn image_from_layout(layout: &SumsLayout, sums: &WindowSums) -> Image {
+    let mut offset = 0;
+    let channels: Vec<ImageChannel> = layout
+        .channels
+        .iter()
+        .map(|(name, kind)| {
+            let c = ImageChannel { name: name.clone(), kind: *kind, offset };
+            offset += width(*kind);
+            c
+        })
+        .collect();
+    let channel_floats = offset;
+    let material_ids = layout.material_ids.as_deref().unwrap_or(&[]);
+    let material_crypto = layout.material_ids.is_some();
     let region = sums.region;
     let rows: Vec<Row> = sums
         .pixels
         .chunks(region.width.max(1))
         .map(|pixels| {
-            let mut row = Row::new(region.width, channel_floats, !material_ids.is_empty(), false);
+            let mut row = Row::new(region.width, channel_floats, material_crypto, false);
             for (rx, px) in pixels.iter().enumerate() {
-                row.finish(rx, &mut px.clone(), &sums.integer, &object_ids, &material_ids);
+                row.finish(rx, &mut px.clone(), &sums.integer, &layout.object_ids, material_ids);
             }
             row
         })
         .collect();
-    assemble(&rows, region.width, region.height, &channels, channel_floats, !material_ids.is_empty())
+    assemble(&rows, region.width, region.height, &channels, channel_floats, material_crypto)
 }
 
 /// The Cryptomatte IDs of the scene's prims and, when the scene names every material, of its

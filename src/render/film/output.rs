@@ -183,12 +183,21 @@ pub struct ExrOptions {
     pub clipping: Option<(f32, f32)>,
     /// Extra string attributes (render settings), written as given.
     pub strings: Vec<(String, String)>,
+    /// Where the pixels sit when they are a region of a larger image: the region's top-left
+    /// corner (the data window's) and the whole image's size (the display window). `None`:
+    /// the pixels are the whole image.
+    pub placement: Option<((usize, usize), (usize, usize))>,
 }
 
 /// Whether a channel is stored as half under `--half`: `R G B A`, `albedo.*`, `N.*` and custom
 /// colour channels (`name.R/G/B`). Depth (`Z`), position (`P.*`), Cryptomatte, custom scalar
 /// channels (any range, so kept exact) and integer channels stay 32-bit.
 pub fn is_half_channel(name: &str) -> bool {
+    // A partial file's exact sums (`strata.sum.*`, see `partial`) are integers and floats
+    // that must survive bit for bit.
+    if name.starts_with("strata.") {
+        return false;
+    }
     if matches!(name, "R" | "G" | "B" | "A") || name.starts_with("albedo.") || name.starts_with("N.") {
         return true;
     }
@@ -218,7 +227,7 @@ fn imath_matrix(m: glam::Mat4) -> [f32; 16] {
 
 /// The attributes every strata EXR carries, whatever the render: colour space, software, and
 /// what the vector and depth channels mean.
-fn standard_attributes() -> Vec<(&'static str, String)> {
+pub(super) fn standard_attributes() -> Vec<(&'static str, String)> {
     vec![
         ("strata/colorSpace", "lin_rec709 (linear Rec.709 primaries, D65 white)".into()),
         (
@@ -256,7 +265,9 @@ fn encode_exr(image: &Image, options: &ExrOptions, out: &mut BufWriter<&File>) -
             channel
         })
         .collect();
+    let ((x, y), (display_width, display_height)) = options.placement.unwrap_or(((0, 0), (image.width, image.height)));
     let mut layer_attributes = LayerAttributes {
+        layer_position: Vec2(x as i32, y as i32),
         software_name: Some(exr_text(&format!("strata {}", env!("CARGO_PKG_VERSION")))),
         world_to_camera: options.world_to_camera.map(imath_matrix),
         world_to_normalized_device: options.world_to_ndc.map(imath_matrix),
@@ -276,7 +287,8 @@ fn encode_exr(image: &Image, options: &ExrOptions, out: &mut BufWriter<&File>) -
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels.into_iter().collect()),
     );
-    let mut image_attributes = ImageAttributes::new(IntegerBounds::new(Vec2(0, 0), Vec2(image.width, image.height)));
+    let mut image_attributes =
+        ImageAttributes::new(IntegerBounds::new(Vec2(0, 0), Vec2(display_width, display_height)));
     // Rec.709 / sRGB primaries with a D65 white point: what strata's linear radiance is in.
     image_attributes.chromaticities = Some(Chromaticities {
         red: Vec2(0.64, 0.33),
@@ -292,6 +304,13 @@ fn encode_exr(image: &Image, options: &ExrOptions, out: &mut BufWriter<&File>) -
 pub fn write_exr(image: &Image, path: &Path) -> Result<(), OutputError> {
     let mut tmp = TempFile::create(path)?;
     tmp.fill(|out| encode_exr(image, &ExrOptions::default(), out))?;
+    tmp.commit()
+}
+
+/// [`write_exr`] with `options`' header attributes, sample types and placement, and no PNG.
+pub fn write_exr_with(image: &Image, path: &Path, options: &ExrOptions) -> Result<(), OutputError> {
+    let mut tmp = TempFile::create(path)?;
+    tmp.fill(|out| encode_exr(image, options, out))?;
     tmp.commit()
 }
 
