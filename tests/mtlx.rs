@@ -8,11 +8,13 @@ mod common;
 
 use std::path::Path;
 use std::sync::Arc;
-use strata::abi::{Closure, ClosureKind, Globals, MaterialCode};
+use strata::abi::{Closure, ClosureKind, ClosureSum, Globals, MaterialCode};
 use strata::backend::{BackendKind, Compiler};
 use strata::compose::scene::compose_stage;
 use strata::diag::{Diagnostics, SourceMap};
 use strata::ir::wired::PassOptions;
+use strata::render::material::closure::{ClosureBsdf, LayeringMode};
+use strata::render::sampling::Rng;
 use strata::scene::Stage;
 
 const DIR: &str = "tests/fixtures/mtlx";
@@ -51,22 +53,30 @@ fn open_pbr(inputs: &str, shaders: &str) -> String {
     )
 }
 
-#[test]
-fn translation_names_the_node_definitions_and_connections_materialx_resolves() {
+/// Checks strata's translation of document `doc` (in the fixture directory) against
+/// MaterialX's own reading of it (`<doc>.expected`): every node's definition and every
+/// connection, found in the first of `materials` that has the node. Returns the stage and the
+/// number of lines checked.
+fn check_against_materialx(doc: &str, materials: &[&str]) -> (Stage, usize) {
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
-    let stage = Stage::open(Path::new(&format!("{DIR}/chess_mat.mtlx")), &mut sources, &mut diags).expect("opens");
+    let stage = Stage::open(Path::new(&format!("{DIR}/{doc}.mtlx")), &mut sources, &mut diags).expect("opens");
     assert!(diags.items().is_empty(), "{}", diags.render(&sources));
-    let expected = std::fs::read_to_string(format!("{DIR}/chess_mat.expected")).unwrap();
-    let material = "/MaterialX/Materials/M_piece";
+    let expected = std::fs::read_to_string(format!("{DIR}/{doc}.expected")).unwrap();
     // A top-level node is copied into the material; a graph's node lives in its graph.
-    let prim_path = |p: &str| format!("{material}/{p}");
+    let material_of = |p: &str| {
+        let top = p.split(['/', '.']).next().unwrap();
+        let found = materials.iter().find(|m| stage.find(&format!("/MaterialX/Materials/{m}/{top}")).is_some());
+        format!("/MaterialX/Materials/{}", found.unwrap_or_else(|| panic!("no material has {p}")))
+    };
     let mut checked = 0;
     for line in expected.lines() {
         let words: Vec<&str> = line.split(' ').collect();
         match words.as_slice() {
             ["node", path, id] => {
-                let prim = stage.prim(stage.find(&prim_path(path)).unwrap_or_else(|| panic!("no prim for {path}")));
+                let material = material_of(path);
+                let prim = stage
+                    .prim(stage.find(&format!("{material}/{path}")).unwrap_or_else(|| panic!("no prim for {path}")));
                 let got = prim.value("info:id").and_then(|v| v.as_str());
                 assert_eq!(got, Some(*id), "{path}");
                 // The shared copy under NodeGraphs names the same definitions.
@@ -77,8 +87,9 @@ fn translation_names_the_node_definitions_and_connections_materialx_resolves() {
                 checked += 1;
             }
             ["connect", input, kind, from, output] => {
+                let material = material_of(input);
                 let (path, name) = input.split_once('.').unwrap();
-                let prim = stage.prim(stage.find(&prim_path(path)).unwrap());
+                let prim = stage.prim(stage.find(&format!("{material}/{path}")).unwrap());
                 let attr = prim.attribute(&format!("inputs:{name}")).unwrap_or_else(|| panic!("no input {input}"));
                 let scope = match (*kind, path.rsplit_once('/')) {
                     ("node", Some((graph, _))) => format!("{material}/{graph}/{from}"),
@@ -95,6 +106,13 @@ fn translation_names_the_node_definitions_and_connections_materialx_resolves() {
             _ => panic!("unexpected line `{line}`"),
         }
     }
+    (stage, checked)
+}
+
+#[test]
+fn translation_names_the_node_definitions_and_connections_materialx_resolves() {
+    let (stage, checked) = check_against_materialx("chess_mat", &["M_piece"]);
+    let material = "/MaterialX/Materials/M_piece";
     assert_eq!(checked, 11, "every node and connection MaterialX reported was checked");
     // fileprefix and colorspace reach the image's file input.
     let image = stage.prim(stage.find(&format!("{material}/NG_piece/img_base")).unwrap());
@@ -386,4 +404,141 @@ fn a_document_sublayered_under_a_usd_layer_composes_its_materials() {
     let code = code.unwrap();
     assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.25, 0.75).kind), ClosureKind::Glossy);
     assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.75, 0.75).kind), ClosureKind::Metal);
+}
+
+/// `/Ball`'s material compiled by `backend`, as [`compiled`] does with the JIT.
+fn compiled_with(rest: &str, backend: BackendKind) -> (Option<Arc<dyn MaterialCode>>, String) {
+    let text = format!(
+        "#usda 1.0\ndef Sphere \"Ball\" (prepend apiSchemas = [\"MaterialBindingAPI\"]) {{ rel material:binding = </M> }}\n{rest}\n"
+    );
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let stage = Stage::from_text("scene.usda", &text, Path::new(DIR), &mut sources, &mut diags).expect("parses");
+    let c = compose_stage(&stage, &mut sources, &mut diags);
+    let code = c
+        .material_of("/Ball")
+        .and_then(|material| Compiler::new(backend, PassOptions::default()).compile(&c.library, material, &mut diags));
+    (code, diags.render(&sources))
+}
+
+/// The full closure value of `code` at the test's shading point.
+fn sum_at(code: &Arc<dyn MaterialCode>) -> ClosureSum {
+    let g = Globals {
+        n: [0.0, 0.0, 1.0],
+        ng: [0.0, 0.0, 1.0],
+        u: 0.5,
+        v: 0.5,
+        dpdu: [1.0, 0.0, 0.0],
+        ..Globals::default()
+    };
+    let mut sum = ClosureSum::default();
+    code.surface_sum(&g, 0, &mut sum).expect("evaluates");
+    sum
+}
+
+/// The closure value of a shader body that sets `bsdf`, compiled as a substance of its own.
+fn by_hand(body: &str) -> ClosureSum {
+    let lib = common::library(&format!(
+        "shader s(output closure bsdf) {{\n{body}\n}}\nsubstance by_hand {{\n    node n = s();\n    surface = n.bsdf;\n}}\n"
+    ));
+    sum_at(&common::compile_stack(&lib, &["by_hand".to_string()], BackendKind::Jit, true))
+}
+
+/// Asserts two closure values have the same terms: kinds, layering bits, weights and
+/// parameters (within `1e-6`, for roughness taken through √α).
+fn assert_same_terms(got: &ClosureSum, want: &ClosureSum) {
+    for (k, (g, w)) in got.terms.iter().zip(&want.terms).enumerate() {
+        let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-6);
+        assert!(
+            g.kind == w.kind && g.above == w.above && close(&g.weight, &w.weight) && close(&g.params, &w.params),
+            "term {k}: got {g:?}\nwant {w:?}"
+        );
+    }
+}
+
+/// The directional albedo (largest channel) of a closure value for outgoing `wo`, by BSDF
+/// sampling: (mean, standard error).
+fn directional_albedo(sum: &ClosureSum, cos: f32, n: usize) -> (f64, f64) {
+    let b = ClosureBsdf::from_sum(sum, LayeringMode::AlbedoScaling);
+    let wo = glam::Vec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
+    let mut rng = Rng::new(29, (cos * 1000.0) as u64, 0);
+    let (mut s1, mut s2) = (0.0f64, 0.0f64);
+    for _ in 0..n {
+        let uc = rng.uniform();
+        if let Some(s) = b.sample(wo, uc, rng.uniform2()) {
+            let w = (s.f.max_element() * s.wi.z.abs() / s.pdf) as f64;
+            s1 += w;
+            s2 += w * w;
+        }
+    }
+    let mean = s1 / n as f64;
+    (mean, ((s2 / n as f64 - mean * mean).max(0.0) / n as f64).sqrt())
+}
+
+#[test]
+fn a_pbrlib_graph_is_the_closure_algebra_written_by_hand() {
+    // layered_mat.mtlx (written by MaterialX): add(multiply(mix(fg = sheen, bg =
+    // layer(dielectric, oren_nayar), 0.25), 0.6), multiply(conductor, colour)) with a uniform EDF. MaterialX names the
+    // definitions and connections strata translates.
+    let (_, checked) = check_against_materialx("layered_mat", &["M_layered", "M_furnace"]);
+    assert_eq!(checked, 30, "every node and connection MaterialX reported was checked");
+    let material = "def Material \"M\" (prepend references = @layered_mat.mtlx@</MaterialX/Materials/M_layered>) {}";
+    let mut sums = Vec::new();
+    for backend in [BackendKind::Jit, BackendKind::Interp] {
+        let (code, rendered) = compiled_with(material, backend);
+        let code = code.unwrap_or_else(|| panic!("{rendered}"));
+        assert!(rendered.is_empty(), "{rendered}");
+        let mut e = [0.0; 3];
+        code.emission(&Globals::default(), 0, &mut e).unwrap();
+        assert_eq!(e, [0.5, 0.25, 0.0], "uniform_edf is the emitted radiance");
+        sums.push(sum_at(&code));
+    }
+    assert_eq!(sums[0], sums[1], "JIT and interpreter agree");
+    // The same closure in the shading language: MaterialX's mix(fg, bg, m) is mix(bg, fg, m);
+    // GGX α 0.04 is perceptual roughness 0.2, α 0.09 is 0.3; the conductor's defaults are
+    // MaterialX's (gold-like ior and extinction).
+    let want = by_hand(
+        "bsdf = mix(layer(dielectric_bsdf(color(1.0), 1.5, 0.2, \"R\"), oren_nayar_diffuse_bsdf(color(0.8, 0.5, 0.2), 0.3, 0.0)),
+                    sheen_bsdf(color(0.9, 0.9, 1.0), 0.4), 0.25) * 0.6
+               + conductor_bsdf(color(0.183, 0.421, 1.373), color(3.424, 2.346, 1.770), 0.3) * color(0.2, 0.3, 0.4);",
+    );
+    assert_same_terms(&sums[0], &want);
+    let kinds: Vec<ClosureKind> = sums[0].terms.iter().map(|t| ClosureKind::from_u32(t.kind)).collect();
+    assert_eq!(
+        &kinds[..5],
+        [
+            ClosureKind::Dielectric,
+            ClosureKind::OrenNayar,
+            ClosureKind::Sheen,
+            ClosureKind::Conductor,
+            ClosureKind::None
+        ]
+    );
+    assert_eq!(sums[0].terms[1].above, 0b1, "the Oren-Nayar base lies under the dielectric");
+}
+
+#[test]
+fn pbrlib_graphs_conserve_energy_in_a_white_furnace() {
+    // A half-weight clear coat over white Lambert (Oren-Nayar, roughness 0) reflects
+    // everything: what the coat does not reflect reaches the white base.
+    let furnace = "def Material \"M\" (prepend references = @layered_mat.mtlx@</MaterialX/Materials/M_furnace>) {}";
+    let layered = "def Material \"M\" (prepend references = @layered_mat.mtlx@</MaterialX/Materials/M_layered>) {}";
+    let sum = |text: &str| {
+        let (code, rendered) = compiled(text);
+        sum_at(&code.unwrap_or_else(|| panic!("{rendered}")))
+    };
+    let (furnace, layered) = (sum(furnace), sum(layered));
+    let mut failures = Vec::new();
+    for cos in [0.1f32, 0.4, 0.7, 1.0] {
+        let (e, se) = directional_albedo(&furnace, cos, 100_000);
+        if (e - 1.0).abs() > 0.01 + 4.0 * se {
+            failures.push(format!("coat over white at cos {cos}: {e} ± {se}, want 1"));
+        }
+        let (e, se) = directional_albedo(&layered, cos, 100_000);
+        if e > 1.0 + 4.0 * se {
+            failures.push(format!("layered graph at cos {cos}: {e} ± {se}, want ≤ 1"));
+        }
+        eprintln!("cos {cos}: furnace {:.4}, layered {e:.4}", directional_albedo(&furnace, cos, 100_000).0);
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
 }

@@ -18,6 +18,7 @@ pub fn surface_substance(id: &str) -> Option<&'static str> {
         "UsdPreviewSurface" | "ND_UsdPreviewSurface_surfaceshader" => Some("UsdPreviewSurface"),
         "ND_open_pbr_surface_surfaceshader" => Some("open_pbr_surface"),
         "ND_standard_surface_surfaceshader" | "ND_standard_surface_surfaceshader_100" => Some("standard_surface"),
+        "ND_surface" => Some("mx_surface"),
         _ => None,
     }
 }
@@ -86,9 +87,33 @@ fn variant(ty: &str) -> Option<&'static str> {
     }
 }
 
+/// pbrlib's closure nodes by definition id, and the node function each is: BSDF nodes are
+/// closures, EDFs emitted radiance as a colour (their operators are the colour nodes).
+const PBRLIB: &[(&str, &str)] = &[
+    ("ND_oren_nayar_diffuse_bsdf", "mx_oren_nayar_diffuse_bsdf"),
+    ("ND_burley_diffuse_bsdf", "mx_burley_diffuse_bsdf"),
+    ("ND_dielectric_bsdf", "mx_dielectric_bsdf"),
+    ("ND_conductor_bsdf", "mx_conductor_bsdf"),
+    ("ND_generalized_schlick_bsdf", "mx_generalized_schlick_bsdf"),
+    ("ND_sheen_bsdf", "mx_sheen_bsdf"),
+    ("ND_layer_bsdf", "mx_layer_bsdf"),
+    ("ND_mix_bsdf", "mx_mix_bsdf"),
+    ("ND_add_bsdf", "mx_add_bsdf"),
+    ("ND_multiply_bsdfC", "mx_multiply_bsdfC"),
+    ("ND_multiply_bsdfF", "mx_multiply_bsdfF"),
+    ("ND_uniform_edf", "mx_uniform_edf"),
+    ("ND_mix_edf", "mx_mix_color3"),
+    ("ND_add_edf", "mx_add_color3"),
+    ("ND_multiply_edfC", "mx_multiply_color3"),
+    ("ND_multiply_edfF", "mx_multiply_color3"),
+];
+
 /// The node function a MaterialX node id names (`mx_image_color3` for `ND_image_vector3`),
 /// if strata's library may have it; the caller checks that it does.
 pub fn node_function(id: &str) -> Option<String> {
+    if let Some((_, function)) = PBRLIB.iter().find(|(nd, _)| *nd == id) {
+        return Some((*function).into());
+    }
     let (node, types) = split_id(id)?;
     if node == "normalmap" {
         // `ND_normalmap` (1.38), `ND_normalmap_float`/`_vector2` (1.39: the type of `scale`).
@@ -209,6 +234,7 @@ const UNREAD_SURFACE_INPUTS: &[(&str, &str, &str)] = &[
     ("standard_surface", "coat_affect_roughness", "the coat does not roughen the base"),
     ("standard_surface", "thin_film_thickness", "no thin-film iridescence"),
     ("standard_surface", "thin_walled", "surfaces are never thin-walled"),
+    ("mx_surface", "thin_walled", "surfaces are never thin-walled"),
 ];
 
 /// Surface inputs that choose one closure by a threshold at 0.5 instead of blending two.
@@ -271,6 +297,49 @@ pub fn report_surface_input(
     }
 }
 
+/// Inputs of pbrlib's BSDF nodes that strata's lobes do not model, with what they do instead
+/// (`"*"`: every BSDF node). Each kind is reported once per run.
+const UNREAD_NODE_INPUTS: &[(&str, &str, &str)] = &[
+    ("*", "normal", "every lobe uses the shading normal"),
+    ("*", "tangent", "lobes are isotropic: tangents are not read"),
+    ("*", "retroreflective", "lobes are not retroreflective"),
+    ("*", "thinfilm_thickness", "no thin-film iridescence"),
+    ("*", "roughness", "lobes are isotropic: an anisotropic α is read as its geometric mean"),
+    ("ND_generalized_schlick_bsdf", "scatter_mode", "generalized_schlick_bsdf reflects only"),
+    ("ND_sheen_bsdf", "mode", "sheen is Conty and Kulla's Charlie sheen"),
+];
+
+/// Reports what a pbrlib BSDF node `id` does not honour of input `input` set to `setting`:
+/// each (input, what) kind once per run.
+pub fn report_node_input(id: &str, input: &str, setting: Setting, at: Span, diags: &mut Diagnostics) {
+    if !PBRLIB.iter().any(|(nd, _)| *nd == id && nd.ends_with("_bsdf")) {
+        return;
+    }
+    let Some((_, _, what)) =
+        UNREAD_NODE_INPUTS.iter().find(|(node, name, _)| (*node == "*" || *node == id) && *name == input)
+    else {
+        return;
+    };
+    let away = match (input, setting) {
+        (_, Setting::Driven) => input != "roughness",
+        ("roughness", Setting::Value(Value::Triple([x, y, _]))) => (x - y).abs() > 1e-6 * x.abs().max(*y),
+        ("roughness", _) => false,
+        ("scatter_mode", Setting::Value(Value::Str(m))) => m != "R",
+        ("mode", Setting::Value(Value::Str(m))) => m != "conty_kulla",
+        (_, Setting::Value(Value::Triple(v))) => v.iter().any(|c| *c != 0.0),
+        (_, Setting::Value(Value::Float(x))) => *x != 0.0,
+        (_, Setting::Value(Value::Int(i))) => *i != 0,
+        _ => false,
+    };
+    if away {
+        diags.push(
+            Diagnostic::warning(format!("MaterialX `{id}` input `{input}` is not supported: {what}"))
+                .at(at, "set here")
+                .kind(what),
+        );
+    }
+}
+
 /// A `'static` kind per unread input, so each is reported once per run.
 fn unread_kind(substance: &str, input: &str) -> &'static str {
     UNREAD_SURFACE_INPUTS
@@ -289,6 +358,7 @@ pub fn keeps_product(substance: &str, product: crate::front::ast::Product, set: 
         ("open_pbr_surface", Product::Emission) => is_set("emission_luminance"),
         ("standard_surface", Product::Normal) => is_set("normal_"),
         ("standard_surface", Product::Emission) => is_set("emission"),
+        ("mx_surface", Product::Emission) => is_set("edf"),
         _ => true,
     }
 }
@@ -309,6 +379,10 @@ mod tests {
         assert_eq!(node_function("ND_convert_vector3_vector2").as_deref(), Some("mx_convert_color3_vector2"));
         assert_eq!(node_function("ND_normalmap").as_deref(), Some("mx_normalmap_color3"));
         assert_eq!(node_function("ND_add_color4"), None);
+        // pbrlib: closures by definition id, EDFs as colours.
+        assert_eq!(node_function("ND_layer_bsdf").as_deref(), Some("mx_layer_bsdf"));
+        assert_eq!(node_function("ND_multiply_bsdfF").as_deref(), Some("mx_multiply_bsdfF"));
+        assert_eq!(node_function("ND_add_edf").as_deref(), Some("mx_add_color3"));
         assert_eq!(node_function("UsdUVTexture"), None);
     }
 

@@ -367,6 +367,82 @@ shader mx_normalmap_color3(color in_ = color(0.5, 0.5, 1.0), float scale = 1.0, 
     out = length(w) > 1e-8 ? color(normalize(w)) : color(n);
 }
 
+// ---- pbrlib: BSDF and EDF nodes on the closure built-ins ------------------------------------
+// A BSDF node is its lobe times `weight`; `layer`/`mix`/`add`/`multiply` are the closure
+// algebra (MaterialX's `mix(fg, bg, m)` is `bg·(1 − m) + fg·m`). MaterialX's microfacet
+// `roughness` is the GGX α along tangent and bitangent (a vector2, as `roughness_anisotropy`
+// makes it from a perceptual roughness); strata's lobes are isotropic and take the perceptual
+// roughness r = √α, here of the geometric mean α = √(αx αy) (compose reports anisotropy).
+// A per-lobe `normal`/`tangent` is reported by compose: every lobe uses the shading normal.
+// An EDF is its emitted radiance as a colour: `uniform_edf` is its colour, and the EDF
+// operators are the colour nodes (`ND_add_edf` is `mx_add_color3`).
+float mx_isotropic_roughness(color alpha) {
+    return sqrt(sqrt(clamp(alpha.r, 0.0, 1.0) * clamp(alpha.g, 0.0, 1.0)));
+}
+
+shader mx_oren_nayar_diffuse_bsdf(float weight = 1.0, color color_ = color(0.18), float roughness = 0.0,
+                                  color normal_ = color(0.0), int energy_compensation = 0, output closure out) {
+    out = oren_nayar_diffuse_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0), energy_compensation != 0 ? 1.0 : 0.0)
+          * clamp(weight, 0.0, 1.0);
+}
+shader mx_burley_diffuse_bsdf(float weight = 1.0, color color_ = color(0.18), float roughness = 0.0,
+                              color normal_ = color(0.0), output closure out) {
+    out = burley_diffuse_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0)) * clamp(weight, 0.0, 1.0);
+}
+shader mx_dielectric_bsdf(float weight = 1.0, color tint = color(1.0), float ior = 1.5,
+                          color roughness = color(0.05, 0.05, 0.0), int retroreflective = 0, float thinfilm_thickness = 0.0,
+                          float thinfilm_ior = 1.5, color normal_ = color(0.0), color tangent = color(0.0),
+                          string distribution = "ggx", string scatter_mode = "R", output closure out) {
+    out = dielectric_bsdf(clamp(tint, 0.0, 1.0), clamp(ior, 1.0, 4.0), mx_isotropic_roughness(roughness), scatter_mode)
+          * clamp(weight, 0.0, 1.0);
+}
+shader mx_conductor_bsdf(float weight = 1.0, color ior = color(0.183, 0.421, 1.373), color extinction = color(3.424, 2.346, 1.770),
+                         color roughness = color(0.05, 0.05, 0.0), int retroreflective = 0, float thinfilm_thickness = 0.0,
+                         float thinfilm_ior = 1.5, color normal_ = color(0.0), color tangent = color(0.0),
+                         string distribution = "ggx", output closure out) {
+    out = conductor_bsdf(ior, extinction, mx_isotropic_roughness(roughness)) * clamp(weight, 0.0, 1.0);
+}
+shader mx_generalized_schlick_bsdf(float weight = 1.0, color color0 = color(1.0), color color82 = color(1.0),
+                                   color color90 = color(1.0), float exponent = 5.0, color roughness = color(0.05, 0.05, 0.0),
+                                   int retroreflective = 0, float thinfilm_thickness = 0.0, float thinfilm_ior = 1.5,
+                                   color normal_ = color(0.0), color tangent = color(0.0), string distribution = "ggx",
+                                   string scatter_mode = "R", output closure out) {
+    out = generalized_schlick_bsdf(clamp(color0, 0.0, 1.0), clamp(color82, 0.0, 1.0), clamp(color90, 0.0, 1.0), exponent,
+                                   mx_isotropic_roughness(roughness))
+          * clamp(weight, 0.0, 1.0);
+}
+shader mx_sheen_bsdf(float weight = 1.0, color color_ = color(1.0), float roughness = 0.3, color normal_ = color(0.0),
+                     string mode = "conty_kulla", output closure out) {
+    out = sheen_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0)) * clamp(weight, 0.0, 1.0);
+}
+
+shader mx_layer_bsdf(closure top, closure base, output closure out) { out = layer(top, base); }
+shader mx_mix_bsdf(closure fg, closure bg, float mix = 0.0, output closure out) {
+    float m = clamp(mix, 0.0, 1.0);
+    out = bg * (1.0 - m) + fg * m;
+}
+shader mx_add_bsdf(closure in1, closure in2, output closure out) { out = in1 + in2; }
+shader mx_multiply_bsdfC(closure in1, color in2 = color(1.0), output closure out) { out = in1 * clamp(in2, 0.0, 1.0); }
+shader mx_multiply_bsdfF(closure in1, float in2 = 1.0, output closure out) { out = in1 * clamp(in2, 0.0, 1.0); }
+
+shader mx_uniform_edf(color color_ = color(1.0), output color out) { out = color_; }
+
+// MaterialX's `surface`: a BSDF, an EDF (emitted radiance) and opacity. The BSDF reaches the
+// shell node's closure port `bsdf` (a substance input cannot carry a closure), wired by
+// compose; unconnected it is black.
+shader mx_surface_shell(closure bsdf, output closure out) { out = bsdf; }
+substance mx_surface {
+    input color edf = color(0.0, 0.0, 0.0);
+    input float opacity = 1.0;
+    input int thin_walled = 0;
+    node shell = mx_surface_shell();
+    node presence = mask(opacity: opacity);
+    node glow = mx_emission(amount: 1.0, tint: edf);
+    surface = shell.out;
+    mask = presence.out;
+    emission = glow.out;
+}
+
 // ---- open_pbr_surface (OpenPBR 1.1) and standard_surface (Autodesk Standard Surface 1.0) -----
 // Both surfaces compose their lobes in `mx_surface_closure`, the one place that turns the
 // physical parameters into a closure. strata has one closure per layer today (no weighted
