@@ -5,8 +5,8 @@
 //!
 //! This module holds what is MaterialX's own: which substance a surface id names, which node
 //! function a node id names (by MaterialX's type suffixes), port names, colour spaces, and
-//! what is reported (a node strata lacks, once per kind; a surface input the single-closure
-//! approximation does not read, when a scene sets it).
+//! what is reported (a node strata lacks, once per kind; a surface input the layered surfaces
+//! do not read, when a scene sets it).
 
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::front::types::Value;
@@ -204,47 +204,41 @@ pub fn to_working_space(space: &str, c: [f32; 3]) -> Option<[f32; 3]> {
     })
 }
 
-/// Surface inputs that the single-closure surfaces do not read (or read approximately), with
-/// what strata does instead; reported when a scene drives them or sets them away from their
-/// default.
+/// Surface inputs that the layered surfaces do not read (or read approximately), with what
+/// strata does instead; reported when a scene drives them or sets them away from their default.
 const UNREAD_SURFACE_INPUTS: &[(&str, &str, &str)] = &[
-    ("open_pbr_surface", "base_diffuse_roughness", "the base is Lambertian (no Oren-Nayar roughness)"),
     ("open_pbr_surface", "specular_roughness_anisotropy", "specular reflection is isotropic"),
     ("open_pbr_surface", "transmission_depth", "transmission has no volume (a thin tinted interface)"),
     ("open_pbr_surface", "transmission_scatter", "transmission has no volume scattering"),
     ("open_pbr_surface", "transmission_dispersion_scale", "no dispersion"),
-    ("open_pbr_surface", "subsurface_weight", "no subsurface scattering: the base is diffuse"),
-    ("open_pbr_surface", "fuzz_weight", "no fuzz (sheen) lobe"),
+    (
+        "open_pbr_surface",
+        "subsurface_weight",
+        "approximated by diffuse reflection of subsurface_color (no light travels under the surface)",
+    ),
+    ("open_pbr_surface", "subsurface_radius", "no subsurface scattering: the radius is not read"),
     ("open_pbr_surface", "coat_roughness_anisotropy", "the coat is isotropic"),
     ("open_pbr_surface", "thin_film_weight", "no thin-film iridescence"),
     ("open_pbr_surface", "geometry_thin_walled", "surfaces are never thin-walled"),
     ("open_pbr_surface", "geometry_coat_normal", "the coat uses the geometry normal"),
     ("open_pbr_surface", "geometry_tangent", "reflection is isotropic: tangents are not read"),
-    ("standard_surface", "diffuse_roughness", "the base is Lambertian (no Oren-Nayar roughness)"),
     ("standard_surface", "specular_anisotropy", "specular reflection is isotropic"),
     ("standard_surface", "transmission_depth", "transmission has no volume (a thin tinted interface)"),
     ("standard_surface", "transmission_scatter", "transmission has no volume scattering"),
     ("standard_surface", "transmission_dispersion", "no dispersion"),
     ("standard_surface", "transmission_extra_roughness", "transmission uses the specular roughness"),
-    ("standard_surface", "subsurface", "no subsurface scattering: the base is diffuse"),
-    ("standard_surface", "sheen", "no sheen lobe"),
+    (
+        "standard_surface",
+        "subsurface",
+        "approximated by diffuse reflection of subsurface_color (no light travels under the surface)",
+    ),
+    ("standard_surface", "subsurface_radius", "no subsurface scattering: the radius is not read"),
     ("standard_surface", "coat_anisotropy", "the coat is isotropic"),
     ("standard_surface", "coat_normal", "the coat uses the geometry normal"),
-    ("standard_surface", "coat_affect_color", "the coat does not darken the base"),
-    ("standard_surface", "coat_affect_roughness", "the coat does not roughen the base"),
+    ("standard_surface", "coat_affect_color", "the coat does not saturate the base"),
     ("standard_surface", "thin_film_thickness", "no thin-film iridescence"),
     ("standard_surface", "thin_walled", "surfaces are never thin-walled"),
     ("mx_surface", "thin_walled", "surfaces are never thin-walled"),
-];
-
-/// Surface inputs that choose one closure by a threshold at 0.5 instead of blending two.
-const THRESHOLD_INPUTS: &[(&str, &str)] = &[
-    ("open_pbr_surface", "base_metalness"),
-    ("open_pbr_surface", "transmission_weight"),
-    ("open_pbr_surface", "coat_weight"),
-    ("standard_surface", "metalness"),
-    ("standard_surface", "transmission"),
-    ("standard_surface", "coat"),
 ];
 
 /// How a surface input is set in a network: a constant, or driven by a node.
@@ -255,7 +249,7 @@ pub enum Setting<'v> {
     Driven,
 }
 
-/// Reports what the single-closure `substance` does not honour of input `input` set to
+/// Reports what the layered `substance` does not honour of input `input` set to
 /// `setting` against its `default`: each (substance, input) kind once per run.
 pub fn report_surface_input(
     substance: &str,
@@ -277,22 +271,6 @@ pub fn report_surface_input(
             Diagnostic::warning(format!("{substance} `{input}` is not supported: {what}"))
                 .at(at, "set here")
                 .kind(unread_kind(substance, input)),
-        );
-        return;
-    }
-    let partial = match setting {
-        Setting::Driven => true,
-        Setting::Value(Value::Float(x)) => *x > 0.0 && *x < 1.0,
-        Setting::Value(_) => false,
-    };
-    if partial && THRESHOLD_INPUTS.iter().any(|(s, i)| *s == substance && *i == input) {
-        diags.push(
-            Diagnostic::warning(format!(
-                "{substance} `{input}` between 0 and 1 is approximated: strata has one closure per layer, so each point \
-                 takes one lobe (switched at 0.5) instead of a blend of two"
-            ))
-            .at(at, "set here")
-            .kind("MaterialX surface blend approximated"),
         );
     }
 }
