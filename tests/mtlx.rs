@@ -8,11 +8,13 @@ mod common;
 
 use std::path::Path;
 use std::sync::Arc;
-use strata::abi::{Closure, ClosureKind, Globals, MaterialCode};
+use strata::abi::{Closure, ClosureKind, ClosureSum, ClosureTerm, Globals, MaterialCode};
 use strata::backend::{BackendKind, Compiler};
 use strata::compose::scene::compose_stage;
 use strata::diag::{Diagnostics, SourceMap};
 use strata::ir::wired::PassOptions;
+use strata::render::material::closure::{ClosureBsdf, LayeringMode};
+use strata::render::sampling::Rng;
 use strata::scene::Stage;
 
 const DIR: &str = "tests/fixtures/mtlx";
@@ -33,12 +35,31 @@ fn compiled(rest: &str) -> (Option<Arc<dyn MaterialCode>>, String) {
     (code, diags.render(&sources))
 }
 
-/// The surface closure of `code` at a shading point with texture coordinates (u, v).
-fn closure_at(code: &Arc<dyn MaterialCode>, u: f32, v: f32) -> Closure {
+/// The terms of `code`'s surface closure that the renderer sees (non-zero weight) at a shading
+/// point with texture coordinates (u, v).
+fn lobes_at(code: &Arc<dyn MaterialCode>, u: f32, v: f32) -> Vec<ClosureTerm> {
     let g = Globals { n: [0.0, 0.0, 1.0], ng: [0.0, 0.0, 1.0], u, v, dpdu: [1.0, 0.0, 0.0], ..Globals::default() };
-    let mut closure = Closure::default();
-    code.surface(&g, 0, &mut closure).expect("evaluates");
-    closure
+    let mut sum = ClosureSum::default();
+    code.surface_sum(&g, 0, &mut sum).expect("evaluates");
+    // Renumber the layering bits over the kept terms, as the renderer does.
+    let mut position = [usize::MAX; 8];
+    let mut kept: Vec<ClosureTerm> = Vec::new();
+    for (k, t) in sum.terms.iter().enumerate() {
+        if t.kind == 0 || t.weight == [0.0; 3] {
+            continue;
+        }
+        let above = (0..k).filter(|&j| t.above & (1 << j) != 0 && position[j] != usize::MAX);
+        let above = above.fold(0, |bits, j| bits | 1 << position[j]);
+        position[k] = kept.len();
+        kept.push(ClosureTerm { above, ..*t });
+    }
+    kept
+}
+
+/// The first term `code`'s surface closure renders with at (u, v), as a single closure.
+fn closure_at(code: &Arc<dyn MaterialCode>, u: f32, v: f32) -> Closure {
+    let first = lobes_at(code, u, v).into_iter().next().unwrap_or_default();
+    Closure { kind: first.kind, params: first.params[..8].try_into().unwrap() }
 }
 
 /// A Material `/M` whose MaterialX surface is an `ND_open_pbr_surface_surfaceshader` with
@@ -51,22 +72,30 @@ fn open_pbr(inputs: &str, shaders: &str) -> String {
     )
 }
 
-#[test]
-fn translation_names_the_node_definitions_and_connections_materialx_resolves() {
+/// Checks strata's translation of document `doc` (in the fixture directory) against
+/// MaterialX's own reading of it (`<doc>.expected`): every node's definition and every
+/// connection, found in the first of `materials` that has the node. Returns the stage and the
+/// number of lines checked.
+fn check_against_materialx(doc: &str, materials: &[&str]) -> (Stage, usize) {
     let mut sources = SourceMap::new();
     let mut diags = Diagnostics::new();
-    let stage = Stage::open(Path::new(&format!("{DIR}/chess_mat.mtlx")), &mut sources, &mut diags).expect("opens");
+    let stage = Stage::open(Path::new(&format!("{DIR}/{doc}.mtlx")), &mut sources, &mut diags).expect("opens");
     assert!(diags.items().is_empty(), "{}", diags.render(&sources));
-    let expected = std::fs::read_to_string(format!("{DIR}/chess_mat.expected")).unwrap();
-    let material = "/MaterialX/Materials/M_piece";
+    let expected = std::fs::read_to_string(format!("{DIR}/{doc}.expected")).unwrap();
     // A top-level node is copied into the material; a graph's node lives in its graph.
-    let prim_path = |p: &str| format!("{material}/{p}");
+    let material_of = |p: &str| {
+        let top = p.split(['/', '.']).next().unwrap();
+        let found = materials.iter().find(|m| stage.find(&format!("/MaterialX/Materials/{m}/{top}")).is_some());
+        format!("/MaterialX/Materials/{}", found.unwrap_or_else(|| panic!("no material has {p}")))
+    };
     let mut checked = 0;
     for line in expected.lines() {
         let words: Vec<&str> = line.split(' ').collect();
         match words.as_slice() {
             ["node", path, id] => {
-                let prim = stage.prim(stage.find(&prim_path(path)).unwrap_or_else(|| panic!("no prim for {path}")));
+                let material = material_of(path);
+                let prim = stage
+                    .prim(stage.find(&format!("{material}/{path}")).unwrap_or_else(|| panic!("no prim for {path}")));
                 let got = prim.value("info:id").and_then(|v| v.as_str());
                 assert_eq!(got, Some(*id), "{path}");
                 // The shared copy under NodeGraphs names the same definitions.
@@ -77,8 +106,9 @@ fn translation_names_the_node_definitions_and_connections_materialx_resolves() {
                 checked += 1;
             }
             ["connect", input, kind, from, output] => {
+                let material = material_of(input);
                 let (path, name) = input.split_once('.').unwrap();
-                let prim = stage.prim(stage.find(&prim_path(path)).unwrap());
+                let prim = stage.prim(stage.find(&format!("{material}/{path}")).unwrap());
                 let attr = prim.attribute(&format!("inputs:{name}")).unwrap_or_else(|| panic!("no input {input}"));
                 let scope = match (*kind, path.rsplit_once('/')) {
                     ("node", Some((graph, _))) => format!("{material}/{graph}/{from}"),
@@ -95,6 +125,13 @@ fn translation_names_the_node_definitions_and_connections_materialx_resolves() {
             _ => panic!("unexpected line `{line}`"),
         }
     }
+    (stage, checked)
+}
+
+#[test]
+fn translation_names_the_node_definitions_and_connections_materialx_resolves() {
+    let (stage, checked) = check_against_materialx("chess_mat", &["M_piece"]);
+    let material = "/MaterialX/Materials/M_piece";
     assert_eq!(checked, 11, "every node and connection MaterialX reported was checked");
     // fileprefix and colorspace reach the image's file input.
     let image = stage.prim(stage.find(&format!("{material}/NG_piece/img_base")).unwrap());
@@ -104,38 +141,74 @@ fn translation_names_the_node_definitions_and_connections_materialx_resolves() {
     assert!(rendered.contains("textures/base.png"), "{rendered}");
 }
 
+/// The compiled material of prim `prim` in scene file `path`.
+fn compiled_file(path: &str, prim: &str) -> Arc<dyn MaterialCode> {
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let stage = Stage::open(Path::new(path), &mut sources, &mut diags).expect("opens");
+    let c = compose_stage(&stage, &mut sources, &mut diags);
+    let material = c.material_of(prim).expect("composed");
+    Compiler::new(BackendKind::Jit, PassOptions::default())
+        .compile(&c.library, material, &mut diags)
+        .unwrap_or_else(|| panic!("{}", diags.render(&sources)))
+}
+
+// The OpenPBR chess piece and its UsdPreviewSurface translation are two models of one
+// material: they must read the same texels into the same lobe parameters (checked exactly
+// at the cell centres), but they need not render alike: OpenPBR's metal is the F82-tint
+// generalized Schlick lobe and its dielectric a specular layer over EON layered by the closure
+// algebra, while UsdPreviewSurface's translation uses strata's artist-colour metal and its
+// built-in coated lobe. The beauty gap is printed (OpenPBR about 5 % brighter in the mean).
 #[test]
-fn the_chess_piece_renders_with_open_pbr_like_its_preview_surface_translation() {
+fn the_chess_piece_reads_its_textures_into_the_lobes_of_its_preview_surface_translation() {
+    let mtlx = compiled_file(&format!("{DIR}/chess.usda"), "/Piece");
+    let preview = compiled_file(&format!("{DIR}/chess_preview.usda"), "/Piece");
+    // Cell centres; the top row (v = 0.75) holds the left dielectric and right metal cells.
+    let mut seen = (0, 0);
+    for (u, v) in [(0.25, 0.25), (0.75, 0.25), (0.25, 0.75), (0.75, 0.75)] {
+        let lobes = lobes_at(&mtlx, u, v);
+        let p = closure_at(&preview, u, v);
+        match ClosureKind::from_u32(p.kind) {
+            // Glossy: [albedo rgb, specular rgb, roughness, ior].
+            ClosureKind::Glossy => {
+                let [specular, base] = lobes.as_slice() else { panic!("({u}, {v}): {lobes:?}") };
+                assert_eq!(ClosureKind::from_u32(specular.kind), ClosureKind::Dielectric);
+                assert_eq!(ClosureKind::from_u32(base.kind), ClosureKind::OrenNayar);
+                assert!((0..3).all(|k| (base.params[k] - p.params[k]).abs() < 1e-5), "({u}, {v}): {base:?} vs {p:?}");
+                assert!((specular.params[4] - p.params[6]).abs() < 1e-5, "roughness at ({u}, {v})");
+                assert_eq!(specular.params[3], p.params[7], "ior at ({u}, {v})");
+                seen.0 += 1;
+            }
+            // Metal: [reflectivity rgb, edge tint rgb, roughness].
+            ClosureKind::Metal => {
+                let [metal] = lobes.as_slice() else { panic!("({u}, {v}): {lobes:?}") };
+                assert_eq!(ClosureKind::from_u32(metal.kind), ClosureKind::GeneralizedSchlick);
+                assert!((0..3).all(|k| (metal.params[k] - p.params[k]).abs() < 1e-3), "({u}, {v}): {metal:?} vs {p:?}");
+                assert!((metal.params[10] - p.params[6]).abs() < 1e-5, "roughness at ({u}, {v})");
+                seen.1 += 1;
+            }
+            other => panic!("preview closure {other:?} at ({u}, {v})"),
+        }
+    }
+    assert_eq!(seen, (2, 2), "two dielectric and two metal cells");
     let settings = common::settings(32, 32, 16, 5, 3);
-    let mtlx = common::render_file(Path::new(&format!("{DIR}/chess.usda")), &settings);
-    let preview = common::render_file(Path::new(&format!("{DIR}/chess_preview.usda")), &settings);
-    let mut worst = 0.0f32;
-    for c in ["albedo.R", "albedo.G", "albedo.B"] {
-        let (a, b) = (mtlx.f32_channel(c).unwrap(), preview.f32_channel(c).unwrap());
-        // Cell centres (8 texels a cell, 16 pixels a cell): bilinear lookups stay in the cell.
-        for (x, y) in [(8, 8), (24, 8), (8, 24), (24, 24)] {
-            let i = y * 32 + x;
-            assert!((a[i] - b[i]).abs() < 1e-4, "{c} at ({x}, {y}): {} vs {}", a[i], b[i]);
-        }
-    }
-    let (mut sum_a, mut sum_b) = (0.0f64, 0.0f64);
-    for c in ["R", "G", "B"] {
-        let (a, b) = (mtlx.f32_channel(c).unwrap(), preview.f32_channel(c).unwrap());
-        for (x, y) in a.iter().zip(b) {
-            sum_a += *x as f64;
-            sum_b += *y as f64;
-            worst = worst.max((x - y).abs());
-        }
-    }
-    let relative = (sum_a - sum_b).abs() / sum_b;
-    assert!(sum_b > 0.0 && relative < 0.02, "mean beauty differs by {:.3} %", relative * 100.0);
-    eprintln!("chess: mean beauty {sum_a:.3} vs {sum_b:.3} ({:.4} %), worst pixel {worst}", relative * 100.0);
+    let (a, b) = (
+        common::render_file(Path::new(&format!("{DIR}/chess.usda")), &settings),
+        common::render_file(Path::new(&format!("{DIR}/chess_preview.usda")), &settings),
+    );
+    let mean = |image: &strata::render::Image| {
+        ["R", "G", "B"].iter().flat_map(|c| image.f32_channel(c).unwrap().iter().map(|x| *x as f64)).sum::<f64>()
+    };
+    let (sum_a, sum_b) = (mean(&a), mean(&b));
+    assert!(sum_a.is_finite() && sum_a > 0.0, "the OpenPBR piece renders");
+    eprintln!("chess: mean beauty OpenPBR {sum_a:.3} vs preview {sum_b:.3} ({:+.2} %)", (sum_a / sum_b - 1.0) * 100.0);
 }
 
 #[test]
 fn nodes_evaluate_to_the_specification_at_sample_points() {
     // Each case: a node network driving base_color (specular_weight 0: the closure is the
-    // diffuse base, whose albedo is base_color) and the value the specification gives.
+    // diffuse base, OpenPBR's Oren-Nayar, whose albedo is base_color) and the value the
+    // specification gives.
     let cases: &[(&str, &str, [f32; 3])] = &[
         // remap 0.25 from [0, 0.5] to [1, 3]: 1 + 0.5 · 2 = 2, clamped to albedo 1.
         (
@@ -194,7 +267,7 @@ fn nodes_evaluate_to_the_specification_at_sample_points() {
             continue;
         };
         let c = closure_at(&code, 0.25, 0.75);
-        if ClosureKind::from_u32(c.kind) != ClosureKind::Diffuse {
+        if ClosureKind::from_u32(c.kind) != ClosureKind::OrenNayar {
             failures.push(format!("{id}: closure {c:?}"));
             continue;
         }
@@ -205,43 +278,138 @@ fn nodes_evaluate_to_the_specification_at_sample_points() {
     assert!(failures.is_empty(), "{failures:#?}");
 }
 
+/// A Material `/M` whose MaterialX surface is an `ND_standard_surface_surfaceshader` with
+/// `inputs` (USDA lines).
+fn standard_surface(inputs: &str) -> String {
+    open_pbr(inputs, "").replace("ND_open_pbr_surface_surfaceshader", "ND_standard_surface_surfaceshader")
+}
+
+/// (kind, weight, first `n` parameters) of each term the renderer sees.
+fn described(lobes: &[ClosureTerm], n: usize) -> Vec<(ClosureKind, [f32; 3], Vec<f32>)> {
+    lobes.iter().map(|t| (ClosureKind::from_u32(t.kind), t.weight, t.params[..n].to_vec())).collect()
+}
+
 #[test]
-fn open_pbr_special_cases_are_strata_closures() {
-    let closure = |inputs: &str| {
-        let (code, rendered) = compiled(&open_pbr(inputs, ""));
+fn open_pbr_and_standard_surface_limiting_cases_are_single_lobes() {
+    use ClosureKind::*;
+    let lobes = |text: String| {
+        let (code, rendered) = compiled(&text);
         let code = code.unwrap_or_else(|| panic!("{rendered}"));
-        (closure_at(&code, 0.5, 0.5), rendered)
+        (lobes_at(&code, 0.5, 0.5), rendered)
     };
-    // Base only: Lambert with base_weight · base_color.
-    let (c, rendered) = closure(
+    // Base only (every other weight 0): the diffuse lobe with base_weight · base_color,
+    // Oren-Nayar (EON in OpenPBR) at roughness 0, which is Lambert (checked below).
+    let (got, rendered) = lobes(open_pbr(
         "        float inputs:specular_weight = 0\n        float inputs:base_weight = 0.5\n        color3f inputs:base_color = (0.8, 0.4, 0.2)",
-    );
+        "",
+    ));
     assert!(rendered.is_empty(), "{rendered}");
-    assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Diffuse);
-    assert_eq!(&c.params[..3], &[0.4, 0.2, 0.1]);
-    // Metalness 1: the conductor, base colour at normal incidence, specular colour as edge tint.
-    let (c, _) = closure(
-        "        float inputs:base_metalness = 1\n        color3f inputs:base_color = (0.9, 0.6, 0.2)\n        color3f inputs:specular_color = (1, 0.9, 0.8)\n        float inputs:specular_roughness = 0.4",
+    assert_eq!(described(&got, 5), [(OrenNayar, [1.0; 3], vec![0.4, 0.2, 0.1, 0.0, 1.0])]);
+    let lambert = ClosureBsdf::from_sum(
+        &ClosureSum::single(&Closure { kind: Diffuse as u32, params: [0.4, 0.2, 0.1, 0.0, 0.0, 0.0, 0.0, 0.0] }),
+        LayeringMode::AlbedoScaling,
     );
-    assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Metal);
-    assert_eq!(&c.params[..7], &[0.9, 0.6, 0.2, 1.0, 0.9, 0.8, 0.4]);
-    // Transmission 1: rough glass with the specular roughness and IOR.
-    let (c, _) = closure(
+    let mut sum = ClosureSum::default();
+    sum.terms[0] = got[0];
+    let base = ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling);
+    for (wo, wi) in [
+        ((0.0, 0.0, 1.0), (0.6, 0.0, 0.8)),
+        ((0.8, 0.0, 0.6), (-0.3, 0.4, 0.866)),
+        ((0.99, 0.0, 0.141), (0.0, 0.99, 0.141)),
+    ] {
+        let (wo, wi) = (glam::Vec3::from(wo).normalize(), glam::Vec3::from(wi).normalize());
+        let (a, b) = (base.eval(wo, wi), lambert.eval(wo, wi));
+        assert!((a - b).abs().max_element() < 1e-5, "{a} vs Lambert {b}");
+    }
+    // Metalness 1: the F82-tint conductor alone (F0 base colour, specular colour as the F82
+    // tint, white at grazing, exponent 5), with the specular roughness.
+    let metal = "        float inputs:base_metalness = 1\n        color3f inputs:base_color = (0.9, 0.6, 0.2)\n        color3f inputs:specular_color = (1, 0.9, 0.8)\n        float inputs:specular_roughness = 0.4";
+    let want = vec![(GeneralizedSchlick, [1.0; 3], vec![0.9, 0.6, 0.2, 1.0, 0.9, 0.8, 1.0, 1.0, 1.0, 5.0, 0.4])];
+    assert_eq!(described(&lobes(open_pbr(metal, "")).0, 11), want);
+    let metal = metal.replace("base_metalness", "metalness") + "\n        float inputs:base = 1";
+    assert_eq!(described(&lobes(standard_surface(&metal)).0, 11), want, "Standard Surface");
+    // Transmission 1: the rough dielectric, reflection and transmission, with the specular
+    // roughness and IOR.
+    let (got, _) = lobes(open_pbr(
         "        float inputs:transmission_weight = 1\n        float inputs:specular_roughness = 0.2\n        float inputs:specular_ior = 1.33",
+        "",
+    ));
+    assert_eq!(described(&got, 6), [(Dielectric, [1.0; 3], vec![1.0, 1.0, 1.0, 1.33, 0.2, 2.0])]);
+    // Defaults: a GGX dielectric reflection (ior 1.5, roughness 0.3) over the 0.8 grey base.
+    let (got, _) = lobes(open_pbr("", ""));
+    assert_eq!(
+        described(&got, 6),
+        [
+            (Dielectric, [1.0; 3], vec![1.0, 1.0, 1.0, 1.5, 0.3, 0.0]),
+            (OrenNayar, [1.0; 3], vec![0.8, 0.8, 0.8, 0.0, 1.0, 0.0])
+        ]
     );
-    assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Glass);
-    assert!((c.params[3] - 0.2).abs() < 1e-6 && (c.params[4] - 1.33).abs() < 1e-6, "{c:?}");
-    // Coat over diffuse: the built-in coated lobe (glossy) with the coat's roughness and IOR,
-    // exactly what strata's own `glossy` node gives.
-    let (c, _) = closure(
+    assert_eq!((got[0].above, got[1].above), (0, 0b1), "the base lies under the specular layer");
+    // Coat 1: the coat (coat IOR and roughness) over the specular layer over the base; the
+    // coat roughens the specular lobe: r' = (r⁴ + 2 r_c⁴)^¼.
+    let (got, _) = lobes(open_pbr(
         "        float inputs:coat_weight = 1\n        float inputs:coat_roughness = 0.1\n        float inputs:coat_ior = 1.5\n        color3f inputs:base_color = (0.5, 0.5, 0.5)",
-    );
-    assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Glossy);
-    assert_eq!(&c.params[..8], &[0.5, 0.5, 0.5, 1.0, 1.0, 1.0, 0.1, 1.5]);
-    // Defaults: GGX dielectric (ior 1.5, roughness 0.3) over a 0.8 grey base.
-    let (c, _) = closure("");
-    assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Glossy);
-    assert_eq!(&c.params[..8], &[0.8, 0.8, 0.8, 1.0, 1.0, 1.0, 0.3, 1.5]);
+        "",
+    ));
+    let r = (0.3f32.powi(4) + 2.0 * 0.1f32.powi(4)).powf(0.25);
+    let kinds: Vec<_> = described(&got, 6).into_iter().map(|(k, w, p)| (k, w, p[3], p[4])).collect();
+    assert_eq!(kinds.len(), 3, "{kinds:?}");
+    assert_eq!(kinds[0], (Dielectric, [1.0; 3], 1.5, 0.1));
+    assert!(kinds[1].0 == Dielectric && (kinds[1].3 - r).abs() < 1e-6, "{kinds:?}");
+    assert_eq!(kinds[2].0, OrenNayar);
+    assert_eq!((got[1].above, got[2].above), (0b1, 0b11));
+}
+
+#[test]
+fn coated_surfaces_conserve_energy_in_a_white_furnace() {
+    // A coat over a white base with no specular layer: what the coat does not reflect reaches
+    // the white base (≈ 1); the full stacks (coat, fuzz or sheen, specular, metal mixes) ≤ 1.
+    let white = "        color3f inputs:base_color = (1, 1, 1)\n        float inputs:base_weight = 1\n        float inputs:coat_weight = 1\n        float inputs:coat_roughness = 0.3\n";
+    let furnace = open_pbr(&format!("{white}        float inputs:specular_weight = 0"), "");
+    let stacks = [
+        ("OpenPBR coat over specular", open_pbr(white, "")),
+        (
+            "OpenPBR fuzz, coat, half metal",
+            open_pbr(
+                &format!(
+                    "{white}        float inputs:fuzz_weight = 1\n        float inputs:base_metalness = 0.5\n        float inputs:specular_roughness = 0.6"
+                ),
+                "",
+            ),
+        ),
+        (
+            "Standard Surface sheen, coat, specular",
+            standard_surface(
+                "        float inputs:base = 1\n        float inputs:coat = 1\n        float inputs:sheen = 1\n        float inputs:specular_roughness = 0.1",
+            ),
+        ),
+    ];
+    let sum = |text: &str| {
+        let (code, rendered) = compiled(text);
+        let code = code.unwrap_or_else(|| panic!("{rendered}"));
+        let mut sum = ClosureSum::default();
+        for (k, t) in lobes_at(&code, 0.5, 0.5).into_iter().enumerate() {
+            sum.terms[k] = t;
+        }
+        sum
+    };
+    let mut failures = Vec::new();
+    let furnace = sum(&furnace);
+    for cos in [0.1f32, 0.5, 1.0] {
+        let (e, se) = directional_albedo(&furnace, cos, 100_000);
+        eprintln!("OpenPBR coat over white at cos {cos}: {e:.4} ± {se:.4}");
+        if (e - 1.0).abs() > 0.01 + 4.0 * se {
+            failures.push(format!("coat over white at cos {cos}: {e} ± {se}, want 1"));
+        }
+        for (name, text) in &stacks {
+            let (e, se) = directional_albedo(&sum(text), cos, 100_000);
+            eprintln!("{name} at cos {cos}: {e:.4} ± {se:.4}");
+            if e > 1.0 + 4.0 * se {
+                failures.push(format!("{name} at cos {cos}: {e} ± {se}, want ≤ 1"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
 }
 
 #[test]
@@ -249,20 +417,16 @@ fn what_the_surfaces_approximate_is_reported_once_per_kind() {
     let text = "def Material \"M\" (prepend references = @odd/unsupported_lobes.mtlx@</MaterialX/Materials/M>) {}";
     let (code, rendered) = compiled(text);
     assert!(code.is_some(), "{rendered}");
-    for want in [
-        "standard_surface `sheen` is not supported",
-        "`thin_film_thickness` is not supported",
-        "`metalness` between 0 and 1 is approximated",
-    ] {
-        assert!(rendered.contains(want), "expected `{want}` in\n{rendered}");
-    }
+    assert!(rendered.contains("`thin_film_thickness` is not supported"), "{rendered}");
+    // Sheen and partial metalness are layered and mixed as the specification says: no warning.
+    assert!(!rendered.contains("sheen") && !rendered.contains("metalness"), "{rendered}");
     // An ND_ node strata lacks: one warning naming it, the input keeps its default.
     let text = "def Material \"M\" (prepend references = @odd/unknown_node.mtlx@</MaterialX/Materials/M>) {}";
     let (code, rendered) = compiled(text);
     assert_eq!(rendered.matches("MaterialX node `ND_hsvadjust_color3` is not implemented").count(), 1, "{rendered}");
-    let c = closure_at(&code.expect("compiles"), 0.5, 0.5);
-    assert_eq!(ClosureKind::from_u32(c.kind), ClosureKind::Glossy);
-    assert_eq!(&c.params[..3], &[0.8, 0.8, 0.8], "base_color falls back to OpenPBR's default");
+    let lobes = lobes_at(&code.expect("compiles"), 0.5, 0.5);
+    let base = lobes.iter().find(|t| t.kind == ClosureKind::OrenNayar as u32).expect("a diffuse base");
+    assert_eq!(&base.params[..3], &[0.8, 0.8, 0.8], "base_color falls back to OpenPBR's default");
 }
 
 #[test]
@@ -327,10 +491,10 @@ fn a_referenced_document_binds_like_usd() {
         .compile(&c.library, material, &mut diags)
         .unwrap_or_else(|| panic!("{}", diags.render(&sources)));
     assert!(!diags.has_errors() && diags.warning_count() == 0, "{}", diags.render(&sources));
-    let closure = closure_at(&code, 0.5, 0.5);
-    assert_eq!(ClosureKind::from_u32(closure.kind), ClosureKind::Glossy);
+    let lobes = lobes_at(&code, 0.5, 0.5);
+    let base = lobes.iter().find(|t| t.kind == ClosureKind::OrenNayar as u32).expect("a diffuse base");
     let want = [0.8 * 0.8, 0.1 * 0.8, 0.1 * 0.8];
-    assert!((0..3).all(|k| (closure.params[k] - want[k]).abs() < 1e-6), "{closure:?}");
+    assert!((0..3).all(|k| (base.params[k] - want[k]).abs() < 1e-6), "{lobes:?}");
 }
 
 /// The sRGB transfer function (IEC 61966-2-1), written out for the references below.
@@ -384,6 +548,143 @@ fn a_document_sublayered_under_a_usd_layer_composes_its_materials() {
     assert!(code.is_some() && !diags.has_errors(), "{}", diags.render(&sources));
     // The top-left cell of metal.png is 0 (dielectric), its top-right 1 (metal).
     let code = code.unwrap();
-    assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.25, 0.75).kind), ClosureKind::Glossy);
-    assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.75, 0.75).kind), ClosureKind::Metal);
+    assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.25, 0.75).kind), ClosureKind::Dielectric);
+    assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.75, 0.75).kind), ClosureKind::GeneralizedSchlick);
+}
+
+/// `/Ball`'s material compiled by `backend`, as [`compiled`] does with the JIT.
+fn compiled_with(rest: &str, backend: BackendKind) -> (Option<Arc<dyn MaterialCode>>, String) {
+    let text = format!(
+        "#usda 1.0\ndef Sphere \"Ball\" (prepend apiSchemas = [\"MaterialBindingAPI\"]) {{ rel material:binding = </M> }}\n{rest}\n"
+    );
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let stage = Stage::from_text("scene.usda", &text, Path::new(DIR), &mut sources, &mut diags).expect("parses");
+    let c = compose_stage(&stage, &mut sources, &mut diags);
+    let code = c
+        .material_of("/Ball")
+        .and_then(|material| Compiler::new(backend, PassOptions::default()).compile(&c.library, material, &mut diags));
+    (code, diags.render(&sources))
+}
+
+/// The full closure value of `code` at the test's shading point.
+fn sum_at(code: &Arc<dyn MaterialCode>) -> ClosureSum {
+    let g = Globals {
+        n: [0.0, 0.0, 1.0],
+        ng: [0.0, 0.0, 1.0],
+        u: 0.5,
+        v: 0.5,
+        dpdu: [1.0, 0.0, 0.0],
+        ..Globals::default()
+    };
+    let mut sum = ClosureSum::default();
+    code.surface_sum(&g, 0, &mut sum).expect("evaluates");
+    sum
+}
+
+/// The closure value of a shader body that sets `bsdf`, compiled as a substance of its own.
+fn by_hand(body: &str) -> ClosureSum {
+    let lib = common::library(&format!(
+        "shader s(output closure bsdf) {{\n{body}\n}}\nsubstance by_hand {{\n    node n = s();\n    surface = n.bsdf;\n}}\n"
+    ));
+    sum_at(&common::compile_stack(&lib, &["by_hand".to_string()], BackendKind::Jit, true))
+}
+
+/// Asserts two closure values have the same terms: kinds, layering bits, weights and
+/// parameters (within `1e-6`, for roughness taken through √α).
+fn assert_same_terms(got: &ClosureSum, want: &ClosureSum) {
+    for (k, (g, w)) in got.terms.iter().zip(&want.terms).enumerate() {
+        let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-6);
+        assert!(
+            g.kind == w.kind && g.above == w.above && close(&g.weight, &w.weight) && close(&g.params, &w.params),
+            "term {k}: got {g:?}\nwant {w:?}"
+        );
+    }
+}
+
+/// The directional albedo (largest channel) of a closure value for outgoing `wo`, by BSDF
+/// sampling: (mean, standard error).
+fn directional_albedo(sum: &ClosureSum, cos: f32, n: usize) -> (f64, f64) {
+    let b = ClosureBsdf::from_sum(sum, LayeringMode::AlbedoScaling);
+    let wo = glam::Vec3::new((1.0 - cos * cos).sqrt(), 0.0, cos);
+    let mut rng = Rng::new(29, (cos * 1000.0) as u64, 0);
+    let (mut s1, mut s2) = (0.0f64, 0.0f64);
+    for _ in 0..n {
+        let uc = rng.uniform();
+        if let Some(s) = b.sample(wo, uc, rng.uniform2()) {
+            let w = (s.f.max_element() * s.wi.z.abs() / s.pdf) as f64;
+            s1 += w;
+            s2 += w * w;
+        }
+    }
+    let mean = s1 / n as f64;
+    (mean, ((s2 / n as f64 - mean * mean).max(0.0) / n as f64).sqrt())
+}
+
+#[test]
+fn a_pbrlib_graph_is_the_closure_algebra_written_by_hand() {
+    // layered_mat.mtlx (written by MaterialX): add(multiply(mix(fg = sheen, bg =
+    // layer(dielectric, oren_nayar), 0.25), 0.6), multiply(conductor, colour)) with a uniform EDF. MaterialX names the
+    // definitions and connections strata translates.
+    let (_, checked) = check_against_materialx("layered_mat", &["M_layered", "M_furnace"]);
+    assert_eq!(checked, 30, "every node and connection MaterialX reported was checked");
+    let material = "def Material \"M\" (prepend references = @layered_mat.mtlx@</MaterialX/Materials/M_layered>) {}";
+    let mut sums = Vec::new();
+    for backend in [BackendKind::Jit, BackendKind::Interp] {
+        let (code, rendered) = compiled_with(material, backend);
+        let code = code.unwrap_or_else(|| panic!("{rendered}"));
+        assert!(rendered.is_empty(), "{rendered}");
+        let mut e = [0.0; 3];
+        code.emission(&Globals::default(), 0, &mut e).unwrap();
+        assert_eq!(e, [0.5, 0.25, 0.0], "uniform_edf is the emitted radiance");
+        sums.push(sum_at(&code));
+    }
+    assert_eq!(sums[0], sums[1], "JIT and interpreter agree");
+    // The same closure in the shading language: MaterialX's mix(fg, bg, m) is mix(bg, fg, m);
+    // GGX α 0.04 is perceptual roughness 0.2, α 0.09 is 0.3; the conductor's defaults are
+    // MaterialX's (gold-like ior and extinction).
+    let want = by_hand(
+        "bsdf = mix(layer(dielectric_bsdf(color(1.0), 1.5, 0.2, \"R\"), oren_nayar_diffuse_bsdf(color(0.8, 0.5, 0.2), 0.3, 0.0)),
+                    sheen_bsdf(color(0.9, 0.9, 1.0), 0.4), 0.25) * 0.6
+               + conductor_bsdf(color(0.183, 0.421, 1.373), color(3.424, 2.346, 1.770), 0.3) * color(0.2, 0.3, 0.4);",
+    );
+    assert_same_terms(&sums[0], &want);
+    let kinds: Vec<ClosureKind> = sums[0].terms.iter().map(|t| ClosureKind::from_u32(t.kind)).collect();
+    assert_eq!(
+        &kinds[..5],
+        [
+            ClosureKind::Dielectric,
+            ClosureKind::OrenNayar,
+            ClosureKind::Sheen,
+            ClosureKind::Conductor,
+            ClosureKind::None
+        ]
+    );
+    assert_eq!(sums[0].terms[1].above, 0b1, "the Oren-Nayar base lies under the dielectric");
+}
+
+#[test]
+fn pbrlib_graphs_conserve_energy_in_a_white_furnace() {
+    // A half-weight clear coat over white Lambert (Oren-Nayar, roughness 0) reflects
+    // everything: what the coat does not reflect reaches the white base.
+    let furnace = "def Material \"M\" (prepend references = @layered_mat.mtlx@</MaterialX/Materials/M_furnace>) {}";
+    let layered = "def Material \"M\" (prepend references = @layered_mat.mtlx@</MaterialX/Materials/M_layered>) {}";
+    let sum = |text: &str| {
+        let (code, rendered) = compiled(text);
+        sum_at(&code.unwrap_or_else(|| panic!("{rendered}")))
+    };
+    let (furnace, layered) = (sum(furnace), sum(layered));
+    let mut failures = Vec::new();
+    for cos in [0.1f32, 0.4, 0.7, 1.0] {
+        let (e, se) = directional_albedo(&furnace, cos, 100_000);
+        if (e - 1.0).abs() > 0.01 + 4.0 * se {
+            failures.push(format!("coat over white at cos {cos}: {e} ± {se}, want 1"));
+        }
+        let (e, se) = directional_albedo(&layered, cos, 100_000);
+        if e > 1.0 + 4.0 * se {
+            failures.push(format!("layered graph at cos {cos}: {e} ± {se}, want ≤ 1"));
+        }
+        eprintln!("cos {cos}: furnace {:.4}, layered {e:.4}", directional_albedo(&furnace, cos, 100_000).0);
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
 }

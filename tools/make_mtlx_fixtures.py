@@ -13,6 +13,10 @@ scenes:
                       definition MaterialX resolves it to (`getNodeDef()`, the standard library
                       loaded), and per connected input where it reads. strata's translation must
                       name the same definitions and connections.
+  layered_mat.mtlx    a hand-written pbrlib graph (layer, mix, add and multiply over dielectric,
+                      Oren-Nayar, sheen and conductor lobes, a uniform EDF through `surface`) and
+                      a half-weight clear coat over white Lambert; layered_mat.expected is
+                      MaterialX's reading of it, as for chess_mat.
   chess.usda          a quad under a camera bound to </Looks/M_piece>, `Looks` referencing
                       @chess_mat.mtlx@</MaterialX/Materials>.
   chess_preview.usda  the same quad with the same textures as a UsdPreviewSurface network: the
@@ -104,6 +108,48 @@ def chess_document():
     ]:
         sr.addInput(input_name, ty).setConnectedOutput(graph_outputs[o])
     doc.addMaterialNode("M_piece", sr)
+    return doc
+
+
+def layered_document():
+    """A hand-written pbrlib graph: mix(fg = sheen, bg = layer(dielectric, oren_nayar), 0.25) · 0.6
+    + conductor · (0.2, 0.3, 0.4) (weights summing to at most 1), with a uniform EDF; and a
+    half-weight clear coat over white Lambert."""
+    doc = mx.createDocument()
+
+    def bsdf(name, category, inputs):
+        node = doc.addNode(category, name, "BSDF")
+        for input_name, ty, value in inputs:
+            i = node.addInput(input_name, ty)
+            if isinstance(value, mx.Node):
+                i.setConnectedNode(value)
+            else:
+                i.setValueString(value)
+        return node
+
+    coat = bsdf("coat", "dielectric_bsdf", [("ior", "float", "1.5"), ("roughness", "vector2", "0.04, 0.04")])
+    base = bsdf("base", "oren_nayar_diffuse_bsdf", [("color", "color3", "0.8, 0.5, 0.2"), ("roughness", "float", "0.3")])
+    coated = bsdf("coated", "layer", [("top", "BSDF", coat), ("base", "BSDF", base)])
+    fuzz = bsdf("fuzz", "sheen_bsdf", [("color", "color3", "0.9, 0.9, 1"), ("roughness", "float", "0.4")])
+    mixed = bsdf("mixed", "mix", [("fg", "BSDF", fuzz), ("bg", "BSDF", coated), ("mix", "float", "0.25")])
+    metal = bsdf("metal", "conductor_bsdf", [("roughness", "vector2", "0.09, 0.09")])
+    tinted = bsdf("tinted", "multiply", [("in1", "BSDF", metal), ("in2", "color3", "0.2, 0.3, 0.4")])
+    scaled = bsdf("scaled", "multiply", [("in1", "BSDF", mixed), ("in2", "float", "0.6")])
+    total = bsdf("total", "add", [("in1", "BSDF", scaled), ("in2", "BSDF", tinted)])
+    glow = doc.addNode("uniform_edf", "glow", "EDF")
+    glow.addInput("color", "color3").setValueString("0.5, 0.25, 0")
+    surface = doc.addNode("surface", "SR_layered", "surfaceshader")
+    surface.addInput("bsdf", "BSDF").setConnectedNode(total)
+    surface.addInput("edf", "EDF").setConnectedNode(glow)
+    doc.addMaterialNode("M_layered", surface)
+
+    white = bsdf("white", "oren_nayar_diffuse_bsdf", [("color", "color3", "1, 1, 1")])
+    clear = bsdf("clear", "dielectric_bsdf", [("ior", "float", "1.5"), ("roughness", "vector2", "0.09, 0.09")])
+    half = bsdf("half", "multiply", [("in1", "BSDF", clear), ("in2", "float", "0.5")])
+    furnace = bsdf("furnace", "layer", [("top", "BSDF", half), ("base", "BSDF", white)])
+    surface = doc.addNode("surface", "SR_furnace", "surfaceshader")
+    surface.addInput("bsdf", "BSDF").setConnectedNode(furnace)
+    doc.addMaterialNode("M_furnace", surface)
     return doc
 
 
@@ -278,6 +324,12 @@ def main():
     mx.writeToXmlFile(doc, out("chess_mat.mtlx"))
     with open(out("chess_mat.expected"), "w") as f:
         f.write("\n".join(describe(out("chess_mat.mtlx"))) + "\n")
+    doc = layered_document()
+    valid, message = doc.validate()
+    assert valid, message
+    mx.writeToXmlFile(doc, out("layered_mat.mtlx"))
+    with open(out("layered_mat.expected"), "w") as f:
+        f.write("\n".join(describe(out("layered_mat.mtlx"))) + "\n")
     chess_scene()
     preview_scene()
     verdicts()

@@ -5,8 +5,8 @@
 //!
 //! This module holds what is MaterialX's own: which substance a surface id names, which node
 //! function a node id names (by MaterialX's type suffixes), port names, colour spaces, and
-//! what is reported (a node strata lacks, once per kind; a surface input the single-closure
-//! approximation does not read, when a scene sets it).
+//! what is reported (a node strata lacks, once per kind; a surface input the layered surfaces
+//! do not read, when a scene sets it).
 
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::front::types::Value;
@@ -18,6 +18,7 @@ pub fn surface_substance(id: &str) -> Option<&'static str> {
         "UsdPreviewSurface" | "ND_UsdPreviewSurface_surfaceshader" => Some("UsdPreviewSurface"),
         "ND_open_pbr_surface_surfaceshader" => Some("open_pbr_surface"),
         "ND_standard_surface_surfaceshader" | "ND_standard_surface_surfaceshader_100" => Some("standard_surface"),
+        "ND_surface" => Some("mx_surface"),
         _ => None,
     }
 }
@@ -86,9 +87,33 @@ fn variant(ty: &str) -> Option<&'static str> {
     }
 }
 
+/// pbrlib's closure nodes by definition id, and the node function each is: BSDF nodes are
+/// closures, EDFs emitted radiance as a colour (their operators are the colour nodes).
+const PBRLIB: &[(&str, &str)] = &[
+    ("ND_oren_nayar_diffuse_bsdf", "mx_oren_nayar_diffuse_bsdf"),
+    ("ND_burley_diffuse_bsdf", "mx_burley_diffuse_bsdf"),
+    ("ND_dielectric_bsdf", "mx_dielectric_bsdf"),
+    ("ND_conductor_bsdf", "mx_conductor_bsdf"),
+    ("ND_generalized_schlick_bsdf", "mx_generalized_schlick_bsdf"),
+    ("ND_sheen_bsdf", "mx_sheen_bsdf"),
+    ("ND_layer_bsdf", "mx_layer_bsdf"),
+    ("ND_mix_bsdf", "mx_mix_bsdf"),
+    ("ND_add_bsdf", "mx_add_bsdf"),
+    ("ND_multiply_bsdfC", "mx_multiply_bsdfC"),
+    ("ND_multiply_bsdfF", "mx_multiply_bsdfF"),
+    ("ND_uniform_edf", "mx_uniform_edf"),
+    ("ND_mix_edf", "mx_mix_color3"),
+    ("ND_add_edf", "mx_add_color3"),
+    ("ND_multiply_edfC", "mx_multiply_color3"),
+    ("ND_multiply_edfF", "mx_multiply_color3"),
+];
+
 /// The node function a MaterialX node id names (`mx_image_color3` for `ND_image_vector3`),
 /// if strata's library may have it; the caller checks that it does.
 pub fn node_function(id: &str) -> Option<String> {
+    if let Some((_, function)) = PBRLIB.iter().find(|(nd, _)| *nd == id) {
+        return Some((*function).into());
+    }
     let (node, types) = split_id(id)?;
     if node == "normalmap" {
         // `ND_normalmap` (1.38), `ND_normalmap_float`/`_vector2` (1.39: the type of `scale`).
@@ -179,46 +204,41 @@ pub fn to_working_space(space: &str, c: [f32; 3]) -> Option<[f32; 3]> {
     })
 }
 
-/// Surface inputs that the single-closure surfaces do not read (or read approximately), with
-/// what strata does instead; reported when a scene drives them or sets them away from their
-/// default.
+/// Surface inputs that the layered surfaces do not read (or read approximately), with what
+/// strata does instead; reported when a scene drives them or sets them away from their default.
 const UNREAD_SURFACE_INPUTS: &[(&str, &str, &str)] = &[
-    ("open_pbr_surface", "base_diffuse_roughness", "the base is Lambertian (no Oren-Nayar roughness)"),
     ("open_pbr_surface", "specular_roughness_anisotropy", "specular reflection is isotropic"),
     ("open_pbr_surface", "transmission_depth", "transmission has no volume (a thin tinted interface)"),
     ("open_pbr_surface", "transmission_scatter", "transmission has no volume scattering"),
     ("open_pbr_surface", "transmission_dispersion_scale", "no dispersion"),
-    ("open_pbr_surface", "subsurface_weight", "no subsurface scattering: the base is diffuse"),
-    ("open_pbr_surface", "fuzz_weight", "no fuzz (sheen) lobe"),
+    (
+        "open_pbr_surface",
+        "subsurface_weight",
+        "approximated by diffuse reflection of subsurface_color (no light travels under the surface)",
+    ),
+    ("open_pbr_surface", "subsurface_radius", "no subsurface scattering: the radius is not read"),
     ("open_pbr_surface", "coat_roughness_anisotropy", "the coat is isotropic"),
     ("open_pbr_surface", "thin_film_weight", "no thin-film iridescence"),
     ("open_pbr_surface", "geometry_thin_walled", "surfaces are never thin-walled"),
     ("open_pbr_surface", "geometry_coat_normal", "the coat uses the geometry normal"),
     ("open_pbr_surface", "geometry_tangent", "reflection is isotropic: tangents are not read"),
-    ("standard_surface", "diffuse_roughness", "the base is Lambertian (no Oren-Nayar roughness)"),
     ("standard_surface", "specular_anisotropy", "specular reflection is isotropic"),
     ("standard_surface", "transmission_depth", "transmission has no volume (a thin tinted interface)"),
     ("standard_surface", "transmission_scatter", "transmission has no volume scattering"),
     ("standard_surface", "transmission_dispersion", "no dispersion"),
     ("standard_surface", "transmission_extra_roughness", "transmission uses the specular roughness"),
-    ("standard_surface", "subsurface", "no subsurface scattering: the base is diffuse"),
-    ("standard_surface", "sheen", "no sheen lobe"),
+    (
+        "standard_surface",
+        "subsurface",
+        "approximated by diffuse reflection of subsurface_color (no light travels under the surface)",
+    ),
+    ("standard_surface", "subsurface_radius", "no subsurface scattering: the radius is not read"),
     ("standard_surface", "coat_anisotropy", "the coat is isotropic"),
     ("standard_surface", "coat_normal", "the coat uses the geometry normal"),
-    ("standard_surface", "coat_affect_color", "the coat does not darken the base"),
-    ("standard_surface", "coat_affect_roughness", "the coat does not roughen the base"),
+    ("standard_surface", "coat_affect_color", "the coat does not saturate the base"),
     ("standard_surface", "thin_film_thickness", "no thin-film iridescence"),
     ("standard_surface", "thin_walled", "surfaces are never thin-walled"),
-];
-
-/// Surface inputs that choose one closure by a threshold at 0.5 instead of blending two.
-const THRESHOLD_INPUTS: &[(&str, &str)] = &[
-    ("open_pbr_surface", "base_metalness"),
-    ("open_pbr_surface", "transmission_weight"),
-    ("open_pbr_surface", "coat_weight"),
-    ("standard_surface", "metalness"),
-    ("standard_surface", "transmission"),
-    ("standard_surface", "coat"),
+    ("mx_surface", "thin_walled", "surfaces are never thin-walled"),
 ];
 
 /// How a surface input is set in a network: a constant, or driven by a node.
@@ -229,7 +249,7 @@ pub enum Setting<'v> {
     Driven,
 }
 
-/// Reports what the single-closure `substance` does not honour of input `input` set to
+/// Reports what the layered `substance` does not honour of input `input` set to
 /// `setting` against its `default`: each (substance, input) kind once per run.
 pub fn report_surface_input(
     substance: &str,
@@ -252,21 +272,48 @@ pub fn report_surface_input(
                 .at(at, "set here")
                 .kind(unread_kind(substance, input)),
         );
+    }
+}
+
+/// Inputs of pbrlib's BSDF nodes that strata's lobes do not model, with what they do instead
+/// (`"*"`: every BSDF node). Each kind is reported once per run.
+const UNREAD_NODE_INPUTS: &[(&str, &str, &str)] = &[
+    ("*", "normal", "every lobe uses the shading normal"),
+    ("*", "tangent", "lobes are isotropic: tangents are not read"),
+    ("*", "retroreflective", "lobes are not retroreflective"),
+    ("*", "thinfilm_thickness", "no thin-film iridescence"),
+    ("*", "roughness", "lobes are isotropic: an anisotropic α is read as its geometric mean"),
+    ("ND_generalized_schlick_bsdf", "scatter_mode", "generalized_schlick_bsdf reflects only"),
+    ("ND_sheen_bsdf", "mode", "sheen is Conty and Kulla's Charlie sheen"),
+];
+
+/// Reports what a pbrlib BSDF node `id` does not honour of input `input` set to `setting`:
+/// each (input, what) kind once per run.
+pub fn report_node_input(id: &str, input: &str, setting: Setting, at: Span, diags: &mut Diagnostics) {
+    if !PBRLIB.iter().any(|(nd, _)| *nd == id && nd.ends_with("_bsdf")) {
         return;
     }
-    let partial = match setting {
-        Setting::Driven => true,
-        Setting::Value(Value::Float(x)) => *x > 0.0 && *x < 1.0,
-        Setting::Value(_) => false,
+    let Some((_, _, what)) =
+        UNREAD_NODE_INPUTS.iter().find(|(node, name, _)| (*node == "*" || *node == id) && *name == input)
+    else {
+        return;
     };
-    if partial && THRESHOLD_INPUTS.iter().any(|(s, i)| *s == substance && *i == input) {
+    let away = match (input, setting) {
+        (_, Setting::Driven) => input != "roughness",
+        ("roughness", Setting::Value(Value::Triple([x, y, _]))) => (x - y).abs() > 1e-6 * x.abs().max(*y),
+        ("roughness", _) => false,
+        ("scatter_mode", Setting::Value(Value::Str(m))) => m != "R",
+        ("mode", Setting::Value(Value::Str(m))) => m != "conty_kulla",
+        (_, Setting::Value(Value::Triple(v))) => v.iter().any(|c| *c != 0.0),
+        (_, Setting::Value(Value::Float(x))) => *x != 0.0,
+        (_, Setting::Value(Value::Int(i))) => *i != 0,
+        _ => false,
+    };
+    if away {
         diags.push(
-            Diagnostic::warning(format!(
-                "{substance} `{input}` between 0 and 1 is approximated: strata has one closure per layer, so each point \
-                 takes one lobe (switched at 0.5) instead of a blend of two"
-            ))
-            .at(at, "set here")
-            .kind("MaterialX surface blend approximated"),
+            Diagnostic::warning(format!("MaterialX `{id}` input `{input}` is not supported: {what}"))
+                .at(at, "set here")
+                .kind(what),
         );
     }
 }
@@ -289,6 +336,7 @@ pub fn keeps_product(substance: &str, product: crate::front::ast::Product, set: 
         ("open_pbr_surface", Product::Emission) => is_set("emission_luminance"),
         ("standard_surface", Product::Normal) => is_set("normal_"),
         ("standard_surface", Product::Emission) => is_set("emission"),
+        ("mx_surface", Product::Emission) => is_set("edf"),
         _ => true,
     }
 }
@@ -309,6 +357,10 @@ mod tests {
         assert_eq!(node_function("ND_convert_vector3_vector2").as_deref(), Some("mx_convert_color3_vector2"));
         assert_eq!(node_function("ND_normalmap").as_deref(), Some("mx_normalmap_color3"));
         assert_eq!(node_function("ND_add_color4"), None);
+        // pbrlib: closures by definition id, EDFs as colours.
+        assert_eq!(node_function("ND_layer_bsdf").as_deref(), Some("mx_layer_bsdf"));
+        assert_eq!(node_function("ND_multiply_bsdfF").as_deref(), Some("mx_multiply_bsdfF"));
+        assert_eq!(node_function("ND_add_edf").as_deref(), Some("mx_add_color3"));
         assert_eq!(node_function("UsdUVTexture"), None);
     }
 

@@ -15,7 +15,7 @@ use super::connect::{Producer, convert_input, producer};
 use super::mtlx;
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::front::ast::Product;
-use crate::front::graph::{NodeInstance, Source};
+use crate::front::graph::{Graph, NodeInstance, Source};
 use crate::front::library::{GraphId, Library};
 use crate::front::types::{Type, Value};
 use crate::runtime::texture;
@@ -101,6 +101,8 @@ pub fn instantiate(
     // Inputs driven by nodes, and inputs set at all (normal and displacement products stay
     // only when something sets them: a bump of 0 costs the integrator a bump per hit).
     let mut driven: Vec<(usize, Source)> = Vec::new();
+    // Closure ports driven by nodes: (template node, parameter, source).
+    let mut ports: Vec<(usize, usize, Source)> = Vec::new();
     let mut set: Vec<String> = Vec::new();
     for attr in &surface.attributes {
         let Some(usd_name) = attr.name.strip_prefix("inputs:") else { continue };
@@ -110,6 +112,25 @@ pub fn instantiate(
             _ => mtlx::port_name(usd_name),
         };
         let name = name.as_ref();
+        if let Some((node, param)) = closure_port(builder.lib, &graph, name) {
+            let mut seen = Vec::new();
+            if let Some(Producer::Output(prim, output)) = producer(stage, surface, attr, true, &mut seen, builder.diags)
+                && let Some((source, from)) = builder.output(prim, output, attr.span)
+            {
+                if from == Type::CLOSURE {
+                    ports.push((node, param, source));
+                } else {
+                    builder.diags.push(
+                        Diagnostic::error(format!(
+                            "`{}` is {from} and cannot drive {substance}'s closure input `{usd_name}`",
+                            attribute_path(prim, output)
+                        ))
+                        .at(attr.span, "connected here"),
+                    );
+                }
+            }
+            continue;
+        }
         let Some((index, input)) = graph.input(name) else {
             let known = graph.inputs.iter().map(|i| match i.name.as_str() {
                 "normal_ts" => "normal",
@@ -195,6 +216,9 @@ pub fn instantiate(
             }
         }
     }
+    for (node, param, source) in ports {
+        graph.nodes[node].args[param] = Some(shift(source));
+    }
     graph.nodes.append(&mut builder.nodes);
     let keep = |p: Product| match p {
         Product::Normal => set.iter().any(|s| s == "normal_ts"),
@@ -220,6 +244,16 @@ pub fn instantiate(
         }
     };
     Some(MaterialRef { path: path.to_string(), graph: graph_id, values, span: binding })
+}
+
+/// A closure port of a surface substance's template graph: the unset closure parameter `name`
+/// of one of its nodes (a substance input cannot carry a closure: `mx_surface`'s `bsdf` is
+/// its shell node's parameter).
+fn closure_port(lib: &Library, graph: &Graph, name: &str) -> Option<(usize, usize)> {
+    graph.nodes.iter().enumerate().find_map(|(n, node)| {
+        let (param, p) = lib.function(node.func).param(name)?;
+        (p.ty == Type::CLOSURE && !p.output && node.args[param].is_none()).then_some((n, param))
+    })
 }
 
 /// A shader's `info:id`.
@@ -395,6 +429,7 @@ impl<'s> Builder<'_, 's> {
                     match node_value(value, &vattr.type_name, ty).and_then(|v| in_working_space(v, vattr)) {
                         Ok(v) => {
                             self.check_token(id, name, &v, *span);
+                            mtlx::report_node_input(id, usd_name, mtlx::Setting::Value(&v), attr.span, self.diags);
                             args[index] = Some(Source::Const(v, ty));
                             if let (Some(a), UsdValue::Tuple(t)) = (alpha, value)
                                 && let [_, _, _, w] = t.as_slice()
@@ -422,6 +457,7 @@ impl<'s> Builder<'_, 's> {
                         );
                         continue;
                     }
+                    mtlx::report_node_input(id, usd_name, mtlx::Setting::Driven, attr.span, self.diags);
                     args[index] = Some(source);
                 }
             }

@@ -367,69 +367,171 @@ shader mx_normalmap_color3(color in_ = color(0.5, 0.5, 1.0), float scale = 1.0, 
     out = length(w) > 1e-8 ? color(normalize(w)) : color(n);
 }
 
+// ---- pbrlib: BSDF and EDF nodes on the closure built-ins ------------------------------------
+// A BSDF node is its lobe times `weight`; `layer`/`mix`/`add`/`multiply` are the closure
+// algebra (MaterialX's `mix(fg, bg, m)` is `bg·(1 − m) + fg·m`). MaterialX's microfacet
+// `roughness` is the GGX α along tangent and bitangent (a vector2, as `roughness_anisotropy`
+// makes it from a perceptual roughness); strata's lobes are isotropic and take the perceptual
+// roughness r = √α, here of the geometric mean α = √(αx αy) (compose reports anisotropy).
+// A per-lobe `normal`/`tangent` is reported by compose: every lobe uses the shading normal.
+// An EDF is its emitted radiance as a colour: `uniform_edf` is its colour, and the EDF
+// operators are the colour nodes (`ND_add_edf` is `mx_add_color3`).
+float mx_isotropic_roughness(color alpha) {
+    return sqrt(sqrt(clamp(alpha.r, 0.0, 1.0) * clamp(alpha.g, 0.0, 1.0)));
+}
+
+shader mx_oren_nayar_diffuse_bsdf(float weight = 1.0, color color_ = color(0.18), float roughness = 0.0,
+                                  color normal_ = color(0.0), int energy_compensation = 0, output closure out) {
+    out = oren_nayar_diffuse_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0), energy_compensation != 0 ? 1.0 : 0.0)
+          * clamp(weight, 0.0, 1.0);
+}
+shader mx_burley_diffuse_bsdf(float weight = 1.0, color color_ = color(0.18), float roughness = 0.0,
+                              color normal_ = color(0.0), output closure out) {
+    out = burley_diffuse_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0)) * clamp(weight, 0.0, 1.0);
+}
+shader mx_dielectric_bsdf(float weight = 1.0, color tint = color(1.0), float ior = 1.5,
+                          color roughness = color(0.05, 0.05, 0.0), int retroreflective = 0, float thinfilm_thickness = 0.0,
+                          float thinfilm_ior = 1.5, color normal_ = color(0.0), color tangent = color(0.0),
+                          string distribution = "ggx", string scatter_mode = "R", output closure out) {
+    out = dielectric_bsdf(clamp(tint, 0.0, 1.0), clamp(ior, 1.0, 4.0), mx_isotropic_roughness(roughness), scatter_mode)
+          * clamp(weight, 0.0, 1.0);
+}
+shader mx_conductor_bsdf(float weight = 1.0, color ior = color(0.183, 0.421, 1.373), color extinction = color(3.424, 2.346, 1.770),
+                         color roughness = color(0.05, 0.05, 0.0), int retroreflective = 0, float thinfilm_thickness = 0.0,
+                         float thinfilm_ior = 1.5, color normal_ = color(0.0), color tangent = color(0.0),
+                         string distribution = "ggx", output closure out) {
+    out = conductor_bsdf(ior, extinction, mx_isotropic_roughness(roughness)) * clamp(weight, 0.0, 1.0);
+}
+shader mx_generalized_schlick_bsdf(float weight = 1.0, color color0 = color(1.0), color color82 = color(1.0),
+                                   color color90 = color(1.0), float exponent = 5.0, color roughness = color(0.05, 0.05, 0.0),
+                                   int retroreflective = 0, float thinfilm_thickness = 0.0, float thinfilm_ior = 1.5,
+                                   color normal_ = color(0.0), color tangent = color(0.0), string distribution = "ggx",
+                                   string scatter_mode = "R", output closure out) {
+    out = generalized_schlick_bsdf(clamp(color0, 0.0, 1.0), clamp(color82, 0.0, 1.0), clamp(color90, 0.0, 1.0), exponent,
+                                   mx_isotropic_roughness(roughness))
+          * clamp(weight, 0.0, 1.0);
+}
+shader mx_sheen_bsdf(float weight = 1.0, color color_ = color(1.0), float roughness = 0.3, color normal_ = color(0.0),
+                     string mode = "conty_kulla", output closure out) {
+    out = sheen_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0)) * clamp(weight, 0.0, 1.0);
+}
+
+shader mx_layer_bsdf(closure top, closure base, output closure out) { out = layer(top, base); }
+shader mx_mix_bsdf(closure fg, closure bg, float mix = 0.0, output closure out) {
+    float m = clamp(mix, 0.0, 1.0);
+    out = bg * (1.0 - m) + fg * m;
+}
+shader mx_add_bsdf(closure in1, closure in2, output closure out) { out = in1 + in2; }
+shader mx_multiply_bsdfC(closure in1, color in2 = color(1.0), output closure out) { out = in1 * clamp(in2, 0.0, 1.0); }
+shader mx_multiply_bsdfF(closure in1, float in2 = 1.0, output closure out) { out = in1 * clamp(in2, 0.0, 1.0); }
+
+shader mx_uniform_edf(color color_ = color(1.0), output color out) { out = color_; }
+
+// MaterialX's `surface`: a BSDF, an EDF (emitted radiance) and opacity. The BSDF reaches the
+// shell node's closure port `bsdf` (a substance input cannot carry a closure), wired by
+// compose; unconnected it is black.
+shader mx_surface_shell(closure bsdf, output closure out) { out = bsdf; }
+substance mx_surface {
+    input color edf = color(0.0, 0.0, 0.0);
+    input float opacity = 1.0;
+    input int thin_walled = 0;
+    node shell = mx_surface_shell();
+    node presence = mask(opacity: opacity);
+    node glow = mx_emission(amount: 1.0, tint: edf);
+    surface = shell.out;
+    mask = presence.out;
+    emission = glow.out;
+}
+
 // ---- open_pbr_surface (OpenPBR 1.1) and standard_surface (Autodesk Standard Surface 1.0) -----
-// Both surfaces compose their lobes in `mx_surface_closure`, the one place that turns the
-// physical parameters into a closure. strata has one closure per layer today (no weighted
-// lobe sums), so that function picks the single closure closest to the specified layering;
-// the closure algebra replaces its body alone. Per parameter:
-// - base weight · base colour: the diffuse albedo (Lambert; base_diffuse_roughness /
-//   diffuse_roughness is reported when set);
-// - metalness m ≥ 0.5: GGX conductor with normal-incidence colour mix(F0(specular IOR) ·
-//   specular colour, base, m) and the specular colour as edge tint (strata's artist-friendly
-//   conductor, close to the F82 tint); m < 0.5: the dielectric lobes with the base darkened by
-//   (1 − m) and their tint moved towards the base by m. The specifications blend the two
-//   linearly; one closure cannot, so it switches at 0.5 (as UsdPreviewSurface's metallic does);
-// - transmission ≥ 0.5 (dielectric): rough glass with the transmission colour as tint, the
-//   specular roughness and IOR; below it opaque;
-// - coat ≥ 0.5: the GGX coat (coat colour as tint, coat roughness and IOR) over the diffuse
-//   base, which then stands for the specular layer too; below it the specular layer (specular
-//   colour · weight as tint, specular roughness and IOR) over the diffuse base;
-// - specular weight 0 and no coat: the diffuse base alone;
+// Both surfaces are the closure algebra's layer stacks, as their specifications layer them:
+//
+//   OpenPBR:          layer(fuzz, layer(coat, mix(dielectric, metal, base_metalness)))
+//   Standard Surface: layer(coat, mix(dielectric, metal, metalness)), sheen under the specular
+//   dielectric:       mix(layer(specular reflection, opaque base), rough glass (R and T), transmission)
+//   opaque base:      diffuse (Oren–Nayar; EON in OpenPBR) of mix(base colour, subsurface colour, subsurface)
+//
+// at most 6 terms of the 8 a closure holds. A layer's weight (coat, fuzz/sheen, specular) is
+// its top's weight (`layer(top · w, base)` = `mix(base, layer(top, base), w)`), so weight 0
+// terms vanish and a single lobe remains in the limiting cases. Per parameter:
+// - metal: GGX with the F82-tint Fresnel (generalized Schlick: F0 base_weight · base_color,
+//   F82 tint specular_color, exponent 5), weighted by specular_weight in OpenPBR;
+// - specular: a GGX dielectric reflection (specular_color tint, specular_ior) weighted by
+//   specular_weight (OpenPBR 1.0's scaled Fresnel; 1.1 modulates the IOR instead);
+// - transmission: the rough dielectric with reflection and transmission, transmission_color
+//   as its tint, no volume (depth, scatter and dispersion are reported);
+// - subsurface: diffuse reflection of subsurface_color (no light travels under the surface;
+//   reported);
+// - coat: a GGX dielectric reflection (coat_ior, coat_roughness) over the base tinted by
+//   mix(1, coat_color, coat_weight); in OpenPBR the coat roughens the specular lobes below
+//   (r' = mix(r, min(1, (r⁴ + 2 r_c⁴)^¼), coat_weight)), in Standard Surface by
+//   coat_affect_roughness · coat · coat_roughness towards 1; the base is not darkened by the
+//   coat's internal reflections (OpenPBR's coat_darkening);
+// - fuzz (OpenPBR, over the coat) and sheen (Standard Surface, over the diffuse): Charlie sheen;
 // - emission: the `emission` product; opacity: the layer mask.
 // Roughness is perceptual (GGX alpha = roughness²), as both specifications define it.
-closure mx_surface_closure(color base, float metalness, float specular_weight, color specular_color, float specular_roughness,
-                           float specular_ior, float transmission, color transmission_color, float coat, color coat_color,
-                           float coat_roughness, float coat_ior) {
-    color albedo = clamp(base, 0.0, 1.0);
-    float r = clamp(specular_roughness, 0.0, 1.0);
-    float m = clamp(metalness, 0.0, 1.0);
-    if (m >= 0.5) {
-        float k = (clamp(specular_ior, 1.0, 4.0) - 1.0) / (clamp(specular_ior, 1.0, 4.0) + 1.0);
-        color f0 = clamp(specular_color, 0.0, 1.0) * (k * k);
-        return metal_bsdf(clamp(mix(f0, albedo, m), 0.0, 0.999), clamp(specular_color, 0.0, 1.0), r);
-    }
-    if (transmission >= 0.5) {
-        return glass_bsdf(clamp(transmission_color, 0.0, 1.0), r, clamp(specular_ior, 1.0001, 4.0));
-    }
-    color diffuse = albedo * (1.0 - m);
-    if (coat >= 0.5) {
-        color tint = mix(clamp(coat_color, 0.0, 1.0), albedo, m);
-        return glossy_bsdf(diffuse, tint, clamp(coat_roughness, 0.0, 1.0), clamp(coat_ior, 1.0, 4.0));
-    }
-    if (specular_weight <= 0.0 && m <= 0.0) {
-        return diffuse_bsdf(albedo);
-    }
-    color tint = mix(clamp(specular_color * specular_weight, 0.0, 1.0), albedo, m);
-    return glossy_bsdf(diffuse, tint, r, clamp(specular_ior, 1.0, 4.0));
+
+// The dielectric base both surfaces share (see above).
+closure mx_dielectric_base(closure opaque, float specular_weight, color specular_color, float roughness, float ior,
+                           float transmission, color transmission_color) {
+    closure specular = dielectric_bsdf(clamp(specular_color, 0.0, 1.0), clamp(ior, 1.0, 4.0), roughness, "R")
+                       * clamp(specular_weight, 0.0, 1.0);
+    closure glass = dielectric_bsdf(clamp(transmission_color, 0.0, 1.0), clamp(ior, 1.0001, 4.0), roughness, "RT");
+    return mix(layer(specular, opaque), glass, clamp(transmission, 0.0, 1.0));
 }
 
-shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0.8, 0.8), float base_metalness = 0.0,
-                        float specular_weight = 1.0, color specular_color = color(1.0), float specular_roughness = 0.3,
-                        float specular_ior = 1.5, float transmission_weight = 0.0, color transmission_color = color(1.0),
-                        float coat_weight = 0.0, color coat_color = color(1.0), float coat_roughness = 0.0,
-                        float coat_ior = 1.6, output closure bsdf) {
-    bsdf = mx_surface_closure(base_color * base_weight, base_metalness, specular_weight, specular_color, specular_roughness,
-                              specular_ior, transmission_weight, transmission_color, coat_weight, coat_color, coat_roughness,
-                              coat_ior);
+// A metal with the F82-tint Fresnel: normal-incidence colour `f0`, `tint` at 82°.
+closure mx_f82_metal(color f0, color tint, float roughness) {
+    return generalized_schlick_bsdf(clamp(f0, 0.0, 1.0), clamp(tint, 0.0, 1.0), color(1.0), 5.0, roughness);
 }
 
-shader mx_standard_surface_bsdf(float base = 0.8, color base_color = color(1.0), float metalness = 0.0, float specular = 1.0,
-                                color specular_color = color(1.0), float specular_roughness = 0.2, float specular_IOR = 1.5,
-                                float transmission = 0.0, color transmission_color = color(1.0), float coat = 0.0,
-                                color coat_color = color(1.0), float coat_roughness = 0.1, float coat_IOR = 1.5,
+// A clear coat of `weight` over `base`, which it tints by `coat_color`.
+closure mx_coated(closure base, float weight, color coat_color, float roughness, float ior) {
+    float c = clamp(weight, 0.0, 1.0);
+    return layer(dielectric_bsdf(color(1.0), clamp(ior, 1.0, 4.0), clamp(roughness, 0.0, 1.0), "R") * c,
+                 base * mix(color(1.0), clamp(coat_color, 0.0, 1.0), c));
+}
+
+shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0.8, 0.8), float base_diffuse_roughness = 0.0,
+                        float base_metalness = 0.0, float specular_weight = 1.0, color specular_color = color(1.0),
+                        float specular_roughness = 0.3, float specular_ior = 1.5, float transmission_weight = 0.0,
+                        color transmission_color = color(1.0), float subsurface_weight = 0.0,
+                        color subsurface_color = color(0.8, 0.8, 0.8), float fuzz_weight = 0.0, color fuzz_color = color(1.0),
+                        float fuzz_roughness = 0.5, float coat_weight = 0.0, color coat_color = color(1.0),
+                        float coat_roughness = 0.0, float coat_ior = 1.6, output closure bsdf) {
+    float c = clamp(coat_weight, 0.0, 1.0);
+    float rc = clamp(coat_roughness, 0.0, 1.0);
+    float r0 = clamp(specular_roughness, 0.0, 1.0);
+    float r = mix(r0, min(1.0, pow(r0 * r0 * r0 * r0 + 2.0 * rc * rc * rc * rc, 0.25)), c);
+    color base = clamp(base_color * base_weight, 0.0, 1.0);
+    color diffuse_colour = mix(base, clamp(subsurface_color, 0.0, 1.0), clamp(subsurface_weight, 0.0, 1.0));
+    closure diffuse = oren_nayar_diffuse_bsdf(diffuse_colour, clamp(base_diffuse_roughness, 0.0, 1.0), 1.0);
+    closure dielectric = mx_dielectric_base(diffuse, specular_weight, specular_color, r, specular_ior, transmission_weight,
+                                            transmission_color);
+    closure metal = mx_f82_metal(base, specular_color, r) * clamp(specular_weight, 0.0, 1.0);
+    closure coated = mx_coated(mix(dielectric, metal, clamp(base_metalness, 0.0, 1.0)), c, coat_color, rc, coat_ior);
+    bsdf = layer(sheen_bsdf(clamp(fuzz_color, 0.0, 1.0), clamp(fuzz_roughness, 0.0, 1.0)) * clamp(fuzz_weight, 0.0, 1.0), coated);
+}
+
+shader mx_standard_surface_bsdf(float base = 0.8, color base_color = color(1.0), float diffuse_roughness = 0.0,
+                                float metalness = 0.0, float specular = 1.0, color specular_color = color(1.0),
+                                float specular_roughness = 0.2, float specular_IOR = 1.5, float transmission = 0.0,
+                                color transmission_color = color(1.0), float subsurface = 0.0,
+                                color subsurface_color = color(1.0), float sheen = 0.0, color sheen_color = color(1.0),
+                                float sheen_roughness = 0.3, float coat = 0.0, color coat_color = color(1.0),
+                                float coat_roughness = 0.1, float coat_IOR = 1.5, float coat_affect_roughness = 0.0,
                                 output closure bsdf) {
-    bsdf = mx_surface_closure(base_color * base, metalness, specular, specular_color, specular_roughness, specular_IOR,
-                              transmission, transmission_color, coat, coat_color, coat_roughness, coat_IOR);
+    float c = clamp(coat, 0.0, 1.0);
+    float rc = clamp(coat_roughness, 0.0, 1.0);
+    float r = mix(clamp(specular_roughness, 0.0, 1.0), 1.0, clamp(coat_affect_roughness, 0.0, 1.0) * c * rc);
+    color albedo = clamp(base_color * base, 0.0, 1.0);
+    color diffuse_colour = mix(albedo, clamp(subsurface_color, 0.0, 1.0), clamp(subsurface, 0.0, 1.0));
+    closure diffuse = oren_nayar_diffuse_bsdf(diffuse_colour, clamp(diffuse_roughness, 0.0, 1.0), 0.0);
+    closure opaque = layer(sheen_bsdf(clamp(sheen_color, 0.0, 1.0), clamp(sheen_roughness, 0.0, 1.0)) * clamp(sheen, 0.0, 1.0),
+                           diffuse);
+    closure dielectric = mx_dielectric_base(opaque, specular, specular_color, r, specular_IOR, transmission, transmission_color);
+    bsdf = mx_coated(mix(dielectric, mx_f82_metal(albedo, specular_color, r), clamp(metalness, 0.0, 1.0)), c, coat_color, rc,
+                     coat_IOR);
 }
 
 // emission_luminance (nits) · emission_color as radiance: UsdLux intensities are nits too.
@@ -445,7 +547,8 @@ shader mx_opacity(color opacity = color(1.0), output float out) {
 }
 
 // Every input of the OpenPBR 1.1 specification with its default; `compose::mtlx` reports
-// those the closure does not read when a scene sets them away from the default.
+// those the closure does not read (or reads approximately) when a scene sets them away from
+// the default.
 substance open_pbr_surface {
     input float base_weight = 1.0;
     input color base_color = color(0.8, 0.8, 0.8);
@@ -488,12 +591,14 @@ substance open_pbr_surface {
     input color geometry_coat_normal = color(0.0, 0.0, 0.0);
     input color geometry_tangent = color(0.0, 0.0, 0.0);
     input color geometry_coat_tangent = color(0.0, 0.0, 0.0);
-    node bsdf = mx_open_pbr_bsdf(base_weight: base_weight, base_color: base_color, base_metalness: base_metalness,
-                                 specular_weight: specular_weight, specular_color: specular_color,
-                                 specular_roughness: specular_roughness, specular_ior: specular_ior,
-                                 transmission_weight: transmission_weight, transmission_color: transmission_color,
-                                 coat_weight: coat_weight, coat_color: coat_color, coat_roughness: coat_roughness,
-                                 coat_ior: coat_ior);
+    node bsdf = mx_open_pbr_bsdf(base_weight: base_weight, base_color: base_color, base_diffuse_roughness: base_diffuse_roughness,
+                                 base_metalness: base_metalness, specular_weight: specular_weight,
+                                 specular_color: specular_color, specular_roughness: specular_roughness,
+                                 specular_ior: specular_ior, transmission_weight: transmission_weight,
+                                 transmission_color: transmission_color, subsurface_weight: subsurface_weight,
+                                 subsurface_color: subsurface_color, fuzz_weight: fuzz_weight, fuzz_color: fuzz_color,
+                                 fuzz_roughness: fuzz_roughness, coat_weight: coat_weight, coat_color: coat_color,
+                                 coat_roughness: coat_roughness, coat_ior: coat_ior);
     node presence = mask(opacity: geometry_opacity);
     node normals = mx_surface_normal(n: geometry_normal);
     node glow = mx_emission(amount: emission_luminance, tint: emission_color);
@@ -547,11 +652,14 @@ substance standard_surface {
     input int thin_walled = 0;
     input color normal_ = color(0.0, 0.0, 0.0);
     input color tangent = color(0.0, 0.0, 0.0);
-    node bsdf = mx_standard_surface_bsdf(base: base, base_color: base_color, metalness: metalness, specular: specular,
-                                         specular_color: specular_color, specular_roughness: specular_roughness,
-                                         specular_IOR: specular_IOR, transmission: transmission,
-                                         transmission_color: transmission_color, coat: coat, coat_color: coat_color,
-                                         coat_roughness: coat_roughness, coat_IOR: coat_IOR);
+    node bsdf = mx_standard_surface_bsdf(base: base, base_color: base_color, diffuse_roughness: diffuse_roughness,
+                                         metalness: metalness, specular: specular, specular_color: specular_color,
+                                         specular_roughness: specular_roughness, specular_IOR: specular_IOR,
+                                         transmission: transmission, transmission_color: transmission_color,
+                                         subsurface: subsurface, subsurface_color: subsurface_color, sheen: sheen,
+                                         sheen_color: sheen_color, sheen_roughness: sheen_roughness, coat: coat,
+                                         coat_color: coat_color, coat_roughness: coat_roughness, coat_IOR: coat_IOR,
+                                         coat_affect_roughness: coat_affect_roughness);
     node presence = mx_opacity(opacity: opacity);
     node normals = mx_surface_normal(n: normal_);
     node glow = mx_emission(amount: emission, tint: emission_color);

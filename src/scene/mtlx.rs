@@ -472,6 +472,17 @@ pub fn nodedef_id(node: Node) -> String {
         |name: &str| inputs(node).find(|i| i.attribute("name") == Some(name)).and_then(|i| i.attribute("type"));
     let in_ty = input_type("in").unwrap_or("float");
     match category {
+        // pbrlib: closure operators are named by their closure type (`ND_layer_bsdf`,
+        // `ND_multiply_bsdfF`), lobes and EDFs by their category alone, as is `surface`.
+        "multiply" if matches!(ty, "BSDF" | "EDF" | "VDF") => {
+            let by = if input_type("in2") == Some("float") { "F" } else { "C" };
+            format!("ND_multiply_{}{by}", ty.to_ascii_lowercase())
+        }
+        "layer" | "mix" | "add" if matches!(ty, "BSDF" | "EDF" | "VDF") => {
+            format!("ND_{category}_{}", ty.to_ascii_lowercase())
+        }
+        _ if matches!(ty, "BSDF" | "EDF" | "VDF") => format!("ND_{category}"),
+        "surface" | "surface_unlit" if ty == "surfaceshader" => format!("ND_{category}"),
         "convert" => format!("ND_convert_{in_ty}_{ty}"),
         // 1.39 names normal maps by the type of `scale`.
         "normalmap" => format!("ND_normalmap_{}", input_type("scale").unwrap_or("float")),
