@@ -149,7 +149,7 @@ fn collection_bindings(
             );
             continue;
         };
-        let collection = Collection::read(owner, name);
+        let collection = Collection::read(stage, owner, name, diags);
         if stage.find(material).is_none() {
             missing.push(
                 "missing material binding target",
@@ -304,7 +304,7 @@ fn collection_slot_binding(
         );
         return None;
     };
-    let members = Collection::read(owner, collection_name);
+    let members = Collection::read(stage, owner, collection_name, diags);
     if let Some(nested) = members.nested() {
         diags.push(
             Diagnostic::warning(format!(
@@ -312,14 +312,6 @@ fn collection_slot_binding(
             ))
             .at(*collection_span, "bound here")
             .note("list the prims in `includes` instead"),
-        );
-    }
-    if members.has_expression {
-        diags.push(
-            Diagnostic::warning(format!(
-                "collection `{collection_path}` has a `membershipExpression`; strata does not evaluate path expressions and reads only its includes and excludes"
-            ))
-            .at(*collection_span, "bound here"),
         );
     }
     let (material, span) = match material {

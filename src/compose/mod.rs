@@ -8,6 +8,7 @@ pub mod binding;
 pub mod collection;
 pub mod connect;
 pub mod mtlx;
+pub mod path_expression;
 pub mod preview;
 pub mod scene;
 pub mod slots;

@@ -853,6 +853,7 @@ impl Session {
                     connections: Vec::new(),
                     time_samples: Vec::new(),
                     metadata: Vec::new(),
+                    weaker_defaults: Vec::new(),
                 });
                 prim.attributes.len() - 1
             }

@@ -72,6 +72,10 @@ pub struct Attribute {
     pub time_samples: Vec<(f64, Value)>,
     /// Metadata, strongest opinion per key.
     pub metadata: Vec<MetadataEntry>,
+    /// For `pathExpression` attributes only: the default values of the weaker opinions,
+    /// strongest first, which a stronger expression's `%_` composes over (USD composes path
+    /// expressions rather than replacing them). Empty for every other type.
+    pub weaker_defaults: Vec<(Value, Span)>,
 }
 
 impl Attribute {

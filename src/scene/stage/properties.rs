@@ -110,6 +110,13 @@ pub(super) fn compose_attribute(specs: &[(&usda::AttributeSpec, &Node)]) -> Attr
     for (a, _) in specs {
         merge_metadata(&mut metadata, &a.metadata);
     }
+    // Path expressions compose: a stronger one's `%_` stands for the next weaker value.
+    let weaker_defaults = if strongest.type_name == "pathExpression" {
+        // A weaker block (`= None`) ends the chain.
+        specs.iter().filter_map(|(a, _)| a.default.clone()).skip(1).take_while(|(v, _)| !v.is_none()).collect()
+    } else {
+        Vec::new()
+    };
     Attribute {
         name: strongest.name.clone(),
         type_name: strongest.type_name.clone(),
@@ -124,6 +131,7 @@ pub(super) fn compose_attribute(specs: &[(&usda::AttributeSpec, &Node)]) -> Attr
         connections,
         time_samples,
         metadata,
+        weaker_defaults,
     }
 }
 
