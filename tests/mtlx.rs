@@ -688,3 +688,82 @@ fn pbrlib_graphs_conserve_energy_in_a_white_furnace() {
     }
     assert!(failures.is_empty(), "{failures:#?}");
 }
+
+#[test]
+fn translucent_subsurface_and_thin_film_nodes_compile_to_what_they_approximate() {
+    // surface(bsdf = add(translucent · 0.5, layer(thin_film, dielectric) · 0.5)) and a
+    // subsurface_bsdf on a second material.
+    let shader = |name: &str, id: &str, inputs: &str| {
+        format!(
+            "    def Shader \"{name}\" {{\n        uniform token info:id = \"{id}\"\n{inputs}        token outputs:out\n    }}\n"
+        )
+    };
+    let connect = |input: &str, node: &str| format!("        token inputs:{input}.connect = </M/{node}.outputs:out>\n");
+    let network = [
+        shader(
+            "T",
+            "ND_translucent_bsdf",
+            "        color3f inputs:color = (0.6, 0.7, 0.8)\n        float inputs:weight = 0.5\n",
+        ),
+        shader("F", "ND_thin_film_bsdf", "        float inputs:thickness = 400\n"),
+        shader("D", "ND_dielectric_bsdf", "        float inputs:weight = 0.5\n"),
+        shader("L", "ND_layer_bsdf", &(connect("top", "F") + &connect("base", "D"))),
+        shader("A", "ND_add_bsdf", &(connect("in1", "T") + &connect("in2", "L"))),
+        shader("S", "ND_surface", &connect("bsdf", "A")).replace("token outputs:out", "token outputs:surface"),
+    ]
+    .concat();
+    let text =
+        format!("def Material \"M\" {{\n    token outputs:mtlx:surface.connect = </M/S.outputs:surface>\n{network}}}");
+    let (code, rendered) = compiled(&text);
+    let code = code.unwrap_or_else(|| panic!("{rendered}"));
+    assert_eq!(rendered.matches("thin_film_bsdf is ignored").count(), 1, "{rendered}");
+    let got = described(&lobes_at(&code, 0.5, 0.5), 3);
+    assert_eq!(
+        got,
+        [
+            (ClosureKind::Translucent, [0.5; 3], vec![0.6, 0.7, 0.8]),
+            (ClosureKind::Dielectric, [0.5; 3], vec![1.0, 1.0, 1.0])
+        ]
+    );
+    let subsurface = text.replace("ND_translucent_bsdf", "ND_subsurface_bsdf");
+    let (code, rendered) = compiled(&subsurface);
+    assert!(rendered.contains("subsurface_bsdf is approximated by diffuse transmission"), "{rendered}");
+    assert_eq!(ClosureKind::from_u32(closure_at(&code.unwrap(), 0.5, 0.5).kind), ClosureKind::Translucent);
+}
+
+#[test]
+fn the_translucent_lobe_is_lambert_on_the_far_side() {
+    let lobe = |albedo: [f32; 3]| {
+        let mut sum = ClosureSum::default();
+        sum.terms[0] = ClosureTerm::from_closure(&Closure {
+            kind: ClosureKind::Translucent as u32,
+            params: [albedo[0], albedo[1], albedo[2], 0.0, 0.0, 0.0, 0.0, 0.0],
+        });
+        ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling)
+    };
+    let b = lobe([0.6, 0.7, 0.8]);
+    let wo = glam::Vec3::new(0.6, 0.0, 0.8);
+    // Closed form: albedo / π through the surface, nothing reflected.
+    let through = glam::Vec3::new(0.3, 0.4, -0.866).normalize();
+    let back = glam::Vec3::new(0.3, 0.4, 0.866).normalize();
+    assert!((b.eval(wo, through) - glam::Vec3::new(0.6, 0.7, 0.8) / std::f32::consts::PI).abs().max_element() < 1e-6);
+    assert_eq!(b.eval(wo, back), glam::Vec3::ZERO);
+    assert_eq!(b.pdf(wo, back), 0.0);
+    // Every sample crosses the surface with the pdf `pdf` reports; a white lobe is a furnace.
+    let mut rng = Rng::new(3, 7, 0);
+    for _ in 0..1000 {
+        let uc = rng.uniform();
+        let s = b.sample(wo, uc, rng.uniform2()).expect("samples");
+        assert!(s.wi.z < 0.0 && (s.pdf - b.pdf(wo, s.wi)).abs() < 1e-5 * s.pdf.max(1.0), "{s:?}");
+        assert!((s.f * s.wi.z.abs() / s.pdf - glam::Vec3::new(0.6, 0.7, 0.8)).abs().max_element() < 1e-5);
+    }
+    let (e, se) = directional_albedo(
+        &ClosureSum::single(&Closure {
+            kind: ClosureKind::Translucent as u32,
+            params: [1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        }),
+        0.3,
+        10_000,
+    );
+    assert!((e - 1.0).abs() < 1e-5 && se < 1e-5, "{e} ± {se}");
+}
