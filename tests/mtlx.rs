@@ -22,17 +22,7 @@ const DIR: &str = "tests/fixtures/mtlx";
 /// `/Ball`'s compiled material in a scene whose other prims are `rest` (USDA, with `/Ball`
 /// bound to `</M>`), resolved against the fixture directory; and the rendered diagnostics.
 fn compiled(rest: &str) -> (Option<Arc<dyn MaterialCode>>, String) {
-    let text = format!(
-        "#usda 1.0\ndef Sphere \"Ball\" (prepend apiSchemas = [\"MaterialBindingAPI\"]) {{ rel material:binding = </M> }}\n{rest}\n"
-    );
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let stage = Stage::from_text("scene.usda", &text, Path::new(DIR), &mut sources, &mut diags).expect("parses");
-    let c = compose_stage(&stage, &mut sources, &mut diags);
-    let code = c.material_of("/Ball").and_then(|material| {
-        Compiler::new(BackendKind::Jit, PassOptions::default()).compile(&c.library, material, &mut diags)
-    });
-    (code, diags.render(&sources))
+    compiled_with(rest, BackendKind::Jit)
 }
 
 /// The terms of `code`'s surface closure that the renderer sees (non-zero weight) at a shading
@@ -552,7 +542,7 @@ fn a_document_sublayered_under_a_usd_layer_composes_its_materials() {
     assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.75, 0.75).kind), ClosureKind::GeneralizedSchlick);
 }
 
-/// `/Ball`'s material compiled by `backend`, as [`compiled`] does with the JIT.
+/// `/Ball`'s compiled material (see [`compiled`]) from `backend`.
 fn compiled_with(rest: &str, backend: BackendKind) -> (Option<Arc<dyn MaterialCode>>, String) {
     let text = format!(
         "#usda 1.0\ndef Sphere \"Ball\" (prepend apiSchemas = [\"MaterialBindingAPI\"]) {{ rel material:binding = </M> }}\n{rest}\n"
