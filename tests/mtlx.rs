@@ -22,17 +22,7 @@ const DIR: &str = "tests/fixtures/mtlx";
 /// `/Ball`'s compiled material in a scene whose other prims are `rest` (USDA, with `/Ball`
 /// bound to `</M>`), resolved against the fixture directory; and the rendered diagnostics.
 fn compiled(rest: &str) -> (Option<Arc<dyn MaterialCode>>, String) {
-    let text = format!(
-        "#usda 1.0\ndef Sphere \"Ball\" (prepend apiSchemas = [\"MaterialBindingAPI\"]) {{ rel material:binding = </M> }}\n{rest}\n"
-    );
-    let mut sources = SourceMap::new();
-    let mut diags = Diagnostics::new();
-    let stage = Stage::from_text("scene.usda", &text, Path::new(DIR), &mut sources, &mut diags).expect("parses");
-    let c = compose_stage(&stage, &mut sources, &mut diags);
-    let code = c.material_of("/Ball").and_then(|material| {
-        Compiler::new(BackendKind::Jit, PassOptions::default()).compile(&c.library, material, &mut diags)
-    });
-    (code, diags.render(&sources))
+    compiled_with(rest, BackendKind::Jit)
 }
 
 /// The terms of `code`'s surface closure that the renderer sees (non-zero weight) at a shading
@@ -552,7 +542,7 @@ fn a_document_sublayered_under_a_usd_layer_composes_its_materials() {
     assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.75, 0.75).kind), ClosureKind::GeneralizedSchlick);
 }
 
-/// `/Ball`'s material compiled by `backend`, as [`compiled`] does with the JIT.
+/// `/Ball`'s compiled material (see [`compiled`]) from `backend`.
 fn compiled_with(rest: &str, backend: BackendKind) -> (Option<Arc<dyn MaterialCode>>, String) {
     let text = format!(
         "#usda 1.0\ndef Sphere \"Ball\" (prepend apiSchemas = [\"MaterialBindingAPI\"]) {{ rel material:binding = </M> }}\n{rest}\n"
@@ -687,4 +677,83 @@ fn pbrlib_graphs_conserve_energy_in_a_white_furnace() {
         eprintln!("cos {cos}: furnace {:.4}, layered {e:.4}", directional_albedo(&furnace, cos, 100_000).0);
     }
     assert!(failures.is_empty(), "{failures:#?}");
+}
+
+#[test]
+fn translucent_subsurface_and_thin_film_nodes_compile_to_what_they_approximate() {
+    // surface(bsdf = add(translucent · 0.5, layer(thin_film, dielectric) · 0.5)) and a
+    // subsurface_bsdf on a second material.
+    let shader = |name: &str, id: &str, inputs: &str| {
+        format!(
+            "    def Shader \"{name}\" {{\n        uniform token info:id = \"{id}\"\n{inputs}        token outputs:out\n    }}\n"
+        )
+    };
+    let connect = |input: &str, node: &str| format!("        token inputs:{input}.connect = </M/{node}.outputs:out>\n");
+    let network = [
+        shader(
+            "T",
+            "ND_translucent_bsdf",
+            "        color3f inputs:color = (0.6, 0.7, 0.8)\n        float inputs:weight = 0.5\n",
+        ),
+        shader("F", "ND_thin_film_bsdf", "        float inputs:thickness = 400\n"),
+        shader("D", "ND_dielectric_bsdf", "        float inputs:weight = 0.5\n"),
+        shader("L", "ND_layer_bsdf", &(connect("top", "F") + &connect("base", "D"))),
+        shader("A", "ND_add_bsdf", &(connect("in1", "T") + &connect("in2", "L"))),
+        shader("S", "ND_surface", &connect("bsdf", "A")).replace("token outputs:out", "token outputs:surface"),
+    ]
+    .concat();
+    let text =
+        format!("def Material \"M\" {{\n    token outputs:mtlx:surface.connect = </M/S.outputs:surface>\n{network}}}");
+    let (code, rendered) = compiled(&text);
+    let code = code.unwrap_or_else(|| panic!("{rendered}"));
+    assert_eq!(rendered.matches("thin_film_bsdf is ignored").count(), 1, "{rendered}");
+    let got = described(&lobes_at(&code, 0.5, 0.5), 3);
+    assert_eq!(
+        got,
+        [
+            (ClosureKind::Translucent, [0.5; 3], vec![0.6, 0.7, 0.8]),
+            (ClosureKind::Dielectric, [0.5; 3], vec![1.0, 1.0, 1.0])
+        ]
+    );
+    let subsurface = text.replace("ND_translucent_bsdf", "ND_subsurface_bsdf");
+    let (code, rendered) = compiled(&subsurface);
+    assert!(rendered.contains("subsurface_bsdf is approximated by diffuse transmission"), "{rendered}");
+    assert_eq!(ClosureKind::from_u32(closure_at(&code.unwrap(), 0.5, 0.5).kind), ClosureKind::Translucent);
+}
+
+#[test]
+fn the_translucent_lobe_is_lambert_on_the_far_side() {
+    let lobe = |albedo: [f32; 3]| {
+        let mut sum = ClosureSum::default();
+        sum.terms[0] = ClosureTerm::from_closure(&Closure {
+            kind: ClosureKind::Translucent as u32,
+            params: [albedo[0], albedo[1], albedo[2], 0.0, 0.0, 0.0, 0.0, 0.0],
+        });
+        ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling)
+    };
+    let b = lobe([0.6, 0.7, 0.8]);
+    let wo = glam::Vec3::new(0.6, 0.0, 0.8);
+    // Closed form: albedo / π through the surface, nothing reflected.
+    let through = glam::Vec3::new(0.3, 0.4, -0.866).normalize();
+    let back = glam::Vec3::new(0.3, 0.4, 0.866).normalize();
+    assert!((b.eval(wo, through) - glam::Vec3::new(0.6, 0.7, 0.8) / std::f32::consts::PI).abs().max_element() < 1e-6);
+    assert_eq!(b.eval(wo, back), glam::Vec3::ZERO);
+    assert_eq!(b.pdf(wo, back), 0.0);
+    // Every sample crosses the surface with the pdf `pdf` reports; a white lobe is a furnace.
+    let mut rng = Rng::new(3, 7, 0);
+    for _ in 0..1000 {
+        let uc = rng.uniform();
+        let s = b.sample(wo, uc, rng.uniform2()).expect("samples");
+        assert!(s.wi.z < 0.0 && (s.pdf - b.pdf(wo, s.wi)).abs() < 1e-5 * s.pdf.max(1.0), "{s:?}");
+        assert!((s.f * s.wi.z.abs() / s.pdf - glam::Vec3::new(0.6, 0.7, 0.8)).abs().max_element() < 1e-5);
+    }
+    let (e, se) = directional_albedo(
+        &ClosureSum::single(&Closure {
+            kind: ClosureKind::Translucent as u32,
+            params: [1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        }),
+        0.3,
+        10_000,
+    );
+    assert!((e - 1.0).abs() < 1e-5 && se < 1e-5, "{e} ± {se}");
 }

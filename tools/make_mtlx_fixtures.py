@@ -318,18 +318,12 @@ def verdicts():
 def main():
     for name, cells in TEXTURES.items():
         write_png(out("textures", name), cells)
-    doc = chess_document()
-    valid, message = doc.validate()
-    assert valid, message
-    mx.writeToXmlFile(doc, out("chess_mat.mtlx"))
-    with open(out("chess_mat.expected"), "w") as f:
-        f.write("\n".join(describe(out("chess_mat.mtlx"))) + "\n")
-    doc = layered_document()
-    valid, message = doc.validate()
-    assert valid, message
-    mx.writeToXmlFile(doc, out("layered_mat.mtlx"))
-    with open(out("layered_mat.expected"), "w") as f:
-        f.write("\n".join(describe(out("layered_mat.mtlx"))) + "\n")
+    for name, doc in [("chess_mat", chess_document()), ("layered_mat", layered_document())]:
+        valid, message = doc.validate()
+        assert valid, message
+        mx.writeToXmlFile(doc, out(f"{name}.mtlx"))
+        with open(out(f"{name}.expected"), "w") as f:
+            f.write("\n".join(describe(out(f"{name}.mtlx"))) + "\n")
     chess_scene()
     preview_scene()
     verdicts()

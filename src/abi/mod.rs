@@ -175,6 +175,8 @@ pub enum ClosureKind {
     Burley = 9,
     /// Charlie sheen (Estevez and Kulla 2017): `[color rgb, roughness]`.
     Sheen = 10,
+    /// Diffuse transmission (MaterialX `translucent_bsdf`): `[albedo rgb]`.
+    Translucent = 11,
 }
 
 impl ClosureKind {
@@ -191,6 +193,7 @@ impl ClosureKind {
             8 => ClosureKind::OrenNayar,
             9 => ClosureKind::Burley,
             10 => ClosureKind::Sheen,
+            11 => ClosureKind::Translucent,
             _ => ClosureKind::None,
         }
     }

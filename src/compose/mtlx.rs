@@ -96,6 +96,9 @@ const PBRLIB: &[(&str, &str)] = &[
     ("ND_conductor_bsdf", "mx_conductor_bsdf"),
     ("ND_generalized_schlick_bsdf", "mx_generalized_schlick_bsdf"),
     ("ND_sheen_bsdf", "mx_sheen_bsdf"),
+    ("ND_translucent_bsdf", "mx_translucent_bsdf"),
+    ("ND_subsurface_bsdf", "mx_subsurface_bsdf"),
+    ("ND_thin_film_bsdf", "mx_thin_film_bsdf"),
     ("ND_layer_bsdf", "mx_layer_bsdf"),
     ("ND_mix_bsdf", "mx_mix_bsdf"),
     ("ND_add_bsdf", "mx_add_bsdf"),
@@ -315,6 +318,23 @@ pub fn report_node_input(id: &str, input: &str, setting: Setting, at: Span, diag
                 .at(at, "set here")
                 .kind(what),
         );
+    }
+}
+
+/// pbrlib nodes strata approximates as a whole, with what it does instead.
+const APPROXIMATED_NODES: &[(&str, &str)] = &[
+    (
+        "ND_subsurface_bsdf",
+        "subsurface_bsdf is approximated by diffuse transmission of its colour: no light travels under the surface \
+         (`radius` and `anisotropy` are not read)",
+    ),
+    ("ND_thin_film_bsdf", "thin_film_bsdf is ignored: the layer below it has no thin-film iridescence"),
+];
+
+/// Reports a pbrlib node that strata approximates as a whole (once per kind).
+pub fn report_node(id: &str, at: Span, diags: &mut Diagnostics) {
+    if let Some((_, what)) = APPROXIMATED_NODES.iter().find(|(nd, _)| *nd == id) {
+        diags.push(Diagnostic::warning(*what).at(at, "this node").kind(what));
     }
 }
 

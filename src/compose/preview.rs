@@ -378,6 +378,7 @@ impl<'s> Builder<'_, 's> {
                     }
                     return None;
                 };
+                mtlx::report_node(id, prim.attribute("info:id").map_or(prim.span, |a| a.span), self.diags);
                 return self.instance(prim, id, &function);
             }
             _ => {

@@ -119,6 +119,7 @@ intrinsics! {
     OrenNayarDiffuseBsdf = "oren_nayar_diffuse_bsdf": Fixed(&[C, F, F], CL),
     BurleyDiffuseBsdf = "burley_diffuse_bsdf": Fixed(&[C, F], CL),
     SheenBsdf = "sheen_bsdf": Fixed(&[C, F], CL),
+    TranslucentBsdf = "translucent_bsdf": Fixed(&[C], CL),
     // layer(top, base): `top` over `base`, energy-conserving (the renderer's layering mode).
     Layer = "layer": Fixed(&[CL, CL], CL),
 }
@@ -162,6 +163,7 @@ impl Intrinsic {
             Intrinsic::OrenNayarDiffuseBsdf => K::OrenNayar,
             Intrinsic::BurleyDiffuseBsdf => K::Burley,
             Intrinsic::SheenBsdf => K::Sheen,
+            Intrinsic::TranslucentBsdf => K::Translucent,
             _ => return None,
         })
     }

@@ -416,6 +416,19 @@ shader mx_sheen_bsdf(float weight = 1.0, color color_ = color(1.0), float roughn
     out = sheen_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0)) * clamp(weight, 0.0, 1.0);
 }
 
+shader mx_translucent_bsdf(float weight = 1.0, color color_ = color(1.0), color normal_ = color(0.0), output closure out) {
+    out = translucent_bsdf(clamp(color_, 0.0, 1.0)) * clamp(weight, 0.0, 1.0);
+}
+// subsurface_bsdf: diffuse transmission of `color` (compose reports the approximation: no
+// light travels under the surface, `radius` and `anisotropy` are not read).
+shader mx_subsurface_bsdf(float weight = 1.0, color color_ = color(0.18), color radius = color(1.0), float anisotropy = 0.0,
+                          color normal_ = color(0.0), output closure out) {
+    out = translucent_bsdf(clamp(color_, 0.0, 1.0)) * clamp(weight, 0.0, 1.0);
+}
+// thin_film_bsdf (MaterialX 1.38, layered over a dielectric or conductor): no lobe, so
+// `layer(thin_film, base)` is the base (compose reports that the film is ignored).
+shader mx_thin_film_bsdf(float thickness = 550.0, float ior = 1.5, output closure out) {}
+
 shader mx_layer_bsdf(closure top, closure base, output closure out) { out = layer(top, base); }
 shader mx_mix_bsdf(closure fg, closure bg, float mix = 0.0, output closure out) {
     float m = clamp(mix, 0.0, 1.0);

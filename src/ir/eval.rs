@@ -489,6 +489,7 @@ fn intrinsic_value(i: Intrinsic, a: &[Value]) -> Result<Value, Stop> {
         | OrenNayarDiffuseBsdf
         | BurleyDiffuseBsdf
         | SheenBsdf
+        | TranslucentBsdf
         | Layer => return Err(Stop::NotConstant),
     })
 }

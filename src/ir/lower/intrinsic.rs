@@ -171,7 +171,8 @@ impl FnLower<'_> {
             | GeneralizedSchlickBsdf
             | OrenNayarDiffuseBsdf
             | BurleyDiffuseBsdf
-            | SheenBsdf => {
+            | SheenBsdf
+            | TranslucentBsdf => {
                 let kind = i.closure_kind().expect("a BSDF constructor");
                 let params: Vec<ssa::Value> = a.iter().flatten().copied().collect();
                 self.lobe(kind, &params)

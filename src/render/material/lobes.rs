@@ -1,6 +1,6 @@
 //! The lobes a closure term can be: [`Bsdf`]'s kinds plus the MaterialX pbrlib lobes
 //! (`dielectric_bsdf`, `generalized_schlick_bsdf`, `oren_nayar_diffuse_bsdf`,
-//! `burley_diffuse_bsdf`, `sheen_bsdf`), with what `layer` needs of a lobe on top: its
+//! `burley_diffuse_bsdf`, `sheen_bsdf`, `translucent_bsdf`), with what `layer` needs of a lobe on top: its
 //! directional albedo `E(μ)`.
 //!
 //! Conventions are [`crate::render::material::bsdf`]'s: local frame, `eval` without the cosine,
@@ -101,6 +101,11 @@ pub enum Lobe {
         /// Roughness in [0, 1].
         roughness: f32,
     },
+    /// Diffuse transmission (`translucent_bsdf`): Lambert on the side opposite `wo`.
+    Translucent {
+        /// Transmittance.
+        albedo: Vec3,
+    },
     /// The Charlie sheen (Estevez and Kulla 2017) with Neubelt and Pettineo's visibility,
     /// divided by its albedo where that exceeds 1 (smooth sheen at grazing angles).
     Sheen {
@@ -168,6 +173,7 @@ impl Lobe {
             },
             ClosureKind::Burley => Lobe::Burley { albedo: colour(&p[0..3]), roughness: sanitize(p[3], 0.0, 1.0, 0.0) },
             ClosureKind::Sheen => Lobe::Sheen { color: colour(&p[0..3]), roughness: sanitize(p[3], 0.0, 1.0, 0.3) },
+            ClosureKind::Translucent => Lobe::Translucent { albedo: colour(&p[0..3]) },
             _ => {
                 let mut closure = crate::abi::Closure { kind: t.kind, params: [0.0; 8] };
                 closure.params.copy_from_slice(&p[..8]);
@@ -204,6 +210,13 @@ impl Lobe {
                     (true, false) => Vec3::ZERO,
                 }
             }
+            Lobe::Translucent { albedo } => {
+                if wo.z * wi.z < 0.0 {
+                    albedo * FRAC_1_PI
+                } else {
+                    Vec3::ZERO
+                }
+            }
             _ => match upper(wo, wi) {
                 Some((wo, wi)) => self.eval_up(wo, wi),
                 None => Vec3::ZERO,
@@ -227,6 +240,13 @@ impl Lobe {
                 Some((wo, wi)) if !ggx.is_smooth() => microfacet_reflection_pdf(ggx, wo, wi),
                 _ => 0.0,
             },
+            Lobe::Translucent { .. } => {
+                if wo.z * wi.z < 0.0 {
+                    wi.z.abs() * FRAC_1_PI
+                } else {
+                    0.0
+                }
+            }
             _ => match upper(wo, wi) {
                 Some((_, wi)) => wi.z * FRAC_1_PI,
                 None => 0.0,
@@ -249,6 +269,14 @@ impl Lobe {
                     s.f *= tint;
                 }
                 Some(s)
+            }
+            Lobe::Translucent { albedo } => {
+                if !(wo.z != 0.0 && wo.is_finite() && u.is_finite()) {
+                    return None;
+                }
+                let wi = cosine_hemisphere(u.clamp(Vec2::ZERO, Vec2::splat(1.0 - f32::EPSILON / 2.0)));
+                let wi = if wo.z > 0.0 { flip_z(wi) } else { wi };
+                finish(wi, albedo * FRAC_1_PI, wi.z.abs() * FRAC_1_PI, false)
             }
             _ => {
                 if !(wo.z != 0.0 && wo.is_finite() && u.is_finite()) {
@@ -310,7 +338,7 @@ impl Lobe {
                 let excess = albedo::sheen(wo.z, roughness).max(albedo::sheen(wi.z, roughness)).max(1.0);
                 color * (sheen_eval(roughness, wo, wi) / excess)
             }
-            Lobe::Bsdf(_) | Lobe::Interface { .. } => Vec3::ZERO,
+            Lobe::Bsdf(_) | Lobe::Interface { .. } | Lobe::Translucent { .. } => Vec3::ZERO,
         }
     }
 
@@ -374,7 +402,7 @@ impl Lobe {
                 }
                 a.min(Vec3::ONE)
             }
-            Lobe::OrenNayar { albedo, .. } | Lobe::Burley { albedo, .. } => albedo,
+            Lobe::OrenNayar { albedo, .. } | Lobe::Burley { albedo, .. } | Lobe::Translucent { albedo } => albedo,
         }
     }
 
@@ -382,6 +410,7 @@ impl Lobe {
     pub fn transmits(&self) -> bool {
         match *self {
             Lobe::Bsdf(b) | Lobe::Interface { glass: b, .. } => b.transmits(),
+            Lobe::Translucent { .. } => true,
             _ => false,
         }
     }
@@ -411,6 +440,9 @@ impl Lobe {
     /// Whether the lobe scatters like a diffuse surface (its layering normalisation is the
     /// cosine-weighted average attenuation; see `closure`).
     pub fn is_diffuse(&self) -> bool {
-        matches!(self, Lobe::Bsdf(Bsdf::Diffuse { .. }) | Lobe::OrenNayar { .. } | Lobe::Burley { .. })
+        matches!(
+            self,
+            Lobe::Bsdf(Bsdf::Diffuse { .. }) | Lobe::OrenNayar { .. } | Lobe::Burley { .. } | Lobe::Translucent { .. }
+        )
     }
 }

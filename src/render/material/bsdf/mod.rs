@@ -212,7 +212,8 @@ impl Bsdf {
             | ClosureKind::GeneralizedSchlick
             | ClosureKind::OrenNayar
             | ClosureKind::Burley
-            | ClosureKind::Sheen => Bsdf::Black,
+            | ClosureKind::Sheen
+            | ClosureKind::Translucent => Bsdf::Black,
         }
     }
 
