@@ -437,23 +437,21 @@ fn main() -> ExitCode {
             strict,
             time,
         }),
-        Command::View { scene, port, bind, spp, res, camera, seed, time } => {
-            cli::view(strata::view::ViewOptions {
-                scene: strata::session::SceneSource::from_path(scene.as_deref()),
-                session: strata::session::SessionOptions { time, ..Default::default() },
-                settings: RenderSettings {
-                    width: res.map_or(640, |r| r.0),
-                    height: res.map_or(480, |r| r.1),
-                    spp,
-                    seed,
-                    ..RenderSettings::default()
-                },
-                resolution_given: res.is_some(),
-                scene_options: strata::render::scene::SceneOptions { camera, ..Default::default() },
-                bind,
-                port,
-            })
-        }
+        Command::View { scene, port, bind, spp, res, camera, seed, time } => cli::view(strata::view::ViewOptions {
+            scene: strata::session::SceneSource::from_path(scene.as_deref()),
+            session: strata::session::SessionOptions { time, ..Default::default() },
+            settings: RenderSettings {
+                width: res.map_or(640, |r| r.0),
+                height: res.map_or(480, |r| r.1),
+                spp,
+                seed,
+                ..RenderSettings::default()
+            },
+            resolution_given: res.is_some(),
+            scene_options: strata::render::scene::SceneOptions { camera, ..Default::default() },
+            bind,
+            port,
+        }),
         Command::Compile { file, output } => cli::compile(&file, &output),
         Command::Bench { what } => {
             let report = match what {

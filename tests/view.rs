@@ -58,8 +58,7 @@ fn progressive_passes_converge_to_the_render_bit_for_bit() {
         assert!(a == b, "channel {} differs from the render's", a.name);
     }
     // An image of fewer samples is a different (noisier) image: the check above can fail.
-    let (fewer, _) =
-        session.render(&Pass::full(RenderSettings { spp: 5, ..settings }), None).expect("render at 5 spp");
+    let (fewer, _) = session.render(&Pass::full(RenderSettings { spp: 5, ..settings }), None).expect("render at 5 spp");
     assert!(fewer.channels[0] != reference.channels[0]);
 }
 
@@ -99,7 +98,7 @@ impl Drop for View {
 /// One HTTP/1.1 request over a fresh connection; returns the status and the body.
 fn http(port: u16, method: &str, path: &str, host: &str, body: Option<&str>) -> (u16, Vec<u8>) {
     let mut stream = TcpStream::connect(("127.0.0.1", port)).expect("connect");
-    stream.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    stream.set_read_timeout(Some(Duration::from_secs(180))).unwrap();
     let body = body.unwrap_or("");
     write!(
         stream,
@@ -108,13 +107,39 @@ fn http(port: u16, method: &str, path: &str, host: &str, body: Option<&str>) -> 
         body.len()
     )
     .unwrap();
+    // Read the head, then exactly the body it announces: a server may keep the connection open.
     let mut raw = Vec::new();
-    stream.read_to_end(&mut raw).expect("response");
-    let split = raw.windows(4).position(|w| w == b"\r\n\r\n").expect("headers end");
-    let head = String::from_utf8_lossy(&raw[..split]).to_string();
+    let mut buffer = [0u8; 65536];
+    let split = loop {
+        if let Some(split) = raw.windows(4).position(|w| w == b"\r\n\r\n") {
+            break split;
+        }
+        let n = stream.read(&mut buffer).expect("response head");
+        assert!(n > 0, "connection closed before the response head");
+        raw.extend_from_slice(&buffer[..n]);
+    };
+    let head = String::from_utf8_lossy(&raw[..split]).to_ascii_lowercase();
     let status = head.split_whitespace().nth(1).and_then(|s| s.parse().ok()).expect("status");
+    let length =
+        head.lines().find_map(|l| l.strip_prefix("content-length:")).and_then(|n| n.trim().parse::<usize>().ok());
+    let chunked = head.contains("transfer-encoding: chunked");
     let mut payload = raw[split + 4..].to_vec();
-    if head.to_ascii_lowercase().contains("transfer-encoding: chunked") {
+    loop {
+        let complete = match length {
+            Some(n) => payload.len() >= n,
+            None if chunked => payload.ends_with(b"0\r\n\r\n"),
+            None => false,
+        };
+        if complete {
+            break;
+        }
+        let n = stream.read(&mut buffer).expect("response body");
+        if n == 0 {
+            break;
+        }
+        payload.extend_from_slice(&buffer[..n]);
+    }
+    if chunked {
         payload = dechunk(&payload);
     }
     (status, payload)
@@ -304,24 +329,28 @@ fn the_page_renders_inspects_and_follows_edits_in_chromium() {
     let first = browser.wait_for("the converged image", &converged_image(0));
     assert!(first.as_str().unwrap().starts_with("160x120:"), "{first}");
 
-    // A click on the floor in the image's lower middle shows its slot stack.
-    let frame = browser.session_call("POST", "/element", Some(json!({ "using": "css selector", "value": "#frame" })));
-    let element = frame.as_object().and_then(|o| o.values().next()).and_then(|v| v.as_str()).expect("#frame").to_string();
+    // A click in the middle of the image, on the centre ball, shows its slot stack.
+    let centre = browser.script(
+        "const r = document.getElementById('frame').getBoundingClientRect();
+         return [Math.round(r.left + r.width / 2), Math.round(r.top + r.height / 2)];",
+    );
     let click = json!({ "actions": [{ "type": "pointer", "id": "mouse", "parameters": { "pointerType": "mouse" },
         "actions": [
-            { "type": "pointerMove", "duration": 0, "x": 0, "y": 50,
-              "origin": { "element-6066-11e4-a52f-4d8b3e4c3b4d": element } },
+            { "type": "pointerMove", "duration": 0, "x": centre[0], "y": centre[1], "origin": "viewport" },
             { "type": "pointerDown", "button": 0 }, { "type": "pointerUp", "button": 0 }
         ] }] });
-    browser.session_call("POST", "/actions", Some(click));
+    let clicked = browser.session_call("POST", "/actions", Some(click));
+    assert!(clicked.is_null(), "the click failed: {clicked}");
     let stack = browser.wait_for(
         "the inspector",
         "const t = document.getElementById('pick-stack'); const p = document.getElementById('pick-prim');
          return t && p ? p.textContent + '\\n' + t.innerText : null;",
     );
     let stack = stack.as_str().unwrap();
-    let expected = expected_stack_line(&scene, stack.lines().next().unwrap_or(""));
-    assert!(stack.contains(&expected), "inspector shows\n{stack}\nexpected a row `{expected}`");
+    assert_eq!(stack.lines().next(), Some("/World/Balls/Center"), "{stack}");
+    for row in expected_stack_rows(&scene, "/World/Balls/Center") {
+        assert!(stack.contains(&row), "inspector shows\n{stack}\nexpected a row `{row}`");
+    }
 
     // Saving an edited substance file changes the image.
     let dirt = dir.path().join("dirt.ash");
@@ -351,7 +380,10 @@ fn the_page_renders_inspects_and_follows_edits_in_chromium() {
 
     // Fixing it renders again and clears the diagnostic.
     std::fs::write(&dirt, &text).unwrap();
-    browser.wait_for("the fix", &format!("return Number(document.getElementById('frame').dataset.edits) > {edits} || null;"));
+    browser.wait_for(
+        "the fix",
+        &format!("return Number(document.getElementById('frame').dataset.edits) > {edits} || null;"),
+    );
     let fixed = browser.wait_for("the fixed image", &converged_image(edits + 1));
     assert_eq!(fixed, first, "the original file renders the original image");
     let diagnostics = browser.script("return document.getElementById('diagnostics').style.display;");
@@ -363,14 +395,22 @@ fn the_page_renders_inspects_and_follows_edits_in_chromium() {
     }
 }
 
-/// The first slot row `strata layers` prints for the picked prim, as the inspector's table
-/// shows it (`slot<TAB>material<TAB>bound at`).
-fn expected_stack_line(scene: &Path, prim: &str) -> String {
+/// The slot and override rows `strata layers` composes for `prim`, as the inspector's table
+/// shows them (`slot<TAB>material<TAB>bound at`).
+fn expected_stack_rows(scene: &Path, prim: &str) -> Vec<String> {
     let mut session = Session::open(SceneSource::File(scene.to_path_buf()), SessionOptions::default());
     let stacks = session.layer_stacks();
     let stack = stacks.iter().find(|s| s.prim == prim).unwrap_or_else(|| panic!("`{prim}` is not a renderable prim"));
-    let layer = stack.layers.first().unwrap_or_else(|| panic!("`{prim}` has no slots"));
-    format!("{}\t{}\t{}", layer.slot.name(), layer.applied.material, layer.applied.bound_at)
+    assert!(stack.layers.len() >= 2, "the centre ball has a layered stack");
+    let row = |slot: String, applied: &strata::compose::slots::Applied| {
+        format!("{slot}\t{}\t{}", applied.material, applied.bound_at)
+    };
+    let mut rows = Vec::new();
+    for layer in &stack.layers {
+        rows.push(row(layer.slot.name(), &layer.applied));
+        rows.extend(layer.overrides.iter().map(|o| row(o.slot.name(), &o.applied)));
+    }
+    rows
 }
 
 fn edits_seen(browser: &Browser) -> u64 {
@@ -379,7 +419,9 @@ fn edits_seen(browser: &Browser) -> u64 {
 }
 
 fn load() -> String {
-    std::fs::read_to_string("/proc/loadavg").map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" ")).unwrap_or_default()
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|l| l.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_default()
 }
 
 fn base64_decode(text: &str) -> Vec<u8> {

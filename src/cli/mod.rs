@@ -454,7 +454,9 @@ pub fn view(options: strata::view::ViewOptions) -> Result<(), Failure> {
     })?;
     println!("strata view: {}", server.url());
     if !follows {
-        eprintln!("note: the embedded default scene has no files to follow; `strata view SCENE.usda` follows saved edits");
+        eprintln!(
+            "note: the embedded default scene has no files to follow; `strata view SCENE.usda` follows saved edits"
+        );
     }
     server.wait().map_err(|e| {
         eprintln!("error: {e}");

@@ -47,7 +47,11 @@ impl Orbit {
                 let (forward, up) = (turn * forward, turn * up);
                 // Never roll over the pole: keep the image's up on the stage's up side.
                 if up.dot(self.up) <= 0.05 {
-                    return camera.posed(pivot - (yaw * camera.forward()) * self.distance, yaw * camera.forward(), self.up);
+                    return camera.posed(
+                        pivot - (yaw * camera.forward()) * self.distance,
+                        yaw * camera.forward(),
+                        self.up,
+                    );
                 }
                 camera.posed(pivot - forward * self.distance, forward, self.up)
             }

@@ -79,7 +79,10 @@ pub fn png(image: &Image, group: &str) -> Option<Vec<u8>> {
 }
 
 fn finite_range(values: &[f32]) -> (f32, f32) {
-    values.iter().filter(|v| v.is_finite()).fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)))
+    values
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)))
 }
 
 fn linear_to_byte(v: f32) -> u8 {

@@ -30,8 +30,7 @@ pub(crate) fn start(changed: impl Fn(Vec<PathBuf>) + Send + 'static) -> Result<W
             return;
         }
         let files = watched.lock().unwrap_or_else(|e| e.into_inner());
-        let paths: Vec<PathBuf> =
-            event.paths.iter().map(|p| canonical(p)).filter(|p| files.contains(p)).collect();
+        let paths: Vec<PathBuf> = event.paths.iter().map(|p| canonical(p)).filter(|p| files.contains(p)).collect();
         if !paths.is_empty() {
             changed(paths);
         }
