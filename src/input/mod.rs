@@ -314,7 +314,9 @@ pub fn was_read(path: &Path) -> bool {
 pub fn files_read() -> Vec<PathBuf> {
     let files = FILES_READ.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
     let mut paths: Vec<PathBuf> = files.iter().map(|f| f.path.clone()).collect();
+    // A file read again after an edit is one identity per version (its mtime is part of it).
     paths.sort();
+    paths.dedup();
     paths
 }
 

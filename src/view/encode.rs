@@ -60,11 +60,11 @@ pub fn png(image: &Image, group: &str) -> Option<Vec<u8>> {
             srgb_byte(v)
         }
     };
+    // One plane is grey: it stands for all three.
+    let plane = |k: usize| planes[k.min(planes.len() - 1)];
     let mut pixels = Vec::with_capacity(n * 3);
-    for i in 0..n {
-        for k in 0..3 {
-            pixels.push(to_byte(planes[k.min(planes.len() - 1)][i]));
-        }
+    for ((&r, &g), &b) in plane(0).iter().zip(plane(1)).zip(plane(2)).take(n) {
+        pixels.extend([to_byte(r), to_byte(g), to_byte(b)]);
     }
     let mut bytes = Vec::new();
     let mut encoder = png::Encoder::new(&mut bytes, image.width as u32, image.height as u32);
