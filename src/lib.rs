@@ -18,6 +18,7 @@
 //! - [`runtime`]: noise, patterns and math semantics shared by every backend.
 //! - [`session`]: the pipeline's entry point: a scene opened, composed, compiled and built
 //!   for rendering, updated incrementally after a change.
+//! - [`view`]: `strata view`, the live progressive render in the browser over a session.
 //! - [`stack`]: the compiler thread with a known stack size that the recursive passes run on.
 
 #![warn(missing_docs)]
@@ -34,3 +35,4 @@ pub mod runtime;
 pub mod scene;
 pub mod session;
 pub mod stack;
+pub mod view;

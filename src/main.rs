@@ -191,6 +191,36 @@ enum Command {
         #[arg(required = true)]
         parts: Vec<PathBuf>,
     },
+    /// Serve a live, progressive render of a scene in the browser that follows every saved
+    /// edit of its layers, substance files and textures, with an inspector of each pixel's
+    /// slot stack.
+    View {
+        /// A USD scene: `.usda`, `.usdc`, `.usd` or `.usdz` (default: the embedded default scene,
+        /// which has no files to follow).
+        scene: Option<PathBuf>,
+        /// The port to listen on (0: any free port).
+        #[arg(long, default_value_t = 7878)]
+        port: u16,
+        /// The address to listen on. Anything but loopback exposes the view to the network.
+        #[arg(long, default_value = "127.0.0.1")]
+        bind: std::net::IpAddr,
+        /// Camera samples per pixel the view converges to (the image `render --spp` writes).
+        #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+        spp: u32,
+        /// Image size, WIDTHxHEIGHT (default: a UsdRender RenderSettings prim's `resolution`,
+        /// else 640x480).
+        #[arg(long, value_parser = parse_resolution)]
+        res: Option<(usize, usize)>,
+        /// The Camera prim to start with (default: as `render`).
+        #[arg(long, value_name = "PRIM")]
+        camera: Option<String>,
+        /// Seed of all sampling (as `render --seed`).
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// The time code to read animated attributes at (as `render --time`).
+        #[arg(long, value_name = "TIME")]
+        time: Option<strata::scene::TimeCode>,
+    },
     /// Measure shading and rendering cost: JIT vs interpreter vs hand-written Rust, compile
     /// time vs graph size, render time and error vs layer count.
     Bench {
@@ -448,6 +478,21 @@ fn main() -> ExitCode {
             frames,
         }),
         Command::Merge { output, parts } => cli::farm::merge(&output, &parts),
+        Command::View { scene, port, bind, spp, res, camera, seed, time } => cli::view(strata::view::ViewOptions {
+            scene: strata::session::SceneSource::from_path(scene.as_deref()),
+            session: strata::session::SessionOptions { time, ..Default::default() },
+            settings: RenderSettings {
+                width: res.map_or(640, |r| r.0),
+                height: res.map_or(480, |r| r.1),
+                spp,
+                seed,
+                ..RenderSettings::default()
+            },
+            resolution_given: res.is_some(),
+            scene_options: strata::render::scene::SceneOptions { camera, ..Default::default() },
+            bind,
+            port,
+        }),
         Command::Compile { file, output } => cli::compile(&file, &output),
         Command::Bench { what } => {
             let report = match what {

@@ -1,6 +1,6 @@
 //! The floor plan (ARCHITECTURE.md): every `crate::` path in the library's non-test code names a
 //! module on its own floor or a lower one. Floors, from the ground up: diag, input, abi,
-//! runtime, stack; front; scene; compose; ir; backend; render; session; the tools (cli, bench, fuzz).
+//! runtime, stack; front; scene; compose; ir; backend; render; session; view; the tools (cli, bench, fuzz).
 //! `tools/floor_plan.py` prints the same check per file, with import cycles.
 
 use std::path::{Path, PathBuf};
@@ -15,6 +15,7 @@ const FLOORS: &[&[&str]] = &[
     &["backend"],
     &["render"],
     &["session"],
+    &["view"],
     &["cli", "bench", "fuzz", "main"],
 ];
 

@@ -13,7 +13,7 @@ child that defines it, since re-exports are aliases, not code of their own.
 Floors, from the ground up (a module may import its own floor and the ones below it):
 
     ground: diag, input, abi, runtime, stack
-    front -> scene -> compose -> ir -> backend -> render -> tools (cli, bench, fuzz, plot)
+    front -> scene -> compose -> ir -> backend -> render -> session -> view -> tools (cli, bench, fuzz, plot)
 
 Top-level modules not named here are reported as unplaced. Exit status is 1 when there is a cycle
 or an upward import, so the script can gate a commit.
@@ -26,7 +26,7 @@ import sys
 from collections import defaultdict
 
 GROUND = {"diag", "input", "abi", "runtime", "stack"}
-STAGES = ["front", "scene", "compose", "ir", "backend", "render", "session"]
+STAGES = ["front", "scene", "compose", "ir", "backend", "render", "session", "view"]
 TOOLS = {"cli", "bench", "fuzz", "main"}
 
 

@@ -635,3 +635,24 @@ pub fn fuzz(options: &fuzz::FuzzOptions) -> Result<(), Failure> {
     }
     if report.findings.is_empty() { Ok(()) } else { Err(Failure) }
 }
+
+/// `strata view [SCENE] [--port P] [--bind ADDR] …`: starts the server, prints its URL and
+/// serves until interrupted.
+pub fn view(options: strata::view::ViewOptions) -> Result<(), Failure> {
+    let follows = !matches!(options.scene, SceneSource::Default);
+    let server = strata::view::start(options).map_err(|e| {
+        eprint!("{e}");
+        eprintln!("error: strata view did not start");
+        Failure
+    })?;
+    println!("strata view: {}", server.url());
+    if !follows {
+        eprintln!(
+            "note: the embedded default scene has no files to follow; `strata view SCENE.usda` follows saved edits"
+        );
+    }
+    server.wait().map_err(|e| {
+        eprintln!("error: {e}");
+        Failure
+    })
+}

@@ -310,6 +310,16 @@ pub fn was_read(path: &Path) -> bool {
     FILES_READ.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).iter().any(|f| f.same_file(&identity))
 }
 
+/// Every input file this process has read (canonical paths), for a live view to watch.
+pub fn files_read() -> Vec<PathBuf> {
+    let files = FILES_READ.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    let mut paths: Vec<PathBuf> = files.iter().map(|f| f.path.clone()).collect();
+    // A file read again after an edit is one identity per version (its mtime is part of it).
+    paths.sort();
+    paths.dedup();
+    paths
+}
+
 /// Reads the whole of `path` under the current [`limits`]; a package-relative path
 /// (`a.usdz[member]`) reads that member of the package.
 pub fn read_bytes(path: &Path) -> Result<Vec<u8>, InputError> {

@@ -162,6 +162,14 @@ impl Camera {
         c
     }
 
+    /// The same lens moved to `origin` looking along `forward` with `up` roughly up (a live
+    /// view's orbit, pan and dolly). No longer reframes the scene when the aspect changes.
+    pub fn posed(&self, origin: Vec3, forward: Vec3, up: Vec3) -> Camera {
+        let forward = forward.normalize_or(self.forward);
+        let right = forward.cross(up).normalize_or(self.right);
+        Camera { origin, forward, right, up: right.cross(forward), framed: None, ..*self }
+    }
+
     /// The angle (radians, small-angle) one pixel spans across an image `width` pixels wide:
     /// a length `l` at distance `d` from the camera covers about `l / (d · pixel_angle)` pixels.
     pub fn pixel_angle(&self, width: usize) -> f32 {

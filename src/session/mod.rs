@@ -539,6 +539,18 @@ impl Session {
         self.prepared.as_ref().map(|p| &p.scene)
     }
 
+    /// Moves the prepared scene's camera (a live view's orbit): geometry and materials are
+    /// kept; the default camera light, when the stage has no lights, travels with it.
+    pub fn set_camera(&mut self, camera: crate::render::camera::Camera) {
+        if let Some(prepared) = &mut self.prepared {
+            let scene = &mut prepared.scene;
+            scene.camera = camera;
+            if scene.default_lights {
+                scene.lights = crate::render::scene::default_lights(&camera);
+            }
+        }
+    }
+
     /// The composition, if [`Session::composition`] ran.
     pub fn composed(&self) -> Option<&SceneComposition> {
         self.composed.as_ref().map(|c| &c.scene)

@@ -1,0 +1,163 @@
+//! The page's HTTP server (axum on a current-thread tokio runtime).
+//!
+//! Every request must name the bound address in `Host` — a page elsewhere that points its
+//! own host name at 127.0.0.1 (DNS rebinding) is refused — and a request that carries an
+//! `Origin` must come from the view's own page, so other sites cannot drive it either.
+//!
+//! | route | answer |
+//! |---|---|
+//! | `GET /` | the page (`page.html`, compiled in) |
+//! | `GET /status?after=N` | the state as JSON, once its generation passes `N` (long poll, 20 s at most) |
+//! | `GET /frame.png?channel=G` | the latest image's channel group `G` (default: the beauty) |
+//! | `GET /pick?x=X&y=Y` | what is at pixel `(X, Y)`: prim, slot stack, channel values |
+//! | `POST /camera` | a [`super::camera::Move`] as JSON |
+//! | `POST /camera/select` | the Camera prim to look through (empty: the starting camera) |
+
+use super::Shared;
+use super::worker::Command;
+use super::{camera::Move, encode};
+use axum::extract::{Query, Request, State};
+use axum::http::{HeaderValue, StatusCode, header};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use serde::Deserialize;
+use serde_json::json;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+/// The page, served as it is.
+const PAGE: &str = include_str!("page.html");
+
+/// The longest a status request waits for something new.
+const LONG_POLL: Duration = Duration::from_secs(20);
+
+/// Serves `listener` until the process ends.
+pub(crate) fn serve(listener: std::net::TcpListener, address: SocketAddr, shared: Arc<Shared>) -> Result<(), String> {
+    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build().map_err(|e| e.to_string())?;
+    runtime.block_on(async move {
+        let listener = tokio::net::TcpListener::from_std(listener).map_err(|e| e.to_string())?;
+        let allowed = Arc::new(Allowed { host: address.to_string(), origin: format!("http://{address}") });
+        let app = axum::Router::new()
+            .route("/", get(page))
+            .route("/status", get(status))
+            .route("/frame.png", get(frame))
+            .route("/pick", get(pick))
+            .route("/camera", post(camera))
+            .route("/camera/select", post(select_camera))
+            .with_state(shared)
+            .layer(middleware::from_fn_with_state(allowed, guard));
+        axum::serve(listener, app).await.map_err(|e| e.to_string())
+    })
+}
+
+/// The `Host` and `Origin` a request may carry.
+struct Allowed {
+    host: String,
+    origin: String,
+}
+
+async fn guard(State(allowed): State<Arc<Allowed>>, request: Request, next: Next) -> Response {
+    let headers = request.headers();
+    let host_ok = headers.get(header::HOST).is_some_and(|h| h.as_bytes() == allowed.host.as_bytes());
+    let origin_ok = headers.get(header::ORIGIN).is_none_or(|o| o.as_bytes() == allowed.origin.as_bytes());
+    if !host_ok || !origin_ok {
+        let message = format!("refused: strata view answers only requests to {}\n", allowed.host);
+        return (StatusCode::FORBIDDEN, message).into_response();
+    }
+    next.run(request).await
+}
+
+fn with_type(body: impl IntoResponse, content_type: &'static str) -> Response {
+    let mut response = body.into_response();
+    let headers = response.headers_mut();
+    headers.insert(header::CONTENT_TYPE, HeaderValue::from_static(content_type));
+    headers.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    response
+}
+
+async fn page() -> Response {
+    with_type(PAGE, "text/html; charset=utf-8")
+}
+
+#[derive(Deserialize)]
+struct After {
+    #[serde(default)]
+    after: u64,
+}
+
+async fn status(State(shared): State<Arc<Shared>>, Query(q): Query<After>) -> Response {
+    let mut generation = shared.generation.subscribe();
+    let _ = tokio::time::timeout(LONG_POLL, generation.wait_for(|g| *g > q.after)).await;
+    let body = shared.snapshot(|p| {
+        let (image_width, image_height) = p.image.as_ref().map_or((0, 0), |i| (i.width, i.height));
+        json!({
+            "generation": p.generation,
+            "samples": p.samples,
+            "spp": p.spp,
+            "width": p.width,
+            "height": p.height,
+            "image_width": image_width,
+            "image_height": image_height,
+            "channels": p.image.as_ref().map(|i| encode::groups(i)).unwrap_or_default(),
+            "diagnostics": p.diagnostics,
+            "failed": p.failed,
+            "edits": p.edits,
+            "update_ms": p.update_ms,
+            "cameras": p.cameras,
+            "camera": p.camera,
+            "watched": p.watched,
+        })
+    });
+    with_type(body.to_string(), "application/json")
+}
+
+#[derive(Deserialize)]
+struct Channel {
+    channel: Option<String>,
+}
+
+async fn frame(State(shared): State<Arc<Shared>>, Query(q): Query<Channel>) -> Response {
+    let Some(image) = shared.snapshot(|p| p.image.clone()) else {
+        return (StatusCode::NOT_FOUND, "no image yet\n").into_response();
+    };
+    let group = q.channel.unwrap_or_else(|| encode::BEAUTY.to_string());
+    match tokio::task::spawn_blocking(move || encode::png(&image, &group)).await {
+        Ok(Some(bytes)) => with_type(bytes, "image/png"),
+        _ => (StatusCode::NOT_FOUND, "no such channel\n").into_response(),
+    }
+}
+
+#[derive(Deserialize)]
+struct Pixel {
+    x: usize,
+    y: usize,
+}
+
+async fn pick(State(shared): State<Arc<Shared>>, Query(q): Query<Pixel>) -> Response {
+    let (reply, answer) = tokio::sync::oneshot::channel();
+    if shared.commands.send(Command::Pick { x: q.x, y: q.y, reply }).is_err() {
+        return (StatusCode::SERVICE_UNAVAILABLE, "the renderer stopped\n").into_response();
+    }
+    match tokio::time::timeout(LONG_POLL, answer).await {
+        Ok(Ok(json)) => with_type(json, "application/json"),
+        _ => (StatusCode::SERVICE_UNAVAILABLE, "no answer from the renderer\n").into_response(),
+    }
+}
+
+async fn camera(State(shared): State<Arc<Shared>>, body: String) -> Response {
+    match serde_json::from_str::<Move>(&body) {
+        Ok(m) => {
+            let _ = shared.commands.send(Command::Camera(m));
+            StatusCode::NO_CONTENT.into_response()
+        }
+        Err(e) => (StatusCode::BAD_REQUEST, format!("{e}\n")).into_response(),
+    }
+}
+
+async fn select_camera(State(shared): State<Arc<Shared>>, body: String) -> Response {
+    let path = body.trim();
+    let _ = shared.commands.send(Command::SelectCamera((!path.is_empty()).then(|| path.to_string())));
+    StatusCode::NO_CONTENT.into_response()
+}

@@ -1,0 +1,324 @@
+//! The render thread: owns the [`Session`], applies saved edits and camera moves, and renders
+//! the preview and the progressive passes between them.
+
+use super::camera::{Move, Orbit};
+use super::progressive::Accumulator;
+use super::watch::Watcher;
+use super::{Shared, ViewOptions};
+use crate::render::scene::SceneOptions;
+use crate::render::{Image, RenderSettings};
+use crate::session::{Change, ChangeKind, Pass, Session};
+use serde_json::json;
+use std::collections::BTreeSet;
+use std::path::PathBuf;
+use std::sync::{Arc, mpsc};
+use std::time::{Duration, Instant};
+
+/// Divisor of the preview's size: the first image of an edit has 1/16 of the pixels, at one
+/// sample.
+const PREVIEW_SCALE: usize = 4;
+
+/// How long file events must stop before an edit is applied.
+const QUIET: Duration = Duration::from_millis(15);
+
+/// File events collected before they are applied.
+#[derive(Default)]
+struct Edits {
+    files: BTreeSet<PathBuf>,
+    first_event: Option<Instant>,
+}
+
+/// What the watcher and the page ask of the worker.
+pub(crate) enum Command {
+    /// Files changed on disk (canonical paths), first seen at `at`.
+    Files { paths: Vec<PathBuf>, at: Instant },
+    /// The page asks what is at a pixel of the full image; the answer is JSON.
+    Pick { x: usize, y: usize, reply: tokio::sync::oneshot::Sender<String> },
+    /// Orbit, pan or dolly the camera.
+    Camera(Move),
+    /// Look through a stage camera (`None`: the camera the view started with).
+    SelectCamera(Option<String>),
+}
+
+/// The render thread's state. See the module documentation.
+pub(crate) struct Worker {
+    session: Session,
+    settings: RenderSettings,
+    scene_options: SceneOptions,
+    shared: Arc<Shared>,
+    orbit: Orbit,
+    /// The last image with every band (for picking channel values).
+    image: Option<Arc<Image>>,
+    /// When the file event behind the coming preview happened.
+    changed_at: Option<Instant>,
+    /// The rendered diagnostics of the last edit (or of opening) and whether it failed.
+    diagnostics: String,
+    failed: bool,
+    /// Edits applied so far.
+    edits: u64,
+}
+
+impl Worker {
+    /// Opens and prepares the scene; the rendered diagnostics when it does not prepare.
+    pub fn open(options: &ViewOptions, shared: Arc<Shared>) -> Result<Worker, String> {
+        let mut session = Session::open(options.scene.clone(), options.session);
+        let mut settings = options.settings.clone();
+        let mut scene_options = options.scene_options.clone();
+        let compiled = session.compile().is_some();
+        if compiled {
+            session.lint_slots();
+        }
+        let view = if compiled { session.view(scene_options.camera.as_deref()) } else { None };
+        let mut prepared = false;
+        if let Some(view) = view {
+            if let (false, Some((w, h))) = (options.resolution_given, view.resolution) {
+                (settings.width, settings.height) = (w, h);
+            }
+            scene_options.camera = view.camera;
+            scene_options.dicing.resolution = (settings.width, settings.height);
+            prepared = session.prepare(&scene_options).is_some();
+        }
+        let diags = session.take_diagnostics();
+        let text = diags.render(session.sources());
+        if !prepared || diags.has_errors() {
+            return Err(text);
+        }
+        let cameras = session.stage().map(crate::render::scene::camera_paths).unwrap_or_default();
+        let up = session.stage().map_or("Y", |s| s.up_axis()).to_string();
+        let scene = session.scene().ok_or("the scene did not prepare")?;
+        let orbit = Orbit::new(&scene.camera, scene.bounds, &up);
+        let camera = scene.camera_path.clone();
+        shared.publish(|p| {
+            p.spp = settings.spp;
+            (p.width, p.height) = (settings.width, settings.height);
+            p.diagnostics = text.clone();
+            p.cameras = cameras;
+            p.camera = camera;
+        });
+        Ok(Worker {
+            session,
+            settings,
+            scene_options,
+            shared,
+            orbit,
+            image: None,
+            changed_at: None,
+            diagnostics: text,
+            failed: false,
+            edits: 0,
+        })
+    }
+
+    /// Renders and answers commands until the server goes away.
+    pub fn run(mut self, commands: mpsc::Receiver<Command>, mut watcher: Watcher) {
+        self.watch(&mut watcher);
+        let mut passes = Accumulator::new(self.settings.clone());
+        let mut preview_due = true;
+        let mut stalled = false;
+        loop {
+            let idle = !preview_due && (passes.done() || stalled);
+            let first = if idle {
+                match commands.recv() {
+                    Ok(command) => Some(command),
+                    Err(_) => return,
+                }
+            } else {
+                commands.try_recv().ok()
+            };
+            let mut edits = Edits::default();
+            let mut restart = false;
+            for command in first.into_iter().chain(std::iter::from_fn(|| commands.try_recv().ok())) {
+                restart |= self.handle(command, &mut edits);
+            }
+            // One save is several events (truncate, write, close): wait until they stop.
+            if !edits.files.is_empty() {
+                while let Ok(command) = commands.recv_timeout(QUIET) {
+                    restart |= self.handle(command, &mut edits);
+                }
+            }
+            if !edits.files.is_empty() && self.apply(std::mem::take(&mut edits.files), &mut watcher) {
+                restart = true;
+                self.changed_at = edits.first_event;
+            }
+            if restart {
+                passes = Accumulator::new(self.settings.clone());
+                (preview_due, stalled) = (true, false);
+            }
+            if preview_due {
+                self.preview();
+                preview_due = false;
+                continue;
+            }
+            if passes.done() || stalled {
+                continue;
+            }
+            match passes.step(&mut self.session) {
+                Ok(false) => {}
+                Ok(true) => match passes.image(&self.session) {
+                    Some(Ok(image)) => {
+                        let image = Arc::new(image);
+                        self.image = Some(image.clone());
+                        let samples = passes.samples();
+                        self.shared.publish(|p| {
+                            p.image = Some(image);
+                            p.samples = samples;
+                        });
+                    }
+                    Some(Err(e)) => stalled = self.report_render_error(&e.to_string()),
+                    None => {}
+                },
+                Err(e) => stalled = self.report_render_error(&e.to_string()),
+            }
+        }
+    }
+
+    /// Handles one command; whether the image must be rendered again. File events are
+    /// collected in `edits` for [`Worker::apply`].
+    fn handle(&mut self, command: Command, edits: &mut Edits) -> bool {
+        match command {
+            Command::Files { paths, at } => {
+                edits.files.extend(paths);
+                edits.first_event = Some(edits.first_event.map_or(at, |e| e.min(at)));
+                false
+            }
+            Command::Pick { x, y, reply } => {
+                let _ = reply.send(self.pick(x, y));
+                false
+            }
+            Command::Camera(m) => {
+                let Some(camera) = self.session.scene().map(|s| self.orbit.apply(&s.camera, m)) else { return false };
+                self.session.set_camera(camera);
+                true
+            }
+            Command::SelectCamera(path) => self.select_camera(path),
+        }
+    }
+
+    fn report_render_error(&self, message: &str) -> bool {
+        let message = format!("error: {message}\n");
+        self.shared.publish(|p| {
+            p.diagnostics = message;
+            p.failed = true;
+        });
+        true
+    }
+
+    /// Watches every file the process has read (layers, substance files, textures).
+    fn watch(&self, watcher: &mut Watcher) {
+        let files = crate::input::files_read();
+        watcher.watch(&files);
+        let watched = files.iter().map(|f| f.display().to_string()).collect();
+        self.shared.publish(|p| p.watched = watched);
+    }
+
+    /// Applies saved edits; whether the image must be rendered again. A failed edit is shown
+    /// at once over the last good image; a good one with its first image ([`Worker::preview`]).
+    fn apply(&mut self, files: BTreeSet<PathBuf>, watcher: &mut Watcher) -> bool {
+        let (mut related, mut failed) = (false, false);
+        for file in files {
+            let report = self.session.apply_change(&Change::File(file));
+            related |= report.kind != ChangeKind::Unrelated;
+            failed |= report.failed || self.session.diagnostics().has_errors();
+            if failed {
+                break;
+            }
+        }
+        if !related {
+            return false;
+        }
+        let diags = self.session.take_diagnostics();
+        self.diagnostics = diags.render(self.session.sources());
+        self.failed = failed;
+        self.edits += 1;
+        // An edit may have made the scene read new files (an import, a sublayer, a texture).
+        self.watch(watcher);
+        if failed {
+            let (text, edits) = (self.diagnostics.clone(), self.edits);
+            self.shared.publish(|p| {
+                p.diagnostics = text;
+                p.failed = true;
+                p.edits = edits;
+            });
+        }
+        !failed
+    }
+
+    /// Looks through `path` (a Camera prim, or the starting camera for `None`).
+    fn select_camera(&mut self, path: Option<String>) -> bool {
+        let options = SceneOptions { camera: path, ..self.scene_options.clone() };
+        if self.session.prepare(&options).is_none() {
+            let diags = self.session.take_diagnostics();
+            let text = diags.render(self.session.sources());
+            self.shared.publish(|p| p.diagnostics = text);
+            return false;
+        }
+        let Some(scene) = self.session.scene() else { return false };
+        let up = self.session.stage().map_or("Y", |s| s.up_axis()).to_string();
+        self.orbit = Orbit::new(&scene.camera, scene.bounds, &up);
+        let camera = scene.camera_path.clone();
+        self.shared.publish(|p| p.camera = camera);
+        true
+    }
+
+    /// The first image after a change: a fraction of the pixels at one sample.
+    fn preview(&mut self) {
+        let settings = RenderSettings {
+            width: self.settings.width.div_ceil(PREVIEW_SCALE),
+            height: self.settings.height.div_ceil(PREVIEW_SCALE),
+            spp: 1,
+            ..self.settings.clone()
+        };
+        match self.session.render(&Pass::full(settings), None) {
+            Ok((image, _)) => {
+                let update_ms = self.changed_at.take().map(|t| t.elapsed().as_secs_f64() * 1e3);
+                let (text, failed, edits) = (self.diagnostics.clone(), self.failed, self.edits);
+                self.shared.publish(|p| {
+                    p.image = Some(Arc::new(image));
+                    p.samples = 0;
+                    if update_ms.is_some() {
+                        p.update_ms = update_ms;
+                    }
+                    (p.diagnostics, p.failed, p.edits) = (text, failed, edits);
+                });
+            }
+            Err(e) => {
+                self.report_render_error(&e.to_string());
+            }
+        }
+    }
+
+    /// What is at pixel `(x, y)` of the full image: the prim, its slot stack, and the
+    /// channel values of the last image.
+    fn pick(&self, x: usize, y: usize) -> String {
+        let (w, h) = (self.settings.width, self.settings.height);
+        let prim = self.session.scene().and_then(|scene| {
+            let camera = scene.camera.with_aspect(w as f32 / h as f32);
+            let film = glam::Vec2::new((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32);
+            let ray = camera.ray(film, glam::Vec2::splat(0.5));
+            let hit = scene.accel.intersect(ray.o, ray.d, ray.tmin, ray.tmax)?;
+            let prim = scene.accel.prim_of(&hit) as usize;
+            scene.prims.get(prim).map(|p| p.path.clone())
+        });
+        let stack = prim.as_ref().and_then(|prim| {
+            let stacks = &self.session.composed()?.stacks;
+            let stack = stacks.iter().find(|s| &s.prim == prim)?;
+            serde_json::from_str::<serde_json::Value>(&crate::session::layers_json(std::slice::from_ref(stack))).ok()
+        });
+        let mut channels = serde_json::Map::new();
+        if let Some(image) = &self.image
+            && x < image.width
+            && y < image.height
+        {
+            let i = y * image.width + x;
+            for channel in image.channels.iter().filter(|c| !c.name.starts_with("Crypto")) {
+                let value = match &channel.data {
+                    crate::render::ChannelData::F32(v) => json!(v[i]),
+                    crate::render::ChannelData::U32(v) => json!(v[i]),
+                };
+                channels.insert(channel.name.clone(), value);
+            }
+        }
+        let layers = stack.and_then(|s| s.get(0).and_then(|p| p.get("layers")).cloned());
+        json!({ "x": x, "y": y, "prim": prim, "layers": layers, "channels": channels }).to_string()
+    }
+}
