@@ -6,7 +6,7 @@ mod common;
 
 use common::strata;
 use exr::meta::attribute::AttributeValue;
-use exr::prelude::{FlatSamples, ReadChannels, ReadLayers};
+use exr::prelude::FlatSamples;
 use std::path::{Path, PathBuf};
 
 /// Renders `scene` (`None`: the default scene) into `dir/out.exr` with `extra` arguments.
@@ -23,17 +23,10 @@ fn render(dir: &Path, scene: Option<&Path>, extra: &[&str]) -> (PathBuf, String)
     (out, stderr)
 }
 
-type ExrImage = exr::image::Image<exr::image::Layer<exr::image::AnyChannels<FlatSamples>>>;
+type ExrImage = strata::render::film::output::ExrFile;
 
 fn read(path: &Path) -> ExrImage {
-    exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(path)
-        .expect("the EXR reads back")
+    strata::render::film::output::read_exr(path).expect("the EXR reads back")
 }
 
 fn channel<'a>(image: &'a ExrImage, name: &str) -> &'a FlatSamples {

@@ -12,10 +12,11 @@ mod common;
 
 use common::strata;
 use exr::meta::attribute::AttributeValue;
-use exr::prelude::{FlatSamples, ReadChannels, ReadLayers};
+use exr::prelude::FlatSamples;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
+use strata::render::film::output::read_exr;
 
 const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/in/farm/shot.usda");
 const RES: &str = "24x18";
@@ -30,14 +31,7 @@ struct Decoded {
 }
 
 fn decode(path: &Path) -> Decoded {
-    let image = exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(path)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let image = read_exr(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let layer = &image.layer_data;
     let mut attributes = BTreeMap::new();
     for (k, v) in layer.attributes.other.iter().chain(&image.attributes.other) {

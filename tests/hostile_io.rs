@@ -274,7 +274,8 @@ fn png_path_that_is_a_directory_fails_before_rendering_and_keeps_the_exr() {
     std::fs::write(&exr, "previous render").unwrap();
     std::fs::create_dir(dir.path().join("out.png")).unwrap();
     let out = strata(&render_args(exr.to_str().unwrap(), &SLOW));
-    assert_eq!(out.status.code(), Some(1));
+    // An output that cannot be written is a resource failure (README, Rendering on a farm).
+    assert_eq!(out.status.code(), Some(3));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("out.png") && stderr.contains("it is a directory"), "{stderr}");
     assert_eq!(std::fs::read_to_string(&exr).unwrap(), "previous render", "the old EXR is intact");
@@ -289,7 +290,7 @@ fn unwritable_output_directory_fails_before_rendering() {
     std::fs::write(&not_a_dir, "").unwrap();
     let exr = not_a_dir.join("out.exr");
     let out = strata(&render_args(exr.to_str().unwrap(), &SLOW));
-    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(out.status.code(), Some(3), "a resource failure");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("cannot create a file in"), "{stderr}");
     assert!(!stderr.contains("rendered"), "{stderr}");

@@ -7,7 +7,6 @@ mod common;
 use common::strata;
 
 use exr::meta::attribute::AttributeValue;
-use exr::prelude::{ReadChannels, ReadLayers};
 use std::path::{Path, PathBuf};
 use strata::render::scene::{DEFAULT_CAMERA_LIGHT_IRRADIANCE, DEFAULT_DOME_RADIANCE, DefaultLights, SceneOptions};
 use strata::session::{SceneSource, Session, SessionOptions};
@@ -92,14 +91,7 @@ fn an_unlit_stage_is_lit_by_a_camera_light_and_a_dim_dome() {
 }
 
 fn header_text(path: &Path, key: &str) -> String {
-    let image = exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(path)
-        .expect("the EXR reads back");
+    let image = strata::render::film::output::read_exr(path).expect("the EXR reads back");
     match image.layer_data.attributes.other.get(&exr::meta::attribute::Text::from(key)) {
         Some(AttributeValue::Text(t)) => t.to_string(),
         other => panic!("attribute `{key}`: {other:?}"),

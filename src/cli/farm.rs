@@ -190,13 +190,7 @@ fn write_checkpoint(passes: &Passes, sums: &WindowSums, samples: Range<u32>) -> 
 }
 
 fn add_stats(total: &mut RenderStats, pass: RenderStats) {
-    total.samples += pass.samples;
-    total.loop_budget_errors += pass.loop_budget_errors;
-    total.out_of_bounds_errors += pass.out_of_bounds_errors;
-    total.nonfinite_closures += pass.nonfinite_closures;
-    total.nonfinite_samples += pass.nonfinite_samples;
-    total.pass_through_limit += pass.pass_through_limit;
-    total.evals.add(&pass.evals);
+    total.add_counts(&pass);
     for fault in pass.first_faults {
         if !total.first_faults.iter().any(|f| f.kind == fault.kind) {
             total.first_faults.push(fault);

@@ -195,6 +195,20 @@ pub struct RenderStats {
     pub layer_modes: Vec<MaterialLayerMode>,
 }
 
+impl RenderStats {
+    /// Adds `other`'s sample, fault and shader-call counters (rows of a render, passes of a
+    /// window); warnings, first faults and layer modes are left as they are.
+    pub fn add_counts(&mut self, other: &RenderStats) {
+        self.samples += other.samples;
+        self.loop_budget_errors += other.loop_budget_errors;
+        self.out_of_bounds_errors += other.out_of_bounds_errors;
+        self.nonfinite_closures += other.nonfinite_closures;
+        self.nonfinite_samples += other.nonfinite_samples;
+        self.pass_through_limit += other.pass_through_limit;
+        self.evals.add(&other.evals);
+    }
+}
+
 /// The layer evaluation one material got (`strata render --stats` prints one line each).
 #[derive(Clone, Debug, PartialEq)]
 pub struct MaterialLayerMode {
@@ -844,14 +858,7 @@ fn render_impl(
                 });
             }
         }
-        let s = &row.stats;
-        stats.samples += s.samples;
-        stats.loop_budget_errors += s.loop_budget_errors;
-        stats.out_of_bounds_errors += s.out_of_bounds_errors;
-        stats.nonfinite_closures += s.nonfinite_closures;
-        stats.nonfinite_samples += s.nonfinite_samples;
-        stats.pass_through_limit += s.pass_through_limit;
-        stats.evals.add(&s.evals);
+        stats.add_counts(&row.stats);
     }
     let image = assemble(&rows, rw, rh, &channels, channel_floats, !material_ids.is_empty());
     let sums = keep_sums.then(|| WindowSums {

@@ -314,6 +314,21 @@ pub fn write_exr_with(image: &Image, path: &Path, options: &ExrOptions) -> Resul
     tmp.commit()
 }
 
+/// A single-part EXR as read back: every channel and attribute of its first layer.
+pub type ExrFile = exr::image::Image<exr::image::Layer<exr::image::AnyChannels<exr::image::FlatSamples>>>;
+
+/// Reads every channel and attribute of the first valid layer of the EXR at `path`.
+pub fn read_exr(path: &Path) -> Result<ExrFile, exr::error::Error> {
+    use exr::prelude::{ReadChannels, ReadLayers};
+    exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+}
+
 /// The preview's display transform: exposure (in stops), the ACES filmic fit of Narkowicz
 /// (2015), then the sRGB transfer function.
 pub fn tone_map(linear: f32, exposure: f32) -> u8 {
@@ -431,21 +446,10 @@ mod tests {
     use super::*;
 
     /// The written EXR, every channel and attribute.
-    fn read_back(
-        path: &Path,
-    ) -> exr::image::Image<exr::image::Layer<exr::image::AnyChannels<exr::image::FlatSamples>>> {
-        exr::prelude::read()
-            .no_deep_data()
-            .largest_resolution_level()
-            .all_channels()
-            .first_valid_layer()
-            .all_attributes()
-            .from_file(path)
-            .unwrap()
+    fn read_back(path: &Path) -> ExrFile {
+        read_exr(path).unwrap()
     }
     use crate::render::film::Channel;
-    use exr::prelude::ReadChannels;
-    use exr::prelude::ReadLayers;
 
     fn sample_image() -> Image {
         let (w, h) = (4, 3);

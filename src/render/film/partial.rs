@@ -22,12 +22,12 @@
 //! the image's pixels × `0..spp` merge, in any order, into the image a single run renders
 //! (exact integer sums, associative); anything else is refused with the parts named.
 
-use super::output::{ExrOptions, OutputError, standard_attributes, write_exr_with};
+use super::output::{ExrFile, ExrOptions, OutputError, read_exr, standard_attributes, write_exr_with};
 use super::sum::{ExactSum, PixelSums, WindowSums};
 use super::{Channel, ChannelData, Image, Region, SumsLayout, image_from_layout};
 use crate::abi::ChannelKind;
 use exr::meta::attribute::{AttributeValue, Text};
-use exr::prelude::{FlatSamples, ReadChannels, ReadLayers};
+use exr::prelude::FlatSamples;
 use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -243,17 +243,13 @@ fn parse_layout(text: &str) -> Result<SumsLayout, String> {
     Ok(SumsLayout { channels, object_ids: ids(&json["objects"])?, material_ids })
 }
 
+/// Per coverage-list entry, the channel of indices and the four of the sum's limbs.
+type CoverageColumns<'a> = Vec<(&'a [u32], Vec<&'a [u32]>)>;
+
 /// Reads a partial file written by [`write_partial`].
 pub fn read_partial(path: &Path) -> Result<Partial, String> {
     let fail = |message: String| format!("`{}`: {message}", path.display());
-    let image = exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(path)
-        .map_err(|e| fail(format!("not a readable EXR: {e}")))?;
+    let image = read_exr(path).map_err(|e| fail(format!("not a readable EXR: {e}")))?;
     let layer = &image.layer_data;
     let text = |key: &str| -> Option<String> {
         match layer.attributes.other.get(&Text::from(key)).or_else(|| image.attributes.other.get(&Text::from(key))) {
@@ -329,7 +325,7 @@ pub fn read_partial(path: &Path) -> Result<Partial, String> {
     let integer = layout.integer();
     let custom: Vec<Vec<&[u32]>> =
         (0..integer.len()).map(|k| limbs(&format!("channel{k}"))).collect::<Result<_, _>>()?;
-    let coverage_lists = |layer: &str| -> Result<Vec<(&[u32], Vec<&[u32]>)>, String> {
+    let coverage_lists = |layer: &str| -> Result<CoverageColumns, String> {
         let mut lists = Vec::new();
         while find(&format!("{layer}.{}.index", lists.len())).is_some() {
             let j = lists.len();
@@ -340,7 +336,7 @@ pub fn read_partial(path: &Path) -> Result<Partial, String> {
     let (objects, materials) = (coverage_lists("object")?, coverage_lists("material")?);
     let pixels = (0..r.width * r.height)
         .map(|i| {
-            let coverage = |lists: &[(&[u32], Vec<&[u32]>)]| -> Vec<(u32, ExactSum)> {
+            let coverage = |lists: &CoverageColumns| -> Vec<(u32, ExactSum)> {
                 lists.iter().filter(|(index, _)| index[i] > 0).map(|(index, l)| (index[i] - 1, sum_at(l, i))).collect()
             };
             PixelSums {
@@ -362,10 +358,7 @@ pub fn read_partial(path: &Path) -> Result<Partial, String> {
 
 /// The header of the single run's EXR, recovered from a partial file's: the attributes the
 /// writer adds itself and the split's are left out; `--half` shows in `R`'s sample type.
-fn single_run_options(
-    image: &exr::image::Image<exr::image::Layer<exr::image::AnyChannels<FlatSamples>>>,
-    text: &dyn Fn(&str) -> Option<String>,
-) -> ExrOptions {
+fn single_run_options(image: &ExrFile, text: &dyn Fn(&str) -> Option<String>) -> ExrOptions {
     let layer = &image.layer_data;
     let standard: Vec<&str> = standard_attributes().iter().map(|(k, _)| *k).collect();
     let mut strings: Vec<(String, String)> = layer
@@ -496,8 +489,8 @@ pub fn merge(parts: &[Partial]) -> Result<Merged, String> {
             pixels[(r.y + i / r.width) * w + r.x + i % r.width].merge(px, &integer);
         }
     }
-    let sums =
-        WindowSums { region: Region { x: 0, y: 0, width: w, height: h }, samples: vec![0..spp], pixels, integer };
+    let region = Region { x: 0, y: 0, width: w, height: h };
+    let sums = WindowSums { region, samples: std::iter::once(0..spp).collect(), pixels, integer };
     let image = image_from_layout(&layout, &sums);
     Ok(Merged { image, options: first.options.clone(), sums })
 }
