@@ -252,6 +252,7 @@ mod tests {
             has_normal: false,
             constant_mask,
             has_emission: false,
+            pruned: None,
         }
     }
 

@@ -322,6 +322,24 @@ impl fmt::Display for ShaderError {
     }
 }
 
+/// Why a layer's shading was removed at compile time: it can never be picked.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Pruned {
+    /// Under the constant-opaque surface of the named slot.
+    HiddenUnder(String),
+    /// Its mask is the constant 0.
+    MaskZero,
+}
+
+impl std::fmt::Display for Pruned {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Pruned::HiddenUnder(slot) => write!(f, "hidden under slot {slot}"),
+            Pruned::MaskZero => f.write_str("mask is 0"),
+        }
+    }
+}
+
 /// What the renderer knows about one layer.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LayerInfo {
@@ -342,6 +360,9 @@ pub struct LayerInfo {
     /// Whether the layer may emit light (it has an emission product that is not constant
     /// black): the renderer calls [`MaterialCode::emission`] only for such layers.
     pub has_emission: bool,
+    /// Why the compiler removed the layer's shading, when it did (the optimising passes
+    /// only); the slot lints read it rather than wiring the material again.
+    pub pruned: Option<Pruned>,
 }
 
 /// A custom channel of a material: its name, kind and offset in the channel output array.

@@ -73,6 +73,7 @@ impl ConstMaterial {
                     has_normal: l.normal.is_some(),
                     constant_mask: None,
                     has_emission: l.emission.is_some(),
+                    pruned: None,
                 })
                 .collect(),
             channels,

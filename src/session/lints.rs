@@ -3,12 +3,12 @@
 //! is a warning at the binding, with a suggestion where one exists. `strata check` runs them,
 //! and `strata render` once per run.
 
+use crate::abi::{MaterialInfo, Pruned};
 use crate::compose::binding::binding_tree;
 use crate::compose::scene::SceneComposition;
 use crate::compose::slots::{BindingTree, Slot};
 use crate::diag::{Diagnostic, Diagnostics, Span, did_you_mean};
 use crate::front::ast::Product;
-use crate::ir::wired::{self, PassOptions};
 use crate::scene::Stage;
 use std::collections::{BTreeMap, HashMap};
 
@@ -18,15 +18,17 @@ struct Bound {
     span: Span,
 }
 
-/// Runs every slot lint on a composed stage and reports to `diags`.
-pub fn lint_slots(stage: &Stage, scene: &SceneComposition, diags: &mut Diagnostics) {
+/// Runs every slot lint on a composed stage and reports to `diags`. `compiled` holds the
+/// compiled (or lowered) info of each of `scene.materials`, in order: the hidden-slot lint
+/// reads the compiler's pruning from it.
+pub fn lint_slots(stage: &Stage, scene: &SceneComposition, compiled: &[&MaterialInfo], diags: &mut Diagnostics) {
     // The composition has reported the tree's own diagnostics already.
     let tree = binding_tree(stage, &mut Diagnostics::new());
     let bound = bound_slots(&tree);
     numeric_lengths(&bound, diags);
     look_alikes(&bound, diags);
     unbound_bases(&bound, diags);
-    hidden_everywhere(&bound, scene, diags);
+    hidden_everywhere(&bound, compiled, diags);
     nothing_to_show(scene, diags);
 }
 
@@ -170,22 +172,16 @@ fn unbound_bases(bound: &[Bound], diags: &mut Diagnostics) {
 
 /// A slot hidden on every prim it reaches: on each composed material that has it, a layer
 /// above it with a surface and a constant mask of 1 hides it (the layers the optimiser
-/// prunes, `abi::layering`).
-fn hidden_everywhere(bound: &[Bound], scene: &SceneComposition, diags: &mut Diagnostics) {
+/// prunes, `abi::layering`), as the compiler recorded it in [`crate::abi::LayerInfo::pruned`].
+fn hidden_everywhere(bound: &[Bound], compiled: &[&MaterialInfo], diags: &mut Diagnostics) {
     // Per horizontal slot name: (materials it is in, materials where it is hidden, by what).
     let mut seen: HashMap<String, (usize, usize, String)> = HashMap::new();
-    for material in &scene.materials {
-        if material.layers.is_empty() {
-            continue;
-        }
-        let wired = wired::build(&scene.library, material, PassOptions::default(), &mut Diagnostics::new());
-        for layer in &wired.layers {
-            let entry = seen.entry(layer.slot.clone()).or_insert((0, 0, String::new()));
-            entry.0 += 1;
-            if let Some(above) = layer.pruned.as_deref().and_then(|why| why.strip_prefix("hidden under slot ")) {
-                entry.1 += 1;
-                entry.2 = above.to_string();
-            }
+    for layer in compiled.iter().flat_map(|info| &info.layers) {
+        let entry = seen.entry(layer.slot.clone()).or_insert((0, 0, String::new()));
+        entry.0 += 1;
+        if let Some(Pruned::HiddenUnder(above)) = &layer.pruned {
+            entry.1 += 1;
+            entry.2 = above.clone();
         }
     }
     let mut hidden: Vec<(&String, &String)> =

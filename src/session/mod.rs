@@ -683,13 +683,16 @@ impl Session {
     /// number of renderable prims and of distinct lowered materials.
     pub fn check(&mut self) -> Option<(usize, usize)> {
         self.composition()?;
-        self.lint_slots();
         let (stage, composed) = (self.stage.as_ref()?, &self.composed.as_ref()?.scene);
         let mut compiler = Compiler::new(BackendKind::Jit, PassOptions::default());
         let mut distinct = HashSet::new();
+        let mut infos = Vec::with_capacity(composed.materials.len());
         for material in &composed.materials {
-            distinct.insert(compiler.lower(&composed.library, material, &mut self.diags).to_text());
+            let module = compiler.lower(&composed.library, material, &mut self.diags);
+            distinct.insert(module.to_text());
+            infos.push(module.info);
         }
+        lints::lint_slots(stage, composed, &infos.iter().collect::<Vec<_>>(), &mut self.diags);
         // Geometry, lights and camera are validated; no BVH is built (it reports nothing).
         crate::render::Scene::validate(stage, &|_| Some(0), &mut self.diags);
         Some((composed.stacks.len(), distinct.len()))
@@ -698,10 +701,15 @@ impl Session {
     /// The slot-name lints (issue 23: numeric names of different lengths, look-alike
     /// names, overrides and vertical slots of slots never bound, slots hidden everywhere,
     /// substances that show nothing) on the current composition, as warnings. `check` runs
-    /// them; `strata render` calls this once per run.
+    /// them; `strata render` calls this once per run, after [`Session::compile`] (the
+    /// hidden-slot lint reads the compiled layers' pruning; before a compile it has none).
     pub fn lint_slots(&mut self) {
         if let (Some(stage), Some(composed)) = (&self.stage, &self.composed) {
-            lints::lint_slots(stage, &composed.scene, &mut self.diags);
+            let infos: Vec<&crate::abi::MaterialInfo> = match &self.compiled {
+                Some(c) if self.compiled_hashes == composed.hashes => c.materials.iter().map(|m| m.info()).collect(),
+                _ => Vec::new(),
+            };
+            lints::lint_slots(stage, &composed.scene, &infos, &mut self.diags);
         }
     }
 

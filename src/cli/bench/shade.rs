@@ -67,6 +67,7 @@ impl Default for HandMaterial {
             has_normal: false,
             constant_mask,
             has_emission: false,
+            pruned: None,
         };
         HandMaterial {
             info: MaterialInfo {

@@ -7,9 +7,9 @@
 //! by snapshot tests.
 
 use super::eval::eval_node;
-use crate::abi::LayerInfo;
 use crate::abi::layering::{self, Unpickable};
 use crate::abi::{ChannelKind, DisplacementMode};
+use crate::abi::{LayerInfo, Pruned};
 use crate::compose::{ComposedMaterial, MaterialRef};
 use crate::diag::{Diagnostic, Diagnostics, Span, did_you_mean};
 use crate::front::ast::{GraphKind, Product};
@@ -93,7 +93,7 @@ pub struct Layer {
     /// Custom channels of the layer (its substance's and its overrides').
     pub channels: Vec<Channel>,
     /// Why the layer's shading was removed, if it was (`hidden under slot 050`).
-    pub pruned: Option<String>,
+    pub pruned: Option<Pruned>,
 }
 
 impl Layer {
@@ -107,6 +107,7 @@ impl Layer {
             has_normal: self.normal.is_some(),
             constant_mask: self.constant_mask(),
             has_emission: self.emission.is_some(),
+            pruned: self.pruned.clone(),
         }
     }
 
@@ -612,8 +613,8 @@ fn prune_hidden_layers(layers: &mut [Layer]) -> usize {
         // is picked. A layer without a surface keeps its normal and channels: the renderer
         // never reads them, but they are products of a substance compiled on its own.
         let why = match &live.unpickable {
-            Some(Unpickable::HiddenUnder(above)) => Some(format!("hidden under slot {}", infos[*above].slot)),
-            Some(Unpickable::MaskZero) => Some("mask is 0".to_string()),
+            Some(Unpickable::HiddenUnder(above)) => Some(Pruned::HiddenUnder(infos[*above].slot.clone())),
+            Some(Unpickable::MaskZero) => Some(Pruned::MaskZero),
             Some(Unpickable::NoSurface) | None => None,
         };
         if let Some(why) = why {

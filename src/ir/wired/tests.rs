@@ -117,7 +117,7 @@ fn opaque_layer_hides_lower_layers() {
     let mut diags = Diagnostics::new();
     let wired = build(&lib, &material, PassOptions::default(), &mut diags);
     assert_eq!(wired.stats.layers_pruned, 1);
-    assert_eq!(wired.layers[0].pruned.as_deref(), Some("hidden under slot 010"));
+    assert_eq!(wired.layers[0].pruned, Some(crate::abi::Pruned::HiddenUnder("010".into())));
     assert!(wired.layers[2].surface.is_some());
     let unoptimised = build(&lib, &material, PassOptions { optimize: false }, &mut diags);
     assert_eq!(unoptimised.stats.layers_pruned, 0);
