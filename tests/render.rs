@@ -88,8 +88,10 @@ fn cli_renders_the_default_scene_and_refuses_bad_input() {
     assert_eq!(clobber.status.code(), Some(1));
     assert_eq!(std::fs::read_to_string(&scene_copy).unwrap(), "#usda 1.0\n", "the input is untouched");
 
+    // An output that cannot be written is a resource failure (3), not bad input (1): a farm
+    // retries the one and not the other (README, "Rendering on a farm").
     let unwritable = run(&["render", "--res", "8x8", "--spp", "1", "-o", "/nonexistent/dir/out.exr"]);
-    assert_eq!(unwritable.status.code(), Some(1));
+    assert_eq!(unwritable.status.code(), Some(3));
 }
 
 /// A 2×2 quad at y = 0 (st along +x and +z), a camera looking straight down at its centre and a
