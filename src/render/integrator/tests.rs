@@ -1,3 +1,4 @@
+use super::lobes::LobeSample;
 use super::*;
 use crate::abi::ClosureKind;
 use crate::render::material::bsdf::BsdfSample;
