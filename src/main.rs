@@ -190,6 +190,16 @@ enum Command {
         /// The partial EXRs.
         #[arg(required = true)]
         parts: Vec<PathBuf>,
+        /// Number the `#` run of the output's and every part's file name with this frame
+        /// (as `render --frames` names them).
+        #[arg(long, allow_negative_numbers = true)]
+        frame: Option<i64>,
+    },
+    /// Write a shot as farm jobs: one render task per frame x split of the samples (each
+    /// checkpointed, resuming when rerun), then one merge per frame.
+    Farm {
+        #[command(subcommand)]
+        scheduler: FarmCommand,
     },
     /// Serve a live, progressive render of a scene in the browser that follows every saved
     /// edit of its layers, substance files and textures, with an inspector of each pixel's
@@ -288,6 +298,84 @@ enum Command {
         #[arg(long, hide = true, default_value_t = 1)]
         stride: u64,
     },
+}
+
+#[derive(Subcommand)]
+enum FarmCommand {
+    /// Write `render.sbatch` (an array job, one task per frame x split, requeued tasks
+    /// resume), `merge.sbatch` and `submit.sh` into the job directory.
+    Slurm {
+        #[command(flatten)]
+        job: FarmJobArgs,
+        /// Submit with sbatch (the merge with --dependency=afterok on the render job) and
+        /// print both job IDs.
+        #[arg(long)]
+        submit: bool,
+        /// The Slurm partition to submit to.
+        #[arg(long)]
+        partition: Option<String>,
+    },
+    /// Write an Open Job Description job template (`job.template.json`): a render step over
+    /// frames x splits and a merge step over frames.
+    Openjd {
+        #[command(flatten)]
+        job: FarmJobArgs,
+    },
+}
+
+/// What every farm job says: the shot, its splits, where things go.
+#[derive(clap::Args)]
+struct FarmJobArgs {
+    /// A USD scene (default: the embedded default scene). Tasks name it as written here,
+    /// relative to this directory.
+    scene: Option<PathBuf>,
+    /// The frames, FIRST-LAST[xSTEP].
+    #[arg(long, value_name = "FIRST-LAST[xSTEP]", value_parser = cli::farm::Frames::parse)]
+    frames: cli::farm::Frames,
+    /// Render tasks per frame, each a contiguous range of the samples.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    split_samples: u32,
+    /// The merged EXRs, with a `#` run for the frame number.
+    #[arg(short, long, value_name = "shot.####.exr")]
+    output: PathBuf,
+    /// Camera samples per pixel of each frame.
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
+    spp: u32,
+    /// Samples per checkpoint within a task (default: a quarter of a task's samples).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    checkpoint: Option<u32>,
+    /// Where the job files, partial files and logs go (default: `OUT_DIR/STEM.farm`).
+    #[arg(long)]
+    dir: Option<PathBuf>,
+    /// Other `strata render` options for every task, after `--` (e.g. `-- --res 1920x1080`).
+    #[arg(last = true, allow_hyphen_values = true)]
+    render_args: Vec<String>,
+}
+
+impl FarmJobArgs {
+    /// The job (binary and working directory filled in by the CLI); the render options are
+    /// checked as `strata render` would parse them.
+    fn job(self) -> Result<strata::session::farm::FarmJob, String> {
+        let check = ["strata", "render", "-o", "check.exr"].into_iter().map(String::from).chain(self.render_args.clone());
+        if let Err(e) = Args::try_parse_from(check) {
+            return Err(format!("the render options after `--` do not parse: {}", e.kind()));
+        }
+        let stem = self.output.file_stem().map_or_else(String::new, |s| s.to_string_lossy().replace('#', ""));
+        let dir = self.dir.unwrap_or_else(|| self.output.with_file_name(format!("{}.farm", stem.trim_end_matches('.'))));
+        let largest_split = self.spp.div_ceil(self.split_samples);
+        Ok(strata::session::farm::FarmJob {
+            strata: PathBuf::new(),
+            workdir: PathBuf::new(),
+            scene: self.scene,
+            frames: self.frames,
+            spp: self.spp,
+            splits: self.split_samples,
+            checkpoint: self.checkpoint.unwrap_or(largest_split.div_ceil(4)),
+            output: self.output,
+            dir,
+            render_args: self.render_args,
+        })
+    }
 }
 
 #[derive(Subcommand)]
@@ -477,7 +565,23 @@ fn main() -> ExitCode {
             resume,
             frames,
         }),
-        Command::Merge { output, parts } => cli::farm::merge(&output, &parts),
+        Command::Merge { output, parts, frame } => cli::farm::merge(&output, &parts, frame),
+        Command::Farm { scheduler } => {
+            let (job, slurm) = match scheduler {
+                FarmCommand::Slurm { job, submit, partition } => {
+                    (job, Some((strata::session::farm::slurm::SlurmOptions { partition }, submit)))
+                }
+                FarmCommand::Openjd { job } => (job, None),
+            };
+            match (job.job(), slurm) {
+                (Err(e), _) => {
+                    eprintln!("error: {e}");
+                    Err(cli::Failure)
+                }
+                (Ok(job), Some((options, submit))) => cli::farm::farm_slurm(job, &options, submit),
+                (Ok(job), None) => cli::farm::farm_openjd(job),
+            }
+        }
         Command::View { scene, port, bind, spp, res, camera, seed, time } => cli::view(strata::view::ViewOptions {
             scene: strata::session::SceneSource::from_path(scene.as_deref()),
             session: strata::session::SessionOptions { time, ..Default::default() },

@@ -10,69 +10,13 @@
 
 mod common;
 
-use common::strata;
-use exr::meta::attribute::AttributeValue;
-use exr::prelude::FlatSamples;
-use std::collections::BTreeMap;
+use common::{Decoded, decode, strata};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use strata::render::film::output::read_exr;
 
 const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/in/farm/shot.usda");
 const RES: &str = "24x18";
 const SPP: u32 = 7;
-
-/// An EXR decoded: windows, attributes (as text), channels (type and bits).
-#[derive(Debug, PartialEq)]
-struct Decoded {
-    windows: String,
-    attributes: BTreeMap<String, String>,
-    channels: BTreeMap<String, (&'static str, Vec<u32>)>,
-}
-
-fn decode(path: &Path) -> Decoded {
-    let image = read_exr(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let layer = &image.layer_data;
-    let mut attributes = BTreeMap::new();
-    for (k, v) in layer.attributes.other.iter().chain(&image.attributes.other) {
-        let text = match v {
-            AttributeValue::Text(t) => t.to_string(),
-            other => format!("{other:?}"),
-        };
-        attributes.insert(k.to_string(), text);
-    }
-    let a = &layer.attributes;
-    attributes.insert(
-        "(layer)".into(),
-        format!(
-            "{:?} {:?} {:?} {:?} {:?} {:?}",
-            a.world_to_camera,
-            a.world_to_normalized_device,
-            a.near_clip_plane,
-            a.far_clip_plane,
-            a.software_name,
-            image.attributes.chromaticities
-        ),
-    );
-    let channels = layer
-        .channel_data
-        .list
-        .iter()
-        .map(|c| {
-            let samples = match &c.sample_data {
-                FlatSamples::F16(v) => ("half", v.iter().map(|x| u32::from(x.to_bits())).collect()),
-                FlatSamples::F32(v) => ("float", v.iter().map(|x| x.to_bits()).collect()),
-                FlatSamples::U32(v) => ("uint", v.clone()),
-            };
-            (c.name.to_string(), samples)
-        })
-        .collect();
-    Decoded {
-        windows: format!("{:?} {:?} {:?}", image.attributes.display_window, a.layer_position, layer.size),
-        attributes,
-        channels,
-    }
-}
 
 /// Runs `strata render` on the test scene with `extra` arguments; panics unless it succeeds.
 fn render(output: &Path, extra: &[&str]) {

@@ -1,6 +1,7 @@
-//! What `strata render` and `strata merge` do for a render farm: frame ranges, output names
-//! per frame, renders in checkpointed passes, and merging partial files. The partial-file
-//! format and the merge are the library's (`render::film::partial`); this parses and prints.
+//! What `strata render`, `strata merge` and `strata farm` do for a render farm: renders in
+//! checkpointed passes, merging partial files, and writing (and submitting) farm jobs. The
+//! frame numbering and the job files are the library's (`session::farm`), the partial-file
+//! format and the merge too (`render::film::partial`); this writes files and prints.
 
 use super::{Failure, resource_failure};
 use std::ops::Range;
@@ -10,62 +11,7 @@ use strata::render::film::{Image, RenderStats, SumsLayout, WindowSums, image_fro
 use strata::render::{ExrOptions, RenderSettings, Window};
 use strata::session::{Pass, Session};
 
-/// A frame range: `FIRST-LAST[xSTEP]` (`1001-1100`, `1-99x2`), or one frame.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Frames {
-    /// The first frame.
-    pub first: i64,
-    /// The last frame (inclusive; rendered when the step lands on it).
-    pub last: i64,
-    /// Frames between renders.
-    pub step: i64,
-}
-
-impl Frames {
-    /// Parses `FIRST-LAST[xSTEP]` or `FRAME`. Negative frames are written with a leading
-    /// minus (`-10--1`).
-    pub fn parse(text: &str) -> Result<Frames, String> {
-        let text = text.trim();
-        let (range, step) = match text.split_once(['x', 'X']) {
-            Some((range, step)) => {
-                (range, step.trim().parse::<i64>().map_err(|_| format!("`{step}` is not a whole step"))?)
-            }
-            None => (text, 1),
-        };
-        // The separating minus is the first one after the first character.
-        let split = range.char_indices().skip(1).find(|&(_, c)| c == '-').map(|(i, _)| i);
-        let number = |s: &str| s.trim().parse::<i64>().map_err(|_| format!("`{s}` is not a frame number"));
-        let (first, last) = match split {
-            Some(i) => (number(&range[..i])?, number(&range[i + 1..])?),
-            None => (number(range)?, number(range)?),
-        };
-        if step < 1 {
-            return Err(format!("the step must be at least 1, not {step}"));
-        }
-        if last < first {
-            return Err(format!("the range {first}-{last} runs backwards"));
-        }
-        if (last - first) / step >= 1_000_000 {
-            return Err("more than a million frames".into());
-        }
-        Ok(Frames { first, last, step })
-    }
-
-    /// The frames, in order.
-    pub fn list(&self) -> Vec<i64> {
-        (self.first..=self.last).step_by(self.step as usize).collect()
-    }
-}
-
-/// `template` with its run of `#` replaced by `frame`, zero-padded to the run's length
-/// (`shot.####.exr`, 1001 → `shot.1001.exr`). `None` when the file name has no `#` run.
-pub fn frame_path(template: &Path, frame: i64) -> Option<PathBuf> {
-    let name = template.file_name()?.to_str()?;
-    let start = name.find('#')?;
-    let run = name[start..].chars().take_while(|&c| c == '#').count();
-    let number = if frame < 0 { format!("-{:0run$}", -frame) } else { format!("{frame:0run$}") };
-    Some(template.with_file_name(format!("{}{number}{}", &name[..start], &name[start + run..])))
-}
+pub use strata::session::farm::{Frames, frame_path};
 
 /// Where the checkpoint of the render writing `output` goes: `OUT.checkpoint.exr` beside it.
 pub fn checkpoint_path(output: &Path) -> PathBuf {
@@ -201,8 +147,19 @@ fn add_stats(total: &mut RenderStats, pass: RenderStats) {
 }
 
 /// `strata merge -o OUT.exr PART…`: checks the parts belong together and writes the EXR
-/// (and PNG) one run of their render writes.
-pub fn merge(output: &Path, parts: &[PathBuf]) -> Result<(), Failure> {
+/// (and PNG) one run of their render writes. With `frame`, the `#` run of every name is
+/// that frame's number (`shot.####.exr`), as `render --frames` names its outputs.
+pub fn merge(output: &Path, parts: &[PathBuf], frame: Option<i64>) -> Result<(), Failure> {
+    if let Some(frame) = frame {
+        let numbered = |p: &Path| {
+            frame_path(p, frame).ok_or_else(|| {
+                eprintln!("error: with --frame, `{}` needs a `#` run for the frame number", p.display());
+                Failure
+            })
+        };
+        let parts = parts.iter().map(|p| numbered(p)).collect::<Result<Vec<_>, _>>()?;
+        return merge(&numbered(output)?, &parts, None);
+    }
     if !output.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
         eprintln!("error: the output must be an .exr file, not `{}`", output.display());
         return Err(Failure);
@@ -243,5 +200,116 @@ pub fn merge(output: &Path, parts: &[PathBuf]) -> Result<(), Failure> {
         output.display(),
         png.display()
     );
+    Ok(())
+}
+
+/// The job with this binary and the working directory filled in.
+fn complete(mut job: strata::session::farm::FarmJob) -> Result<strata::session::farm::FarmJob, Failure> {
+    let fail = |what: &str, e: std::io::Error| {
+        eprintln!("error: {what}: {e}");
+        resource_failure()
+    };
+    job.strata = std::env::current_exe().and_then(|p| p.canonicalize()).map_err(|e| fail("the strata binary", e))?;
+    job.workdir = std::env::current_dir().map_err(|e| fail("the working directory", e))?;
+    job.validate().map_err(|e| {
+        eprintln!("error: {e}");
+        Failure
+    })?;
+    Ok(job)
+}
+
+/// Writes `text` to `dir/name` whole or not at all (temp + rename), executable when `exec`.
+fn write_job_file(dir: &Path, name: &str, text: &str, exec: bool) -> Result<PathBuf, Failure> {
+    let path = dir.join(name);
+    let temp = dir.join(format!(".{name}.tmp"));
+    let written = std::fs::write(&temp, text).and_then(|()| {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&temp, std::fs::Permissions::from_mode(if exec { 0o755 } else { 0o644 }))?;
+        std::fs::rename(&temp, &path)
+    });
+    written.map_err(|e| {
+        let _ = std::fs::remove_file(&temp);
+        eprintln!("error: cannot write `{}`: {e}", path.display());
+        resource_failure()
+    })?;
+    Ok(path)
+}
+
+/// Creates the job directory with its `logs` and `parts`, and the outputs' directory.
+fn job_dirs(job: &strata::session::farm::FarmJob) -> Result<(), Failure> {
+    let output_dir = job.output.parent().unwrap_or(Path::new(""));
+    for dir in [job.dir.join("logs"), job.dir.join("parts"), output_dir.to_path_buf()] {
+        let dir = job.workdir.join(dir);
+        std::fs::create_dir_all(&dir).map_err(|e| {
+            eprintln!("error: cannot create `{}`: {e}", dir.display());
+            resource_failure()
+        })?;
+    }
+    Ok(())
+}
+
+/// `strata farm slurm`: writes `render.sbatch`, `merge.sbatch` and `submit.sh` into the job
+/// directory; with `submit`, submits them (the merge with `--dependency=afterok`).
+pub fn farm_slurm(
+    job: strata::session::farm::FarmJob,
+    options: &strata::session::farm::slurm::SlurmOptions,
+    submit: bool,
+) -> Result<(), Failure> {
+    use strata::session::farm::slurm::{MERGE_SCRIPT, RENDER_SCRIPT, SUBMIT_SCRIPT, slurm_job};
+    let job = complete(job)?;
+    let scripts = slurm_job(&job, options).map_err(|e| {
+        eprintln!("error: {e}");
+        Failure
+    })?;
+    job_dirs(&job)?;
+    let dir = job.workdir.join(&job.dir);
+    let render = write_job_file(&dir, RENDER_SCRIPT, &scripts.render, true)?;
+    let merge = write_job_file(&dir, MERGE_SCRIPT, &scripts.merge, true)?;
+    let submit_script = write_job_file(&dir, SUBMIT_SCRIPT, &scripts.submit, true)?;
+    for warning in &scripts.warnings {
+        eprintln!("warning: {warning}");
+    }
+    eprintln!("{}", job.summary());
+    if !submit {
+        println!("{}", submit_script.display());
+        eprintln!("wrote {}, {} and {}; run the last to submit", render.display(), merge.display(), submit_script.display());
+        return Ok(());
+    }
+    let render_id = sbatch(&[render.as_os_str()])?;
+    let dependency = format!("--dependency=afterok:{render_id}");
+    let merge_id = sbatch(&[dependency.as_ref(), merge.as_os_str()])?;
+    println!("{render_id} {merge_id}");
+    eprintln!("submitted render job {render_id} and merge job {merge_id} (after every render task succeeds)");
+    Ok(())
+}
+
+/// Runs `sbatch --parsable ARGS…` and returns the job ID it prints (`ID` or `ID;CLUSTER`).
+fn sbatch(args: &[&std::ffi::OsStr]) -> Result<String, Failure> {
+    let out = std::process::Command::new("sbatch").arg("--parsable").args(args).output().map_err(|e| {
+        eprintln!("error: cannot run sbatch: {e}");
+        resource_failure()
+    })?;
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let id = stdout.trim().split(';').next().unwrap_or("").to_string();
+    if !out.status.success() || id.is_empty() || !id.chars().all(|c| c.is_ascii_digit()) {
+        eprintln!("error: sbatch failed ({}): {}{}", out.status, stdout.trim(), String::from_utf8_lossy(&out.stderr).trim());
+        return Err(resource_failure());
+    }
+    Ok(id)
+}
+
+/// `strata farm openjd`: writes the job template into the job directory and prints its path.
+pub fn farm_openjd(job: strata::session::farm::FarmJob) -> Result<(), Failure> {
+    use strata::session::farm::openjd::{TEMPLATE, openjd_template};
+    let job = complete(job)?;
+    let template = openjd_template(&job).map_err(|e| {
+        eprintln!("error: {e}");
+        Failure
+    })?;
+    job_dirs(&job)?;
+    let path = write_job_file(&job.workdir.join(&job.dir), TEMPLATE, &template, false)?;
+    eprintln!("{}", job.summary());
+    println!("{}", path.display());
+    eprintln!("wrote {}; `openjd run {}` runs it here", path.display(), path.display());
     Ok(())
 }

@@ -16,6 +16,7 @@
 //! same image, bit for bit, whatever was updated before.
 
 mod example;
+pub mod farm;
 mod fingerprint;
 mod layers;
 mod lints;

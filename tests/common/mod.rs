@@ -161,3 +161,57 @@ pub fn stage_scene(
     assert!(!diags.has_errors(), "{}", diags.render(session.sources()));
     (session, scene)
 }
+
+/// An EXR decoded: windows, attributes (as text), channels (type and bits). Two runs' EXR
+/// bytes differ in attribute order alone (the `exr` crate keeps them in a `HashMap`), so
+/// farm tests compare these.
+#[derive(Debug, PartialEq)]
+pub struct Decoded {
+    pub windows: String,
+    pub attributes: std::collections::BTreeMap<String, String>,
+    pub channels: std::collections::BTreeMap<String, (&'static str, Vec<u32>)>,
+}
+
+pub fn decode(path: &std::path::Path) -> Decoded {
+    let image = strata::render::film::output::read_exr(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let layer = &image.layer_data;
+    let mut attributes = std::collections::BTreeMap::new();
+    for (k, v) in layer.attributes.other.iter().chain(&image.attributes.other) {
+        let text = match v {
+            exr::meta::attribute::AttributeValue::Text(t) => t.to_string(),
+            other => format!("{other:?}"),
+        };
+        attributes.insert(k.to_string(), text);
+    }
+    let a = &layer.attributes;
+    attributes.insert(
+        "(layer)".into(),
+        format!(
+            "{:?} {:?} {:?} {:?} {:?} {:?}",
+            a.world_to_camera,
+            a.world_to_normalized_device,
+            a.near_clip_plane,
+            a.far_clip_plane,
+            a.software_name,
+            image.attributes.chromaticities
+        ),
+    );
+    let channels = layer
+        .channel_data
+        .list
+        .iter()
+        .map(|c| {
+            let samples = match &c.sample_data {
+                exr::prelude::FlatSamples::F16(v) => ("half", v.iter().map(|x| u32::from(x.to_bits())).collect()),
+                exr::prelude::FlatSamples::F32(v) => ("float", v.iter().map(|x| x.to_bits()).collect()),
+                exr::prelude::FlatSamples::U32(v) => ("uint", v.clone()),
+            };
+            (c.name.to_string(), samples)
+        })
+        .collect();
+    Decoded {
+        windows: format!("{:?} {:?} {:?}", image.attributes.display_window, a.layer_position, layer.size),
+        attributes,
+        channels,
+    }
+}
