@@ -356,12 +356,14 @@ impl FarmJobArgs {
     /// The job (binary and working directory filled in by the CLI); the render options are
     /// checked as `strata render` would parse them.
     fn job(self) -> Result<strata::session::farm::FarmJob, String> {
-        let check = ["strata", "render", "-o", "check.exr"].into_iter().map(String::from).chain(self.render_args.clone());
+        let check =
+            ["strata", "render", "-o", "check.exr"].into_iter().map(String::from).chain(self.render_args.clone());
         if let Err(e) = Args::try_parse_from(check) {
             return Err(format!("the render options after `--` do not parse: {}", e.kind()));
         }
         let stem = self.output.file_stem().map_or_else(String::new, |s| s.to_string_lossy().replace('#', ""));
-        let dir = self.dir.unwrap_or_else(|| self.output.with_file_name(format!("{}.farm", stem.trim_end_matches('.'))));
+        let dir =
+            self.dir.unwrap_or_else(|| self.output.with_file_name(format!("{}.farm", stem.trim_end_matches('.'))));
         let largest_split = self.spp.div_ceil(self.split_samples);
         Ok(strata::session::farm::FarmJob {
             strata: PathBuf::new(),

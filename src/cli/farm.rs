@@ -272,7 +272,12 @@ pub fn farm_slurm(
     eprintln!("{}", job.summary());
     if !submit {
         println!("{}", submit_script.display());
-        eprintln!("wrote {}, {} and {}; run the last to submit", render.display(), merge.display(), submit_script.display());
+        eprintln!(
+            "wrote {}, {} and {}; run the last to submit",
+            render.display(),
+            merge.display(),
+            submit_script.display()
+        );
         return Ok(());
     }
     let render_id = sbatch(&[render.as_os_str()])?;
@@ -292,7 +297,12 @@ fn sbatch(args: &[&std::ffi::OsStr]) -> Result<String, Failure> {
     let stdout = String::from_utf8_lossy(&out.stdout);
     let id = stdout.trim().split(';').next().unwrap_or("").to_string();
     if !out.status.success() || id.is_empty() || !id.chars().all(|c| c.is_ascii_digit()) {
-        eprintln!("error: sbatch failed ({}): {}{}", out.status, stdout.trim(), String::from_utf8_lossy(&out.stderr).trim());
+        eprintln!(
+            "error: sbatch failed ({}): {}{}",
+            out.status,
+            stdout.trim(),
+            String::from_utf8_lossy(&out.stderr).trim()
+        );
         return Err(resource_failure());
     }
     Ok(id)

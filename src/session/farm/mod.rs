@@ -152,12 +152,16 @@ impl FarmJob {
             ));
         }
         if self.splits == 0 || self.splits > self.spp {
-            return Err(format!("--split-samples must be 1 to the {} samples per pixel, not {}", self.spp, self.splits));
+            return Err(format!(
+                "--split-samples must be 1 to the {} samples per pixel, not {}",
+                self.spp, self.splits
+            ));
         }
         if self.checkpoint == 0 {
             return Err("--checkpoint must be at least 1 sample".into());
         }
-        let owned = ["-o", "--output", "--spp", "--samples", "--frames", "--time", "--tile", "--checkpoint", "--resume"];
+        let owned =
+            ["-o", "--output", "--spp", "--samples", "--frames", "--time", "--tile", "--checkpoint", "--resume"];
         if let Some(arg) = self.render_args.iter().find(|a| owned.contains(&a.split('=').next().unwrap_or(a))) {
             return Err(format!("`{arg}` is set by the farm job itself; give it to `strata farm`, not after `--`"));
         }

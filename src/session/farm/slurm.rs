@@ -200,7 +200,9 @@ mod tests {
         assert_eq!(job.task_count(), 9);
         assert!(scripts.render.contains("#SBATCH --array=0-8\n") && scripts.render.contains("#SBATCH --requeue\n"));
         assert!(scripts.merge.contains("#SBATCH --array=0-2\n"));
-        assert!(scripts.submit.contains(&format!("--dependency=afterok:\"$render\" {}", shell_quote("farm/merge.sbatch"))));
+        assert!(
+            scripts.submit.contains(&format!("--dependency=afterok:\"$render\" {}", shell_quote("farm/merge.sbatch")))
+        );
     }
 
     #[test]
