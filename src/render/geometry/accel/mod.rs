@@ -21,6 +21,7 @@
 //! the extent, far below f32's resolution there (6e-8), at every scene scale.
 
 use crate::render::geometry::Triangle;
+use crate::render::geometry::motion::MotionKeys;
 use crate::render::geometry::primvars::PrimvarRef;
 use crate::render::geometry::shapes::Shape;
 use crate::render::material::frame::Frame;
@@ -563,6 +564,25 @@ struct Instance {
     mirrors: bool,
     prototype: u32,
     prims: u32,
+    /// Index of its keyed transform in [`Accel::motions`], or [`STILL`]: `to_object` and
+    /// `to_world` are then the transform at every time.
+    motion: u32,
+}
+
+/// [`Instance::motion`] of an instance that does not move.
+const STILL: u32 = u32::MAX;
+
+impl Instance {
+    /// `(to_object, to_world)` at ray time `time` (an instance that does not move reads its
+    /// stored pair; a moving one interpolates its keys and inverts them, per ray).
+    #[inline(always)]
+    fn transforms_at(&self, motions: &[MotionKeys], time: f32) -> (DAffine3, DAffine3) {
+        if self.motion == STILL {
+            return (self.to_object, self.to_world);
+        }
+        let m = motions[self.motion as usize].at(time);
+        (m.inverse(), m)
+    }
 }
 
 /// The acceleration structure: the world's BLAS, the prototypes' BLASes and the instances.
@@ -576,6 +596,8 @@ pub struct Accel {
     tlas: Option<BvhSpace>,
     /// Instances with a singular or non-finite transform, or an empty prototype: skipped.
     pub skipped_instances: usize,
+    /// The keyed transforms of moving instances (see [`crate::render::geometry::motion`]).
+    motions: Vec<MotionKeys>,
 }
 
 impl Accel {
@@ -591,30 +613,60 @@ impl Accel {
         instances: &[InstanceDesc],
         instance_prims: Vec<u32>,
     ) -> Accel {
+        Accel::with_moving_instances(world, prototypes, instances, instance_prims, Vec::new())
+    }
+
+    /// [`Accel::with_instances`] where the instances named in `motion` (by index in
+    /// `instances`) move by their keys instead of staying at `to_world`: their top-level
+    /// boxes cover every key.
+    pub fn with_moving_instances(
+        world: Blas,
+        prototypes: Vec<Blas>,
+        instances: &[InstanceDesc],
+        instance_prims: Vec<u32>,
+        motion: Vec<(u32, MotionKeys)>,
+    ) -> Accel {
         let mut skipped = 0;
         let mut kept = Vec::with_capacity(instances.len());
         let mut boxes = Vec::with_capacity(instances.len());
-        for desc in instances {
+        let mut keys_of: HashMap<u32, MotionKeys> = motion.into_iter().collect();
+        let mut motions = Vec::with_capacity(keys_of.len());
+        for (index, desc) in instances.iter().enumerate() {
+            let keys = keys_of.remove(&(index as u32));
             let m = desc.to_world;
             let det = DMat3::from_mat4(m).determinant();
+            let moving_ok = keys.as_ref().is_none_or(|k| {
+                k.transforms().iter().all(|t| t.is_finite() && t.matrix3.determinant() != 0.0)
+            });
             let bounds = prototypes.get(desc.prototype as usize).and_then(Blas::bounds);
-            let Some((lo, hi)) = bounds.filter(|_| det != 0.0 && det.is_finite() && m.is_finite()) else {
+            let Some((lo, hi)) = bounds.filter(|_| det != 0.0 && det.is_finite() && m.is_finite() && moving_ok) else {
                 skipped += 1;
                 continue;
             };
-            let (wlo, whi) = crate::render::geometry::shapes::transformed_box(&m, lo.as_dvec3(), hi.as_dvec3());
+            let (wlo, whi) = match &keys {
+                Some(k) => k.bounds(lo.as_dvec3(), hi.as_dvec3()),
+                None => crate::render::geometry::shapes::transformed_box(&m, lo.as_dvec3(), hi.as_dvec3()),
+            };
             let (wlo, whi) = (wlo.as_vec3(), whi.as_vec3());
             if !wlo.is_finite() || !whi.is_finite() {
                 skipped += 1;
                 continue;
             }
             let to_world = DAffine3::from_mat4(m);
+            let motion = match keys {
+                Some(k) => {
+                    motions.push(k);
+                    motions.len() as u32 - 1
+                }
+                None => STILL,
+            };
             kept.push(Instance {
                 to_object: to_world.inverse(),
                 to_world,
                 mirrors: det < 0.0,
                 prototype: desc.prototype,
                 prims: desc.prims,
+                motion,
             });
             // Padded like every other box (see `padded_box`), and outward for the f32 rounding
             // of the transformed corners.
@@ -622,7 +674,7 @@ impl Accel {
             boxes.push(Padded(Aabb::new((wlo - Vec3::splat(pad)).into(), (whi + Vec3::splat(pad)).into())));
         }
         let tlas = BvhSpace::build(boxes);
-        Accel { world, prototypes, instances: kept, instance_prims, tlas, skipped_instances: skipped }
+        Accel { world, prototypes, instances: kept, instance_prims, tlas, skipped_instances: skipped, motions }
     }
 
     /// Number of triangles stored (unique geometry: each prototype's once).
@@ -663,8 +715,25 @@ impl Accel {
         self.instance_prims[(inst.prims + local) as usize]
     }
 
+    /// Whether any instance moves (rays then need a time).
+    pub fn has_motion(&self) -> bool {
+        !self.motions.is_empty()
+    }
+
+    /// Number of instances that move.
+    pub fn moving_instance_count(&self) -> usize {
+        self.motions.len()
+    }
+
     /// The closest hit of the ray `o + t d`, `t` in `(tmin, tmax)`. `d` must be unit length.
+    /// Moving instances are where they are at the shutter's opening (see [`Accel::intersect_at`]).
     pub fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
+        self.intersect_at(o, d, tmin, tmax, 0.0)
+    }
+
+    /// [`Accel::intersect`] at ray time `time` (`[0, 1)` across the shutter; see
+    /// [`crate::render::geometry::motion`]).
+    pub fn intersect_at(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> Option<Hit> {
         if !o.is_finite() || !d.is_finite() || d == Vec3::ZERO {
             return None;
         }
@@ -677,8 +746,9 @@ impl Accel {
         wide::closest(&space.bvh, ray, |r, id| {
             let i = space.bvh.primitive_indices[id];
             let inst = &self.instances[i as usize];
-            let oo = inst.to_object.transform_point3(od).as_vec3();
-            let ob = inst.to_object.transform_vector3(dd).as_vec3();
+            let (to_object, _) = inst.transforms_at(&self.motions, time);
+            let oo = to_object.transform_point3(od).as_vec3();
+            let ob = to_object.transform_vector3(dd).as_vec3();
             // A nearly singular instance can overflow f32 in object space: no hit there.
             if !oo.is_finite() || !ob.is_finite() || ob == Vec3::ZERO {
                 return f32::INFINITY;
@@ -696,6 +766,11 @@ impl Accel {
 
     /// Whether anything lies on the ray within `(tmin, tmax)` (shadow rays: stops at the first hit).
     pub fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
+        self.occluded_at(o, d, tmin, tmax, 0.0)
+    }
+
+    /// [`Accel::occluded`] at ray time `time`.
+    pub fn occluded_at(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
         if !o.is_finite() || !d.is_finite() || d == Vec3::ZERO {
             return false;
         }
@@ -707,8 +782,9 @@ impl Accel {
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
         wide::any(&space.bvh, ray, |r, id| {
             let inst = &self.instances[space.bvh.primitive_indices[id] as usize];
-            let oo = inst.to_object.transform_point3(od).as_vec3();
-            let ob = inst.to_object.transform_vector3(dd).as_vec3();
+            let (to_object, _) = inst.transforms_at(&self.motions, time);
+            let oo = to_object.transform_point3(od).as_vec3();
+            let ob = to_object.transform_vector3(dd).as_vec3();
             let finite = oo.is_finite() && ob.is_finite() && ob != Vec3::ZERO;
             finite && self.prototypes[inst.prototype as usize].occluded(oo, ob, tmin, unscale(r.tmax, k, tmax))
         })
@@ -716,19 +792,26 @@ impl Accel {
 
     /// World-space surface geometry where the ray `o + t d` made `hit`.
     pub fn surface(&self, o: Vec3, d: Vec3, hit: &Hit) -> SurfaceGeom {
+        self.surface_at(o, d, hit, 0.0)
+    }
+
+    /// [`Accel::surface`] for a hit of a ray at time `time` (as given to [`Accel::intersect_at`]).
+    pub fn surface_at(&self, o: Vec3, d: Vec3, hit: &Hit, time: f32) -> SurfaceGeom {
         if hit.instance == WORLD {
             return self.world.surface(o, d, hit.t, hit.index, hit.b1, hit.b2).0;
         }
         let inst = &self.instances[hit.instance as usize];
-        let oo = inst.to_object.transform_point3(o.as_dvec3()).as_vec3();
-        let ob = inst.to_object.transform_vector3(d.as_dvec3()).as_vec3();
+        let (to_object, to_world) = inst.transforms_at(&self.motions, time);
+        let oo = to_object.transform_point3(o.as_dvec3()).as_vec3();
+        let ob = to_object.transform_vector3(d.as_dvec3()).as_vec3();
         let blas = &self.prototypes[inst.prototype as usize];
         let (local, vertices) = blas.surface(oo, ob, hit.t, hit.index, hit.b1, hit.b2);
-        let m = &inst.to_world;
+        let m = &to_world;
+        let mirrors = if inst.motion == STILL { inst.mirrors } else { to_world.matrix3.determinant() < 0.0 };
         let point = |p: Vec3| m.transform_point3(p.as_dvec3()).as_vec3();
         let vector = |v: Vec3| m.transform_vector3(v.as_dvec3()).as_vec3();
         // Normals transform by the inverse transpose.
-        let normal_matrix = inst.to_object.matrix3.transpose();
+        let normal_matrix = to_object.matrix3.transpose();
         let normal = |n: Vec3| (normal_matrix * n.as_dvec3()).as_vec3().normalize_or_zero();
         let p = point(local.p);
         // The object-space error carried to world space (|M| p_error), plus the rounding of
@@ -744,7 +827,7 @@ impl Accel {
                 let ng = winding_normal(w);
                 let ng = if ng == Vec3::ZERO || !ng.is_finite() {
                     let n = normal(local.ng);
-                    if inst.mirrors { -n } else { n }
+                    if mirrors { -n } else { n }
                 } else {
                     ng
                 };
