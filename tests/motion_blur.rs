@@ -194,8 +194,7 @@ def Cube "Inside" {{
         )
     };
     let fixed = "double3 xformOp:translate = (0.5, 0, 0)\n    uniform token[] xformOpOrder = [\"xformOp:translate\"]";
-    let moving =
-        "double3 xformOp:translate.timeSamples = { 0: (-1, 0, 0), 1: (1, 0.5, 0) }\n    uniform token[] xformOpOrder = [\"xformOp:translate\"]";
+    let moving = "double3 xformOp:translate.timeSamples = { 0: (-1, 0, 0), 1: (1, 0.5, 0) }\n    uniform token[] xformOpOrder = [\"xformOp:translate\"]";
     let settings = common::settings(48, 32, 16, 3, 4);
     let closed = common::render_file(&scene("still_closed.usda", &still(0.0, 0.0, fixed)), &settings);
     let open = common::render_file(&scene("still_open.usda", &still(-0.5, 0.5, fixed)), &settings);
@@ -239,9 +238,14 @@ fn transforms_at_fractional_times_are_usds() {
     let mut sources = strata::diag::SourceMap::new();
     let mut diags = strata::diag::Diagnostics::new();
     let text = std::fs::read_to_string(path).unwrap();
-    let stage =
-        strata::scene::Stage::from_text("xforms.usda", &text, Path::new("tests/fixtures/motion"), &mut sources, &mut diags)
-            .expect("stage");
+    let stage = strata::scene::Stage::from_text(
+        "xforms.usda",
+        &text,
+        Path::new("tests/fixtures/motion"),
+        &mut sources,
+        &mut diags,
+    )
+    .expect("stage");
     assert!(!diags.has_errors(), "{}", diags.render(&sources));
     let want = expected();
     let mut checked = 0;
@@ -300,4 +304,87 @@ fn a_moving_camera_blurs_as_the_scene_moving_the_other_way() {
     assert!(mean < 0.01, "mean alpha difference {mean}");
     let partial = a.iter().filter(|&&x| x > 0.1 && x < 0.9).count();
     assert!(partial > a.len() / 2, "the moving camera blurs ({partial} partly covered pixels)");
+}
+
+/// A deforming mesh's BVH bounds contain it at every time: a height field whose vertices
+/// rise by different amounts while the whole sheet slides along x, sampled at frames 0 and
+/// 1, is met by a ray straight down at random points of it at random times exactly where
+/// USD's linearly interpolated points put it (a box that missed the triangle there would
+/// lose the hit).
+#[test]
+fn a_deforming_meshs_bounds_contain_it_at_all_times() {
+    const N: usize = 6;
+    let height = |i: usize, j: usize| ((i * 7 + j * 3) % 5) as f64 * 0.4;
+    let mut p0 = Vec::new();
+    let mut p1 = Vec::new();
+    for j in 0..=N {
+        for i in 0..=N {
+            p0.push(DVec3::new(i as f64, j as f64, 0.0));
+            p1.push(DVec3::new(i as f64 + 0.5, j as f64, height(i, j)));
+        }
+    }
+    let (mut counts, mut indices) = (Vec::new(), Vec::new());
+    for j in 0..N {
+        for i in 0..N {
+            let v = j * (N + 1) + i;
+            counts.push("4".to_string());
+            indices.extend([v, v + 1, v + N + 2, v + N + 1].map(|x| x.to_string()));
+        }
+    }
+    let list = |ps: &[DVec3]| ps.iter().map(|p| format!("({}, {}, {})", p.x, p.y, p.z)).collect::<Vec<_>>().join(", ");
+    let text = format!(
+        r#"#usda 1.0
+(
+    startTimeCode = 0
+)
+def Camera "Cam" {{
+    double3 xformOp:translate = (3, 3, 20)
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+    double shutter:open = 0
+    double shutter:close = 1
+}}
+def Mesh "Sheet" {{
+    uniform token subdivisionScheme = "none"
+    int[] faceVertexCounts = [{}]
+    int[] faceVertexIndices = [{}]
+    point3f[] points.timeSamples = {{ 0: [{}], 1: [{}] }}
+}}
+"#,
+        counts.join(", "),
+        indices.join(", "),
+        list(&p0),
+        list(&p1)
+    );
+    let (scene, _) = common::scene_file(&scene("sheet.usda", &text));
+    assert_eq!(scene.motion.deforming_prims, 1, "{:?}", scene.motion);
+    assert!(scene.has_motion());
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut uniform = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for _ in 0..2000 {
+        let tau = uniform();
+        // A point of the sheet at tau: bilinear in its quad's interpolated corners, on one of
+        // the two triangles the quad is split into (fan from its first corner).
+        let (i, j) = ((uniform() * N as f64) as usize, (uniform() * N as f64) as usize);
+        let corner = |di: usize, dj: usize| {
+            let v = (j + dj) * (N + 1) + i + di;
+            p0[v].lerp(p1[v], tau)
+        };
+        let (a, b, c, d) = (corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1));
+        let (u, w) = (uniform(), uniform());
+        let (u, w) = if u + w > 1.0 { (1.0 - u, 1.0 - w) } else { (u, w) };
+        let (e, f) = if uniform() < 0.5 { (b, c) } else { (c, d) };
+        let target = a + (e - a) * u + (f - a) * w;
+        let origin = target + DVec3::new(0.0, 0.0, 10.0);
+        let hit = scene
+            .accel
+            .intersect_at(origin.as_vec3(), -glam::Vec3::Z, 0.0, f32::INFINITY, tau as f32)
+            .unwrap_or_else(|| panic!("no hit at {target} at time {tau}"));
+        assert!((hit.t as f64 - 10.0).abs() < 1e-4, "hit at {} instead of 10 ({target}, time {tau})", hit.t);
+        assert!(scene.accel.occluded_at(origin.as_vec3(), -glam::Vec3::Z, 0.0, 10.5, tau as f32));
+    }
 }

@@ -256,7 +256,7 @@ impl Scene {
             parts;
         let accel = Accel::with_moving_instances(
             Blas::new(geometry.triangles, geometry.shapes),
-            geometry.prototypes.into_iter().map(|p| Blas::new(p.triangles, p.shapes)).collect(),
+            geometry.prototypes.into_iter().map(|p| Blas::deforming(p.triangles, p.shapes, p.deformation)).collect(),
             &geometry.instances,
             geometry.instance_prims,
             motion.instances,
@@ -389,7 +389,7 @@ impl Parts {
         // Displaced surfaces may reach past the undisplaced bounds (the camera stays framed on those).
         let bounds = geometry.bounds().unwrap_or(bounds);
         let shutter = chosen.map_or(Shutter::default(), |(_, prim)| Shutter::of_camera(prim, diags));
-        let (instances, stats) = motion::apply(&mut geometry, stage, shutter);
+        let (instances, stats) = motion::apply(&mut geometry, stage, shutter, options.geometry, diags);
         let camera_motion = chosen.and_then(|(id, _)| motion::camera_motion(stage, id, shutter));
         let motion = Motion { shutter, instances, camera: camera_motion, stats };
         Some(Parts { geometry, prim_material, lights, camera, camera_path, default_lit, displaced, bounds, motion })

@@ -156,6 +156,9 @@ pub struct Prototype {
     pub prims: u32,
     /// Prototype-space bounds `(min, max)`; `None` when empty.
     pub bounds: Option<(DVec3, DVec3)>,
+    /// For a mesh that deforms while the shutter is open: its triangles' positions keyed
+    /// over the shutter (`triangles` holds them at the frame).
+    pub deformation: Option<motion::Deformation>,
 }
 
 /// The triangles of a whole stage.

@@ -10,6 +10,12 @@
 //! nothing moves — and every scene with the shutter closed, the default — is built and traced
 //! exactly as before, so its image is bit for bit the same.
 //!
+//! A mesh whose `points` are sampled inside the shutter deforms: it is emitted again at each
+//! key (the shutter's ends and every sample time of its points or placement inside it), in
+//! world space, and becomes a prototype of its own whose triangles move linearly between
+//! those keys ([`Deformation`]); each triangle's BVH box covers it at every key, so at every
+//! time between.
+//!
 //! Transforms at a time are USD's (`ComputeLocalToWorldTransform(time)`: every xformOp's
 //! samples interpolated — linearly, quaternions by slerp — and the ops composed), evaluated at
 //! the shutter's ends and at every sample time inside it. Between keys the matrices are
@@ -18,11 +24,13 @@
 //! translation none), so the keys follow USD's curve and the boxes over them bound it.
 
 use crate::diag::{Diagnostic, Diagnostics};
+use crate::render::geometry::emit::{Emitter, emit_prim};
+use crate::render::geometry::primvars::PrimvarTable;
 use crate::render::geometry::shapes::transformed_box;
 use crate::render::geometry::xform::{transform_sample_times, world_transform_at};
-use crate::render::geometry::{Geometry, InstanceDesc, Prototype, bounds_of};
+use crate::render::geometry::{Geometry, GeometryOptions, InstanceDesc, Prototype, Triangle, bounds_of};
 use crate::scene::{Prim, Stage, TimeCode, Value};
-use glam::{DAffine3, DMat4, DVec3};
+use glam::{DAffine3, DMat4, DVec3, Vec3};
 use std::collections::HashMap;
 
 /// How far (relative to the transform's largest entry) linear interpolation between two keys
@@ -181,12 +189,7 @@ fn halve(
 /// The transform keys of a prim's world placement over `shutter` at frame `frame`, relative
 /// to its placement at the frame (`W(t) · W(frame)⁻¹`), or `None` when no op that places it
 /// has samples or the placement is the frame's throughout.
-pub fn placement_motion(
-    stage: &Stage,
-    id: crate::scene::PrimId,
-    frame: f64,
-    shutter: Shutter,
-) -> Option<MotionKeys> {
+pub fn placement_motion(stage: &Stage, id: crate::scene::PrimId, frame: f64, shutter: Shutter) -> Option<MotionKeys> {
     let samples = transform_sample_times(stage, id);
     if samples.is_empty() {
         return None;
@@ -221,11 +224,171 @@ pub fn camera_motion(stage: &Stage, id: crate::scene::PrimId, shutter: Shutter) 
     Some(MotionKeys::sample(&world, a, b, &transform_sample_times(stage, id)))
 }
 
+/// World-space triangle positions keyed over the shutter, for a deforming prototype: each
+/// triangle's vertices move linearly between keys.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Deformation {
+    times: Vec<f32>,
+    /// Per key, every triangle's vertices (in the prototype's order).
+    positions: Vec<Vec<[Vec3; 3]>>,
+}
+
+impl Deformation {
+    /// Ray times of the keys.
+    pub fn times(&self) -> &[f32] {
+        &self.times
+    }
+
+    /// The triangles' vertices at key `k`.
+    pub fn key(&self, k: usize) -> &[[Vec3; 3]] {
+        &self.positions[k]
+    }
+
+    /// Triangle `i`'s vertices at ray time `tau`.
+    #[inline]
+    pub fn at(&self, i: usize, tau: f32) -> [Vec3; 3] {
+        let n = self.times.len();
+        let k = self.times[1..n - 1].partition_point(|&t| t <= tau);
+        let (t0, t1) = (self.times[k], self.times[k + 1]);
+        let w = if t1 > t0 { ((tau - t0) / (t1 - t0)).clamp(0.0, 1.0) } else { 0.0 };
+        let (p0, p1) = (&self.positions[k][i], &self.positions[k + 1][i]);
+        [0, 1, 2].map(|v| p0[v] + (p1[v] - p0[v]) * w)
+    }
+
+    /// Triangle `i`'s box over the whole shutter: the union of its keys' boxes.
+    pub fn bounds(&self, i: usize) -> (Vec3, Vec3) {
+        let boxes = self.positions.iter().map(|key| {
+            let p = &key[i];
+            (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]))
+        });
+        boxes.reduce(|(a, b), (c, d)| (a.min(c), b.max(d))).expect("at least two keys")
+    }
+}
+
+/// The deformation of world prim `prim` (renderable prim `index`, whose `count` triangles the
+/// frame's build emitted) over `shutter`: `None` when its points are not sampled, it is not a
+/// mesh, or neither its points nor its placement change within the shutter.
+#[allow(clippy::too_many_arguments)]
+fn deformation_of(
+    stage: &Stage,
+    id: crate::scene::PrimId,
+    frame: f64,
+    shutter: Shutter,
+    options: GeometryOptions,
+    names: &[String],
+    count: usize,
+    diags: &mut Diagnostics,
+) -> Option<Deformation> {
+    let prim = stage.prim(id);
+    let points = prim.attribute("points")?;
+    if points.time_samples.is_empty() || prim.type_name.as_deref() != Some("Mesh") {
+        return None;
+    }
+    let (a, b) = (shutter.time(frame, 0.0), shutter.time(frame, 1.0));
+    let mut times: Vec<f64> = points.time_samples.iter().map(|(t, _)| *t).collect();
+    times.extend(transform_sample_times(stage, id));
+    times.retain(|&t| t > a && t < b);
+    times.extend([a, b]);
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    let quiet = &mut Diagnostics::new();
+    let at_frame = (points.value_at(TimeCode::At(frame)), world_transform_at(stage, id, frame, quiet));
+    let keys: Vec<(Option<Value>, DMat4)> =
+        times.iter().map(|&t| (points.value_at(TimeCode::At(t)), world_transform_at(stage, id, t, quiet))).collect();
+    if keys.iter().all(|k| *k == at_frame) {
+        return None;
+    }
+    let mut positions = Vec::with_capacity(keys.len());
+    for (value, world) in keys {
+        let mut posed = prim.clone();
+        if let Some(attr) = posed.attributes.iter_mut().find(|a| a.name == "points") {
+            attr.value = value.map(|v| (v, attr.span));
+        }
+        let (mut triangles, mut shapes, mut degenerate) = (Vec::new(), Vec::new(), 0);
+        let mut table = PrimvarTable { names: names.to_vec(), ..PrimvarTable::default() };
+        let mut out = Emitter::new(&mut triangles, &mut shapes, &mut degenerate, &mut table, world, 0, usize::MAX);
+        out.subdiv_level = options.subdiv_level;
+        emit_prim(&posed, &mut out, quiet);
+        if triangles.len() != count {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "`{}` has {} triangles at one time inside the shutter and {count} at the frame (degenerate                      faces, or displacement); rendered without deformation blur",
+                    prim.path,
+                    triangles.len()
+                ))
+                .at(crate::render::geometry::xform::value_span(points), "its points"),
+            );
+            return None;
+        }
+        positions.push(triangles.into_iter().map(|t| t.p).collect());
+    }
+    let span = b - a;
+    Some(Deformation { times: times.iter().map(|t| (((t - a) / span) as f32).clamp(0.0, 1.0)).collect(), positions })
+}
+
+/// Moves every deforming world mesh (see [`deformation_of`]) into a prototype of its own
+/// with its [`Deformation`], placed once where it is (the keys are in world space); returns
+/// how many. Meshes with GeomSubset materials are left to transform blur.
+fn deform(
+    geometry: &mut Geometry,
+    stage: &Stage,
+    frame: f64,
+    shutter: Shutter,
+    options: GeometryOptions,
+    diags: &mut Diagnostics,
+) -> usize {
+    let mut counts = vec![0usize; geometry.prims.len()];
+    for t in &geometry.triangles {
+        counts[t.prim as usize] += 1;
+    }
+    let has_subsets: Vec<bool> = {
+        let mut v = vec![false; geometry.prims.len()];
+        for p in &geometry.prims {
+            if let Some(owner) = p.subset_of {
+                v[owner as usize] = true;
+            }
+        }
+        v
+    };
+    let mut deforming = 0;
+    for prim in 0..geometry.prims.len() {
+        if counts[prim] == 0 || has_subsets[prim] || geometry.prims[prim].subset_of.is_some() {
+            continue;
+        }
+        let Some(id) = stage.find(&geometry.prims[prim].path) else { continue };
+        let names = geometry.primvars.names.clone();
+        let Some(deformation) = deformation_of(stage, id, frame, shutter, options, &names, counts[prim], diags) else {
+            continue;
+        };
+        let (mine, rest): (Vec<Triangle>, Vec<Triangle>) =
+            std::mem::take(&mut geometry.triangles).into_iter().partition(|t| t.prim == prim as u32);
+        geometry.triangles = rest;
+        let mut proto = Prototype { prims: 1, ..Prototype::default() };
+        proto.triangles = mine.into_iter().map(|t| Triangle { prim: 0, ..t }).collect();
+        // Bounds over every key (the frame's positions need not be inside the shutter).
+        let boxes = (0..proto.triangles.len()).map(|i| deformation.bounds(i));
+        proto.bounds =
+            boxes.reduce(|(a, b), (c, d)| (a.min(c), b.max(d))).map(|(lo, hi)| (lo.as_dvec3(), hi.as_dvec3()));
+        proto.deformation = Some(deformation);
+        geometry.prototypes.push(proto);
+        let prims = geometry.instance_prims.len() as u32;
+        geometry.instance_prims.push(prim as u32);
+        let prototype = geometry.prototypes.len() as u32 - 1;
+        geometry.instances.push(InstanceDesc { to_world: DMat4::IDENTITY, prototype, prims });
+        // The keys hold its placement already: it is placed by no prim that could move it again.
+        geometry.instance_placers.push(crate::scene::PrimId(u32::MAX));
+        deforming += 1;
+    }
+    deforming
+}
+
 /// What [`apply`] made move.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct MotionStats {
     /// Renderable prims of the world moved into instances of their own.
     pub moving_prims: usize,
+    /// Of those, meshes that deform (their points are sampled inside the shutter).
+    pub deforming_prims: usize,
     /// Instances (of those and of instancing) with keyed transforms.
     pub moving_instances: usize,
 }
@@ -235,12 +398,19 @@ pub struct MotionStats {
 /// relative to it), and instances whose placing prim moves get keys. Returns the keys of each
 /// moving instance (by index in `geometry.instances`). Nothing changes when the shutter is
 /// closed, the stage is not at a numeric time, or nothing moves.
-pub fn apply(geometry: &mut Geometry, stage: &Stage, shutter: Shutter) -> (Vec<(u32, MotionKeys)>, MotionStats) {
+pub fn apply(
+    geometry: &mut Geometry,
+    stage: &Stage,
+    shutter: Shutter,
+    options: GeometryOptions,
+    diags: &mut Diagnostics,
+) -> (Vec<(u32, MotionKeys)>, MotionStats) {
     let mut stats = MotionStats::default();
     let TimeCode::At(frame) = stage.time() else { return (Vec::new(), stats) };
     if !shutter.is_open() {
         return (Vec::new(), stats);
     }
+    stats.deforming_prims = deform(geometry, stage, frame, shutter, options, diags);
     let mut motion: Vec<(u32, MotionKeys)> = Vec::new();
     let mut memo: HashMap<u32, Option<MotionKeys>> = HashMap::new();
     let mut keys_of = |id: crate::scene::PrimId| {
@@ -248,6 +418,9 @@ pub fn apply(geometry: &mut Geometry, stage: &Stage, shutter: Shutter) -> (Vec<(
     };
     // Instances of instancing whose placing prim moves.
     for (i, placer) in geometry.instance_placers.iter().enumerate() {
+        if placer.0 as usize >= stage.len() {
+            continue;
+        }
         if let Some(keys) = keys_of(*placer) {
             let to_world = DAffine3::from_mat4(geometry.instances[i].to_world);
             motion.push((i as u32, keys.then(to_world)));
@@ -258,7 +431,8 @@ pub fn apply(geometry: &mut Geometry, stage: &Stage, shutter: Shutter) -> (Vec<(
         .prims
         .iter()
         .map(|p| {
-            // A prim made of triangles outside the world (only instanced) moves with its instance.
+            // A prim made of triangles outside the world (only instanced) moves with its
+            // instance; a deforming one has left the world with its placement in its keys.
             stage.find(&p.path).and_then(&mut keys_of)
         })
         .collect();
