@@ -571,7 +571,8 @@ impl Context<'_> {
     }
 
     /// Transmittance along a shadow segment: 0 behind an opaque surface, the product of
-    /// transparencies across masked ones.
+    /// transparencies across masked ones, at the path's ray time `time`.
+    #[allow(clippy::too_many_arguments)]
     fn transmittance(
         &self,
         mut o: Vec3,
