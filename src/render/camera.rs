@@ -80,15 +80,11 @@ impl Camera {
         let f_stop = num("fStop", 0.0);
         let focus = num("focusDistance", 0.0);
         let lens_radius = if f_stop > 0.0 && focus > 0.0 { (focal * 0.1 / f_stop / 2.0) as f32 } else { 0.0 };
-        let origin = world.transform_point3(glam::DVec3::ZERO).as_vec3();
-        let right = world.transform_vector3(glam::DVec3::X).as_vec3().normalize_or(Vec3::X);
-        let up = world.transform_vector3(glam::DVec3::Y).as_vec3().normalize_or(Vec3::Y);
-        let forward = world.transform_vector3(-glam::DVec3::Z).as_vec3().normalize_or(-Vec3::Z);
-        Camera {
-            origin,
-            right,
-            up,
-            forward,
+        let placed = Camera {
+            origin: Vec3::ZERO,
+            right: Vec3::X,
+            up: Vec3::Y,
+            forward: -Vec3::Z,
             tan_half: Vec2::new(tan_w, tan_w / aspect.max(1e-6)),
             shift,
             lens_radius,
@@ -96,7 +92,18 @@ impl Camera {
             near: clip[0].max(0.0) as f32,
             far: clip[1] as f32,
             framed: None,
-        }
+        };
+        placed.placed_at(world)
+    }
+
+    /// The same lens under the camera-to-world transform `world` (a camera moving while the
+    /// shutter is open is placed per ray).
+    pub fn placed_at(&self, world: DMat4) -> Camera {
+        let origin = world.transform_point3(glam::DVec3::ZERO).as_vec3();
+        let right = world.transform_vector3(glam::DVec3::X).as_vec3().normalize_or(Vec3::X);
+        let up = world.transform_vector3(glam::DVec3::Y).as_vec3().normalize_or(Vec3::Y);
+        let forward = world.transform_vector3(-glam::DVec3::Z).as_vec3().normalize_or(-Vec3::Z);
+        Camera { origin, right, up, forward, framed: None, ..*self }
     }
 
     /// A camera that frames the box `(lo, hi)` in a three-quarter view from the front right

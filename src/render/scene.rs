@@ -6,6 +6,7 @@ use crate::diag::{Diagnostic, Diagnostics};
 use crate::render::camera::Camera;
 use crate::render::geometry::accel::{Accel, Blas};
 use crate::render::geometry::displace::{DicingOptions, DisplacementStats};
+use crate::render::geometry::motion::{self, MotionKeys, MotionStats, Shutter};
 use crate::render::geometry::primvars::PrimvarTable;
 use crate::render::geometry::xform::world_transforms;
 use crate::render::geometry::{self, GeomPrim};
@@ -49,6 +50,13 @@ pub struct Scene {
     pub primvars: PrimvarTable,
     /// Whether the stage had no light and [`default_lights`] light it.
     pub default_lights: bool,
+    /// The camera's shutter (`shutter:open`, `shutter:close`); closed when there is no Camera prim.
+    pub shutter: Shutter,
+    /// The camera-to-world transform keyed over the shutter, when the camera moves while it
+    /// is open (`None`: [`Scene::camera`] throughout).
+    pub camera_motion: Option<MotionKeys>,
+    /// What moves while the shutter is open.
+    pub motion: MotionStats,
 }
 
 /// Whether a stage without lights gets [`default_lights`].
@@ -196,6 +204,14 @@ pub fn choose_view(stage: &Stage, requested: Option<&str>, diags: &mut Diagnosti
 }
 
 impl Scene {
+    /// Whether camera rays carry a time: the shutter is open and something in view of it
+    /// (an instance, the camera) moves. A scene where nothing moves draws no time, so it
+    /// renders exactly as with the shutter closed.
+    #[inline]
+    pub fn has_motion(&self) -> bool {
+        self.camera_motion.is_some() || self.accel.has_motion()
+    }
+
     /// Whether renderable prim `prim`'s surface was diced and displaced.
     #[inline]
     pub fn prim_displaced(&self, prim: u32) -> bool {
@@ -236,12 +252,14 @@ impl Scene {
         diags: &mut Diagnostics,
     ) -> Option<Scene> {
         let parts = Parts::gather(stage, material_of_prim, materials, options, diags)?;
-        let Parts { geometry, prim_material, lights, camera, camera_path, default_lit, displaced, bounds } = parts;
-        let accel = Accel::with_instances(
+        let Parts { geometry, prim_material, lights, camera, camera_path, default_lit, displaced, bounds, motion } =
+            parts;
+        let accel = Accel::with_moving_instances(
             Blas::new(geometry.triangles, geometry.shapes),
-            geometry.prototypes.into_iter().map(|p| Blas::new(p.triangles, p.shapes)).collect(),
+            geometry.prototypes.into_iter().map(|p| Blas::deforming(p.triangles, p.shapes, p.deformation)).collect(),
             &geometry.instances,
             geometry.instance_prims,
+            motion.instances,
         );
         let scene_radius = (bounds.1 - bounds.0).length() / 2.0;
         let light_power: f32 = lights.iter().filter(|l| !l.is_infinite()).map(|l| l.power(scene_radius)).sum();
@@ -261,6 +279,9 @@ impl Scene {
             camera_path,
             material_names: Vec::new(),
             bounds,
+            shutter: motion.shutter,
+            camera_motion: motion.camera,
+            motion: motion.stats,
         })
     }
 
@@ -287,6 +308,17 @@ struct Parts {
     default_lit: bool,
     displaced: crate::render::geometry::displace::Displaced,
     bounds: (Vec3, Vec3),
+    motion: Motion,
+}
+
+/// What moves while the shutter is open (see [`crate::render::geometry::motion`]).
+#[derive(Default)]
+struct Motion {
+    shutter: Shutter,
+    /// Keys of moving instances, by index in the geometry's instances.
+    instances: Vec<(u32, MotionKeys)>,
+    camera: Option<MotionKeys>,
+    stats: MotionStats,
 }
 
 impl Parts {
@@ -356,7 +388,11 @@ impl Parts {
         }
         // Displaced surfaces may reach past the undisplaced bounds (the camera stays framed on those).
         let bounds = geometry.bounds().unwrap_or(bounds);
-        Some(Parts { geometry, prim_material, lights, camera, camera_path, default_lit, displaced, bounds })
+        let shutter = chosen.map_or(Shutter::default(), |(_, prim)| Shutter::of_camera(prim, diags));
+        let (instances, stats) = motion::apply(&mut geometry, stage, shutter, options.geometry, diags);
+        let camera_motion = chosen.and_then(|(id, _)| motion::camera_motion(stage, id, shutter));
+        let motion = Motion { shutter, instances, camera: camera_motion, stats };
+        Some(Parts { geometry, prim_material, lights, camera, camera_path, default_lit, displaced, bounds, motion })
     }
 }
 

@@ -683,6 +683,7 @@ fn render_impl(
     crate::input::check_memory(&format!("a {rw} x {rh} film of {} channels", film.1), film.0)
         .map_err(RenderError::BadSettings)?;
     let camera = scene.camera.with_aspect(w as f32 / h as f32);
+    let moving = scene.has_motion();
     let primvar_slots = crate::render::integrator::primvar_slots(scene, materials);
     let layer_modes: Vec<LayerMode> = materials.iter().map(|m| settings.mode.resolve(*m)).collect();
     let ctx = Context {
@@ -727,7 +728,16 @@ fn render_impl(
                 // Numbers are counter based: skipping the lens draw of a pinhole camera
                 // changes no other decision's numbers.
                 let lens = if camera.has_lens() { sampler.get2(Slot::Lens) } else { Vec2::ZERO };
-                let ray = camera.ray(film, lens);
+                // Likewise the time: drawn only where something moves while the shutter is open.
+                let ray = if moving {
+                    scratch.time = sampler.get1(Slot::Time);
+                    match &scene.camera_motion {
+                        Some(keys) => camera.placed_at(keys.at(scratch.time).into()).ray(film, lens),
+                        None => camera.ray(film, lens),
+                    }
+                } else {
+                    camera.ray(film, lens)
+                };
                 // Stratified over the pixel's samples: sample k picks in [k, k + 1) / spp.
                 let u_pick = ((sample as f32 + sampler.get1(Slot::LayerPick)) / settings.spp as f32)
                     .min(1.0 - f32::EPSILON / 2.0);

@@ -410,13 +410,13 @@ impl Builder<'_> {
             self.geometry.instance_prims.push(index);
         }
         let to_world = self.xforms[root.0 as usize].world;
-        self.place(stage.prim(root), prototype, start, to_world, None, diags);
+        self.place(root, prototype, start, to_world, None, diags);
     }
 
     /// Adds an instance after checking that it lies within the extent.
     fn place(
         &mut self,
-        prim: &Prim,
+        placer: PrimId,
         prototype: u32,
         prims: u32,
         to_world: DMat4,
@@ -424,6 +424,7 @@ impl Builder<'_> {
         diags: &mut Diagnostics,
     ) -> bool {
         let Some((lo, hi)) = self.geometry.prototypes[prototype as usize].bounds else { return true };
+        let prim = self.stage.prim(placer);
         let (wlo, whi) = crate::render::geometry::shapes::transformed_box(&to_world, lo, hi);
         if let Some(far) = [wlo, whi].into_iter().find(|w| !w.is_finite() || w.abs().max_element() > MAX_EXTENT) {
             let mut d = beyond_extent(self.stage, prim, far);
@@ -459,6 +460,7 @@ impl Builder<'_> {
             return true;
         }
         self.geometry.instances.push(InstanceDesc { to_world, prototype, prims });
+        self.geometry.instance_placers.push(placer);
         true
     }
 }
@@ -731,7 +733,7 @@ impl Builder<'_> {
             let s = scales.map_or(DVec3::ONE, |s| DVec3::from_slice(&s[3 * k..3 * k + 3]));
             // Row-vector USD: proto · scale · orient · translate; column-vector: T R S proto.
             let m = instancer * DMat4::from_scale_rotation_translation(s, r, t) * local;
-            if !self.place(prim, p, prims, m, Some((k, positions_span)), diags) {
+            if !self.place(id, p, prims, m, Some((k, positions_span)), diags) {
                 // One extent error per instancer is enough.
                 break;
             }

@@ -9,6 +9,7 @@ pub mod accel;
 mod builder;
 pub mod displace;
 mod emit;
+pub mod motion;
 pub mod primvars;
 pub mod shapes;
 pub mod skel;
@@ -155,6 +156,9 @@ pub struct Prototype {
     pub prims: u32,
     /// Prototype-space bounds `(min, max)`; `None` when empty.
     pub bounds: Option<(DVec3, DVec3)>,
+    /// For a mesh that deforms while the shutter is open: its triangles' positions keyed
+    /// over the shutter (`triangles` holds them at the frame).
+    pub deformation: Option<motion::Deformation>,
 }
 
 /// The triangles of a whole stage.
@@ -176,6 +180,9 @@ pub struct Geometry {
     /// Per-instance prim tables: prototype-local prim `j` of an instance is the renderable
     /// prim `instance_prims[instance.prims + j]`.
     pub instance_prims: Vec<u32>,
+    /// Per instance, the prim that places it (the instanceable root, the point instancer):
+    /// the instance moves as that prim does ([`motion::apply`]).
+    pub instance_placers: Vec<PrimId>,
     /// The primvars materials read, for every triangle and shape that has them (world and
     /// prototypes alike).
     pub primvars: PrimvarTable,

@@ -42,6 +42,51 @@ pub fn world_transforms(stage: &Stage, diags: &mut Diagnostics) -> Vec<PrimXform
 
 /// A prim's local transform from its `xformOpOrder`, and whether it resets the parent stack.
 pub fn local_transform(prim: &Prim, diags: &mut Diagnostics) -> (DMat4, bool) {
+    local_transform_with(prim, &|attr| attr.get().cloned(), diags)
+}
+
+/// [`local_transform`] with every op's value read at `time` (USD's `Get(time)`: samples
+/// interpolated linearly, quaternions by slerp), as `ComputeLocalToWorldTransform(time)` does.
+pub fn local_transform_at(prim: &Prim, time: f64, diags: &mut Diagnostics) -> (DMat4, bool) {
+    local_transform_with(prim, &|attr| attr.value_at(crate::scene::TimeCode::At(time)), diags)
+}
+
+/// The local-to-world transform of prim `id` at `time` (see [`local_transform_at`]).
+pub fn world_transform_at(stage: &Stage, id: crate::scene::PrimId, time: f64, diags: &mut Diagnostics) -> DMat4 {
+    let prim = stage.prim(id);
+    let (local, reset) = local_transform_at(prim, time, diags);
+    match prim.parent {
+        Some(parent) if !reset => world_transform_at(stage, parent, time, diags) * local,
+        _ => local,
+    }
+}
+
+/// The times at which an attribute that places prim `id` (an xformOp of it or of an
+/// ancestor up to a `!resetXformStack!`) has samples, unsorted; empty when it does not move.
+pub fn transform_sample_times(stage: &Stage, id: crate::scene::PrimId) -> Vec<f64> {
+    let mut times = Vec::new();
+    let mut at = Some(id);
+    while let Some(id) = at {
+        let prim = stage.prim(id);
+        let order = prim.attribute("xformOpOrder").and_then(|a| a.get()).and_then(Value::as_string_array);
+        let order = order.map(|o| o.to_vec()).unwrap_or_default();
+        for entry in &order {
+            let name = entry.strip_prefix("!invert!").unwrap_or(entry);
+            if let Some(attr) = prim.attribute(name) {
+                times.extend(attr.time_samples.iter().map(|(t, _)| *t));
+            }
+        }
+        at = if order.iter().any(|e| e == "!resetXformStack!") { None } else { prim.parent };
+    }
+    times
+}
+
+/// [`local_transform`] with each op's value given by `value_of`.
+fn local_transform_with(
+    prim: &Prim,
+    value_of: &dyn Fn(&Attribute) -> Option<Value>,
+    diags: &mut Diagnostics,
+) -> (DMat4, bool) {
     let Some(order_attr) = prim.attribute("xformOpOrder") else { return (DMat4::IDENTITY, false) };
     let Some(order) = order_attr.get().and_then(Value::as_string_array) else { return (DMat4::IDENTITY, false) };
     let mut m = DMat4::IDENTITY;
@@ -64,8 +109,8 @@ pub fn local_transform(prim: &Prim, diags: &mut Diagnostics) -> (DMat4, bool) {
             );
             continue;
         };
-        let Some(value) = attr.get() else { continue };
-        match op_matrix(name, value) {
+        let Some(value) = value_of(attr) else { continue };
+        match op_matrix(name, &value) {
             Ok(op) => {
                 let op = if invert {
                     if op.determinant().abs() < 1e-300 {

@@ -185,6 +185,9 @@ pub struct Scratch {
     pub site: FaultSite,
     /// Entry points called so far on this thread (the film resets and collects it per row).
     pub counts: EvalCounts,
+    /// The time of the sample being traced (`[0, 1)` across an open shutter; 0 when nothing
+    /// moves): every ray of its path sees the scene at that time.
+    pub time: f32,
 }
 
 impl Scratch {
@@ -213,6 +216,7 @@ impl Scratch {
             albedo_memo: None,
             site: FaultSite::default(),
             counts: EvalCounts::default(),
+            time: 0.0,
         }
     }
 }
@@ -291,8 +295,8 @@ struct SurfacePoint {
 }
 
 /// Surface geometry where the ray `o + t d` hit.
-fn surface_point(accel: &Accel, scene: &Scene, o: Vec3, d: Vec3, hit: &Hit) -> SurfacePoint {
-    let g = accel.surface(o, d, hit);
+fn surface_point(accel: &Accel, scene: &Scene, o: Vec3, d: Vec3, hit: &Hit, time: f32) -> SurfacePoint {
+    let g = accel.surface_at(o, d, hit, time);
     SurfacePoint {
         p: g.p,
         p_error: g.p_error,
@@ -567,7 +571,8 @@ impl Context<'_> {
     }
 
     /// Transmittance along a shadow segment: 0 behind an opaque surface, the product of
-    /// transparencies across masked ones.
+    /// transparencies across masked ones, at the path's ray time `time`.
+    #[allow(clippy::too_many_arguments)]
     fn transmittance(
         &self,
         mut o: Vec3,
@@ -576,21 +581,22 @@ impl Context<'_> {
         site: &mut FaultSite,
         counts: &mut EvalCounts,
         primvars: &mut [f32],
+        time: f32,
     ) -> Result<f32, Invalid> {
         let accel = &self.scene.accel;
         if self.all_opaque {
-            return Ok(if accel.occluded(o, d, 0.0, dist) { 0.0 } else { 1.0 });
+            return Ok(if accel.occluded_at(o, d, 0.0, dist, time) { 0.0 } else { 1.0 });
         }
         let mut remaining = dist;
         let mut t_total = 1.0f32;
         for _ in 0..MAX_PASS_THROUGH {
-            let Some(hit) = accel.intersect(o, d, 0.0, remaining) else { return Ok(t_total) };
+            let Some(hit) = accel.intersect_at(o, d, 0.0, remaining, time) else { return Ok(t_total) };
             // An opaque material stops the ray before any surface geometry or shader runs: a
             // scene with one transparent prim does not make shadow rays pay at the others.
             if is_opaque(self.materials[hit_material(accel, self.scene, &hit)]) {
                 return Ok(0.0);
             }
-            let sp = surface_point(accel, self.scene, o, d, &hit);
+            let sp = surface_point(accel, self.scene, o, d, &hit, time);
             let material = self.materials[sp.material];
             let nl = material.info().layers.len();
             if nl > 0 {
@@ -654,7 +660,7 @@ impl Context<'_> {
         let side = if ng.dot(ls.wi) > 0.0 { ng } else { -ng };
         let o = offset_ray_origin(p, p_error, side);
         let dist = if ls.dist.is_finite() { ls.dist * (1.0 - 1e-4) } else { f32::INFINITY };
-        let tr = self.transmittance(o, ls.wi, dist, &mut s.site, &mut s.counts, &mut s.primvars)?;
+        let tr = self.transmittance(o, ls.wi, dist, &mut s.site, &mut s.counts, &mut s.primvars, s.time)?;
         if tr <= 0.0 {
             return Ok(Vec3::ZERO);
         }
@@ -687,7 +693,7 @@ impl Context<'_> {
         }
         let wi = to / dist;
         let hit = Hit { t: dist, index: es.triangle, instance: WORLD, b1: es.b1, b2: es.b2 };
-        let sp = surface_point(accel, self.scene, p, wi, &hit);
+        let sp = surface_point(accel, self.scene, p, wi, &hit, s.time);
         // One-sided: the point must face `p`.
         let cos = -sp.ng.dot(wi);
         if cos <= 0.0 {
@@ -806,7 +812,7 @@ impl Context<'_> {
         let mut compression = 1.0f32;
         let accel = &self.scene.accel;
         loop {
-            let hit = accel.intersect(o, d, tmin, tmax);
+            let hit = accel.intersect_at(o, d, tmin, tmax, s.time);
             let t_hit = hit.map_or(f32::INFINITY, |h| h.t);
             // Still the camera's ray until the first bounce (passing through is not one).
             let camera_ray = bounces == 0;
@@ -815,7 +821,7 @@ impl Context<'_> {
                 out.radiance += throughput * self.escape_emission(d, &from, camera_ray);
                 break;
             };
-            let sp = surface_point(accel, self.scene, o, d, &hit);
+            let sp = surface_point(accel, self.scene, o, d, &hit, s.time);
             // The pick at the vertex's first surface has a dimension of its own; each
             // pass through a transparent pick takes another, so later decisions keep theirs.
             let u_layer = match (bounces, vertex_passes) {

@@ -74,6 +74,10 @@ pub enum Slot {
     Roulette,
     /// The layer pick after passing through `n` transparent picks: [`Slot::PassPick`]` + n`.
     PassPick,
+    /// The camera ray's time across an open shutter (vertex 0). Numbered far above the pass
+    /// picks, so adding it moved no other decision's dimension: images rendered before it
+    /// are unchanged.
+    Time = 1 << 30,
 }
 
 /// The numbers of one camera sample.

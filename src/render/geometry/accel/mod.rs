@@ -21,6 +21,7 @@
 //! the extent, far below f32's resolution there (6e-8), at every scene scale.
 
 use crate::render::geometry::Triangle;
+use crate::render::geometry::motion::{Deformation, MotionKeys};
 use crate::render::geometry::primvars::PrimvarRef;
 use crate::render::geometry::shapes::Shape;
 use crate::render::material::frame::Frame;
@@ -215,6 +216,9 @@ pub struct Blas {
     group_members: Vec<u32>,
     /// Object-space bounds `(min, max)` of the finite primitives; `None` when there are none.
     bounds: Option<(Vec3, Vec3)>,
+    /// A deforming mesh's triangles keyed over the shutter (`positions` then hold them at the
+    /// frame, and the boxes cover every key).
+    deformation: Option<Box<Deformation>>,
 }
 
 /// A primitive's box, padded, as exact bits (the key that groups coincident primitives);
@@ -295,18 +299,27 @@ impl Blas {
     /// Primitives with non-finite bounds are kept (indices stay valid) but can never be hit;
     /// the geometry stage reports them before this.
     pub fn new(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Blas {
+        Blas::deforming(triangles, shapes, None)
+    }
+
+    /// [`Blas::new`] whose triangles move by `deformation` (one position per triangle and key,
+    /// see [`crate::render::geometry::motion`]) when it is given.
+    pub fn deforming(triangles: Vec<Triangle>, shapes: Vec<Shape>, deformation: Option<Deformation>) -> Blas {
         // The triangles are split into what the traversal reads and what a hit reads, and
         // freed, before the BVH is built (build peak memory).
         let (positions, attrs) = AttrTable::take(triangles);
-        let tri_bounds = |p: &[Vec3; 3]| (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+        let tri_bounds = |(i, p): (usize, &[Vec3; 3])| match &deformation {
+            Some(d) => d.bounds(i),
+            None => (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2])),
+        };
         let mut bounds: Option<(Vec3, Vec3)> = None;
-        for (lo, hi) in positions.iter().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds)) {
+        for (lo, hi) in positions.iter().enumerate().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds)) {
             if lo.is_finite() && hi.is_finite() {
                 bounds = Some(bounds.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
             }
         }
         let count = positions.len() + shapes.len();
-        let all_bounds = positions.iter().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds));
+        let all_bounds = positions.iter().enumerate().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds));
         let (bvh, group_start, group_members) = if count <= FLAT_PRIMITIVES {
             // Primitives with non-finite bounds are left out, as the BVH leaves them out.
             let finite: Vec<u32> = all_bounds
@@ -318,7 +331,8 @@ impl Blas {
         } else {
             build_grouped(all_bounds, count)
         };
-        Blas { bvh, positions, attrs, shapes, group_start, group_members, bounds }
+        let deformation = deformation.map(Box::new);
+        Blas { bvh, positions, attrs, shapes, group_start, group_members, bounds, deformation }
     }
 
     /// The most primitives one PLOC build was given while building this BVH: at most
@@ -369,11 +383,26 @@ impl Blas {
 
     /// `(t, b1, b2)` of the ray against the primitive in leaf slot `k` (an index into
     /// `group_members`).
+    /// `DEFORMS`: the triangles are taken at ray time `time` from [`Blas::deformation`]
+    /// (a constant, so a still BLAS's loop is the one it always was).
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn hit_slot(&self, pre: &RayPre, o: Vec3, d: Vec3, k: usize, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    fn hit_slot<const DEFORMS: bool>(
+        &self,
+        pre: &RayPre,
+        o: Vec3,
+        d: Vec3,
+        k: usize,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> Option<(f32, f32, f32)> {
         let i = self.group_members[k] as usize;
         if let Some(p) = self.positions.get(i) {
-            pre.intersect(p, tmin, tmax)
+            match (DEFORMS, &self.deformation) {
+                (true, Some(keys)) => pre.intersect(&keys.at(i, time), tmin, tmax),
+                _ => pre.intersect(p, tmin, tmax),
+            }
         } else {
             self.shapes[i - self.positions.len()].intersect(o, d, tmin, tmax).map(|t| (t, 0.0, 0.0))
         }
@@ -394,7 +423,29 @@ impl Blas {
     /// not be unit length (object-space rays are not), and `t` is in its units.
     #[inline]
     fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32, f32, f32)> {
-        let Some(space) = self.bvh.as_ref() else { return self.intersect_flat(o, d, tmin, tmax) };
+        self.intersect_when::<false>(o, d, tmin, tmax, 0.0)
+    }
+
+    /// [`Blas::intersect`] at ray time `time` (matters only when the BLAS deforms).
+    #[inline]
+    fn intersect_at(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> Option<(f32, u32, f32, f32)> {
+        if self.deformation.is_some() {
+            self.intersect_when::<true>(o, d, tmin, tmax, time)
+        } else {
+            self.intersect_when::<false>(o, d, tmin, tmax, time)
+        }
+    }
+
+    #[inline(always)]
+    fn intersect_when<const DEFORMS: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> Option<(f32, u32, f32, f32)> {
+        let Some(space) = self.bvh.as_ref() else { return self.intersect_flat::<DEFORMS>(o, d, tmin, tmax, time) };
         let pre = RayPre::new(o, d);
         let (ray, k) = space.ray(o, d, tmin, tmax)?;
         let mut best = None;
@@ -402,7 +453,7 @@ impl Blas {
             let mut closest = unscale(r.tmax, k, tmax);
             let mut found = false;
             for k in self.group(id) {
-                if let Some((t, b1, b2)) = self.hit_slot(&pre, o, d, k, tmin, closest) {
+                if let Some((t, b1, b2)) = self.hit_slot::<DEFORMS>(&pre, o, d, k, tmin, closest, time) {
                     best = Some((t, self.group_members[k], b1, b2));
                     closest = t;
                     found = true;
@@ -415,7 +466,14 @@ impl Blas {
 
     /// [`Blas::intersect`] without a BVH: every primitive tested.
     #[inline]
-    fn intersect_flat(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32, f32, f32)> {
+    fn intersect_flat<const DEFORMS: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> Option<(f32, u32, f32, f32)> {
         if self.is_empty() {
             return None;
         }
@@ -423,7 +481,7 @@ impl Blas {
         let mut best = None;
         let mut closest = tmax;
         for k in 0..self.group_members.len() {
-            if let Some((t, b1, b2)) = self.hit_slot(&pre, o, d, k, tmin, closest) {
+            if let Some((t, b1, b2)) = self.hit_slot::<DEFORMS>(&pre, o, d, k, tmin, closest, time) {
                 best = Some((t, self.group_members[k], b1, b2));
                 closest = t;
             }
@@ -434,27 +492,54 @@ impl Blas {
     /// Whether anything lies on `o + t d` within `(tmin, tmax)`.
     #[inline]
     fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
+        self.occluded_when::<false>(o, d, tmin, tmax, 0.0)
+    }
+
+    /// [`Blas::occluded`] at ray time `time` (matters only when the BLAS deforms).
+    #[inline]
+    fn occluded_at(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
+        if self.deformation.is_some() {
+            self.occluded_when::<true>(o, d, tmin, tmax, time)
+        } else {
+            self.occluded_when::<false>(o, d, tmin, tmax, time)
+        }
+    }
+
+    #[inline(always)]
+    fn occluded_when<const DEFORMS: bool>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
         let Some(space) = self.bvh.as_ref() else {
             if self.is_empty() {
                 return false;
             }
             let pre = RayPre::new(o, d);
-            return (0..self.group_members.len()).any(|k| self.hit_slot(&pre, o, d, k, tmin, tmax).is_some());
+            return (0..self.group_members.len())
+                .any(|k| self.hit_slot::<DEFORMS>(&pre, o, d, k, tmin, tmax, time).is_some());
         };
         let pre = RayPre::new(o, d);
         let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return false };
         wide::any(&space.bvh, ray, |r, id| {
             let tmax = unscale(r.tmax, k, tmax);
-            self.group(id).any(|k| self.hit_slot(&pre, o, d, k, tmin, tmax).is_some())
+            self.group(id).any(|k| self.hit_slot::<DEFORMS>(&pre, o, d, k, tmin, tmax, time).is_some())
         })
     }
 
     /// Surface geometry in this BLAS's space where `o + t d` hit primitive `index`, with the
     /// triangle's vertices (for callers that move them to another space).
-    fn surface(&self, o: Vec3, d: Vec3, t: f32, index: u32, b1: f32, b2: f32) -> (SurfaceGeom, Option<[Vec3; 3]>) {
+    #[allow(clippy::too_many_arguments)]
+    fn surface(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        t: f32,
+        index: u32,
+        b1: f32,
+        b2: f32,
+        time: f32,
+    ) -> (SurfaceGeom, Option<[Vec3; 3]>) {
         let i = index as usize;
-        match self.positions.get(i) {
-            Some(&p) => {
+        let deformed = |p: [Vec3; 3]| self.deformation.as_ref().map_or(p, |keys| keys.at(i, time));
+        match self.positions.get(i).copied().map(deformed) {
+            Some(p) => {
                 let a = self.attrs.get(i, p);
                 let b0 = 1.0 - b1 - b2;
                 let pos = p[0] * b0 + p[1] * b1 + p[2] * b2;
@@ -563,6 +648,25 @@ struct Instance {
     mirrors: bool,
     prototype: u32,
     prims: u32,
+    /// Index of its keyed transform in [`Accel::motions`], or [`STILL`]: `to_object` and
+    /// `to_world` are then the transform at every time.
+    motion: u32,
+}
+
+/// [`Instance::motion`] of an instance that does not move.
+const STILL: u32 = u32::MAX;
+
+impl Instance {
+    /// `(to_object, to_world)` at ray time `time` (an instance that does not move reads its
+    /// stored pair; a moving one interpolates its keys and inverts them, per ray).
+    #[inline(always)]
+    fn transforms_at(&self, motions: &[MotionKeys], time: f32) -> (DAffine3, DAffine3) {
+        if self.motion == STILL {
+            return (self.to_object, self.to_world);
+        }
+        let m = motions[self.motion as usize].at(time);
+        (m.inverse(), m)
+    }
 }
 
 /// The acceleration structure: the world's BLAS, the prototypes' BLASes and the instances.
@@ -576,6 +680,10 @@ pub struct Accel {
     tlas: Option<BvhSpace>,
     /// Instances with a singular or non-finite transform, or an empty prototype: skipped.
     pub skipped_instances: usize,
+    /// The keyed transforms of moving instances (see [`crate::render::geometry::motion`]).
+    motions: Vec<MotionKeys>,
+    /// Whether anything moves: an instance by its keys, or a prototype that deforms.
+    moves: bool,
 }
 
 impl Accel {
@@ -591,30 +699,60 @@ impl Accel {
         instances: &[InstanceDesc],
         instance_prims: Vec<u32>,
     ) -> Accel {
+        Accel::with_moving_instances(world, prototypes, instances, instance_prims, Vec::new())
+    }
+
+    /// [`Accel::with_instances`] where the instances named in `motion` (by index in
+    /// `instances`) move by their keys instead of staying at `to_world`: their top-level
+    /// boxes cover every key.
+    pub fn with_moving_instances(
+        world: Blas,
+        prototypes: Vec<Blas>,
+        instances: &[InstanceDesc],
+        instance_prims: Vec<u32>,
+        motion: Vec<(u32, MotionKeys)>,
+    ) -> Accel {
         let mut skipped = 0;
         let mut kept = Vec::with_capacity(instances.len());
         let mut boxes = Vec::with_capacity(instances.len());
-        for desc in instances {
+        let mut keys_of: HashMap<u32, MotionKeys> = motion.into_iter().collect();
+        let mut motions = Vec::with_capacity(keys_of.len());
+        for (index, desc) in instances.iter().enumerate() {
+            let keys = keys_of.remove(&(index as u32));
             let m = desc.to_world;
             let det = DMat3::from_mat4(m).determinant();
+            let moving_ok = keys
+                .as_ref()
+                .is_none_or(|k| k.transforms().iter().all(|t| t.is_finite() && t.matrix3.determinant() != 0.0));
             let bounds = prototypes.get(desc.prototype as usize).and_then(Blas::bounds);
-            let Some((lo, hi)) = bounds.filter(|_| det != 0.0 && det.is_finite() && m.is_finite()) else {
+            let Some((lo, hi)) = bounds.filter(|_| det != 0.0 && det.is_finite() && m.is_finite() && moving_ok) else {
                 skipped += 1;
                 continue;
             };
-            let (wlo, whi) = crate::render::geometry::shapes::transformed_box(&m, lo.as_dvec3(), hi.as_dvec3());
+            let (wlo, whi) = match &keys {
+                Some(k) => k.bounds(lo.as_dvec3(), hi.as_dvec3()),
+                None => crate::render::geometry::shapes::transformed_box(&m, lo.as_dvec3(), hi.as_dvec3()),
+            };
             let (wlo, whi) = (wlo.as_vec3(), whi.as_vec3());
             if !wlo.is_finite() || !whi.is_finite() {
                 skipped += 1;
                 continue;
             }
             let to_world = DAffine3::from_mat4(m);
+            let motion = match keys {
+                Some(k) => {
+                    motions.push(k);
+                    motions.len() as u32 - 1
+                }
+                None => STILL,
+            };
             kept.push(Instance {
                 to_object: to_world.inverse(),
                 to_world,
                 mirrors: det < 0.0,
                 prototype: desc.prototype,
                 prims: desc.prims,
+                motion,
             });
             // Padded like every other box (see `padded_box`), and outward for the f32 rounding
             // of the transformed corners.
@@ -622,7 +760,8 @@ impl Accel {
             boxes.push(Padded(Aabb::new((wlo - Vec3::splat(pad)).into(), (whi + Vec3::splat(pad)).into())));
         }
         let tlas = BvhSpace::build(boxes);
-        Accel { world, prototypes, instances: kept, instance_prims, tlas, skipped_instances: skipped }
+        let moves = !motions.is_empty() || prototypes.iter().any(|p| p.deformation.is_some());
+        Accel { world, prototypes, instances: kept, instance_prims, tlas, skipped_instances: skipped, motions, moves }
     }
 
     /// Number of triangles stored (unique geometry: each prototype's once).
@@ -663,8 +802,25 @@ impl Accel {
         self.instance_prims[(inst.prims + local) as usize]
     }
 
+    /// Whether anything moves: an instance, or a prototype that deforms (rays then need a time).
+    pub fn has_motion(&self) -> bool {
+        self.moves
+    }
+
+    /// Number of instances that move.
+    pub fn moving_instance_count(&self) -> usize {
+        self.motions.len()
+    }
+
     /// The closest hit of the ray `o + t d`, `t` in `(tmin, tmax)`. `d` must be unit length.
+    /// Moving instances are where they are at the shutter's opening (see [`Accel::intersect_at`]).
     pub fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<Hit> {
+        self.intersect_at(o, d, tmin, tmax, 0.0)
+    }
+
+    /// [`Accel::intersect`] at ray time `time` (`[0, 1)` across the shutter; see
+    /// [`crate::render::geometry::motion`]).
+    pub fn intersect_at(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> Option<Hit> {
         if !o.is_finite() || !d.is_finite() || d == Vec3::ZERO {
             return None;
         }
@@ -677,13 +833,14 @@ impl Accel {
         wide::closest(&space.bvh, ray, |r, id| {
             let i = space.bvh.primitive_indices[id];
             let inst = &self.instances[i as usize];
-            let oo = inst.to_object.transform_point3(od).as_vec3();
-            let ob = inst.to_object.transform_vector3(dd).as_vec3();
+            let (to_object, _) = inst.transforms_at(&self.motions, time);
+            let oo = to_object.transform_point3(od).as_vec3();
+            let ob = to_object.transform_vector3(dd).as_vec3();
             // A nearly singular instance can overflow f32 in object space: no hit there.
             if !oo.is_finite() || !ob.is_finite() || ob == Vec3::ZERO {
                 return f32::INFINITY;
             }
-            match self.prototypes[inst.prototype as usize].intersect(oo, ob, tmin, unscale(r.tmax, k, tmax)) {
+            match self.prototypes[inst.prototype as usize].intersect_at(oo, ob, tmin, unscale(r.tmax, k, tmax), time) {
                 Some((t, index, b1, b2)) => {
                     best = Some(Hit { t, index, instance: i, b1, b2 });
                     t * k
@@ -696,6 +853,11 @@ impl Accel {
 
     /// Whether anything lies on the ray within `(tmin, tmax)` (shadow rays: stops at the first hit).
     pub fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
+        self.occluded_at(o, d, tmin, tmax, 0.0)
+    }
+
+    /// [`Accel::occluded`] at ray time `time`.
+    pub fn occluded_at(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
         if !o.is_finite() || !d.is_finite() || d == Vec3::ZERO {
             return false;
         }
@@ -707,28 +869,36 @@ impl Accel {
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
         wide::any(&space.bvh, ray, |r, id| {
             let inst = &self.instances[space.bvh.primitive_indices[id] as usize];
-            let oo = inst.to_object.transform_point3(od).as_vec3();
-            let ob = inst.to_object.transform_vector3(dd).as_vec3();
+            let (to_object, _) = inst.transforms_at(&self.motions, time);
+            let oo = to_object.transform_point3(od).as_vec3();
+            let ob = to_object.transform_vector3(dd).as_vec3();
             let finite = oo.is_finite() && ob.is_finite() && ob != Vec3::ZERO;
-            finite && self.prototypes[inst.prototype as usize].occluded(oo, ob, tmin, unscale(r.tmax, k, tmax))
+            finite && self.prototypes[inst.prototype as usize].occluded_at(oo, ob, tmin, unscale(r.tmax, k, tmax), time)
         })
     }
 
     /// World-space surface geometry where the ray `o + t d` made `hit`.
     pub fn surface(&self, o: Vec3, d: Vec3, hit: &Hit) -> SurfaceGeom {
+        self.surface_at(o, d, hit, 0.0)
+    }
+
+    /// [`Accel::surface`] for a hit of a ray at time `time` (as given to [`Accel::intersect_at`]).
+    pub fn surface_at(&self, o: Vec3, d: Vec3, hit: &Hit, time: f32) -> SurfaceGeom {
         if hit.instance == WORLD {
-            return self.world.surface(o, d, hit.t, hit.index, hit.b1, hit.b2).0;
+            return self.world.surface(o, d, hit.t, hit.index, hit.b1, hit.b2, time).0;
         }
         let inst = &self.instances[hit.instance as usize];
-        let oo = inst.to_object.transform_point3(o.as_dvec3()).as_vec3();
-        let ob = inst.to_object.transform_vector3(d.as_dvec3()).as_vec3();
+        let (to_object, to_world) = inst.transforms_at(&self.motions, time);
+        let oo = to_object.transform_point3(o.as_dvec3()).as_vec3();
+        let ob = to_object.transform_vector3(d.as_dvec3()).as_vec3();
         let blas = &self.prototypes[inst.prototype as usize];
-        let (local, vertices) = blas.surface(oo, ob, hit.t, hit.index, hit.b1, hit.b2);
-        let m = &inst.to_world;
+        let (local, vertices) = blas.surface(oo, ob, hit.t, hit.index, hit.b1, hit.b2, time);
+        let m = &to_world;
+        let mirrors = if inst.motion == STILL { inst.mirrors } else { to_world.matrix3.determinant() < 0.0 };
         let point = |p: Vec3| m.transform_point3(p.as_dvec3()).as_vec3();
         let vector = |v: Vec3| m.transform_vector3(v.as_dvec3()).as_vec3();
         // Normals transform by the inverse transpose.
-        let normal_matrix = inst.to_object.matrix3.transpose();
+        let normal_matrix = to_object.matrix3.transpose();
         let normal = |n: Vec3| (normal_matrix * n.as_dvec3()).as_vec3().normalize_or_zero();
         let p = point(local.p);
         // The object-space error carried to world space (|M| p_error), plus the rounding of
@@ -744,7 +914,7 @@ impl Accel {
                 let ng = winding_normal(w);
                 let ng = if ng == Vec3::ZERO || !ng.is_finite() {
                     let n = normal(local.ng);
-                    if inst.mirrors { -n } else { n }
+                    if mirrors { -n } else { n }
                 } else {
                     ng
                 };

@@ -1,0 +1,533 @@
+//! Motion blur: what moves while the camera's shutter is open, as keyed transforms.
+//!
+//! A UsdGeom camera's `shutter:open` and `shutter:close` are frames relative to the time code
+//! rendered; when they differ, each camera ray carries a time `τ` in `[0, 1)` across that
+//! interval (its own sampler dimension) and sees the scene as it is then. Only prims whose
+//! placement changes inside the interval pay for it: each becomes an instance (its geometry
+//! built once, at the frame's time, as today) whose transform is keyed over the shutter
+//! ([`MotionKeys`]); the top-level BVH's box of a moving instance covers every key, and a ray
+//! moves into its object space through the transform at its own time. A scene in which
+//! nothing moves — and every scene with the shutter closed, the default — is built and traced
+//! exactly as before, so its image is bit for bit the same.
+//!
+//! A mesh whose `points` are sampled inside the shutter deforms: it is emitted again at each
+//! key (the shutter's ends and every sample time of its points or placement inside it), in
+//! world space, and becomes a prototype of its own whose triangles move linearly between
+//! those keys ([`Deformation`]); each triangle's BVH box covers it at every key, so at every
+//! time between.
+//!
+//! Transforms at a time are USD's (`ComputeLocalToWorldTransform(time)`: every xformOp's
+//! samples interpolated — linearly, quaternions by slerp — and the ops composed), evaluated at
+//! the shutter's ends and at every sample time inside it. Between keys the matrices are
+//! interpolated linearly, and a segment is halved until that stays within
+//! [`KEY_TOLERANCE`] of USD's transform at its middle (a rotation needs a few keys, a
+//! translation none), so the keys follow USD's curve and the boxes over them bound it.
+
+use crate::diag::{Diagnostic, Diagnostics};
+use crate::render::geometry::emit::{Emitter, emit_prim};
+use crate::render::geometry::primvars::PrimvarTable;
+use crate::render::geometry::shapes::transformed_box;
+use crate::render::geometry::xform::{transform_sample_times, world_transform_at};
+use crate::render::geometry::{Geometry, GeometryOptions, InstanceDesc, Prototype, Triangle, bounds_of};
+use crate::scene::{Prim, Stage, TimeCode, Value};
+use glam::{DAffine3, DMat4, DVec3, Vec3};
+use std::collections::HashMap;
+
+/// How far (relative to the transform's largest entry) linear interpolation between two keys
+/// may stray from USD's transform at their middle before the segment is halved: 1e-4, a
+/// tenth of a pixel for an object a thousand pixels across. (Interpolated rotations shrink
+/// by up to this much between keys.)
+pub const KEY_TOLERANCE: f64 = 1e-4;
+
+/// The most times a segment between authored keys is halved (256 pieces): a half turn
+/// between two samples needs 128.
+const MAX_HALVINGS: u32 = 8;
+
+/// The camera's shutter interval in frames relative to the time code rendered
+/// (`shutter:open`, `shutter:close`; both 0 by default: closed).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Shutter {
+    /// When the shutter opens.
+    pub open: f64,
+    /// When it closes.
+    pub close: f64,
+}
+
+impl Shutter {
+    /// The shutter of a Camera prim; a warning (and a closed shutter) when it closes before
+    /// it opens or is not finite.
+    pub fn of_camera(prim: &Prim, diags: &mut Diagnostics) -> Shutter {
+        let num = |name: &str| prim.value(name).and_then(Value::as_f64).unwrap_or(0.0);
+        let (open, close) = (num("shutter:open"), num("shutter:close"));
+        if !(open.is_finite() && close.is_finite() && open <= close) {
+            let attr = prim.attribute("shutter:close").or_else(|| prim.attribute("shutter:open"));
+            diags.push(
+                Diagnostic::warning(format!(
+                    "camera `{}`: shutter:open {open} to shutter:close {close} is not an interval; rendered without motion blur",
+                    prim.path
+                ))
+                .at(attr.map_or(prim.span, crate::render::geometry::xform::value_span), "here"),
+            );
+            return Shutter::default();
+        }
+        Shutter { open, close }
+    }
+
+    /// Whether the shutter is open for a while (rays then carry a time).
+    pub fn is_open(&self) -> bool {
+        self.close > self.open
+    }
+
+    /// The stage time at ray time `tau` (`[0, 1]` across the shutter) of frame `frame`.
+    pub fn time(&self, frame: f64, tau: f64) -> f64 {
+        frame + self.open + (self.close - self.open) * tau
+    }
+}
+
+/// A transform keyed over the shutter: `times` (ray times in `[0, 1]`, ascending, the first 0
+/// and the last 1) and the transform at each, linearly interpolated between them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MotionKeys {
+    times: Vec<f32>,
+    transforms: Vec<DAffine3>,
+}
+
+impl MotionKeys {
+    /// Keys of `transform_at(stage time)` over the shutter `[a, b]` of stage time, at its ends,
+    /// at `inner` (authored sample times, any order; those outside `(a, b)` are ignored) and
+    /// wherever a segment had to be halved (see the module documentation).
+    pub fn sample(transform_at: &dyn Fn(f64) -> DMat4, a: f64, b: f64, inner: &[f64]) -> MotionKeys {
+        let mut at: Vec<f64> = inner.iter().copied().filter(|&t| t > a && t < b).collect();
+        at.push(a);
+        at.push(b);
+        at.sort_by(f64::total_cmp);
+        at.dedup();
+        let mut keys: Vec<(f64, DMat4)> = vec![(a, transform_at(a))];
+        for pair in at.windows(2) {
+            let end = (pair[1], transform_at(pair[1]));
+            halve(transform_at, *keys.last().expect("a first key"), end, MAX_HALVINGS, &mut keys);
+            keys.push(end);
+        }
+        let span = b - a;
+        MotionKeys {
+            times: keys.iter().map(|(t, _)| (((t - a) / span) as f32).clamp(0.0, 1.0)).collect(),
+            transforms: keys.iter().map(|(_, m)| DAffine3::from_mat4(*m)).collect(),
+        }
+    }
+
+    /// Ray times of the keys.
+    pub fn times(&self) -> &[f32] {
+        &self.times
+    }
+
+    /// The keyed transforms.
+    pub fn transforms(&self) -> &[DAffine3] {
+        &self.transforms
+    }
+
+    /// Whether every key is `m` exactly.
+    fn is_constant(&self, m: &DAffine3) -> bool {
+        self.transforms.iter().all(|k| k == m)
+    }
+
+    /// The transform at ray time `tau` (clamped to `[0, 1]`).
+    #[inline]
+    pub fn at(&self, tau: f32) -> DAffine3 {
+        let n = self.times.len();
+        // The segment [times[k], times[k + 1]] holding tau.
+        let k = self.times[1..n - 1].partition_point(|&t| t <= tau);
+        let (t0, t1) = (self.times[k], self.times[k + 1]);
+        let w = if t1 > t0 { ((tau - t0) / (t1 - t0)).clamp(0.0, 1.0) as f64 } else { 0.0 };
+        let (m0, m1) = (&self.transforms[k], &self.transforms[k + 1]);
+        DAffine3 {
+            matrix3: m0.matrix3 * (1.0 - w) + m1.matrix3 * w,
+            translation: m0.translation * (1.0 - w) + m1.translation * w,
+        }
+    }
+
+    /// The world box `(min, max)` of the object box `(lo, hi)` over the whole shutter: each
+    /// point moves linearly between keys, so the keys' boxes bound it.
+    pub fn bounds(&self, lo: DVec3, hi: DVec3) -> (DVec3, DVec3) {
+        self.transforms
+            .iter()
+            .map(|m| transformed_box(&DMat4::from(*m), lo, hi))
+            .reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))
+            .expect("at least two keys")
+    }
+
+    /// These keys applied after `m` (`key · m` at every key).
+    fn then(&self, m: DAffine3) -> MotionKeys {
+        MotionKeys { times: self.times.clone(), transforms: self.transforms.iter().map(|k| *k * m).collect() }
+    }
+}
+
+/// Adds the keys strictly between `start` and `end` that linear interpolation needs to stay
+/// within [`KEY_TOLERANCE`] of `transform_at` (depth-first, so in time order).
+fn halve(
+    transform_at: &dyn Fn(f64) -> DMat4,
+    start: (f64, DMat4),
+    end: (f64, DMat4),
+    depth: u32,
+    keys: &mut Vec<(f64, DMat4)>,
+) {
+    if depth == 0 {
+        return;
+    }
+    let mid_t = 0.5 * (start.0 + end.0);
+    let mid = transform_at(mid_t);
+    let lerp = (start.1 + end.1) * 0.5;
+    let scale = mid.to_cols_array().iter().fold(1e-300f64, |m, x| m.max(x.abs()));
+    let error = (mid - lerp).to_cols_array().iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    if error <= KEY_TOLERANCE * scale {
+        return;
+    }
+    halve(transform_at, start, (mid_t, mid), depth - 1, keys);
+    keys.push((mid_t, mid));
+    halve(transform_at, (mid_t, mid), end, depth - 1, keys);
+}
+
+/// The transform keys of a prim's world placement over `shutter` at frame `frame`, relative
+/// to its placement at the frame (`W(t) · W(frame)⁻¹`), or `None` when no op that places it
+/// has samples or the placement is the frame's throughout.
+pub fn placement_motion(stage: &Stage, id: crate::scene::PrimId, frame: f64, shutter: Shutter) -> Option<MotionKeys> {
+    let samples = transform_sample_times(stage, id);
+    if samples.is_empty() {
+        return None;
+    }
+    // Problems with the ops were reported when the frame's transforms were read.
+    let quiet = &mut Diagnostics::new();
+    let base = world_transform_at(stage, id, frame, quiet);
+    if base.determinant() == 0.0 || !base.is_finite() {
+        return None;
+    }
+    let to_base = base.inverse();
+    let relative = |t: f64| world_transform_at(stage, id, t, &mut Diagnostics::new()) * to_base;
+    let (a, b) = (shutter.time(frame, 0.0), shutter.time(frame, 1.0));
+    let keys = MotionKeys::sample(&relative, a, b, &samples);
+    // Exactly the frame's placement at every key (bit for bit: `W · W⁻¹` is not always the
+    // identity in floating point, so compare each key's world transform with the frame's).
+    let still = keys.times.len() == 2
+        && [a, b].iter().all(|&t| world_transform_at(stage, id, t, &mut Diagnostics::new()) == base);
+    if still || keys.is_constant(&DAffine3::IDENTITY) { None } else { Some(keys) }
+}
+
+/// The camera-to-world transform of Camera prim `id` keyed over `shutter`, when the camera
+/// moves while it is open (`None` otherwise, and at the default time).
+pub fn camera_motion(stage: &Stage, id: crate::scene::PrimId, shutter: Shutter) -> Option<MotionKeys> {
+    let TimeCode::At(frame) = stage.time() else { return None };
+    if !shutter.is_open() {
+        return None;
+    }
+    placement_motion(stage, id, frame, shutter)?;
+    let world = |t: f64| world_transform_at(stage, id, t, &mut Diagnostics::new());
+    let (a, b) = (shutter.time(frame, 0.0), shutter.time(frame, 1.0));
+    Some(MotionKeys::sample(&world, a, b, &transform_sample_times(stage, id)))
+}
+
+/// World-space triangle positions keyed over the shutter, for a deforming prototype: each
+/// triangle's vertices move linearly between keys.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Deformation {
+    times: Vec<f32>,
+    /// Per key, every triangle's vertices (in the prototype's order).
+    positions: Vec<Vec<[Vec3; 3]>>,
+}
+
+impl Deformation {
+    /// Ray times of the keys.
+    pub fn times(&self) -> &[f32] {
+        &self.times
+    }
+
+    /// The triangles' vertices at key `k`.
+    pub fn key(&self, k: usize) -> &[[Vec3; 3]] {
+        &self.positions[k]
+    }
+
+    /// Triangle `i`'s vertices at ray time `tau`.
+    #[inline]
+    pub fn at(&self, i: usize, tau: f32) -> [Vec3; 3] {
+        let n = self.times.len();
+        let k = self.times[1..n - 1].partition_point(|&t| t <= tau);
+        let (t0, t1) = (self.times[k], self.times[k + 1]);
+        let w = if t1 > t0 { ((tau - t0) / (t1 - t0)).clamp(0.0, 1.0) } else { 0.0 };
+        let (p0, p1) = (&self.positions[k][i], &self.positions[k + 1][i]);
+        [0, 1, 2].map(|v| p0[v] + (p1[v] - p0[v]) * w)
+    }
+
+    /// Triangle `i`'s box over the whole shutter: the union of its keys' boxes.
+    pub fn bounds(&self, i: usize) -> (Vec3, Vec3) {
+        let boxes = self.positions.iter().map(|key| {
+            let p = &key[i];
+            (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]))
+        });
+        boxes.reduce(|(a, b), (c, d)| (a.min(c), b.max(d))).expect("at least two keys")
+    }
+}
+
+/// The deformation of world prim `prim` (renderable prim `index`, whose `count` triangles the
+/// frame's build emitted) over `shutter`: `None` when its points are not sampled, it is not a
+/// mesh, or neither its points nor its placement change within the shutter.
+#[allow(clippy::too_many_arguments)]
+fn deformation_of(
+    stage: &Stage,
+    id: crate::scene::PrimId,
+    frame: f64,
+    shutter: Shutter,
+    options: GeometryOptions,
+    names: &[String],
+    count: usize,
+    diags: &mut Diagnostics,
+) -> Option<Deformation> {
+    let prim = stage.prim(id);
+    let points = prim.attribute("points")?;
+    if points.time_samples.is_empty() || prim.type_name.as_deref() != Some("Mesh") {
+        return None;
+    }
+    let (a, b) = (shutter.time(frame, 0.0), shutter.time(frame, 1.0));
+    let mut times: Vec<f64> = points.time_samples.iter().map(|(t, _)| *t).collect();
+    times.extend(transform_sample_times(stage, id));
+    times.retain(|&t| t > a && t < b);
+    times.extend([a, b]);
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    let quiet = &mut Diagnostics::new();
+    let at_frame = (points.value_at(TimeCode::At(frame)), world_transform_at(stage, id, frame, quiet));
+    let keys: Vec<(Option<Value>, DMat4)> =
+        times.iter().map(|&t| (points.value_at(TimeCode::At(t)), world_transform_at(stage, id, t, quiet))).collect();
+    if keys.iter().all(|k| *k == at_frame) {
+        return None;
+    }
+    let mut positions = Vec::with_capacity(keys.len());
+    for (value, world) in keys {
+        let mut posed = prim.clone();
+        if let Some(attr) = posed.attributes.iter_mut().find(|a| a.name == "points") {
+            attr.value = value.map(|v| (v, attr.span));
+        }
+        let (mut triangles, mut shapes, mut degenerate) = (Vec::new(), Vec::new(), 0);
+        let mut table = PrimvarTable { names: names.to_vec(), ..PrimvarTable::default() };
+        let mut out = Emitter::new(&mut triangles, &mut shapes, &mut degenerate, &mut table, world, 0, usize::MAX);
+        out.subdiv_level = options.subdiv_level;
+        emit_prim(&posed, &mut out, quiet);
+        if triangles.len() != count {
+            diags.push(
+                Diagnostic::warning(format!(
+                    "`{}` has {} triangles at one time inside the shutter and {count} at the frame (degenerate                      faces, or displacement); rendered without deformation blur",
+                    prim.path,
+                    triangles.len()
+                ))
+                .at(crate::render::geometry::xform::value_span(points), "its points"),
+            );
+            return None;
+        }
+        positions.push(triangles.into_iter().map(|t| t.p).collect());
+    }
+    let span = b - a;
+    Some(Deformation { times: times.iter().map(|t| (((t - a) / span) as f32).clamp(0.0, 1.0)).collect(), positions })
+}
+
+/// Moves every deforming world mesh (see [`deformation_of`]) into a prototype of its own
+/// with its [`Deformation`], placed once where it is (the keys are in world space); returns
+/// how many. Meshes with GeomSubset materials are left to transform blur.
+fn deform(
+    geometry: &mut Geometry,
+    stage: &Stage,
+    frame: f64,
+    shutter: Shutter,
+    options: GeometryOptions,
+    diags: &mut Diagnostics,
+) -> usize {
+    let mut counts = vec![0usize; geometry.prims.len()];
+    for t in &geometry.triangles {
+        counts[t.prim as usize] += 1;
+    }
+    let has_subsets: Vec<bool> = {
+        let mut v = vec![false; geometry.prims.len()];
+        for p in &geometry.prims {
+            if let Some(owner) = p.subset_of {
+                v[owner as usize] = true;
+            }
+        }
+        v
+    };
+    let mut deforming = 0;
+    for prim in 0..geometry.prims.len() {
+        if counts[prim] == 0 || has_subsets[prim] || geometry.prims[prim].subset_of.is_some() {
+            continue;
+        }
+        let Some(id) = stage.find(&geometry.prims[prim].path) else { continue };
+        let names = geometry.primvars.names.clone();
+        let Some(deformation) = deformation_of(stage, id, frame, shutter, options, &names, counts[prim], diags) else {
+            continue;
+        };
+        let (mine, rest): (Vec<Triangle>, Vec<Triangle>) =
+            std::mem::take(&mut geometry.triangles).into_iter().partition(|t| t.prim == prim as u32);
+        geometry.triangles = rest;
+        let mut proto = Prototype { prims: 1, ..Prototype::default() };
+        proto.triangles = mine.into_iter().map(|t| Triangle { prim: 0, ..t }).collect();
+        // Bounds over every key (the frame's positions need not be inside the shutter).
+        let boxes = (0..proto.triangles.len()).map(|i| deformation.bounds(i));
+        proto.bounds =
+            boxes.reduce(|(a, b), (c, d)| (a.min(c), b.max(d))).map(|(lo, hi)| (lo.as_dvec3(), hi.as_dvec3()));
+        proto.deformation = Some(deformation);
+        geometry.prototypes.push(proto);
+        let prims = geometry.instance_prims.len() as u32;
+        geometry.instance_prims.push(prim as u32);
+        let prototype = geometry.prototypes.len() as u32 - 1;
+        geometry.instances.push(InstanceDesc { to_world: DMat4::IDENTITY, prototype, prims });
+        // The keys hold its placement already: it is placed by no prim that could move it again.
+        geometry.instance_placers.push(crate::scene::PrimId(u32::MAX));
+        deforming += 1;
+    }
+    deforming
+}
+
+/// What [`apply`] made move.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MotionStats {
+    /// Renderable prims of the world moved into instances of their own.
+    pub moving_prims: usize,
+    /// Of those, meshes that deform (their points are sampled inside the shutter).
+    pub deforming_prims: usize,
+    /// Instances (of those and of instancing) with keyed transforms.
+    pub moving_instances: usize,
+}
+
+/// Makes what moves within `shutter` at the stage's time move: world prims whose placement
+/// changes become instances of their own geometry (built at the frame, so the keys are
+/// relative to it), and instances whose placing prim moves get keys. Returns the keys of each
+/// moving instance (by index in `geometry.instances`). Nothing changes when the shutter is
+/// closed, the stage is not at a numeric time, or nothing moves.
+pub fn apply(
+    geometry: &mut Geometry,
+    stage: &Stage,
+    shutter: Shutter,
+    options: GeometryOptions,
+    diags: &mut Diagnostics,
+) -> (Vec<(u32, MotionKeys)>, MotionStats) {
+    let mut stats = MotionStats::default();
+    let TimeCode::At(frame) = stage.time() else { return (Vec::new(), stats) };
+    if !shutter.is_open() {
+        return (Vec::new(), stats);
+    }
+    stats.deforming_prims = deform(geometry, stage, frame, shutter, options, diags);
+    let mut motion: Vec<(u32, MotionKeys)> = Vec::new();
+    let mut memo: HashMap<u32, Option<MotionKeys>> = HashMap::new();
+    let mut keys_of = |id: crate::scene::PrimId| {
+        memo.entry(id.0).or_insert_with(|| placement_motion(stage, id, frame, shutter)).clone()
+    };
+    // Instances of instancing whose placing prim moves.
+    for (i, placer) in geometry.instance_placers.iter().enumerate() {
+        if placer.0 as usize >= stage.len() {
+            continue;
+        }
+        if let Some(keys) = keys_of(*placer) {
+            let to_world = DAffine3::from_mat4(geometry.instances[i].to_world);
+            motion.push((i as u32, keys.then(to_world)));
+        }
+    }
+    // World prims that move: each prim's triangles and shapes become a prototype of one prim.
+    let moving: Vec<Option<MotionKeys>> = geometry
+        .prims
+        .iter()
+        .map(|p| {
+            // A prim made of triangles outside the world (only instanced) moves with its
+            // instance; a deforming one has left the world with its placement in its keys.
+            stage.find(&p.path).and_then(&mut keys_of)
+        })
+        .collect();
+    if moving.iter().all(Option::is_none) {
+        stats.moving_instances = motion.len();
+        return (motion, stats);
+    }
+    let mut prototype_of: Vec<Option<u32>> = vec![None; moving.len()];
+    let first_new = geometry.prototypes.len();
+    let mut claim = |prim: u32, geometry: &mut Geometry| -> Option<usize> {
+        moving[prim as usize].as_ref()?;
+        let p = *prototype_of[prim as usize].get_or_insert_with(|| {
+            geometry.prototypes.push(Prototype { prims: 1, ..Prototype::default() });
+            geometry.prototypes.len() as u32 - 1
+        });
+        Some(p as usize)
+    };
+    let triangles = std::mem::take(&mut geometry.triangles);
+    for mut t in triangles {
+        match claim(t.prim, geometry) {
+            Some(p) => {
+                t.prim = 0;
+                geometry.prototypes[p].triangles.push(t);
+            }
+            None => geometry.triangles.push(t),
+        }
+    }
+    let shapes = std::mem::take(&mut geometry.shapes);
+    for mut s in shapes {
+        match claim(s.prim, geometry) {
+            Some(p) => {
+                s.prim = 0;
+                geometry.prototypes[p].shapes.push(s);
+            }
+            None => geometry.shapes.push(s),
+        }
+    }
+    for (prim, p) in prototype_of.iter().enumerate() {
+        let Some(p) = *p else { continue };
+        let proto = &mut geometry.prototypes[p as usize];
+        proto.bounds = bounds_of(&proto.triangles, &proto.shapes);
+        let prims = geometry.instance_prims.len() as u32;
+        geometry.instance_prims.push(prim as u32);
+        let keys = moving[prim].clone().expect("only moving prims have prototypes");
+        motion.push((geometry.instances.len() as u32, keys));
+        geometry.instances.push(InstanceDesc { to_world: DMat4::IDENTITY, prototype: p, prims });
+        // Their placer is the prim itself (read again by a later `apply` of the same build).
+        geometry.instance_placers.push(stage.find(&geometry.prims[prim].path).expect("found above"));
+        stats.moving_prims += 1;
+    }
+    debug_assert!(geometry.prototypes.len() >= first_new);
+    stats.moving_instances = motion.len();
+    (motion, stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_follow_a_rotation_and_not_a_translation() {
+        let slide = |t: f64| DMat4::from_translation(DVec3::new(t, 0.0, 0.0));
+        let keys = MotionKeys::sample(&slide, 0.0, 1.0, &[]);
+        assert_eq!(keys.times(), [0.0, 1.0], "a translation is linear: no key between the ends");
+        let turn = |t: f64| DMat4::from_rotation_z(t * std::f64::consts::FRAC_PI_2);
+        let keys = MotionKeys::sample(&turn, 0.0, 1.0, &[]);
+        assert!(keys.times().len() > 8, "{}", keys.times().len());
+        for k in 0..=100 {
+            let tau = k as f32 / 100.0;
+            let got = DMat4::from(keys.at(tau));
+            let want = turn(tau as f64);
+            let err = (got - want).to_cols_array().iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            assert!(err < 1e-4, "{tau}: {err}");
+        }
+        // Authored sample times inside the interval are keys; those outside are not.
+        let keys = MotionKeys::sample(&slide, 0.0, 2.0, &[-1.0, 0.5, 3.0]);
+        assert_eq!(keys.times(), [0.0, 0.25, 1.0]);
+    }
+
+    #[test]
+    fn bounds_cover_every_time() {
+        let turn = |t: f64| DMat4::from_translation(DVec3::new(3.0 * t, 0.0, 0.0)) * DMat4::from_rotation_y(t * 2.0);
+        let keys = MotionKeys::sample(&turn, 0.0, 1.0, &[]);
+        let (lo, hi) = keys.bounds(DVec3::splat(-1.0), DVec3::splat(1.0));
+        for k in 0..=1000 {
+            let m = keys.at(k as f32 / 1000.0);
+            for corner in 0..8 {
+                let c = DVec3::new(
+                    if corner & 1 == 0 { -1.0 } else { 1.0 },
+                    if corner & 2 == 0 { -1.0 } else { 1.0 },
+                    if corner & 4 == 0 { -1.0 } else { 1.0 },
+                );
+                let p = m.transform_point3(c);
+                assert!(p.cmpge(lo - 1e-12).all() && p.cmple(hi + 1e-12).all(), "{p} outside {lo}..{hi}");
+            }
+        }
+    }
+}
