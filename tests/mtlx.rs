@@ -241,15 +241,35 @@ fn nodes_evaluate_to_the_specification_at_sample_points() {
         // ramplr at u = 0.25 from (0, 0, 0) to (1, 0.5, 0).
         ("ND_ramplr_color3", "color3f inputs:valuer = (1, 0.5, 0)", [0.25, 0.125, 0.0]),
         // combine3 builds a colour from floats (named by the type it builds).
-        ("ND_combine3_color3", "float inputs:in1 = 0.1\n float inputs:in2 = 0.2\n float inputs:in3 = 0.3", [0.1, 0.2, 0.3]),
+        (
+            "ND_combine3_color3",
+            "float inputs:in1 = 0.1\n float inputs:in2 = 0.2\n float inputs:in3 = 0.3",
+            [0.1, 0.2, 0.3],
+        ),
         // fract(x) = x − floor(x); safepower keeps the sign: −0.25² → −0.0625 (clamped to 0).
         ("ND_fract_color3", "color3f inputs:in = (1.25, -0.25, 2)", [0.25, 0.75, 0.0]),
-        ("ND_safepower_color3", "color3f inputs:in1 = (-0.25, 0.5, 0.9)\n color3f inputs:in2 = (2, 2, 1)", [0.0, 0.25, 0.9]),
+        (
+            "ND_safepower_color3",
+            "color3f inputs:in1 = (-0.25, 0.5, 0.9)\n color3f inputs:in2 = (2, 2, 1)",
+            [0.0, 0.25, 0.9],
+        ),
         // atan2(iny, inx): atan2(1, 1) = π/4; atan2(0, 1) = 0.
-        ("ND_atan2_vector3", "float3 inputs:iny = (1, 0, 0.5)\n float3 inputs:inx = (1, 1, 0.5)", [0.785_398_2, 0.0, 0.785_398_2]),
+        (
+            "ND_atan2_vector3",
+            "float3 inputs:iny = (1, 0, 0.5)\n float3 inputs:inx = (1, 1, 0.5)",
+            [std::f32::consts::FRAC_PI_4, 0.0, std::f32::consts::FRAC_PI_4],
+        ),
         // burn 1 − (1 − bg) / fg: fg 0.5, bg 0.75 → 0.5; dodge bg / (1 − fg): 0.25 / 0.5 = 0.5.
-        ("ND_burn_color3", "color3f inputs:fg = (0.5, 0.5, 0.5)\n color3f inputs:bg = (0.75, 0.75, 0.75)", [0.5, 0.5, 0.5]),
-        ("ND_dodge_color3", "color3f inputs:fg = (0.5, 0.5, 0.5)\n color3f inputs:bg = (0.25, 0.1, 0)", [0.5, 0.2, 0.0]),
+        (
+            "ND_burn_color3",
+            "color3f inputs:fg = (0.5, 0.5, 0.5)\n color3f inputs:bg = (0.75, 0.75, 0.75)",
+            [0.5, 0.5, 0.5],
+        ),
+        (
+            "ND_dodge_color3",
+            "color3f inputs:fg = (0.5, 0.5, 0.5)\n color3f inputs:bg = (0.25, 0.1, 0)",
+            [0.5, 0.2, 0.0],
+        ),
         ("ND_outside_color3", "color3f inputs:in = (0.8, 0.4, 0.2)\n float inputs:mask = 0.25", [0.6, 0.3, 0.15]),
         // rotate2d by 90°: (x, y) → (y, −x) in MaterialX's sense; (0.5, 0.25) → (0.25, −0.5).
         ("ND_rotate2d_vector2", "float2 inputs:in = (0.5, 0.25)\n float inputs:amount = 90", [0.25, 0.0, 0.0]),
@@ -863,7 +883,10 @@ fn a_coat_normal_equal_to_the_surface_normal_renders_today_s_image_and_a_tilted_
     let unset = coated_ball_beauty("", "");
     let normal_node = "    def Shader \"Nworld\" {\n        uniform token info:id = \"ND_normal_vector3\"\n        \
                        string inputs:space = \"world\"\n        float3 outputs:out\n    }";
-    let wired = coated_ball_beauty("        float3 inputs:geometry_coat_normal.connect = </M/Nworld.outputs:out>\n", normal_node);
+    let wired = coated_ball_beauty(
+        "        float3 inputs:geometry_coat_normal.connect = </M/Nworld.outputs:out>\n",
+        normal_node,
+    );
     assert!(unset.iter().any(|x| *x > 0.0), "the ball renders");
     assert!(
         unset.iter().zip(&wired).all(|(a, b)| a.to_bits() == b.to_bits()),
@@ -885,7 +908,11 @@ fn thin_film_and_unlit_surfaces_reach_their_closures() {
     let lobes = lobes_at(&code.unwrap_or_else(|| panic!("{rendered}")), 0.5, 0.5);
     let reflections: Vec<_> = lobes.iter().filter(|t| t.kind == ClosureKind::Dielectric as u32).collect();
     assert_eq!(reflections.len(), 1, "{lobes:?}");
-    assert!((reflections[0].params[6] - 300.0).abs() < 1e-3 && reflections[0].params[7] == 1.33, "{:?}", reflections[0]);
+    assert!(
+        (reflections[0].params[6] - 300.0).abs() < 1e-3 && reflections[0].params[7] == 1.33,
+        "{:?}",
+        reflections[0]
+    );
     assert!(rendered.contains("the film colours the dielectric's specular reflection only"), "{rendered}");
     // surface_unlit: emission · emission_color is the emission product, no BSDF.
     let text = "def Material \"M\" {\n    token outputs:mtlx:surface.connect = </M/S.outputs:surface>\n    \

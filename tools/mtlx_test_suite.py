@@ -40,7 +40,7 @@ def locate(materialx):
         materialx = os.path.join("target", "materialx")
         if not os.path.isdir(os.path.join(materialx, "resources")):
             subprocess.run(["git", "clone", "--depth", "1", "--filter=blob:none", "--sparse", REPO, materialx], check=True)
-            subprocess.run(["git", "-C", materialx, "sparse-checkout", "set", "resources/Materials"], check=True)
+            subprocess.run(["git", "-C", materialx, "sparse-checkout", "set", "resources/Materials", "resources/Images"], check=True)
     root = os.path.join(materialx, "resources", "Materials")
     if not os.path.isdir(root):
         sys.exit(f"no resources/Materials under {materialx}")

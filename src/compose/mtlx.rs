@@ -436,7 +436,8 @@ mod tests {
         assert_eq!(to_working_space("no_such_space", [0.0; 3]), None);
         // Every space with other primaries maps its white to Rec.709 white (same or adapted
         // white point); the legacy and OCIO names are the same spaces.
-        for space in ["lin_ap0", "lin_displayp3", "srgb_displayp3", "lin_adobergb", "adobergb", "g18_ap1", "ACES2065-1"] {
+        for space in ["lin_ap0", "lin_displayp3", "srgb_displayp3", "lin_adobergb", "adobergb", "g18_ap1", "ACES2065-1"]
+        {
             let w = to_working_space(space, [1.0, 1.0, 1.0]).unwrap();
             assert!(w.iter().all(|x| (x - 1.0).abs() < 1e-3), "{space}: {w:?}");
         }

@@ -151,7 +151,8 @@ impl Intrinsic {
 
     /// Whether this builds or combines BSDF closures.
     pub fn is_closure(self) -> bool {
-        self.closure_kind().is_some() || matches!(self, Intrinsic::Layer | Intrinsic::WithNormal | Intrinsic::WithThinFilm)
+        self.closure_kind().is_some()
+            || matches!(self, Intrinsic::Layer | Intrinsic::WithNormal | Intrinsic::WithThinFilm)
     }
 
     /// The lobe a BSDF constructor builds (its arguments, flattened, are the lobe's

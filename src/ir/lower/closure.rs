@@ -144,7 +144,8 @@ impl FnLower<'_> {
     /// `c`, but generalized Schlick terms' (their parameters fill those words): one known to be
     /// such a term is reported at `span`.
     pub(super) fn closure_with_normal(&mut self, c: &[ssa::Value], n: &[ssa::Value], span: Span) -> Lv {
-        let (out, skipped) = self.closure_set_params(c, abi::TERM_NORMAL, n, Kinds::AllBut(ClosureKind::GeneralizedSchlick));
+        let (out, skipped) =
+            self.closure_set_params(c, abi::TERM_NORMAL, n, Kinds::AllBut(ClosureKind::GeneralizedSchlick));
         if skipped {
             self.diags.push(
                 Diagnostic::warning("generalized_schlick_bsdf has no normal of its own: it uses the shading normal")

@@ -426,7 +426,11 @@ fn a_term_with_its_own_normal_is_shaded_about_it() {
             && s.delta
         {
             deltas += 1;
-            assert!((s.wi - mirror).length() < 1e-4, "delta reflection {} vs the mirror about the coat normal {mirror}", s.wi);
+            assert!(
+                (s.wi - mirror).length() < 1e-4,
+                "delta reflection {} vs the mirror about the coat normal {mirror}",
+                s.wi
+            );
         }
     }
     assert!(deltas > 20, "the smooth coat was sampled {deltas} times");
@@ -472,7 +476,11 @@ fn thin_film_reflectance_matches_the_characteristic_matrix_at_normal_incidence()
                     .iter()
                     .map(|&l| film_reflectance_by_matrix(film as f64, substrate as f64, d as f64, l) / 3.0)
                     .sum();
-                assert!((got[c] as f64 - want).abs() < 2e-5, "film {film} on {substrate}, {d} nm, channel {c}: {} vs {want}", got[c]);
+                assert!(
+                    (got[c] as f64 - want).abs() < 2e-5,
+                    "film {film} on {substrate}, {d} nm, channel {c}: {} vs {want}",
+                    got[c]
+                );
             }
         }
         // No film: the bare interface at every angle; a film of the substrate's index: the

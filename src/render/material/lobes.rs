@@ -426,7 +426,9 @@ impl Lobe {
                 let r = ggx.alpha.sqrt();
                 tint * match fresnel {
                     Fresnel::Dielectric { eta } => Vec3::splat(albedo::dielectric_reflection(mu, r, eta)),
-                    Fresnel::Schlick { .. } | Fresnel::ThinFilm { .. } => fresnel.eval(mu) * albedo::ggx_reflection(mu, r),
+                    Fresnel::Schlick { .. } | Fresnel::ThinFilm { .. } => {
+                        fresnel.eval(mu) * albedo::ggx_reflection(mu, r)
+                    }
                 }
             }
             Lobe::Bsdf(Bsdf::Metal { eta, k, ggx, .. }) => {
