@@ -13,7 +13,7 @@ use strata::backend::{BackendKind, Compiler};
 use strata::compose::scene::compose_stage;
 use strata::diag::{Diagnostics, SourceMap};
 use strata::ir::wired::PassOptions;
-use strata::render::material::closure::{ClosureBsdf, LayeringMode};
+use strata::render::material::closure::{ClosureBsdf, LayeringMode, walk};
 use strata::render::sampling::Rng;
 use strata::scene::Stage;
 
@@ -240,6 +240,45 @@ fn nodes_evaluate_to_the_specification_at_sample_points() {
         ("ND_texcoord_vector2", "", [0.25, 0.75, 0.0]),
         // ramplr at u = 0.25 from (0, 0, 0) to (1, 0.5, 0).
         ("ND_ramplr_color3", "color3f inputs:valuer = (1, 0.5, 0)", [0.25, 0.125, 0.0]),
+        // combine3 builds a colour from floats (named by the type it builds).
+        (
+            "ND_combine3_color3",
+            "float inputs:in1 = 0.1\n float inputs:in2 = 0.2\n float inputs:in3 = 0.3",
+            [0.1, 0.2, 0.3],
+        ),
+        // fract(x) = x − floor(x); safepower keeps the sign: −0.25² → −0.0625 (clamped to 0).
+        ("ND_fract_color3", "color3f inputs:in = (1.25, -0.25, 2)", [0.25, 0.75, 0.0]),
+        (
+            "ND_safepower_color3",
+            "color3f inputs:in1 = (-0.25, 0.5, 0.9)\n color3f inputs:in2 = (2, 2, 1)",
+            [0.0, 0.25, 0.9],
+        ),
+        // atan2(iny, inx): atan2(1, 1) = π/4; atan2(0, 1) = 0.
+        (
+            "ND_atan2_vector3",
+            "float3 inputs:iny = (1, 0, 0.5)\n float3 inputs:inx = (1, 1, 0.5)",
+            [std::f32::consts::FRAC_PI_4, 0.0, std::f32::consts::FRAC_PI_4],
+        ),
+        // burn 1 − (1 − bg) / fg: fg 0.5, bg 0.75 → 0.5; dodge bg / (1 − fg): 0.25 / 0.5 = 0.5.
+        (
+            "ND_burn_color3",
+            "color3f inputs:fg = (0.5, 0.5, 0.5)\n color3f inputs:bg = (0.75, 0.75, 0.75)",
+            [0.5, 0.5, 0.5],
+        ),
+        (
+            "ND_dodge_color3",
+            "color3f inputs:fg = (0.5, 0.5, 0.5)\n color3f inputs:bg = (0.25, 0.1, 0)",
+            [0.5, 0.2, 0.0],
+        ),
+        ("ND_outside_color3", "color3f inputs:in = (0.8, 0.4, 0.2)\n float inputs:mask = 0.25", [0.6, 0.3, 0.15]),
+        // rotate2d by 90°: (x, y) → (y, −x) in MaterialX's sense; (0.5, 0.25) → (0.25, −0.5).
+        ("ND_rotate2d_vector2", "float2 inputs:in = (0.5, 0.25)\n float inputs:amount = 90", [0.25, 0.0, 0.0]),
+        // place2d (scale, rotate, offset about the pivot): ((0.25, 0.75) − 0.5) / 2 − (−0.3, 0) + 0.5.
+        (
+            "ND_place2d_vector2",
+            "float2 inputs:texcoord = (0.25, 0.75)\n float2 inputs:pivot = (0.5, 0.5)\n float2 inputs:scale = (2, 2)\n float2 inputs:offset = (-0.3, 0)",
+            [0.675, 0.625, 0.0],
+        ),
     ];
     let mut failures = Vec::new();
     for (id, inputs, want) in cases {
@@ -400,6 +439,65 @@ fn coated_surfaces_conserve_energy_in_a_white_furnace() {
         }
     }
     assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// Exact dielectric Fresnel reflectance (unpolarised) at `cos` from outside, index `eta`.
+fn fresnel(cos: f64, eta: f64) -> f64 {
+    let sin2_t = (1.0 - cos * cos) / (eta * eta);
+    if sin2_t >= 1.0 {
+        return 1.0;
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    let rs = (cos - eta * cos_t) / (cos + eta * cos_t);
+    let rp = (eta * cos - cos_t) / (eta * cos + cos_t);
+    0.5 * (rs * rs + rp * rp)
+}
+
+#[test]
+fn the_coat_darkens_a_lambert_base_as_the_interfaced_lambertian_does() {
+    // A Lambert base of albedo ρ under a smooth coat of index η reflects at normal incidence
+    // F0 + (1 − F0) ρ (1 − K) / (1 − ρ K): light enters, and each time the base reflects it the
+    // fraction K = 1 − (1 − E_F) / η² returns by internal reflection (E_F the hemispherical
+    // Fresnel albedo, integrated here from the exact Fresnel, not the specification's fit).
+    // Two references: that closed form, and the random-walk layering, which follows the
+    // internal reflections themselves (with coat_darkening 0, so the walk alone darkens).
+    let (rho, eta) = (0.5f64, 1.5f64);
+    let n = 200_000;
+    let e_f: f64 = (0..n).map(|k| (k as f64 + 0.5) / n as f64).map(|mu| 2.0 * fresnel(mu, eta) * mu / n as f64).sum();
+    let k = 1.0 - (1.0 - e_f) / (eta * eta);
+    let f0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
+    let interfaced = f0 + (1.0 - f0) * rho * (1.0 - k) / (1.0 - rho * k);
+    let surface = |darkening: f32| {
+        let text = open_pbr(
+            &format!(
+                "        color3f inputs:base_color = ({rho}, {rho}, {rho})\n        float inputs:specular_weight = 0\n        \
+                 float inputs:coat_weight = 1\n        float inputs:coat_roughness = 0\n        float inputs:coat_ior = {eta}\n        \
+                 float inputs:coat_darkening = {darkening}"
+            ),
+            "",
+        );
+        let (code, rendered) = compiled(&text);
+        let code = code.unwrap_or_else(|| panic!("{rendered}"));
+        assert!(rendered.is_empty(), "{rendered}");
+        let mut sum = ClosureSum::default();
+        for (k, t) in lobes_at(&code, 0.5, 0.5).into_iter().enumerate() {
+            sum.terms[k] = t;
+        }
+        sum
+    };
+    let (darkened, se) = directional_albedo(&surface(1.0), 1.0, 200_000);
+    let (plain, _) = directional_albedo(&surface(0.0), 1.0, 200_000);
+    let walk = ClosureBsdf::from_sum(&surface(0.0), LayeringMode::RandomWalk);
+    let walked = walk::directional_albedo(&walk, 1.0, 400_000, 7) as f64;
+    eprintln!(
+        "coat (η {eta}) over Lambert ρ {rho} at normal incidence: darkened {darkened:.4} ± {se:.4}, \
+         interfaced Lambertian {interfaced:.4}, random walk {walked:.4}, undarkened {plain:.4}"
+    );
+    assert!((darkened - interfaced).abs() < 0.003 + 4.0 * se, "darkened {darkened} vs closed form {interfaced}");
+    assert!((walked - interfaced).abs() < 0.01, "random walk {walked} vs closed form {interfaced}");
+    // Without darkening the base shows its albedo through the coat's transmission alone.
+    let undarkened = f0 + (1.0 - f0) * rho;
+    assert!((plain - undarkened).abs() < 0.003 + 4.0 * se, "coat_darkening 0: {plain} vs {undarkened}");
 }
 
 #[test]
@@ -756,4 +854,77 @@ fn the_translucent_lobe_is_lambert_on_the_far_side() {
         10_000,
     );
     assert!((e - 1.0).abs() < 1e-5 && se < 1e-5, "{e} ± {se}");
+}
+
+/// Renders a sphere under an OpenPBR coat whose coat normal is set by `coat_normal` (USDA
+/// lines, with any shaders it needs in `shaders`): the beauty channels.
+fn coated_ball_beauty(coat_normal: &str, shaders: &str) -> Vec<f32> {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let inputs = format!(
+        "        color3f inputs:base_color = (0.2, 0.4, 0.8)\n        float inputs:coat_weight = 1\n        \
+         float inputs:coat_roughness = 0.15\n{coat_normal}"
+    );
+    let text = format!(
+        "#usda 1.0\n(\n    upAxis = \"Y\"\n)\ndef Camera \"Cam\" {{\n    double3 xformOp:translate = (0, 0, 4)\n    \
+         uniform token[] xformOpOrder = [\"xformOp:translate\"]\n}}\n\
+         def Sphere \"Ball\" (prepend apiSchemas = [\"MaterialBindingAPI\"]) {{ rel material:binding = </M> }}\n{}\n",
+        open_pbr(&inputs, shaders)
+    );
+    let path = dir.path().join("ball.usda");
+    std::fs::write(&path, text).expect("writes");
+    let image = common::render_file(&path, &common::settings(40, 40, 8, 3, 3));
+    ["R", "G", "B"].iter().flat_map(|c| image.f32_channel(c).unwrap().to_vec()).collect()
+}
+
+#[test]
+fn a_coat_normal_equal_to_the_surface_normal_renders_today_s_image_and_a_tilted_one_does_not() {
+    // Unset, the coat uses the surface normal N; wired to MaterialX's `normal` node (world
+    // space) it is N again: bit for bit the same image. A constant tilted normal is not.
+    let unset = coated_ball_beauty("", "");
+    let normal_node = "    def Shader \"Nworld\" {\n        uniform token info:id = \"ND_normal_vector3\"\n        \
+                       string inputs:space = \"world\"\n        float3 outputs:out\n    }";
+    let wired = coated_ball_beauty(
+        "        float3 inputs:geometry_coat_normal.connect = </M/Nworld.outputs:out>\n",
+        normal_node,
+    );
+    assert!(unset.iter().any(|x| *x > 0.0), "the ball renders");
+    assert!(
+        unset.iter().zip(&wired).all(|(a, b)| a.to_bits() == b.to_bits()),
+        "a coat normal equal to N changed the image"
+    );
+    let tilted = coated_ball_beauty("        float3 inputs:geometry_coat_normal = (0.6, 0, 0.8)\n", "");
+    let changed = unset.iter().zip(&tilted).filter(|(a, b)| a != b).count();
+    assert!(changed > unset.len() / 4, "a tilted coat normal changed only {changed} of {} values", unset.len());
+}
+
+#[test]
+fn thin_film_and_unlit_surfaces_reach_their_closures() {
+    // OpenPBR's film (thickness in µm) on the specular reflection: the dielectric "R" term
+    // carries 300 nm of index 1.33; at weight 1 no bare specular term is left.
+    let (code, rendered) = compiled(&open_pbr(
+        "        float inputs:thin_film_weight = 1\n        float inputs:thin_film_thickness = 0.3\n        float inputs:thin_film_ior = 1.33",
+        "",
+    ));
+    let lobes = lobes_at(&code.unwrap_or_else(|| panic!("{rendered}")), 0.5, 0.5);
+    let reflections: Vec<_> = lobes.iter().filter(|t| t.kind == ClosureKind::Dielectric as u32).collect();
+    assert_eq!(reflections.len(), 1, "{lobes:?}");
+    assert!(
+        (reflections[0].params[6] - 300.0).abs() < 1e-3 && reflections[0].params[7] == 1.33,
+        "{:?}",
+        reflections[0]
+    );
+    assert!(rendered.contains("the film colours the dielectric's specular reflection only"), "{rendered}");
+    // surface_unlit: emission · emission_color is the emission product, no BSDF.
+    let text = "def Material \"M\" {\n    token outputs:mtlx:surface.connect = </M/S.outputs:surface>\n    \
+                def Shader \"S\" {\n        uniform token info:id = \"ND_surface_unlit\"\n        \
+                float inputs:emission = 2\n        color3f inputs:emission_color = (0.5, 0.25, 1)\n        \
+                token outputs:surface\n    }\n}";
+    let (code, rendered) = compiled(text);
+    let code = code.unwrap_or_else(|| panic!("{rendered}"));
+    assert!(rendered.is_empty(), "{rendered}");
+    assert!(lobes_at(&code, 0.5, 0.5).is_empty(), "an unlit surface has no lobe");
+    let mut emitted = [0.0f32; 3];
+    let g = Globals { n: [0.0, 0.0, 1.0], ng: [0.0, 0.0, 1.0], ..Globals::default() };
+    code.emission(&g, 0, &mut emitted).expect("emits");
+    assert_eq!(emitted, [1.0, 0.5, 2.0]);
 }

@@ -163,8 +163,9 @@ pub enum ClosureKind {
     Glass = 4,
     /// GGX conductor from its complex index: `[eta rgb, k rgb, roughness]`.
     Conductor = 5,
-    /// GGX dielectric interface: `[tint rgb, ior, roughness, scatter]`, scatter 0 reflects
-    /// only (a coat), 1 transmits only, 2 does both.
+    /// GGX dielectric interface: `[tint rgb, ior, roughness, scatter, film thickness (nm),
+    /// film ior]`, scatter 0 reflects only (a coat), 1 transmits only, 2 does both; a film
+    /// thickness of 0 is no thin film.
     Dielectric = 6,
     /// GGX reflection with the generalized Schlick Fresnel and F82 tint:
     /// `[color0 rgb, color82 rgb, color90 rgb, exponent, roughness]`.
@@ -216,6 +217,13 @@ pub struct Closure {
 pub const MAX_CLOSURE_TERMS: usize = 8;
 /// Parameter words of one [`ClosureTerm`].
 pub const TERM_PARAMS: usize = 11;
+/// Where a term's own shading normal starts in its parameters (three words, world space; zero:
+/// the layer's shading normal), set by `with_normal`. Every kind's parameters end before it
+/// but [`ClosureKind::GeneralizedSchlick`]'s, which has no normal of its own.
+pub const TERM_NORMAL: usize = 8;
+/// Where a [`ClosureKind::Dielectric`] term's thin film is in its parameters: thickness in
+/// nanometres (0: none) and the film's index, set by `with_thin_film`.
+pub const TERM_THIN_FILM: usize = 6;
 
 /// One weighted lobe of a [`ClosureSum`]. Field order is the C ABI (16 words).
 #[repr(C)]

@@ -19,6 +19,7 @@ pub fn surface_substance(id: &str) -> Option<&'static str> {
         "ND_open_pbr_surface_surfaceshader" => Some("open_pbr_surface"),
         "ND_standard_surface_surfaceshader" | "ND_standard_surface_surfaceshader_100" => Some("standard_surface"),
         "ND_surface" => Some("mx_surface"),
+        "ND_surface_unlit" => Some("mx_surface_unlit"),
         _ => None,
     }
 }
@@ -122,6 +123,10 @@ pub fn node_function(id: &str) -> Option<String> {
         // `ND_normalmap` (1.38), `ND_normalmap_float`/`_vector2` (1.39: the type of `scale`).
         return Some("mx_normalmap_color3".into());
     }
+    if matches!(node, "combine2" | "combine3") {
+        // Named by the type they build; the library's variant takes floats.
+        return Some(format!("mx_{node}_float"));
+    }
     if node == "convert" {
         let (from, to) = types.split_once('_')?;
         return match (variant(from)?, to) {
@@ -169,11 +174,28 @@ pub fn port_name(name: &str) -> Cow<'_, str> {
     if RESERVED.contains(&name) { Cow::Owned(format!("{name}_")) } else { Cow::Borrowed(name) }
 }
 
+/// MaterialX's name for colour space `space`: its own names, their legacy (1.38) forms and the
+/// ACES OCIO configs' names of the same spaces (MaterialX's test suite uses both).
+fn canonical_space(space: &str) -> &str {
+    match space {
+        "gamma18" => "g18_rec709",
+        "gamma22" => "g22_rec709",
+        "gamma24" => "rec709_display",
+        "lin_srgb" | "Utility - Linear - sRGB" | "Linear Rec.709 (sRGB)" => "lin_rec709",
+        "Utility - sRGB - Texture" | "sRGB - Texture" => "srgb_texture",
+        "ACEScg" | "lin_ap1_scene" => "acescg",
+        "ACES2065-1" | "lin_ap0" => "lin_ap0",
+        "sRGB Encoded P3-D65" | "srgb_p3d65" => "srgb_displayp3",
+        "Linear P3-D65" | "lin_p3d65" => "lin_displayp3",
+        other => other,
+    }
+}
+
 /// How a texture of MaterialX colour space `space` decodes (the runtime's `sRGB` or `raw`)
 /// and the space the node converts its texels from (`""`: none). `None` for a space strata
-/// does not know.
+/// does not know for textures.
 pub fn texture_decode(space: &str) -> Option<(&'static str, &'static str)> {
-    Some(match space {
+    Some(match canonical_space(space) {
         "srgb_texture" => ("sRGB", "srgb_texture"),
         "" | "lin_rec709" | "raw" => ("raw", ""),
         "acescg" => ("raw", "acescg"),
@@ -188,21 +210,31 @@ pub fn texture_decode(space: &str) -> Option<(&'static str, &'static str)> {
 /// colour management defines it. `None` for a space strata does not know.
 pub fn to_working_space(space: &str, c: [f32; 3]) -> Option<[f32; 3]> {
     let srgb = |x: f32| if x <= 0.04045 { x / 12.92 } else { ((x + 0.055) / 1.055).powf(2.4) };
-    let g22 = |x: f32| x.max(0.0).powf(2.2);
-    // AP1 (ACEScg, D60) to linear Rec.709 (D65), Bradford-adapted.
-    let ap1 = |[r, g, b]: [f32; 3]| {
-        [
-            1.70505 * r - 0.62179 * g - 0.08326 * b,
-            -0.13026 * r + 1.14080 * g - 0.01055 * b,
-            -0.02400 * r - 0.12897 * g + 1.15297 * b,
-        ]
-    };
-    Some(match space {
+    let gamma = |g: f32| move |x: f32| x.max(0.0).powf(g);
+    // Linear primaries to linear Rec.709 (D65); AP0 and AP1 (D60) Bradford-adapted. From
+    // each space's primaries and white point.
+    let matrix = |m: [[f32; 3]; 3], [r, g, b]: [f32; 3]| m.map(|row| row[0] * r + row[1] * g + row[2] * b);
+    const AP1: [[f32; 3]; 3] =
+        [[1.70505, -0.62179, -0.08326], [-0.13026, 1.14080, -0.01055], [-0.02400, -0.12897, 1.15297]];
+    const AP0: [[f32; 3]; 3] =
+        [[2.52169, -1.13413, -0.38756], [-0.27648, 1.37272, -0.09624], [-0.01538, -0.15298, 1.16835]];
+    const P3: [[f32; 3]; 3] = [[1.22494, -0.22494, 0.0], [-0.04206, 1.04206, 0.0], [-0.01964, -0.07864, 1.09827]];
+    const ADOBE: [[f32; 3]; 3] = [[1.39836, -0.39836, 0.0], [0.0, 1.0, 0.0], [0.0, -0.04293, 1.04293]];
+    Some(match canonical_space(space) {
         "" | "lin_rec709" | "raw" => c,
         "srgb_texture" => c.map(srgb),
-        "g22_rec709" => c.map(g22),
-        "acescg" | "lin_ap1" => ap1(c),
-        "g22_ap1" => ap1(c.map(g22)),
+        "g18_rec709" => c.map(gamma(1.8)),
+        "g22_rec709" => c.map(gamma(2.2)),
+        // BT.1886 with a black level of 0: a pure 2.4 power.
+        "rec709_display" => c.map(gamma(2.4)),
+        "acescg" | "lin_ap1" => matrix(AP1, c),
+        "g18_ap1" => matrix(AP1, c.map(gamma(1.8))),
+        "g22_ap1" => matrix(AP1, c.map(gamma(2.2))),
+        "lin_ap0" => matrix(AP0, c),
+        "lin_displayp3" => matrix(P3, c),
+        "srgb_displayp3" => matrix(P3, c.map(srgb)),
+        "lin_adobergb" => matrix(ADOBE, c),
+        "adobergb" => matrix(ADOBE, c.map(gamma(2.199_218_8))),
         _ => return None,
     })
 }
@@ -221,9 +253,12 @@ const UNREAD_SURFACE_INPUTS: &[(&str, &str, &str)] = &[
     ),
     ("open_pbr_surface", "subsurface_radius", "no subsurface scattering: the radius is not read"),
     ("open_pbr_surface", "coat_roughness_anisotropy", "the coat is isotropic"),
-    ("open_pbr_surface", "thin_film_weight", "no thin-film iridescence"),
+    (
+        "open_pbr_surface",
+        "thin_film_weight",
+        "the film colours the dielectric's specular reflection only (not the metal, not transmission)",
+    ),
     ("open_pbr_surface", "geometry_thin_walled", "surfaces are never thin-walled"),
-    ("open_pbr_surface", "geometry_coat_normal", "the coat uses the geometry normal"),
     ("open_pbr_surface", "geometry_tangent", "reflection is isotropic: tangents are not read"),
     ("standard_surface", "specular_anisotropy", "specular reflection is isotropic"),
     ("standard_surface", "transmission_depth", "transmission has no volume (a thin tinted interface)"),
@@ -237,11 +272,15 @@ const UNREAD_SURFACE_INPUTS: &[(&str, &str, &str)] = &[
     ),
     ("standard_surface", "subsurface_radius", "no subsurface scattering: the radius is not read"),
     ("standard_surface", "coat_anisotropy", "the coat is isotropic"),
-    ("standard_surface", "coat_normal", "the coat uses the geometry normal"),
     ("standard_surface", "coat_affect_color", "the coat does not saturate the base"),
-    ("standard_surface", "thin_film_thickness", "no thin-film iridescence"),
+    (
+        "standard_surface",
+        "thin_film_thickness",
+        "the film colours the dielectric's specular reflection only (not the metal, not transmission)",
+    ),
     ("standard_surface", "thin_walled", "surfaces are never thin-walled"),
     ("mx_surface", "thin_walled", "surfaces are never thin-walled"),
+    ("mx_surface_unlit", "transmission", "an unlit surface hides what lies behind it (its opacity is read)"),
 ];
 
 /// How a surface input is set in a network: a constant, or driven by a node.
@@ -281,10 +320,11 @@ pub fn report_surface_input(
 /// Inputs of pbrlib's BSDF nodes that strata's lobes do not model, with what they do instead
 /// (`"*"`: every BSDF node). Each kind is reported once per run.
 const UNREAD_NODE_INPUTS: &[(&str, &str, &str)] = &[
-    ("*", "normal", "every lobe uses the shading normal"),
+    ("ND_generalized_schlick_bsdf", "normal", "generalized_schlick_bsdf uses the shading normal"),
     ("*", "tangent", "lobes are isotropic: tangents are not read"),
     ("*", "retroreflective", "lobes are not retroreflective"),
-    ("*", "thinfilm_thickness", "no thin-film iridescence"),
+    ("ND_conductor_bsdf", "thinfilm_thickness", "no thin-film iridescence on conductors"),
+    ("ND_generalized_schlick_bsdf", "thinfilm_thickness", "no thin-film iridescence on generalized_schlick_bsdf"),
     ("*", "roughness", "lobes are isotropic: an anisotropic α is read as its geometric mean"),
     ("ND_generalized_schlick_bsdf", "scatter_mode", "generalized_schlick_bsdf reflects only"),
     ("ND_sheen_bsdf", "mode", "sheen is Conty and Kulla's Charlie sheen"),
@@ -394,5 +434,18 @@ mod tests {
         assert!(w.iter().all(|x| (x - 1.0).abs() < 1e-3), "{w:?}");
         assert_eq!(to_working_space("g22_rec709", [0.5, 0.0, 1.0]).unwrap()[0], 0.5f32.powf(2.2));
         assert_eq!(to_working_space("no_such_space", [0.0; 3]), None);
+        // Every space with other primaries maps its white to Rec.709 white (same or adapted
+        // white point); the legacy and OCIO names are the same spaces.
+        for space in ["lin_ap0", "lin_displayp3", "srgb_displayp3", "lin_adobergb", "adobergb", "g18_ap1", "ACES2065-1"]
+        {
+            let w = to_working_space(space, [1.0, 1.0, 1.0]).unwrap();
+            assert!(w.iter().all(|x| (x - 1.0).abs() < 1e-3), "{space}: {w:?}");
+        }
+        // Display P3's red is outside Rec.709 (published matrix row: 1.2249, -0.2249, 0).
+        let red = to_working_space("lin_displayp3", [1.0, 0.0, 0.0]).unwrap();
+        assert!((red[0] - 1.2249).abs() < 1e-3 && (red[1] + 0.0421).abs() < 1e-3, "{red:?}");
+        assert_eq!(to_working_space("gamma22", [0.5; 3]), to_working_space("g22_rec709", [0.5; 3]));
+        assert_eq!(to_working_space("rec709_display", [0.5; 3]).unwrap()[0], 0.5f32.powf(2.4));
+        assert_eq!(texture_decode("Utility - sRGB - Texture"), texture_decode("srgb_texture"));
     }
 }

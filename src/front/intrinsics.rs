@@ -122,6 +122,12 @@ intrinsics! {
     TranslucentBsdf = "translucent_bsdf": Fixed(&[C], CL),
     // layer(top, base): `top` over `base`, energy-conserving (the renderer's layering mode).
     Layer = "layer": Fixed(&[CL, CL], CL),
+    // with_normal(c, n): every term of `c` shaded about its own world-space normal `n` (zero:
+    // the layer's shading normal); generalized_schlick_bsdf terms have no room for one.
+    WithNormal = "with_normal": Fixed(&[CL, V], CL),
+    // with_thin_film(c, thickness_nm, ior): a thin film on every dielectric_bsdf term of `c`
+    // (Airy interference in its Fresnel; thickness 0: none).
+    WithThinFilm = "with_thin_film": Fixed(&[CL, F, F], CL),
 }
 
 impl Intrinsic {
@@ -145,7 +151,8 @@ impl Intrinsic {
 
     /// Whether this builds or combines BSDF closures.
     pub fn is_closure(self) -> bool {
-        self.closure_kind().is_some() || self == Intrinsic::Layer
+        self.closure_kind().is_some()
+            || matches!(self, Intrinsic::Layer | Intrinsic::WithNormal | Intrinsic::WithThinFilm)
     }
 
     /// The lobe a BSDF constructor builds (its arguments, flattened, are the lobe's

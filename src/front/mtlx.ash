@@ -47,6 +47,28 @@ shader mx_sin_float(float in_ = 0.0, output float out) { out = sin(in_); }
 shader mx_sin_color3(color in_ = color(0.0), output color out) { out = color(sin(in_.r), sin(in_.g), sin(in_.b)); }
 shader mx_cos_float(float in_ = 0.0, output float out) { out = cos(in_); }
 shader mx_cos_color3(color in_ = color(0.0), output color out) { out = color(cos(in_.r), cos(in_.g), cos(in_.b)); }
+shader mx_tan_float(float in_ = 0.0, output float out) { out = tan(in_); }
+shader mx_tan_color3(color in_ = color(0.0), output color out) { out = color(tan(in_.r), tan(in_.g), tan(in_.b)); }
+shader mx_asin_float(float in_ = 0.0, output float out) { out = asin(clamp(in_, -1.0, 1.0)); }
+shader mx_asin_color3(color in_ = color(0.0), output color out) {
+    out = color(asin(clamp(in_.r, -1.0, 1.0)), asin(clamp(in_.g, -1.0, 1.0)), asin(clamp(in_.b, -1.0, 1.0)));
+}
+shader mx_acos_float(float in_ = 0.0, output float out) { out = acos(clamp(in_, -1.0, 1.0)); }
+shader mx_acos_color3(color in_ = color(0.0), output color out) {
+    out = color(acos(clamp(in_.r, -1.0, 1.0)), acos(clamp(in_.g, -1.0, 1.0)), acos(clamp(in_.b, -1.0, 1.0)));
+}
+shader mx_atan2_float(float iny = 0.0, float inx = 1.0, output float out) { out = atan2(iny, inx); }
+shader mx_atan2_color3(color iny = color(0.0), color inx = color(1.0), output color out) {
+    out = color(atan2(iny.r, inx.r), atan2(iny.g, inx.g), atan2(iny.b, inx.b));
+}
+shader mx_fract_float(float in_ = 0.0, output float out) { out = in_ - floor(in_); }
+shader mx_fract_color3(color in_ = color(0.0), output color out) { out = in_ - color(floor(in_.r), floor(in_.g), floor(in_.b)); }
+// safepower: sign(in1) · |in1|^in2 (no NaN for a negative base).
+float mx_safepower1(float a, float b) { return sign(a) * pow(abs(a), b); }
+shader mx_safepower_float(float in1 = 0.0, float in2 = 1.0, output float out) { out = mx_safepower1(in1, in2); }
+shader mx_safepower_color3(color in1 = color(0.0), color in2 = color(1.0), output color out) {
+    out = color(mx_safepower1(in1.r, in2.r), mx_safepower1(in1.g, in2.g), mx_safepower1(in1.b, in2.b));
+}
 
 shader mx_clamp_float(float in_ = 0.0, float low = 0.0, float high = 1.0, output float out) { out = min(max(in_, low), high); }
 shader mx_clamp_color3(color in_ = color(0.0), color low = color(0.0), color high = color(1.0), output color out) {
@@ -59,6 +81,28 @@ shader mx_dotproduct_color3(color in1 = color(0.0), color in2 = color(0.0), outp
 }
 shader mx_crossproduct_color3(color in1 = color(0.0), color in2 = color(0.0), output color out) {
     out = color(cross(vector(in1), vector(in2)));
+}
+shader mx_distance_color3(color in1 = color(0.0), color in2 = color(0.0), output float out) {
+    out = length(vector(in1) - vector(in2));
+}
+// rotate2d: `amount` degrees about the origin, in the sense of MaterialX's reference shaders
+// ((x, y) → (x cos a + y sin a, −x sin a + y cos a)).
+color mx_rotate2(color p, float degrees_) {
+    float a = radians(degrees_);
+    return color(cos(a) * p.r + sin(a) * p.g, -sin(a) * p.r + cos(a) * p.g, 0.0);
+}
+shader mx_rotate2d_color3(color in_ = color(0.0), float amount = 0.0, output color out) { out = mx_rotate2(in_, amount); }
+// place2d: about `pivot`, scale (divide), rotate and offset (subtract) in that order
+// (operationorder 0), or offset, rotate and scale (1).
+shader mx_place2d_color3(color texcoord = color(0.0), color pivot = color(0.0), color scale = color(1.0, 1.0, 0.0),
+                         float rotate = 0.0, color offset = color(0.0), int operationorder = 0, output color out) {
+    color p = texcoord - pivot;
+    float sx = scale.r != 0.0 ? scale.r : 1.0;
+    float sy = scale.g != 0.0 ? scale.g : 1.0;
+    color srt = mx_rotate2(color(p.r / sx, p.g / sy, 0.0), rotate) - offset + pivot;
+    color turned = mx_rotate2(p - offset, rotate);
+    color trs = color(turned.r / sx, turned.g / sy, 0.0) + pivot;
+    out = operationorder == 0 ? color(srt.r, srt.g, 0.0) : color(trs.r, trs.g, 0.0);
 }
 shader mx_magnitude_color3(color in_ = color(0.0), output float out) { out = length(vector(in_)); }
 shader mx_normalize_color3(color in_ = color(0.0), output color out) {
@@ -118,6 +162,23 @@ shader mx_screen_float(float fg = 0.0, float bg = 0.0, float mix = 1.0, output f
 shader mx_screen_color3(color fg = color(0.0), color bg = color(0.0), float mix = 1.0, output color out) {
     out = mix * (color(1.0) - (color(1.0) - fg) * (color(1.0) - bg)) + (1.0 - mix) * bg;
 }
+
+// burn 1 − (1 − bg) / fg and dodge bg / (1 − fg), 0 where they divide by 0 (as MaterialX's
+// reference shaders), mixed over bg by `mix`.
+float mx_burn1(float fg, float bg, float m) { return abs(fg) < 1e-8 ? 0.0 : m * (1.0 - (1.0 - bg) / fg) + (1.0 - m) * bg; }
+float mx_dodge1(float fg, float bg, float m) { return abs(1.0 - fg) < 1e-8 ? 0.0 : m * (bg / (1.0 - fg)) + (1.0 - m) * bg; }
+shader mx_burn_float(float fg = 0.0, float bg = 0.0, float mix = 1.0, output float out) { out = mx_burn1(fg, bg, mix); }
+shader mx_burn_color3(color fg = color(0.0), color bg = color(0.0), float mix = 1.0, output color out) {
+    out = color(mx_burn1(fg.r, bg.r, mix), mx_burn1(fg.g, bg.g, mix), mx_burn1(fg.b, bg.b, mix));
+}
+shader mx_dodge_float(float fg = 0.0, float bg = 0.0, float mix = 1.0, output float out) { out = mx_dodge1(fg, bg, mix); }
+shader mx_dodge_color3(color fg = color(0.0), color bg = color(0.0), float mix = 1.0, output color out) {
+    out = color(mx_dodge1(fg.r, bg.r, mix), mx_dodge1(fg.g, bg.g, mix), mx_dodge1(fg.b, bg.b, mix));
+}
+shader mx_inside_float(float in_ = 0.0, float mask = 1.0, output float out) { out = in_ * mask; }
+shader mx_inside_color3(color in_ = color(0.0), float mask = 1.0, output color out) { out = in_ * mask; }
+shader mx_outside_float(float in_ = 0.0, float mask = 0.0, output float out) { out = in_ * (1.0 - mask); }
+shader mx_outside_color3(color in_ = color(0.0), float mask = 0.0, output color out) { out = in_ * (1.0 - mask); }
 
 // ---- conditionals ------------------------------------------------------------------------------
 
@@ -373,7 +434,9 @@ shader mx_normalmap_color3(color in_ = color(0.5, 0.5, 1.0), float scale = 1.0, 
 // `roughness` is the GGX α along tangent and bitangent (a vector2, as `roughness_anisotropy`
 // makes it from a perceptual roughness); strata's lobes are isotropic and take the perceptual
 // roughness r = √α, here of the geometric mean α = √(αx αy) (compose reports anisotropy).
-// A per-lobe `normal`/`tangent` is reported by compose: every lobe uses the shading normal.
+// A per-lobe `normal` (world space; unset, the zero vector: the shading normal) shades the lobe
+// about it (`with_normal`), but generalized_schlick_bsdf's (compose reports it); `tangent` is
+// reported (lobes are isotropic).
 // An EDF is its emitted radiance as a colour: `uniform_edf` is its colour, and the EDF
 // operators are the colour nodes (`ND_add_edf` is `mx_add_color3`).
 float mx_isotropic_roughness(color alpha) {
@@ -382,25 +445,29 @@ float mx_isotropic_roughness(color alpha) {
 
 shader mx_oren_nayar_diffuse_bsdf(float weight = 1.0, color color_ = color(0.18), float roughness = 0.0,
                                   color normal_ = color(0.0), int energy_compensation = 0, output closure out) {
-    out = oren_nayar_diffuse_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0), energy_compensation != 0 ? 1.0 : 0.0)
-          * clamp(weight, 0.0, 1.0);
+    closure lobe = oren_nayar_diffuse_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0), energy_compensation != 0 ? 1.0 : 0.0);
+    out = with_normal(lobe, vector(normal_)) * clamp(weight, 0.0, 1.0);
 }
 shader mx_burley_diffuse_bsdf(float weight = 1.0, color color_ = color(0.18), float roughness = 0.0,
                               color normal_ = color(0.0), output closure out) {
-    out = burley_diffuse_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0)) * clamp(weight, 0.0, 1.0);
+    out = with_normal(burley_diffuse_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0)), vector(normal_))
+          * clamp(weight, 0.0, 1.0);
 }
 shader mx_dielectric_bsdf(float weight = 1.0, color tint = color(1.0), float ior = 1.5,
                           color roughness = color(0.05, 0.05, 0.0), int retroreflective = 0, float thinfilm_thickness = 0.0,
                           float thinfilm_ior = 1.5, color normal_ = color(0.0), color tangent = color(0.0),
                           string distribution = "ggx", string scatter_mode = "R", output closure out) {
-    out = dielectric_bsdf(clamp(tint, 0.0, 1.0), clamp(ior, 1.0, 4.0), mx_isotropic_roughness(roughness), scatter_mode)
-          * clamp(weight, 0.0, 1.0);
+    closure lobe = dielectric_bsdf(clamp(tint, 0.0, 1.0), clamp(ior, 1.0, 4.0), mx_isotropic_roughness(roughness), scatter_mode);
+    // No film (thickness 0) leaves the lobe's words as dielectric_bsdf wrote them.
+    float film_ior = thinfilm_thickness > 0.0 ? clamp(thinfilm_ior, 1.0, 4.0) : 0.0;
+    closure filmed = with_thin_film(lobe, max(thinfilm_thickness, 0.0), film_ior);
+    out = with_normal(filmed, vector(normal_)) * clamp(weight, 0.0, 1.0);
 }
 shader mx_conductor_bsdf(float weight = 1.0, color ior = color(0.183, 0.421, 1.373), color extinction = color(3.424, 2.346, 1.770),
                          color roughness = color(0.05, 0.05, 0.0), int retroreflective = 0, float thinfilm_thickness = 0.0,
                          float thinfilm_ior = 1.5, color normal_ = color(0.0), color tangent = color(0.0),
                          string distribution = "ggx", output closure out) {
-    out = conductor_bsdf(ior, extinction, mx_isotropic_roughness(roughness)) * clamp(weight, 0.0, 1.0);
+    out = with_normal(conductor_bsdf(ior, extinction, mx_isotropic_roughness(roughness)), vector(normal_)) * clamp(weight, 0.0, 1.0);
 }
 shader mx_generalized_schlick_bsdf(float weight = 1.0, color color0 = color(1.0), color color82 = color(1.0),
                                    color color90 = color(1.0), float exponent = 5.0, color roughness = color(0.05, 0.05, 0.0),
@@ -413,17 +480,17 @@ shader mx_generalized_schlick_bsdf(float weight = 1.0, color color0 = color(1.0)
 }
 shader mx_sheen_bsdf(float weight = 1.0, color color_ = color(1.0), float roughness = 0.3, color normal_ = color(0.0),
                      string mode = "conty_kulla", output closure out) {
-    out = sheen_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0)) * clamp(weight, 0.0, 1.0);
+    out = with_normal(sheen_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0)), vector(normal_)) * clamp(weight, 0.0, 1.0);
 }
 
 shader mx_translucent_bsdf(float weight = 1.0, color color_ = color(1.0), color normal_ = color(0.0), output closure out) {
-    out = translucent_bsdf(clamp(color_, 0.0, 1.0)) * clamp(weight, 0.0, 1.0);
+    out = with_normal(translucent_bsdf(clamp(color_, 0.0, 1.0)), vector(normal_)) * clamp(weight, 0.0, 1.0);
 }
 // subsurface_bsdf: diffuse transmission of `color` (compose reports the approximation: no
 // light travels under the surface, `radius` and `anisotropy` are not read).
 shader mx_subsurface_bsdf(float weight = 1.0, color color_ = color(0.18), color radius = color(1.0), float anisotropy = 0.0,
                           color normal_ = color(0.0), output closure out) {
-    out = translucent_bsdf(clamp(color_, 0.0, 1.0)) * clamp(weight, 0.0, 1.0);
+    out = with_normal(translucent_bsdf(clamp(color_, 0.0, 1.0)), vector(normal_)) * clamp(weight, 0.0, 1.0);
 }
 // thin_film_bsdf (MaterialX 1.38, layered over a dielectric or conductor): no lobe, so
 // `layer(thin_film, base)` is the base (compose reports that the film is ignored).
@@ -478,17 +545,21 @@ substance mx_surface {
 // - coat: a GGX dielectric reflection (coat_ior, coat_roughness) over the base tinted by
 //   mix(1, coat_color, coat_weight); in OpenPBR the coat roughens the specular lobes below
 //   (r' = mix(r, min(1, (r⁴ + 2 r_c⁴)^¼), coat_weight)), in Standard Surface by
-//   coat_affect_roughness · coat · coat_roughness towards 1; the base is not darkened by the
-//   coat's internal reflections (OpenPBR's coat_darkening);
+//   coat_affect_roughness · coat · coat_roughness towards 1; in OpenPBR the coat darkens the
+//   base by its internal reflections (coat_darkening, below);
 // - fuzz (OpenPBR, over the coat) and sheen (Standard Surface, over the diffuse): Charlie sheen;
 // - emission: the `emission` product; opacity: the layer mask.
 // Roughness is perceptual (GGX alpha = roughness²), as both specifications define it.
 
 // The dielectric base both surfaces share (see above).
+// The specular reflection is under a thin film of `film_weight` (`film_thickness` nm, index
+// `film_ior`; weight 0: none), mixed as OpenPBR mixes its film in.
 closure mx_dielectric_base(closure opaque, float specular_weight, color specular_color, float roughness, float ior,
-                           float transmission, color transmission_color) {
-    closure specular = dielectric_bsdf(clamp(specular_color, 0.0, 1.0), clamp(ior, 1.0, 4.0), roughness, "R")
-                       * clamp(specular_weight, 0.0, 1.0);
+                           float transmission, color transmission_color, float film_weight, float film_thickness,
+                           float film_ior) {
+    closure bare = dielectric_bsdf(clamp(specular_color, 0.0, 1.0), clamp(ior, 1.0, 4.0), roughness, "R");
+    closure filmed = with_thin_film(bare, max(film_thickness, 0.0), clamp(film_ior, 1.0, 4.0));
+    closure specular = mix(bare, filmed, clamp(film_weight, 0.0, 1.0)) * clamp(specular_weight, 0.0, 1.0);
     closure glass = dielectric_bsdf(clamp(transmission_color, 0.0, 1.0), clamp(ior, 1.0001, 4.0), roughness, "RT");
     return mix(layer(specular, opaque), glass, clamp(transmission, 0.0, 1.0));
 }
@@ -498,11 +569,37 @@ closure mx_f82_metal(color f0, color tint, float roughness) {
     return generalized_schlick_bsdf(clamp(f0, 0.0, 1.0), clamp(tint, 0.0, 1.0), color(1.0), 5.0, roughness);
 }
 
-// A clear coat of `weight` over `base`, which it tints by `coat_color`.
-closure mx_coated(closure base, float weight, color coat_color, float roughness, float ior) {
+// OpenPBR's coat darkening (specification, "Coat: Darkening"): of the light the base
+// reflects, the fraction K returns to it by internal reflection at the coat, so the base is
+// seen darkened by Δ = (1 − K) / (1 − E_b K), E_b its albedo at normal incidence (exact for a
+// Lambert base under a smooth coat, the interfaced Lambertian). K blends the smooth-base value
+// (the coat's F0) and the rough-base value 1 − (1 − E_F(η)) / η² by the base's roughness
+// estimate; the factor is mix(1, Δ, coat_weight · coat_darkening).
+float mx_fresnel_hemispherical_albedo(float eta) {
+    // d'Eon 2021's fit (within 0.2 % for η in [1, 3]), as the specification quotes it.
+    return log((10893.0 * eta - 1438.2) / (-774.4 * eta * eta + 10212.0 * eta + 1.0));
+}
+float mx_dielectric_f0(float eta) {
+    float r = (eta - 1.0) / (eta + 1.0);
+    return r * r;
+}
+color mx_coat_darkening(color base_albedo, float base_roughness, float coat_ior, float amount) {
+    float eta = clamp(coat_ior, 1.0, 4.0);
+    float k_rough = 1.0 - (1.0 - mx_fresnel_hemispherical_albedo(eta)) / (eta * eta);
+    float k = clamp(mix(mx_dielectric_f0(eta), k_rough, clamp(base_roughness, 0.0, 1.0)), 0.0, 0.999);
+    color e = clamp(base_albedo, 0.0, 1.0);
+    color delta = color((1.0 - k) / (1.0 - e.r * k), (1.0 - k) / (1.0 - e.g * k), (1.0 - k) / (1.0 - e.b * k));
+    return mix(color(1.0), delta, clamp(amount, 0.0, 1.0));
+}
+
+// A clear coat of `weight` over `base`, which it tints by `coat_color`, shaded about
+// `coat_normal` (world space; unset, the zero vector: the surface's unperturbed normal N, as
+// both specifications default it to Nworld, so a bumped base keeps a smooth coat).
+closure mx_coated(closure base, float weight, color coat_color, float roughness, float ior, color coat_normal) {
     float c = clamp(weight, 0.0, 1.0);
-    return layer(dielectric_bsdf(color(1.0), clamp(ior, 1.0, 4.0), clamp(roughness, 0.0, 1.0), "R") * c,
-                 base * mix(color(1.0), clamp(coat_color, 0.0, 1.0), c));
+    vector n = length(vector(coat_normal)) > 1e-8 ? normalize(vector(coat_normal)) : vector(N);
+    closure coat = with_normal(dielectric_bsdf(color(1.0), clamp(ior, 1.0, 4.0), clamp(roughness, 0.0, 1.0), "R"), n);
+    return layer(coat * c, base * mix(color(1.0), clamp(coat_color, 0.0, 1.0), c));
 }
 
 shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0.8, 0.8), float base_diffuse_roughness = 0.0,
@@ -511,7 +608,9 @@ shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0
                         color transmission_color = color(1.0), float subsurface_weight = 0.0,
                         color subsurface_color = color(0.8, 0.8, 0.8), float fuzz_weight = 0.0, color fuzz_color = color(1.0),
                         float fuzz_roughness = 0.5, float coat_weight = 0.0, color coat_color = color(1.0),
-                        float coat_roughness = 0.0, float coat_ior = 1.6, output closure bsdf) {
+                        float coat_roughness = 0.0, float coat_ior = 1.6, float coat_darkening = 1.0,
+                        color coat_normal = color(0.0), float thin_film_weight = 0.0, float thin_film_thickness = 0.5,
+                        float thin_film_ior = 1.4, output closure bsdf) {
     float c = clamp(coat_weight, 0.0, 1.0);
     float rc = clamp(coat_roughness, 0.0, 1.0);
     float r0 = clamp(specular_roughness, 0.0, 1.0);
@@ -520,9 +619,19 @@ shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0
     color diffuse_colour = mix(base, clamp(subsurface_color, 0.0, 1.0), clamp(subsurface_weight, 0.0, 1.0));
     closure diffuse = oren_nayar_diffuse_bsdf(diffuse_colour, clamp(base_diffuse_roughness, 0.0, 1.0), 1.0);
     closure dielectric = mx_dielectric_base(diffuse, specular_weight, specular_color, r, specular_ior, transmission_weight,
-                                            transmission_color);
+                                            transmission_color, thin_film_weight, thin_film_thickness * 1000.0, thin_film_ior);
     closure metal = mx_f82_metal(base, specular_color, r) * clamp(specular_weight, 0.0, 1.0);
-    closure coated = mx_coated(mix(dielectric, metal, clamp(base_metalness, 0.0, 1.0)), c, coat_color, rc, coat_ior);
+    // The base's albedo at normal incidence and roughness estimate, for the coat's darkening:
+    // its slabs' albedos mixed by their weights (the glass returns only its reflection).
+    float m = clamp(base_metalness, 0.0, 1.0);
+    float fs = clamp(clamp(specular_weight, 0.0, 1.0) * mx_dielectric_f0(clamp(specular_ior, 1.0, 4.0)), 0.0, 1.0);
+    color e_specular = clamp(specular_color, 0.0, 1.0) * fs;
+    color e_opaque = e_specular + diffuse_colour * (color(1.0) - e_specular);
+    color e_dielectric = mix(e_opaque, e_specular, clamp(transmission_weight, 0.0, 1.0));
+    color e_base = mix(e_dielectric, base * clamp(specular_weight, 0.0, 1.0), m);
+    float base_roughness = mix(mix(1.0, r0, fs), r0, m);
+    color darkening = mx_coat_darkening(e_base, base_roughness, coat_ior, c * clamp(coat_darkening, 0.0, 1.0));
+    closure coated = mx_coated(mix(dielectric, metal, m) * darkening, c, coat_color, rc, coat_ior, coat_normal);
     bsdf = layer(sheen_bsdf(clamp(fuzz_color, 0.0, 1.0), clamp(fuzz_roughness, 0.0, 1.0)) * clamp(fuzz_weight, 0.0, 1.0), coated);
 }
 
@@ -533,6 +642,7 @@ shader mx_standard_surface_bsdf(float base = 0.8, color base_color = color(1.0),
                                 color subsurface_color = color(1.0), float sheen = 0.0, color sheen_color = color(1.0),
                                 float sheen_roughness = 0.3, float coat = 0.0, color coat_color = color(1.0),
                                 float coat_roughness = 0.1, float coat_IOR = 1.5, float coat_affect_roughness = 0.0,
+                                color coat_normal = color(0.0), float thin_film_thickness = 0.0, float thin_film_IOR = 1.5,
                                 output closure bsdf) {
     float c = clamp(coat, 0.0, 1.0);
     float rc = clamp(coat_roughness, 0.0, 1.0);
@@ -542,9 +652,27 @@ shader mx_standard_surface_bsdf(float base = 0.8, color base_color = color(1.0),
     closure diffuse = oren_nayar_diffuse_bsdf(diffuse_colour, clamp(diffuse_roughness, 0.0, 1.0), 0.0);
     closure opaque = layer(sheen_bsdf(clamp(sheen_color, 0.0, 1.0), clamp(sheen_roughness, 0.0, 1.0)) * clamp(sheen, 0.0, 1.0),
                            diffuse);
-    closure dielectric = mx_dielectric_base(opaque, specular, specular_color, r, specular_IOR, transmission, transmission_color);
+    closure dielectric = mx_dielectric_base(opaque, specular, specular_color, r, specular_IOR, transmission, transmission_color,
+                                            thin_film_thickness > 0.0 ? 1.0 : 0.0, thin_film_thickness, thin_film_IOR);
     bsdf = mx_coated(mix(dielectric, mx_f82_metal(albedo, specular_color, r), clamp(metalness, 0.0, 1.0)), c, coat_color, rc,
-                     coat_IOR);
+                     coat_IOR, coat_normal);
+}
+
+// MaterialX's `surface_unlit`: emission · emission_color as emitted radiance and no BSDF
+// (black to light), opacity the mask; `transmission` is reported (compose).
+shader mx_unlit_shell(output closure out) {}
+substance mx_surface_unlit {
+    input float emission = 1.0;
+    input color emission_color = color(1.0, 1.0, 1.0);
+    input float transmission = 0.0;
+    input color transmission_color = color(1.0, 1.0, 1.0);
+    input float opacity = 1.0;
+    node shell = mx_unlit_shell();
+    node presence = mask(opacity: opacity);
+    node glow = mx_emission(amount: emission, tint: emission_color);
+    surface = shell.out;
+    mask = presence.out;
+    emission = glow.out;
 }
 
 // emission_luminance (nits) · emission_color as radiance: UsdLux intensities are nits too.
@@ -611,7 +739,9 @@ substance open_pbr_surface {
                                  transmission_color: transmission_color, subsurface_weight: subsurface_weight,
                                  subsurface_color: subsurface_color, fuzz_weight: fuzz_weight, fuzz_color: fuzz_color,
                                  fuzz_roughness: fuzz_roughness, coat_weight: coat_weight, coat_color: coat_color,
-                                 coat_roughness: coat_roughness, coat_ior: coat_ior);
+                                 coat_roughness: coat_roughness, coat_ior: coat_ior, coat_darkening: coat_darkening,
+                                 coat_normal: geometry_coat_normal, thin_film_weight: thin_film_weight,
+                                 thin_film_thickness: thin_film_thickness, thin_film_ior: thin_film_ior);
     node presence = mask(opacity: geometry_opacity);
     node normals = mx_surface_normal(n: geometry_normal);
     node glow = mx_emission(amount: emission_luminance, tint: emission_color);
@@ -672,7 +802,8 @@ substance standard_surface {
                                          subsurface: subsurface, subsurface_color: subsurface_color, sheen: sheen,
                                          sheen_color: sheen_color, sheen_roughness: sheen_roughness, coat: coat,
                                          coat_color: coat_color, coat_roughness: coat_roughness, coat_IOR: coat_IOR,
-                                         coat_affect_roughness: coat_affect_roughness);
+                                         coat_affect_roughness: coat_affect_roughness, coat_normal: coat_normal,
+                                         thin_film_thickness: thin_film_thickness, thin_film_IOR: thin_film_IOR);
     node presence = mx_opacity(opacity: opacity);
     node normals = mx_surface_normal(n: normal_);
     node glow = mx_emission(amount: emission, tint: emission_color);

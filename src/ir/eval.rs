@@ -490,6 +490,8 @@ fn intrinsic_value(i: Intrinsic, a: &[Value]) -> Result<Value, Stop> {
         | BurleyDiffuseBsdf
         | SheenBsdf
         | TranslucentBsdf
-        | Layer => return Err(Stop::NotConstant),
+        | Layer
+        | WithNormal
+        | WithThinFilm => return Err(Stop::NotConstant),
     })
 }

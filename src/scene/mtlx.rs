@@ -487,6 +487,11 @@ pub fn nodedef_id(node: Node) -> String {
         // 1.39 names normal maps by the type of `scale`.
         "normalmap" => format!("ND_normalmap_{}", input_type("scale").unwrap_or("float")),
         "extract" => format!("ND_extract_{in_ty}"),
+        // Nodes that reduce a vector are named by the vector's type.
+        "magnitude" | "mincomponent" | "maxcomponent" => format!("ND_{category}_{in_ty}"),
+        "dotproduct" | "distance" => format!("ND_{category}_{}", input_type("in1").unwrap_or("vector3")),
+        // MaterialX's `usd` library names its texture node without a type.
+        "UsdUVTexture" => "ND_UsdUVTexture".to_string(),
         "separate2" | "separate3" | "separate4" => format!("ND_{category}_{in_ty}"),
         _ if ty == "multioutput" => format!("ND_{category}_{in_ty}"),
         "add" | "subtract" | "multiply" | "divide" | "modulo" | "power" | "min" | "max" | "clamp" | "smoothstep"

@@ -12,7 +12,7 @@
 use super::{FnLower, Lv};
 use crate::abi::{self, ClosureKind, MAX_CLOSURE_TERMS, TERM_PARAMS};
 use crate::diag::{Diagnostic, Span};
-use crate::ir::ssa::{self, BinOp, Ty, Var};
+use crate::ir::ssa::{self, BinOp, CmpOp, Ty, Var};
 
 /// Words of one term: kind, above, weight rgb, parameters.
 pub(super) const TERM_WORDS: usize = 5 + TERM_PARAMS;
@@ -29,6 +29,15 @@ const PARAMS: usize = 5;
 /// The scalar layout of a closure value.
 pub(super) fn closure_layout() -> Vec<Ty> {
     (0..MAX_CLOSURE_TERMS).flat_map(|_| [Ty::I32, Ty::I32].into_iter().chain([Ty::F32; TERM_WORDS - 2])).collect()
+}
+
+/// The kinds of closure term a parameter-setting operator applies to.
+#[derive(Clone, Copy)]
+enum Kinds {
+    /// Every kind but this one.
+    AllBut(ClosureKind),
+    /// This kind only.
+    Only(ClosureKind),
 }
 
 /// What the lowering knows of a closure variable's terms: how many any assignment so far may
@@ -129,6 +138,73 @@ impl FnLower<'_> {
             out[to + ABOVE] = self.b.binary(BinOp::Or, moved, top_bits);
         }
         Lv::Scalars(out)
+    }
+
+    /// `with_normal(c, n)`: `n` in the normal words ([`abi::TERM_NORMAL`]) of every term of
+    /// `c`, but generalized Schlick terms' (their parameters fill those words): one known to be
+    /// such a term is reported at `span`.
+    pub(super) fn closure_with_normal(&mut self, c: &[ssa::Value], n: &[ssa::Value], span: Span) -> Lv {
+        let (out, skipped) =
+            self.closure_set_params(c, abi::TERM_NORMAL, n, Kinds::AllBut(ClosureKind::GeneralizedSchlick));
+        if skipped {
+            self.diags.push(
+                Diagnostic::warning("generalized_schlick_bsdf has no normal of its own: it uses the shading normal")
+                    .at(span, "this normal"),
+            );
+        }
+        Lv::Scalars(out)
+    }
+
+    /// `with_thin_film(c, thickness, ior)`: a thin film (thickness in nm, its index) on every
+    /// dielectric term of `c` ([`abi::TERM_THIN_FILM`]); other terms are unchanged.
+    pub(super) fn closure_with_thin_film(&mut self, c: &[ssa::Value], film: &[ssa::Value]) -> Lv {
+        Lv::Scalars(self.closure_set_params(c, abi::TERM_THIN_FILM, film, Kinds::Only(ClosureKind::Dielectric)).0)
+    }
+
+    /// `c` with `values` in parameter words `at..` of every term of the `kinds`: a term of a
+    /// kind known when compiling is set or not, one of a kind known only when running by a
+    /// select. Also whether a term of a known kind was left out.
+    fn closure_set_params(
+        &mut self,
+        c: &[ssa::Value],
+        at: usize,
+        values: &[ssa::Value],
+        kinds: Kinds,
+    ) -> (Vec<ssa::Value>, bool) {
+        let mut out = c.to_vec();
+        let mut skipped = false;
+        for t in 0..self.live_terms(c) {
+            let kind = c[t * TERM_WORDS + KIND];
+            let known = self.b.known(kind).map(ClosureKind::from_u32);
+            if known == Some(ClosureKind::None) {
+                continue;
+            }
+            // `keep`: whether the term keeps its words.
+            let keep = match (known, kinds) {
+                (Some(k), Kinds::AllBut(other)) if k != other => None,
+                (Some(k), Kinds::Only(one)) if k == one => None,
+                (Some(_), _) => {
+                    skipped = true;
+                    continue;
+                }
+                (None, Kinds::AllBut(other)) => {
+                    let other = self.b.iconst(other as i32);
+                    Some(self.b.cmp(CmpOp::Eq, kind, other))
+                }
+                (None, Kinds::Only(one)) => {
+                    let one = self.b.iconst(one as i32);
+                    Some(self.b.cmp(CmpOp::Ne, kind, one))
+                }
+            };
+            for (k, &v) in values.iter().enumerate() {
+                let word = t * TERM_WORDS + PARAMS + at + k;
+                out[word] = match keep {
+                    None => v,
+                    Some(keep) => self.b.select(keep, c[word], v),
+                };
+            }
+        }
+        (out, skipped)
     }
 
     /// `mix(a, b, t) = a·(1 − t) + b·t`, `t` one float or a colour.

@@ -147,6 +147,11 @@ impl FnLower<'_> {
             Cellnoise => Lv::Scalars(vec![self.b.call(RtFn::Cellnoise, a[0].clone())]),
             Cellular => Lv::Scalars(vec![self.b.call(RtFn::Cellular, a[0].clone())]),
             Layer => self.closure_concat(&a[0], &a[1], true, at),
+            WithNormal => self.closure_with_normal(&a[0], &a[1], at),
+            WithThinFilm => {
+                let film = [a[1][0], a[2][0]];
+                self.closure_with_thin_film(&a[0], &film)
+            }
             DielectricBsdf => {
                 // The scatter mode string becomes the lobe's last parameter: 0 R, 1 T, 2 RT.
                 let Some(mode) = self.constant_string(&args[3], frame, "the scatter mode") else {

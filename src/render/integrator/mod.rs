@@ -554,6 +554,8 @@ impl Context<'_> {
             n
         };
         (lobe.weight, lobe.frame, lobe.layer) = (weight, Frame::from_normal(n), layer);
+        // Terms with a normal of their own (`with_normal`) turn into its frame.
+        lobe.bsdf.set_term_normals(closure, &lobe.frame, lobe.frame.to_local(-d));
         Ok(())
     }
 

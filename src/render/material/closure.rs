@@ -22,11 +22,18 @@
 //! [`LayeringMode::RandomWalk`] instead follows light between the top and base interfaces
 //! (`walk`), the position-free stochastic reference of Guo et al. 2018 and pbrt-v4's
 //! `LayeredBxDF`.
+//!
+//! **Per-term normals.** A term may carry its own shading normal (`with_normal`, MaterialX's
+//! per-lobe `normal` inputs, OpenPBR's coat normal; [`TERM_NORMAL`]): it is then evaluated and
+//! sampled in a frame about that normal ([`ClosureBsdf::set_term_normals`]), rotated from the
+//! shading frame. The attenuation of the terms under it keeps using the shading frame's
+//! cosines, and a walk over a stack with a tilted term falls back to albedo scaling.
 
-use crate::abi::{ClosureKind, ClosureSum, ClosureTerm, MAX_CLOSURE_TERMS};
+use crate::abi::{ClosureKind, ClosureSum, ClosureTerm, MAX_CLOSURE_TERMS, TERM_NORMAL};
 use crate::render::material::bsdf::{Bsdf, BsdfSample, finish};
+use crate::render::material::frame::Frame;
 use crate::render::material::lobes::Lobe;
-use glam::{Vec2, Vec3};
+use glam::{Quat, Vec2, Vec3};
 
 /// How `layer(top, base)` is rendered.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -65,6 +72,68 @@ pub(crate) struct Term {
     inv_norm: Vec3,
     /// Estimated albedo × weight (max channel): the term's share of samples before layering.
     importance: f32,
+    /// The rotation from the shading frame to the frame of the term's own normal, if it has
+    /// one that differs ([`ClosureBsdf::set_term_normals`]).
+    tilt: Option<Quat>,
+}
+
+impl Term {
+    /// The lobe's f(wo, wi) in the term's frame.
+    #[inline]
+    fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        match self.tilt {
+            None => self.lobe.eval(wo, wi),
+            Some(q) => self.lobe.eval(q * wo, q * wi),
+        }
+    }
+
+    /// The lobe's pdf in the term's frame (a rotation keeps solid angles).
+    #[inline]
+    fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        match self.tilt {
+            None => self.lobe.pdf(wo, wi),
+            Some(q) => self.lobe.pdf(q * wo, q * wi),
+        }
+    }
+
+    /// The lobe's sample in the term's frame, its direction rotated back.
+    #[inline]
+    fn sample(&self, wo: Vec3, uc: f32, u: Vec2) -> Option<BsdfSample> {
+        match self.tilt {
+            None => self.lobe.sample(wo, uc, u),
+            Some(q) => {
+                let s = self.lobe.sample(q * wo, uc, u)?;
+                Some(BsdfSample { wi: (q.conjugate() * s.wi).normalize(), ..s })
+            }
+        }
+    }
+}
+
+/// Smallest cosine between `wo` and a term's own normal: a normal tilted further away from the
+/// viewer is bent towards it (as shading normals are), so the term never sees `wo` from below.
+const MIN_TILTED_COS: f32 = 0.01;
+
+/// The world-space normal a closure term carries, if any (a zero vector is none; the
+/// generalized Schlick lobe uses those words for its parameters).
+#[inline]
+fn term_normal(t: &ClosureTerm) -> Option<Vec3> {
+    if t.kind == ClosureKind::GeneralizedSchlick as u32 || t.kind == ClosureKind::None as u32 {
+        return None;
+    }
+    let n = Vec3::from_slice(&t.params[TERM_NORMAL..TERM_NORMAL + 3]);
+    (n != Vec3::ZERO && n.is_finite()).then_some(n)
+}
+
+/// A term's colour weight as the renderer uses it: each channel clamped to [0, 1], NaN as 0.
+#[inline]
+fn clamped_weight(t: &ClosureTerm) -> Vec3 {
+    Vec3::from_array(t.weight.map(|w| if w.is_nan() { 0.0 } else { w.clamp(0.0, 1.0) }))
+}
+
+/// Whether a term is decoded (not empty, some weight).
+#[inline]
+fn is_live(t: &ClosureTerm) -> bool {
+    t.kind != ClosureKind::None as u32 && clamped_weight(t) != Vec3::ZERO
 }
 
 /// Points of the 8-point Gauss–Legendre rule on [0, 1] and their weights (summing to 1).
@@ -102,8 +171,14 @@ impl From<Bsdf> for ClosureBsdf {
 }
 
 /// An unused slot of [`ClosureBsdf::terms`].
-const EMPTY_TERM: Term =
-    Term { lobe: Lobe::Bsdf(Bsdf::Black), weight: Vec3::ZERO, above: 0, inv_norm: Vec3::ZERO, importance: 0.0 };
+const EMPTY_TERM: Term = Term {
+    lobe: Lobe::Bsdf(Bsdf::Black),
+    weight: Vec3::ZERO,
+    above: 0,
+    inv_norm: Vec3::ZERO,
+    importance: 0.0,
+    tilt: None,
+};
 
 /// Attenuations `a_i(μ)` of every term (see the module docs).
 type Attenuation = [Vec3; MAX_CLOSURE_TERMS];
@@ -120,13 +195,12 @@ impl ClosureBsdf {
     /// [`ClosureBsdf::from_sum`] in place: the integrator decodes each shading point's closure
     /// into the slot it keeps, rather than moving a value of all [`MAX_CLOSURE_TERMS`] terms.
     pub fn set_sum(&mut self, sum: &ClosureSum, mode: LayeringMode) {
-        let clamped =
-            |t: &ClosureTerm| Vec3::from_array(t.weight.map(|w| if w.is_nan() { 0.0 } else { w.clamp(0.0, 1.0) }));
+        let clamped = clamped_weight;
         // The terms that are not empty; most materials have one, decoded without the general
         // renumbering below.
         let mut live = 0u32;
         for (k, t) in sum.terms.iter().enumerate() {
-            if t.kind != ClosureKind::None as u32 && clamped(t) != Vec3::ZERO {
+            if is_live(t) {
                 live |= 1 << k;
             }
         }
@@ -185,7 +259,7 @@ impl ClosureBsdf {
             let lobe = if covered & (1 << i) != 0 { lobe.covering() } else { lobe };
             let above = above & ((1u16 << i) - 1) as u8;
             b.layered |= above != 0;
-            b.terms[i] = Term { lobe, weight, above, inv_norm: Vec3::ONE, importance: 0.0 };
+            b.terms[i] = Term { lobe, weight, above, inv_norm: Vec3::ONE, importance: 0.0, tilt: None };
             b.len = i + 1;
         }
         for t in b.terms.iter_mut().take(old_len).skip(b.len) {
@@ -219,6 +293,41 @@ impl ClosureBsdf {
         }
     }
 
+    /// Gives the terms of `sum` (as [`ClosureBsdf::set_sum`] decoded them) that carry their own
+    /// world-space normal a frame about it: `frame` is the shading frame and `wo` the outgoing
+    /// direction in it. A normal on the far side of the frame is flipped (as the shading
+    /// normal is), one tilted away from `wo` bent towards it ([`MIN_TILTED_COS`]); a normal
+    /// within 1e-6 of the shading normal is none, so such a closure is today's bit for bit.
+    pub fn set_term_normals(&mut self, sum: &ClosureSum, frame: &Frame, wo: Vec3) {
+        // Most closures have none: one pass over the words before any decoding.
+        if !sum.terms.iter().any(|t| term_normal(t).is_some()) {
+            return;
+        }
+        let mut i = 0;
+        for t in sum.terms.iter() {
+            if !is_live(t) {
+                continue;
+            }
+            if let Some(n) = term_normal(t)
+                && i < self.len
+            {
+                let mut n = frame.to_local(n.normalize());
+                if n.z < 0.0 {
+                    n = -n;
+                }
+                if n.z < 1.0 - 1e-6 {
+                    let side = if wo.z < 0.0 { -1.0 } else { 1.0 };
+                    let cos = n.dot(wo) * side;
+                    if cos < MIN_TILTED_COS {
+                        n = (n + wo * (side * (MIN_TILTED_COS - cos))).normalize();
+                    }
+                    self.terms[i].tilt = Some(Quat::from_rotation_arc(n, Vec3::Z));
+                }
+            }
+            i += 1;
+        }
+    }
+
     /// The terms.
     pub(crate) fn terms(&self) -> &[Term] {
         &self.terms[..self.len]
@@ -248,7 +357,8 @@ impl ClosureBsdf {
     /// Whether the closure is a single unit-weight lobe (every method then delegates to it).
     #[inline]
     fn single(&self) -> Option<&Lobe> {
-        (self.len == 1 && self.terms[0].weight == Vec3::ONE).then_some(&self.terms[0].lobe)
+        let t = &self.terms[0];
+        (self.len == 1 && t.weight == Vec3::ONE && t.tilt.is_none()).then_some(&t.lobe)
     }
 
     /// The factor `w_i a_i(μo) a_i(μi) / N_i` of term `i`.
@@ -292,7 +402,7 @@ impl ClosureBsdf {
         let (ao, ai) = self.attenuations(wo, wi);
         let mut f = Vec3::ZERO;
         for i in 0..self.len {
-            f += self.terms[i].lobe.eval(wo, wi) * self.factor(i, &ao, &ai);
+            f += self.terms[i].eval(wo, wi) * self.factor(i, &ao, &ai);
         }
         f
     }
@@ -321,7 +431,7 @@ impl ClosureBsdf {
     pub(crate) fn pdf_mixture(&self, wo: Vec3, wi: Vec3) -> f32 {
         let ao = if self.layered { self.attenuation(wo.z) } else { [Vec3::ONE; MAX_CLOSURE_TERMS] };
         let p = self.probabilities(&ao);
-        (0..self.len).filter(|&i| p[i] > 0.0).map(|i| p[i] * self.terms[i].lobe.pdf(wo, wi)).sum()
+        (0..self.len).filter(|&i| p[i] > 0.0).map(|i| p[i] * self.terms[i].pdf(wo, wi)).sum()
     }
 
     /// Samples wi: `uc` picks the term (then, rescaled, the term's own component), `u` the
@@ -345,7 +455,7 @@ impl ClosureBsdf {
         let ao = if self.layered { self.attenuation(wo.z) } else { [Vec3::ONE; MAX_CLOSURE_TERMS] };
         let p = self.probabilities(&ao);
         let (k, uc) = pick(&p[..self.len], uc)?;
-        let s = self.terms[k].lobe.sample(wo, uc, u)?;
+        let s = self.terms[k].sample(wo, uc, u)?;
         if s.delta {
             let ai = if self.layered { self.attenuation(s.wi.z) } else { [Vec3::ONE; MAX_CLOSURE_TERMS] };
             return finish(s.wi, s.f * self.factor(k, &ao, &ai), s.pdf * p[k], true);
@@ -546,7 +656,7 @@ pub mod walk {
     fn stack(b: &ClosureBsdf) -> Option<Stack> {
         let terms = b.terms();
         let covered: u8 = terms.iter().fold(0, |m, t| m | t.above);
-        if covered.count_ones() != 1 {
+        if covered.count_ones() != 1 || terms.iter().any(|t| t.tilt.is_some()) {
             return None;
         }
         let top = covered.trailing_zeros() as usize;

@@ -386,3 +386,120 @@ fn term_choice_covers_every_term() {
         let _ = b.sample(wo, uc, Vec2::splat(0.5));
     }
 }
+
+// ---------------------------------------------------------------- per-term normals
+
+/// A coat (dielectric "R", roughness `rough`) with its own world normal `n` over a Lambert
+/// base, as compiled code returns it, decoded in the shading frame of world +z with `wo`.
+fn tilted_coat_over_diffuse(rough: f32, n: Vec3, wo: Vec3) -> ClosureBsdf {
+    use crate::render::material::frame::Frame;
+    let mut sum = ClosureSum::default();
+    sum.terms[0] = term(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, rough, 0.0, 0.0, 0.0, n.x, n.y, n.z]);
+    sum.terms[1] = ClosureTerm { above: 1, ..term(ClosureKind::Diffuse, &[0.8, 0.8, 0.8]) };
+    let mut b = ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling);
+    b.set_term_normals(&sum, &Frame::from_normal(Vec3::Z), wo);
+    b
+}
+
+/// A term normal equal to the shading normal changes nothing, bit for bit; a tilted one
+/// reflects a smooth coat about itself (the reflection law) and keeps sampling consistent with
+/// evaluation (χ²).
+#[test]
+fn a_term_with_its_own_normal_is_shaded_about_it() {
+    let wo = dir(0.8, 0.4);
+    let plain = layered(coat(0.2, 1.5), diffuse(0.8), LayeringMode::AlbedoScaling);
+    let same = tilted_coat_over_diffuse(0.2, Vec3::Z, wo);
+    assert!(same == plain, "a normal equal to the shading normal must change nothing");
+    let mut rng = Pcg32::new(5, 1);
+    for _ in 0..200 {
+        let wi = rng.dir();
+        assert_eq!(same.eval(wo, wi).to_array().map(f32::to_bits), plain.eval(wo, wi).to_array().map(f32::to_bits));
+    }
+    // Smooth coat tilted 20° about y: its delta reflection is wo mirrored about the tilted
+    // normal, not about +z.
+    let n = Vec3::new(20f32.to_radians().sin(), 0.0, 20f32.to_radians().cos());
+    let smooth = tilted_coat_over_diffuse(0.0, n, wo);
+    let mirror = 2.0 * n.dot(wo) * n - wo;
+    let mut deltas = 0;
+    for _ in 0..4000 {
+        if let Some(s) = smooth.sample(wo, rng.f32(), rng.vec2())
+            && s.delta
+        {
+            deltas += 1;
+            assert!(
+                (s.wi - mirror).length() < 1e-4,
+                "delta reflection {} vs the mirror about the coat normal {mirror}",
+                s.wi
+            );
+        }
+    }
+    assert!(deltas > 20, "the smooth coat was sampled {deltas} times");
+    // Rough tilted coat: χ² of sampling against the pdf, and the highlight moves with the
+    // normal (the largest eval lies about the tilted mirror direction).
+    let rough = tilted_coat_over_diffuse(0.15, n, wo);
+    let r = chi2_test(|uc, u| rough.sample(wo, uc, u), |wi| rough.pdf(wo, wi), &[(mirror, 0.1)], 91);
+    assert!(r.p > 1e-3 && r.integral <= 1.0 + 1e-3, "χ² p = {}, ∫pdf = {}", r.p, r.integral);
+    let untilted_mirror = Vec3::new(-wo.x, -wo.y, wo.z);
+    let (at_tilted, at_plain) = (rough.eval(wo, mirror).x, rough.eval(wo, untilted_mirror).x);
+    assert!(at_tilted > 5.0 * at_plain, "highlight at the tilted mirror {at_tilted} vs the plain mirror {at_plain}");
+}
+
+// ---------------------------------------------------------------- thin film
+
+/// Reflectance at normal incidence of a film (index `n2`, `d` nm) on a substrate (`n3`) in air
+/// at wavelength `lambda` nm, by the film's characteristic matrix (Born and Wolf §1.6) in f64:
+/// a different formulation from the Airy sum the renderer evaluates.
+fn film_reflectance_by_matrix(n2: f64, n3: f64, d: f64, lambda: f64) -> f64 {
+    let delta = 2.0 * std::f64::consts::PI * n2 * d / lambda;
+    // M = [[cos δ, i sin δ / n2], [i n2 sin δ, cos δ]]; B = m11 + m12 n3, C = m21 + m22 n3.
+    let (b_re, b_im) = (delta.cos(), delta.sin() * n3 / n2);
+    let (c_re, c_im) = (n3 * delta.cos(), n2 * delta.sin());
+    // r = (B − C) / (B + C) with n1 = 1.
+    let (num_re, num_im) = (b_re - c_re, b_im - c_im);
+    let (den_re, den_im) = (b_re + c_re, b_im + c_im);
+    (num_re * num_re + num_im * num_im) / (den_re * den_re + den_im * den_im)
+}
+
+/// The thin-film Fresnel a dielectric term carries matches the characteristic-matrix
+/// reflectance at normal incidence (averaged over each channel's wavelengths), is the bare
+/// interface without a film or with a film of the substrate's own index, and reaches the
+/// renderer from the closure term's words.
+#[test]
+fn thin_film_reflectance_matches_the_characteristic_matrix_at_normal_incidence() {
+    use crate::render::material::lobes::thin_film;
+    let bands = [[600.0, 630.0, 670.0], [500.0, 530.0, 560.0], [415.0, 445.0, 475.0]];
+    for (film, substrate) in [(1.33f32, 1.5f32), (2.0, 1.5), (1.4, 1.0001)] {
+        for d in [0.0f32, 80.0, 250.0, 500.0, 1200.0] {
+            let got = thin_film(1.0, substrate, film, d);
+            for (c, band) in bands.iter().enumerate() {
+                let want: f64 = band
+                    .iter()
+                    .map(|&l| film_reflectance_by_matrix(film as f64, substrate as f64, d as f64, l) / 3.0)
+                    .sum();
+                assert!(
+                    (got[c] as f64 - want).abs() < 2e-5,
+                    "film {film} on {substrate}, {d} nm, channel {c}: {} vs {want}",
+                    got[c]
+                );
+            }
+        }
+        // No film: the bare interface at every angle; a film of the substrate's index: the
+        // bare interface of that index, whatever its thickness.
+        for cos in [1.0f32, 0.7, 0.3, 0.05] {
+            let bare = fresnel_dielectric(cos, substrate);
+            assert!((thin_film(cos, substrate, film, 0.0) - Vec3::splat(bare)).abs().max_element() < 1e-5);
+            let same = thin_film(cos, substrate, substrate, 333.0);
+            assert!((same - Vec3::splat(bare)).abs().max_element() < 1e-5, "{same} vs {bare}");
+        }
+    }
+    // A smooth "R" dielectric term with a 250 nm film of 1.33: its delta reflection at normal
+    // incidence is the film's reflectance, and the colour differs per channel.
+    let t = term(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, 0.0, 0.0, 250.0, 1.33]);
+    let mut sum = ClosureSum::default();
+    sum.terms[0] = t;
+    let b = ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling);
+    let s = b.sample(Vec3::Z, 0.5, Vec2::splat(0.5)).expect("a delta reflection");
+    let want = thin_film(1.0, 1.5, 1.33, 250.0);
+    assert!(s.delta && (s.f * s.wi.z / s.pdf - want).abs().max_element() < 1e-5, "{:?} vs {want}", s.f);
+    assert!((want.x - want.z).abs() > 0.01, "iridescent: {want}");
+}

@@ -6,14 +6,14 @@
 //! Conventions are [`crate::render::material::bsdf`]'s: local frame, `eval` without the cosine,
 //! reflection lobes two-sided, transmitting ones oriented (`wo.z < 0` is inside).
 
-use crate::abi::{ClosureKind, ClosureTerm};
+use crate::abi::{ClosureKind, ClosureTerm, TERM_THIN_FILM};
 use crate::render::material::albedo;
 use crate::render::material::bsdf::{
     Bsdf, BsdfSample, colour, cosine_hemisphere, finish, flip_z, ior, microfacet_reflection_pdf, reflect, roughness,
     sanitize, upper,
 };
 use crate::render::material::microfacet::{
-    Ggx, fresnel_conductor3, fresnel_dielectric, hemispherical_average, sheen_eval,
+    Ggx, fresnel_conductor3, fresnel_dielectric, hemispherical_average, hemispherical_average3, sheen_eval,
 };
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
@@ -25,6 +25,15 @@ pub enum Fresnel {
     Dielectric {
         /// Index of refraction in [1, 4].
         eta: f32,
+    },
+    /// A dielectric of index `eta` under a thin film (Airy interference; [`thin_film`]).
+    ThinFilm {
+        /// Index of refraction of the substrate in [1, 4].
+        eta: f32,
+        /// Index of refraction of the film in [1, 4].
+        film_eta: f32,
+        /// Film thickness in nanometres (> 0).
+        thickness: f32,
     },
     /// MaterialX's generalized Schlick with Hoffman's F82 tint.
     Schlick {
@@ -48,6 +57,7 @@ impl Fresnel {
     pub fn eval(&self, cos: f32) -> Vec3 {
         match *self {
             Fresnel::Dielectric { eta } => Vec3::splat(fresnel_dielectric(cos, eta)),
+            Fresnel::ThinFilm { eta, film_eta, thickness } => thin_film(cos, eta, film_eta, thickness),
             Fresnel::Schlick { color0, color82, color90, exponent } => {
                 let x = cos.clamp(0.0, 1.0);
                 let factor = 1.0 / (COS_F82 * (1.0 - COS_F82).powi(6));
@@ -57,6 +67,43 @@ impl Fresnel {
             }
         }
     }
+}
+
+/// Wavelengths (nm) each RGB channel averages the thin-film reflectance over: three per band
+/// (red 580–700, green 490–580, blue 400–490), so a thick film's fast oscillation averages out
+/// rather than aliasing.
+const FILM_WAVELENGTHS: [[f32; 3]; 3] = [[600.0, 630.0, 670.0], [500.0, 530.0, 560.0], [415.0, 445.0, 475.0]];
+
+/// Reflectance of a dielectric substrate (index `eta`) under a film (index `film_eta`,
+/// `thickness` nm) seen from air at `cos θ`, per RGB channel: the Airy sum of the two
+/// interfaces' amplitudes with the phase the film's round trip adds, for s and p polarisation
+/// averaged (as Belcour and Barla 2017 before their spectral integration). The indices are
+/// ≥ 1, so neither interface totally reflects.
+pub fn thin_film(cos: f32, eta: f32, film_eta: f32, thickness: f32) -> Vec3 {
+    let cos1 = cos.clamp(0.0, 1.0);
+    let sin2 = 1.0 - cos1 * cos1;
+    let cos2 = (1.0 - sin2 / (film_eta * film_eta)).max(0.0).sqrt();
+    let cos3 = (1.0 - sin2 / (eta * eta)).max(0.0).sqrt();
+    // Amplitude reflection coefficients at air|film (12) and film|substrate (23).
+    let (n1, n2, n3) = (1.0, film_eta, eta);
+    let r12s = (n1 * cos1 - n2 * cos2) / (n1 * cos1 + n2 * cos2);
+    let r12p = (n2 * cos1 - n1 * cos2) / (n2 * cos1 + n1 * cos2);
+    let r23s = (n2 * cos2 - n3 * cos3) / (n2 * cos2 + n3 * cos3);
+    let r23p = (n3 * cos2 - n2 * cos3) / (n3 * cos2 + n2 * cos3);
+    // |(a + b e^{iδ}) / (1 + a b e^{iδ})|² for real a, b.
+    let airy = |a: f32, b: f32, cos_delta: f32| {
+        let ab = a * b;
+        ((a * a + b * b + 2.0 * ab * cos_delta) / (1.0 + ab * ab + 2.0 * ab * cos_delta)).clamp(0.0, 1.0)
+    };
+    let path = 4.0 * PI * film_eta * thickness * cos2;
+    let mut r = Vec3::ZERO;
+    for (c, band) in FILM_WAVELENGTHS.iter().enumerate() {
+        for lambda in band {
+            let cos_delta = (path / lambda).cos();
+            r[c] += 0.5 * (airy(r12s, r23s, cos_delta) + airy(r12p, r23p, cos_delta)) / 3.0;
+        }
+    }
+    r
 }
 
 /// One lobe of a closure term; Copy, sanitised, allocation-free like [`Bsdf`].
@@ -146,8 +193,15 @@ impl Lobe {
         match kind {
             ClosureKind::Dielectric => {
                 let (tint, eta, ggx) = (colour(&p[0..3]), ior(p[3]), roughness(p[4]));
+                // A thin film (reflection only; a transmitting interface keeps its plain Fresnel).
+                let thickness = sanitize(p[TERM_THIN_FILM], 0.0, 1e5, 0.0);
+                let fresnel = if thickness > 0.0 {
+                    Fresnel::ThinFilm { eta, film_eta: ior(p[TERM_THIN_FILM + 1]), thickness }
+                } else {
+                    Fresnel::Dielectric { eta }
+                };
                 match sanitize(p[5], 0.0, 2.0, 2.0).round() as u32 {
-                    0 => Lobe::Specular { fresnel: Fresnel::Dielectric { eta }, tint, ggx },
+                    0 => Lobe::Specular { fresnel, tint, ggx },
                     mode => {
                         let mut closure = crate::abi::Closure { kind: ClosureKind::Glass as u32, params: [0.0; 8] };
                         closure.params[..3].copy_from_slice(&p[0..3]);
@@ -372,7 +426,9 @@ impl Lobe {
                 let r = ggx.alpha.sqrt();
                 tint * match fresnel {
                     Fresnel::Dielectric { eta } => Vec3::splat(albedo::dielectric_reflection(mu, r, eta)),
-                    Fresnel::Schlick { .. } => fresnel.eval(mu) * albedo::ggx_reflection(mu, r),
+                    Fresnel::Schlick { .. } | Fresnel::ThinFilm { .. } => {
+                        fresnel.eval(mu) * albedo::ggx_reflection(mu, r)
+                    }
                 }
             }
             Lobe::Bsdf(Bsdf::Metal { eta, k, ggx, .. }) => {
@@ -396,11 +452,9 @@ impl Lobe {
                 (r + (1.0 - fav) * transmitted).min(Vec3::ONE)
             }
             Lobe::Specular { .. } | Lobe::Sheen { .. } => {
-                let mut a = Vec3::ZERO;
-                for c in 0..3 {
-                    a[c] = hemispherical_average(|mu| self.directional_albedo(mu)[c]);
-                }
-                a.min(Vec3::ONE)
+                // Each node's directional albedo once for all three channels (it is a table
+                // lookup or two), the same sums per channel as a scalar average of each.
+                hemispherical_average3(|mu| self.directional_albedo(mu)).min(Vec3::ONE)
             }
             Lobe::OrenNayar { albedo, .. } | Lobe::Burley { albedo, .. } | Lobe::Translucent { albedo } => albedo,
         }

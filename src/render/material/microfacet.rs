@@ -166,12 +166,18 @@ pub fn gulbrandsen(r: f32, g: f32) -> (f32, f32) {
 /// Cosine-weighted hemispherical average `2 ∫ F(μ) μ dμ` of a Fresnel curve, by 8-point
 /// Gauss–Legendre quadrature (exact enough for an albedo estimate, not for the hot path).
 pub fn hemispherical_average(f: impl Fn(f32) -> f32) -> f32 {
+    hemispherical_average3(|mu| Vec3::splat(f(mu))).x
+}
+
+/// [`hemispherical_average`] of a colour-valued `f`, each channel summed exactly as the scalar
+/// average sums it (so `f` is evaluated once per node, not once per channel).
+pub fn hemispherical_average3(f: impl Fn(f32) -> Vec3) -> Vec3 {
     const X: [f32; 4] = [0.183_434_64, 0.525_532_4, 0.796_666_5, 0.960_289_9];
     const W: [f32; 4] = [0.362_683_8, 0.313_706_65, 0.222_381_03, 0.101_228_54];
-    let mut sum = 0.0;
+    let mut sum = Vec3::ZERO;
     for (x, w) in X.iter().zip(W) {
         for mu in [0.5 * (1.0 + x), 0.5 * (1.0 - x)] {
-            sum += w * 0.5 * f(mu) * mu;
+            sum += f(mu) * (w * 0.5) * mu;
         }
     }
     2.0 * sum
