@@ -2,12 +2,15 @@
 //! the preview and the progressive passes between them.
 
 use super::camera::{Move, Orbit};
+use super::look::{self, LookEdits};
 use super::progressive::Accumulator;
 use super::watch::Watcher;
 use super::{Shared, ViewOptions};
+use crate::compose::slots::SlotFilter;
+use crate::render::film::display::DisplayServer;
 use crate::render::scene::SceneOptions;
 use crate::render::{Image, RenderSettings};
-use crate::session::{Change, ChangeKind, Pass, Session};
+use crate::session::{Change, ChangeKind, Pass, SceneSource, Session};
 use serde_json::json;
 use std::collections::BTreeSet;
 use std::path::PathBuf;
@@ -38,6 +41,12 @@ pub(crate) enum Command {
     Camera(Move),
     /// Look through a stage camera (`None`: the camera the view started with).
     SelectCamera(Option<String>),
+    /// Set a material input in memory (a [`Change::Value`]), asked for at `at`.
+    SetInput { change: Change, at: Instant },
+    /// Mute or solo slots (in memory).
+    Slots(SlotFilter),
+    /// Write the input edits as an override layer; the answer is JSON.
+    WriteLook { reply: tokio::sync::oneshot::Sender<Result<String, String>> },
 }
 
 /// The render thread's state. See the module documentation.
@@ -54,8 +63,16 @@ pub(crate) struct Worker {
     /// The rendered diagnostics of the last edit (or of opening) and whether it failed.
     diagnostics: String,
     failed: bool,
-    /// Edits applied so far.
+    /// Edits applied so far (saved files and look edits).
     edits: u64,
+    /// The input values set from the page, re-applied after a layer is read again.
+    look: LookEdits,
+    /// When the input edit behind the coming preview was asked for.
+    input_at: Option<Instant>,
+    /// The scene file (override layers are written beside it).
+    scene: SceneSource,
+    /// The tev viewer each full-resolution pass is sent to (`--display-server`).
+    display: Option<DisplayServer>,
 }
 
 impl Worker {
@@ -83,6 +100,10 @@ impl Worker {
         if !prepared || diags.has_errors() {
             return Err(text);
         }
+        let display = match &options.display_server {
+            Some(address) => Some(DisplayServer::connect(address, &options.scene.display_name())?),
+            None => None,
+        };
         let cameras = session.stage().map(crate::render::scene::camera_paths).unwrap_or_default();
         let up = session.stage().map_or("Y", |s| s.up_axis()).to_string();
         let scene = session.scene().ok_or("the scene did not prepare")?;
@@ -106,15 +127,22 @@ impl Worker {
             diagnostics: text,
             failed: false,
             edits: 0,
+            look: LookEdits::default(),
+            input_at: None,
+            scene: options.scene.clone(),
+            display,
         })
     }
 
     /// Renders and answers commands until the server goes away.
     pub fn run(mut self, commands: mpsc::Receiver<Command>, mut watcher: Watcher) {
         self.watch(&mut watcher);
+        self.publish_look();
         let mut passes = Accumulator::new(self.settings.clone());
         let mut preview_due = true;
         let mut stalled = false;
+        // Time spent in the passes since the last restart (bands and merging into images).
+        let mut pass_time = Duration::ZERO;
         loop {
             let idle = !preview_due && (passes.done() || stalled);
             let first = if idle {
@@ -142,7 +170,7 @@ impl Worker {
             }
             if restart {
                 passes = Accumulator::new(self.settings.clone());
-                (preview_due, stalled) = (true, false);
+                (preview_due, stalled, pass_time) = (true, false, Duration::ZERO);
             }
             if preview_due {
                 self.preview();
@@ -152,16 +180,22 @@ impl Worker {
             if passes.done() || stalled {
                 continue;
             }
+            let pass_start = Instant::now();
             match passes.step(&mut self.session) {
-                Ok(false) => {}
+                Ok(false) => pass_time += pass_start.elapsed(),
                 Ok(true) => match passes.image(&self.session) {
                     Some(Ok(image)) => {
+                        pass_time += pass_start.elapsed();
+                        self.send_to_display(&image);
                         let image = Arc::new(image);
                         self.image = Some(image.clone());
                         let samples = passes.samples();
+                        let pixels = (self.settings.width * self.settings.height) as f64;
+                        let rate = pixels * f64::from(samples) / pass_time.as_secs_f64().max(1e-9);
                         self.shared.publish(|p| {
                             p.image = Some(image);
                             p.samples = samples;
+                            p.samples_per_second = Some(rate);
                         });
                     }
                     Some(Err(e)) => stalled = self.report_render_error(&e.to_string()),
@@ -191,6 +225,80 @@ impl Worker {
                 true
             }
             Command::SelectCamera(path) => self.select_camera(path),
+            Command::SetInput { change, at } => {
+                let applied = self.look_edit(|session| session.apply_change(&change).failed);
+                if applied {
+                    self.look.record(&change);
+                    self.input_at = Some(at);
+                }
+                applied
+            }
+            Command::Slots(filter) => self.look_edit(|session| session.set_slot_filter(filter).failed),
+            Command::WriteLook { reply } => {
+                let _ = reply.send(self.write_look());
+                false
+            }
+        }
+    }
+
+    /// Applies a look edit (an input value, mute or solo) to the session; whether it applied.
+    /// A failed one shows its diagnostics and keeps the image.
+    fn look_edit(&mut self, edit: impl FnOnce(&mut Session) -> bool) -> bool {
+        let failed = edit(&mut self.session) || self.session.diagnostics().has_errors();
+        let diags = self.session.take_diagnostics();
+        self.diagnostics = diags.render(self.session.sources());
+        self.failed = failed;
+        self.edits += 1;
+        self.publish_look();
+        if failed {
+            let (text, edits) = (self.diagnostics.clone(), self.edits);
+            self.shared.publish(|p| {
+                p.diagnostics = text;
+                p.failed = true;
+                p.edits = edits;
+            });
+        }
+        !failed
+    }
+
+    /// Publishes the slots that can be muted, the filter and the number of input edits.
+    fn publish_look(&self) {
+        let mut slots: Vec<String> = self
+            .session
+            .composed()
+            .map(|c| c.stacks.iter().flat_map(|s| s.layers.iter().map(|l| l.slot.name())).collect())
+            .unwrap_or_default();
+        slots.sort();
+        slots.dedup();
+        let filter = self.session.slot_filter().clone();
+        let inputs = self.look.len();
+        self.shared.publish(|p| {
+            p.slots = slots;
+            p.muted = filter.muted.into_iter().collect();
+            p.solo = filter.solo;
+            p.look_inputs = inputs;
+        });
+    }
+
+    /// Writes the input edits as an override layer beside the scene: its path as JSON.
+    fn write_look(&self) -> Result<String, String> {
+        let SceneSource::File(scene) = &self.scene else {
+            return Err("the embedded default scene has no file to sublayer the edits under".into());
+        };
+        if self.look.len() == 0 {
+            return Err("no input has been edited".into());
+        }
+        let path = self.look.write(scene)?;
+        Ok(json!({ "path": path.display().to_string(), "attributes": self.look.len() }).to_string())
+    }
+
+    /// Sends a full-resolution pass to tev; a viewer that went away is reported once and
+    /// dropped.
+    fn send_to_display(&mut self, image: &Image) {
+        if let Some(Err(e)) = self.display.as_mut().map(|d| d.send(image)) {
+            self.display = None;
+            let message = format!("warning: {e}\n");
+            self.shared.publish(|p| p.diagnostics = message);
         }
     }
 
@@ -222,6 +330,12 @@ impl Worker {
             if failed {
                 break;
             }
+            // The stage was read again: the input values set from the page apply on top.
+            if report.restaged {
+                for change in self.look.changes() {
+                    failed |= self.session.apply_change(&change).failed;
+                }
+            }
         }
         if !related {
             return false;
@@ -232,6 +346,7 @@ impl Worker {
         self.edits += 1;
         // An edit may have made the scene read new files (an import, a sublayer, a texture).
         self.watch(watcher);
+        self.publish_look();
         if failed {
             let (text, edits) = (self.diagnostics.clone(), self.edits);
             self.shared.publish(|p| {
@@ -271,12 +386,16 @@ impl Worker {
         match self.session.render(&Pass::full(settings), None) {
             Ok((image, _)) => {
                 let update_ms = self.changed_at.take().map(|t| t.elapsed().as_secs_f64() * 1e3);
+                let input_ms = self.input_at.take().map(|t| t.elapsed().as_secs_f64() * 1e3);
                 let (text, failed, edits) = (self.diagnostics.clone(), self.failed, self.edits);
                 self.shared.publish(|p| {
                     p.image = Some(Arc::new(image));
                     p.samples = 0;
                     if update_ms.is_some() {
                         p.update_ms = update_ms;
+                    }
+                    if input_ms.is_some() {
+                        p.input_ms = input_ms;
                     }
                     (p.diagnostics, p.failed, p.edits) = (text, failed, edits);
                 });
@@ -319,6 +438,7 @@ impl Worker {
             }
         }
         let layers = stack.and_then(|s| s.get(0).and_then(|p| p.get("layers")).cloned());
-        json!({ "x": x, "y": y, "prim": prim, "layers": layers, "channels": channels }).to_string()
+        let inputs = prim.as_deref().map(|prim| look::inputs_json(&self.session, prim));
+        json!({ "x": x, "y": y, "prim": prim, "layers": layers, "inputs": inputs, "channels": channels }).to_string()
     }
 }
