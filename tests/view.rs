@@ -521,6 +521,80 @@ fn an_override_layer_holds_the_input_edits_as_usd_reads_them() {
     }
 }
 
+/// The view's status once `done` holds for it (long polls).
+fn wait_status(port: u16, what: &str, done: impl Fn(&Value) -> bool) -> Value {
+    let own = format!("127.0.0.1:{port}");
+    let deadline = Instant::now() + Duration::from_secs(180);
+    let mut after = 0;
+    loop {
+        let (_, body) = http(port, "GET", &format!("/status?after={after}"), &own, None);
+        let status: Value = serde_json::from_slice(&body).expect("status JSON");
+        if done(&status) {
+            return status;
+        }
+        assert!(Instant::now() < deadline, "timed out waiting for {what}: {status}");
+        after = status["generation"].as_u64().unwrap_or(0);
+    }
+}
+
+/// A pick gives each layer's share of the rule-5 pick at that pixel (summing to one with the
+/// transparency, over the slots of the prim's stack), and selects the prim: the channel list
+/// gains its Cryptomatte mattes, which cover the picked pixel fully and the background not.
+#[test]
+fn a_pick_gives_layer_shares_and_the_selections_mattes() {
+    let (_dir, scene) = scene_dir();
+    let view = View::start(&scene, &[]);
+    let own = format!("127.0.0.1:{}", view.port);
+    wait_status(view.port, "the converged image", |s| s["samples"] == 4);
+    let (_, body) = http(view.port, "GET", "/pick?x=80&y=60", &own, None);
+    let pick: Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(pick["prim"], "/World/Balls/Center");
+    let shares = pick["shares"]["layers"].as_array().expect("shares");
+    let slots: Vec<&str> = shares.iter().map(|l| l["slot"].as_str().unwrap()).collect();
+    assert_eq!(slots, ["000", "050"], "{pick}");
+    let total: f64 = shares.iter().map(|l| l["share"].as_f64().unwrap()).sum::<f64>()
+        + pick["shares"]["transparent"].as_f64().unwrap();
+    assert!((total - 1.0).abs() < 1e-5, "shares sum to {total}");
+    assert!(shares.iter().all(|l| (0.0..=1.0).contains(&l["share"].as_f64().unwrap())));
+
+    let status = wait_status(view.port, "the selection", |s| s["selected"] == "/World/Balls/Center");
+    for layer in ["CryptoObject", "CryptoMaterial"] {
+        let channel = format!("matte:{layer}");
+        assert!(status["channels"].as_array().unwrap().iter().any(|c| c == &channel), "{status}");
+        let (code, png) = http(view.port, "GET", &format!("/frame.png?channel={channel}"), &own, None);
+        assert_eq!(code, 200);
+        let decoder = png::Decoder::new(std::io::Cursor::new(png));
+        let mut reader = decoder.read_info().unwrap();
+        let mut pixels = vec![0; reader.output_buffer_size().unwrap()];
+        reader.next_frame(&mut pixels).unwrap();
+        let at = |x: usize, y: usize| pixels[(y * 160 + x) * 3];
+        assert_eq!(at(80, 60), 255, "{layer}: the picked pixel is covered");
+        assert_eq!(at(0, 0), 0, "{layer}: the corner is not the ball");
+    }
+
+    // Frame the selection: the ball then spans much of the image's height, whole. (Edge pixels
+    // average ball and background positions, so the framed bounds are loose: about half.)
+    let covered = |port: u16| {
+        let (_, png) = http(port, "GET", "/frame.png?channel=matte:CryptoObject", &own, None);
+        let mut reader = png::Decoder::new(std::io::Cursor::new(png)).read_info().unwrap();
+        let mut pixels = vec![0; reader.output_buffer_size().unwrap()];
+        reader.next_frame(&mut pixels).unwrap();
+        // Covered pixels, and the rows they span.
+        let rows: Vec<usize> =
+            pixels.chunks(3).enumerate().filter(|(_, p)| p[0] == 255).map(|(i, _)| i / 160).collect();
+        (rows.len(), rows.iter().max().unwrap_or(&0) - rows.iter().min().unwrap_or(&0))
+    };
+    let before = covered(view.port);
+    let generation = wait_status(view.port, "the status", |_| true)["generation"].as_u64().unwrap();
+    assert_eq!(http(view.port, "POST", "/camera/frame", &own, None).0, 204);
+    wait_status(view.port, "the framed image", |s| {
+        s["samples"] == 4 && s["generation"].as_u64() > Some(generation + 1)
+    });
+    let after = covered(view.port);
+    assert!(after.0 > 2 * before.0, "framing grew the ball from {before:?} to {after:?} (pixels, rows)");
+    assert!(after.1 >= 50 && after.1 < 119, "the ball spans much of the image's 120 rows, not all: {after:?}");
+}
+
 /// The value usd-core composes for `attribute` (`PATH.NAME`, or `PATH.NAME[i]` for a
 /// component) with `layer` sublayered above `scene`; `None` (printed) where no Python with
 /// usd-core is found outside CI. `STRATA_USD_PYTHON` names the interpreter (default `python3`).

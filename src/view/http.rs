@@ -14,6 +14,7 @@
 //! | `POST /camera/select` | the Camera prim to look through (empty: the starting camera) |
 //! | `POST /input` | set a material input in memory: `{"prim", "input", "type", "value"}` |
 //! | `POST /slots` | mute or solo slots in memory: `{"muted": [..], "solo": null}` |
+//! | `POST /camera/frame` | frame the picked prim |
 //! | `POST /look/write` | write the input edits as an override layer beside the scene: `{"path"}` |
 
 use super::Shared;
@@ -51,6 +52,7 @@ pub(crate) fn serve(listener: std::net::TcpListener, address: SocketAddr, shared
             .route("/pick", get(pick))
             .route("/camera", post(camera))
             .route("/camera/select", post(select_camera))
+            .route("/camera/frame", post(frame_selected))
             .route("/input", post(set_input))
             .route("/slots", post(set_slots))
             .route("/look/write", post(write_look))
@@ -108,7 +110,14 @@ async fn status(State(shared): State<Arc<Shared>>, Query(q): Query<After>) -> Re
             "height": p.height,
             "image_width": image_width,
             "image_height": image_height,
-            "channels": p.image.as_ref().map(|i| encode::groups(i)).unwrap_or_default(),
+            "channels": p.image.as_ref().map(|i| {
+                let mut groups = encode::groups(i);
+                if p.selected.is_some() && p.samples > 0 {
+                    groups.extend(["CryptoObject", "CryptoMaterial"].map(|l| format!("{}{l}", encode::MATTE)));
+                }
+                groups
+            }).unwrap_or_default(),
+            "selected": p.selected.as_ref().map(|(prim, _)| prim),
             "diagnostics": p.diagnostics,
             "failed": p.failed,
             "edits": p.edits,
@@ -133,11 +142,17 @@ struct Channel {
 }
 
 async fn frame(State(shared): State<Arc<Shared>>, Query(q): Query<Channel>) -> Response {
-    let Some(image) = shared.snapshot(|p| p.image.clone()) else {
+    let Some((image, selected)) = shared.snapshot(|p| p.image.clone().map(|i| (i, p.selected.clone()))) else {
         return (StatusCode::NOT_FOUND, "no image yet\n").into_response();
     };
     let group = q.channel.unwrap_or_else(|| encode::BEAUTY.to_string());
-    match tokio::task::spawn_blocking(move || encode::png(&image, &group)).await {
+    let encode = move || match (group.strip_prefix(encode::MATTE), selected) {
+        (Some("CryptoObject"), Some((prim, _))) => encode::matte(&image, "CryptoObject", &prim),
+        (Some("CryptoMaterial"), Some((_, material))) => encode::matte(&image, "CryptoMaterial", &material),
+        (Some(_), _) => None,
+        (None, _) => encode::png(&image, &group),
+    };
+    match tokio::task::spawn_blocking(encode).await {
         Ok(Some(bytes)) => with_type(bytes, "image/png"),
         _ => (StatusCode::NOT_FOUND, "no such channel\n").into_response(),
     }
@@ -173,6 +188,11 @@ async fn camera(State(shared): State<Arc<Shared>>, body: String) -> Response {
 async fn select_camera(State(shared): State<Arc<Shared>>, body: String) -> Response {
     let path = body.trim();
     let _ = shared.commands.send(Command::SelectCamera((!path.is_empty()).then(|| path.to_string())));
+    StatusCode::NO_CONTENT.into_response()
+}
+
+async fn frame_selected(State(shared): State<Arc<Shared>>) -> Response {
+    let _ = shared.commands.send(Command::FrameSelected);
     StatusCode::NO_CONTENT.into_response()
 }
 

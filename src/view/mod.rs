@@ -106,6 +106,8 @@ pub(crate) struct Published {
     pub solo: Option<String>,
     /// Inputs set from the page so far (what an override layer would write).
     pub look_inputs: usize,
+    /// The last picked prim and its material's name (its Cryptomatte mattes can be shown).
+    pub selected: Option<(String, String)>,
     /// Camera samples per second of the passes since the last restart (bands and merges).
     pub samples_per_second: Option<f64>,
 }

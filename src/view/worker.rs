@@ -45,8 +45,20 @@ pub(crate) enum Command {
     SetInput { change: Change, at: Instant },
     /// Mute or solo slots (in memory).
     Slots(SlotFilter),
+    /// Dolly and turn nothing, so the picked prim fills the view.
+    FrameSelected,
     /// Write the input edits as an override layer; the answer is JSON.
     WriteLook { reply: tokio::sync::oneshot::Sender<Result<String, String>> },
+}
+
+impl Command {
+    /// The (prim, attribute) an input edit sets.
+    fn edited_input(&self) -> Option<(&str, &str)> {
+        match self {
+            Command::SetInput { change: Change::Value { prim, attribute, .. }, .. } => Some((prim, attribute)),
+            _ => None,
+        }
+    }
 }
 
 /// The render thread's state. See the module documentation.
@@ -155,8 +167,20 @@ impl Worker {
             };
             let mut edits = Edits::default();
             let mut restart = false;
-            for command in first.into_iter().chain(std::iter::from_fn(|| commands.try_recv().ok())) {
-                restart |= self.handle(command, &mut edits);
+            let batch: Vec<Command> =
+                first.into_iter().chain(std::iter::from_fn(|| commands.try_recv().ok())).collect();
+            // A dragged slider sends a value per mouse move: only the last of each input recompiles.
+            let last_edit: std::collections::HashMap<(&str, &str), usize> =
+                batch.iter().enumerate().filter_map(|(i, c)| c.edited_input().map(|key| (key, i))).collect();
+            let keep: Vec<bool> = batch
+                .iter()
+                .enumerate()
+                .map(|(i, c)| c.edited_input().is_none_or(|key| last_edit[&key] == i))
+                .collect();
+            for (command, keep) in batch.into_iter().zip(keep) {
+                if keep {
+                    restart |= self.handle(command, &mut edits);
+                }
             }
             // One save is several events (truncate, write, close): wait until they stop.
             if !edits.files.is_empty() {
@@ -234,6 +258,7 @@ impl Worker {
                 applied
             }
             Command::Slots(filter) => self.look_edit(|session| session.set_slot_filter(filter).failed),
+            Command::FrameSelected => self.frame_selected(),
             Command::WriteLook { reply } => {
                 let _ = reply.send(self.write_look());
                 false
@@ -245,6 +270,13 @@ impl Worker {
     /// A failed one shows its diagnostics and keeps the image.
     fn look_edit(&mut self, edit: impl FnOnce(&mut Session) -> bool) -> bool {
         let failed = edit(&mut self.session) || self.session.diagnostics().has_errors();
+        self.settle_edit(failed)
+    }
+
+    /// Counts an applied edit and publishes its diagnostics; a failed one is shown at once
+    /// over the last good image, a good one with its first image ([`Worker::preview`]).
+    /// Whether the image must be rendered again.
+    fn settle_edit(&mut self, failed: bool) -> bool {
         let diags = self.session.take_diagnostics();
         self.diagnostics = diags.render(self.session.sources());
         self.failed = failed;
@@ -259,6 +291,34 @@ impl Worker {
             });
         }
         !failed
+    }
+
+    /// Frames the picked prim: the bounds of the positions (`P`) of the pixels of the last
+    /// full image whose most-covering prim (Cryptomatte rank 0) it is, the visible part of it.
+    fn frame_selected(&mut self) -> bool {
+        let (Some((prim, _)), Some(image)) = (self.shared.snapshot(|p| p.selected.clone()), &self.image) else {
+            return false;
+        };
+        let id = crate::render::film::cryptomatte::id_bits(&prim);
+        let rank0 = crate::render::film::cryptomatte::channel_names("CryptoObject");
+        let planes = ["P.R", "P.G", "P.B", &rank0[0]].map(|n| image.f32_channel(n));
+        let [Some(x), Some(y), Some(z), Some(ids)] = planes else { return false };
+        let mut bounds = (glam::Vec3::splat(f32::INFINITY), glam::Vec3::splat(f32::NEG_INFINITY));
+        for i in (0..ids.len()).filter(|&i| ids[i].to_bits() == id) {
+            let p = glam::Vec3::new(x[i], y[i], z[i]);
+            if p.is_finite() {
+                bounds = (bounds.0.min(p), bounds.1.max(p));
+            }
+        }
+        let Some(camera) = self.session.scene().map(|s| s.camera) else { return false };
+        if bounds.0.cmpgt(bounds.1).any() {
+            return false;
+        }
+        let (centre, radius) = ((bounds.0 + bounds.1) * 0.5, ((bounds.1 - bounds.0).length() * 0.5).max(1e-4));
+        let aspect = self.settings.width as f32 / self.settings.height as f32;
+        let framed = self.orbit.frame(&camera, centre, radius, aspect);
+        self.session.set_camera(framed);
+        true
     }
 
     /// Publishes the slots that can be muted, the filter and the number of input edits.
@@ -340,22 +400,9 @@ impl Worker {
         if !related {
             return false;
         }
-        let diags = self.session.take_diagnostics();
-        self.diagnostics = diags.render(self.session.sources());
-        self.failed = failed;
-        self.edits += 1;
         // An edit may have made the scene read new files (an import, a sublayer, a texture).
         self.watch(watcher);
-        self.publish_look();
-        if failed {
-            let (text, edits) = (self.diagnostics.clone(), self.edits);
-            self.shared.publish(|p| {
-                p.diagnostics = text;
-                p.failed = true;
-                p.edits = edits;
-            });
-        }
-        !failed
+        self.settle_edit(failed)
     }
 
     /// Looks through `path` (a Camera prim, or the starting camera for `None`).
@@ -410,12 +457,14 @@ impl Worker {
     /// channel values of the last image.
     fn pick(&self, x: usize, y: usize) -> String {
         let (w, h) = (self.settings.width, self.settings.height);
+        let mut shares = None;
         let prim = self.session.scene().and_then(|scene| {
             let camera = scene.camera.with_aspect(w as f32 / h as f32);
             let film = glam::Vec2::new((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32);
             let ray = camera.ray(film, glam::Vec2::splat(0.5));
             let hit = scene.accel.intersect(ray.o, ray.d, ray.tmin, ray.tmax)?;
             let prim = scene.accel.prim_of(&hit) as usize;
+            shares = self.pick_shares(scene, ray.o, ray.d, &hit);
             scene.prims.get(prim).map(|p| p.path.clone())
         });
         let stack = prim.as_ref().and_then(|prim| {
@@ -438,7 +487,51 @@ impl Worker {
             }
         }
         let layers = stack.and_then(|s| s.get(0).and_then(|p| p.get("layers")).cloned());
+        let selected = prim.as_ref().map(|prim| {
+            let compiled = self.session.compiled();
+            let material = compiled.and_then(|c| c.material_names.get(*c.prim_material.get(prim)?)).cloned();
+            (prim.clone(), material.unwrap_or_default())
+        });
+        self.shared.publish(|p| p.selected = selected);
         let inputs = prim.as_deref().map(|prim| look::inputs_json(&self.session, prim));
-        json!({ "x": x, "y": y, "prim": prim, "layers": layers, "inputs": inputs, "channels": channels }).to_string()
+        json!({ "x": x, "y": y, "prim": prim, "layers": layers, "inputs": inputs, "shares": shares, "channels": channels })
+            .to_string()
+    }
+
+    /// Each layer's share of the pick (DESIGN.md rule 5) at the surface under the pixel's
+    /// centre — the probability the sample counts there estimate — and the transparency:
+    /// through the integrator's own [`crate::render::integrator::shading_state`].
+    fn pick_shares(
+        &self,
+        scene: &crate::render::Scene,
+        o: glam::Vec3,
+        d: glam::Vec3,
+        hit: &crate::render::geometry::accel::Hit,
+    ) -> Option<serde_json::Value> {
+        let g = scene.accel.surface(o, d, hit);
+        let material = self.session.compiled()?.materials.get(*scene.prim_material.get(g.prim as usize)?)?.clone();
+        let info = material.info();
+        let slots = scene.primvars.slots(&info.primvars);
+        let mut primvars = vec![0.0; info.primvar_floats];
+        if !slots.is_empty() {
+            scene.primvars.fill(g.primvars, g.bary, &slots, &mut primvars);
+        }
+        let facing = |n: glam::Vec3| if n.dot(d) > 0.0 { -n } else { n };
+        let globals = crate::abi::Globals {
+            p: g.p.to_array(),
+            n: facing(g.ns).to_array(),
+            ng: facing(g.ng).to_array(),
+            i: d.to_array(),
+            dpdu: g.dpdu.to_array(),
+            dpdv: g.dpdv.to_array(),
+            u: g.uv.x,
+            v: g.uv.y,
+            st_footprint: [0.0; 4],
+            primvars: crate::abi::PrimvarValues::new(&primvars),
+        };
+        let state = crate::render::integrator::shading_state(material.as_ref(), &globals).ok()?;
+        let layers: Vec<serde_json::Value> =
+            info.layers.iter().zip(&state.weights).map(|(l, w)| json!({ "slot": l.slot, "share": w })).collect();
+        Some(json!({ "layers": layers, "transparent": state.transparency }))
     }
 }
