@@ -180,6 +180,9 @@ enum Command {
         /// numbers each frame with its run of `#` (`shot.####.exr`).
         #[arg(long, value_name = "FIRST-LAST[xSTEP]", value_parser = cli::farm::Frames::parse)]
         frames: Option<cli::farm::Frames>,
+        /// Also send the image to the tev viewer listening at HOST:PORT (its TCP protocol).
+        #[arg(long, value_name = "HOST:PORT")]
+        display_server: Option<String>,
     },
     /// Merge partial EXRs (`strata render --samples`/`--tile`) into the EXR and PNG one run
     /// writes, bit for bit; refuses parts of other renders, overlapping or missing parts.
@@ -230,6 +233,9 @@ enum Command {
         /// The time code to read animated attributes at (as `render --time`).
         #[arg(long, value_name = "TIME")]
         time: Option<strata::scene::TimeCode>,
+        /// Also send each full-resolution pass to the tev viewer at HOST:PORT.
+        #[arg(long, value_name = "HOST:PORT")]
+        display_server: Option<String>,
     },
     /// Measure shading and rendering cost: JIT vs interpreter vs hand-written Rust, compile
     /// time vs graph size, render time and error vs layer count.
@@ -528,6 +534,7 @@ fn main() -> ExitCode {
             checkpoint,
             resume,
             frames,
+            display_server,
         } => cli::render(&cli::RenderArgs {
             scene,
             output,
@@ -566,6 +573,7 @@ fn main() -> ExitCode {
             checkpoint,
             resume,
             frames,
+            display_server,
         }),
         Command::Merge { output, parts, frame } => cli::farm::merge(&output, &parts, frame),
         Command::Farm { scheduler } => {
@@ -584,21 +592,24 @@ fn main() -> ExitCode {
                 (Ok(job), None) => cli::farm::farm_openjd(job),
             }
         }
-        Command::View { scene, port, bind, spp, res, camera, seed, time } => cli::view(strata::view::ViewOptions {
-            scene: strata::session::SceneSource::from_path(scene.as_deref()),
-            session: strata::session::SessionOptions { time, ..Default::default() },
-            settings: RenderSettings {
-                width: res.map_or(640, |r| r.0),
-                height: res.map_or(480, |r| r.1),
-                spp,
-                seed,
-                ..RenderSettings::default()
-            },
-            resolution_given: res.is_some(),
-            scene_options: strata::render::scene::SceneOptions { camera, ..Default::default() },
-            bind,
-            port,
-        }),
+        Command::View { scene, port, bind, spp, res, camera, seed, time, display_server } => {
+            cli::view(strata::view::ViewOptions {
+                scene: strata::session::SceneSource::from_path(scene.as_deref()),
+                session: strata::session::SessionOptions { time, ..Default::default() },
+                settings: RenderSettings {
+                    width: res.map_or(640, |r| r.0),
+                    height: res.map_or(480, |r| r.1),
+                    spp,
+                    seed,
+                    ..RenderSettings::default()
+                },
+                resolution_given: res.is_some(),
+                scene_options: strata::render::scene::SceneOptions { camera, ..Default::default() },
+                bind,
+                port,
+                display_server,
+            })
+        }
         Command::Compile { file, output } => cli::compile(&file, &output),
         Command::Bench { what } => {
             let report = match what {

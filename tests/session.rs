@@ -4,6 +4,7 @@
 //! fresh on the changed files.
 
 use std::path::{Path, PathBuf};
+use strata::compose::slots::SlotFilter;
 use strata::render::scene::SceneOptions;
 use strata::render::{Image, Region, RenderSettings, Window, WindowSums};
 use strata::scene::Value;
@@ -153,6 +154,52 @@ fn an_input_value_set_in_memory_renders_as_if_authored() {
         "uniform token info:strata:sourceAsset:subIdentifier = \"brushed_metal\"\n            float inputs:roughness = 0.6",
     );
     assert!(render(&mut session) == render(&mut prepared(&scene)));
+}
+
+/// Muting a slot in memory renders what the scene renders with that slot's bindings
+/// removed from the file; soloing renders the slot alone where it is bound; clearing the
+/// filter renders the original image bit for bit. The files are never touched.
+#[test]
+fn muted_and_soloed_slots_render_as_if_unbound() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = split_default_scene(dir.path());
+    let text = std::fs::read_to_string(&scene).unwrap();
+    let mut session = prepared(&scene);
+    let original = render(&mut session);
+
+    let muted = SlotFilter { muted: ["050".to_string()].into(), solo: None };
+    let report = session.set_slot_filter(muted);
+    assert!(!report.failed && !report.geometry_rebuilt && report.recompiled > 0, "{report:?}");
+    let without_dirt = render(&mut session);
+    assert_ne!(without_dirt, original, "muting the dirt shows");
+    // The oracle: the dirt bindings (and their override) deleted from the layer, opened fresh.
+    edit(&scene, "rel material:slotBinding:_050 = </Looks/Dirt>", "");
+    edit(&scene, "rel material:slotBinding:_050:_:_010 = </Looks/DirtMarker>", "");
+    assert!(without_dirt == render(&mut prepared(&scene)), "muted == unbound in the file");
+    std::fs::write(&scene, &text).unwrap();
+
+    // Solo the dirt: where it is bound it is the only layer.
+    session.set_slot_filter(SlotFilter { muted: Default::default(), solo: Some("050".into()) });
+    let solo = render(&mut session);
+    edit(&scene, "rel material:slotBinding:_000 = </Looks/Metal>", "");
+    edit(&scene, "rel material:slotBinding:_000:_:_010 = </Looks/RedPaint>", "");
+    edit(
+        &scene,
+        "def Xform \"Balls\"\n    {",
+        "def Xform \"Balls\"\n    {\n        rel material:slotBinding:_000 = None",
+    );
+    edit(
+        &scene,
+        "rel material:slotBinding:_050 = None",
+        "rel material:slotBinding:_000 = </Looks/Clay>\n            rel material:slotBinding:_050 = None",
+    );
+    assert!(solo == render(&mut prepared(&scene)), "solo == the other slots unbound where the slot is");
+    std::fs::write(&scene, &text).unwrap();
+
+    let report = session.set_slot_filter(SlotFilter::default());
+    assert!(!report.failed);
+    assert!(render(&mut session) == original, "unmuting restores the image bit for bit");
+    assert_eq!(std::fs::read_to_string(&scene).unwrap(), text);
 }
 
 /// A 4x4 RGB PNG of one colour.

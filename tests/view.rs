@@ -19,7 +19,11 @@ use strata::session::{Pass, SceneSource, Session, SessionOptions};
 use strata::view::progressive::{Accumulator, sample_ranges};
 
 fn prepared(settings: &RenderSettings) -> Session {
-    let mut session = Session::open(SceneSource::Default, SessionOptions::default());
+    prepared_from(SceneSource::Default, settings)
+}
+
+fn prepared_from(source: SceneSource, settings: &RenderSettings) -> Session {
+    let mut session = Session::open(source, SessionOptions::default());
     let options = SceneOptions {
         dicing: DicingOptions { resolution: (settings.width, settings.height), ..DicingOptions::default() },
         ..SceneOptions::default()
@@ -310,26 +314,21 @@ fn converged_image(edits: u64) -> String {
     )
 }
 
-#[test]
-fn the_page_renders_inspects_and_follows_edits_in_chromium() {
-    let (chromium, chromedriver) = match browser() {
-        Ok(found) => found,
+/// Chromium with its driver, or `None` (with the reason printed) where they are missing
+/// outside CI.
+fn browser_or_skip() -> Option<Browser> {
+    match browser() {
+        Ok((chromium, chromedriver)) => Some(Browser::start(&chromium, &chromedriver)),
         Err(reason) if std::env::var_os("CI").is_none() => {
             eprintln!("skipped: {reason}");
-            return;
+            None
         }
         Err(reason) => panic!("CI must install the browser: {reason}"),
-    };
-    let (dir, scene) = scene_dir();
-    let view = View::start(&scene, &[]);
-    let browser = Browser::start(&chromium, &chromedriver);
-    browser.session_call("POST", "/url", Some(json!({ "url": view.url })));
+    }
+}
 
-    // The image appears and converges.
-    let first = browser.wait_for("the converged image", &converged_image(0));
-    assert!(first.as_str().unwrap().starts_with("160x120:"), "{first}");
-
-    // A click in the middle of the image, on the centre ball, shows its slot stack.
+/// A real mouse click in the middle of the image (on the default scene's centre ball).
+fn click_centre(browser: &Browser) {
     let centre = browser.script(
         "const r = document.getElementById('frame').getBoundingClientRect();
          return [Math.round(r.left + r.width / 2), Math.round(r.top + r.height / 2)];",
@@ -341,6 +340,21 @@ fn the_page_renders_inspects_and_follows_edits_in_chromium() {
         ] }] });
     let clicked = browser.session_call("POST", "/actions", Some(click));
     assert!(clicked.is_null(), "the click failed: {clicked}");
+}
+
+#[test]
+fn the_page_renders_inspects_and_follows_edits_in_chromium() {
+    let Some(browser) = browser_or_skip() else { return };
+    let (dir, scene) = scene_dir();
+    let view = View::start(&scene, &[]);
+    browser.session_call("POST", "/url", Some(json!({ "url": view.url })));
+
+    // The image appears and converges.
+    let first = browser.wait_for("the converged image", &converged_image(0));
+    assert!(first.as_str().unwrap().starts_with("160x120:"), "{first}");
+
+    // A click in the middle of the image, on the centre ball, shows its slot stack.
+    click_centre(&browser);
     let stack = browser.wait_for(
         "the inspector",
         "const t = document.getElementById('pick-stack'); const p = document.getElementById('pick-prim');
@@ -395,6 +409,218 @@ fn the_page_renders_inspects_and_follows_edits_in_chromium() {
     }
 }
 
+/// Look edits from the page, in Chromium: muting the dirt slot changes the image and
+/// unmuting brings the original back bit for bit; the inspector lists the centre ball's
+/// inputs, and moving the dirt's coverage slider changes the image; the edit is written as an
+/// override layer that usd-core reads. Prints the input-edit-to-image time.
+#[test]
+fn look_edits_from_the_page_change_the_image_and_undo_bit_for_bit() {
+    let Some(browser) = browser_or_skip() else { return };
+    let (_dir, scene) = scene_dir();
+    let view = View::start(&scene, &[]);
+    browser.session_call("POST", "/url", Some(json!({ "url": view.url })));
+    let first = browser.wait_for("the converged image", &converged_image(0));
+
+    // Mute the dirt slot (`050`, scene-wide), then unmute it.
+    let toggle =
+        "const b = document.querySelector('[data-mute=\"050\"]'); if (!b) return null; b.click(); return true;";
+    browser.wait_for("the mute checkbox", toggle);
+    let muted = browser.wait_for("the muted image", &converged_image(1));
+    assert_ne!(muted, first, "muting the dirt did not change the image");
+    assert_eq!(browser.script("return document.getElementById('slots').dataset.muted;"), "050");
+    browser.wait_for("the mute checkbox", toggle);
+    let unmuted = browser.wait_for("the unmuted image", &converged_image(2));
+    assert_eq!(unmuted, first, "unmuting did not restore the original image bit for bit");
+
+    // The inspector lists the inputs of the centre ball's layers; the paint override drives
+    // the clay's colour, the dirt's coverage has a slider.
+    click_centre(&browser);
+    let inputs = browser
+        .wait_for("the inputs", "const t = document.getElementById('pick-inputs'); return t ? t.innerText : null;");
+    let inputs = inputs.as_str().unwrap();
+    assert!(inputs.contains("/Looks/Dirt") && inputs.contains("coverage"), "{inputs}");
+    assert!(inputs.contains("driven by /Looks/RedPaint"), "{inputs}");
+    let slide = "const s = [...document.querySelectorAll('input[type=range]')]
+                   .find((e) => e.dataset.input === '/Looks/Dirt.coverage');
+                 if (!s) return null;
+                 s.value = 0.25; s.dispatchEvent(new Event('change')); return true;";
+    let moved = Instant::now();
+    browser.wait_for("the coverage slider", slide);
+    browser
+        .wait_for("the edit's preview", "return Number(document.getElementById('frame').dataset.edits) >= 3 || null;");
+    let seen_ms = moved.elapsed().as_secs_f64() * 1e3;
+    let edited = browser.wait_for("the edited image", &converged_image(3));
+    assert_ne!(edited, first, "the coverage edit did not change the image");
+    let reported = browser.script("return document.getElementById('update').textContent;");
+    eprintln!("input edit → page saw the preview: {seen_ms:.0} ms (load {}); view reports: {reported}", load());
+
+    // Written as an override layer beside the scene; the scene file is untouched.
+    let original = std::fs::read_to_string(&scene).unwrap();
+    browser.script("document.getElementById('write-look').click(); return true;");
+    let written = browser.wait_for(
+        "the override layer",
+        "const o = document.getElementById('look-written'); return o.dataset.ok === 'true' ? o.textContent : null;",
+    );
+    let path = PathBuf::from(written.as_str().unwrap().strip_prefix("wrote ").expect("a path"));
+    assert_eq!(path.file_name().unwrap(), "default.look.usda");
+    assert_eq!(std::fs::read_to_string(&scene).unwrap(), original);
+    if let Some(value) = usd_value(&path, &scene, "/Looks/Dirt/Surface.inputs:coverage") {
+        assert!((value - 0.25).abs() < 1e-6, "usd-core reads {value}");
+    }
+}
+
+/// An input set over HTTP renders, in a session opened on the written override layer
+/// sublayered above the scene, what the view's session renders after the same
+/// `Change::Value`, bit for bit; usd-core reads the value from that layer stack.
+#[test]
+fn an_override_layer_holds_the_input_edits_as_usd_reads_them() {
+    let (dir, scene) = scene_dir();
+    let view = View::start(&scene, &[]);
+    let own = format!("127.0.0.1:{}", view.port);
+    let (status, _) = http(view.port, "POST", "/look/write", &own, None);
+    assert_eq!(status, 409, "nothing to write before an edit");
+    let edit = r#"{"prim": "/Looks/Dirt/Surface", "input": "dirt_color", "type": "color", "value": [0.1, 0.3, 0.6]}"#;
+    assert_eq!(http(view.port, "POST", "/input", &own, Some(edit)).0, 204);
+    let bad = r#"{"prim": "/Looks/Dirt/Surface", "input": "coverage", "type": "float", "value": "lots"}"#;
+    assert_eq!(http(view.port, "POST", "/input", &own, Some(bad)).0, 400);
+    // The edit is applied before the layer is written (commands are handled in order).
+    let (status, body) = http(view.port, "POST", "/look/write", &own, None);
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+    let answer: Value = serde_json::from_slice(&body).unwrap();
+    let layer = PathBuf::from(answer["path"].as_str().unwrap());
+    let text = std::fs::read_to_string(&layer).unwrap();
+    assert!(
+        text.contains("over \"Surface\"") && text.contains("color3f inputs:dirt_color = (0.1, 0.3, 0.6)"),
+        "{text}"
+    );
+
+    let root = dir.path().join("root.usda");
+    std::fs::write(
+        &root,
+        "#usda 1.0\n(\n    defaultPrim = \"World\"\n    subLayers = [@./default.look.usda@, @./default.usda@]\n)\n",
+    )
+    .unwrap();
+    let settings = RenderSettings { width: 48, height: 36, spp: 2, seed: 5, ..RenderSettings::default() };
+    let mut authored = prepared_from(SceneSource::File(root), &settings);
+    let mut edited = prepared_from(SceneSource::File(scene.clone()), &settings);
+    let report = edited.apply_change(&strata::session::Change::Value {
+        prim: "/Looks/Dirt/Surface".into(),
+        attribute: "inputs:dirt_color".into(),
+        type_name: "color3f".into(),
+        value: strata::scene::Value::Tuple(vec![0.1, 0.3, 0.6]),
+    });
+    assert!(!report.failed && report.recompiled > 0, "{report:?}");
+    let (a, _) = authored.render(&Pass::full(settings.clone()), None).unwrap();
+    let (b, _) = edited.render(&Pass::full(settings.clone()), None).unwrap();
+    let (c, _) =
+        prepared_from(SceneSource::File(scene.clone()), &settings).render(&Pass::full(settings), None).unwrap();
+    assert!(a == b, "the layer renders as the in-memory edit, bit for bit");
+    assert!(a != c, "the edit shows");
+    if let Some(green) = usd_value(&layer, &scene, "/Looks/Dirt/Surface.inputs:dirt_color[1]") {
+        assert!((green - 0.3).abs() < 1e-6, "usd-core reads {green}");
+    }
+}
+
+/// The view's status once `done` holds for it (long polls).
+fn wait_status(port: u16, what: &str, done: impl Fn(&Value) -> bool) -> Value {
+    let own = format!("127.0.0.1:{port}");
+    let deadline = Instant::now() + Duration::from_secs(180);
+    let mut after = 0;
+    loop {
+        let (_, body) = http(port, "GET", &format!("/status?after={after}"), &own, None);
+        let status: Value = serde_json::from_slice(&body).expect("status JSON");
+        if done(&status) {
+            return status;
+        }
+        assert!(Instant::now() < deadline, "timed out waiting for {what}: {status}");
+        after = status["generation"].as_u64().unwrap_or(0);
+    }
+}
+
+/// A pick gives each layer's share of the rule-5 pick at that pixel (summing to one with the
+/// transparency, over the slots of the prim's stack), and selects the prim: the channel list
+/// gains its Cryptomatte mattes, which cover the picked pixel fully and the background not.
+#[test]
+fn a_pick_gives_layer_shares_and_the_selections_mattes() {
+    let (_dir, scene) = scene_dir();
+    let view = View::start(&scene, &[]);
+    let own = format!("127.0.0.1:{}", view.port);
+    wait_status(view.port, "the converged image", |s| s["samples"] == 4);
+    let (_, body) = http(view.port, "GET", "/pick?x=80&y=60", &own, None);
+    let pick: Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(pick["prim"], "/World/Balls/Center");
+    let shares = pick["shares"]["layers"].as_array().expect("shares");
+    let slots: Vec<&str> = shares.iter().map(|l| l["slot"].as_str().unwrap()).collect();
+    assert_eq!(slots, ["000", "050"], "{pick}");
+    let total: f64 = shares.iter().map(|l| l["share"].as_f64().unwrap()).sum::<f64>()
+        + pick["shares"]["transparent"].as_f64().unwrap();
+    assert!((total - 1.0).abs() < 1e-5, "shares sum to {total}");
+    assert!(shares.iter().all(|l| (0.0..=1.0).contains(&l["share"].as_f64().unwrap())));
+
+    let status = wait_status(view.port, "the selection", |s| s["selected"] == "/World/Balls/Center");
+    for layer in ["CryptoObject", "CryptoMaterial"] {
+        let channel = format!("matte:{layer}");
+        assert!(status["channels"].as_array().unwrap().iter().any(|c| c == &channel), "{status}");
+        let (code, png) = http(view.port, "GET", &format!("/frame.png?channel={channel}"), &own, None);
+        assert_eq!(code, 200);
+        let decoder = png::Decoder::new(std::io::Cursor::new(png));
+        let mut reader = decoder.read_info().unwrap();
+        let mut pixels = vec![0; reader.output_buffer_size().unwrap()];
+        reader.next_frame(&mut pixels).unwrap();
+        let at = |x: usize, y: usize| pixels[(y * 160 + x) * 3];
+        assert_eq!(at(80, 60), 255, "{layer}: the picked pixel is covered");
+        assert_eq!(at(0, 0), 0, "{layer}: the corner is not the ball");
+    }
+
+    // Frame the selection: the ball then spans much of the image's height, whole. (Edge pixels
+    // average ball and background positions, so the framed bounds are loose: about half.)
+    let covered = |port: u16| {
+        let (_, png) = http(port, "GET", "/frame.png?channel=matte:CryptoObject", &own, None);
+        let mut reader = png::Decoder::new(std::io::Cursor::new(png)).read_info().unwrap();
+        let mut pixels = vec![0; reader.output_buffer_size().unwrap()];
+        reader.next_frame(&mut pixels).unwrap();
+        // Covered pixels, and the rows they span.
+        let rows: Vec<usize> =
+            pixels.chunks(3).enumerate().filter(|(_, p)| p[0] == 255).map(|(i, _)| i / 160).collect();
+        (rows.len(), rows.iter().max().unwrap_or(&0) - rows.iter().min().unwrap_or(&0))
+    };
+    let before = covered(view.port);
+    let generation = wait_status(view.port, "the status", |_| true)["generation"].as_u64().unwrap();
+    assert_eq!(http(view.port, "POST", "/camera/frame", &own, None).0, 204);
+    wait_status(view.port, "the framed image", |s| {
+        s["samples"] == 4 && s["generation"].as_u64() > Some(generation + 1)
+    });
+    let after = covered(view.port);
+    assert!(after.0 > 2 * before.0, "framing grew the ball from {before:?} to {after:?} (pixels, rows)");
+    assert!(after.1 >= 50 && after.1 < 119, "the ball spans much of the image's 120 rows, not all: {after:?}");
+}
+
+/// The value usd-core composes for `attribute` (`PATH.NAME`, or `PATH.NAME[i]` for a
+/// component) with `layer` sublayered above `scene`; `None` (printed) where no Python with
+/// usd-core is found outside CI. `STRATA_USD_PYTHON` names the interpreter (default `python3`).
+fn usd_value(layer: &Path, scene: &Path, attribute: &str) -> Option<f64> {
+    let python = std::env::var("STRATA_USD_PYTHON").unwrap_or_else(|_| "python3".into());
+    let has_usd = Command::new(&python).args(["-c", "import pxr.Usd"]).output().is_ok_and(|o| o.status.success());
+    if !has_usd {
+        let reason = format!("{python} cannot import usd-core's pxr (set STRATA_USD_PYTHON)");
+        assert!(std::env::var_os("CI").is_none(), "CI must install usd-core: {reason}");
+        eprintln!("skipped the usd-core check: {reason}");
+        return None;
+    }
+    let script = "import sys\nfrom pxr import Sdf, Usd\nlayer, scene, attr = sys.argv[1:]\n\
+        written = Sdf.Layer.FindOrOpen(layer)\n\
+        assert written.GetPrimAtPath('/Looks').specifier == Sdf.SpecifierOver\n\
+        root = Sdf.Layer.CreateAnonymous('.usda')\nroot.subLayerPaths = [layer, scene]\n\
+        path, _, index = attr.partition('[')\n\
+        stage = Usd.Stage.Open(root)\n\
+        value = stage.GetAttributeAtPath(path).Get()\n\
+        print(value[int(index[:-1])] if index else value)\n";
+    let out =
+        Command::new(&python).args(["-c", script]).args([layer, scene]).arg(attribute).output().expect("python runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    Some(String::from_utf8_lossy(&out.stdout).trim().parse().expect("a number"))
+}
+
 /// The slot and override rows `strata layers` composes for `prim`, as the inspector's table
 /// shows them (`slot<TAB>material<TAB>bound at`).
 fn expected_stack_rows(scene: &Path, prim: &str) -> Vec<String> {
@@ -442,4 +668,202 @@ fn base64_decode(text: &str) -> Vec<u8> {
             bytes.into_iter().take(c.len().saturating_sub(1))
         })
         .collect()
+}
+
+// ---- tev ----------------------------------------------------------------------------------
+
+/// A packet of tev's protocol as a test decodes it from the bytes (tev's `Ipc.h`: a u32
+/// length including itself, a type byte, bools as a byte, NUL-terminated strings,
+/// little-endian integers, f32 pixels).
+#[derive(Debug)]
+enum TevPacket {
+    Create { name: String, width: i32, height: i32, channels: Vec<String> },
+    Update { name: String, channels: Vec<String>, x: i32, y: i32, width: i32, height: i32, data: Vec<Vec<f32>> },
+}
+
+struct Reader<'a>(&'a [u8]);
+
+impl Reader<'_> {
+    fn take(&mut self, n: usize) -> &[u8] {
+        let (head, rest) = self.0.split_at(n);
+        self.0 = rest;
+        head
+    }
+    fn byte(&mut self) -> u8 {
+        self.take(1)[0]
+    }
+    fn i32(&mut self) -> i32 {
+        i32::from_le_bytes(self.take(4).try_into().unwrap())
+    }
+    fn i64(&mut self) -> i64 {
+        i64::from_le_bytes(self.take(8).try_into().unwrap())
+    }
+    fn text(&mut self) -> String {
+        let end = self.0.iter().position(|&b| b == 0).expect("a NUL-terminated string");
+        let s = String::from_utf8(self.take(end).to_vec()).unwrap();
+        self.take(1);
+        s
+    }
+}
+
+fn decode_tev(packet: &[u8]) -> TevPacket {
+    let mut r = Reader(packet);
+    let length = u32::from_le_bytes(r.take(4).try_into().unwrap()) as usize;
+    assert_eq!(length, packet.len());
+    match r.byte() {
+        4 => {
+            assert_eq!(r.byte(), 1, "grab focus on create");
+            let name = r.text();
+            let (width, height, n) = (r.i32(), r.i32(), r.i32());
+            let channels = (0..n).map(|_| r.text()).collect();
+            assert!(r.0.is_empty(), "trailing bytes in CreateImage");
+            TevPacket::Create { name, width, height, channels }
+        }
+        6 => {
+            r.byte();
+            let name = r.text();
+            let n = r.i32() as usize;
+            let channels: Vec<String> = (0..n).map(|_| r.text()).collect();
+            let (x, y, width, height) = (r.i32(), r.i32(), r.i32(), r.i32());
+            let offsets: Vec<i64> = (0..n).map(|_| r.i64()).collect();
+            let strides: Vec<i64> = (0..n).map(|_| r.i64()).collect();
+            let floats: Vec<f32> = r.0.chunks(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect();
+            let pixels = (width * height) as usize;
+            let data = (0..n)
+                .map(|c| (0..pixels).map(|p| floats[(offsets[c] + p as i64 * strides[c]) as usize]).collect())
+                .collect();
+            TevPacket::Update { name, channels, x, y, width, height, data }
+        }
+        other => panic!("unexpected packet type {other}"),
+    }
+}
+
+/// A stand-in for tev: accepts one connection and collects its packets until it closes.
+struct FakeTev {
+    address: String,
+    packets: std::sync::Arc<std::sync::Mutex<Vec<TevPacket>>>,
+    thread: std::thread::JoinHandle<()>,
+}
+
+impl FakeTev {
+    fn start() -> FakeTev {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let address = listener.local_addr().unwrap().to_string();
+        let packets = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let sink = packets.clone();
+        let thread = std::thread::spawn(move || {
+            let (mut stream, _) = listener.accept().expect("a connection");
+            let mut length = [0u8; 4];
+            while stream.read_exact(&mut length).is_ok() {
+                let mut packet = length.to_vec();
+                packet.resize(u32::from_le_bytes(length) as usize, 0);
+                stream.read_exact(&mut packet[4..]).expect("a whole packet");
+                sink.lock().unwrap().push(decode_tev(&packet));
+            }
+        });
+        FakeTev { address, packets, thread }
+    }
+
+    /// Rows received in updates so far.
+    fn rows(&self) -> i32 {
+        let packets = self.packets.lock().unwrap();
+        packets.iter().map(|p| if let TevPacket::Update { height, .. } = p { *height } else { 0 }).sum()
+    }
+
+    fn finish(self) -> Vec<TevPacket> {
+        self.thread.join().expect("the fake tev");
+        std::mem::take(&mut *self.packets.lock().unwrap())
+    }
+}
+
+/// The float channels of an EXR but Cryptomatte's, by name.
+fn exr_channels(path: &Path) -> std::collections::BTreeMap<String, Vec<f32>> {
+    let image = strata::render::film::output::read_exr(path).expect("the EXR reads back");
+    let mut out = std::collections::BTreeMap::new();
+    for c in &image.layer_data.channel_data.list {
+        if let exr::image::FlatSamples::F32(v) = &c.sample_data
+            && !c.name.to_string().starts_with("Crypto")
+        {
+            out.insert(c.name.to_string(), v.clone());
+        }
+    }
+    out
+}
+
+/// Checks that `packets` create a `width`×`height` image with the EXR's float channels and
+/// that the last update of each row holds the EXR's values, bit for bit.
+fn assert_tev_shows(packets: &[TevPacket], exr: &Path, width: i32, height: i32) {
+    let expected = exr_channels(exr);
+    let TevPacket::Create { name: created, width: w, height: h, channels } = &packets[0] else {
+        panic!("the first packet creates the image: {:?}", packets.first())
+    };
+    assert_eq!((*w, *h), (width, height));
+    let mut names = channels.clone();
+    names.sort();
+    assert_eq!(names, expected.keys().cloned().collect::<Vec<_>>(), "tev gets the EXR's float channels");
+    let mut shown: std::collections::BTreeMap<String, Vec<Option<f32>>> =
+        channels.iter().map(|c| (c.clone(), vec![None; (width * height) as usize])).collect();
+    for p in &packets[1..] {
+        let TevPacket::Update { name, channels, x, y, width: uw, height: uh, data } = p else { panic!("{p:?}") };
+        assert_eq!(name, created, "updates name the created image");
+        assert_eq!((*x, *uw), (0, width), "updates are bands of whole rows");
+        for (c, values) in channels.iter().zip(data) {
+            let target = shown.get_mut(c).expect("a created channel");
+            for (i, v) in values.iter().enumerate() {
+                target[(*y * width) as usize + i] = Some(*v);
+            }
+            assert_eq!(values.len(), (uw * uh) as usize);
+        }
+    }
+    for (name, values) in &expected {
+        let got: Vec<f32> = shown[name].iter().map(|v| v.expect("every pixel sent")).collect();
+        assert!(got.iter().zip(values).all(|(a, b)| a.to_bits() == b.to_bits()), "channel {name} differs");
+    }
+}
+
+/// `render --display-server` sends the image it writes to tev: one CreateImage of the
+/// right size and channels, then UpdateImage bands whose pixels are the EXR's bit for bit.
+#[test]
+fn render_sends_its_image_to_a_display_server() {
+    let tev = FakeTev::start();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("tev.exr");
+    let status = Command::new(env!("CARGO_BIN_EXE_strata"))
+        .args(["render", "--res", "24x16", "--spp", "2", "--display-server", &tev.address, "-o"])
+        .arg(&out)
+        .stdout(Stdio::null())
+        .status()
+        .expect("strata render runs");
+    assert!(status.success());
+    let packets = tev.finish();
+    assert!(matches!(&packets[0], TevPacket::Create { name, .. } if name == "tev.exr"), "{:?}", packets.first());
+    assert_tev_shows(&packets, &out, 24, 16);
+}
+
+/// `view --display-server` streams every full-resolution pass; the last one is `render`'s
+/// image at the same settings.
+#[test]
+fn the_view_streams_its_passes_to_a_display_server() {
+    let tev = FakeTev::start();
+    let (dir, scene) = scene_dir();
+    let view = View::start(&scene, &["--display-server", &tev.address]);
+    // Passes of 1, 2 and 4 samples: three full images of 120 rows.
+    let deadline = Instant::now() + Duration::from_secs(180);
+    while tev.rows() < 3 * 120 {
+        assert!(Instant::now() < deadline, "the view sent {} rows", tev.rows());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    drop(view);
+    let packets = tev.finish();
+    let out = dir.path().join("render.exr");
+    let status = Command::new(env!("CARGO_BIN_EXE_strata"))
+        .arg("render")
+        .arg(&scene)
+        .args(["--res", "160x120", "--spp", "4", "-o"])
+        .arg(&out)
+        .stdout(Stdio::null())
+        .status()
+        .expect("strata render runs");
+    assert!(status.success());
+    assert_tev_shows(&packets, &out, 160, 120);
 }

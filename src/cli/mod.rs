@@ -180,6 +180,8 @@ pub struct RenderArgs {
     pub resume: bool,
     /// Render these frames (`--frames`), the output's `#` run numbering each.
     pub frames: Option<farm::Frames>,
+    /// Send each image to the tev viewer at this `HOST:PORT` (`--display-server`).
+    pub display_server: Option<String>,
 }
 
 /// `strata render [SCENE] -o OUT.exr …`: one image, a split of it (`--samples`, `--tile`:
@@ -421,6 +423,15 @@ fn render_frame(
         eprintln!("error: {e}");
         resource_failure()
     })?;
+    if let Some(address) = &args.display_server {
+        // The files are written: a viewer that cannot be reached is only a warning.
+        let name = exr_path.file_name().map_or_else(|| "strata".into(), |n| n.to_string_lossy().into_owned());
+        let sent =
+            strata::render::film::display::DisplayServer::connect(address, &name).and_then(|mut d| d.send(&image));
+        if let Err(e) = sent {
+            eprintln!("warning: {e}");
+        }
+    }
     if let Some((_, _, _, checkpoint)) = &sums {
         // The output is whole: its checkpoint is no longer needed.
         let _ = std::fs::remove_file(checkpoint);

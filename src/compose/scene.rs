@@ -6,7 +6,7 @@
 
 use super::binding::binding_tree;
 use super::connect::{attribute_path, convert_input, value_producer};
-use super::slots::{LayerBinding, PrimStack, resolve_stacks};
+use super::slots::{LayerBinding, PrimStack, SlotFilter, resolve_stacks};
 use super::{ComposedLayer, ComposedMaterial, DisplayPrimvars, MaterialRef, preview};
 use crate::diag::{Diagnostic, Diagnostics, OncePerKind, SourceMap, Span, did_you_mean};
 use crate::front::ast::{GraphKind, Product};
@@ -43,7 +43,8 @@ struct InputValue {
 
 /// Everything composition produced for a scene.
 pub struct SceneComposition {
-    /// Slot stacks of the renderable prims, in scene order.
+    /// Slot stacks of the renderable prims, in scene order, as bound (a [`SlotFilter`]
+    /// changes the materials, not the stacks).
     pub stacks: Vec<PrimStack>,
     /// Every substance file the scene uses, loaded and checked.
     pub library: Library,
@@ -64,6 +65,17 @@ impl SceneComposition {
 /// Resolves slot stacks, loads the bound substances and composes each renderable prim's
 /// material. Errors are reported to `diags`; the result holds what could be composed.
 pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnostics) -> SceneComposition {
+    compose_stage_filtered(stage, &SlotFilter::default(), sources, diags)
+}
+
+/// [`compose_stage`] with the layers `filter` hides left out of the materials (a live view's
+/// mute and solo); the stacks stay as bound.
+pub fn compose_stage_filtered(
+    stage: &Stage,
+    filter: &SlotFilter,
+    sources: &mut SourceMap,
+    diags: &mut Diagnostics,
+) -> SceneComposition {
     let tree = binding_tree(stage, diags);
     let stacks = resolve_stacks(&tree, diags);
     // Find every material used, once.
@@ -132,7 +144,7 @@ pub fn compose_stage(stage: &Stage, sources: &mut SourceMap, diags: &mut Diagnos
                     true
                 })
         };
-        for layer in &stack.layers {
+        for layer in filter.layers(stack) {
             let Some(mut horizontal) = compose_layer(layer, &mut resolve, diags) else { continue };
             for vertical in &layer.vertical {
                 let Some(vertical) = compose_layer(vertical, &mut resolve, diags) else { continue };

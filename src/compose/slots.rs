@@ -239,6 +239,40 @@ pub struct PrimStack {
     pub layers: Vec<LayerBinding>,
 }
 
+/// Slots a live view hides without editing the scene (`strata view`'s mute and solo), by
+/// horizontal slot name (`050`), scene-wide: a muted slot's layer — with its overrides and
+/// vertical layers — leaves every stack; a soloed slot is the only layer left on the prims
+/// that have it, and prims without it keep their stacks. Composition applies it to the
+/// materials only: [`PrimStack`]s stay as bound, so an inspector still shows what is muted.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SlotFilter {
+    /// Slots left out.
+    pub muted: std::collections::BTreeSet<String>,
+    /// The one slot kept where a prim has it.
+    pub solo: Option<String>,
+}
+
+impl SlotFilter {
+    /// Whether nothing is hidden.
+    pub fn is_empty(&self) -> bool {
+        self.muted.is_empty() && self.solo.is_none()
+    }
+
+    /// The layers of `stack` that take part in its material.
+    pub fn layers<'a>(&'a self, stack: &'a PrimStack) -> impl Iterator<Item = &'a LayerBinding> + 'a {
+        let solo = self.solo.as_ref().filter(|s| stack.layers.iter().any(|l| &l.slot.name() == *s));
+        stack.layers.iter().filter(move |l| {
+            let name = l.slot.name();
+            !self.muted.contains(&name) && solo.is_none_or(|s| *s == name)
+        })
+    }
+
+    /// `stack` with only the layers that take part in its material.
+    pub fn apply(&self, stack: &PrimStack) -> PrimStack {
+        PrimStack { prim: stack.prim.clone(), layers: self.layers(stack).cloned().collect() }
+    }
+}
+
 /// A slot in effect on a prim: the depth of the prim whose binding put it there (rule 1c
 /// compares depths), and what it binds (`None`: removed).
 type Effective = (usize, Option<Applied>);

@@ -28,8 +28,9 @@ pub use object::{ShaderObject, shader_object};
 
 use crate::abi::MaterialCode;
 use crate::backend::{BackendKind, CompileStats, Compiler};
-use crate::compose::scene::{SceneComposition, compose_stage};
+use crate::compose::scene::{SceneComposition, compose_stage_filtered};
 use crate::compose::slots::PrimStack;
+use crate::compose::slots::SlotFilter;
 use crate::diag::{Diagnostic, Diagnostics, FileId, SourceMap};
 use crate::front::library::Library;
 use crate::input::InputLimits;
@@ -288,6 +289,8 @@ pub struct Session {
     code: HashMap<u64, Arc<dyn MaterialCode>>,
     prepared: Option<Prepared>,
     stats: SessionStats,
+    /// Slots muted or soloed in memory (a live view's look edits).
+    slot_filter: SlotFilter,
 }
 
 impl Session {
@@ -312,6 +315,7 @@ impl Session {
             code: HashMap::new(),
             prepared: None,
             stats: SessionStats::default(),
+            slot_filter: SlotFilter::default(),
         };
         session.read_stage();
         session
@@ -417,7 +421,7 @@ impl Session {
         };
         let start = Instant::now();
         let errors = self.diags.error_count();
-        let scene = compose_stage(stage, &mut self.sources, &mut self.diags);
+        let scene = compose_stage_filtered(stage, &self.slot_filter, &mut self.sources, &mut self.diags);
         let mut files = FileHashes::default();
         let hashes =
             scene.materials.iter().map(|m| fingerprint::material_hash(m, &scene.library, &mut files)).collect();
@@ -482,7 +486,8 @@ impl Session {
         let material_names = (0..materials.len())
             .map(|m| {
                 let first = scene.prim_material.iter().position(|&pm| pm == m);
-                first.and_then(|i| scene.stacks.get(i)).map_or_else(|| format!("material {m}"), material_name)
+                let stack = first.and_then(|i| scene.stacks.get(i));
+                stack.map_or_else(|| format!("material {m}"), |s| material_name(&self.slot_filter.apply(s)))
             })
             .collect();
         self.compiled_hashes = composed.hashes.clone();
@@ -850,6 +855,20 @@ impl Session {
             report.geometry_rebuilt = true;
             report.failed = self.build_scene(options).is_none();
         }
+    }
+
+    /// Mutes or solos slots in memory (the files are untouched) and redoes what depends on
+    /// the materials, as a change of input value does.
+    pub fn set_slot_filter(&mut self, filter: SlotFilter) -> UpdateReport {
+        let start = Instant::now();
+        self.diags = Diagnostics::new();
+        self.slot_filter = filter;
+        self.redo_from_composition(ChangeKind::Value, start)
+    }
+
+    /// The slots muted or soloed by [`Session::set_slot_filter`].
+    pub fn slot_filter(&self) -> &SlotFilter {
+        &self.slot_filter
     }
 
     /// Sets attribute `attribute` of prim `prim` (declaring it as `type_name` when the prim

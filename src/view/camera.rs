@@ -69,6 +69,17 @@ impl Orbit {
     }
 }
 
+impl Orbit {
+    /// `camera` turned nowhere but moved along its view axis so that a sphere about `centre`
+    /// of `radius` fills the image (`aspect`: width / height); the pivot becomes `centre`.
+    pub fn frame(&mut self, camera: &Camera, centre: Vec3, radius: f32, aspect: f32) -> Camera {
+        let tan_half_x = camera.pixel_angle(1) / 2.0;
+        let half = tan_half_x.min(tan_half_x / aspect.max(1e-6)).atan();
+        self.distance = (radius / half.sin().max(1e-6)).max(1e-4);
+        camera.posed(centre - camera.forward() * self.distance, camera.forward(), camera.up())
+    }
+}
+
 fn finite(x: f32) -> f32 {
     if x.is_finite() { x.clamp(-4.0, 4.0) } else { 0.0 }
 }

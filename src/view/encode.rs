@@ -27,6 +27,27 @@ pub fn groups(image: &Image) -> Vec<String> {
     groups
 }
 
+/// The prefix of a channel-selector entry that shows the Cryptomatte matte of the selected
+/// prim (`matte:CryptoObject`) or of its material (`matte:CryptoMaterial`).
+pub const MATTE: &str = "matte:";
+
+/// The coverage of the ID of `name` in Cryptomatte layer `layer` of `image` (the sum of
+/// its ranks' coverage per pixel), as grey PNG bytes; `None` when the image has no such layer.
+pub fn matte(image: &Image, layer: &str, name: &str) -> Option<Vec<u8>> {
+    let id = crate::render::film::cryptomatte::id_bits(name);
+    let names = crate::render::film::cryptomatte::channel_names(layer);
+    let planes: Vec<&[f32]> = names.iter().map(|n| image.f32_channel(n)).collect::<Option<_>>()?;
+    let n = image.width * image.height;
+    let mut pixels = Vec::with_capacity(n * 3);
+    for i in 0..n {
+        // Ranks are (ID, coverage) pairs: R/G and B/A of each group of four channels.
+        let coverage: f32 = planes.chunks(2).filter(|pair| pair[0][i].to_bits() == id).map(|pair| pair[1][i]).sum();
+        let byte = linear_to_byte(coverage);
+        pixels.extend([byte, byte, byte]);
+    }
+    encode_rgb(image.width, image.height, &pixels)
+}
+
 fn group_of(name: &str) -> &str {
     name.rsplit_once('.').map_or(name, |(group, _)| group)
 }
@@ -66,14 +87,18 @@ pub fn png(image: &Image, group: &str) -> Option<Vec<u8>> {
     for ((&r, &g), &b) in plane(0).iter().zip(plane(1)).zip(plane(2)).take(n) {
         pixels.extend([to_byte(r), to_byte(g), to_byte(b)]);
     }
+    encode_rgb(image.width, image.height, &pixels)
+}
+
+fn encode_rgb(width: usize, height: usize, pixels: &[u8]) -> Option<Vec<u8>> {
     let mut bytes = Vec::new();
-    let mut encoder = png::Encoder::new(&mut bytes, image.width as u32, image.height as u32);
+    let mut encoder = png::Encoder::new(&mut bytes, width as u32, height as u32);
     encoder.set_color(png::ColorType::Rgb);
     encoder.set_depth(png::BitDepth::Eight);
     // Fast settings: a frame is shown once, on the same machine.
     encoder.set_compression(png::Compression::Fast);
     let mut writer = encoder.write_header().ok()?;
-    writer.write_image_data(&pixels).ok()?;
+    writer.write_image_data(pixels).ok()?;
     writer.finish().ok()?;
     Some(bytes)
 }

@@ -12,10 +12,16 @@
 //! | `GET /pick?x=X&y=Y` | what is at pixel `(X, Y)`: prim, slot stack, channel values |
 //! | `POST /camera` | a [`super::camera::Move`] as JSON |
 //! | `POST /camera/select` | the Camera prim to look through (empty: the starting camera) |
+//! | `POST /input` | set a material input in memory: `{"prim", "input", "type", "value"}` |
+//! | `POST /slots` | mute or solo slots in memory: `{"muted": [..], "solo": null}` |
+//! | `POST /camera/frame` | frame the picked prim |
+//! | `POST /look/write` | write the input edits as an override layer beside the scene: `{"path"}` |
 
 use super::Shared;
+use super::look::InputEdit;
 use super::worker::Command;
 use super::{camera::Move, encode};
+use crate::compose::slots::SlotFilter;
 use axum::extract::{Query, Request, State};
 use axum::http::{HeaderValue, StatusCode, header};
 use axum::middleware::{self, Next};
@@ -46,6 +52,10 @@ pub(crate) fn serve(listener: std::net::TcpListener, address: SocketAddr, shared
             .route("/pick", get(pick))
             .route("/camera", post(camera))
             .route("/camera/select", post(select_camera))
+            .route("/camera/frame", post(frame_selected))
+            .route("/input", post(set_input))
+            .route("/slots", post(set_slots))
+            .route("/look/write", post(write_look))
             .with_state(shared)
             .layer(middleware::from_fn_with_state(allowed, guard));
         axum::serve(listener, app).await.map_err(|e| e.to_string())
@@ -100,7 +110,14 @@ async fn status(State(shared): State<Arc<Shared>>, Query(q): Query<After>) -> Re
             "height": p.height,
             "image_width": image_width,
             "image_height": image_height,
-            "channels": p.image.as_ref().map(|i| encode::groups(i)).unwrap_or_default(),
+            "channels": p.image.as_ref().map(|i| {
+                let mut groups = encode::groups(i);
+                if p.selected.is_some() && p.samples > 0 {
+                    groups.extend(["CryptoObject", "CryptoMaterial"].map(|l| format!("{}{l}", encode::MATTE)));
+                }
+                groups
+            }).unwrap_or_default(),
+            "selected": p.selected.as_ref().map(|(prim, _)| prim),
             "diagnostics": p.diagnostics,
             "failed": p.failed,
             "edits": p.edits,
@@ -108,6 +125,12 @@ async fn status(State(shared): State<Arc<Shared>>, Query(q): Query<After>) -> Re
             "cameras": p.cameras,
             "camera": p.camera,
             "watched": p.watched,
+            "input_ms": p.input_ms,
+            "slots": p.slots,
+            "muted": p.muted,
+            "solo": p.solo,
+            "look_inputs": p.look_inputs,
+            "samples_per_second": p.samples_per_second,
         })
     });
     with_type(body.to_string(), "application/json")
@@ -119,11 +142,17 @@ struct Channel {
 }
 
 async fn frame(State(shared): State<Arc<Shared>>, Query(q): Query<Channel>) -> Response {
-    let Some(image) = shared.snapshot(|p| p.image.clone()) else {
+    let Some((image, selected)) = shared.snapshot(|p| p.image.clone().map(|i| (i, p.selected.clone()))) else {
         return (StatusCode::NOT_FOUND, "no image yet\n").into_response();
     };
     let group = q.channel.unwrap_or_else(|| encode::BEAUTY.to_string());
-    match tokio::task::spawn_blocking(move || encode::png(&image, &group)).await {
+    let encode = move || match (group.strip_prefix(encode::MATTE), selected) {
+        (Some("CryptoObject"), Some((prim, _))) => encode::matte(&image, "CryptoObject", &prim),
+        (Some("CryptoMaterial"), Some((_, material))) => encode::matte(&image, "CryptoMaterial", &material),
+        (Some(_), _) => None,
+        (None, _) => encode::png(&image, &group),
+    };
+    match tokio::task::spawn_blocking(encode).await {
         Ok(Some(bytes)) => with_type(bytes, "image/png"),
         _ => (StatusCode::NOT_FOUND, "no such channel\n").into_response(),
     }
@@ -160,4 +189,51 @@ async fn select_camera(State(shared): State<Arc<Shared>>, body: String) -> Respo
     let path = body.trim();
     let _ = shared.commands.send(Command::SelectCamera((!path.is_empty()).then(|| path.to_string())));
     StatusCode::NO_CONTENT.into_response()
+}
+
+async fn frame_selected(State(shared): State<Arc<Shared>>) -> Response {
+    let _ = shared.commands.send(Command::FrameSelected);
+    StatusCode::NO_CONTENT.into_response()
+}
+
+async fn set_input(State(shared): State<Arc<Shared>>, body: String) -> Response {
+    let at = std::time::Instant::now();
+    let change = serde_json::from_str::<InputEdit>(&body).map_err(|e| e.to_string()).and_then(|e| e.change());
+    match change {
+        Ok(change) => {
+            let _ = shared.commands.send(Command::SetInput { change, at });
+            StatusCode::NO_CONTENT.into_response()
+        }
+        Err(e) => (StatusCode::BAD_REQUEST, format!("{e}\n")).into_response(),
+    }
+}
+
+#[derive(Deserialize)]
+struct Slots {
+    #[serde(default)]
+    muted: Vec<String>,
+    solo: Option<String>,
+}
+
+async fn set_slots(State(shared): State<Arc<Shared>>, body: String) -> Response {
+    match serde_json::from_str::<Slots>(&body) {
+        Ok(slots) => {
+            let filter = SlotFilter { muted: slots.muted.into_iter().collect(), solo: slots.solo };
+            let _ = shared.commands.send(Command::Slots(filter));
+            StatusCode::NO_CONTENT.into_response()
+        }
+        Err(e) => (StatusCode::BAD_REQUEST, format!("{e}\n")).into_response(),
+    }
+}
+
+async fn write_look(State(shared): State<Arc<Shared>>) -> Response {
+    let (reply, answer) = tokio::sync::oneshot::channel();
+    if shared.commands.send(Command::WriteLook { reply }).is_err() {
+        return (StatusCode::SERVICE_UNAVAILABLE, "the renderer stopped\n").into_response();
+    }
+    match tokio::time::timeout(LONG_POLL, answer).await {
+        Ok(Ok(Ok(json))) => with_type(json, "application/json"),
+        Ok(Ok(Err(e))) => (StatusCode::CONFLICT, format!("{e}\n")).into_response(),
+        _ => (StatusCode::SERVICE_UNAVAILABLE, "no answer from the renderer\n").into_response(),
+    }
 }

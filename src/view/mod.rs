@@ -17,6 +17,7 @@
 mod camera;
 mod encode;
 mod http;
+mod look;
 pub mod progressive;
 mod watch;
 mod worker;
@@ -44,6 +45,8 @@ pub struct ViewOptions {
     pub bind: IpAddr,
     /// The port (0: any free port).
     pub port: u16,
+    /// Also send each full-resolution pass to the tev viewer at this `HOST:PORT`.
+    pub display_server: Option<String>,
 }
 
 /// A running view: its address and the threads serving it.
@@ -93,6 +96,20 @@ pub(crate) struct Published {
     pub camera: Option<String>,
     /// Files being watched.
     pub watched: Vec<String>,
+    /// Time from the last input edit to its first image, ms.
+    pub input_ms: Option<f64>,
+    /// Every horizontal slot the scene binds, the muted ones and the soloed one.
+    pub slots: Vec<String>,
+    /// See `slots`.
+    pub muted: Vec<String>,
+    /// See `slots`.
+    pub solo: Option<String>,
+    /// Inputs set from the page so far (what an override layer would write).
+    pub look_inputs: usize,
+    /// The last picked prim and its material's name (its Cryptomatte mattes can be shown).
+    pub selected: Option<(String, String)>,
+    /// Camera samples per second of the passes since the last restart (bands and merges).
+    pub samples_per_second: Option<f64>,
 }
 
 /// State shared by the worker, the watcher and the HTTP handlers.

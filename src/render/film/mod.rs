@@ -7,6 +7,7 @@
 //! ([`Window`], [`WindowSums`]). Rows are rendered in parallel with rayon.
 
 pub mod cryptomatte;
+pub mod display;
 pub mod output;
 pub mod partial;
 pub mod sum;
