@@ -611,52 +611,87 @@ fn make_room(residency: &mut Residency, incoming: u64) {
     }
 }
 
-/// Level `index` of `content`, decoding the source when it is not resident. `None` when the
-/// source fails.
+/// The level's image when it is resident.
+fn resident(level: &Level) -> Option<Arc<Image>> {
+    level.image.read().ok()?.as_ref().map(Arc::clone)
+}
+
+/// Level `index` of `content`, made when it is not resident: downsampled from the nearest
+/// resident finer level, or, when none is, from the source decoded again (formats without
+/// tiles decode whole). `None` when the source fails.
+///
+/// What is kept: the wanted level and the coarser ones made with it (a third of its size;
+/// trilinear reads the next coarser level) are made room for; finer levels a decode made on
+/// the way are kept only in room the budget has free, as the first to be evicted. So a miss
+/// of a coarse level never decodes the file while a finer level is resident, and a budget
+/// smaller than the textures keeps the levels lookups reach instead of whole chains.
 #[cold]
 fn load_level(content: &Content, index: usize) -> Option<Arc<Image>> {
     MISSES.fetch_add(1, Ordering::Relaxed);
     let _decoding = content.decoding.lock().ok()?;
-    if let Some(image) = content.levels[index].image.read().ok()?.as_ref() {
-        return Some(Arc::clone(image)); // another thread decoded it meanwhile
+    if let Some(image) = resident(&content.levels[index]) {
+        return Some(image); // another thread made it meanwhile
     }
     if content.failed.load(Ordering::Relaxed) {
         return None;
     }
-    DECODES.fetch_add(1, Ordering::Relaxed);
-    let finest = match content.source.decode() {
-        Ok(image) if image.is_consistent() && (image.width, image.height) == (content.width, content.height) => image,
-        _ => {
-            content.failed.store(true, Ordering::Relaxed);
-            return None;
+    let finer = (0..index).rev().find_map(|j| resident(&content.levels[j]).map(|image| (j, image)));
+    let decoded = finer.is_none();
+    let (first, base) = match finer {
+        Some(found) => found,
+        None => {
+            DECODES.fetch_add(1, Ordering::Relaxed);
+            match content.source.decode() {
+                Ok(image)
+                    if image.is_consistent() && (image.width, image.height) == (content.width, content.height) =>
+                {
+                    (0, Arc::new(image))
+                }
+                _ => {
+                    content.failed.store(true, Ordering::Relaxed);
+                    return None;
+                }
+            }
         }
     };
-    // The chain is built from the finest level each time: formats without tiles decode
-    // whole, so every level costs one decode anyway.
-    let mut chain = Vec::with_capacity(content.levels.len());
-    chain.push(Arc::new(finest));
-    while chain.len() < content.levels.len() {
-        let next = chain[chain.len() - 1].downsample();
-        chain.push(Arc::new(next));
+    // chain[k] is level first + k: down to the wanted level, then on through the coarser
+    // levels that are not resident.
+    let mut chain = vec![base];
+    while first + chain.len() < content.levels.len() {
+        let next = first + chain.len();
+        if next > index && resident(&content.levels[next]).is_some() {
+            break;
+        }
+        let image = chain[chain.len() - 1].downsample();
+        chain.push(Arc::new(image));
     }
-    let wanted = Arc::clone(&chain[index]);
+    let wanted = Arc::clone(&chain[index - first]);
     let mut residency = RESIDENCY.lock().ok()?;
     let now = CLOCK.fetch_add(1, Ordering::Relaxed) + 1;
-    // Coarsest first: when the budget is small the coarse levels stay.
-    for (level, image) in content.levels.iter().zip(chain).rev() {
-        let Ok(slot) = level.image.write() else { continue };
-        if slot.is_some() {
+    // The wanted level and coarser, coarsest first: when the budget is small the coarse
+    // levels stay. Then the finer levels made on the way (the decoded base among them; a
+    // resident one is already in place), coarsest first, into free room only.
+    let mut order: Vec<(usize, bool)> = (index..first + chain.len()).rev().map(|l| (l, true)).collect();
+    let speculative = if decoded { first } else { first + 1 };
+    order.extend((speculative..index).rev().map(|l| (l, false)));
+    for (index, requested) in order {
+        let image = &chain[index - first];
+        let level = &content.levels[index];
+        if resident(level).is_some() {
             continue;
         }
-        drop(slot);
-        make_room(&mut residency, image.bytes());
-        if residency.resident.saturating_add(image.bytes()) > memory_budget() {
-            continue; // does not fit even alone: used for this lookup, not kept
+        // A level larger than the whole budget evicts nothing: it could not stay anyway.
+        if requested && image.bytes() <= memory_budget() {
+            make_room(&mut residency, image.bytes());
         }
-        let Ok(mut reacquired) = level.image.write() else { continue };
+        if residency.resident.saturating_add(image.bytes()) > memory_budget() {
+            continue; // does not fit: used for this lookup, not kept
+        }
+        let Ok(mut slot) = level.image.write() else { continue };
         residency.resident += image.bytes();
-        level.last_use.store(now, Ordering::Relaxed);
-        *reacquired = Some(image);
+        // Levels nobody asked for are the first candidates for eviction.
+        level.last_use.store(if requested { now } else { 0 }, Ordering::Relaxed);
+        *slot = Some(Arc::clone(image));
     }
     Some(wanted)
 }
@@ -1028,6 +1063,67 @@ mod tests {
             lookup_with(Filter::Trilinear, id, s, t, 0, [f32::NAN, f32::INFINITY, 0.0, 0.0]),
             lookup(id, s, t, 0)
         );
+    }
+
+    /// A source that counts its decodes.
+    struct Counting(Image, Arc<AtomicUsize>);
+
+    impl TexelSource for Counting {
+        fn decode(&self) -> Result<Image, String> {
+            self.1.fetch_add(1, Ordering::Relaxed);
+            Ok(self.0.clone())
+        }
+    }
+
+    /// An unregistered texture of `image` (no other test's eviction reaches it), its decode
+    /// counter, and its mip chain built independently of the cache.
+    fn counted(image: Image) -> (Content, Arc<AtomicUsize>, Vec<Image>) {
+        let decodes = Arc::new(AtomicUsize::new(0));
+        let (w, h) = (image.width, image.height);
+        let mut chain = vec![image.clone()];
+        while chain.len() < level_count(w, h) {
+            let next = chain[chain.len() - 1].downsample();
+            chain.push(next);
+        }
+        (Content::new(w, h, Box::new(Counting(image, Arc::clone(&decodes)))), decodes, chain)
+    }
+
+    /// Evicts `content`'s levels `range` as the budget would.
+    fn evict(content: &Content, range: std::ops::RangeFrom<usize>) {
+        let mut residency = RESIDENCY.lock().unwrap();
+        for level in &content.levels[range] {
+            if let Some(image) = level.image.write().unwrap().take() {
+                residency.resident -= image.bytes();
+            }
+        }
+    }
+
+    #[test]
+    fn a_coarse_miss_is_made_from_a_resident_finer_level_without_decoding() {
+        let (content, decodes, chain) = counted(grey(64, 48, |x, y| ((x * 37 + y * 91) % 256) as u8));
+        assert_eq!(*load_level(&content, 0).unwrap(), chain[0]);
+        assert_eq!(decodes.load(Ordering::Relaxed), 1);
+        evict(&content, 3..);
+        assert_eq!(*load_level(&content, 4).unwrap(), chain[4]);
+        assert_eq!(decodes.load(Ordering::Relaxed), 1, "level 4 is made from the resident level 2");
+        for (k, level) in content.levels.iter().enumerate() {
+            assert_eq!(resident(level).as_deref(), Some(&chain[k]), "level {k}");
+        }
+        evict(&content, 0..);
+    }
+
+    #[test]
+    fn a_decode_for_a_coarse_level_keeps_the_finer_ones_in_free_room_as_first_to_go() {
+        let (content, decodes, chain) = counted(grey(40, 40, |x, y| (x * y % 256) as u8));
+        assert_eq!(*load_level(&content, 3).unwrap(), chain[3]);
+        for (k, level) in content.levels.iter().enumerate() {
+            assert_eq!(resident(level).as_deref(), Some(&chain[k]), "level {k}");
+            let last_use = level.last_use.load(Ordering::Relaxed);
+            assert_eq!(last_use == 0, k < 3, "level {k}: only the levels nobody asked for are oldest");
+        }
+        assert_eq!(*load_level(&content, 0).unwrap(), chain[0], "resident");
+        assert_eq!(decodes.load(Ordering::Relaxed), 1);
+        evict(&content, 0..);
     }
 
     #[test]
