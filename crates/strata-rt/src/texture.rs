@@ -6,10 +6,12 @@
 //! precision ([`Texels`]: 8-bit stays 8-bit with sRGB decoded through a table at lookup, 16-bit,
 //! half and float as they are; one to four channels), and a box-filtered mip chain is built
 //! from it. Each mip level is a unit of residency: the levels resident at once are bounded by
-//! [`set_memory_budget`], the least recently used evicted first; an evicted level is decoded
-//! again when reached, so any budget (smaller than one texture included) renders the same
-//! image. Lookups take a per-texture and a per-level read lock, never a global one; only a
-//! miss (decode, eviction) takes the residency lock.
+//! [`set_memory_budget`], the least recently used evicted first; an evicted level is made
+//! again when reached (from a resident finer level, else by decoding the source), so any
+//! budget (smaller than one texture included) renders the same image. Lookups take no lock:
+//! each level is an atomic pointer whose evicted images are freed once no lookup can hold
+//! them ([`Slot`], epoch-based); only a miss takes the texture's decode lock and the
+//! residency lock.
 //!
 //! **Filtering.** [`lookup_filtered`] receives the ray's footprint in texture space (the ray
 //! cone's two axes mapped through the surface's st Jacobian, see `abi::Globals::st_footprint`)
@@ -22,9 +24,10 @@
 //! (r, g, b, a) and each wrap mode one of the `WRAP_*` constants. Old callers that pass a bare
 //! channel get repeat wrapping, as before.
 
+use crossbeam_epoch::{self as epoch, Atomic, Guard, Owned, Shared};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, AtomicUsize, Ordering};
-use std::sync::{Arc, LazyLock, Mutex, OnceLock, RwLock};
+use std::sync::{LazyLock, Mutex, OnceLock};
 
 /// Wrap mode: tile the image (the default).
 pub const WRAP_REPEAT: i32 = 0;
@@ -420,9 +423,58 @@ impl TexelSource for InMemory {
     }
 }
 
+/// A value readers reach without a lock: an atomic pointer whose replaced values are freed
+/// once no thread that could have read them is still pinned (crossbeam-epoch's deferred
+/// reclamation). Writers are serialised by the caller (the residency lock).
+struct Slot<T: Send + 'static>(Atomic<T>);
+
+impl<T: Send + 'static> Slot<T> {
+    fn new(value: Option<T>) -> Slot<T> {
+        Slot(value.map_or_else(Atomic::null, Atomic::new))
+    }
+
+    /// The value, valid while both the slot and the guard are.
+    #[inline]
+    fn get<'a>(&'a self, guard: &'a Guard) -> Option<&'a T> {
+        // SAFETY: a value leaves the slot only through `swap`, which defers its destruction
+        // until every guard pinned before then is dropped, or with the slot (`Drop`, which
+        // the borrow of `self` excludes).
+        unsafe { self.0.load(Ordering::Acquire, guard).as_ref() }
+    }
+
+    /// Puts `value` (or nothing) in the slot and returns the old value, readable through
+    /// `guard` and freed once no guard pinned now remains.
+    fn swap<'a>(&'a self, value: Option<T>, guard: &'a Guard) -> Option<&'a T> {
+        let new = value.map_or_else(Shared::null, |v| Owned::new(v).into_shared(guard));
+        let old = self.0.swap(new, Ordering::AcqRel, guard);
+        if old.is_null() {
+            return None;
+        }
+        // SAFETY: `old` is out of the slot, so no new reader reaches it; the readers that
+        // loaded it are pinned, as `guard` is, and its destruction waits for all of them.
+        unsafe {
+            guard.defer_destroy(old);
+            Some(old.deref())
+        }
+    }
+}
+
+impl<T: Send + 'static> Drop for Slot<T> {
+    fn drop(&mut self) {
+        // SAFETY: `&mut self`: no reader holds the value (`get` borrows the slot), and a
+        // slot inside a replaced `Content` is dropped only after every reader's guard.
+        unsafe {
+            let value = self.0.load(Ordering::Relaxed, epoch::unprotected());
+            if !value.is_null() {
+                drop(value.into_owned());
+            }
+        }
+    }
+}
+
 /// One mip level's residency.
 struct Level {
-    image: RwLock<Option<Arc<Image>>>,
+    image: Slot<Image>,
     /// The residency clock when last read (an epoch, advanced per miss, not per lookup, so
     /// lookups write it only when it changed).
     last_use: AtomicU64,
@@ -438,12 +490,15 @@ struct Content {
     decoding: Mutex<()>,
     /// Set when decoding failed: the texture reads 0 (no retry per lookup).
     failed: AtomicBool,
+    /// Set (under the residency lock) when a new source replaced this one: a miss in flight
+    /// keeps nothing.
+    retired: AtomicBool,
 }
 
 impl Content {
     fn new(width: usize, height: usize, source: Box<dyn TexelSource>) -> Content {
         let levels = (0..level_count(width, height))
-            .map(|_| Level { image: RwLock::new(None), last_use: AtomicU64::new(0) })
+            .map(|_| Level { image: Slot::new(None), last_use: AtomicU64::new(0) })
             .collect();
         Content {
             source,
@@ -452,13 +507,15 @@ impl Content {
             levels,
             decoding: Mutex::new(()),
             failed: AtomicBool::new(false),
+            retired: AtomicBool::new(false),
         }
     }
 }
 
 struct Entry {
     name: PathBuf,
-    content: RwLock<Arc<Content>>,
+    /// Never empty; replaced when the file changes.
+    content: Slot<Content>,
 }
 
 /// Registry slots: an append-only table of segments, so a lookup finds its entry without a
@@ -569,32 +626,28 @@ pub fn reset_stats() {
 /// Drops every resident level (benchmarks start cold with it).
 pub fn evict_all() {
     let Ok(mut residency) = RESIDENCY.lock() else { return };
-    for entry in entries() {
-        let Ok(content) = entry.content.read() else { continue };
+    let guard = &epoch::pin();
+    for content in entries().filter_map(|entry| entry.content.get(guard)) {
         for level in content.levels.iter() {
-            if let Ok(mut image) = level.image.write()
-                && let Some(old) = image.take()
-            {
+            if let Some(old) = level.image.swap(None, guard) {
                 residency.resident = residency.resident.saturating_sub(old.bytes());
             }
         }
     }
+    guard.flush();
 }
 
 /// Evicts least recently used levels until `incoming` more bytes fit the budget (or nothing
-/// is left to evict). Entries being replaced are skipped (`try_read`), so eviction never
-/// waits on a writer while holding the residency lock.
-fn make_room(residency: &mut Residency, incoming: u64) {
+/// is left to evict). Evicted levels are freed once no lookup can still be reading them.
+fn make_room(residency: &mut Residency, incoming: u64, guard: &Guard) {
     let budget = memory_budget();
     while residency.resident.saturating_add(incoming) > budget {
         // The oldest level; among equally old ones the largest (so a texture that does not
         // fit keeps its coarse levels).
         let mut victim: Option<(u64, u64, &Level)> = None;
-        let guards: Vec<_> = entries().filter_map(|e| e.content.try_read().ok().map(|c| Arc::clone(&c))).collect();
-        for content in &guards {
+        for content in entries().filter_map(|entry| entry.content.get(guard)) {
             for level in content.levels.iter() {
-                let Ok(image) = level.image.try_read() else { continue };
-                let Some(image) = image.as_ref() else { continue };
+                let Some(image) = level.image.get(guard) else { continue };
                 let key = (level.last_use.load(Ordering::Relaxed), u64::MAX - image.bytes());
                 if victim.is_none_or(|(t, b, _)| key < (t, b)) {
                     victim = Some((key.0, key.1, level));
@@ -602,81 +655,113 @@ fn make_room(residency: &mut Residency, incoming: u64) {
             }
         }
         let Some((_, _, level)) = victim else { return };
-        if let Ok(mut image) = level.image.write()
-            && let Some(old) = image.take()
-        {
+        if let Some(old) = level.image.swap(None, guard) {
             residency.resident = residency.resident.saturating_sub(old.bytes());
             EVICTIONS.fetch_add(1, Ordering::Relaxed);
         }
     }
 }
 
-/// Level `index` of `content`, decoding the source when it is not resident. `None` when the
-/// source fails.
+/// Runs `read` on level `index` of `content`, made when it is not resident: downsampled from
+/// the nearest resident finer level, or, when none is, from the source decoded again (formats
+/// without tiles decode whole). `None` when the source fails.
+///
+/// What is kept: the wanted level and the coarser ones made with it (a third of its size;
+/// trilinear reads the next coarser level) are made room for; finer levels a decode made on
+/// the way are kept only in room the budget has free, as the first to be evicted. So a miss
+/// of a coarse level never decodes the file while a finer level is resident, and a budget
+/// smaller than the textures keeps the levels lookups reach instead of whole chains.
 #[cold]
-fn load_level(content: &Content, index: usize) -> Option<Arc<Image>> {
+fn load_level<R>(content: &Content, index: usize, guard: &Guard, read: impl FnOnce(&Image) -> R) -> Option<R> {
     MISSES.fetch_add(1, Ordering::Relaxed);
     let _decoding = content.decoding.lock().ok()?;
-    if let Some(image) = content.levels[index].image.read().ok()?.as_ref() {
-        return Some(Arc::clone(image)); // another thread decoded it meanwhile
+    if let Some(image) = content.levels[index].image.get(guard) {
+        return Some(read(image)); // another thread made it meanwhile
     }
     if content.failed.load(Ordering::Relaxed) {
         return None;
     }
-    DECODES.fetch_add(1, Ordering::Relaxed);
-    let finest = match content.source.decode() {
-        Ok(image) if image.is_consistent() && (image.width, image.height) == (content.width, content.height) => image,
-        _ => {
-            content.failed.store(true, Ordering::Relaxed);
-            return None;
+    let finer = (0..index).rev().find_map(|j| content.levels[j].image.get(guard).map(|image| (j, image)));
+    let decoded = match finer {
+        Some(_) => None,
+        None => {
+            DECODES.fetch_add(1, Ordering::Relaxed);
+            match content.source.decode() {
+                Ok(image)
+                    if image.is_consistent() && (image.width, image.height) == (content.width, content.height) =>
+                {
+                    Some(image)
+                }
+                _ => {
+                    content.failed.store(true, Ordering::Relaxed);
+                    return None;
+                }
+            }
         }
     };
-    // The chain is built from the finest level each time: formats without tiles decode
-    // whole, so every level costs one decode anyway.
-    let mut chain = Vec::with_capacity(content.levels.len());
-    chain.push(Arc::new(finest));
-    while chain.len() < content.levels.len() {
-        let next = chain[chain.len() - 1].downsample();
-        chain.push(Arc::new(next));
+    let (first, base) = match (finer, &decoded) {
+        (Some(found), _) => found,
+        (None, Some(image)) => (0, image),
+        (None, None) => return None,
+    };
+    // Levels first + 1 on, each from the one above: down to the wanted level, then on
+    // through the coarser levels that are not resident.
+    let mut made: Vec<Image> = Vec::new();
+    loop {
+        let next = first + 1 + made.len();
+        if next >= content.levels.len() || (next > index && content.levels[next].image.get(guard).is_some()) {
+            break;
+        }
+        let image = made.last().unwrap_or(base).downsample();
+        made.push(image);
     }
-    let wanted = Arc::clone(&chain[index]);
-    let mut residency = RESIDENCY.lock().ok()?;
+    let result = read(if index == first { base } else { &made[index - first - 1] });
+    // Owned images by level - first (a resident base is already in place).
+    let mut owned: Vec<Option<Image>> = std::iter::once(decoded).chain(made.into_iter().map(Some)).collect();
+    let Ok(mut residency) = RESIDENCY.lock() else { return Some(result) };
+    if content.retired.load(Ordering::Relaxed) {
+        return Some(result); // its file changed meanwhile: these texels are stale
+    }
     let now = CLOCK.fetch_add(1, Ordering::Relaxed) + 1;
-    // Coarsest first: when the budget is small the coarse levels stay.
-    for (level, image) in content.levels.iter().zip(chain).rev() {
-        let Ok(slot) = level.image.write() else { continue };
-        if slot.is_some() {
-            continue;
+    // The wanted level and coarser, coarsest first: when the budget is small the coarse
+    // levels stay. Then the finer levels made on the way, coarsest first, into free room.
+    let requested = (index..first + owned.len()).rev().map(|l| (l, true));
+    let on_the_way = (first..index).rev().map(|l| (l, false));
+    for (l, requested) in requested.chain(on_the_way) {
+        let Some(image) = owned[l - first].take() else { continue };
+        let level = &content.levels[l];
+        let bytes = image.bytes();
+        // A level larger than the whole budget evicts nothing: it could not stay anyway.
+        if requested && bytes <= memory_budget() {
+            make_room(&mut residency, bytes, guard);
         }
-        drop(slot);
-        make_room(&mut residency, image.bytes());
-        if residency.resident.saturating_add(image.bytes()) > memory_budget() {
-            continue; // does not fit even alone: used for this lookup, not kept
+        if residency.resident.saturating_add(bytes) > memory_budget() || level.image.get(guard).is_some() {
+            continue; // does not fit: used for this lookup, not kept
         }
-        let Ok(mut reacquired) = level.image.write() else { continue };
-        residency.resident += image.bytes();
-        level.last_use.store(now, Ordering::Relaxed);
-        *reacquired = Some(image);
+        residency.resident += bytes;
+        // Levels nobody asked for are the first candidates for eviction.
+        level.last_use.store(if requested { now } else { 0 }, Ordering::Relaxed);
+        level.image.swap(Some(image), guard);
     }
-    Some(wanted)
+    drop(residency);
+    guard.flush(); // what was evicted is freed as soon as no lookup can hold it
+    Some(result)
 }
 
 /// Runs `read` on level `index` of `content`, loading it on a miss; `None` when it cannot be
 /// loaded.
 #[inline]
-fn with_level<R>(content: &Content, index: usize, read: impl FnOnce(&Image) -> R) -> Option<R> {
+fn with_level<R>(content: &Content, index: usize, guard: &Guard, read: impl FnOnce(&Image) -> R) -> Option<R> {
     MY_SHARD.with(|&shard| FETCHES[shard].0.fetch_add(1, Ordering::Relaxed));
     let level = &content.levels[index];
-    if let Ok(image) = level.image.read()
-        && let Some(image) = image.as_ref()
-    {
+    if let Some(image) = level.image.get(guard) {
         let now = CLOCK.load(Ordering::Relaxed);
         if level.last_use.load(Ordering::Relaxed) != now {
             level.last_use.store(now, Ordering::Relaxed);
         }
         return Some(read(image));
     }
-    load_level(content, index).map(|image| read(&image))
+    load_level(content, index, guard, read)
 }
 
 /// The id of the texture registered under `name`, if any.
@@ -701,7 +786,7 @@ pub fn register_source(
     let id = COUNT.load(Ordering::Acquire);
     let segment = SLOTS.get(id / SEGMENT).ok_or("too many textures")?;
     let segment = segment.get_or_init(|| (0..SEGMENT).map(|_| OnceLock::new()).collect());
-    let content = RwLock::new(Arc::new(Content::new(width, height, source)));
+    let content = Slot::new(Some(Content::new(width, height, source)));
     segment[id % SEGMENT].set(Entry { name, content }).map_err(|_| "texture slot taken".to_string())?;
     COUNT.store(id + 1, Ordering::Release);
     Ok(id as i32)
@@ -729,13 +814,14 @@ pub fn register_image(name: PathBuf, mut image: Image) -> Result<i32, String> {
 /// running keep the old texels.
 pub fn replace_source(id: i32, width: usize, height: usize, source: Box<dyn TexelSource>) -> Result<(), String> {
     let entry = entry(id).ok_or("no such texture")?;
-    let fresh = Arc::new(Content::new(width, height, source));
-    let old = std::mem::replace(&mut *entry.content.write().map_err(|_| "texture registry poisoned")?, fresh);
-    if let Ok(mut residency) = RESIDENCY.lock() {
+    let fresh = Content::new(width, height, source);
+    // Under the residency lock, so a miss of the old source in flight keeps nothing.
+    let mut residency = RESIDENCY.lock().map_err(|_| "texture registry poisoned")?;
+    let guard = &epoch::pin();
+    if let Some(old) = entry.content.swap(Some(fresh), guard) {
+        old.retired.store(true, Ordering::Relaxed);
         for level in old.levels.iter() {
-            if let Ok(mut image) = level.image.write()
-                && let Some(image) = image.take()
-            {
+            if let Some(image) = level.image.swap(None, guard) {
                 residency.resident = residency.resident.saturating_sub(image.bytes());
             }
         }
@@ -806,7 +892,9 @@ pub fn lookup_with(filter: Filter, id: i32, s: f32, t: f32, mode: i32, footprint
         return 0.0;
     }
     let Some(entry) = entry(id) else { return 0.0 };
-    let Ok(content) = entry.content.read() else { return 0.0 };
+    // Pinned once per lookup: what it reads cannot be freed until it returns.
+    let guard = &epoch::pin();
+    let Some(content) = entry.content.get(guard) else { return 0.0 };
     // Far coordinates lose all precision in f32 anyway; keep the integer maths in range.
     let (s, t) = (s.clamp(-1e7, 1e7), 1.0 - t.clamp(-1e7, 1e7));
     let (w, h) = (content.width as f32, content.height as f32);
@@ -816,7 +904,7 @@ pub fn lookup_with(filter: Filter, id: i32, s: f32, t: f32, mode: i32, footprint
     let (la, lb) = (ax.0.hypot(ax.1), ay.0.hypot(ay.1));
     let (major_axis, major, minor) = if la >= lb { (ax, la, lb) } else { (ay, lb, la) };
     let sample_level = |level: usize, s: f32, t: f32| {
-        with_level(&content, level, |image| {
+        with_level(content, level, guard, |image| {
             image.bilinear(s * image.width as f32, t * image.height as f32, channel, wrap_s, wrap_t)
         })
         .unwrap_or(0.0)
@@ -834,7 +922,7 @@ pub fn lookup_with(filter: Filter, id: i32, s: f32, t: f32, mode: i32, footprint
     };
     match filter {
         Filter::Nearest => {
-            with_level(&content, 0, |image| image.nearest(s * w, t * h, channel, wrap_s, wrap_t)).unwrap_or(0.0)
+            with_level(content, 0, guard, |image| image.nearest(s * w, t * h, channel, wrap_s, wrap_t)).unwrap_or(0.0)
         }
         Filter::Bilinear => sample_level(0, s, t),
         Filter::Trilinear => trilinear(major.max(1.0).log2(), s, t),
@@ -864,6 +952,7 @@ pub fn lookup_with(filter: Filter, id: i32, s: f32, t: f32, mode: i32, footprint
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::sync::Arc;
 
     #[test]
     fn bilinear_wraps_and_flips_t() {
@@ -1028,6 +1117,77 @@ mod tests {
             lookup_with(Filter::Trilinear, id, s, t, 0, [f32::NAN, f32::INFINITY, 0.0, 0.0]),
             lookup(id, s, t, 0)
         );
+    }
+
+    /// A source that counts its decodes.
+    struct Counting(Image, Arc<AtomicUsize>);
+
+    impl TexelSource for Counting {
+        fn decode(&self) -> Result<Image, String> {
+            self.1.fetch_add(1, Ordering::Relaxed);
+            Ok(self.0.clone())
+        }
+    }
+
+    /// An unregistered texture of `image` (no other test's eviction reaches it), its decode
+    /// counter, and its mip chain built independently of the cache.
+    fn counted(image: Image) -> (Content, Arc<AtomicUsize>, Vec<Image>) {
+        let decodes = Arc::new(AtomicUsize::new(0));
+        let (w, h) = (image.width, image.height);
+        let mut chain = vec![image.clone()];
+        while chain.len() < level_count(w, h) {
+            let next = chain[chain.len() - 1].downsample();
+            chain.push(next);
+        }
+        (Content::new(w, h, Box::new(Counting(image, Arc::clone(&decodes)))), decodes, chain)
+    }
+
+    /// Evicts `content`'s levels `range` as the budget would.
+    fn evict(content: &Content, range: std::ops::RangeFrom<usize>) {
+        let mut residency = RESIDENCY.lock().unwrap();
+        let guard = &epoch::pin();
+        for level in &content.levels[range] {
+            if let Some(image) = level.image.swap(None, guard) {
+                residency.resident -= image.bytes();
+            }
+        }
+    }
+
+    /// Level `index` of `content` as a lookup reaches it (loaded on a miss).
+    fn level(content: &Content, index: usize) -> Image {
+        with_level(content, index, &epoch::pin(), Image::clone).unwrap()
+    }
+
+    /// Whether every level of `content` is resident and equals `chain`'s.
+    fn all_resident(content: &Content, chain: &[Image]) -> bool {
+        let guard = &epoch::pin();
+        content.levels.iter().zip(chain).all(|(level, want)| level.image.get(guard) == Some(want))
+    }
+
+    #[test]
+    fn a_coarse_miss_is_made_from_a_resident_finer_level_without_decoding() {
+        let (content, decodes, chain) = counted(grey(64, 48, |x, y| ((x * 37 + y * 91) % 256) as u8));
+        assert_eq!(level(&content, 0), chain[0]);
+        assert_eq!(decodes.load(Ordering::Relaxed), 1);
+        evict(&content, 3..);
+        assert_eq!(level(&content, 4), chain[4]);
+        assert_eq!(decodes.load(Ordering::Relaxed), 1, "level 4 is made from the resident level 2");
+        assert!(all_resident(&content, &chain));
+        evict(&content, 0..);
+    }
+
+    #[test]
+    fn a_decode_for_a_coarse_level_keeps_the_finer_ones_in_free_room_as_first_to_go() {
+        let (content, decodes, chain) = counted(grey(40, 40, |x, y| (x * y % 256) as u8));
+        assert_eq!(level(&content, 3), chain[3]);
+        assert!(all_resident(&content, &chain));
+        for (k, level) in content.levels.iter().enumerate() {
+            let last_use = level.last_use.load(Ordering::Relaxed);
+            assert_eq!(last_use == 0, k < 3, "level {k}: only the levels nobody asked for are oldest");
+        }
+        assert_eq!(level(&content, 0), chain[0], "resident");
+        assert_eq!(decodes.load(Ordering::Relaxed), 1);
+        evict(&content, 0..);
     }
 
     #[test]

@@ -124,7 +124,8 @@ fn lookup_ns(id: i32, side: u32, filter: Filter, footprint: [f32; 4], threads: u
 }
 
 /// A ground plane of `SCENE_TEXTURES` strips, each with its own texture, seen at a grazing
-/// angle, lit by a dome.
+/// angle, lit by a dome. Each material has a scope of its own: a layer holds one spec per
+/// prim path (a second `def "Looks"` would leave every strip but the first unbound).
 fn scene_text(dir: &Path) -> String {
     let mut text = String::from(
         "#usda 1.0\n(\n    upAxis = \"Y\"\n)\n\ndef Camera \"Camera\"\n{\n    float focalLength = 30\n    \
@@ -142,15 +143,15 @@ fn scene_text(dir: &Path) -> String {
              int[] faceVertexCounts = [4]\n    int[] faceVertexIndices = [0, 1, 2, 3]\n    \
              point3f[] points = [({x0}, 0, 10), ({x1}, 0, 10), ({x1}, 0, -90), ({x0}, 0, -90)]\n    \
              texCoord2f[] primvars:st = [(0, 0), (1, 0), (1, 40), (0, 40)] (\n        interpolation = \"vertex\"\n    )\n    \
-             rel material:binding = </Looks/M{k}>\n}}\n\
-             def \"Looks\"\n{{\n    def Material \"M{k}\"\n    {{\n        \
-             token outputs:surface.connect = </Looks/M{k}/PBR.outputs:surface>\n        \
+             rel material:binding = </Looks{k}/M{k}>\n}}\n\
+             def \"Looks{k}\"\n{{\n    def Material \"M{k}\"\n    {{\n        \
+             token outputs:surface.connect = </Looks{k}/M{k}/PBR.outputs:surface>\n        \
              def Shader \"PBR\"\n        {{\n            uniform token info:id = \"UsdPreviewSurface\"\n            \
-             color3f inputs:diffuseColor.connect = </Looks/M{k}/Tex.outputs:rgb>\n            token outputs:surface\n        }}\n        \
+             color3f inputs:diffuseColor.connect = </Looks{k}/M{k}/Tex.outputs:rgb>\n            token outputs:surface\n        }}\n        \
              def Shader \"St\"\n        {{\n            uniform token info:id = \"UsdPrimvarReader_float2\"\n            \
              token inputs:varname = \"st\"\n            float2 outputs:result\n        }}\n        \
              def Shader \"Tex\"\n        {{\n            uniform token info:id = \"UsdUVTexture\"\n            \
-             asset inputs:file = @{}@\n            float2 inputs:st.connect = </Looks/M{k}/St.outputs:result>\n            \
+             asset inputs:file = @{}@\n            float2 inputs:st.connect = </Looks{k}/M{k}/St.outputs:result>\n            \
              float3 outputs:rgb\n        }}\n    }}\n}}\n",
             file.display()
         );

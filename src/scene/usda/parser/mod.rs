@@ -32,15 +32,37 @@ const MAX_DEPTH: usize = 200;
 /// Parses `text` (the contents of `file`) into a layer. Asset paths are resolved against
 /// `base_dir`, the directory of the file.
 pub fn parse(file: FileId, text: &str, base_dir: &Path, diags: &mut Diagnostics) -> Layer {
-    // Unrecognised text is reported first (a pass that keeps nothing else); the parser then
-    // pulls tokens from a second pass through a bounded window.
-    let lex_errors = lex_errors(file, text);
+    // Unrecognised text is reported before any parse error. Most files have none: they are
+    // lexed once, as the parser pulls tokens through a bounded window. A file with some (or
+    // one the parser gave up on before its end, whose rest is unknown) is parsed again, its
+    // unrecognised text found by a pass that keeps nothing else and reported first.
+    let mut first = Diagnostics::new();
+    let (layer, lexed_clean) = parse_pass(file, text, base_dir, &mut first, Vec::new());
+    if lexed_clean {
+        diags.extend(first);
+        return layer;
+    }
+    drop(layer);
+    parse_pass(file, text, base_dir, diags, lex_errors(file, text)).0
+}
+
+/// Parses `text` after reporting `lex_errors`; also whether every token was lexed and none
+/// was unrecognised.
+fn parse_pass(
+    file: FileId,
+    text: &str,
+    base_dir: &Path,
+    diags: &mut Diagnostics,
+    lex_errors: Vec<Span>,
+) -> (Layer, bool) {
     let tokens = RefCell::new(TokenWindow::new(TokenStream::new(file, text)));
     let mut parser = Parser { text, file, tokens, pos: 0, base_dir, diags, errors: 0, depth: 0 };
     for span in lex_errors {
         parser.error(Diagnostic::error("unrecognised text").at(span, "not valid in a .usda file"));
     }
-    parser.layer()
+    let layer = parser.layer();
+    let window = parser.tokens.borrow();
+    (layer, window.exhausted && !window.unrecognised)
 }
 
 /// Marker for a reported parse error; the diagnostic is already in the sink.
@@ -83,6 +105,10 @@ struct TokenWindow<'a> {
     buffer: VecDeque<Token>,
     /// No more tokens: the stream is exhausted or the parser stopped.
     done: bool,
+    /// The stream ended (every token was lexed).
+    exhausted: bool,
+    /// Some text matched no token.
+    unrecognised: bool,
 }
 
 impl<'a> TokenWindow<'a> {
@@ -90,7 +116,7 @@ impl<'a> TokenWindow<'a> {
     const KEEP: usize = 1 << 16;
 
     fn new(stream: TokenStream<'a>) -> TokenWindow<'a> {
-        TokenWindow { stream, base: 0, buffer: VecDeque::new(), done: false }
+        TokenWindow { stream, base: 0, buffer: VecDeque::new(), done: false, exhausted: false, unrecognised: false }
     }
 
     /// Token `at`, lexing up to it; `None` past the end or before the window.
@@ -98,8 +124,8 @@ impl<'a> TokenWindow<'a> {
         while !self.done && self.base + self.buffer.len() <= at {
             match self.stream.next() {
                 Some(Ok(token)) => self.buffer.push_back(token),
-                Some(Err(_)) => {} // reported before parsing
-                None => self.done = true,
+                Some(Err(_)) => self.unrecognised = true, // reported before parsing
+                None => (self.done, self.exhausted) = (true, true),
             }
         }
         if at >= self.base + 2 * Self::KEEP {
