@@ -370,7 +370,15 @@ impl Blas {
     /// `(t, b1, b2)` of the ray against the primitive in leaf slot `k` (an index into
     /// `group_members`).
     #[inline(always)]
-    fn hit_slot(&self, pre: &RayPre, o: Vec3, d: Vec3, k: usize, tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
+    fn hit_slot<const KZ: usize>(
+        &self,
+        pre: &RayPre<KZ>,
+        o: Vec3,
+        d: Vec3,
+        k: usize,
+        tmin: f32,
+        tmax: f32,
+    ) -> Option<(f32, f32, f32)> {
         let i = self.group_members[k] as usize;
         if let Some(p) = self.positions.get(i) {
             pre.intersect(p, tmin, tmax)
@@ -394,8 +402,19 @@ impl Blas {
     /// not be unit length (object-space rays are not), and `t` is in its units.
     #[inline]
     fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32, f32, f32)> {
-        let Some(space) = self.bvh.as_ref() else { return self.intersect_flat(o, d, tmin, tmax) };
-        let pre = RayPre::new(o, d);
+        // One branch per ray on the direction's largest axis, not one per triangle test.
+        match dominant_axis(d) {
+            0 => self.intersect_along::<0>(o, d, tmin, tmax),
+            1 => self.intersect_along::<1>(o, d, tmin, tmax),
+            _ => self.intersect_along::<2>(o, d, tmin, tmax),
+        }
+    }
+
+    /// [`Blas::intersect`] for a ray whose largest direction component is axis `KZ`.
+    #[inline(always)]
+    fn intersect_along<const KZ: usize>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32, f32, f32)> {
+        let pre = RayPre::<KZ>::new(o, d);
+        let Some(space) = self.bvh.as_ref() else { return self.intersect_flat(&pre, o, d, tmin, tmax) };
         let (ray, k) = space.ray(o, d, tmin, tmax)?;
         let mut best = None;
         wide::closest(&space.bvh, ray, |r, id| {
@@ -415,15 +434,18 @@ impl Blas {
 
     /// [`Blas::intersect`] without a BVH: every primitive tested.
     #[inline]
-    fn intersect_flat(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, u32, f32, f32)> {
-        if self.is_empty() {
-            return None;
-        }
-        let pre = RayPre::new(o, d);
+    fn intersect_flat<const KZ: usize>(
+        &self,
+        pre: &RayPre<KZ>,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+    ) -> Option<(f32, u32, f32, f32)> {
         let mut best = None;
         let mut closest = tmax;
         for k in 0..self.group_members.len() {
-            if let Some((t, b1, b2)) = self.hit_slot(&pre, o, d, k, tmin, closest) {
+            if let Some((t, b1, b2)) = self.hit_slot(pre, o, d, k, tmin, closest) {
                 best = Some((t, self.group_members[k], b1, b2));
                 closest = t;
             }
@@ -434,14 +456,20 @@ impl Blas {
     /// Whether anything lies on `o + t d` within `(tmin, tmax)`.
     #[inline]
     fn occluded(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
+        match dominant_axis(d) {
+            0 => self.occluded_along::<0>(o, d, tmin, tmax),
+            1 => self.occluded_along::<1>(o, d, tmin, tmax),
+            _ => self.occluded_along::<2>(o, d, tmin, tmax),
+        }
+    }
+
+    /// [`Blas::occluded`] for a ray whose largest direction component is axis `KZ`.
+    #[inline(always)]
+    fn occluded_along<const KZ: usize>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
+        let pre = RayPre::<KZ>::new(o, d);
         let Some(space) = self.bvh.as_ref() else {
-            if self.is_empty() {
-                return false;
-            }
-            let pre = RayPre::new(o, d);
             return (0..self.group_members.len()).any(|k| self.hit_slot(&pre, o, d, k, tmin, tmax).is_some());
         };
-        let pre = RayPre::new(o, d);
         let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return false };
         wide::any(&space.bvh, ray, |r, id| {
             let tmax = unscale(r.tmax, k, tmax);
@@ -868,45 +896,53 @@ impl Boundable for Padded {
     }
 }
 
+/// The axis of `d`'s largest component (the first of equals, from the last): the watertight
+/// test shears along it.
+#[inline]
+fn dominant_axis(d: Vec3) -> usize {
+    let a = d.abs();
+    if a.x > a.y {
+        if a.x > a.z { 0 } else { 2 }
+    } else if a.y > a.z {
+        1
+    } else {
+        2
+    }
+}
+
 /// Per-ray precomputation of the watertight test (pbrt-v4's, after Woop, Benthin & Wald
-/// 2013): the axis permutation that makes the direction's largest component z, and the shear
-/// that maps the ray to +z. The test runs in f32 on the compact positions; its rounding is
-/// bounded (see [`RayPre::intersect`]) so a hit is never reported behind the origin, and
-/// hit points carry an error bound that [`offset_ray_origin`] moves past.
-struct RayPre {
+/// 2013) for a ray whose largest direction component is axis `KZ` ([`dominant_axis`]): the
+/// permutation that makes that component z is in the type, so the test reads each vertex's
+/// coordinates directly, and the shear that maps the ray to +z is stored. The test runs in
+/// f32 on the compact positions; its rounding is bounded (see [`RayPre::intersect`]) so a
+/// hit is never reported behind the origin, and hit points carry an error bound that
+/// [`offset_ray_origin`] moves past.
+struct RayPre<const KZ: usize> {
     o: Vec3,
-    k: [usize; 3],
     /// `(−dx/dz, −dy/dz, 1/dz)` in the permuted axes.
     s: Vec3,
 }
 
-impl RayPre {
-    #[inline]
-    fn new(o: Vec3, d: Vec3) -> RayPre {
-        let a = d.abs();
-        let kz = if a.x > a.y {
-            if a.x > a.z { 0 } else { 2 }
-        } else if a.y > a.z {
-            1
-        } else {
-            2
-        };
-        let kx = (kz + 1) % 3;
-        let ky = (kx + 1) % 3;
-        let s = Vec3::new(-d[kx] / d[kz], -d[ky] / d[kz], 1.0 / d[kz]);
-        RayPre { o, k: [kx, ky, kz], s }
+impl<const KZ: usize> RayPre<KZ> {
+    /// The permuted x and y axes: the two after `KZ`, cyclically (so the permutation keeps
+    /// the handedness).
+    const KX: usize = (KZ + 1) % 3;
+    const KY: usize = (KZ + 2) % 3;
+
+    #[inline(always)]
+    fn new(o: Vec3, d: Vec3) -> RayPre<KZ> {
+        let s = Vec3::new(-d[Self::KX] / d[KZ], -d[Self::KY] / d[KZ], 1.0 / d[KZ]);
+        RayPre { o, s }
     }
 
     /// `(t, b1, b2)` of a hit with `t` in `(tmin, tmax)`.
     #[inline]
     fn intersect(&self, p: &[Vec3; 3], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
-        let [kx, ky, kz] = self.k;
-        // Translate to the ray origin, permute, shear. The permutation indexes a 4-array
-        // with indices below 4: loads, no branches and no bounds checks.
+        // Translate to the ray origin, permute, shear.
         let shear = |v: Vec3| {
-            let v = (v - self.o).extend(0.0).to_array();
-            let z = v[kz & 3];
-            (v[kx & 3] + self.s.x * z, v[ky & 3] + self.s.y * z, z)
+            let v = v - self.o;
+            let z = v[KZ];
+            (v[Self::KX] + self.s.x * z, v[Self::KY] + self.s.y * z, z)
         };
         let (x0, y0, z0) = shear(p[0]);
         let (x1, y1, z1) = shear(p[1]);
