@@ -483,14 +483,23 @@ impl Blas {
         let i = index as usize;
         match self.positions.get(i) {
             Some(&p) => {
-                let a = self.attrs.get(i, p);
+                let a = self.attrs.get(i);
                 let b0 = 1.0 - b1 - b2;
                 let pos = p[0] * b0 + p[1] * b1 + p[2] * b2;
                 let err = (p[0] * b0).abs() + (p[1] * b1).abs() + (p[2] * b2).abs();
                 let ng = winding_normal(p);
-                let ns = shading_normal(a.n[0] * b0 + a.n[1] * b1 + a.n[2] * b2, ng);
-                let uv = a.uv[0] * b0 + a.uv[1] * b1 + a.uv[2] * b2;
-                let (dpdu, dpdv) = tangents(p, a.uv, ns);
+                // A flat triangle's shading normal is its winding normal: nothing to
+                // interpolate and renormalise.
+                let ns = match a.n {
+                    Some(n) => shading_normal(n[0] * b0 + n[1] * b1 + n[2] * b2, ng),
+                    None => ng,
+                };
+                let (uv, (dpdu, dpdv)) = match a.uv {
+                    Some(uv) => (uv[0] * b0 + uv[1] * b1 + uv[2] * b2, tangents(p, uv, ns)),
+                    // The parametric coordinates (0,0), (1,0), (0,1): uv is (b1, b2) and the
+                    // edges from corner 0 are ∂P/∂u and ∂P/∂v, as `tangents` finds them.
+                    None => (Vec2::new(b1, b2), edge_tangents(p, ns)),
+                };
                 let geom = SurfaceGeom {
                     p: pos,
                     p_error: err * gamma(7),
@@ -579,6 +588,19 @@ pub(crate) fn tangents(p: [Vec3; 3], uv: [Vec2; 3], n: Vec3) -> (Vec3, Vec3) {
     }
     let f = Frame::from_normal(n);
     (f.t, f.b)
+}
+
+/// [`tangents`] for the parametric coordinates `(0,0), (1,0), (0,1)`: the edges from corner 0,
+/// or a frame around `n` when they do not span a plane.
+#[inline]
+fn edge_tangents(p: [Vec3; 3], n: Vec3) -> (Vec3, Vec3) {
+    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+    if e1.is_finite() && e2.is_finite() && e1.cross(e2).length_squared() > 0.0 {
+        (e1, e2)
+    } else {
+        let f = Frame::from_normal(n);
+        (f.t, f.b)
+    }
 }
 
 /// An instance as the traversal uses it.
@@ -776,10 +798,16 @@ impl Accel {
                 } else {
                     ng
                 };
-                let a = blas.attrs.get(hit.index as usize, v);
+                let a = blas.attrs.get(hit.index as usize);
                 let b0 = 1.0 - hit.b1 - hit.b2;
-                let ns = shading_normal(normal(a.n[0] * b0 + a.n[1] * hit.b1 + a.n[2] * hit.b2), ng);
-                let (dpdu, dpdv) = tangents(w, a.uv, ns);
+                let ns = match a.n {
+                    Some(n) => shading_normal(normal(n[0] * b0 + n[1] * hit.b1 + n[2] * hit.b2), ng),
+                    None => ng,
+                };
+                let (dpdu, dpdv) = match a.uv {
+                    Some(uv) => tangents(w, uv, ns),
+                    None => edge_tangents(w, ns),
+                };
                 SurfaceGeom { p, p_error, ng, ns, dpdu, dpdv, ..local }
             }
             None => {
