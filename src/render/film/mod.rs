@@ -722,8 +722,9 @@ fn render_impl(
             // full render's.
             let pixel = (y * w + x) as u64;
             px.reset(channel_floats);
+            let pixel_key = PathSampler::pixel_key(settings.seed, pixel);
             for sample in samples.clone() {
-                let mut sampler = PathSampler::new(settings.sampler, settings.seed, pixel, sample);
+                let mut sampler = PathSampler::of_pixel(settings.sampler, pixel_key, sample);
                 let jitter = sampler.get2(Slot::Pixel);
                 let film = Vec2::new((x as f32 + jitter.x) / w as f32, (y as f32 + jitter.y) / h as f32);
                 // Numbers are counter based: skipping the lens draw of a pinhole camera

@@ -96,7 +96,20 @@ pub struct PathSampler {
 impl PathSampler {
     /// The sampler of sample `sample` of pixel `pixel` under `seed`, at vertex 0.
     pub fn new(kind: SamplerKind, seed: u64, pixel: u64, sample: u32) -> PathSampler {
-        let pixel_key = mix64(mix64(seed ^ 0x5851_f42d_4c95_7f2d) ^ pixel.wrapping_mul(0xd6e8_feb8_6659_fd93));
+        PathSampler::of_pixel(kind, PathSampler::pixel_key(seed, pixel), sample)
+    }
+
+    /// The key every dimension of pixel `pixel` under `seed` derives from: computed once per
+    /// pixel by a caller that loops over its samples ([`PathSampler::of_pixel`]).
+    #[inline]
+    pub fn pixel_key(seed: u64, pixel: u64) -> u64 {
+        mix64(mix64(seed ^ 0x5851_f42d_4c95_7f2d) ^ pixel.wrapping_mul(0xd6e8_feb8_6659_fd93))
+    }
+
+    /// The sampler of sample `sample` of the pixel whose [`PathSampler::pixel_key`] is
+    /// `pixel_key`, at vertex 0 (the same as [`PathSampler::new`]).
+    #[inline]
+    pub fn of_pixel(kind: SamplerKind, pixel_key: u64, sample: u32) -> PathSampler {
         PathSampler { kind, pixel_key, sample, sample_reversed: sample.reverse_bits(), vertex: 0 }
     }
 
@@ -154,13 +167,40 @@ impl PathSampler {
     /// The seed of dimension (vertex, slot) in this pixel.
     #[inline]
     fn dimension_key(&self, slot: u32) -> u64 {
-        mix64(self.pixel_key ^ mix64((u64::from(self.vertex) << 32) | u64::from(slot)))
+        let (vertex, slot) = (self.vertex as usize, slot as usize);
+        let dimension = match DIMENSION_HASHES.get(vertex).and_then(|row| row.get(slot)) {
+            Some(&hash) => hash,
+            None => dimension_hash(vertex as u32, slot as u32),
+        };
+        mix64(self.pixel_key ^ dimension)
     }
 }
 
+/// The hash of dimension (vertex, slot), which a pixel's key is mixed with.
+#[inline]
+const fn dimension_hash(vertex: u32, slot: u32) -> u64 {
+    mix64(((vertex as u64) << 32) | slot as u64)
+}
+
+/// [`dimension_hash`] of the first 16 vertices' first 16 slots, tabulated (2 KiB): one mix
+/// per number instead of two.
+const DIMENSION_HASHES: [[u64; 16]; 16] = {
+    let mut table = [[0u64; 16]; 16];
+    let mut vertex = 0;
+    while vertex < 16 {
+        let mut slot = 0;
+        while slot < 16 {
+            table[vertex][slot] = dimension_hash(vertex as u32, slot as u32);
+            slot += 1;
+        }
+        vertex += 1;
+    }
+    table
+};
+
 /// SplitMix64 finaliser: a bijective 64-bit mix with good avalanche.
 #[inline]
-fn mix64(mut z: u64) -> u64 {
+const fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
     z ^ (z >> 31)

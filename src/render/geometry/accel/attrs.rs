@@ -11,13 +11,16 @@ use glam::{Vec2, Vec3};
 const NONE: u32 = u32::MAX;
 
 /// The texture coordinates of a triangle without its own: the parametric `(0,0), (1,0), (0,1)`.
-const PARAMETRIC_UV: [Vec2; 3] = [Vec2::ZERO, Vec2::X, Vec2::Y];
+pub(super) const PARAMETRIC_UV: [Vec2; 3] = [Vec2::ZERO, Vec2::X, Vec2::Y];
 
 /// What a triangle needs only after it was hit.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct TriangleAttrs {
-    pub(super) n: [Vec3; 3],
-    pub(super) uv: [Vec2; 3],
+    /// The corners' shading normals; `None` when each is the triangle's flat normal (the
+    /// caller has the winding normal already, and a hit then needs no interpolation).
+    pub(super) n: Option<[Vec3; 3]>,
+    /// The corners' texture coordinates; `None` for [`PARAMETRIC_UV`].
+    pub(super) uv: Option<[Vec2; 3]>,
     /// The prim: a global prim index in the world BLAS, a prototype-local one in a prototype's.
     pub(super) prim: u32,
     pub(super) primvars: PrimvarRef,
@@ -117,13 +120,14 @@ impl AttrTable {
         self.prims.get(i).copied()
     }
 
-    /// Triangle `i`'s attributes, as the triangle held them (`p`: its positions).
+    /// Triangle `i`'s attributes, as the triangle held them (`None` for the flat normal and
+    /// the parametric coordinates).
     #[inline]
-    pub(super) fn get(&self, i: usize, p: [Vec3; 3]) -> TriangleAttrs {
+    pub(super) fn get(&self, i: usize) -> TriangleAttrs {
         let entry = |of: &[u32]| of.get(i).copied().filter(|&k| k != NONE).map(|k| k as usize);
         TriangleAttrs {
-            n: entry(&self.normal_of).map_or_else(|| [flat_normal(p); 3], |k| self.normals[k]),
-            uv: entry(&self.uv_of).map_or(PARAMETRIC_UV, |k| self.uvs[k]),
+            n: entry(&self.normal_of).map(|k| self.normals[k]),
+            uv: entry(&self.uv_of).map(|k| self.uvs[k]),
             prim: self.prims[i],
             primvars: self.primvars.get(i).copied().unwrap_or(PrimvarRef::NONE),
         }
@@ -162,9 +166,9 @@ mod tests {
         assert_eq!(table.len(), triangles.len());
         for (i, t) in triangles.iter().enumerate() {
             assert_eq!(positions[i], t.p);
-            let a = table.get(i, positions[i]);
-            assert_eq!(a.n, t.n, "{i}");
-            assert_eq!(a.uv, if t.has_uv { t.uv } else { PARAMETRIC_UV }, "{i}");
+            let a = table.get(i);
+            assert_eq!(a.n.unwrap_or([flat_normal(positions[i]); 3]), t.n, "{i}");
+            assert_eq!(a.uv.unwrap_or(PARAMETRIC_UV), if t.has_uv { t.uv } else { PARAMETRIC_UV }, "{i}");
             assert_eq!((a.prim, a.primvars), (t.prim, t.primvars), "{i}");
         }
         assert_eq!(table.normals.len(), triangles.len().div_ceil(3));

@@ -387,9 +387,9 @@ impl Blas {
     /// (a constant, so a still BLAS's loop is the one it always was).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn hit_slot<const DEFORMS: bool>(
+    fn hit_slot<const KZ: usize, const DEFORMS: bool>(
         &self,
-        pre: &RayPre,
+        pre: &RayPre<KZ>,
         o: Vec3,
         d: Vec3,
         k: usize,
@@ -445,15 +445,35 @@ impl Blas {
         tmax: f32,
         time: f32,
     ) -> Option<(f32, u32, f32, f32)> {
-        let Some(space) = self.bvh.as_ref() else { return self.intersect_flat::<DEFORMS>(o, d, tmin, tmax, time) };
-        let pre = RayPre::new(o, d);
+        // One branch per ray on the direction's largest axis, not one per triangle test.
+        match dominant_axis(d) {
+            0 => self.intersect_along::<0, DEFORMS>(o, d, tmin, tmax, time),
+            1 => self.intersect_along::<1, DEFORMS>(o, d, tmin, tmax, time),
+            _ => self.intersect_along::<2, DEFORMS>(o, d, tmin, tmax, time),
+        }
+    }
+
+    /// [`Blas::intersect_when`] for a ray whose largest direction component is axis `KZ`.
+    #[inline(always)]
+    fn intersect_along<const KZ: usize, const DEFORMS: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> Option<(f32, u32, f32, f32)> {
+        let pre = RayPre::<KZ>::new(o, d);
+        let Some(space) = self.bvh.as_ref() else {
+            return self.intersect_flat::<KZ, DEFORMS>(&pre, o, d, tmin, tmax, time);
+        };
         let (ray, k) = space.ray(o, d, tmin, tmax)?;
         let mut best = None;
         wide::closest(&space.bvh, ray, |r, id| {
             let mut closest = unscale(r.tmax, k, tmax);
             let mut found = false;
             for k in self.group(id) {
-                if let Some((t, b1, b2)) = self.hit_slot::<DEFORMS>(&pre, o, d, k, tmin, closest, time) {
+                if let Some((t, b1, b2)) = self.hit_slot::<KZ, DEFORMS>(&pre, o, d, k, tmin, closest, time) {
                     best = Some((t, self.group_members[k], b1, b2));
                     closest = t;
                     found = true;
@@ -465,23 +485,21 @@ impl Blas {
     }
 
     /// [`Blas::intersect`] without a BVH: every primitive tested.
+    #[allow(clippy::too_many_arguments)]
     #[inline]
-    fn intersect_flat<const DEFORMS: bool>(
+    fn intersect_flat<const KZ: usize, const DEFORMS: bool>(
         &self,
+        pre: &RayPre<KZ>,
         o: Vec3,
         d: Vec3,
         tmin: f32,
         tmax: f32,
         time: f32,
     ) -> Option<(f32, u32, f32, f32)> {
-        if self.is_empty() {
-            return None;
-        }
-        let pre = RayPre::new(o, d);
         let mut best = None;
         let mut closest = tmax;
         for k in 0..self.group_members.len() {
-            if let Some((t, b1, b2)) = self.hit_slot::<DEFORMS>(&pre, o, d, k, tmin, closest, time) {
+            if let Some((t, b1, b2)) = self.hit_slot::<KZ, DEFORMS>(pre, o, d, k, tmin, closest, time) {
                 best = Some((t, self.group_members[k], b1, b2));
                 closest = t;
             }
@@ -507,19 +525,32 @@ impl Blas {
 
     #[inline(always)]
     fn occluded_when<const DEFORMS: bool>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
+        match dominant_axis(d) {
+            0 => self.occluded_along::<0, DEFORMS>(o, d, tmin, tmax, time),
+            1 => self.occluded_along::<1, DEFORMS>(o, d, tmin, tmax, time),
+            _ => self.occluded_along::<2, DEFORMS>(o, d, tmin, tmax, time),
+        }
+    }
+
+    /// [`Blas::occluded_when`] for a ray whose largest direction component is axis `KZ`.
+    #[inline(always)]
+    fn occluded_along<const KZ: usize, const DEFORMS: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> bool {
+        let pre = RayPre::<KZ>::new(o, d);
         let Some(space) = self.bvh.as_ref() else {
-            if self.is_empty() {
-                return false;
-            }
-            let pre = RayPre::new(o, d);
             return (0..self.group_members.len())
-                .any(|k| self.hit_slot::<DEFORMS>(&pre, o, d, k, tmin, tmax, time).is_some());
+                .any(|k| self.hit_slot::<KZ, DEFORMS>(&pre, o, d, k, tmin, tmax, time).is_some());
         };
-        let pre = RayPre::new(o, d);
         let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return false };
         wide::any(&space.bvh, ray, |r, id| {
             let tmax = unscale(r.tmax, k, tmax);
-            self.group(id).any(|k| self.hit_slot::<DEFORMS>(&pre, o, d, k, tmin, tmax, time).is_some())
+            self.group(id).any(|k| self.hit_slot::<KZ, DEFORMS>(&pre, o, d, k, tmin, tmax, time).is_some())
         })
     }
 
@@ -540,14 +571,23 @@ impl Blas {
         let deformed = |p: [Vec3; 3]| self.deformation.as_ref().map_or(p, |keys| keys.at(i, time));
         match self.positions.get(i).copied().map(deformed) {
             Some(p) => {
-                let a = self.attrs.get(i, p);
+                let a = self.attrs.get(i);
                 let b0 = 1.0 - b1 - b2;
                 let pos = p[0] * b0 + p[1] * b1 + p[2] * b2;
                 let err = (p[0] * b0).abs() + (p[1] * b1).abs() + (p[2] * b2).abs();
                 let ng = winding_normal(p);
-                let ns = shading_normal(a.n[0] * b0 + a.n[1] * b1 + a.n[2] * b2, ng);
-                let uv = a.uv[0] * b0 + a.uv[1] * b1 + a.uv[2] * b2;
-                let (dpdu, dpdv) = tangents(p, a.uv, ns);
+                // A flat triangle's shading normal is its winding normal: nothing to
+                // interpolate and renormalise.
+                let ns = match a.n {
+                    Some(n) => shading_normal(n[0] * b0 + n[1] * b1 + n[2] * b2, ng),
+                    None => ng,
+                };
+                let (uv, (dpdu, dpdv)) = match a.uv {
+                    Some(uv) => (uv[0] * b0 + uv[1] * b1 + uv[2] * b2, tangents(p, uv, ns)),
+                    // The parametric coordinates (0,0), (1,0), (0,1): uv is (b1, b2) and the
+                    // edges from corner 0 are ∂P/∂u and ∂P/∂v, as `tangents` finds them.
+                    None => (Vec2::new(b1, b2), edge_tangents(p, ns)),
+                };
                 let geom = SurfaceGeom {
                     p: pos,
                     p_error: err * gamma(7),
@@ -636,6 +676,19 @@ pub(crate) fn tangents(p: [Vec3; 3], uv: [Vec2; 3], n: Vec3) -> (Vec3, Vec3) {
     }
     let f = Frame::from_normal(n);
     (f.t, f.b)
+}
+
+/// [`tangents`] for the parametric coordinates `(0,0), (1,0), (0,1)`: the edges from corner 0,
+/// or a frame around `n` when they do not span a plane.
+#[inline]
+fn edge_tangents(p: [Vec3; 3], n: Vec3) -> (Vec3, Vec3) {
+    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+    if e1.is_finite() && e2.is_finite() && e1.cross(e2).length_squared() > 0.0 {
+        (e1, e2)
+    } else {
+        let f = Frame::from_normal(n);
+        (f.t, f.b)
+    }
 }
 
 /// An instance as the traversal uses it.
@@ -918,10 +971,16 @@ impl Accel {
                 } else {
                     ng
                 };
-                let a = blas.attrs.get(hit.index as usize, v);
+                let a = blas.attrs.get(hit.index as usize);
                 let b0 = 1.0 - hit.b1 - hit.b2;
-                let ns = shading_normal(normal(a.n[0] * b0 + a.n[1] * hit.b1 + a.n[2] * hit.b2), ng);
-                let (dpdu, dpdv) = tangents(w, a.uv, ns);
+                let ns = match a.n {
+                    Some(n) => shading_normal(normal(n[0] * b0 + n[1] * hit.b1 + n[2] * hit.b2), ng),
+                    None => ng,
+                };
+                let (dpdu, dpdv) = match a.uv {
+                    Some(uv) => tangents(w, uv, ns),
+                    None => edge_tangents(w, ns),
+                };
                 SurfaceGeom { p, p_error, ng, ns, dpdu, dpdv, ..local }
             }
             None => {
@@ -1038,45 +1097,53 @@ impl Boundable for Padded {
     }
 }
 
+/// The axis of `d`'s largest component (the first of equals, from the last): the watertight
+/// test shears along it.
+#[inline]
+fn dominant_axis(d: Vec3) -> usize {
+    let a = d.abs();
+    if a.x > a.y {
+        if a.x > a.z { 0 } else { 2 }
+    } else if a.y > a.z {
+        1
+    } else {
+        2
+    }
+}
+
 /// Per-ray precomputation of the watertight test (pbrt-v4's, after Woop, Benthin & Wald
-/// 2013): the axis permutation that makes the direction's largest component z, and the shear
-/// that maps the ray to +z. The test runs in f32 on the compact positions; its rounding is
-/// bounded (see [`RayPre::intersect`]) so a hit is never reported behind the origin, and
-/// hit points carry an error bound that [`offset_ray_origin`] moves past.
-struct RayPre {
+/// 2013) for a ray whose largest direction component is axis `KZ` ([`dominant_axis`]): the
+/// permutation that makes that component z is in the type, so the test reads each vertex's
+/// coordinates directly, and the shear that maps the ray to +z is stored. The test runs in
+/// f32 on the compact positions; its rounding is bounded (see [`RayPre::intersect`]) so a
+/// hit is never reported behind the origin, and hit points carry an error bound that
+/// [`offset_ray_origin`] moves past.
+struct RayPre<const KZ: usize> {
     o: Vec3,
-    k: [usize; 3],
     /// `(−dx/dz, −dy/dz, 1/dz)` in the permuted axes.
     s: Vec3,
 }
 
-impl RayPre {
-    #[inline]
-    fn new(o: Vec3, d: Vec3) -> RayPre {
-        let a = d.abs();
-        let kz = if a.x > a.y {
-            if a.x > a.z { 0 } else { 2 }
-        } else if a.y > a.z {
-            1
-        } else {
-            2
-        };
-        let kx = (kz + 1) % 3;
-        let ky = (kx + 1) % 3;
-        let s = Vec3::new(-d[kx] / d[kz], -d[ky] / d[kz], 1.0 / d[kz]);
-        RayPre { o, k: [kx, ky, kz], s }
+impl<const KZ: usize> RayPre<KZ> {
+    /// The permuted x and y axes: the two after `KZ`, cyclically (so the permutation keeps
+    /// the handedness).
+    const KX: usize = (KZ + 1) % 3;
+    const KY: usize = (KZ + 2) % 3;
+
+    #[inline(always)]
+    fn new(o: Vec3, d: Vec3) -> RayPre<KZ> {
+        let s = Vec3::new(-d[Self::KX] / d[KZ], -d[Self::KY] / d[KZ], 1.0 / d[KZ]);
+        RayPre { o, s }
     }
 
     /// `(t, b1, b2)` of a hit with `t` in `(tmin, tmax)`.
     #[inline]
     fn intersect(&self, p: &[Vec3; 3], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
-        let [kx, ky, kz] = self.k;
-        // Translate to the ray origin, permute, shear. The permutation indexes a 4-array
-        // with indices below 4: loads, no branches and no bounds checks.
+        // Translate to the ray origin, permute, shear.
         let shear = |v: Vec3| {
-            let v = (v - self.o).extend(0.0).to_array();
-            let z = v[kz & 3];
-            (v[kx & 3] + self.s.x * z, v[ky & 3] + self.s.y * z, z)
+            let v = v - self.o;
+            let z = v[KZ];
+            (v[Self::KX] + self.s.x * z, v[Self::KY] + self.s.y * z, z)
         };
         let (x0, y0, z0) = shear(p[0]);
         let (x1, y1, z1) = shear(p[1]);

@@ -236,9 +236,12 @@ fn grazing_rays_never_rehit_their_surface_at_any_scale() {
 /// Brute force over every triangle with the same watertight test: the nearest `t` and
 /// every triangle hit at exactly that `t` (a ray through a shared edge hits both).
 fn brute_force(tris: &[[Vec3; 3]], o: Vec3, d: Vec3, tmax: f32) -> Option<(f32, Vec<u32>)> {
-    let pre = RayPre::new(o, d);
-    let hits: Vec<(f32, u32)> =
-        tris.iter().enumerate().filter_map(|(i, p)| pre.intersect(p, 0.0, tmax).map(|h| (h.0, i as u32))).collect();
+    let test = |p: &[Vec3; 3]| match dominant_axis(d) {
+        0 => RayPre::<0>::new(o, d).intersect(p, 0.0, tmax),
+        1 => RayPre::<1>::new(o, d).intersect(p, 0.0, tmax),
+        _ => RayPre::<2>::new(o, d).intersect(p, 0.0, tmax),
+    };
+    let hits: Vec<(f32, u32)> = tris.iter().enumerate().filter_map(|(i, p)| test(p).map(|h| (h.0, i as u32))).collect();
     let t = hits.iter().map(|h| h.0).reduce(f32::min)?;
     Some((t, hits.iter().filter(|h| h.0 == t).map(|h| h.1).collect()))
 }
