@@ -551,6 +551,8 @@ impl Session {
         if let Some(prepared) = &mut self.prepared {
             let scene = &mut prepared.scene;
             scene.camera = camera;
+            // The viewer's pose replaces the stage camera's, its motion under the shutter too.
+            scene.camera_motion = None;
             if scene.default_lights {
                 scene.lights = crate::render::scene::default_lights(&camera);
             }
