@@ -470,7 +470,7 @@ enum BenchCommand {
         #[arg(long)]
         quick: bool,
     },
-    /// Measure and draw every chart of README's Charts section and docs/STABILITY.md as SVG:
+    /// Measure and draw every chart of docs/PERFORMANCE.md's Charts section and docs/STABILITY.md as SVG:
     /// error vs time of stochastic vs weighted layering (1-64 layers; constant, noise and thin
     /// masks), JIT vs interpreter, strata vs Mitsuba 3 (from the committed CSV), per-point
     /// cost, compile time vs graph size, GGX and glass energy. A few minutes on 2 cores.

@@ -278,7 +278,7 @@ fn dome_with_1e4_to_1_dynamic_range() {
 }
 
 /// `strata render --stats` reports what was compiled, the shader calls per sample and the time
-/// split (README, Performance).
+/// split (docs/PERFORMANCE.md).
 #[test]
 fn render_stats_report_calls_and_time_split() {
     let dir = tempfile::tempdir().unwrap();

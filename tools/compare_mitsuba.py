@@ -1,4 +1,4 @@
-"""strata against Mitsuba 3: images compared region by region, and the timing of README's
+"""strata against Mitsuba 3: images compared region by region, and the timing of docs/MITSUBA.md's and docs/PERFORMANCE.md's
 Performance section. Not part of the test suite (`cargo test` needs neither Python nor Mitsuba).
 
     pip install mitsuba numpy flip-evaluator
@@ -13,7 +13,7 @@ Performance section. Not part of the test suite (`cargo test` needs neither Pyth
                                               # (strata: render ... --spp 64 --max-depth 8)
     python3 tools/compare_mitsuba.py measure [--scenes matte,mcg,layers,layers_dome] [--spp 64]
         [--res 320x240] [--threads 2] [--max-depth 8] [--csv FILE]
-                       # equal-error CPU time, strata / Mitsuba (README's Performance table)
+                       # equal-error CPU time, strata / Mitsuba (docs/PERFORMANCE.md's table)
     python3 tools/compare_mitsuba.py check    # CI (below)
 
 `measure` renders each scene with strata and Mitsuba at the same resolution, thread count and
@@ -583,7 +583,7 @@ def check(args):
 
 
 def timing(args):
-    """README's Performance figure: the matte ball at 640x480, 64 spp, three runs (the first
+    """docs/PERFORMANCE.md's figure: the matte ball at 640x480, 64 spp, three runs (the first
     includes kernel compilation). Compare with
         strata render scenes/compare/matte_ball.usda -o strata.exr --spp 64 --max-depth 8"""
     mi = load_mitsuba(args.variant)
@@ -690,7 +690,7 @@ def equal_error_row(sc, name, res, spp, strata, other, sigmas=3.0, min_pixels=16
 
 
 def equal_error_table(rows, other):
-    """The README table of equal_error_row rows, markdown."""
+    """The docs/PERFORMANCE.md table of equal_error_row rows, markdown."""
     out = [f"| scene | CPU ms per spp, strata / {other} | time per spp | variance per spp (worst region) | "
            f"**equal-error time** | image mean, strata vs {other} (± 3 se) | regions within 3 se + tol |",
            "|---|---|---|---|---|---|---|"]

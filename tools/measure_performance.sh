@@ -3,7 +3,7 @@
 # (with its default independent sampler, then with its stratified multijitter) and against Cycles
 # on the matte ball, one-thread samples per CPU second, and variance per spp against spp
 # (docs/charts/variance_per_spp.svg). Writes the CSVs under docs/ and the printed tables to
-# docs/performance_run.md, which README's Performance section quotes. Not part of CI.
+# docs/performance_run.md, which docs/PERFORMANCE.md quotes. Not part of CI.
 #
 #   apt-get install libllvm19                       # Mitsuba's llvm_ad_rgb (else scalar_rgb)
 #   python3 -m venv /tmp/venv && /tmp/venv/bin/pip install mitsuba==3.9.1 numpy bpy matplotlib OpenEXR

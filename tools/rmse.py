@@ -1,4 +1,4 @@
-"""RMSE of EXR renders against a reference EXR (the beauty RGB), for README's equal-spp
+"""RMSE of EXR renders against a reference EXR (the beauty RGB), for docs/PERFORMANCE.md's equal-spp
 comparisons. Optional tool: `pip install OpenEXR numpy`.
 
     python3 tools/rmse.py REFERENCE.exr IMAGE.exr [IMAGE.exr ...]

@@ -3,7 +3,7 @@
 //! plotters is built without its font features: text is laid out with its naive metrics and
 //! written as SVG `<text>` elements that the viewer renders, so drawing needs no font file, no
 //! system font and no network. Every chart has a caption block under the plot area: the
-//! figures the README quotes (ratios at equal time and equal error) are printed into the SVG
+//! figures docs/PERFORMANCE.md quotes (ratios at equal time and equal error) are printed into the SVG
 //! itself, so a chart and its numbers cannot drift apart.
 
 use plotters::prelude::*;

@@ -1,4 +1,4 @@
-//! `strata bench charts`: the README's and docs/STABILITY.md's charts.
+//! `strata bench charts`: the charts of docs/PERFORMANCE.md and docs/STABILITY.md.
 
 use super::*;
 
@@ -97,7 +97,7 @@ fn ratio_text(a: &[(f64, f64)], b: &[(f64, f64)]) -> String {
     }
 }
 
-/// `strata bench charts --plot DIR`: measures and draws every chart of README's Charts section
+/// `strata bench charts --plot DIR`: measures and draws every chart of docs/PERFORMANCE.md's Charts section
 /// into `dir` as SVG, and returns the printed report (the same ratios as the captions).
 /// `mitsuba_csv`, when it exists, is `tools/compare_mitsuba.py`'s CSV (optional).
 pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) -> Result<String, String> {
@@ -333,7 +333,7 @@ pub fn bench_charts(dir: &Path, mitsuba_csv: Option<&Path>, o: &ChartOptions) ->
 /// strata vs Mitsuba 3 per scene from `tools/compare_mitsuba.py`'s CSV: one point per
 /// renderer at (CPU seconds, noise). The noise of one render is the relative mean absolute
 /// difference between two renders of the same renderer with different seeds, divided by √2;
-/// at equal spp both renderers converge to the same image where their models agree (README).
+/// at equal spp both renderers converge to the same image where their models agree (docs/MITSUBA.md).
 fn mitsuba_chart(csv: &Path, file: &Path) -> Result<String, String> {
     let text = std::fs::read_to_string(csv).map_err(|e| format!("cannot read {}: {e}", csv.display()))?;
     let mut lines = text.lines();
