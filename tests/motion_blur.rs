@@ -2,7 +2,9 @@
 //! across an open shutter covers each pixel for the fraction of the shutter its disc spends
 //! over it; a scene where nothing visible moves renders bit for bit as with the shutter
 //! closed; transforms at fractional times are usd-core's (`tools/make_motion_fixtures.py`);
-//! a moving camera sees what a scene moving the other way shows it.
+//! a moving camera sees what a scene moving the other way shows it. Deformation blur of
+//! skinned meshes (UsdSkel) and Points follows the same analytic profile, their BVH boxes hold
+//! them at every time, and when they hold still the open shutter changes no bit.
 
 mod common;
 
@@ -118,7 +120,13 @@ fn coverage(x: usize, y: usize, shutter: f64) -> f64 {
 fn a_sliding_sphere_blurs_into_the_analytic_coverage_profile() {
     const SPP: u32 = 256;
     let path = scene("slide.usda", &sliding(0.0, 1.0, &slide_ops(), ""));
-    let image = render(&path, SPP);
+    assert_follows_the_profile(&render(&path, SPP), SPP, "sliding sphere");
+}
+
+/// The alpha channel of `image` (rendered at `spp`) against [`coverage`] of the sliding
+/// sphere over a whole-frame shutter, pixel by pixel within 4σ of its sample count; it also
+/// tells the shutter's length and the time apart.
+fn assert_follows_the_profile(image: &Image, spp: u32, what: &str) {
     let alpha = image.f32_channel("A").expect("alpha");
     let mut worst: f64 = 0.0;
     let mut total = 0.0;
@@ -129,9 +137,9 @@ fn a_sliding_sphere_blurs_into_the_analytic_coverage_profile() {
             let got = alpha[y * W + x] as f64;
             // Four standard deviations of a mean of SPP Bernoulli samples (Sobol points
             // do better), plus the midpoint rule's error.
-            let sd = (want * (1.0 - want) / SPP as f64).sqrt();
+            let sd = (want * (1.0 - want) / spp as f64).sqrt();
             let err = (got - want).abs();
-            assert!(err <= 4.0 * sd + 0.01, "pixel ({x}, {y}): alpha {got:.4}, analytic {want:.4}");
+            assert!(err <= 4.0 * sd + 0.01, "{what}: pixel ({x}, {y}): alpha {got:.4}, analytic {want:.4}");
             worst = worst.max(err);
             total += err;
             if want > 0.1 && want < 0.9 {
@@ -144,12 +152,220 @@ fn a_sliding_sphere_blurs_into_the_analytic_coverage_profile() {
         }
     }
     let mean = total / (W * H) as f64;
-    assert!(mean < 0.01, "mean error {mean}");
+    assert!(mean < 0.01, "{what}: mean error {mean}");
     // The profile is a blur (many pixels partly covered), and it tells the shutter's length
     // and the time apart: the same check would fail by far against either.
-    assert!(partial > W * H / 2, "{partial} partly covered pixels");
-    assert!(against_half > 0.3 && against_still > 0.3, "{against_half} {against_still}");
-    eprintln!("sliding sphere at {SPP} spp: worst pixel error {worst:.4}, mean {mean:.5}");
+    assert!(partial > W * H / 2, "{what}: {partial} partly covered pixels");
+    assert!(against_half > 0.3 && against_still > 0.3, "{what}: {against_half} {against_still}");
+    eprintln!("{what} at {spp} spp: worst pixel error {worst:.4}, mean {mean:.5}");
+}
+
+/// A UV sphere mesh of radius `R` around the origin (`SEGMENTS` around, half as many from
+/// pole to pole): `(points, faceVertexCounts, faceVertexIndices)` as USD text. At 96 segments
+/// its outline is within 0.05 % of the sphere's radius (0.004 pixel here).
+fn uv_sphere() -> (String, String, String) {
+    const SEGMENTS: usize = 96;
+    const RINGS: usize = SEGMENTS / 2;
+    let mut points = vec![DVec3::new(0.0, R, 0.0)];
+    for ring in 1..RINGS {
+        let theta = std::f64::consts::PI * ring as f64 / RINGS as f64;
+        for k in 0..SEGMENTS {
+            let phi = std::f64::consts::TAU * k as f64 / SEGMENTS as f64;
+            points.push(DVec3::new(theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin()) * R);
+        }
+    }
+    points.push(DVec3::new(0.0, -R, 0.0));
+    let ring_vertex = |ring: usize, k: usize| 1 + (ring - 1) * SEGMENTS + k % SEGMENTS;
+    let (mut counts, mut indices) = (Vec::new(), Vec::new());
+    for k in 0..SEGMENTS {
+        counts.push(3);
+        indices.extend([0, ring_vertex(1, k + 1), ring_vertex(1, k)]);
+    }
+    for ring in 1..RINGS - 1 {
+        for k in 0..SEGMENTS {
+            counts.push(4);
+            indices.extend([
+                ring_vertex(ring, k),
+                ring_vertex(ring, k + 1),
+                ring_vertex(ring + 1, k + 1),
+                ring_vertex(ring + 1, k),
+            ]);
+        }
+    }
+    let last = points.len() - 1;
+    for k in 0..SEGMENTS {
+        counts.push(3);
+        indices.extend([last, ring_vertex(RINGS - 1, k), ring_vertex(RINGS - 1, k + 1)]);
+    }
+    let join = |v: Vec<String>| v.join(", ");
+    (
+        join(points.iter().map(|p| format!("({}, {}, {})", p.x, p.y, p.z)).collect()),
+        join(counts.iter().map(usize::to_string).collect()),
+        join(indices.iter().map(usize::to_string).collect()),
+    )
+}
+
+/// The sliding-sphere camera looking at a UV sphere mesh skinned to the one joint of a
+/// skeleton, whose animation moves the joint from `from` to `to` over frames 0 to 1.
+fn skinned(from: f64, to: f64) -> String {
+    let (points, counts, indices) = uv_sphere();
+    let camera = sliding(0.0, 1.0, "", "");
+    // The camera of `sliding`, without its sphere.
+    let camera = &camera[..camera.find("def Sphere").unwrap()];
+    format!(
+        r#"{camera}
+def SkelRoot "Rig" (
+    prepend apiSchemas = ["SkelBindingAPI"]
+)
+{{
+    rel skel:skeleton = </Rig/Skel>
+    def Skeleton "Skel" (
+        prepend apiSchemas = ["SkelBindingAPI"]
+    )
+    {{
+        uniform token[] joints = ["root"]
+        uniform matrix4d[] bindTransforms = [( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1) )]
+        uniform matrix4d[] restTransforms = [( (1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 1, 0), (0, 0, 0, 1) )]
+        rel skel:animationSource = </Rig/Anim>
+    }}
+    def SkelAnimation "Anim"
+    {{
+        uniform token[] joints = ["root"]
+        quatf[] rotations = [(1, 0, 0, 0)]
+        half3[] scales = [(1, 1, 1)]
+        float3[] translations.timeSamples = {{ 0: [({from}, 0, {depth})], 1: [({to}, 0, {depth})] }}
+    }}
+    def Mesh "Ball" (
+        prepend apiSchemas = ["SkelBindingAPI"]
+    )
+    {{
+        uniform token subdivisionScheme = "none"
+        int[] faceVertexCounts = [{counts}]
+        int[] faceVertexIndices = [{indices}]
+        point3f[] points = [{points}]
+        int[] primvars:skel:jointIndices = [0] (
+            elementSize = 1
+            interpolation = "constant"
+        )
+        float[] primvars:skel:jointWeights = [1] (
+            elementSize = 1
+            interpolation = "constant"
+        )
+    }}
+}}
+"#,
+        depth = -DEPTH,
+    )
+}
+
+/// A sphere mesh skinned to a joint that slides at constant speed (UsdSkel) deforms across
+/// the shutter as the sliding sphere moves: its alpha follows the same analytic profile.
+#[test]
+fn a_skinned_sphere_on_a_sliding_joint_blurs_into_the_analytic_profile() {
+    const SPP: u32 = 256;
+    let path = scene("skinned.usda", &skinned(X0, X1));
+    let (scene, _) = common::scene_file(&path);
+    assert_eq!((scene.motion.deforming_prims, scene.motion.moving_prims), (1, 0), "{:?}", scene.motion);
+    assert_follows_the_profile(&render(&path, SPP), SPP, "skinned sphere");
+}
+
+/// `count` points of `widths` `2 R` as USD text, point `k` at `at(k)`.
+fn points_text(count: usize, at: impl Fn(usize) -> DVec3) -> String {
+    (0..count).map(|k| at(k)).map(|p| format!("({}, {}, {})", p.x, p.y, p.z)).collect::<Vec<_>>().join(", ")
+}
+
+/// A Points prim whose one point slides as the sphere does (its width the sphere's diameter)
+/// blurs into the same analytic profile: its sphere moves with the point across the shutter.
+#[test]
+fn a_sliding_point_blurs_into_the_analytic_profile() {
+    const SPP: u32 = 256;
+    let camera = sliding(0.0, 1.0, "", "");
+    let camera = &camera[..camera.find("def Sphere").unwrap()];
+    let text = format!(
+        "{camera}\ndef Points \"Dot\" {{\n    float[] widths = [{}]\n    point3f[] points.timeSamples = {{ 0: [{}], 1: [{}] }}\n}}\n",
+        2.0 * R,
+        points_text(1, |_| DVec3::new(X0, 0.0, -DEPTH)),
+        points_text(1, |_| DVec3::new(X1, 0.0, -DEPTH)),
+    );
+    let path = scene("dot.usda", &text);
+    let (scene, _) = common::scene_file(&path);
+    assert_eq!(scene.motion.deforming_prims, 1, "{:?}", scene.motion);
+    assert_follows_the_profile(&render(&path, SPP), SPP, "sliding point");
+}
+
+/// Moving points' spheres are inside their BVH boxes at every time: 64 points, each moving its
+/// own way (and one not at all), are met by a ray straight down through the centre each has
+/// at a random time, at its radius above the centre, for 2 000 random (point, time) pairs.
+#[test]
+fn moving_points_bounds_contain_them_at_all_times() {
+    const N: usize = 64;
+    let start = |k: usize| DVec3::new((k % 8) as f64 * 3.0, (k / 8) as f64 * 3.0, 0.0);
+    let end = |k: usize| {
+        if k == 5 {
+            return start(k);
+        }
+        start(k) + DVec3::new(((k * 7) % 5) as f64 - 2.0, ((k * 3) % 7) as f64 - 3.0, ((k * 5) % 3) as f64)
+    };
+    let text = format!(
+        r#"#usda 1.0
+(
+    startTimeCode = 0
+)
+def Camera "Cam" {{
+    double3 xformOp:translate = (10, 10, 40)
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+    double shutter:open = 0
+    double shutter:close = 1
+}}
+def Points "Cloud" {{
+    float[] widths = [1]
+    point3f[] points.timeSamples = {{ 0: [{}], 1: [{}] }}
+}}
+"#,
+        points_text(N, start),
+        points_text(N, end)
+    );
+    let (scene, _) = common::scene_file(&scene("cloud.usda", &text));
+    assert_eq!(scene.motion.deforming_prims, 1, "{:?}", scene.motion);
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut uniform = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for _ in 0..2000 {
+        let (k, tau) = ((uniform() * N as f64) as usize, uniform());
+        let centre = start(k).lerp(end(k), tau);
+        let origin = centre + DVec3::new(0.0, 0.0, 10.0);
+        let hit = scene
+            .accel
+            .intersect_at(origin.as_vec3(), -glam::Vec3::Z, 0.0, f32::INFINITY, tau as f32)
+            .unwrap_or_else(|| panic!("no hit on point {k} at {centre}, time {tau}"));
+        assert!((hit.t as f64 - 9.5).abs() < 1e-4, "hit at {} instead of 9.5 (point {k}, time {tau})", hit.t);
+        assert!(scene.accel.occluded_at(origin.as_vec3(), -glam::Vec3::Z, 0.0, 9.6, tau as f32));
+    }
+}
+
+/// A skinned mesh whose animation is sampled but holds still, and Points sampled at the same
+/// place, under an open shutter: nothing deforms and the image is the closed shutter's, bit
+/// for bit.
+#[test]
+fn still_skinned_meshes_and_points_render_the_closed_image_bit_for_bit() {
+    let text = |open: f64, close: f64| {
+        let rig = skinned(0.5, 0.5).replace("double shutter:open = 0", &format!("double shutter:open = {open}"));
+        let rig = rig.replace("double shutter:close = 1", &format!("double shutter:close = {close}"));
+        format!(
+            "{rig}\ndef Points \"Dot\" {{\n    float[] widths = [0.4]\n    point3f[] points.timeSamples = {{ 0: [(-1, 0, -10)], 1: [(-1, 0, -10)] }}\n}}\ndef DistantLight \"Sun\" {{}}\n"
+        )
+    };
+    let (closed, open) = (scene("rig_closed.usda", &text(0.0, 0.0)), scene("rig_open.usda", &text(0.0, 1.0)));
+    let (scene_open, _) = common::scene_file(&open);
+    assert!(!scene_open.has_motion(), "{:?}", scene_open.motion);
+    let settings = common::settings(48, 16, 8, 3, 4);
+    let (a, b) = (common::render_file(&closed, &settings), common::render_file(&open, &settings));
+    assert!(a.f32_channel("A").unwrap().iter().any(|&x| x > 0.5), "the rig is in view");
+    assert_same_bits(&a, &b, "still rig, shutter open");
 }
 
 /// Every channel of two images, bit for bit.

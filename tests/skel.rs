@@ -173,6 +173,38 @@ fn skinned_points_match_usd_bake_skinning() {
     assert!(checked > 500, "{checked}");
 }
 
+/// Skinned points between the animation's samples, where deformation blur poses them (on a
+/// copy of the stage at each shutter key, `Stage::at_time`): usd-core's
+/// `SkinningQuery.ComputeSkinnedPoints` at fractional times
+/// (`tools/make_skel_fractional_expected.py`), for the meshes without blend shapes.
+#[test]
+fn skinned_points_at_fractional_times_match_usd() {
+    let stage = open("arm.usda");
+    let want = expected("arm_fractional_expected.json");
+    let mut checked = 0;
+    for t in want["times"].as_array().unwrap() {
+        let t = t.as_f64().unwrap();
+        assert!(t.fract() != 0.0);
+        let at = stage.at_time(TimeCode::At(t));
+        let mut diags = Diagnostics::new();
+        let xforms = world_transforms(&at, &mut diags);
+        for mesh in want["meshes"].as_array().unwrap() {
+            let path = mesh["prim"].as_str().unwrap();
+            let (got, _) = skinned_world_points(&at, &xforms, at.find(path).unwrap(), &mut diags)
+                .unwrap_or_else(|| panic!("{path} is skinned"));
+            let expect = points(&mesh["points"][&format!("{t}")]);
+            assert_eq!(got.len(), expect.len(), "{path}");
+            for (i, (g, e)) in got.iter().zip(&expect).enumerate() {
+                let err = (*g - *e).length();
+                assert!(err <= 1e-4 * e.length().max(1.0), "{path} point {i} at t={t}: strata {g}, usd-core {e}");
+            }
+            checked += got.len();
+        }
+        assert!(diags.items().is_empty(), "{:?}", diags.items().iter().map(|d| &d.message).collect::<Vec<_>>());
+    }
+    assert!(checked > 100, "{checked}");
+}
+
 /// The geometry builder emits the posed points: every vertex of the skinned strip's
 /// triangles is one of USD's baked points at that time, and the rest pose is not.
 #[test]

@@ -390,6 +390,7 @@ impl Parts {
         let bounds = geometry.bounds().unwrap_or(bounds);
         let shutter = chosen.map_or(Shutter::default(), |(_, prim)| Shutter::of_camera(prim, diags));
         let (instances, stats) = motion::apply(&mut geometry, stage, shutter, options.geometry, diags);
+        motion::report_moving_lights(stage, lights.iter().map(|l| l.path.as_str()), shutter, diags);
         let camera_motion = chosen.and_then(|(id, _)| motion::camera_motion(stage, id, shutter));
         let motion = Motion { shutter, instances, camera: camera_motion, stats };
         Some(Parts { geometry, prim_material, lights, camera, camera_path, default_lit, displaced, bounds, motion })

@@ -225,12 +225,15 @@ pub fn camera_motion(stage: &Stage, id: crate::scene::PrimId, shutter: Shutter) 
 }
 
 /// World-space triangle positions keyed over the shutter, for a deforming prototype: each
-/// triangle's vertices move linearly between keys.
+/// triangle's vertices move linearly between keys; so does each analytic shape (a Points
+/// prim's spheres), by a translation from where the frame placed it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Deformation {
     times: Vec<f32>,
     /// Per key, every triangle's vertices (in the prototype's order).
     positions: Vec<Vec<[Vec3; 3]>>,
+    /// Per key, every shape's translation from its place at the frame (empty: no shapes).
+    offsets: Vec<Vec<Vec3>>,
 }
 
 impl Deformation {
@@ -244,15 +247,32 @@ impl Deformation {
         &self.positions[k]
     }
 
-    /// Triangle `i`'s vertices at ray time `tau`.
+    /// The segment `k` (keys `k`, `k + 1`) holding ray time `tau`, and the weight of key `k + 1`.
     #[inline]
-    pub fn at(&self, i: usize, tau: f32) -> [Vec3; 3] {
+    fn segment(&self, tau: f32) -> (usize, f32) {
         let n = self.times.len();
         let k = self.times[1..n - 1].partition_point(|&t| t <= tau);
         let (t0, t1) = (self.times[k], self.times[k + 1]);
-        let w = if t1 > t0 { ((tau - t0) / (t1 - t0)).clamp(0.0, 1.0) } else { 0.0 };
+        (k, if t1 > t0 { ((tau - t0) / (t1 - t0)).clamp(0.0, 1.0) } else { 0.0 })
+    }
+
+    /// Triangle `i`'s vertices at ray time `tau`.
+    #[inline]
+    pub fn at(&self, i: usize, tau: f32) -> [Vec3; 3] {
+        let (k, w) = self.segment(tau);
         let (p0, p1) = (&self.positions[k][i], &self.positions[k + 1][i]);
         [0, 1, 2].map(|v| p0[v] + (p1[v] - p0[v]) * w)
+    }
+
+    /// Shape `j`'s translation from its place at the frame, at ray time `tau`.
+    #[inline]
+    pub fn shape_offset(&self, j: usize, tau: f32) -> Vec3 {
+        if self.offsets.is_empty() {
+            return Vec3::ZERO;
+        }
+        let (k, w) = self.segment(tau);
+        let (a, b) = (self.offsets[k][j], self.offsets[k + 1][j]);
+        a + (b - a) * w
     }
 
     /// Triangle `i`'s box over the whole shutter: the union of its keys' boxes.
@@ -263,11 +283,44 @@ impl Deformation {
         });
         boxes.reduce(|(a, b), (c, d)| (a.min(c), b.max(d))).expect("at least two keys")
     }
+
+    /// The box over the whole shutter of shape `j`, whose box at the frame is `(lo, hi)`.
+    pub fn shape_bounds(&self, j: usize, (lo, hi): (Vec3, Vec3)) -> (Vec3, Vec3) {
+        let boxes = self.offsets.iter().map(|key| (lo + key[j], hi + key[j]));
+        boxes.fold((lo, hi), |(a, b), (c, d)| (a.min(c), b.max(d)))
+    }
 }
 
-/// The deformation of world prim `prim` (renderable prim `index`, whose `count` triangles the
-/// frame's build emitted) over `shutter`: `None` when its points are not sampled, it is not a
-/// mesh, or neither its points nor its placement change within the shutter.
+/// What a prim emits at one key: its triangles' vertices and its shapes' centres.
+type Emitted = (Vec<[Vec3; 3]>, Vec<Vec3>);
+
+/// A shape's centre (its object-space origin) in the world.
+fn shape_centre(shape: &crate::render::geometry::shapes::Shape) -> Vec3 {
+    shape.to_world.transform_point3(DVec3::ZERO).as_vec3()
+}
+
+/// `prim`, placed by `world`, emitted as the frame's build emits it (same primvar table,
+/// subdivision level).
+fn emit_at(prim: &Prim, world: DMat4, options: GeometryOptions, names: &[String]) -> Emitted {
+    let (mut triangles, mut shapes, mut degenerate) = (Vec::new(), Vec::new(), 0);
+    let mut table = PrimvarTable { names: names.to_vec(), ..PrimvarTable::default() };
+    let mut out = Emitter::new(&mut triangles, &mut shapes, &mut degenerate, &mut table, world, 0, usize::MAX);
+    out.subdiv_level = options.subdiv_level;
+    emit_prim(prim, &mut out, &mut Diagnostics::new());
+    (triangles.into_iter().map(|t| t.p).collect(), shapes.iter().map(shape_centre).collect())
+}
+
+/// Copies of the stage at key times, shared by every skinned prim of one build (each copy is
+/// the whole stage; a shot's keys are few).
+type StagesAt = HashMap<u64, (Stage, Vec<crate::render::geometry::xform::PrimXform>)>;
+
+/// The deformation of world prim `id` over `shutter`, given what the frame's build emitted for
+/// it (`frame_emitted`): `None` when nothing that shapes it is sampled, it is not a Mesh or
+/// Points, or it is the frame's shape at every key.
+/// - A skinned prim (UsdSkel) is posed at each key time, as the frame's build poses it, from a
+///   copy of the stage at that time: keys at the samples of its points, its skeleton's
+///   placement and its animation.
+/// - Otherwise its `points` (and placement) are read at each key time.
 #[allow(clippy::too_many_arguments)]
 fn deformation_of(
     stage: &Stage,
@@ -276,57 +329,93 @@ fn deformation_of(
     shutter: Shutter,
     options: GeometryOptions,
     names: &[String],
-    count: usize,
+    frame_emitted: &Emitted,
+    stages: &mut StagesAt,
     diags: &mut Diagnostics,
 ) -> Option<Deformation> {
     let prim = stage.prim(id);
+    if !matches!(prim.type_name.as_deref(), Some("Mesh" | "Points")) {
+        return None;
+    }
     let points = prim.attribute("points")?;
-    if points.time_samples.is_empty() || prim.type_name.as_deref() != Some("Mesh") {
+    let skinned = crate::render::geometry::skel::skinning_sample_times(stage, id);
+    let mut times: Vec<f64> = match &skinned {
+        Some(times) => times.clone(),
+        None => points.time_samples.iter().map(|(t, _)| *t).collect(),
+    };
+    if times.is_empty() {
         return None;
     }
     let (a, b) = (shutter.time(frame, 0.0), shutter.time(frame, 1.0));
-    let mut times: Vec<f64> = points.time_samples.iter().map(|(t, _)| *t).collect();
     times.extend(transform_sample_times(stage, id));
     times.retain(|&t| t > a && t < b);
     times.extend([a, b]);
     times.sort_by(f64::total_cmp);
     times.dedup();
     let quiet = &mut Diagnostics::new();
-    let at_frame = (points.value_at(TimeCode::At(frame)), world_transform_at(stage, id, frame, quiet));
-    let keys: Vec<(Option<Value>, DMat4)> =
-        times.iter().map(|&t| (points.value_at(TimeCode::At(t)), world_transform_at(stage, id, t, quiet))).collect();
-    if keys.iter().all(|k| *k == at_frame) {
-        return None;
-    }
-    let mut positions = Vec::with_capacity(keys.len());
-    for (value, world) in keys {
-        let mut posed = prim.clone();
-        if let Some(attr) = posed.attributes.iter_mut().find(|a| a.name == "points") {
-            attr.value = value.map(|v| (v, attr.span));
+    if skinned.is_none() {
+        // Cheap test first: the points and placement are the frame's at every key.
+        let at_frame = (points.value_at(TimeCode::At(frame)), world_transform_at(stage, id, frame, quiet));
+        if times
+            .iter()
+            .all(|&t| (points.value_at(TimeCode::At(t)), world_transform_at(stage, id, t, quiet)) == at_frame)
+        {
+            return None;
         }
-        let (mut triangles, mut shapes, mut degenerate) = (Vec::new(), Vec::new(), 0);
-        let mut table = PrimvarTable { names: names.to_vec(), ..PrimvarTable::default() };
-        let mut out = Emitter::new(&mut triangles, &mut shapes, &mut degenerate, &mut table, world, 0, usize::MAX);
-        out.subdiv_level = options.subdiv_level;
-        emit_prim(&posed, &mut out, quiet);
-        if triangles.len() != count {
+    }
+    let mut keys: Vec<Emitted> = Vec::with_capacity(times.len());
+    for &t in &times {
+        let emitted = if skinned.is_some() {
+            let (at, xforms) = stages.entry(t.to_bits()).or_insert_with(|| {
+                let at = stage.at_time(TimeCode::At(t));
+                let xforms = crate::render::geometry::xform::world_transforms(&at, &mut Diagnostics::new());
+                (at, xforms)
+            });
+            let world = xforms[id.0 as usize].world;
+            let prim_at = at.prim(id);
+            let posed = crate::render::geometry::skel::posed_prim(at, xforms, prim_at, world, quiet);
+            emit_at(posed.as_ref().unwrap_or(prim_at), world, options, names)
+        } else {
+            let mut posed = prim.clone();
+            if let Some(attr) = posed.attributes.iter_mut().find(|a| a.name == "points") {
+                attr.value = points.value_at(TimeCode::At(t)).map(|v| (v, attr.span));
+            }
+            emit_at(&posed, world_transform_at(stage, id, t, quiet), options, names)
+        };
+        if (emitted.0.len(), emitted.1.len()) != (frame_emitted.0.len(), frame_emitted.1.len()) {
             diags.push(
                 Diagnostic::warning(format!(
-                    "`{}` has {} triangles at one time inside the shutter and {count} at the frame (degenerate                      faces, or displacement); rendered without deformation blur",
+                    "`{}` has {} triangles and {} points at one time inside the shutter, and {} and {} at the \
+                     frame (degenerate faces, or displacement); rendered without deformation blur",
                     prim.path,
-                    triangles.len()
+                    emitted.0.len(),
+                    emitted.1.len(),
+                    frame_emitted.0.len(),
+                    frame_emitted.1.len()
                 ))
                 .at(crate::render::geometry::xform::value_span(points), "its points"),
             );
             return None;
         }
-        positions.push(triangles.into_iter().map(|t| t.p).collect());
+        keys.push(emitted);
     }
+    if keys.iter().all(|k| k == frame_emitted) {
+        return None;
+    }
+    let offsets = if frame_emitted.1.is_empty() {
+        Vec::new()
+    } else {
+        keys.iter().map(|(_, centres)| centres.iter().zip(&frame_emitted.1).map(|(c, f)| *c - *f).collect()).collect()
+    };
     let span = b - a;
-    Some(Deformation { times: times.iter().map(|t| (((t - a) / span) as f32).clamp(0.0, 1.0)).collect(), positions })
+    Some(Deformation {
+        times: times.iter().map(|t| (((t - a) / span) as f32).clamp(0.0, 1.0)).collect(),
+        positions: keys.into_iter().map(|(triangles, _)| triangles).collect(),
+        offsets,
+    })
 }
 
-/// Moves every deforming world mesh (see [`deformation_of`]) into a prototype of its own
+/// Moves every deforming world prim (see [`deformation_of`]) into a prototype of its own
 /// with its [`Deformation`], placed once where it is (the keys are in world space); returns
 /// how many. Meshes with GeomSubset materials are left to transform blur.
 fn deform(
@@ -337,9 +426,12 @@ fn deform(
     options: GeometryOptions,
     diags: &mut Diagnostics,
 ) -> usize {
-    let mut counts = vec![0usize; geometry.prims.len()];
+    let mut counts = vec![(0usize, 0usize); geometry.prims.len()];
     for t in &geometry.triangles {
-        counts[t.prim as usize] += 1;
+        counts[t.prim as usize].0 += 1;
+    }
+    for s in &geometry.shapes {
+        counts[s.prim as usize].1 += 1;
     }
     let has_subsets: Vec<bool> = {
         let mut v = vec![false; geometry.prims.len()];
@@ -350,23 +442,37 @@ fn deform(
         }
         v
     };
+    let mut stages = StagesAt::new();
     let mut deforming = 0;
     for prim in 0..geometry.prims.len() {
-        if counts[prim] == 0 || has_subsets[prim] || geometry.prims[prim].subset_of.is_some() {
+        if counts[prim] == (0, 0) || has_subsets[prim] || geometry.prims[prim].subset_of.is_some() {
             continue;
         }
         let Some(id) = stage.find(&geometry.prims[prim].path) else { continue };
+        let mine = |p: u32| p == prim as u32;
+        let frame_emitted: Emitted = (
+            geometry.triangles.iter().filter(|t| mine(t.prim)).map(|t| t.p).collect(),
+            geometry.shapes.iter().filter(|s| mine(s.prim)).map(shape_centre).collect(),
+        );
         let names = geometry.primvars.names.clone();
-        let Some(deformation) = deformation_of(stage, id, frame, shutter, options, &names, counts[prim], diags) else {
+        let Some(deformation) =
+            deformation_of(stage, id, frame, shutter, options, &names, &frame_emitted, &mut stages, diags)
+        else {
             continue;
         };
-        let (mine, rest): (Vec<Triangle>, Vec<Triangle>) =
-            std::mem::take(&mut geometry.triangles).into_iter().partition(|t| t.prim == prim as u32);
+        let (triangles, rest): (Vec<Triangle>, Vec<Triangle>) =
+            std::mem::take(&mut geometry.triangles).into_iter().partition(|t| mine(t.prim));
         geometry.triangles = rest;
+        let (shapes, rest): (Vec<_>, Vec<_>) =
+            std::mem::take(&mut geometry.shapes).into_iter().partition(|s| mine(s.prim));
+        geometry.shapes = rest;
         let mut proto = Prototype { prims: 1, ..Prototype::default() };
-        proto.triangles = mine.into_iter().map(|t| Triangle { prim: 0, ..t }).collect();
+        proto.triangles = triangles.into_iter().map(|t| Triangle { prim: 0, ..t }).collect();
+        proto.shapes = shapes.into_iter().map(|s| crate::render::geometry::shapes::Shape { prim: 0, ..s }).collect();
         // Bounds over every key (the frame's positions need not be inside the shutter).
-        let boxes = (0..proto.triangles.len()).map(|i| deformation.bounds(i));
+        let boxes = (0..proto.triangles.len())
+            .map(|i| deformation.bounds(i))
+            .chain(proto.shapes.iter().enumerate().map(|(j, s)| deformation.shape_bounds(j, s.world_bounds())));
         proto.bounds =
             boxes.reduce(|(a, b), (c, d)| (a.min(c), b.max(d))).map(|(lo, hi)| (lo.as_dvec3(), hi.as_dvec3()));
         proto.deformation = Some(deformation);
@@ -380,6 +486,51 @@ fn deform(
         deforming += 1;
     }
     deforming
+}
+
+/// Warns once for each light of `lights` (prim paths) that moves or changes while `shutter`
+/// is open at the stage's time: lights are not motion-blurred, each shines from where it is
+/// at the frame.
+pub fn report_moving_lights<'a>(
+    stage: &Stage,
+    lights: impl Iterator<Item = &'a str>,
+    shutter: Shutter,
+    diags: &mut Diagnostics,
+) {
+    let TimeCode::At(frame) = stage.time() else { return };
+    if !shutter.is_open() {
+        return;
+    }
+    let (a, b) = (shutter.time(frame, 0.0), shutter.time(frame, 1.0));
+    let mut seen = std::collections::HashSet::new();
+    for path in lights {
+        let Some(id) = stage.find(path) else { continue };
+        if !seen.insert(id) {
+            continue;
+        }
+        let prim = stage.prim(id);
+        let changes = prim.attributes.iter().find(|attr| {
+            !attr.time_samples.is_empty() && {
+                let at = attr.value_at(TimeCode::At(frame));
+                [a, b]
+                    .iter()
+                    .chain(attr.time_samples.iter().map(|(t, _)| t).filter(|&&t| t > a && t < b))
+                    .any(|&t| attr.value_at(TimeCode::At(t)) != at)
+            }
+        });
+        if placement_motion(stage, id, frame, shutter).is_some() || changes.is_some() {
+            let mut warning = Diagnostic::warning(format!(
+                "light `{path}` moves or changes while the shutter is open; lights are not motion-blurred: \
+                 it shines as it is at the frame"
+            ));
+            if let Some(attr) = changes {
+                warning = warning.at(crate::render::geometry::xform::value_span(attr), "sampled here");
+            } else {
+                warning = warning.at(prim.span, "this light");
+            }
+            diags.push(warning);
+        }
+    }
 }
 
 /// What [`apply`] made move.

@@ -92,6 +92,37 @@ pub fn skinned_world_points(
     Some((points, normals))
 }
 
+/// The times at which something that poses the skinned prim `id` has samples: its own
+/// attributes (points, normals, skinning primvars), its skeleton's attributes and placement,
+/// and the bound animation's (joint transforms, blend shape weights), unsorted; `None` when
+/// `id` is not skinned (no `SkelRoot` above it, or no `skel:skeleton` binding to a Skeleton).
+/// Deformation blur keys skinned prims at these times (`crate::render::geometry::motion`).
+pub fn skinning_sample_times(stage: &Stage, id: PrimId) -> Option<Vec<f64>> {
+    let prim = stage.prim(id);
+    prim.attribute("points")?;
+    let root = skel_root(stage, id)?;
+    let (skel_path, _) = inherited(stage, id, root, |p| target(p, "skel:skeleton"))?;
+    let skel = stage.find(skel_path).filter(|&s| stage.prim(s).type_name.as_deref() == Some("Skeleton"))?;
+    let mut times = crate::render::geometry::xform::transform_sample_times(stage, skel);
+    let anim = animation(stage, skel, &mut Diagnostics::new());
+    for p in [Some(id), Some(skel), anim].into_iter().flatten() {
+        times.extend(stage.prim(p).attributes.iter().flat_map(|a| a.time_samples.iter().map(|(t, _)| *t)));
+    }
+    Some(times)
+}
+
+/// The `SkelRoot` at or above `id`.
+fn skel_root(stage: &Stage, id: PrimId) -> Option<PrimId> {
+    let mut root = Some(id);
+    while let Some(r) = root {
+        if stage.prim(r).type_name.as_deref() == Some("SkelRoot") {
+            return Some(r);
+        }
+        root = stage.prim(r).parent;
+    }
+    None
+}
+
 fn is_normals(name: &str) -> bool {
     matches!(name, "normals" | "primvars:normals" | "primvars:normals:indices")
 }
@@ -160,14 +191,7 @@ fn tokens(value: Option<&Value>) -> Option<&[String]> {
 /// Poses the prim `id`, if it is skinned.
 fn pose(stage: &Stage, xforms: &[PrimXform], id: PrimId, diags: &mut Diagnostics) -> Option<Posed> {
     let prim = stage.prim(id);
-    let mut root = Some(id);
-    while let Some(r) = root {
-        if stage.prim(r).type_name.as_deref() == Some("SkelRoot") {
-            break;
-        }
-        root = stage.prim(r).parent;
-    }
-    let root = root?;
+    let root = skel_root(stage, id)?;
     let (skel_path, skel_span) = inherited(stage, id, root, |p| target(p, "skel:skeleton"))?;
     let indices_attr = inherited(stage, id, root, |p| p.attribute("primvars:skel:jointIndices"));
     let weights_attr = inherited(stage, id, root, |p| p.attribute("primvars:skel:jointWeights"));

@@ -289,6 +289,21 @@ impl Stage {
         }
     }
 
+    /// A copy of the stage at `time` (see [`Stage::set_time`]): deformation blur poses
+    /// skinned prims at the shutter's key times with it. Array values are shared, not copied.
+    pub fn at_time(&self, time: TimeCode) -> Stage {
+        let mut copy = Stage {
+            prims: self.prims.clone(),
+            roots: self.roots.clone(),
+            by_path: self.by_path.clone(),
+            metadata: self.metadata.clone(),
+            root_file: self.root_file,
+            time: self.time,
+        };
+        copy.set_time(time);
+        copy
+    }
+
     /// What usdview opens at: the root layer's `startTimeCode` (0 when not authored, as
     /// `UsdStage::GetStartTimeCode`) when any attribute is animated, else the default time.
     pub fn opening_time(&self) -> TimeCode {

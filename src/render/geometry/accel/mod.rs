@@ -312,14 +312,20 @@ impl Blas {
             Some(d) => d.bounds(i),
             None => (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2])),
         };
+        let shape_bounds = |(j, s): (usize, &Shape)| match &deformation {
+            Some(d) => d.shape_bounds(j, s.world_bounds()),
+            None => s.world_bounds(),
+        };
         let mut bounds: Option<(Vec3, Vec3)> = None;
-        for (lo, hi) in positions.iter().enumerate().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds)) {
+        for (lo, hi) in positions.iter().enumerate().map(tri_bounds).chain(shapes.iter().enumerate().map(shape_bounds))
+        {
             if lo.is_finite() && hi.is_finite() {
                 bounds = Some(bounds.map_or((lo, hi), |(a, b)| (a.min(lo), b.max(hi))));
             }
         }
         let count = positions.len() + shapes.len();
-        let all_bounds = positions.iter().enumerate().map(tri_bounds).chain(shapes.iter().map(Shape::world_bounds));
+        let all_bounds =
+            positions.iter().enumerate().map(tri_bounds).chain(shapes.iter().enumerate().map(shape_bounds));
         let (bvh, group_start, group_members) = if count <= FLAT_PRIMITIVES {
             // Primitives with non-finite bounds are left out, as the BVH leaves them out.
             let finite: Vec<u32> = all_bounds
@@ -404,7 +410,13 @@ impl Blas {
                 _ => pre.intersect(p, tmin, tmax),
             }
         } else {
-            self.shapes[i - self.positions.len()].intersect(o, d, tmin, tmax).map(|t| (t, 0.0, 0.0))
+            let j = i - self.positions.len();
+            // A deforming prototype's shapes (a Points prim's spheres) move by a translation.
+            let o = match (DEFORMS, &self.deformation) {
+                (true, Some(keys)) => o - keys.shape_offset(j, time),
+                _ => o,
+            };
+            self.shapes[j].intersect(o, d, tmin, tmax).map(|t| (t, 0.0, 0.0))
         }
     }
 
@@ -603,8 +615,19 @@ impl Blas {
                 (geom, Some(p))
             }
             None => {
-                let shape = &self.shapes[i - self.positions.len()];
-                let h = shape.surface(o, d, t);
+                let j = i - self.positions.len();
+                let shape = &self.shapes[j];
+                let h = match &self.deformation {
+                    Some(keys) => {
+                        // Hit where the shape is at `time`: found moved back, then moved there.
+                        let offset = keys.shape_offset(j, time);
+                        let mut h = shape.surface(o - offset, d, t);
+                        h.p += offset;
+                        h.p_error += (h.p.abs() + offset.abs()) * f32::EPSILON;
+                        h
+                    }
+                    None => shape.surface(o, d, t),
+                };
                 let n = if h.n == Vec3::ZERO || !h.n.is_finite() { -d.normalize_or_zero() } else { h.n };
                 let (dpdu, dpdv) = frame_or(h.dpdu, h.dpdv, n);
                 let geom = SurfaceGeom {
