@@ -308,18 +308,23 @@ enum Command {
 
 #[derive(Subcommand)]
 enum FarmCommand {
-    /// Write `render.sbatch` (an array job, one task per frame x split, requeued tasks
-    /// resume), `merge.sbatch` and `submit.sh` into the job directory.
+    /// Write `render.sbatch` (per chunk of frames, an array per split; requeued tasks
+    /// resume), `merge.sbatch` (an array per chunk, each frame after its own render tasks)
+    /// and `submit.sh` into the job directory.
     Slurm {
         #[command(flatten)]
         job: FarmJobArgs,
-        /// Submit with sbatch (the merge with --dependency=afterok on the render job) and
-        /// print both job IDs.
+        /// Submit with sbatch (each frame's merge with --dependency=aftercorr on its render
+        /// tasks) and print a `render ID` or `merge ID` line per array.
         #[arg(long)]
         submit: bool,
         /// The Slurm partition to submit to.
         #[arg(long)]
         partition: Option<String>,
+        /// The site's MaxArraySize: frames go in chunks of arrays no larger (default: read
+        /// from `scontrol show config` with --submit, else Slurm's default 1001).
+        #[arg(long)]
+        max_array_size: Option<u64>,
     },
     /// Write an Open Job Description job template (`job.template.json`): a render step over
     /// frames x splits and a merge step over frames.
@@ -578,8 +583,9 @@ fn main() -> ExitCode {
         Command::Merge { output, parts, frame } => cli::farm::merge(&output, &parts, frame),
         Command::Farm { scheduler } => {
             let (job, slurm) = match scheduler {
-                FarmCommand::Slurm { job, submit, partition } => {
-                    (job, Some((strata::session::farm::slurm::SlurmOptions { partition }, submit)))
+                FarmCommand::Slurm { job, submit, partition, max_array_size } => {
+                    let options = strata::session::farm::slurm::SlurmOptions { partition, max_array_size };
+                    (job, Some((options, submit)))
                 }
                 FarmCommand::Openjd { job } => (job, None),
             };

@@ -234,14 +234,33 @@ fn a_slurm_array_of_frames_by_splits_merges_into_single_process_renders() {
     let work = root.path().join("work");
     std::fs::create_dir(&work).unwrap();
     // 3 frames × 2 splits; 2-sample checkpoints, so a task holds a checkpoint while it renders.
+    // An array limit of 2 splits the frames into chunks 1-2 and 3: 4 render arrays, 2 merges.
     let spp = 64;
     let mut args = vec!["farm", "slurm", SCENE, "--frames", "1-3", "--split-samples", "2", "--spp", "64"];
-    args.extend(["--checkpoint", "2", "-o", "out/shot.####.exr", "--submit", "--"]);
+    args.extend(["--checkpoint", "2", "--max-array-size", "2", "-o", "out/shot.####.exr", "--submit", "--"]);
     args.extend(SLURM_RENDER_ARGS);
     let out =
         run(Command::new(env!("CARGO_BIN_EXE_strata")).args(&args).current_dir(&work).env("SLURM_CONF", &slurm.conf));
-    let ids = String::from_utf8(out.stdout).unwrap();
-    let [render, merge] = ids.split_whitespace().collect::<Vec<_>>()[..] else { panic!("job IDs: {ids:?}") };
+    let printed = String::from_utf8(out.stdout).unwrap();
+    let arrays: Vec<(&str, &str)> = printed.lines().filter_map(|l| l.split_once(' ')).collect();
+    let kinds: Vec<&str> = arrays.iter().map(|a| a.0).collect();
+    assert_eq!(kinds, ["render", "render", "merge", "render", "render", "merge"], "{printed}");
+    let of = |kind: &str| arrays.iter().filter(|a| a.0 == kind).map(|a| a.1.to_string()).collect::<Vec<_>>();
+    let (renders, merges) = (of("render"), of("merge"));
+    let render = renders[0].as_str();
+    // Each merge array waits on its own chunk's render arrays only (`aftercorr`: task by task);
+    // the first chunk's renders take seconds, so its merge still waits on both.
+    let after = |merge: &str| -> Vec<String> {
+        let text = slurm.scontrol(&["show", "job", merge]).unwrap_or_default();
+        let field = text.split_whitespace().find_map(|w| w.strip_prefix("Dependency=")).unwrap_or("").to_string();
+        // `aftercorr:A_*(state):B_*(state)` or one `aftercorr:` per job, joined by commas.
+        let ids = field.split(',').filter_map(|d| d.strip_prefix("aftercorr:")).flat_map(|d| d.split(':'));
+        ids.map(|id| id.chars().take_while(char::is_ascii_digit).collect()).collect()
+    };
+    let mut first = after(&merges[0]);
+    first.sort();
+    assert_eq!(first, [renders[0].clone(), renders[1].clone()], "merge {}", merges[0]);
+    assert!(after(&merges[1]).iter().all(|id| renders[2..].contains(id)), "merge {}", merges[1]);
     let job_dir = work.join("out/shot.farm");
     assert!(job_dir.join("submit.sh").is_file() && job_dir.join("render.sbatch").is_file());
 
@@ -273,15 +292,17 @@ fn a_slurm_array_of_frames_by_splits_merges_into_single_process_renders() {
         }
         text
     };
-    wait_for("the merge job to finish", Duration::from_secs(600), || {
-        let states = slurm.states(merge);
+    wait_for("the merge jobs to finish", Duration::from_secs(600), || {
+        let states: Vec<String> = merges.iter().flat_map(|m| slurm.states(m)).collect();
         let failed = states
             .iter()
             .any(|s| ["FAILED", "CANCELLED", "TIMEOUT", "NODE_FAIL", "OUT_OF_MEMORY"].contains(&s.as_str()));
-        assert!(!failed, "merge job {merge}: {states:?}\n{}", logs());
+        assert!(!failed, "merge jobs {merges:?}: {states:?}\n{}", logs());
         states.len() == 3 && states.iter().all(|s| s == "COMPLETED")
     });
-    assert!(slurm.states(render).iter().all(|s| s == "COMPLETED"));
+    for r in &renders {
+        assert!(slurm.states(r).iter().all(|s| s == "COMPLETED"));
+    }
     let log = logs();
     assert!(log.contains("resuming from"), "the requeued task did not resume:\n{log}");
     single_run(&work, SCENE, "1-3", spp, &SLURM_RENDER_ARGS);

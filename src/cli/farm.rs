@@ -249,15 +249,23 @@ fn job_dirs(job: &strata::session::farm::FarmJob) -> Result<(), Failure> {
 }
 
 /// `strata farm slurm`: writes `render.sbatch`, `merge.sbatch` and `submit.sh` into the job
-/// directory; with `submit`, submits them (the merge with `--dependency=afterok`).
+/// directory; with `submit`, makes the submissions itself (the site's array limit read from
+/// `scontrol show config` unless `--max-array-size` gave it) and prints `render ID` / `merge ID`
+/// lines, as `submit.sh` does.
 pub fn farm_slurm(
     job: strata::session::farm::FarmJob,
     options: &strata::session::farm::slurm::SlurmOptions,
     submit: bool,
 ) -> Result<(), Failure> {
-    use strata::session::farm::slurm::{MERGE_SCRIPT, RENDER_SCRIPT, SUBMIT_SCRIPT, slurm_job};
+    use strata::session::farm::slurm::{
+        MERGE_SCRIPT, RENDER_SCRIPT, SUBMIT_SCRIPT, Script, array_limit_from_config, array_option, slurm_job,
+    };
     let job = complete(job)?;
-    let scripts = slurm_job(&job, options).map_err(|e| {
+    let mut options = options.clone();
+    if submit && options.max_array_size.is_none() {
+        options.max_array_size = site_config().as_deref().and_then(array_limit_from_config);
+    }
+    let scripts = slurm_job(&job, &options).map_err(|e| {
         eprintln!("error: {e}");
         Failure
     })?;
@@ -280,12 +288,36 @@ pub fn farm_slurm(
         );
         return Ok(());
     }
-    let render_id = sbatch(&[render.as_os_str()])?;
-    let dependency = format!("--dependency=afterok:{render_id}");
-    let merge_id = sbatch(&[dependency.as_ref(), merge.as_os_str()])?;
-    println!("{render_id} {merge_id}");
-    eprintln!("submitted render job {render_id} and merge job {merge_id} (after every render task succeeds)");
+    let mut ids: Vec<String> = Vec::with_capacity(scripts.submissions.len());
+    for s in &scripts.submissions {
+        let mut args = vec![array_option(s.tasks)];
+        if !s.after.is_empty() {
+            let after: String = s.after.iter().map(|&a| format!(":{}", ids[a])).collect();
+            args.push(format!("--dependency=aftercorr{after}"));
+        }
+        let (name, script) = match s.script {
+            Script::Render => ("render", &render),
+            Script::Merge => ("merge", &merge),
+        };
+        args.push(script.display().to_string());
+        args.extend(s.args.iter().map(u64::to_string));
+        let id = sbatch(&args.iter().map(std::ffi::OsStr::new).collect::<Vec<_>>())?;
+        println!("{name} {id}");
+        ids.push(id);
+    }
+    eprintln!("submitted {} arrays (each frame's merge after its own render tasks)", ids.len());
     Ok(())
+}
+
+/// `scontrol show config`'s text, `None` (with a note) when it cannot be read.
+fn site_config() -> Option<String> {
+    match std::process::Command::new("scontrol").args(["show", "config"]).output() {
+        Ok(out) if out.status.success() => Some(String::from_utf8_lossy(&out.stdout).into_owned()),
+        _ => {
+            eprintln!("note: `scontrol show config` failed; assuming Slurm's default MaxArraySize (1001)");
+            None
+        }
+    }
 }
 
 /// Runs `sbatch --parsable ARGS…` and returns the job ID it prints (`ID` or `ID;CLUSTER`).
