@@ -604,3 +604,51 @@ def Mesh "Sheet" {{
         assert!(scene.accel.occluded_at(origin.as_vec3(), -glam::Vec3::Z, 0.0, 10.5, tau as f32));
     }
 }
+
+/// Lights are not motion-blurred: a light that moves inside the open shutter, and one whose
+/// intensity changes, are each named by one warning; a light that holds still is not, and
+/// with the shutter closed none is.
+#[test]
+fn lights_that_move_inside_the_shutter_are_named_by_a_warning() {
+    let text = |close: f64| {
+        format!(
+            r#"#usda 1.0
+(
+    startTimeCode = 0
+)
+def Camera "Cam" {{
+    double3 xformOp:translate = (0, 0, 10)
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+    double shutter:open = 0
+    double shutter:close = {close}
+}}
+def Sphere "Ball" {{}}
+def SphereLight "Moving" {{
+    double3 xformOp:translate.timeSamples = {{ 0: (-2, 3, 0), 1: (2, 3, 0) }}
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+}}
+def DistantLight "Dimming" {{
+    float inputs:intensity.timeSamples = {{ 0: 2, 1: 1 }}
+}}
+def DistantLight "Still" {{
+    float inputs:intensity.timeSamples = {{ 0: 2, 1: 2 }}
+}}
+"#
+        )
+    };
+    let warnings = |close: f64| {
+        let path = scene(&format!("lights_{close}.usda"), &text(close));
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_strata"))
+            .args(["render", path.to_str().unwrap(), "--res", "8x8", "--spp", "1", "-o"])
+            .arg(path.with_extension("exr"))
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+        stderr.lines().filter(|l| l.contains("while the shutter is open")).map(String::from).collect::<Vec<_>>()
+    };
+    let open = warnings(1.0);
+    assert_eq!(open.len(), 2, "{open:?}");
+    assert!(open.iter().any(|l| l.contains("`/Moving`")) && open.iter().any(|l| l.contains("`/Dimming`")), "{open:?}");
+    assert!(warnings(0.0).is_empty());
+}
