@@ -271,7 +271,7 @@ fn a_skinned_sphere_on_a_sliding_joint_blurs_into_the_analytic_profile() {
 
 /// `count` points of `widths` `2 R` as USD text, point `k` at `at(k)`.
 fn points_text(count: usize, at: impl Fn(usize) -> DVec3) -> String {
-    (0..count).map(|k| at(k)).map(|p| format!("({}, {}, {})", p.x, p.y, p.z)).collect::<Vec<_>>().join(", ")
+    (0..count).map(at).map(|p| format!("({}, {}, {})", p.x, p.y, p.z)).collect::<Vec<_>>().join(", ")
 }
 
 /// A Points prim whose one point slides as the sphere does (its width the sphere's diameter)
@@ -307,43 +307,24 @@ fn moving_points_bounds_contain_them_at_all_times() {
         start(k) + DVec3::new(((k * 7) % 5) as f64 - 2.0, ((k * 3) % 7) as f64 - 3.0, ((k * 5) % 3) as f64)
     };
     let text = format!(
-        r#"#usda 1.0
-(
-    startTimeCode = 0
-)
-def Camera "Cam" {{
-    double3 xformOp:translate = (10, 10, 40)
-    uniform token[] xformOpOrder = ["xformOp:translate"]
-    double shutter:open = 0
-    double shutter:close = 1
-}}
+        r#"{}
 def Points "Cloud" {{
     float[] widths = [1]
     point3f[] points.timeSamples = {{ 0: [{}], 1: [{}] }}
 }}
 "#,
+        camera_above(DVec3::new(10.0, 10.0, 40.0), 1.0),
         points_text(N, start),
         points_text(N, end)
     );
     let (scene, _) = common::scene_file(&scene("cloud.usda", &text));
     assert_eq!(scene.motion.deforming_prims, 1, "{:?}", scene.motion);
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let mut uniform = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut uniform = uniform_numbers(0x9e37_79b9_7f4a_7c15);
     for _ in 0..2000 {
         let (k, tau) = ((uniform() * N as f64) as usize, uniform());
         let centre = start(k).lerp(end(k), tau);
         let origin = centre + DVec3::new(0.0, 0.0, 10.0);
-        let hit = scene
-            .accel
-            .intersect_at(origin.as_vec3(), -glam::Vec3::Z, 0.0, f32::INFINITY, tau as f32)
-            .unwrap_or_else(|| panic!("no hit on point {k} at {centre}, time {tau}"));
-        assert!((hit.t as f64 - 9.5).abs() < 1e-4, "hit at {} instead of 9.5 (point {k}, time {tau})", hit.t);
-        assert!(scene.accel.occluded_at(origin.as_vec3(), -glam::Vec3::Z, 0.0, 9.6, tau as f32));
+        assert_hit_straight_down(&scene, origin, 9.5, tau, &format!("point {k} at {centre}"));
     }
 }
 
@@ -522,6 +503,38 @@ fn a_moving_camera_blurs_as_the_scene_moving_the_other_way() {
     assert!(partial > a.len() / 2, "the moving camera blurs ({partial} partly covered pixels)");
 }
 
+/// A stage at frame 0 with a camera at `at` looking down −z, its shutter open from 0 to `close`.
+fn camera_above(at: DVec3, close: f64) -> String {
+    format!(
+        "#usda 1.0\n(\n    startTimeCode = 0\n)\ndef Camera \"Cam\" {{\n    double3 xformOp:translate = ({}, {}, {})\n    \
+         uniform token[] xformOpOrder = [\"xformOp:translate\"]\n    double shutter:open = 0\n    double shutter:close = {close}\n}}",
+        at.x, at.y, at.z
+    )
+}
+
+/// Uniform numbers in `[0, 1)` from a xorshift generator seeded with `seed` (not 0).
+fn uniform_numbers(seed: u64) -> impl FnMut() -> f64 {
+    let mut state = seed;
+    move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// A ray straight down from `origin` at ray time `tau` hits `scene` at `distance` (within
+/// 1e-4), and a shadow ray a little longer is occluded: the BVH boxes hold `what` there.
+fn assert_hit_straight_down(scene: &strata::render::Scene, origin: DVec3, distance: f64, tau: f64, what: &str) {
+    let (o, down, tau) = (origin.as_vec3(), -glam::Vec3::Z, tau as f32);
+    let hit = scene
+        .accel
+        .intersect_at(o, down, 0.0, f32::INFINITY, tau)
+        .unwrap_or_else(|| panic!("no hit on {what} at time {tau}"));
+    assert!((hit.t as f64 - distance).abs() < 1e-4, "hit at {} instead of {distance} ({what}, time {tau})", hit.t);
+    assert!(scene.accel.occluded_at(o, down, 0.0, distance as f32 + 0.1, tau));
+}
+
 /// A deforming mesh's BVH bounds contain it at every time: a height field whose vertices
 /// rise by different amounts while the whole sheet slides along x, sampled at frames 0 and
 /// 1, is met by a ray straight down at random points of it at random times exactly where
@@ -549,16 +562,7 @@ fn a_deforming_meshs_bounds_contain_it_at_all_times() {
     }
     let list = |ps: &[DVec3]| ps.iter().map(|p| format!("({}, {}, {})", p.x, p.y, p.z)).collect::<Vec<_>>().join(", ");
     let text = format!(
-        r#"#usda 1.0
-(
-    startTimeCode = 0
-)
-def Camera "Cam" {{
-    double3 xformOp:translate = (3, 3, 20)
-    uniform token[] xformOpOrder = ["xformOp:translate"]
-    double shutter:open = 0
-    double shutter:close = 1
-}}
+        r#"{}
 def Mesh "Sheet" {{
     uniform token subdivisionScheme = "none"
     int[] faceVertexCounts = [{}]
@@ -566,6 +570,7 @@ def Mesh "Sheet" {{
     point3f[] points.timeSamples = {{ 0: [{}], 1: [{}] }}
 }}
 "#,
+        camera_above(DVec3::new(3.0, 3.0, 20.0), 1.0),
         counts.join(", "),
         indices.join(", "),
         list(&p0),
@@ -574,13 +579,7 @@ def Mesh "Sheet" {{
     let (scene, _) = common::scene_file(&scene("sheet.usda", &text));
     assert_eq!(scene.motion.deforming_prims, 1, "{:?}", scene.motion);
     assert!(scene.has_motion());
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut uniform = || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut uniform = uniform_numbers(0x2545_f491_4f6c_dd1d);
     for _ in 0..2000 {
         let tau = uniform();
         // A point of the sheet at tau: bilinear in its quad's interpolated corners, on one of
@@ -596,12 +595,7 @@ def Mesh "Sheet" {{
         let (e, f) = if uniform() < 0.5 { (b, c) } else { (c, d) };
         let target = a + (e - a) * u + (f - a) * w;
         let origin = target + DVec3::new(0.0, 0.0, 10.0);
-        let hit = scene
-            .accel
-            .intersect_at(origin.as_vec3(), -glam::Vec3::Z, 0.0, f32::INFINITY, tau as f32)
-            .unwrap_or_else(|| panic!("no hit at {target} at time {tau}"));
-        assert!((hit.t as f64 - 10.0).abs() < 1e-4, "hit at {} instead of 10 ({target}, time {tau})", hit.t);
-        assert!(scene.accel.occluded_at(origin.as_vec3(), -glam::Vec3::Z, 0.0, 10.5, tau as f32));
+        assert_hit_straight_down(&scene, origin, 10.0, tau, &format!("the sheet at {target}"));
     }
 }
 
@@ -612,16 +606,7 @@ def Mesh "Sheet" {{
 fn lights_that_move_inside_the_shutter_are_named_by_a_warning() {
     let text = |close: f64| {
         format!(
-            r#"#usda 1.0
-(
-    startTimeCode = 0
-)
-def Camera "Cam" {{
-    double3 xformOp:translate = (0, 0, 10)
-    uniform token[] xformOpOrder = ["xformOp:translate"]
-    double shutter:open = 0
-    double shutter:close = {close}
-}}
+            r#"{}
 def Sphere "Ball" {{}}
 def SphereLight "Moving" {{
     double3 xformOp:translate.timeSamples = {{ 0: (-2, 3, 0), 1: (2, 3, 0) }}
@@ -633,7 +618,8 @@ def DistantLight "Dimming" {{
 def DistantLight "Still" {{
     float inputs:intensity.timeSamples = {{ 0: 2, 1: 2 }}
 }}
-"#
+"#,
+            camera_above(DVec3::new(0.0, 0.0, 10.0), close)
         )
     };
     let warnings = |close: f64| {
