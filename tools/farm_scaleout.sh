@@ -12,7 +12,8 @@ t1=$(date +%s.%N); echo "one process (2 threads): $(echo "$t1 - $t0" | bc) s"
 for N in 1 2 4; do
   t0=$(date +%s.%N)
   ids=$($S farm slurm $SCENE --frames 1-3 --split-samples $N --spp $SPP -o s$N/shot.####.exr --submit -- --res $RES --threads 1 2>/dev/null)
-  merge=${ids#* }
+  # One `render ID` / `merge ID` line per array; 3 frames make one chunk, so one merge array.
+  merge=$(echo "$ids" | awk '$1 == "merge" {print $2}')
   until scontrol show job $merge | grep -o 'JobState=[A-Z]*' | sort | uniq -c | grep -q "3 JobState=COMPLETED"; do sleep 0.2; done
   t1=$(date +%s.%N)
   same=yes; for f in 1 2 3; do cmp -s single/shot.000$f.png s$N/shot.000$f.png || same=no; done
