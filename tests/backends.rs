@@ -20,7 +20,7 @@ fn compile(source: &str, name: &str, backend: BackendKind, optimize: bool) -> Ar
     let (lib, _) = Library::from_text("test.ash", source, &mut sources, &mut diags);
     assert!(!diags.has_errors(), "{}\n{source}", diags.render(&sources));
     let material = single_layer(&lib, name);
-    let mut compiler = Compiler::new(backend, PassOptions { optimize });
+    let mut compiler = Compiler::new(backend, PassOptions { optimize, ..Default::default() });
     let code = compiler.compile(&lib, &material, &mut diags);
     assert!(!diags.has_errors(), "{}", diags.render(&sources));
     code.expect("compiled")
@@ -116,6 +116,7 @@ fn points(count: usize) -> Vec<Globals<'static>> {
             v: f(),
             st_footprint: [f(), f(), f(), f()],
             primvars: Default::default(),
+            params: Default::default(),
         });
     }
     pts

@@ -14,8 +14,10 @@ pub mod scene;
 pub mod slots;
 
 use crate::diag::Span;
-use crate::front::library::GraphId;
-use crate::front::types::Value;
+use crate::front::ast::BaseType;
+use crate::front::graph::{Graph, Source};
+use crate::front::library::{GraphId, Library};
+use crate::front::types::{Type, Value};
 pub use slots::Slot;
 
 /// A substance or override as bound in a scene: the graph plus the input values its material
@@ -124,5 +126,103 @@ impl ComposedMaterial {
             key.push('|');
         }
         key
+    }
+}
+
+/// How many words of a parameter block input `index` of `graph` takes when inputs are live
+/// (a live view compiles them as parameters, `ir::wired::PassOptions::live_inputs`): 1 for a
+/// float, 3 for a colour, point, vector or normal; 0 for the inputs that stay folded constants
+/// — integers, strings, arrays, and an input that is a displacement's bound, which dicing
+/// needs before any shading.
+pub fn live_input_words(graph: &Graph, index: usize) -> usize {
+    let Some(input) = graph.inputs.get(index) else { return 0 };
+    let is_bound = graph.products.iter().any(|p| matches!(p.bound, Some(Source::Input(i)) if i == index));
+    if is_bound || input.ty.array.is_some() {
+        return 0;
+    }
+    match input.ty {
+        t if t.is_triple() => 3,
+        t if t.base == BaseType::Float => 1,
+        _ => 0,
+    }
+}
+
+/// The words of `value` as a parameter of type `ty` ([`live_input_words`] of them), as the
+/// lowering writes the same value as a constant (a float fills a triple).
+fn live_words(value: &Value, ty: Type, out: &mut Vec<f32>) {
+    let width = if ty.is_triple() { 3 } else { 1 };
+    match value {
+        Value::Triple(t) if width == 3 => out.extend_from_slice(t),
+        Value::Float(x) => out.extend(std::iter::repeat_n(*x, width)),
+        Value::Int(i) => out.extend(std::iter::repeat_n(*i as f32, width)),
+        _ => out.extend(std::iter::repeat_n(0.0, width)),
+    }
+}
+
+impl ComposedMaterial {
+    /// The substances and overrides in parameter-block order: per layer bottom to top, its
+    /// substance, its overrides, then each vertical layer's substance and overrides. The wired
+    /// IR's builder numbers live inputs in the same order.
+    pub fn references_in_order(&self) -> Vec<&MaterialRef> {
+        let mut out = Vec::new();
+        for layer in &self.layers {
+            for part in std::iter::once(layer).chain(&layer.vertical) {
+                out.extend(part.references());
+            }
+        }
+        out
+    }
+
+    /// [`ComposedMaterial::references_in_order`], mutable.
+    pub fn references_mut(&mut self) -> Vec<&mut MaterialRef> {
+        let mut out = Vec::new();
+        for layer in &mut self.layers {
+            out.push(&mut layer.substance);
+            out.extend(layer.overrides.iter_mut().map(|(_, o)| o));
+            for vertical in &mut layer.vertical {
+                out.push(&mut vertical.substance);
+                out.extend(vertical.overrides.iter_mut().map(|(_, o)| o));
+            }
+        }
+        out
+    }
+
+    /// The parameter block of this material when its inputs are live: each reference's live
+    /// inputs ([`live_input_words`]) in [`ComposedMaterial::references_in_order`], each the
+    /// value the scene sets, else the input's default. The default substance (no layers) has
+    /// none.
+    pub fn parameter_block(&self, lib: &Library) -> Vec<f32> {
+        let mut block = Vec::new();
+        for r in self.references_in_order() {
+            let graph = lib.get(r.graph);
+            for (index, input) in graph.inputs.iter().enumerate() {
+                if live_input_words(graph, index) == 0 {
+                    continue;
+                }
+                let value = r.values.iter().find(|(i, _)| *i == index).map_or(&input.default, |(_, v)| v);
+                live_words(value, input.ty, &mut block);
+            }
+        }
+        block
+    }
+
+    /// The material's "class" when its inputs are live: the values of live inputs removed
+    /// (they live in the parameter block), every other value kept. Materials with the same
+    /// class share compiled code.
+    pub fn class(&self, lib: &Library) -> ComposedMaterial {
+        let mut class = self.clone();
+        let strip = |r: &mut MaterialRef| {
+            let graph = lib.get(r.graph);
+            r.values.retain(|(i, _)| live_input_words(graph, *i) == 0);
+        };
+        for layer in &mut class.layers {
+            strip(&mut layer.substance);
+            layer.overrides.iter_mut().for_each(|(_, o)| strip(o));
+            for vertical in &mut layer.vertical {
+                strip(&mut vertical.substance);
+                vertical.overrides.iter_mut().for_each(|(_, o)| strip(o));
+            }
+        }
+        class
     }
 }

@@ -131,6 +131,8 @@ async fn status(State(shared): State<Arc<Shared>>, Query(q): Query<After>) -> Re
             "solo": p.solo,
             "look_inputs": p.look_inputs,
             "samples_per_second": p.samples_per_second,
+            "materials_compiled": p.materials_compiled,
+            "parameter_writes": p.parameter_writes,
         })
     });
     with_type(body.to_string(), "application/json")

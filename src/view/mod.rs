@@ -110,6 +110,11 @@ pub(crate) struct Published {
     pub selected: Option<(String, String)>,
     /// Camera samples per second of the passes since the last restart (bands and merges).
     pub samples_per_second: Option<f64>,
+    /// Materials the session has compiled so far, and parameter blocks input edits rewrote
+    /// instead ([`crate::session::SessionStats`]): an input edit compiles nothing.
+    pub materials_compiled: usize,
+    /// See `materials_compiled`.
+    pub parameter_writes: usize,
 }
 
 /// State shared by the worker, the watcher and the HTTP handlers.

@@ -90,7 +90,11 @@ pub(crate) struct Worker {
 impl Worker {
     /// Opens and prepares the scene; the rendered diagnostics when it does not prepare.
     pub fn open(options: &ViewOptions, shared: Arc<Shared>) -> Result<Worker, String> {
-        let mut session = Session::open(options.scene.clone(), options.session);
+        // Inputs are parameters of the compiled code here: an edit from the page rewrites a
+        // parameter block instead of recompiling (`render` folds them).
+        let mut session_options = options.session;
+        session_options.passes.live_inputs = true;
+        let mut session = Session::open(options.scene.clone(), session_options);
         let mut settings = options.settings.clone();
         let mut scene_options = options.scene_options.clone();
         let compiled = session.compile().is_some();
@@ -435,9 +439,12 @@ impl Worker {
                 let update_ms = self.changed_at.take().map(|t| t.elapsed().as_secs_f64() * 1e3);
                 let input_ms = self.input_at.take().map(|t| t.elapsed().as_secs_f64() * 1e3);
                 let (text, failed, edits) = (self.diagnostics.clone(), self.failed, self.edits);
+                let stats = self.session.stats();
+                let (compiled, writes) = (stats.materials_compiled, stats.parameter_writes);
                 self.shared.publish(|p| {
                     p.image = Some(Arc::new(image));
                     p.samples = 0;
+                    (p.materials_compiled, p.parameter_writes) = (compiled, writes);
                     if update_ms.is_some() {
                         p.update_ms = update_ms;
                     }
@@ -528,6 +535,7 @@ impl Worker {
             v: g.uv.y,
             st_footprint: [0.0; 4],
             primvars: crate::abi::PrimvarValues::new(&primvars),
+            params: Default::default(),
         };
         let state = crate::render::integrator::shading_state(material.as_ref(), &globals).ok()?;
         let layers: Vec<serde_json::Value> =
