@@ -126,6 +126,27 @@ fn run(dir: &Path, res: (usize, usize), spp: u32, repeats: usize) -> Result<Stri
         out += &row(label, &timings, recompiled, "-");
     }
     out += "\nlive inputs: what `strata view` compiles (float and colour inputs read from a parameter block)\n";
+    // What reading inputs from the block costs the render: the same image both ways.
+    let (mut folded, mut live) = (open_with(false)?, open_with(true)?);
+    let (mut folded_ms, mut live_ms) = (Vec::new(), Vec::new());
+    for _ in 0..repeats {
+        let start = Instant::now();
+        let a = render_folded(&mut folded, &pass)?;
+        folded_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        let start = Instant::now();
+        let b = render_live(&mut live, &pass)?;
+        live_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        if a != b {
+            return Err("live inputs render another image than folded ones".into());
+        }
+    }
+    folded_ms.sort_by(f64::total_cmp);
+    live_ms.sort_by(f64::total_cmp);
+    let (f, l) = (folded_ms[folded_ms.len() / 2], live_ms[live_ms.len() / 2]);
+    out += &format!(
+        "render with inputs folded {f:.1} ms, live {l:.1} ms: {:.3}x (median of {repeats}, alternating; the same image)\n",
+        l / f
+    );
     out += "\ntarget: first sample within 100 ms of the edit on 2 cores (issue 21)\n";
     Ok(out)
 }
@@ -165,4 +186,17 @@ fn row(label: &str, timings: &[Timing], recompiled: usize, fresh: &str) -> Strin
         recompiled,
         fresh
     )
+}
+
+/// The pass rendered by a session with folded inputs (a function of its own, so a profiler
+/// — `valgrind --tool=callgrind`, inclusive cost — tells it from [`render_live`]).
+#[inline(never)]
+fn render_folded(session: &mut Session, pass: &Pass) -> Result<strata::render::Image, String> {
+    session.render(pass, None).map(|(image, _)| image).map_err(|e| e.to_string())
+}
+
+/// The pass rendered by a session with live inputs; see [`render_folded`].
+#[inline(never)]
+fn render_live(session: &mut Session, pass: &Pass) -> Result<strata::render::Image, String> {
+    session.render(pass, None).map(|(image, _)| image).map_err(|e| e.to_string())
 }
