@@ -421,6 +421,19 @@ fn a_live_input_edit_rewrites_a_parameter_block_and_renders_as_if_authored_and_f
     );
     assert!(edited == render(&mut prepared(&scene)), "the edited block renders as the authored, folded values");
 
+    // A float input of exactly 0 or 1 stays folded (as a mask it is a compile-time fact: a
+    // pruned layer, one that hides the layers below, and the layer mode that follows):
+    // crossing it changes the class and compiles, and still renders as folded.
+    let report = live.apply_change(&Change::Value {
+        prim: "/Looks/Dirt/Surface".into(),
+        attribute: "inputs:coverage".into(),
+        type_name: "float".into(),
+        value: Value::Float(1.0),
+    });
+    assert!(!report.failed && report.recompiled > 0, "{report:?}");
+    edit(&scene, "float inputs:coverage = 0.3", "float inputs:coverage = 1");
+    assert!(render(&mut live) == render(&mut prepared(&scene)), "a folded fact renders as folded");
+
     // An edit that is not a live input (an int, a string) still composes and compiles.
     let report = live.apply_change(&Change::Value {
         prim: "/Looks/Metal/Surface".into(),

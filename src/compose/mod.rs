@@ -130,20 +130,46 @@ impl ComposedMaterial {
 }
 
 /// How many words of a parameter block input `index` of `graph` takes when inputs are live
-/// (a live view compiles them as parameters, `ir::wired::PassOptions::live_inputs`): 1 for a
-/// float, 3 for a colour, point, vector or normal; 0 for the inputs that stay folded constants
-/// — integers, strings, arrays, and an input that is a displacement's bound, which dicing
-/// needs before any shading.
-pub fn live_input_words(graph: &Graph, index: usize) -> usize {
+/// (a live view compiles them as parameters, `ir::wired::PassOptions::live_inputs`) and its
+/// value is `value`: 1 for a float, 3 for a colour, point, vector or normal; 0 for the inputs
+/// that stay folded constants — integers, strings, arrays, an input that is a displacement's
+/// bound (dicing needs it before any shading), and the values the folder turns into
+/// compile-time facts: a float of exactly 0 or 1 (a mask that prunes a layer or hides the ones
+/// below, which also chooses the layer mode) and a black triple (emission that is dropped).
+/// So a live material renders `render`'s folded image bit for bit; an edit that crosses one
+/// of those values changes the class and compiles.
+pub fn live_input_words(graph: &Graph, index: usize, value: &Value) -> usize {
     let Some(input) = graph.inputs.get(index) else { return 0 };
     let is_bound = graph.products.iter().any(|p| matches!(p.bound, Some(Source::Input(i)) if i == index));
     if is_bound || input.ty.array.is_some() {
         return 0;
     }
-    match input.ty {
-        t if t.is_triple() => 3,
-        t if t.base == BaseType::Float => 1,
+    match (input.ty, value) {
+        (_, Value::Float(x)) if *x == 0.0 || *x == 1.0 => 0,
+        (_, Value::Triple(t)) if t.iter().all(|x| *x == 0.0) => 0,
+        (t, _) if t.is_triple() => 3,
+        (t, _) if t.base == BaseType::Float => 1,
         _ => 0,
+    }
+}
+
+impl MaterialRef {
+    /// The value of input `index` of `graph` (this reference's graph): the scene's, else the
+    /// input's default.
+    pub fn input_value<'a>(&'a self, graph: &'a Graph, index: usize) -> &'a Value {
+        self.values.iter().find(|(i, _)| *i == index).map_or(&graph.inputs[index].default, |(_, v)| v)
+    }
+
+    /// Per input of `graph`, its value when it is folded into the compiled class with live
+    /// inputs, `None` when it is a parameter ([`live_input_words`]): what must not change for
+    /// a parameter block to stand for an edit.
+    pub fn folded_inputs(&self, graph: &Graph) -> Vec<Option<Value>> {
+        (0..graph.inputs.len())
+            .map(|i| {
+                let value = self.input_value(graph, i);
+                (live_input_words(graph, i, value) == 0).then(|| value.clone())
+            })
+            .collect()
     }
 }
 
@@ -196,24 +222,28 @@ impl ComposedMaterial {
         for r in self.references_in_order() {
             let graph = lib.get(r.graph);
             for (index, input) in graph.inputs.iter().enumerate() {
-                if live_input_words(graph, index) == 0 {
-                    continue;
+                let value = r.input_value(graph, index);
+                if live_input_words(graph, index, value) > 0 {
+                    live_words(value, input.ty, &mut block);
                 }
-                let value = r.values.iter().find(|(i, _)| *i == index).map_or(&input.default, |(_, v)| v);
-                live_words(value, input.ty, &mut block);
             }
         }
         block
     }
 
-    /// The material's "class" when its inputs are live: the values of live inputs removed
-    /// (they live in the parameter block), every other value kept. Materials with the same
-    /// class share compiled code.
+    /// The material's "class" when its inputs are live, for hashing: every input's folded
+    /// value, the parameters marked as such (their values live in the parameter block).
+    /// Materials with the same class share compiled code.
     pub fn class(&self, lib: &Library) -> ComposedMaterial {
         let mut class = self.clone();
         let strip = |r: &mut MaterialRef| {
             let graph = lib.get(r.graph);
-            r.values.retain(|(i, _)| live_input_words(graph, *i) == 0);
+            let folded = r.folded_inputs(graph);
+            r.values = folded
+                .into_iter()
+                .enumerate()
+                .map(|(i, v)| (i, v.unwrap_or_else(|| Value::Str("<parameter>".into()))))
+                .collect();
         };
         for layer in &mut class.layers {
             strip(&mut layer.substance);

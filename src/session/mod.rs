@@ -926,15 +926,10 @@ impl Session {
                 if *values == r.values {
                     continue;
                 }
-                // Only live inputs may differ: anything else changes the compiled class.
+                // Only parameters may differ: anything else changes the compiled class.
                 let graph = lib.get(r.graph);
-                let folded = |v: &[(usize, crate::front::types::Value)]| {
-                    v.iter()
-                        .filter(|(k, _)| crate::compose::live_input_words(graph, *k) == 0)
-                        .cloned()
-                        .collect::<Vec<_>>()
-                };
-                if folded(values) != folded(&r.values) {
+                let after = crate::compose::MaterialRef { values: values.clone(), ..r.clone() };
+                if after.folded_inputs(graph) != r.folded_inputs(graph) {
                     return false;
                 }
                 r.values = values.clone();

@@ -276,14 +276,14 @@ impl Builder<'_> {
     fn input_values(&mut self, graph: &Graph, material: &MaterialRef) -> Vec<Operand> {
         let mut operands = Vec::with_capacity(graph.inputs.len());
         for (i, input) in graph.inputs.iter().enumerate() {
-            let words = if self.live { crate::compose::live_input_words(graph, i) } else { 0 };
+            let value = material.input_value(graph, i);
+            let words = if self.live { crate::compose::live_input_words(graph, i, value) } else { 0 };
             operands.push(if words > 0 {
                 let offset = self.next_param;
                 self.next_param += words as u32;
                 Operand::Param { offset, ty: input.ty }
             } else {
-                let value = material.values.iter().find(|(j, _)| *j == i).map(|(_, v)| v.clone());
-                Operand::Const(value.unwrap_or_else(|| input.default.clone()), input.ty)
+                Operand::Const(value.clone(), input.ty)
             });
         }
         operands
