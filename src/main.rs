@@ -440,7 +440,9 @@ enum BenchCommand {
     },
     /// What a live edit costs on the default scene: time from a file change (a substance
     /// file, a layer's material input, a layer's geometry) to the session updated, to the
-    /// first new samples and to the full image, against opening a fresh session.
+    /// first new samples and to the full image, against opening a fresh session; then an
+    /// input set in memory with inputs folded and live (the view's parameter blocks), and
+    /// the render time of folded against live inputs.
     Update {
         /// Samples per pixel of each image.
         #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=4096))]

@@ -40,6 +40,7 @@ fn point(i: usize) -> Globals<'static> {
         v: (t * 0.029) % 1.0,
         st_footprint: [0.0; 4],
         primvars: Default::default(),
+        params: Default::default(),
     }
 }
 

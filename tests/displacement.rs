@@ -102,7 +102,7 @@ fn build_with(
     optimize: bool,
     options: &strata::render::scene::SceneOptions,
 ) -> Built {
-    let passes = strata::ir::wired::PassOptions { optimize };
+    let passes = strata::ir::wired::PassOptions { optimize, ..Default::default() };
     let session_options = SessionOptions { backend, passes, ..Default::default() };
     let mut session = Session::open(SceneSource::File(path.to_path_buf()), session_options);
     let materials = session.compile_or_report().unwrap_or_else(|e| panic!("{e}")).materials.clone();

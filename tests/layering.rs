@@ -145,6 +145,7 @@ fn points(count: usize, seed: u64) -> Vec<Globals<'static>> {
                 v: next() * 0.5 + 0.5,
                 st_footprint: [0.0; 4],
                 primvars: Default::default(),
+                params: Default::default(),
             }
         })
         .collect()

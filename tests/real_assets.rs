@@ -36,7 +36,7 @@ fn build(
     path: &Path,
     lights: DefaultLights,
 ) -> (strata::render::Scene, Vec<std::sync::Arc<dyn strata::abi::MaterialCode>>, String) {
-    let passes = strata::ir::wired::PassOptions { optimize: true };
+    let passes = strata::ir::wired::PassOptions { optimize: true, ..Default::default() };
     let options = SessionOptions { backend: strata::backend::BackendKind::Jit, passes, ..Default::default() };
     let mut session = Session::open(SceneSource::File(path.to_path_buf()), options);
     session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));

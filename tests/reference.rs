@@ -159,6 +159,7 @@ fn displacement_rules_give_the_analytic_normal() {
                 v: 0.5,
                 st_footprint: [0.0; 4],
                 primvars: Default::default(),
+                params: Default::default(),
             };
             let state = shading_state(code.as_ref(), &g).expect("shades");
             let want = Vec3::new(-case.gradient.0, 1.0, -case.gradient.1).normalize();

@@ -182,7 +182,7 @@ fn pathological_programs_are_diagnosed() {
         };
         for backend in [BackendKind::Jit, BackendKind::Interp] {
             for optimize in [true, false] {
-                let mut compiler = Compiler::new(backend, PassOptions { optimize });
+                let mut compiler = Compiler::new(backend, PassOptions { optimize, ..Default::default() });
                 let code = compiler.compile(&lib, &material, &mut diags).expect("compiles");
                 assert!(diags.items().is_empty(), "{text}: {}", diags.render(&sources));
                 let g = Globals::default();

@@ -360,3 +360,86 @@ fn sample_ranges_merge_into_the_full_image_bit_for_bit() {
         assert!(merged.merge(&parts[0]).is_err(), "samples merged twice");
     }
 }
+
+/// Opens `path` with live inputs (as `strata view` does) and prepares it.
+fn prepared_live(path: &Path) -> Session {
+    let passes = strata::ir::wired::PassOptions { live_inputs: true, ..Default::default() };
+    let mut session =
+        Session::open(SceneSource::File(path.to_path_buf()), SessionOptions { passes, ..Default::default() });
+    if session.prepare(&SceneOptions::default()).is_none() {
+        panic!("{}", session.diagnostics().render(session.sources()));
+    }
+    session
+}
+
+/// With live inputs (the view's option) a float or colour input is a parameter of the
+/// compiled code: the session renders what `render`'s folded constants render; an edit
+/// rewrites the material's parameter block — nothing composed, nothing compiled (the
+/// compile counter stays) — and renders as the same value authored in the file and compiled
+/// with folding, bit for bit (the parameter loads feed the same operations with the same
+/// bits the folder would have evaluated with `runtime::math`'s semantics).
+#[test]
+fn a_live_input_edit_rewrites_a_parameter_block_and_renders_as_if_authored_and_folded() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = split_default_scene(dir.path());
+    let mut live = prepared_live(&scene);
+    assert!(render(&mut live) == render(&mut prepared(&scene)), "live inputs render as folded constants");
+
+    let (compiled, compositions) = (live.stats().materials_compiled, live.stats().compositions);
+    let edits = [
+        ("/Looks/Metal/Surface", "inputs:roughness", "float", Value::Float(0.6)),
+        ("/Looks/Dirt/Surface", "inputs:coverage", "float", Value::Float(0.3)),
+        ("/Looks/Dirt/Surface", "inputs:dirt_color", "color3f", Value::Tuple(vec![0.1, 0.3, 0.2])),
+    ];
+    let before = render(&mut live);
+    for (prim, attribute, type_name, value) in &edits {
+        let report = live.apply_change(&Change::Value {
+            prim: prim.to_string(),
+            attribute: attribute.to_string(),
+            type_name: type_name.to_string(),
+            value: value.clone(),
+        });
+        assert!(!report.failed && !report.recomposed && report.recompiled == 0, "{report:?}");
+        assert!(!report.geometry_rebuilt, "{report:?}");
+    }
+    assert_eq!(live.stats().materials_compiled, compiled, "no material was compiled");
+    assert_eq!(live.stats().compositions, compositions, "the stage was not composed again");
+    assert!(live.stats().parameter_writes >= 3, "{:?}", live.stats());
+    let edited = render(&mut live);
+    assert!(edited != before, "the edits show");
+
+    // The oracle: the same values authored in the layer, opened fresh, folded as `render` does.
+    edit(
+        &scene,
+        "uniform token info:strata:sourceAsset:subIdentifier = \"brushed_metal\"",
+        "uniform token info:strata:sourceAsset:subIdentifier = \"brushed_metal\"\n            float inputs:roughness = 0.6",
+    );
+    edit(
+        &scene,
+        "uniform token info:strata:sourceAsset:subIdentifier = \"dirt\"",
+        "uniform token info:strata:sourceAsset:subIdentifier = \"dirt\"\n            float inputs:coverage = 0.3\n            color3f inputs:dirt_color = (0.1, 0.3, 0.2)",
+    );
+    assert!(edited == render(&mut prepared(&scene)), "the edited block renders as the authored, folded values");
+
+    // A float input of exactly 0 or 1 stays folded (as a mask it is a compile-time fact: a
+    // pruned layer, one that hides the layers below, and the layer mode that follows):
+    // crossing it changes the class and compiles, and still renders as folded.
+    let report = live.apply_change(&Change::Value {
+        prim: "/Looks/Dirt/Surface".into(),
+        attribute: "inputs:coverage".into(),
+        type_name: "float".into(),
+        value: Value::Float(1.0),
+    });
+    assert!(!report.failed && report.recompiled > 0, "{report:?}");
+    edit(&scene, "float inputs:coverage = 0.3", "float inputs:coverage = 1");
+    assert!(render(&mut live) == render(&mut prepared(&scene)), "a folded fact renders as folded");
+
+    // An edit that is not a live input (an int, a string) still composes and compiles.
+    let report = live.apply_change(&Change::Value {
+        prim: "/Looks/Metal/Surface".into(),
+        attribute: "info:strata:sourceAsset:subIdentifier".into(),
+        type_name: "token".into(),
+        value: Value::Token("clay".into()),
+    });
+    assert!(report.recomposed && report.recompiled > 0, "{report:?}");
+}

@@ -444,6 +444,7 @@ fn look_edits_from_the_page_change_the_image_and_undo_bit_for_bit() {
                    .find((e) => e.dataset.input === '/Looks/Dirt.coverage');
                  if (!s) return null;
                  s.value = 0.25; s.dispatchEvent(new Event('change')); return true;";
+    let compiled = wait_status(view.port, "the status", |_| true)["materials_compiled"].as_u64().expect("a count");
     let moved = Instant::now();
     browser.wait_for("the coverage slider", slide);
     browser
@@ -451,8 +452,16 @@ fn look_edits_from_the_page_change_the_image_and_undo_bit_for_bit() {
     let seen_ms = moved.elapsed().as_secs_f64() * 1e3;
     let edited = browser.wait_for("the edited image", &converged_image(3));
     assert_ne!(edited, first, "the coverage edit did not change the image");
+    // The coverage is a live input: the edit rewrote a parameter block and compiled nothing.
+    let status = wait_status(view.port, "the status", |_| true);
+    assert_eq!(status["materials_compiled"].as_u64(), Some(compiled), "the slider recompiled: {status}");
+    assert!(status["parameter_writes"].as_u64() >= Some(1), "{status}");
     let reported = browser.script("return document.getElementById('update').textContent;");
-    eprintln!("input edit → page saw the preview: {seen_ms:.0} ms (load {}); view reports: {reported}", load());
+    eprintln!(
+        "input edit → page saw the preview: {seen_ms:.0} ms (load {}); view reports: {reported}; server-side {} ms",
+        load(),
+        status["input_ms"]
+    );
 
     // Written as an override layer beside the scene; the scene file is untouched.
     let original = std::fs::read_to_string(&scene).unwrap();
@@ -866,4 +875,95 @@ fn the_view_streams_its_passes_to_a_display_server() {
         .expect("strata render runs");
     assert!(status.success());
     assert_tev_shows(&packets, &out, 160, 120);
+}
+
+/// A ball with three layers: a base, a layer whose mask input is 0 and, on top, one whose mask
+/// input is 0.3 (both masks are live inputs: evaluated per hit, not known when compiling).
+fn three_layer_ball(dir: &Path) -> PathBuf {
+    std::fs::write(
+        dir.join("layers.ash"),
+        "substance base { node d = diffuse(albedo: color(0.5, 0.5, 0.5)); surface = d.bsdf; }\n\
+         substance film {\n    input float coverage = 1.0;\n    node m = mask(opacity: coverage);\n    \
+         node d = diffuse(albedo: color(0.9, 0.1, 0.1));\n    surface = d.bsdf;\n    mask = m.out;\n}\n",
+    )
+    .unwrap();
+    let material = |name: &str, graph: &str, coverage: &str| {
+        format!(
+            "    def Material \"{name}\"\n    {{\n        def Shader \"Surface\"\n        {{\n            \
+             uniform token info:implementationSource = \"sourceAsset\"\n            \
+             uniform asset info:strata:sourceAsset = @layers.ash@\n            \
+             uniform token info:strata:sourceAsset:subIdentifier = \"{graph}\"\n{coverage}        }}\n    }}\n"
+        )
+    };
+    let scene = dir.join("ball.usda");
+    std::fs::write(
+        &scene,
+        format!(
+            "#usda 1.0\n(\n    upAxis = \"Y\"\n)\n\ndef Sphere \"Ball\"\n{{\n    double radius = 1\n    \
+             rel material:slotBinding:_000 = </Looks/Base>\n    rel material:slotBinding:_050 = </Looks/Hidden>\n    \
+             rel material:slotBinding:_060 = </Looks/Film>\n}}\n\ndef Scope \"Looks\"\n{{\n{}{}{}}}\n",
+            material("Base", "base", ""),
+            material("Hidden", "film", "            float inputs:coverage = 0\n"),
+            material("Film", "film", "            float inputs:coverage = 0.3\n"),
+        ),
+    )
+    .unwrap();
+    scene
+}
+
+/// Per-layer coverage mattes of the selected prim: every layer of its stack has one in the
+/// channel list; inside the ball they sum to its coverage (1; the Cryptomatte matte of the
+/// render's own samples is the independent reference), the layer with mask 0 reads 0, the one
+/// with the constant mask 0.3 reads 0.3 and the base the rest, 0.7 (each within the PNG's
+/// 8-bit rounding), and outside the ball all read 0.
+#[test]
+fn per_layer_coverage_mattes_sum_to_the_prims_coverage_and_follow_the_masks() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = three_layer_ball(dir.path());
+    let view = View::start(&scene, &[]);
+    let own = format!("127.0.0.1:{}", view.port);
+    wait_status(view.port, "the converged image", |s| s["samples"] == 4);
+    let (_, body) = http(view.port, "GET", "/pick?x=80&y=60", &own, None);
+    let pick: Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(pick["prim"], "/Ball", "{pick}");
+    let status = wait_status(view.port, "the selection", |s| s["selected"] == "/Ball");
+    let channels: Vec<&str> = status["channels"].as_array().unwrap().iter().filter_map(|c| c.as_str()).collect();
+    let coverage: Vec<&str> = channels.iter().copied().filter(|c| c.starts_with("coverage:")).collect();
+    assert_eq!(coverage, ["coverage:0:000", "coverage:1:050", "coverage:2:060"], "{status}");
+    let grey = |channel: &str| -> Vec<f32> {
+        let (code, png) = http(view.port, "GET", &format!("/frame.png?channel={channel}"), &own, None);
+        assert_eq!(code, 200, "{channel}");
+        let mut reader = png::Decoder::new(std::io::Cursor::new(png)).read_info().unwrap();
+        let mut pixels = vec![0; reader.output_buffer_size().unwrap()];
+        reader.next_frame(&mut pixels).unwrap();
+        pixels.chunks(3).map(|p| f32::from(p[0]) / 255.0).collect()
+    };
+    let mattes: Vec<Vec<f32>> = coverage.iter().map(|c| grey(c)).collect();
+    let object = grey("matte:CryptoObject");
+    let (width, height) = (160, 120);
+    // Pixels whose whole 3x3 neighbourhood the render's samples find fully inside or outside.
+    let settled = |x: usize, y: usize, value: f32| {
+        (y.saturating_sub(1)..=(y + 1).min(height - 1))
+            .all(|j| (x.saturating_sub(1)..=(x + 1).min(width - 1)).all(|i| object[j * width + i] == value))
+    };
+    let rounding = 1.0 / 255.0;
+    let (mut inside, mut outside) = (0, 0);
+    for y in 0..height {
+        for x in 0..width {
+            let i = y * width + x;
+            let at: Vec<f32> = mattes.iter().map(|m| m[i]).collect();
+            if settled(x, y, 1.0) {
+                inside += 1;
+                let sum: f32 = at.iter().sum();
+                assert!((sum - 1.0).abs() <= 2.0 * rounding, "({x}, {y}): mattes {at:?} sum to {sum}");
+                assert_eq!(at[1], 0.0, "({x}, {y}): mask 0 → matte 0");
+                assert!((at[2] - 0.3).abs() <= rounding, "({x}, {y}): mask 0.3 → matte {}", at[2]);
+                assert!((at[0] - 0.7).abs() <= rounding, "({x}, {y}): the base takes the rest: {}", at[0]);
+            } else if settled(x, y, 0.0) {
+                outside += 1;
+                assert!(at.iter().all(|&m| m == 0.0), "({x}, {y}): outside the ball {at:?}");
+            }
+        }
+    }
+    assert!(inside > 1000 && outside > 1000, "the ball and the background are both seen: {inside}, {outside}");
 }

@@ -85,6 +85,11 @@ pub struct Globals<'a> {
     /// The primvars the material reads, interpolated at this point, laid out as
     /// [`MaterialInfo::primvars`] says (empty: every primvar reads its fallback).
     pub primvars: PrimvarValues<'a>,
+    /// The material instance's parameter block: its live inputs (a view's editable substance
+    /// inputs, compiled as parameters rather than folded constants), laid out as
+    /// `compose::ComposedMaterial::parameter_block` says. Empty for materials compiled
+    /// with their inputs folded, which never read it; [`ParameterInstance`] sets it.
+    pub params: PrimvarValues<'a>,
 }
 
 /// A borrowed `[f32]` in C layout (`const float *values; uint32_t len;`): the primvar values
@@ -133,6 +138,11 @@ impl<'a> PrimvarValues<'a> {
 pub const PRIMVARS_PTR_OFFSET: usize = std::mem::offset_of!(Globals<'static>, primvars);
 /// See [`PRIMVARS_PTR_OFFSET`].
 pub const PRIMVARS_LEN_OFFSET: usize = PRIMVARS_PTR_OFFSET + std::mem::offset_of!(PrimvarValues<'static>, len);
+
+/// Byte offsets of [`Globals::params`]' pointer and length, for code generation.
+pub const PARAMS_PTR_OFFSET: usize = std::mem::offset_of!(Globals<'static>, params);
+/// See [`PARAMS_PTR_OFFSET`].
+pub const PARAMS_LEN_OFFSET: usize = PARAMS_PTR_OFFSET + std::mem::offset_of!(PrimvarValues<'static>, len);
 
 /// A primvar a material reads: the renderer writes, at `offset` of [`Globals::primvars`], 1
 /// when the shaded prim has it (0 when not: the reader's fallback is used), then `width`
@@ -439,4 +449,66 @@ pub trait MaterialCode: Send + Sync {
     /// Writes one layer's custom channels at their offsets (0 for channels the layer lacks).
     /// `out.len()` is `info().channel_floats`.
     fn channels(&self, g: &Globals, layer: usize, out: &mut [f32]) -> Result<(), ShaderError>;
+}
+
+/// One material instance of a compiled material "class" whose live inputs are parameters:
+/// the class's code with this instance's parameter block. Every entry point passes the
+/// caller's globals on with [`Globals::params`] pointing at the block (a copy of the globals
+/// on the stack, nothing allocated), so many instances share one compiled class and an input
+/// edit rewrites a block instead of recompiling.
+pub struct ParameterInstance {
+    class: std::sync::Arc<dyn MaterialCode>,
+    block: Box<[f32]>,
+}
+
+impl ParameterInstance {
+    /// The instance of `class` with parameter `block`.
+    pub fn new(class: std::sync::Arc<dyn MaterialCode>, block: Vec<f32>) -> ParameterInstance {
+        ParameterInstance { class, block: block.into_boxed_slice() }
+    }
+
+    /// The parameter block.
+    pub fn block(&self) -> &[f32] {
+        &self.block
+    }
+
+    /// The compiled class.
+    pub fn class(&self) -> &std::sync::Arc<dyn MaterialCode> {
+        &self.class
+    }
+
+    #[inline]
+    fn with_block<'g>(&'g self, g: &Globals<'g>) -> Globals<'g> {
+        Globals { params: PrimvarValues::new(&self.block), ..*g }
+    }
+}
+
+impl MaterialCode for ParameterInstance {
+    fn info(&self) -> &MaterialInfo {
+        self.class.info()
+    }
+    fn masks(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError> {
+        self.class.masks(&self.with_block(g), out)
+    }
+    fn mask(&self, g: &Globals, layer: usize) -> Result<f32, ShaderError> {
+        self.class.mask(&self.with_block(g), layer)
+    }
+    fn surface(&self, g: &Globals, layer: usize, out: &mut Closure) -> Result<(), ShaderError> {
+        self.class.surface(&self.with_block(g), layer, out)
+    }
+    fn surface_sum(&self, g: &Globals, layer: usize, out: &mut ClosureSum) -> Result<(), ShaderError> {
+        self.class.surface_sum(&self.with_block(g), layer, out)
+    }
+    fn displacement(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError> {
+        self.class.displacement(&self.with_block(g), out)
+    }
+    fn normal(&self, g: &Globals, layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError> {
+        self.class.normal(&self.with_block(g), layer, out)
+    }
+    fn emission(&self, g: &Globals, layer: usize, out: &mut [f32; 3]) -> Result<(), ShaderError> {
+        self.class.emission(&self.with_block(g), layer, out)
+    }
+    fn channels(&self, g: &Globals, layer: usize, out: &mut [f32]) -> Result<(), ShaderError> {
+        self.class.channels(&self.with_block(g), layer, out)
+    }
 }

@@ -151,18 +151,9 @@ fn translate(fb: &mut FunctionBuilder, func: &ssa::Function, calls: &HashMap<RtF
                 Inst::IConst(i) => Some(fb.ins().iconst(types::I32, *i as i64)),
                 Inst::Global(o) => Some(fb.ins().load(types::F32, flags, globals, (*o * 4) as i32)),
                 Inst::Primvar(i) => {
-                    // Branch-free: past the end, load from the globals themselves (always
-                    // readable) and select 0, as the interpreter's `PrimvarValues::get` does.
-                    let len = fb.ins().load(types::I32, flags, globals, abi::PRIMVARS_LEN_OFFSET as i32);
-                    let base = fb.ins().load(ptr, flags, globals, abi::PRIMVARS_PTR_OFFSET as i32);
-                    let index = fb.ins().iconst(types::I32, *i as i64);
-                    let inside = fb.ins().icmp(IntCC::UnsignedLessThan, index, len);
-                    let at = fb.ins().iadd_imm_u(base, i64::from(*i) * 4);
-                    let at = fb.ins().select(inside, at, globals);
-                    let word = fb.ins().load(types::F32, flags, at, 0);
-                    let zero = fb.ins().f32const(0.0);
-                    Some(fb.ins().select(inside, word, zero))
+                    Some(word_of(fb, ptr, globals, (abi::PRIMVARS_PTR_OFFSET, abi::PRIMVARS_LEN_OFFSET), *i))
                 }
+                Inst::Param(i) => Some(word_of(fb, ptr, globals, (abi::PARAMS_PTR_OFFSET, abi::PARAMS_LEN_OFFSET), *i)),
                 Inst::Unary(op, a) => {
                     let a = v(a);
                     Some(match op {
@@ -294,4 +285,26 @@ fn binary(fb: &mut FunctionBuilder, op: BinOp, a: ir::Value, b: ir::Value) -> ir
         BinOp::And => fb.ins().band(a, b),
         BinOp::Or => fb.ins().bor(a, b),
     }
+}
+
+/// Word `index` of a borrowed `[f32]` in the globals (its pointer and length at `at`), 0 past
+/// its end. Branch-free: past the end, load from the globals themselves (always readable) and
+/// select 0, as the interpreter's `PrimvarValues::get` does.
+fn word_of(
+    fb: &mut FunctionBuilder,
+    ptr: types::Type,
+    globals: ir::Value,
+    at: (usize, usize),
+    index: u32,
+) -> ir::Value {
+    let flags = MemFlagsData::trusted();
+    let len = fb.ins().load(types::I32, flags, globals, at.1 as i32);
+    let base = fb.ins().load(ptr, flags, globals, at.0 as i32);
+    let i = fb.ins().iconst(types::I32, i64::from(index));
+    let inside = fb.ins().icmp(IntCC::UnsignedLessThan, i, len);
+    let address = fb.ins().iadd_imm_u(base, i64::from(index) * 4);
+    let address = fb.ins().select(inside, address, globals);
+    let word = fb.ins().load(types::F32, flags, address, 0);
+    let zero = fb.ins().f32const(0.0);
+    fb.ins().select(inside, word, zero)
 }

@@ -77,6 +77,7 @@ fn execute(func: &Function, globals: &abi::Globals, out: &mut [u32], s: &mut Scr
                 Inst::IConst(i) => *i as u32,
                 Inst::Global(o) => g[*o as usize],
                 Inst::Primvar(i) => globals.primvars.get(*i).to_bits(),
+                Inst::Param(i) => globals.params.get(*i).to_bits(),
                 Inst::Unary(..) | Inst::Binary(..) | Inst::Cmp(..) | Inst::Select(..) | Inst::Call(..) => {
                     eval_pure(func, &inst.inst, |x| s.values[x.0 as usize]).unwrap_or(0)
                 }

@@ -103,7 +103,7 @@ fn print_out(text: &str) -> Result<(), Failure> {
 /// `strata ir SCENE --prim PATH [--lowered]`: the wired IR of one prim's material, or its
 /// lowered IR.
 pub fn ir(scene: &Path, prim: &str, optimize: bool, stats: bool, lowered: bool) -> Result<(), Failure> {
-    let options = SessionOptions { passes: PassOptions { optimize }, ..Default::default() };
+    let options = SessionOptions { passes: PassOptions { optimize, ..Default::default() }, ..Default::default() };
     let mut session = Session::open(SceneSource::File(scene.to_path_buf()), options);
     if session.composition().is_none() || session.diagnostics().has_errors() {
         report(&session.take_diagnostics(), session.sources())?;
@@ -213,7 +213,7 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
     let time = frames[0].map(|f| TimeCode::At(f as f64)).or(args.time);
     let options = SessionOptions {
         backend: args.backend,
-        passes: PassOptions { optimize: args.optimize },
+        passes: PassOptions { optimize: args.optimize, ..Default::default() },
         time,
         strict: args.strict,
         limits: None,

@@ -10,7 +10,8 @@ use super::slots::{LayerBinding, PrimStack, SlotFilter, resolve_stacks};
 use super::{ComposedLayer, ComposedMaterial, DisplayPrimvars, MaterialRef, preview};
 use crate::diag::{Diagnostic, Diagnostics, OncePerKind, SourceMap, Span, did_you_mean};
 use crate::front::ast::{GraphKind, Product};
-use crate::front::library::Library;
+use crate::front::library::{GraphId, Library};
+use crate::front::types::Value;
 use crate::scene::{Stage, Value as UsdValue};
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -284,6 +285,21 @@ fn material_source(stage: &Stage, path: &str, binding: Span, diags: &mut Diagnos
             .collect()
     };
     Some(MaterialSource { file: asset.resolved.clone(), file_span: asset_span, graph_name, inputs, unconnected })
+}
+
+/// The input values Material prim `path` sets on its strata substance or override `graph`, read
+/// again from the stage as composition reads them (a live view's input edit, which rewrites a
+/// parameter block without composing the stage again). `None` for a UsdShade preview network,
+/// a material whose shader or graph changed, or values composition would report.
+pub fn material_values(stage: &Stage, lib: &Library, path: &str, graph: GraphId) -> Option<Vec<(usize, Value)>> {
+    let id = stage.find(path)?;
+    if preview::is_preview_material(stage, id) {
+        return None;
+    }
+    let mut diags = Diagnostics::new();
+    let source = material_source(stage, path, Span::default(), &mut diags)?;
+    let r = material_ref(lib, path, &source, Span::default(), &mut diags)?;
+    (r.graph == graph && !diags.has_errors()).then_some(r.values)
 }
 
 fn material_ref(

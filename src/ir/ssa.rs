@@ -148,6 +148,9 @@ pub enum Inst {
     /// Reads word `index` of the shading point's primvar values (`abi::Globals::primvars`),
     /// 0 past their end.
     Primvar(u32),
+    /// Reads word `index` of the material instance's parameter block (`abi::Globals::params`:
+    /// a live input compiled as a parameter), 0 past its end.
+    Param(u32),
     /// A unary operation.
     Unary(UnOp, Value),
     /// A binary operation.
@@ -335,6 +338,7 @@ impl fmt::Display for Inst {
             Inst::IConst(i) => write!(f, "iconst {i}"),
             Inst::Global(o) => write!(f, "global {}", global_name(*o)),
             Inst::Primvar(i) => write!(f, "primvar {i}"),
+            Inst::Param(i) => write!(f, "param {i}"),
             Inst::Unary(op, a) => write!(f, "{} v{}", format!("{op:?}").to_lowercase(), a.0),
             Inst::Binary(op, a, b) => write!(f, "{} v{}, v{}", format!("{op:?}").to_lowercase(), a.0, b.0),
             Inst::Cmp(op, a, b) => write!(f, "cmp.{} v{}, v{}", format!("{op:?}").to_lowercase(), a.0, b.0),
@@ -436,7 +440,7 @@ pub fn validate(f: &Function) -> Result<(), Invalid> {
                         }
                         Some(Ty::F32)
                     }
-                    Inst::Primvar(_) => Some(Ty::F32),
+                    Inst::Primvar(_) | Inst::Param(_) => Some(Ty::F32),
                     Inst::Unary(op, a) => {
                         let (from, to) = match op {
                             UnOp::FNeg | UnOp::FAbs | UnOp::Sqrt | UnOp::Floor | UnOp::Ceil => (Ty::F32, Ty::F32),
@@ -1030,7 +1034,7 @@ fn rename(inst: &mut Inst, mut map: impl FnMut(Value) -> Value) {
             *b = map(*b);
         }
         Inst::Call(_, args) => args.iter_mut().for_each(|a| *a = map(*a)),
-        Inst::FConst(_) | Inst::IConst(_) | Inst::Global(_) | Inst::Primvar(_) | Inst::Get(_) => {}
+        Inst::FConst(_) | Inst::IConst(_) | Inst::Global(_) | Inst::Primvar(_) | Inst::Param(_) | Inst::Get(_) => {}
     }
 }
 
@@ -1048,7 +1052,7 @@ fn for_each_operand(inst: &Inst, mut f: impl FnMut(Value)) {
             f(*b);
         }
         Inst::Call(_, args) => args.iter().copied().for_each(f),
-        Inst::FConst(_) | Inst::IConst(_) | Inst::Global(_) | Inst::Primvar(_) | Inst::Get(_) => {}
+        Inst::FConst(_) | Inst::IConst(_) | Inst::Global(_) | Inst::Primvar(_) | Inst::Param(_) | Inst::Get(_) => {}
     }
 }
 

@@ -26,7 +26,7 @@ pub use example::write_split_default_scene;
 pub use layers::{layers_json, layers_table};
 pub use object::{ShaderObject, shader_object};
 
-use crate::abi::MaterialCode;
+use crate::abi::{MaterialCode, ParameterInstance};
 use crate::backend::{BackendKind, CompileStats, Compiler};
 use crate::compose::scene::{SceneComposition, compose_stage_filtered};
 use crate::compose::slots::PrimStack;
@@ -74,7 +74,10 @@ impl SceneSource {
 pub struct SessionOptions {
     /// Which backend runs the shaders.
     pub backend: BackendKind,
-    /// Constant folding and layer pruning.
+    /// Constant folding and layer pruning; with `passes.live_inputs` (`strata view`, never
+    /// `render`), float and colour inputs are parameters of the compiled code: one compiled
+    /// class per material without those values, a parameter block per material, and a
+    /// [`Change::Value`] of such an input rewrites the block without composing or compiling.
     pub passes: PassOptions,
     /// The time code the stage is read at (`None`: [`Stage::opening_time`]).
     pub time: Option<TimeCode>,
@@ -182,6 +185,9 @@ pub struct SessionStats {
     pub scene_builds: usize,
     /// Times an existing render scene was rebound to new materials (BVH kept).
     pub scene_rebinds: usize,
+    /// Parameter blocks rewritten by input edits with live inputs (nothing composed or
+    /// compiled for them).
+    pub parameter_writes: usize,
     /// Wall time of the last stage read (USD and every layer it names), ms.
     pub parse_ms: f64,
     /// Wall time of the last composition, ms.
@@ -253,7 +259,14 @@ impl Compiled {
 /// A composition with the content hash of each of its materials.
 struct Composed {
     scene: SceneComposition,
+    /// Per material, what its image depends on: its content hash, or with live inputs its
+    /// class's and its parameter block's.
     hashes: Vec<u64>,
+    /// Per material, the content hash of its compiled code: its class's with live inputs,
+    /// else `hashes`'.
+    classes: Vec<u64>,
+    /// Per material, its parameter block (live inputs only; else empty).
+    blocks: Vec<Vec<f32>>,
     /// Canonical paths of the substance files (and their imports) the materials use.
     files: HashSet<PathBuf>,
     /// Composition reported errors: a change to any substance file may fix it.
@@ -423,10 +436,23 @@ impl Session {
         let errors = self.diags.error_count();
         let scene = compose_stage_filtered(stage, &self.slot_filter, &mut self.sources, &mut self.diags);
         let mut files = FileHashes::default();
-        let hashes =
-            scene.materials.iter().map(|m| fingerprint::material_hash(m, &scene.library, &mut files)).collect();
+        let (mut hashes, mut classes, mut blocks) = (Vec::new(), Vec::new(), Vec::new());
+        for m in &scene.materials {
+            if self.options.passes.live_inputs {
+                let class = fingerprint::material_hash(&m.class(&scene.library), &scene.library, &mut files);
+                let block = m.parameter_block(&scene.library);
+                hashes.push(instance_hash(class, &block));
+                classes.push(class);
+                blocks.push(block);
+            } else {
+                let hash = fingerprint::material_hash(m, &scene.library, &mut files);
+                hashes.push(hash);
+                classes.push(hash);
+                blocks.push(Vec::new());
+            }
+        }
         let failed = self.diags.error_count() > errors;
-        self.composed = Some(Composed { scene, hashes, files: files.visited(), failed });
+        self.composed = Some(Composed { scene, hashes, classes, blocks, files: files.visited(), failed });
         self.stats.compositions += 1;
         self.stats.compose_ms = start.elapsed().as_secs_f64() * 1e3;
     }
@@ -463,22 +489,29 @@ impl Session {
         let composed = self.composed.as_ref()?;
         let start = Instant::now();
         let (mut compiled, mut reused) = (0, 0);
-        let mut materials = Vec::with_capacity(composed.scene.materials.len());
-        for (material, &hash) in composed.scene.materials.iter().zip(&composed.hashes) {
-            let code = match self.code.get(&hash) {
-                Some(code) => {
+        let mut materials: Vec<Arc<dyn MaterialCode>> = Vec::with_capacity(composed.scene.materials.len());
+        // Keep the code of the current materials only: the cache does not grow with edits.
+        let mut code: HashMap<u64, Arc<dyn MaterialCode>> = HashMap::new();
+        for (i, material) in composed.scene.materials.iter().enumerate() {
+            let class = composed.classes[i];
+            let class_code = match code.get(&class).or_else(|| self.code.get(&class)) {
+                Some(c) => {
                     reused += 1;
-                    code.clone()
+                    c.clone()
                 }
                 None => {
                     compiled += 1;
                     self.compiler.compile(&composed.scene.library, material, &mut self.diags)?
                 }
             };
-            materials.push(code);
+            code.insert(class, class_code.clone());
+            materials.push(if self.options.passes.live_inputs {
+                Arc::new(ParameterInstance::new(class_code, composed.blocks[i].clone()))
+            } else {
+                class_code
+            });
         }
-        // Keep the code of the current materials only: the cache does not grow with edits.
-        self.code = composed.hashes.iter().copied().zip(materials.iter().cloned()).collect();
+        self.code = code;
         let scene = &composed.scene;
         let prim_material = scene.stacks.iter().zip(&scene.prim_material).map(|(s, m)| (s.prim.clone(), *m)).collect();
         // Each material is named after the first prim stack composing it: identical
@@ -796,7 +829,7 @@ impl Session {
                 if let Err(message) = self.set_value(prim, attribute, type_name, value) {
                     self.diags.push(Diagnostic::error(message));
                     report.failed = true;
-                } else {
+                } else if !self.write_parameters(&mut report) {
                     self.redo_from_composition_into(&mut report);
                 }
             }
@@ -836,6 +869,12 @@ impl Session {
                 return;
             }
         }
+        self.rebind_or_rebuild(report);
+    }
+
+    /// After new materials: rebinds the render scene (if built before) when its geometry and
+    /// what its build read from the materials are unchanged, else builds it again.
+    fn rebind_or_rebuild(&mut self, report: &mut UpdateReport) {
         let (Some(prepared), Some(stage), Some(compiled)) = (&self.prepared, &self.stage, &self.compiled) else {
             return;
         };
@@ -857,6 +896,64 @@ impl Session {
             report.geometry_rebuilt = true;
             report.failed = self.build_scene(options).is_none();
         }
+    }
+
+    /// With live inputs, the fast road of an input edit already set on the stage: reads every
+    /// strata material's values again (no composition, no substance file) and, when only live
+    /// inputs changed, rewrites the changed materials' parameter blocks over their compiled
+    /// classes and rebinds the render scene (rebuilt only if a changed material moves
+    /// geometry). `false` when it does not apply (no live inputs, a value that is not a live
+    /// input, nothing a material reads changed): the caller composes again.
+    fn write_parameters(&mut self, report: &mut UpdateReport) -> bool {
+        let (Some(stage), Some(composed), Some(compiled)) = (&self.stage, &mut self.composed, &mut self.compiled)
+        else {
+            return false;
+        };
+        if !self.options.passes.live_inputs || composed.failed || self.compiled_hashes != composed.hashes {
+            return false;
+        }
+        let lib = &composed.scene.library;
+        let mut fresh: HashMap<String, Option<Vec<(usize, crate::front::types::Value)>>> = HashMap::new();
+        let mut updated = Vec::new();
+        for (i, material) in composed.scene.materials.iter().enumerate() {
+            let mut edited = material.clone();
+            let mut changed = false;
+            for r in edited.references_mut() {
+                let values = fresh
+                    .entry(r.path.clone())
+                    .or_insert_with(|| crate::compose::scene::material_values(stage, lib, &r.path, r.graph));
+                let Some(values) = values else { continue };
+                if *values == r.values {
+                    continue;
+                }
+                // Only parameters may differ: anything else changes the compiled class.
+                let graph = lib.get(r.graph);
+                let after = crate::compose::MaterialRef { values: values.clone(), ..r.clone() };
+                if after.folded_inputs(graph) != r.folded_inputs(graph) {
+                    return false;
+                }
+                r.values = values.clone();
+                changed = true;
+            }
+            if changed {
+                updated.push((i, edited));
+            }
+        }
+        if updated.is_empty() {
+            return false;
+        }
+        for (i, material) in updated {
+            let block = material.parameter_block(lib);
+            let Some(class) = self.code.get(&composed.classes[i]) else { return false };
+            compiled.materials[i] = Arc::new(ParameterInstance::new(class.clone(), block.clone()));
+            composed.hashes[i] = instance_hash(composed.classes[i], &block);
+            composed.blocks[i] = block;
+            composed.scene.materials[i] = material;
+            self.stats.parameter_writes += 1;
+        }
+        self.compiled_hashes = composed.hashes.clone();
+        self.rebind_or_rebuild(report);
+        true
     }
 
     /// Mutes or solos slots in memory (the files are untouched) and redoes what depends on
@@ -908,6 +1005,15 @@ impl Session {
         attr.blocked = false;
         Ok(())
     }
+}
+
+/// The hash of a material instance: its compiled class and its parameter block's bits.
+fn instance_hash(class: u64, block: &[f32]) -> u64 {
+    use std::hash::{DefaultHasher, Hash, Hasher};
+    let mut hasher = DefaultHasher::new();
+    class.hash(&mut hasher);
+    block.iter().map(|x| x.to_bits()).for_each(|bits| bits.hash(&mut hasher));
+    hasher.finish()
 }
 
 /// What a render scene's build read from its materials: the primvars they read, and per

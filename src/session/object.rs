@@ -34,6 +34,10 @@ typedef struct StrataGlobals {
     /* The primvars the material reads (see the material's primvar table); NULL, 0: none. */
     const float *primvars;
     uint32_t primvar_len;
+    /* A material instance's parameter block (a live view's unfolded inputs); NULL, 0 for
+       objects, whose inputs are folded. */
+    const float *params;
+    uint32_t param_len;
 } StrataGlobals;
 
 /* One weighted lobe of a closure (abi::ClosureTerm): kind 0 none, 1 diffuse, 2 glossy,

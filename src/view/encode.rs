@@ -48,6 +48,16 @@ pub fn matte(image: &Image, layer: &str, name: &str) -> Option<Vec<u8>> {
     encode_rgb(image.width, image.height, &pixels)
 }
 
+/// The prefix of a channel-selector entry that shows a layer's coverage matte of the selected
+/// prim (`coverage:INDEX:SLOT`, computed by the render thread).
+pub const COVERAGE: &str = "coverage:";
+
+/// Values in [0, 1] (a coverage matte) as grey PNG bytes.
+pub fn grey(width: usize, height: usize, values: &[f32]) -> Option<Vec<u8>> {
+    let pixels: Vec<u8> = values.iter().flat_map(|&v| [linear_to_byte(v); 3]).collect();
+    encode_rgb(width, height, &pixels)
+}
+
 fn group_of(name: &str) -> &str {
     name.rsplit_once('.').map_or(name, |(group, _)| group)
 }

@@ -115,6 +115,10 @@ async fn status(State(shared): State<Arc<Shared>>, Query(q): Query<After>) -> Re
                 if p.selected.is_some() && p.samples > 0 {
                     groups.extend(["CryptoObject", "CryptoMaterial"].map(|l| format!("{}{l}", encode::MATTE)));
                 }
+                if p.selected.is_some() {
+                    let coverage = p.selected_layers.iter().enumerate();
+                    groups.extend(coverage.map(|(i, slot)| format!("{}{i}:{slot}", encode::COVERAGE)));
+                }
                 groups
             }).unwrap_or_default(),
             "selected": p.selected.as_ref().map(|(prim, _)| prim),
@@ -131,6 +135,8 @@ async fn status(State(shared): State<Arc<Shared>>, Query(q): Query<After>) -> Re
             "solo": p.solo,
             "look_inputs": p.look_inputs,
             "samples_per_second": p.samples_per_second,
+            "materials_compiled": p.materials_compiled,
+            "parameter_writes": p.parameter_writes,
         })
     });
     with_type(body.to_string(), "application/json")
@@ -146,6 +152,17 @@ async fn frame(State(shared): State<Arc<Shared>>, Query(q): Query<Channel>) -> R
         return (StatusCode::NOT_FOUND, "no image yet\n").into_response();
     };
     let group = q.channel.unwrap_or_else(|| encode::BEAUTY.to_string());
+    if let Some(rest) = group.strip_prefix(encode::COVERAGE) {
+        let layer = rest.split(':').next().and_then(|i| i.parse().ok());
+        let (reply, answer) = tokio::sync::oneshot::channel();
+        if layer.is_none() || shared.commands.send(Command::Coverage { layer: layer.unwrap_or(0), reply }).is_err() {
+            return (StatusCode::NOT_FOUND, "no such channel\n").into_response();
+        }
+        return match tokio::time::timeout(LONG_POLL, answer).await {
+            Ok(Ok(Some(bytes))) => with_type(bytes, "image/png"),
+            _ => (StatusCode::NOT_FOUND, "no such channel\n").into_response(),
+        };
+    }
     let encode = move || match (group.strip_prefix(encode::MATTE), selected) {
         (Some("CryptoObject"), Some((prim, _))) => encode::matte(&image, "CryptoObject", &prim),
         (Some("CryptoMaterial"), Some((_, material))) => encode::matte(&image, "CryptoMaterial", &material),

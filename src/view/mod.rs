@@ -15,6 +15,7 @@
 //! rebinding) and serves one static page compiled into the binary.
 
 mod camera;
+mod coverage;
 mod encode;
 mod http;
 mod look;
@@ -108,8 +109,16 @@ pub(crate) struct Published {
     pub look_inputs: usize,
     /// The last picked prim and its material's name (its Cryptomatte mattes can be shown).
     pub selected: Option<(String, String)>,
+    /// The slots of the selected prim's material layers, bottom to top (each has a coverage
+    /// matte, `coverage:INDEX:SLOT` in the channel selector).
+    pub selected_layers: Vec<String>,
     /// Camera samples per second of the passes since the last restart (bands and merges).
     pub samples_per_second: Option<f64>,
+    /// Materials the session has compiled so far, and parameter blocks input edits rewrote
+    /// instead ([`crate::session::SessionStats`]): an input edit compiles nothing.
+    pub materials_compiled: usize,
+    /// See `materials_compiled`.
+    pub parameter_writes: usize,
 }
 
 /// State shared by the worker, the watcher and the HTTP handlers.

@@ -49,6 +49,8 @@ pub(crate) enum Command {
     FrameSelected,
     /// Write the input edits as an override layer; the answer is JSON.
     WriteLook { reply: tokio::sync::oneshot::Sender<Result<String, String>> },
+    /// Layer `layer`'s coverage matte of the selected prim as PNG bytes.
+    Coverage { layer: usize, reply: tokio::sync::oneshot::Sender<Option<Vec<u8>>> },
 }
 
 impl Command {
@@ -85,12 +87,19 @@ pub(crate) struct Worker {
     scene: SceneSource,
     /// The tev viewer each full-resolution pass is sent to (`--display-server`).
     display: Option<DisplayServer>,
+    /// The selected prim's per-layer coverage mattes for the current image (dropped on
+    /// every restart): the prim and each layer's values at the full resolution.
+    coverage: Option<(String, Vec<Vec<f32>>)>,
 }
 
 impl Worker {
     /// Opens and prepares the scene; the rendered diagnostics when it does not prepare.
     pub fn open(options: &ViewOptions, shared: Arc<Shared>) -> Result<Worker, String> {
-        let mut session = Session::open(options.scene.clone(), options.session);
+        // Inputs are parameters of the compiled code here: an edit from the page rewrites a
+        // parameter block instead of recompiling (`render` folds them).
+        let mut session_options = options.session;
+        session_options.passes.live_inputs = true;
+        let mut session = Session::open(options.scene.clone(), session_options);
         let mut settings = options.settings.clone();
         let mut scene_options = options.scene_options.clone();
         let compiled = session.compile().is_some();
@@ -143,6 +152,7 @@ impl Worker {
             input_at: None,
             scene: options.scene.clone(),
             display,
+            coverage: None,
         })
     }
 
@@ -193,6 +203,7 @@ impl Worker {
                 self.changed_at = edits.first_event;
             }
             if restart {
+                self.coverage = None;
                 passes = Accumulator::new(self.settings.clone());
                 (preview_due, stalled, pass_time) = (true, false, Duration::ZERO);
             }
@@ -261,6 +272,10 @@ impl Worker {
             Command::FrameSelected => self.frame_selected(),
             Command::WriteLook { reply } => {
                 let _ = reply.send(self.write_look());
+                false
+            }
+            Command::Coverage { layer, reply } => {
+                let _ = reply.send(self.coverage(layer));
                 false
             }
         }
@@ -435,9 +450,12 @@ impl Worker {
                 let update_ms = self.changed_at.take().map(|t| t.elapsed().as_secs_f64() * 1e3);
                 let input_ms = self.input_at.take().map(|t| t.elapsed().as_secs_f64() * 1e3);
                 let (text, failed, edits) = (self.diagnostics.clone(), self.failed, self.edits);
+                let stats = self.session.stats();
+                let (compiled, writes) = (stats.materials_compiled, stats.parameter_writes);
                 self.shared.publish(|p| {
                     p.image = Some(Arc::new(image));
                     p.samples = 0;
+                    (p.materials_compiled, p.parameter_writes) = (compiled, writes);
                     if update_ms.is_some() {
                         p.update_ms = update_ms;
                     }
@@ -492,10 +510,31 @@ impl Worker {
             let material = compiled.and_then(|c| c.material_names.get(*c.prim_material.get(prim)?)).cloned();
             (prim.clone(), material.unwrap_or_default())
         });
-        self.shared.publish(|p| p.selected = selected);
+        let slots = prim.as_deref().and_then(|prim| {
+            let compiled = self.session.compiled()?;
+            let material = compiled.materials.get(*compiled.prim_material.get(prim)?)?;
+            Some(material.info().layers.iter().map(|l| l.slot.clone()).collect::<Vec<_>>())
+        });
+        self.shared.publish(|p| {
+            p.selected = selected;
+            p.selected_layers = slots.unwrap_or_default();
+        });
         let inputs = prim.as_deref().map(|prim| look::inputs_json(&self.session, prim));
         json!({ "x": x, "y": y, "prim": prim, "layers": layers, "inputs": inputs, "shares": shares, "channels": channels })
             .to_string()
+    }
+
+    /// Layer `layer`'s coverage matte of the selected prim, as PNG bytes; computed once per
+    /// selection and image ([`super::coverage`]).
+    fn coverage(&mut self, layer: usize) -> Option<Vec<u8>> {
+        let prim = self.shared.snapshot(|p| p.selected.as_ref().map(|(prim, _)| prim.clone()))?;
+        let (w, h) = (self.settings.width, self.settings.height);
+        if self.coverage.as_ref().is_none_or(|(p, _)| *p != prim) {
+            let (scene, compiled) = (self.session.scene()?, self.session.compiled()?);
+            self.coverage = Some((prim.clone(), super::coverage::mattes(scene, &compiled.materials, &prim, w, h)?));
+        }
+        let mattes = &self.coverage.as_ref()?.1;
+        super::encode::grey(w, h, mattes.get(layer)?)
     }
 
     /// Each layer's share of the pick (DESIGN.md rule 5) at the surface under the pixel's
@@ -511,24 +550,8 @@ impl Worker {
         let g = scene.accel.surface(o, d, hit);
         let material = self.session.compiled()?.materials.get(*scene.prim_material.get(g.prim as usize)?)?.clone();
         let info = material.info();
-        let slots = scene.primvars.slots(&info.primvars);
-        let mut primvars = vec![0.0; info.primvar_floats];
-        if !slots.is_empty() {
-            scene.primvars.fill(g.primvars, g.bary, &slots, &mut primvars);
-        }
-        let facing = |n: glam::Vec3| if n.dot(d) > 0.0 { -n } else { n };
-        let globals = crate::abi::Globals {
-            p: g.p.to_array(),
-            n: facing(g.ns).to_array(),
-            ng: facing(g.ng).to_array(),
-            i: d.to_array(),
-            dpdu: g.dpdu.to_array(),
-            dpdv: g.dpdv.to_array(),
-            u: g.uv.x,
-            v: g.uv.y,
-            st_footprint: [0.0; 4],
-            primvars: crate::abi::PrimvarValues::new(&primvars),
-        };
+        let mut primvars = Vec::new();
+        let globals = super::coverage::surface_globals(scene, material.as_ref(), o, d, hit, &mut primvars);
         let state = crate::render::integrator::shading_state(material.as_ref(), &globals).ok()?;
         let layers: Vec<serde_json::Value> =
             info.layers.iter().zip(&state.weights).map(|(l, w)| json!({ "slot": l.slot, "share": w })).collect();

@@ -51,7 +51,7 @@ pub fn compile_stack(lib: &Library, names: &[String], backend: BackendKind, opti
         })
         .collect();
     let mut diags = Diagnostics::new();
-    let mut compiler = Compiler::new(backend, PassOptions { optimize });
+    let mut compiler = Compiler::new(backend, PassOptions { optimize, ..Default::default() });
     let code = compiler.compile(lib, &ComposedMaterial { layers, ..Default::default() }, &mut diags);
     assert!(!diags.has_errors());
     code.expect("compiled")
@@ -96,7 +96,8 @@ pub fn scene_file_with(
     resolution: (usize, usize),
 ) -> (strata::render::Scene, Vec<Arc<dyn MaterialCode>>) {
     use strata::session::{SceneSource, Session, SessionOptions};
-    let options = SessionOptions { backend, passes: PassOptions { optimize }, ..Default::default() };
+    let options =
+        SessionOptions { backend, passes: PassOptions { optimize, ..Default::default() }, ..Default::default() };
     let mut session = Session::open(SceneSource::File(path.to_path_buf()), options);
     session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
     let options = strata::render::scene::SceneOptions {
@@ -151,7 +152,11 @@ pub fn stage_scene(
     backend: BackendKind,
     optimize: bool,
 ) -> (strata::session::Session, strata::render::Scene) {
-    let options = strata::session::SessionOptions { backend, passes: PassOptions { optimize }, ..Default::default() };
+    let options = strata::session::SessionOptions {
+        backend,
+        passes: PassOptions { optimize, ..Default::default() },
+        ..Default::default()
+    };
     let mut session = strata::session::Session::open(source, options);
     session.compile_or_report().unwrap_or_else(|e| panic!("{e}"));
     let mut diags = session.take_diagnostics();

@@ -96,6 +96,7 @@ pub fn sample_points(n: usize, seed: u64) -> Vec<Globals<'static>> {
                 v: rng.unit(),
                 st_footprint: [0.0; 4],
                 primvars: Default::default(),
+                params: Default::default(),
             }
         })
         .collect()

@@ -255,7 +255,7 @@ mod tests {
         };
         let mut out = vec![];
         for backend in [BackendKind::Jit, BackendKind::Interp] {
-            let mut compiler = Compiler::new(backend, PassOptions { optimize: true });
+            let mut compiler = Compiler::new(backend, PassOptions { optimize: true, ..Default::default() });
             let code = compiler.compile(&lib, &material, &mut diags);
             if diags.has_errors() {
                 return Err(diags.render(&sources));

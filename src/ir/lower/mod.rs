@@ -386,6 +386,11 @@ impl FnLower<'_> {
                 self.convert(lv, from, ty)
             }
             Operand::Default => self.zero(ty),
+            Operand::Param { offset, ty: from } => {
+                let width = if from.is_triple() { 3 } else { 1 };
+                let words = (0..width).map(|k| self.b.value(Inst::Param(offset + k), Ty::F32)).collect();
+                self.convert(Lv::Scalars(words), *from, ty)
+            }
         }
     }
 

@@ -38,6 +38,14 @@ pub enum Operand {
     },
     /// The node type's default for this input (which may read shading globals).
     Default,
+    /// A live input (`PassOptions::live_inputs`): read at run time from word `offset` of the
+    /// material instance's parameter block (`abi::Globals::params`), `ty`'s width of words.
+    Param {
+        /// First word in the block.
+        offset: u32,
+        /// The input's type.
+        ty: Type,
+    },
 }
 
 /// One node instance.
@@ -148,11 +156,17 @@ pub struct WiredMaterial {
 pub struct PassOptions {
     /// Constant folding and pruning of hidden layers.
     pub optimize: bool,
+    /// Substance and override inputs of float and triple types become parameters read from
+    /// the instance's block ([`Operand::Param`], laid out as
+    /// [`ComposedMaterial::parameter_block`]) instead of folded constants, so one compiled
+    /// class serves every material that differs only in those values and an edit rewrites a
+    /// block (`strata view`; `render` folds).
+    pub live_inputs: bool,
 }
 
 impl Default for PassOptions {
     fn default() -> Self {
-        PassOptions { optimize: true }
+        PassOptions { optimize: true, live_inputs: false }
     }
 }
 
@@ -173,7 +187,7 @@ fn build_here(
     options: PassOptions,
     diags: &mut Diagnostics,
 ) -> WiredMaterial {
-    let mut b = Builder { lib, nodes: Vec::new(), diags };
+    let mut b = Builder { lib, nodes: Vec::new(), diags, live: false, next_param: 0 };
     let mut layers = Vec::new();
     if material.layers.is_empty() {
         // The prelude's own graph, by its file: a user graph of the same name is rejected when
@@ -182,12 +196,15 @@ fn build_here(
             Some(graph) => {
                 let substance = MaterialRef { path: String::new(), graph, values: Vec::new(), span: Span::default() };
                 layers.push(b.layer(0, "default", &substance, &[]));
+                b.live = false;
             }
             None => b.diags.push(Diagnostic::error(
                 "internal compiler error: the built-in library has no `default_substance` to shade unbound prims",
             )),
         }
     }
+    // The default substance above has no parameters; scene materials may.
+    b.live = options.live_inputs;
     for (index, layer) in material.layers.iter().enumerate() {
         let overrides: Vec<(String, &MaterialRef)> = layer.overrides.iter().map(|(s, m)| (s.name(), m)).collect();
         let mut wired = b.layer(index, &layer.slot.name(), &layer.substance, &overrides);
@@ -225,6 +242,11 @@ struct Builder<'a> {
     lib: &'a Library,
     nodes: Vec<Node>,
     diags: &'a mut Diagnostics,
+    /// Live inputs become [`Operand::Param`]s.
+    live: bool,
+    /// The next parameter word: references are visited in
+    /// [`ComposedMaterial::references_in_order`].
+    next_param: u32,
 }
 
 /// The operands that a graph instance's exposed inputs resolve to.
@@ -249,17 +271,22 @@ impl Builder<'_> {
         instance
     }
 
-    /// The operands of a material's exposed inputs: scene values, else defaults.
-    fn input_values(graph: &Graph, material: &MaterialRef) -> Vec<Operand> {
-        graph
-            .inputs
-            .iter()
-            .enumerate()
-            .map(|(i, input)| {
-                let value = material.values.iter().find(|(j, _)| *j == i).map(|(_, v)| v.clone());
-                Operand::Const(value.unwrap_or_else(|| input.default.clone()), input.ty)
-            })
-            .collect()
+    /// The operands of a material's exposed inputs: scene values, else defaults; live inputs
+    /// are parameters, numbered on from the previous reference's.
+    fn input_values(&mut self, graph: &Graph, material: &MaterialRef) -> Vec<Operand> {
+        let mut operands = Vec::with_capacity(graph.inputs.len());
+        for (i, input) in graph.inputs.iter().enumerate() {
+            let value = material.input_value(graph, i);
+            let words = if self.live { crate::compose::live_input_words(graph, i, value) } else { 0 };
+            operands.push(if words > 0 {
+                let offset = self.next_param;
+                self.next_param += words as u32;
+                Operand::Param { offset, ty: input.ty }
+            } else {
+                Operand::Const(value.clone(), input.ty)
+            });
+        }
+        operands
     }
 
     fn layer(
@@ -271,10 +298,13 @@ impl Builder<'_> {
     ) -> Layer {
         let lib = self.lib;
         let graph = lib.get(substance.graph);
-        let mut inputs = Self::input_values(graph, substance);
+        let mut inputs = self.input_values(graph, substance);
+        // Every override's inputs, numbered before any is skipped (the block's order).
+        let mut all_over_inputs: Vec<Vec<Operand>> =
+            overrides.iter().map(|(_, over)| self.input_values(lib.get(over.graph), over)).collect();
         let mut channels = Vec::new();
         // Overrides in ascending slot order: a later (higher) one replaces an earlier connection.
-        for (over_slot, over) in overrides {
+        for (k, (over_slot, over)) in overrides.iter().enumerate() {
             let og = lib.get(over.graph);
             if og.kind != GraphKind::Override {
                 self.diags.push(
@@ -287,7 +317,7 @@ impl Builder<'_> {
                 );
                 continue;
             }
-            let over_inputs = Self::input_values(og, over);
+            let over_inputs = std::mem::take(&mut all_over_inputs[k]);
             let instance = self.instantiate(og, over_slot, index, over_inputs);
             for output in &og.outputs {
                 let Some((i, input)) = graph.input(&output.name) else {
@@ -715,7 +745,7 @@ impl WiredMaterial {
     pub fn validate(&self, lib: &Library) -> Result<(), String> {
         let check = |op: &Operand, to: Type, before: usize, what: &dyn Fn() -> String| -> Result<(), String> {
             let from = match op {
-                Operand::Const(_, t) => *t,
+                Operand::Const(_, t) | Operand::Param { ty: t, .. } => *t,
                 Operand::Default => return Ok(()),
                 Operand::Node { node, param } => {
                     let n = node.0 as usize;
@@ -782,6 +812,7 @@ impl WiredMaterial {
                 format!("%{}.{}", node.0, func.params[*param].name)
             }
             Operand::Default => "default".to_string(),
+            Operand::Param { offset, .. } => format!("param {offset}"),
         };
         let _ = writeln!(out, "material: {} layer(s), {} node(s)", self.layers.len(), self.nodes.len());
         for (name, kind) in &self.channels {

@@ -119,7 +119,7 @@ fn opaque_layer_hides_lower_layers() {
     assert_eq!(wired.stats.layers_pruned, 1);
     assert_eq!(wired.layers[0].pruned, Some(crate::abi::Pruned::HiddenUnder("010".into())));
     assert!(wired.layers[2].surface.is_some());
-    let unoptimised = build(&lib, &material, PassOptions { optimize: false }, &mut diags);
+    let unoptimised = build(&lib, &material, PassOptions { optimize: false, ..Default::default() }, &mut diags);
     assert_eq!(unoptimised.stats.layers_pruned, 0);
     assert!(unoptimised.nodes.len() > wired.nodes.len());
 }
@@ -140,7 +140,7 @@ fn literal_masks_are_constant_at_every_optimisation_level() {
     };
     let mut diags = Diagnostics::new();
     for optimize in [true, false] {
-        let wired = build(&lib, &material, PassOptions { optimize }, &mut diags);
+        let wired = build(&lib, &material, PassOptions { optimize, ..Default::default() }, &mut diags);
         let masks: Vec<Option<f32>> = wired.layers.iter().map(Layer::constant_mask).collect();
         assert_eq!(masks, [Some(1.0), Some(1.0), None], "optimise {optimize}");
         assert_eq!(wired.layers[0].surface.is_none(), optimize, "optimise {optimize}: plastic under the sheet");

@@ -341,6 +341,7 @@ impl Base {
             u: v.uv.x,
             v: v.uv.y,
             primvars: Default::default(),
+            params: Default::default(),
         }
     }
 }

@@ -341,6 +341,7 @@ impl Context<'_> {
             v: sp.uv.y,
             st_footprint: [0.0; 4],
             primvars: PrimvarValues::new(&primvars[..used]),
+            params: PrimvarValues::default(),
         }
     }
 

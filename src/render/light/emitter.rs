@@ -172,6 +172,7 @@ impl Emitters {
                     v: geom.uv.y,
                     // The power estimate reads primvars at their fallbacks.
                     primvars: crate::abi::PrimvarValues::new(&[]),
+                    params: Default::default(),
                 };
                 sum += expected_emission(material, &g, &mut masks, &mut weights);
             }
