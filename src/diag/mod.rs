@@ -820,6 +820,48 @@ impl OncePerKind {
 mod tests {
     use super::*;
 
+    /// A released text renders every diagnostic exactly as the held text does (the
+    /// reference is the same map without the release), and a file changed since quotes
+    /// nothing yet keeps its line numbers.
+    #[test]
+    fn a_released_text_is_read_again_for_diagnostics() {
+        let dir = std::env::temp_dir().join(format!("strata-release-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("big.usda");
+        let mut text = String::from("#usda 1.0\n");
+        while text.len() < RELEASE_BYTES + 10 {
+            text += "def Xform \"Ä\" { double x = 1 }\n";
+        }
+        let at = text.len() - 15;
+        std::fs::write(&path, &text).unwrap();
+        let name = path.display().to_string();
+        let (mut held, mut released) = (SourceMap::new(), SourceMap::new());
+        let (a, b) = (held.add(&name, text.clone()), released.add(&name, text.clone()));
+        released.release(b, &path);
+        assert!(released.files[0].text.is_empty(), "the text is given back");
+        let span = |file| Span::new(file, at, at + 5);
+        let diag = |file| Diagnostic::error("bad").at(span(file), "here");
+        assert_eq!(diag(b).render(&released), diag(a).render(&held));
+        assert_eq!(released.line_col(span(b)), held.line_col(span(a)));
+        assert_eq!(released.slice(span(b)), held.slice(span(a)));
+
+        // Changed on disk: no quote, the same line number.
+        let mut again = SourceMap::new();
+        let c = again.add(&name, text.clone());
+        again.release(c, &path);
+        std::fs::write(&path, text.replace('x', "y")).unwrap();
+        assert_eq!(again.text(c), "");
+        assert_eq!(again.line_col(span(c)).0, held.line_col(span(a)).0);
+        assert!(again.location(span(c)).starts_with(&name));
+
+        // Small texts and texts that are not the file's stay held.
+        let mut small = SourceMap::new();
+        let d = small.add(&name, "#usda 1.0\n");
+        small.release(d, &path);
+        assert_eq!(small.text(d), "#usda 1.0\n");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
     #[test]
     fn closest_name_suggests_typos_only() {
         let names = ["albedo", "roughness", "ior", "specular"];
