@@ -5,7 +5,7 @@
 //! instead of failing at the first one, so one run shows as many problems as it can.
 
 use codespan_reporting::diagnostic as cs;
-use codespan_reporting::files::{self as csfiles, Files as _, SimpleFiles};
+use codespan_reporting::files as csfiles;
 use codespan_reporting::term;
 use std::fmt;
 use std::ops::Range;
@@ -89,8 +89,82 @@ impl Span {
 /// Every source file a run has read, so diagnostics can quote them.
 #[derive(Default)]
 pub struct SourceMap {
-    files: SimpleFiles<String, String>,
-    count: u32,
+    files: Vec<SourceFile>,
+}
+
+/// One file of a [`SourceMap`].
+struct SourceFile {
+    name: String,
+    /// The text while it is held (empty once [`SourceMap::release`]d).
+    text: String,
+    /// Byte offset of each line's start.
+    line_starts: Vec<usize>,
+    /// Set when the text was given back: where it is read again from, and what it was.
+    released: Option<Released>,
+}
+
+/// A released file's text: read again from `path` on first need, and used only if it is
+/// still what was parsed (same length and hash), so a quote never shows other text.
+struct Released {
+    path: std::path::PathBuf,
+    len: usize,
+    hash: u64,
+    text: std::sync::OnceLock<String>,
+}
+
+/// Texts smaller than this are kept: releasing them saves little and costs a read.
+const RELEASE_BYTES: usize = 1 << 20;
+
+/// A fast 64-bit hash of `text` (a word at a time) to recognise a file read again.
+fn text_hash(text: &str) -> u64 {
+    let bytes = text.as_bytes();
+    let mut words = bytes.chunks_exact(8);
+    let mut h = bytes.len() as u64;
+    for w in &mut words {
+        h = (h.rotate_left(23) ^ u64::from_le_bytes(w.try_into().unwrap_or_default()))
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+    for &b in words.remainder() {
+        h = (h.rotate_left(23) ^ u64::from(b)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+    h
+}
+
+impl SourceFile {
+    /// The text, read again if it was released (empty when the file changed since).
+    fn text(&self) -> &str {
+        match &self.released {
+            None => &self.text,
+            Some(r) => r.text.get_or_init(|| {
+                std::fs::read_to_string(&r.path)
+                    .ok()
+                    .filter(|t| t.len() == r.len && text_hash(t) == r.hash)
+                    .unwrap_or_default()
+            }),
+        }
+    }
+
+    /// The text's length in bytes (also when released).
+    fn len(&self) -> usize {
+        self.released.as_ref().map_or(self.text.len(), |r| r.len)
+    }
+
+    /// The byte range of line `index` (newline included), as codespan's `SimpleFile`.
+    fn line_range(&self, index: usize) -> Result<Range<usize>, csfiles::Error> {
+        let start = |i: usize| match i.cmp(&self.line_starts.len()) {
+            std::cmp::Ordering::Less => Ok(self.line_starts[i]),
+            std::cmp::Ordering::Equal => Ok(self.len()),
+            std::cmp::Ordering::Greater => {
+                Err(csfiles::Error::LineTooLarge { given: i, max: self.line_starts.len().saturating_sub(1) })
+            }
+        };
+        Ok(start(index)?..start(index + 1)?)
+    }
+
+    /// The index of the line holding byte `at`.
+    fn line_index(&self, at: usize) -> usize {
+        self.line_starts.binary_search(&at).unwrap_or_else(|next| next.saturating_sub(1))
+    }
 }
 
 impl SourceMap {
@@ -101,21 +175,41 @@ impl SourceMap {
 
     /// Registers a file's text under a display name and returns its id.
     pub fn add(&mut self, name: impl Into<String>, text: impl Into<String>) -> FileId {
-        let id = self.files.add(name.into(), text.into());
-        self.count += 1;
-        FileId(id as u32)
+        let text = text.into();
+        let line_starts = csfiles::line_starts(&text).collect();
+        self.files.push(SourceFile { name: name.into(), text, line_starts, released: None });
+        FileId(self.files.len() as u32 - 1)
+    }
+
+    /// Gives back the memory of `file`'s text, once parsed, when it is large and is the
+    /// content of the file at `path`: a diagnostic that quotes it later reads it again
+    /// (and quotes nothing if the file has changed since). A 10⁶-triangle mesh's text is
+    /// about 57 bytes per triangle.
+    pub fn release(&mut self, file: FileId, path: &std::path::Path) {
+        let Some(f) = self.files.get_mut(file.0 as usize) else { return };
+        let on_disk = std::fs::metadata(path).map(|m| m.is_file() && m.len() == f.text.len() as u64);
+        if f.released.is_some() || f.text.len() < RELEASE_BYTES || !on_disk.unwrap_or(false) {
+            return;
+        }
+        let text = std::mem::take(&mut f.text);
+        f.released = Some(Released {
+            path: path.to_path_buf(),
+            len: text.len(),
+            hash: text_hash(&text),
+            text: std::sync::OnceLock::new(),
+        });
     }
 
     /// The display name of a file.
     pub fn name(&self, file: FileId) -> &str {
-        self.files.get(file.0 as usize).map(|f| f.name().as_str()).unwrap_or("<unknown>")
+        self.files.get(file.0 as usize).map(|f| f.name.as_str()).unwrap_or("<unknown>")
     }
 
     /// The byte range of the line holding byte `at` of a file (newline excluded).
     pub fn line_bounds(&self, file: FileId, at: usize) -> Range<usize> {
-        let id = file.0 as usize;
         let text = self.text(file);
-        match self.files.line_index(id, at).and_then(|i| self.files.line_range(id, i)) {
+        let Some(f) = self.files.get(file.0 as usize) else { return at..at };
+        match f.line_range(f.line_index(at)) {
             Ok(range) => {
                 let end = range.end.min(text.len());
                 let start = range.start.min(end);
@@ -127,12 +221,12 @@ impl SourceMap {
 
     /// One-based number of the line holding byte `at` of a file.
     pub fn line_number(&self, file: FileId, at: usize) -> usize {
-        self.files.line_index(file.0 as usize, at).map_or(1, |i| i + 1)
+        self.files.get(file.0 as usize).map_or(1, |f| f.line_index(at) + 1)
     }
 
     /// The full text of a file.
     pub fn text(&self, file: FileId) -> &str {
-        self.files.get(file.0 as usize).map(|f| f.source().as_str()).unwrap_or("")
+        self.files.get(file.0 as usize).map_or("", SourceFile::text)
     }
 
     /// The text a span covers.
@@ -142,12 +236,13 @@ impl SourceMap {
 
     /// One-based line and column of a span's start.
     pub fn line_col(&self, span: Span) -> (usize, usize) {
-        let text = self.text(span.file);
-        let at = (span.start as usize).min(text.len());
-        let before = &text[..at];
-        let line = before.matches('\n').count() + 1;
-        let col = before.rsplit('\n').next().map(|l| l.chars().count()).unwrap_or(0) + 1;
-        (line, col)
+        let Some(f) = self.files.get(span.file.0 as usize) else { return (1, 1) };
+        let at = (span.start as usize).min(f.len());
+        let line = f.line_index(at);
+        let start = f.line_starts.get(line).copied().unwrap_or(0).min(at);
+        // Columns count characters; bytes when the text is no longer what was parsed.
+        let col = f.text().get(start..at).map_or(at - start, |t| t.chars().count()) + 1;
+        (line + 1, col)
     }
 
     /// `name:line:col` of a span's start.
@@ -268,7 +363,7 @@ impl Diagnostic {
             .with_labels(labels)
             .with_notes(self.notes.clone());
         let config = term::Config::default();
-        term::emit_into_string(&config, &sources.files, &diagnostic)
+        term::emit_into_string(&config, sources, &diagnostic)
             .unwrap_or_else(|_| format!("{:?}: {}\n", self.severity, self.message))
     }
 
@@ -389,6 +484,28 @@ fn ceil_char(text: &str, mut at: usize) -> usize {
         at += 1;
     }
     at
+}
+
+impl<'a> csfiles::Files<'a> for SourceMap {
+    type FileId = usize;
+    type Name = &'a str;
+    type Source = &'a str;
+
+    fn name(&'a self, id: usize) -> Result<&'a str, csfiles::Error> {
+        self.files.get(id).map(|f| f.name.as_str()).ok_or(csfiles::Error::FileMissing)
+    }
+
+    fn source(&'a self, id: usize) -> Result<&'a str, csfiles::Error> {
+        self.files.get(id).map(SourceFile::text).ok_or(csfiles::Error::FileMissing)
+    }
+
+    fn line_index(&'a self, id: usize, byte_index: usize) -> Result<usize, csfiles::Error> {
+        self.files.get(id).map(|f| f.line_index(byte_index)).ok_or(csfiles::Error::FileMissing)
+    }
+
+    fn line_range(&'a self, id: usize, line_index: usize) -> Result<Range<usize>, csfiles::Error> {
+        self.files.get(id).ok_or(csfiles::Error::FileMissing)?.line_range(line_index)
+    }
 }
 
 impl<'a> csfiles::Files<'a> for Excerpts {
@@ -702,6 +819,48 @@ impl OncePerKind {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A released text renders every diagnostic exactly as the held text does (the
+    /// reference is the same map without the release), and a file changed since quotes
+    /// nothing yet keeps its line numbers.
+    #[test]
+    fn a_released_text_is_read_again_for_diagnostics() {
+        let dir = std::env::temp_dir().join(format!("strata-release-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("big.usda");
+        let mut text = String::from("#usda 1.0\n");
+        while text.len() < RELEASE_BYTES + 10 {
+            text += "def Xform \"Ä\" { double x = 1 }\n";
+        }
+        let at = text.len() - 15;
+        std::fs::write(&path, &text).unwrap();
+        let name = path.display().to_string();
+        let (mut held, mut released) = (SourceMap::new(), SourceMap::new());
+        let (a, b) = (held.add(&name, text.clone()), released.add(&name, text.clone()));
+        released.release(b, &path);
+        assert!(released.files[0].text.is_empty(), "the text is given back");
+        let span = |file| Span::new(file, at, at + 5);
+        let diag = |file| Diagnostic::error("bad").at(span(file), "here");
+        assert_eq!(diag(b).render(&released), diag(a).render(&held));
+        assert_eq!(released.line_col(span(b)), held.line_col(span(a)));
+        assert_eq!(released.slice(span(b)), held.slice(span(a)));
+
+        // Changed on disk: no quote, the same line number.
+        let mut again = SourceMap::new();
+        let c = again.add(&name, text.clone());
+        again.release(c, &path);
+        std::fs::write(&path, text.replace('x', "y")).unwrap();
+        assert_eq!(again.text(c), "");
+        assert_eq!(again.line_col(span(c)).0, held.line_col(span(a)).0);
+        assert!(again.location(span(c)).starts_with(&name));
+
+        // Small texts and texts that are not the file's stay held.
+        let mut small = SourceMap::new();
+        let d = small.add(&name, "#usda 1.0\n");
+        small.release(d, &path);
+        assert_eq!(small.text(d), "#usda 1.0\n");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn closest_name_suggests_typos_only() {

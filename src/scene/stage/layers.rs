@@ -241,7 +241,10 @@ impl Layers {
         let layer = match source {
             LayerSource::Text(text) => {
                 let file = sources.add(name, text);
-                usda::parse(file, sources.text(file), &dir, &mut parsed)
+                let layer = usda::parse(file, sources.text(file), &dir, &mut parsed);
+                // The layer holds what it needs; a diagnostic reads the file again.
+                sources.release(file, Path::new(name));
+                layer
             }
             LayerSource::Crate(bytes) => usdc::convert(name, &bytes, &dir, sources, &mut parsed),
             LayerSource::MaterialX(xml) => materialx_layer(name, xml, &dir, sources, &mut parsed),

@@ -32,7 +32,6 @@ use obvhs::bvh2::node::Bvh2Node;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
 use obvhs::cwbvh::CwBvh;
 use obvhs::cwbvh::builder::build_cwbvh;
-use obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh;
 use obvhs::ploc::{PlocBuilder, PlocSearchDistance, SortPrecision};
 use obvhs::ray::Ray;
 use obvhs::{Boundable, BvhBuildParams};
@@ -40,6 +39,7 @@ use std::collections::HashMap;
 use std::time::Duration;
 
 mod attrs;
+mod convert;
 mod wide;
 
 use attrs::AttrTable;
@@ -135,7 +135,7 @@ impl BvhSpace {
             // allocate theirs (build peak memory).
             drop(boxes);
             ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
-            (bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf.clamp(1, 3), true, false), largest)
+            (convert::bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf), largest)
         };
         Some(BvhSpace { bvh, scale, largest_batch })
     }
