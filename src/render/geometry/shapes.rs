@@ -8,7 +8,7 @@
 //! transform. `(u, v)` follow the tessellation strata used before: `u = φ / 2π` around the
 //! axis, `v` along it (sphere: `1 − θ/π` from the +z pole; disks: `½ + ½ (x, y)/r`).
 
-use glam::{DMat3, DMat4, DVec3, Mat3, Vec2, Vec3};
+use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
 use std::f64::consts::{PI, TAU};
 
 /// One analytic surface part in object space (the prim's local space, axis permuted to z).
@@ -90,81 +90,72 @@ pub struct Shape {
     cull: Cull,
 }
 
-/// A conservative single-precision miss test (after pbrt-v4's f32 quadratics with error
-/// bounds): the ray is moved to object space in f32 and tested against a sphere around the
-/// part, with a margin far above every rounding of the f32 arithmetic, so it says "miss"
-/// only where the exact f64 test ([`Part::intersect`]) finds no hit either. Rays it cannot
-/// decide (near the part, or any non-finite value) go to the f64 test, whose answer is then
-/// the same as without it: images are bit-identical.
+/// A conservative single-precision miss test (after pbrt-v4's f32 tests with error bounds),
+/// in world space so that it costs no transform: the ray's line against a sphere around the
+/// part's world image, with margins of ten times or more every rounding of the f32
+/// arithmetic, so it says "miss" only where the exact f64 test ([`Part::intersect`]) finds
+/// no hit either. Rays it cannot decide (near the part, or any non-finite value) go to the
+/// f64 test, whose answer is then the same as without it: images are bit-identical.
 #[derive(Clone, Copy, Debug)]
 struct Cull {
-    /// World → object in f32: linear part and translation.
-    linear: Mat3,
-    translation: Vec3,
-    /// The largest `|linear|` entry, and the largest translation magnitude (error bounds).
-    linear_max: f32,
-    translation_max: f32,
-    /// A bound on the linear part's condition number (Frobenius norms of it and of its
-    /// inverse): how much the f32 direction's rounding can turn the object-space ray.
-    condition: f32,
-    /// The bounding sphere in object space (a sphere part's own sphere).
+    /// The sphere in world space: its centre rounded to f32, its radius rounded up.
     centre: Vec3,
     radius: f32,
+    /// The centre's largest coordinate magnitude (its rounding is part of the margin).
+    centre_size: f32,
 }
 
-/// The cull's margin, relative to the sizes it bounds: the f32 transform rounds the
-/// object-space origin by at most √3 γ(5) ≈ 5e-7 of its size, turns the direction by at
-/// most √3 γ(4) ≈ 4e-7 times the condition number, and the closest-approach arithmetic errs
-/// by about 1e-6 of the distance (the condition-number bound used is at least 3): this is
-/// about twenty times each.
+/// The cull's margin on distances and squared distances, relative to the sizes they round
+/// with: the f32 differences and dot products err by a few ε (6e-8) of them, 1e-6 all told.
 const CULL_MARGIN: f32 = 1e-5;
 
+/// The margin on the squared distance for the rounding of `o − centre` (at most
+/// 6 ε |o − centre| (|o| + |centre|) in the largest coordinates): about ten times that.
+const CULL_ORIGIN_MARGIN: f32 = 4e-6;
+
 impl Cull {
-    /// The test for `part` under `to_object` (its inverse is `to_world`); one that never
-    /// culls when anything is not finite in f32.
-    fn new(part: &Part, to_object: &DMat4, to_world: &DMat4) -> Cull {
+    /// The test for `part` under `to_world`; one that never culls when anything is not
+    /// finite in f32.
+    fn new(part: &Part, to_world: &DMat4) -> Cull {
         let (centre, radius) = part.bounding_sphere();
-        let frobenius = |m: &DMat4| DMat3::from_mat4(*m).to_cols_array().iter().map(|x| x * x).sum::<f64>().sqrt();
-        let linear = DMat3::from_mat4(*to_object);
+        // The linear part stretches a length by at most its spectral norm, which is at most
+        // the square root of the largest absolute row sum of LᵀL (exact for a rotation
+        // times a uniform scale).
+        let linear = DMat3::from_mat4(*to_world);
+        let g = linear.transpose() * linear;
+        let stretch = (0..3).map(|i| g.row(i).abs().element_sum()).fold(0.0f64, f64::max).sqrt();
+        let centre = to_world.transform_point3(centre);
         let cull = Cull {
-            linear: linear.as_mat3(),
-            translation: to_object.w_axis.truncate().as_vec3(),
-            linear_max: linear.to_cols_array().iter().fold(0.0f64, |m, x| m.max(x.abs())) as f32,
-            translation_max: to_object.w_axis.truncate().abs().max_element() as f32,
-            condition: (frobenius(to_object) * frobenius(to_world)) as f32,
             centre: centre.as_vec3(),
-            radius: radius as f32,
+            radius: (radius * stretch) as f32 * (1.0 + 1e-6),
+            centre_size: centre.abs().max_element() as f32,
         };
-        let finite = cull.linear.is_finite()
-            && cull.translation.is_finite()
-            && [cull.linear_max, cull.translation_max, cull.condition, cull.radius].iter().all(|x| x.is_finite())
-            && cull.centre.is_finite();
-        // A radius of +∞ never culls (the bound below is then +∞ or NaN).
-        if finite { cull } else { Cull { radius: f32::INFINITY, ..cull } }
+        if cull.centre.is_finite() && cull.radius.is_finite() && cull.centre_size.is_finite() {
+            cull
+        } else {
+            // An infinite radius never culls (the comparisons below are then false).
+            Cull { radius: f32::INFINITY, ..cull }
+        }
     }
 
-    /// Whether the world ray `o + t d`, `t` in `(tmin, tmax)`, certainly misses the sphere
-    /// (and so the part): its line passes farther from the centre than the radius plus the
-    /// margin, or the whole sphere lies before `tmin` or beyond `tmax` along it.
+    /// Whether the world ray `o + t d`, `t` > `tmin`, certainly misses the sphere (and so
+    /// the part): its line passes wide of it, or it starts outside the sphere and moves
+    /// away from its centre (when `tmin` ≥ 0).
     #[inline]
-    fn misses(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> bool {
-        let oc = self.linear * o + self.translation - self.centre;
-        let od = self.linear * d;
-        let a = od.length_squared();
-        let b = oc.dot(od);
-        // Rounding of the object-space origin (f32 transform of o), of the closest-approach
-        // arithmetic (relative to |oc|), and of the direction (turned by up to a few ε times
-        // the condition number, which moves the closest point by that times |oc|).
-        let origin_size = self.linear_max * o.abs().max_element() * 3.0 + self.translation_max;
-        let reach = self.radius + CULL_MARGIN * (self.radius + origin_size + oc.length() * self.condition);
-        let closest = oc - od * (b / a);
+    fn misses(&self, o: Vec3, d: Vec3, tmin: f32) -> bool {
+        let oc = o - self.centre;
+        let (a, b, c2) = (d.length_squared(), oc.dot(d), oc.length_squared());
+        let (o_size, oc_size) = (o.abs().max_element(), oc.abs().max_element());
+        let reach = self.radius + CULL_MARGIN * (self.radius + self.centre_size + o_size);
+        // |oc|² − (oc·d)²/|d|²: the squared distance of the line from the centre, which
+        // rounds by about 1e-6 of |oc|², and by the rounding of oc itself.
+        let slack = CULL_MARGIN * c2 + CULL_ORIGIN_MARGIN * oc_size * (o_size + self.centre_size);
+        let outside = c2 > reach * reach + slack;
         // Every comparison is false on NaN: nothing non-finite culls.
-        let wide_of = closest.length_squared() > reach * reach;
-        // Hits are within reach/|od| of the closest approach at t = −b/a.
-        let root_a = a.sqrt();
-        let behind = -b + reach * root_a < tmin * a;
-        let beyond = -b - reach * root_a > tmax * a;
-        wide_of || behind || beyond
+        let wide_of = c2 - b * (b / a) > reach * reach + slack;
+        // Outside and moving away (oc·d > 0 beyond its rounding): the distance only grows.
+        let away = b > 3.0 * CULL_MARGIN * d.abs().max_element() * (oc_size + o_size + self.centre_size);
+        wide_of || (outside && away && tmin >= 0.0)
     }
 }
 
@@ -347,7 +338,7 @@ impl Shape {
             normal_to_world: linear.inverse().transpose(),
             prim,
             primvars: Default::default(),
-            cull: Cull::new(&part, &to_object, &m),
+            cull: Cull::new(&part, &m),
         })
     }
 
@@ -360,7 +351,7 @@ impl Shape {
     /// The nearest hit distance of the world ray `o + t d` in `(tmin, tmax)`.
     #[inline]
     pub fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<f32> {
-        if self.cull.misses(o, d, tmin, tmax) {
+        if self.cull.misses(o, d, tmin) {
             return None;
         }
         self.intersect_exact(o, d, tmin, tmax)
@@ -667,12 +658,13 @@ mod tests {
                         _ => (0.0, dist),
                     };
                     let exact = shape.intersect_exact(o, d, tmin, tmax);
-                    let cull = shape.cull.misses(o, d, tmin, tmax);
+                    let cull = shape.cull.misses(o, d, tmin);
                     assert!(!(cull && exact.is_some()), "{part:?} under {m:?}: ray {o} {d} culled but hits");
                     hits += usize::from(exact.is_some());
                     // A whole ray from near by whose line passes 5 % outside the sphere (in
-                    // f64): the margin is far below that, so the cull must take it, unless
-                    // the transform puts the origin 10⁶ units out in object space.
+                    // f64, in object space: the same ratio in world space under a rotation
+                    // and uniform scale): the margins are far below that, so the cull must
+                    // take it. (Under the non-uniform scale the world sphere is looser.)
                     let (oo, od) =
                         (to_object.transform_point3(o.as_dvec3()), to_object.transform_vector3(d.as_dvec3()));
                     let oc = oo - centre;
