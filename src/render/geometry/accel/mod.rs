@@ -1159,8 +1159,9 @@ impl<const KZ: usize> RayPre<KZ> {
         RayPre { o, s }
     }
 
-    /// `(t, b1, b2)` of a hit with `t` in `(tmin, tmax)`.
-    #[inline]
+    /// `(t, b1, b2)` of a hit with `t` in `(tmin, tmax)`. Inlined into the traversal's leaf
+    /// loop: a call per triangle test spilled the sheared ray around it.
+    #[inline(always)]
     fn intersect(&self, p: &[Vec3; 3], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
         // Translate to the ray origin, permute, shear.
         let shear = |v: Vec3| {

@@ -141,6 +141,35 @@ impl State {
     }
 }
 
+/// `hits` (`node`'s hit mask), after asking the cache for the inner children it names.
+/// Which node comes next depends on the one being tested, so the processor cannot fetch
+/// ahead by itself: on a BVH larger than the cache a traversal waits on every node's first
+/// load (a third of its time on 10⁵ triangles, by `perf`). The children queued here are
+/// in the cache by the time the traversal comes back to them.
+#[inline(always)]
+fn prefetched(bvh: &CwBvh, node: &CwBvhNode, hits: u32, state: &State) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let mut inner = hits >> 24;
+        while inner != 0 {
+            // As obvhs' traversal finds the child: its slot, then its place among the
+            // node's inner children.
+            let slot = inner.trailing_zeros() ^ (state.oct_inv4 & 0xff);
+            inner &= inner - 1;
+            let rank = (u32::from(node.imask) & ((1 << slot) - 1)).count_ones();
+            let child = bvh.nodes.as_ptr().wrapping_add((node.child_base_idx + rank) as usize).cast::<i8>();
+            // SAFETY: SSE is part of x86-64, and a prefetch never faults (the address is a
+            // child of this node anyway). A node is 80 bytes: two cache lines.
+            unsafe {
+                _mm_prefetch::<_MM_HINT_T0>(child);
+                _mm_prefetch::<_MM_HINT_T0>(child.wrapping_add(79));
+            }
+        }
+    }
+    hits
+}
+
 /// [`closest`] with the node test `node_hits` (obvhs' `ray_traverse`).
 #[inline(always)]
 fn closest_with<F: FnMut(&Ray, usize) -> f32>(
@@ -152,7 +181,7 @@ fn closest_with<F: FnMut(&Ray, usize) -> f32>(
     let mut ray = ray;
     let mut state = State::new(bvh, ray.direction);
     let mut node: &CwBvhNode;
-    obvhs::traverse!(bvh, node, state, node_hits(node, &ray, state.oct_inv4), {
+    obvhs::traverse!(bvh, node, state, prefetched(bvh, node, node_hits(node, &ray, state.oct_inv4), &state), {
         let t = on_primitive(&ray, state.primitive_id as usize);
         if t < ray.tmax {
             ray.tmax = t;
@@ -170,7 +199,7 @@ fn any_with<F: FnMut(&Ray, usize) -> bool>(
 ) -> bool {
     let mut state = State::new(bvh, ray.direction);
     let mut node: &CwBvhNode;
-    obvhs::traverse!(bvh, node, state, node_hits(node, &ray, state.oct_inv4), {
+    obvhs::traverse!(bvh, node, state, prefetched(bvh, node, node_hits(node, &ray, state.oct_inv4), &state), {
         if on_primitive(&ray, state.primitive_id as usize) {
             return true;
         }
@@ -230,17 +259,15 @@ mod avx2 {
         let (z0, z1) = slabs(&node.child_min_z, &node.child_max_z, ray.direction.z < 0.0, scale.z, origin.z);
         let tmin = _mm256_max_ps(_mm256_max_ps(x0, _mm256_max_ps(y0, z0)), _mm256_set1_ps(EPSILON));
         let tmax = _mm256_min_ps(_mm256_min_ps(x1, _mm256_min_ps(y1, z1)), _mm256_set1_ps(ray.tmax));
-        let mut met = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tmin, tmax)) as u32;
+        let met = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LE_OQ>(tmin, tmax));
+        // Each child met contributes its bits shifted to its place (obvhs' loop over the
+        // met children, here in the lanes: no branch per child).
         let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
-        let mut hits = 0;
-        while met != 0 {
-            let shift = 8 * met.trailing_zeros();
-            met &= met - 1;
-            let child_bits = ((child_bits8 >> shift) & 0xff) as u32;
-            let bit_index = ((bit_index8 >> shift) & 0xff) as u32;
-            hits |= child_bits << bit_index;
-        }
-        hits
+        let lanes = |bytes: u64| _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(bytes as i64));
+        let bits = _mm256_and_si256(_mm256_sllv_epi32(lanes(child_bits8), lanes(bit_index8)), met);
+        let half = _mm_or_si128(_mm256_castsi256_si128(bits), _mm256_extracti128_si256::<1>(bits));
+        let pair = _mm_or_si128(half, _mm_unpackhi_epi64(half, half));
+        _mm_cvtsi128_si32(_mm_or_si128(pair, _mm_srli_epi64::<32>(pair))) as u32
     }
 }
 
