@@ -468,7 +468,13 @@ fn deform(
         geometry.shapes = rest;
         let mut proto = Prototype { prims: 1, ..Prototype::default() };
         proto.triangles = triangles.into_iter().map(|t| Triangle { prim: 0, ..t }).collect();
-        proto.shapes = shapes.into_iter().map(|s| crate::render::geometry::shapes::Shape { prim: 0, ..s }).collect();
+        proto.shapes = shapes
+            .into_iter()
+            .map(|mut s| {
+                s.prim = 0;
+                s
+            })
+            .collect();
         // Bounds over every key (the frame's positions need not be inside the shutter).
         let boxes = (0..proto.triangles.len())
             .map(|i| deformation.bounds(i))
