@@ -116,9 +116,62 @@ fn coverage(x: usize, y: usize, shutter: f64) -> f64 {
 /// shutter halved.
 #[test]
 fn a_sliding_sphere_blurs_into_the_analytic_coverage_profile() {
-    const SPP: u32 = 256;
     let path = scene("slide.usda", &sliding(0.0, 1.0, &slide_ops(), ""));
-    let image = render(&path, SPP);
+    assert_blurred_into_the_profile(&path, "sliding sphere");
+}
+
+/// The sliding sphere of [`sliding`] as the one point of a point instancer whose `points`
+/// attributes (`positions`, `velocities`: lines of USD) move it.
+fn sliding_point(points: &str) -> String {
+    format!(
+        r#"#usda 1.0
+(
+    startTimeCode = 0
+    endTimeCode = 1
+    timeCodesPerSecond = 24
+)
+def Camera "Cam" {{
+    float focalLength = 50
+    float horizontalAperture = 20
+    float2 clippingRange = (0.1, 1000)
+    double shutter:open = 0
+    double shutter:close = 1
+}}
+def PointInstancer "Points" {{
+    rel prototypes = [</Points/Protos/Ball>]
+    int[] protoIndices = [0]
+    {points}
+    def Scope "Protos" {{
+        def Sphere "Ball" {{ double radius = {R} }}
+    }}
+}}
+"#
+    )
+}
+
+/// Point instances blur as the sliding sphere does (issue 26: transform blur of point
+/// instancers): their `positions` sampled at both frames, or sampled once with `velocities`
+/// (USD's rule: positions + velocities × (t − sample) / timeCodesPerSecond, here 24).
+#[test]
+fn a_sliding_point_instance_blurs_into_the_analytic_coverage_profile() {
+    let sampled =
+        format!("point3f[] positions.timeSamples = {{ 0: [({X0}, 0, {z})], 1: [({X1}, 0, {z})] }}", z = -DEPTH);
+    let path = scene("points.usda", &sliding_point(&sampled));
+    assert_blurred_into_the_profile(&path, "point instance, positions sampled");
+    let velocity = (X1 - X0) * 24.0;
+    let with_velocities = format!(
+        "point3f[] positions.timeSamples = {{ 0: [({X0}, 0, {z})] }}\n    vector3f[] velocities.timeSamples = {{ 0: [({velocity}, 0, 0)] }}",
+        z = -DEPTH
+    );
+    let path = scene("velocities.usda", &sliding_point(&with_velocities));
+    assert_blurred_into_the_profile(&path, "point instance, velocities");
+}
+
+/// Renders `path` at 256 spp and checks its alpha against the sliding sphere's analytic
+/// profile (see [`a_sliding_sphere_blurs_into_the_analytic_coverage_profile`]).
+fn assert_blurred_into_the_profile(path: &Path, what: &str) {
+    const SPP: u32 = 256;
+    let image = render(path, SPP);
     let alpha = image.f32_channel("A").expect("alpha");
     let mut worst: f64 = 0.0;
     let mut total = 0.0;
@@ -131,7 +184,7 @@ fn a_sliding_sphere_blurs_into_the_analytic_coverage_profile() {
             // do better), plus the midpoint rule's error.
             let sd = (want * (1.0 - want) / SPP as f64).sqrt();
             let err = (got - want).abs();
-            assert!(err <= 4.0 * sd + 0.01, "pixel ({x}, {y}): alpha {got:.4}, analytic {want:.4}");
+            assert!(err <= 4.0 * sd + 0.01, "{what}: pixel ({x}, {y}): alpha {got:.4}, analytic {want:.4}");
             worst = worst.max(err);
             total += err;
             if want > 0.1 && want < 0.9 {
@@ -144,12 +197,12 @@ fn a_sliding_sphere_blurs_into_the_analytic_coverage_profile() {
         }
     }
     let mean = total / (W * H) as f64;
-    assert!(mean < 0.01, "mean error {mean}");
+    assert!(mean < 0.01, "{what}: mean error {mean}");
     // The profile is a blur (many pixels partly covered), and it tells the shutter's length
     // and the time apart: the same check would fail by far against either.
-    assert!(partial > W * H / 2, "{partial} partly covered pixels");
-    assert!(against_half > 0.3 && against_still > 0.3, "{against_half} {against_still}");
-    eprintln!("sliding sphere at {SPP} spp: worst pixel error {worst:.4}, mean {mean:.5}");
+    assert!(partial > W * H / 2, "{what}: {partial} partly covered pixels");
+    assert!(against_half > 0.3 && against_still > 0.3, "{what}: {against_half} {against_still}");
+    eprintln!("{what} at {SPP} spp: worst pixel error {worst:.4}, mean {mean:.5}");
 }
 
 /// Every channel of two images, bit for bit.
@@ -203,7 +256,7 @@ def Cube "Inside" {{
     let closed = scene("hidden_closed.usda", &still(0.0, 0.0, moving));
     let open = scene("hidden_open.usda", &still(0.0, 1.0, moving));
     let (scene_open, _) = common::scene_file(&open);
-    assert!(scene_open.has_motion() && scene_open.motion.moving_prims == 1, "{:?}", scene_open.motion);
+    assert!(scene_open.has_motion() && scene_open.motion.moving_instances == 1, "{:?}", scene_open.motion);
     let (scene_closed, _) = common::scene_file(&closed);
     assert!(!scene_closed.has_motion());
     assert_same_bits(
