@@ -375,7 +375,8 @@ fn moving_at(time: f64) -> Session {
 #[test]
 fn a_new_time_code_moves_instances_and_renders_what_a_fresh_session_renders() {
     // Frame 2: the camera, a parent (with a cube, a sphere that also moves on its own, an
-    // instanceable reference, a point instancer and a light under it) move: instances only.
+    // instanceable reference, a point instancer whose points move too and a light under it)
+    // move: instances only.
     // Frame 3: a ball's visibility changes: built again, and says why. Frame 4: moves again.
     let mut session = moving_at(1.0);
     let first = render(&mut session);
