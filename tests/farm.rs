@@ -290,8 +290,8 @@ fn a_frame_range_renders_what_single_frame_runs_render_with_one_preparation() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("frame 1 (1/2)") && stderr.contains("frame 4 (2/2)"), "{stderr}");
-    // The moving ball rebuilds the scene; no material changes with time, so none recompiles.
-    assert!(stderr.contains("0 material(s) recompiled"), "{stderr}");
+    // The moving ball moves its instance: nothing is recompiled or built but the top level.
+    assert!(stderr.contains("frame 4 (2/2)") && stderr.contains("instances moved"), "{stderr}");
     assert!(stderr.contains("rendered 2 frames") && stderr.contains("stage read 1 time(s)"), "{stderr}");
     let mut images = Vec::new();
     for frame in [1, 4] {
@@ -308,6 +308,43 @@ fn a_frame_range_renders_what_single_frame_runs_render_with_one_preparation() {
     // Without a `#` run the frames would overwrite one file: refused.
     let out = strata(&["render", SCENE, "-o", d.join("shot.exr").to_str().unwrap(), "--frames", "1-2"]);
     assert_eq!(out.status.code(), Some(1));
+}
+
+/// `tests/in/farm/moving.usda` over frames 1 to 4 in one process: a moving camera, a parent
+/// moving a cube, a sphere moving on its own too, an instanceable reference, a point
+/// instancer and a light; a ball that disappears at frame 3. Every frame equals a
+/// single-frame run of a fresh process, and the per-frame lines say what was redone.
+#[test]
+fn moving_instances_over_a_frame_range_render_what_single_frame_runs_render() {
+    const MOVING: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/in/farm/moving.usda");
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let template = d.join("moving.####.exr");
+    let args = ["--res", RES, "--spp", "7", "--threads", "2"];
+    let mut frames = vec!["render", MOVING, "-o", template.to_str().unwrap(), "--frames", "1-4"];
+    frames.extend(args);
+    let out = strata(&frames);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let line = |frame: usize| stderr.lines().find(|l| l.starts_with(&format!("frame {frame} "))).unwrap_or("");
+    assert!(line(2).contains("instances moved") && line(4).contains("instances moved"), "{stderr}");
+    assert!(line(3).contains("rebuilt (geometry, BVH): `/Blink.visibility` changed"), "{stderr}");
+    assert!(stderr.contains("built 2 time(s), rebound 0 time(s) and its instances moved 2 time(s)"), "{stderr}");
+    let mut images = Vec::new();
+    for frame in 1..=4 {
+        let single = d.join(format!("single.{frame}.exr"));
+        let time = frame.to_string();
+        let mut one = vec!["render", MOVING, "-o", single.to_str().unwrap(), "--time", &time];
+        one.extend(args);
+        let out = strata(&one);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let mut framed = decode(&d.join(format!("moving.{frame:04}.exr")));
+        assert_eq!(framed.attributes.remove("strata/frame"), Some(frame.to_string()));
+        let single = decode(&single);
+        assert!(framed == single, "frame {frame} differs from a single-frame run");
+        assert!(!images.contains(&single.channels["R"]), "frame {frame} repeats an earlier one");
+        images.push(single.channels["R"].clone());
+    }
 }
 
 #[test]

@@ -123,6 +123,55 @@ fn a_sliding_sphere_blurs_into_the_analytic_coverage_profile() {
     assert_follows_the_profile(&render(&path, SPP), SPP, "sliding sphere");
 }
 
+/// The sliding sphere of [`sliding`] as the one point of a point instancer whose `points`
+/// attributes (`positions`, `velocities`: lines of USD) move it.
+fn sliding_point(points: &str) -> String {
+    format!(
+        r#"#usda 1.0
+(
+    startTimeCode = 0
+    endTimeCode = 1
+    timeCodesPerSecond = 24
+)
+def Camera "Cam" {{
+    float focalLength = 50
+    float horizontalAperture = 20
+    float2 clippingRange = (0.1, 1000)
+    double shutter:open = 0
+    double shutter:close = 1
+}}
+def PointInstancer "Points" {{
+    rel prototypes = [</Points/Protos/Ball>]
+    int[] protoIndices = [0]
+    {points}
+    def Scope "Protos" {{
+        def Sphere "Ball" {{ double radius = {R} }}
+    }}
+}}
+"#
+    )
+}
+
+/// Point instances blur as the sliding sphere does (issue 26: transform blur of point
+/// instancers): their `positions` sampled at both frames, or sampled once with `velocities`
+/// (USD's rule: positions + velocities × (t − sample) / timeCodesPerSecond, here 24).
+#[test]
+fn a_sliding_point_instance_blurs_into_the_analytic_coverage_profile() {
+    const SPP: u32 = 256;
+    let sampled =
+        format!("point3f[] positions.timeSamples = {{ 0: [({X0}, 0, {z})], 1: [({X1}, 0, {z})] }}", z = -DEPTH);
+    let path = scene("points.usda", &sliding_point(&sampled));
+    assert_follows_the_profile(&render(&path, SPP), SPP, "point instance, positions sampled");
+    let velocity = (X1 - X0) * 24.0;
+    let with_velocities = format!(
+        "point3f[] positions.timeSamples = {{ 0: [({X0}, 0, {z})] }}\n    vector3f[] velocities.timeSamples = {{ 0: [({velocity}, 0, 0)] }}",
+        z = -DEPTH
+    );
+    let path = scene("velocities.usda", &sliding_point(&with_velocities));
+    assert_follows_the_profile(&render(&path, SPP), SPP, "point instance, velocities");
+}
+
+
 /// The alpha channel of `image` (rendered at `spp`) against [`coverage`] of the sliding
 /// sphere over a whole-frame shutter, pixel by pixel within 4σ of its sample count; it also
 /// tells the shutter's length and the time apart.
@@ -400,7 +449,7 @@ def Cube "Inside" {{
     let closed = scene("hidden_closed.usda", &still(0.0, 0.0, moving));
     let open = scene("hidden_open.usda", &still(0.0, 1.0, moving));
     let (scene_open, _) = common::scene_file(&open);
-    assert!(scene_open.has_motion() && scene_open.motion.moving_prims == 1, "{:?}", scene_open.motion);
+    assert!(scene_open.has_motion() && scene_open.motion.moving_instances == 1, "{:?}", scene_open.motion);
     let (scene_closed, _) = common::scene_file(&closed);
     assert!(!scene_closed.has_motion());
     assert_same_bits(

@@ -372,6 +372,17 @@ fn prepared_live(path: &Path) -> Session {
     session
 }
 
+/// `tests/in/farm/moving.usda` opened at `time` and prepared.
+fn moving_at(time: f64) -> Session {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/in/farm/moving.usda");
+    let options = SessionOptions { time: Some(strata::scene::TimeCode::At(time)), ..SessionOptions::default() };
+    let mut session = Session::open(SceneSource::File(scene), options);
+    if session.prepare(&SceneOptions::default()).is_none() {
+        panic!("{}", session.diagnostics().render(session.sources()));
+    }
+    session
+}
+
 /// With live inputs (the view's option) a float or colour input is a parameter of the
 /// compiled code: the session renders what `render`'s folded constants render; an edit
 /// rewrites the material's parameter block — nothing composed, nothing compiled (the
@@ -442,4 +453,40 @@ fn a_live_input_edit_rewrites_a_parameter_block_and_renders_as_if_authored_and_f
         value: Value::Token("clay".into()),
     });
     assert!(report.recomposed && report.recompiled > 0, "{report:?}");
+}
+
+#[test]
+fn a_new_time_code_moves_instances_and_renders_what_a_fresh_session_renders() {
+    // Frame 2: the camera, a parent (with a cube, a sphere that also moves on its own, an
+    // instanceable reference, a point instancer whose points move too and a light under it)
+    // move: instances only.
+    // Frame 3: a ball's visibility changes: built again, and says why. Frame 4: moves again.
+    let mut session = moving_at(1.0);
+    let first = render(&mut session);
+    let blas = session.stats().blas_builds;
+    assert!(blas >= 5, "world, the moving prims' own, the shared reference, the pebble: {blas}");
+    let mut images = vec![first];
+    for (time, moved) in [(2.0, true), (3.0, false), (4.0, true)] {
+        let before = session.stats().clone();
+        let report = session.set_time(strata::scene::TimeCode::At(time));
+        assert_eq!(report.instances_moved, moved, "{time}: {report:?}");
+        assert_eq!(report.recompiled, 0, "{time}: {report:?}");
+        let after = session.stats();
+        if moved {
+            assert!(!report.geometry_rebuilt && !report.recomposed, "{time}: {report:?}");
+            assert_eq!(after.blas_builds, before.blas_builds, "{time}: no bottom-level BVH is built again");
+            assert_eq!(after.scene_builds, before.scene_builds);
+            assert_eq!(after.compositions, before.compositions, "materials are not composed again");
+            assert_eq!(after.instance_moves, before.instance_moves + 1);
+        } else {
+            assert!(report.geometry_rebuilt, "{time}: {report:?}");
+            let why = report.rebuild_reason.as_deref().unwrap_or("");
+            assert!(why.contains("/Blink.visibility"), "{why}");
+            assert!(after.blas_builds > before.blas_builds);
+        }
+        let image = render(&mut session);
+        assert!(image == render(&mut moving_at(time)), "frame {time} differs from a fresh session's");
+        assert!(!images.contains(&image), "frame {time} looks like an earlier one: the test proves nothing");
+        images.push(image);
+    }
 }

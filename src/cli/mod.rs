@@ -238,14 +238,17 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         if let (Some(frame), Some(update)) = (frame, update) {
             let what = if k == 0 {
                 "first frame: everything built".to_string()
-            } else if !update.recomposed {
+            } else if update.instances_moved && !rendered.rebuilt {
+                "instances moved: top-level BVH built again, geometry and materials kept".to_string()
+            } else if !update.recomposed && !rendered.rebuilt {
                 "nothing animated changed".to_string()
             } else {
-                format!(
-                    "{} material(s) recompiled, scene {}",
-                    update.recompiled,
-                    if update.geometry_rebuilt || rendered.rebuilt { "rebuilt (geometry, BVH)" } else { "kept" }
-                )
+                let scene = match (&update.rebuild_reason, update.geometry_rebuilt || rendered.rebuilt) {
+                    (Some(why), _) if !why.is_empty() => format!("rebuilt (geometry, BVH): {why}"),
+                    (_, true) => "rebuilt (geometry, BVH)".to_string(),
+                    (_, false) => "kept".to_string(),
+                };
+                format!("{} material(s) recompiled, scene {scene}", update.recompiled)
             };
             eprintln!(
                 "frame {frame} ({}/{}): {} in {:.2} s ({what})",
@@ -261,13 +264,14 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         let seconds = start.elapsed().as_secs_f64();
         eprintln!(
             "rendered {} frames in {seconds:.2} s ({:.2} s a frame): stage read {} time(s), {} material(s) compiled, \
-             render scene built {} time(s) and rebound {} time(s)",
+             render scene built {} time(s), rebound {} time(s) and its instances moved {} time(s)",
             frames.len(),
             seconds / frames.len() as f64,
             after.stage_reads,
             after.materials_compiled,
             after.scene_builds - before.scene_builds,
-            after.scene_rebinds - before.scene_rebinds
+            after.scene_rebinds - before.scene_rebinds,
+            after.instance_moves - before.instance_moves
         );
     }
     Ok(())

@@ -8,12 +8,12 @@ use crate::render::geometry::accel::{Accel, Blas};
 use crate::render::geometry::displace::{DicingOptions, DisplacementStats};
 use crate::render::geometry::motion::{self, MotionKeys, MotionStats, Shutter};
 use crate::render::geometry::primvars::PrimvarTable;
-use crate::render::geometry::xform::world_transforms;
-use crate::render::geometry::{self, GeomPrim};
+use crate::render::geometry::xform::{PrimXform, world_transforms};
+use crate::render::geometry::{self, GeomPrim, InstanceDesc};
 use crate::render::light::emitter::Emitters;
 use crate::render::light::{Light, LightKind, lights_from_stage};
-use crate::scene::Stage;
-use glam::Vec3;
+use crate::scene::{Prim, PrimId, Stage};
+use glam::{DVec3, Vec3};
 
 /// Everything the integrator needs about the scene, materials excepted (they are passed to
 /// [`crate::render::render`] as `abi::MaterialCode`s, indexed by [`Scene::prim_material`]).
@@ -57,6 +57,42 @@ pub struct Scene {
     pub camera_motion: Option<MotionKeys>,
     /// What moves while the shutter is open.
     pub motion: MotionStats,
+    /// What [`Scene::move_to`] needs to place the instances at another time code.
+    placement: Placement,
+}
+
+/// How the build placed its instances, kept so that another time code moves them without
+/// building any BLAS again ([`Scene::move_to`]).
+struct Placement {
+    /// Every instance as the build placed it (before the unplaceable were skipped).
+    instances: Vec<InstanceDesc>,
+    /// Per instance, the prim that places it (`PrimId(u32::MAX)`: none, it stays).
+    placers: Vec<PrimId>,
+    /// Bounds of each prototype in its own space.
+    prototype_bounds: Vec<Option<(DVec3, DVec3)>>,
+    /// Bounds of the world's own triangles and shapes.
+    world_bounds: Option<(DVec3, DVec3)>,
+    /// Per stage prim: its transform is baked into triangles ([`geometry::Geometry::baked`]).
+    baked: Vec<bool>,
+    /// A world-space renderable prim has time samples (its placement or its attributes):
+    /// under an open shutter its keys or deformation change with the frame.
+    world_animated: bool,
+    /// Instances the build left out for a singular transform.
+    singular: bool,
+    /// The Camera prim looked through.
+    camera: Option<PrimId>,
+    /// The scene options it was built with.
+    options: SceneOptions,
+}
+
+/// Why [`Scene::move_to`] could not move the instances: the scene must be built again.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NeedsRebuild(pub String);
+
+impl std::fmt::Display for NeedsRebuild {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
 }
 
 /// Whether a stage without lights gets [`default_lights`].
@@ -254,6 +290,21 @@ impl Scene {
         let parts = Parts::gather(stage, material_of_prim, materials, options, diags)?;
         let Parts { geometry, prim_material, lights, camera, camera_path, default_lit, displaced, bounds, motion } =
             parts;
+        let placement = Placement {
+            instances: geometry.instances.clone(),
+            placers: geometry.instance_placers.clone(),
+            prototype_bounds: geometry.prototypes.iter().map(|p| p.bounds).collect(),
+            world_bounds: geometry.world_bounds(),
+            world_animated: geometry.prims.iter().any(|p| {
+                stage.find(&p.path).is_some_and(|id| {
+                    geometry.baked.get(id.0 as usize).copied().unwrap_or(false) && time_varying(stage, id)
+                })
+            }),
+            baked: geometry.baked.clone(),
+            singular: motion.singular,
+            camera: camera_path.as_deref().and_then(|p| stage.find(p)),
+            options: options.clone(),
+        };
         let accel = Accel::with_moving_instances(
             Blas::new(geometry.triangles, geometry.shapes),
             geometry.prototypes.into_iter().map(|p| Blas::deforming(p.triangles, p.shapes, p.deformation)).collect(),
@@ -282,7 +333,60 @@ impl Scene {
             shutter: motion.shutter,
             camera_motion: motion.camera,
             motion: motion.stats,
+            placement,
         })
+    }
+
+    /// Moves the scene to the stage's time when, since it was built, only transforms that
+    /// place instances changed (`changed`: the prims whose xformOps did): instance transforms
+    /// (and their keys under an open shutter), the top-level BVH, the camera, the lights and
+    /// the emitters' light power are computed again, exactly as a build at this time computes
+    /// them, and every BLAS is kept. The scene is untouched and the reason returned when that
+    /// would not be what a build makes (a transform baked into triangles changed, displaced
+    /// geometry is diced for a camera, an instance became singular, …).
+    pub fn move_to(
+        &mut self,
+        stage: &Stage,
+        changed: &[PrimId],
+        materials: &[&dyn MaterialCode],
+        diags: &mut Diagnostics,
+    ) -> Result<(), NeedsRebuild> {
+        let why = |s: String| Err(NeedsRebuild(s));
+        let p = &self.placement;
+        if let Some(&id) = changed.iter().find(|id| p.baked.get(id.0 as usize).copied().unwrap_or(true)) {
+            return why(format!("`{}` moved geometry built in world space", stage.prim(id).path));
+        }
+        if self.shutter.is_open() && p.world_animated {
+            return why("a world-space prim is animated under an open shutter".into());
+        }
+        if self.displacement.is_some() && !changed.is_empty() {
+            return why("displaced geometry is diced for the camera".into());
+        }
+        if p.singular {
+            return why("an instance had a singular transform".into());
+        }
+        if changed.is_empty() && !self.shutter.is_open() {
+            return Ok(());
+        }
+        let xforms = world_transforms(stage, diags);
+        let Some(instances) = instances_at(stage, &xforms, p) else {
+            return why("a point instancer's points or an instance's transform cannot be placed".into());
+        };
+        let bounds = geometry::placed_bounds(p.world_bounds, &p.prototype_bounds, &instances)
+            .unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
+        crate::render::support::report_unsupported(stage, &xforms, diags);
+        let chosen = p.camera.map(|id| (id, stage.prim(id)));
+        let (lights, camera, default_lit) = lights_and_camera(stage, &xforms, chosen, bounds, &p.options, diags);
+        let motion = motion::instance_motion(stage, &p.placers, &instances, self.shutter);
+        self.camera_motion = chosen.and_then(|(id, _)| motion::camera_motion(stage, id, self.shutter));
+        self.motion.moving_instances = motion.len();
+        self.accel.move_instances(&instances, motion);
+        let scene_radius = (bounds.1 - bounds.0).length() / 2.0;
+        let light_power: f32 = lights.iter().filter(|l| !l.is_infinite()).map(|l| l.power(scene_radius)).sum();
+        self.emitters = Emitters::build(&self.accel, self.prims.len(), &self.prim_material, materials, light_power);
+        (self.lights, self.camera, self.default_lights, self.bounds) = (lights, camera, default_lit, bounds);
+        self.placement.instances = instances;
+        Ok(())
     }
 
     /// Everything [`Scene::from_stage`] reports — geometry, materials of prims, lights,
@@ -319,6 +423,83 @@ struct Motion {
     instances: Vec<(u32, MotionKeys)>,
     camera: Option<MotionKeys>,
     stats: MotionStats,
+    /// The build left out instances with a singular transform.
+    singular: bool,
+}
+
+/// The lights (the default ones when the stage has none and `options` allow them) and the
+/// camera (`chosen`, or one framing `bounds`) at the stage's time; and whether the default
+/// lights light it.
+fn lights_and_camera(
+    stage: &Stage,
+    xforms: &[PrimXform],
+    chosen: Option<(PrimId, &Prim)>,
+    bounds: (Vec3, Vec3),
+    options: &SceneOptions,
+    diags: &mut Diagnostics,
+) -> (Vec<Light>, Camera, bool) {
+    let mut lights = lights_from_stage(stage, xforms, diags);
+    let camera = chosen
+        .map(|(id, prim)| Camera::from_prim(prim, xforms[id.0 as usize].world, 1.0, diags))
+        .unwrap_or_else(|| Camera::framing(bounds.0, bounds.1, 1.0, stage.up_axis()));
+    let default_lit = lights.is_empty() && options.default_lights == DefaultLights::WhenUnlit;
+    if default_lit {
+        lights = default_lights(&camera);
+        diags.push(Diagnostic::info(
+            "the stage has no lights: it is lit by a light that travels with the camera and a dim dome, \
+             as usdview shows it (--no-default-lights turns them off)",
+        ));
+    } else if lights.is_empty() {
+        diags.push(Diagnostic::warning("the scene has no lights: the image will be black"));
+    }
+    (lights, camera, default_lit)
+}
+
+/// Whether prim `id` has an attribute with time samples, or its placement does.
+fn time_varying(stage: &Stage, id: PrimId) -> bool {
+    stage.prim(id).attributes.iter().any(|a| !a.time_samples.is_empty())
+        || !crate::render::geometry::xform::transform_sample_times(stage, id).is_empty()
+}
+
+/// The instances of `placement` at the stage's time: each placed by its prim's world
+/// transform, or by its point instancer's point, as a build computes them; `None` when one
+/// cannot be placed as before (a point instancer's points changed in number or became
+/// invalid, a transform became singular or left the extent).
+fn instances_at(stage: &Stage, xforms: &[PrimXform], placement: &Placement) -> Option<Vec<InstanceDesc>> {
+    let mut out = placement.instances.clone();
+    let mut i = 0;
+    while i < out.len() {
+        let placer = placement.placers[i];
+        // The instances of one placer are consecutive (a point instancer's in point order).
+        let run = placement.placers[i..].iter().take_while(|&&p| p == placer).count();
+        if placer.0 as usize >= stage.len() {
+            i += run;
+            continue;
+        }
+        if stage.prim(placer).type_name.as_deref() == Some("PointInstancer") {
+            let points = geometry::point_instance_transforms(stage, xforms, placer)?;
+            if points.len() != run {
+                return None;
+            }
+            for (desc, m) in out[i..i + run].iter_mut().zip(points) {
+                desc.to_world = m;
+            }
+        } else {
+            for desc in &mut out[i..i + run] {
+                desc.to_world = xforms[placer.0 as usize].world;
+            }
+        }
+        i += run;
+    }
+    let placeable = out.iter().all(|desc| {
+        let det = glam::DMat3::from_mat4(desc.to_world).determinant();
+        let Some((lo, hi)) = placement.prototype_bounds[desc.prototype as usize] else { return true };
+        let (wlo, whi) = crate::render::geometry::shapes::transformed_box(&desc.to_world, lo, hi);
+        det != 0.0
+            && det.is_finite()
+            && [wlo, whi].iter().all(|w| w.is_finite() && w.abs().max_element() <= geometry::MAX_EXTENT)
+    });
+    placeable.then_some(out)
 }
 
 impl Parts {
@@ -337,7 +518,14 @@ impl Parts {
             materials.iter().flat_map(|m| m.info().primvars.iter().map(|p| p.name.clone())).collect();
         read.sort();
         read.dedup();
-        let mut geometry = geometry::build_with_primvars(stage, &xforms, options.geometry, &read, diags);
+        // Dicing and light sampling work on world triangles: prims whose material displaces
+        // or emits keep world space even when they move.
+        let stays_in_world = |prim: &Prim| {
+            material_of_prim(&prim.path)
+                .and_then(|m| materials.get(m))
+                .is_some_and(|code| code.info().layers.iter().any(|l| l.displacement_bound.is_some() || l.has_emission))
+        };
+        let mut geometry = geometry::build_for_render(stage, &xforms, options.geometry, &read, &stays_in_world, diags);
         let mut prim_material = Vec::with_capacity(geometry.prims.len());
         for prim in &geometry.prims {
             match material_of_prim(&prim.path) {
@@ -352,26 +540,13 @@ impl Parts {
             }
         }
         crate::render::support::report_unsupported(stage, &xforms, diags);
-        let mut lights = lights_from_stage(stage, &xforms, diags);
         let bounds = geometry.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
         let chosen = match &options.camera {
             Some(path) => stage.find(path).map(|id| (id, stage.prim(id))),
             None => stage.depth_first().find(|(_, p)| p.type_name.as_deref() == Some("Camera")),
         };
         let camera_path = chosen.map(|(_, prim)| prim.path.clone());
-        let camera = chosen
-            .map(|(id, prim)| Camera::from_prim(prim, xforms[id.0 as usize].world, 1.0, diags))
-            .unwrap_or_else(|| Camera::framing(bounds.0, bounds.1, 1.0, stage.up_axis()));
-        let default_lit = lights.is_empty() && options.default_lights == DefaultLights::WhenUnlit;
-        if default_lit {
-            lights = default_lights(&camera);
-            diags.push(Diagnostic::info(
-                "the stage has no lights: it is lit by a light that travels with the camera and a dim dome, \
-                 as usdview shows it (--no-default-lights turns them off)",
-            ));
-        } else if lights.is_empty() {
-            diags.push(Diagnostic::warning("the scene has no lights: the image will be black"));
-        }
+        let (lights, camera, default_lit) = lights_and_camera(stage, &xforms, chosen, bounds, options, diags);
         if diags.error_count() > errors {
             return None;
         }
@@ -389,10 +564,11 @@ impl Parts {
         // Displaced surfaces may reach past the undisplaced bounds (the camera stays framed on those).
         let bounds = geometry.bounds().unwrap_or(bounds);
         let shutter = chosen.map_or(Shutter::default(), |(_, prim)| Shutter::of_camera(prim, diags));
+        let singular = geometry.singular_instances > 0;
         let (instances, stats) = motion::apply(&mut geometry, stage, shutter, options.geometry, diags);
         motion::report_moving_lights(stage, lights.iter().map(|l| l.path.as_str()), shutter, diags);
         let camera_motion = chosen.and_then(|(id, _)| motion::camera_motion(stage, id, shutter));
-        let motion = Motion { shutter, instances, camera: camera_motion, stats };
+        let motion = Motion { shutter, instances, camera: camera_motion, stats, singular };
         Some(Parts { geometry, prim_material, lights, camera, camera_path, default_lit, displaced, bounds, motion })
     }
 }

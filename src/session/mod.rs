@@ -38,7 +38,7 @@ use crate::input::scenes;
 use crate::ir::wired::{self, PassOptions};
 use crate::render::scene::{SceneOptions, View};
 use crate::render::{Image, Progress, RenderError, RenderSettings, RenderStats, Window, WindowSums};
-use crate::scene::{Stage, TimeCode, Value, ValueType};
+use crate::scene::{PrimId, Stage, TimeCode, Value, ValueType};
 use fingerprint::FileHashes;
 use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -144,6 +144,11 @@ pub struct UpdateReport {
     pub reused: usize,
     /// Geometry and BVH were built again.
     pub geometry_rebuilt: bool,
+    /// Only instances moved (a new time code): their transforms and the top-level BVH were
+    /// computed again, every bottom-level BVH and the materials kept.
+    pub instances_moved: bool,
+    /// Why a new time code built the render scene again instead of moving instances.
+    pub rebuild_reason: Option<String>,
     /// Texture registry entries read again.
     pub textures_reloaded: usize,
     /// The update failed (its errors are in the diagnostics); the session keeps the last
@@ -163,6 +168,8 @@ impl UpdateReport {
             recompiled: 0,
             reused: 0,
             geometry_rebuilt: false,
+            instances_moved: false,
+            rebuild_reason: None,
             textures_reloaded: 0,
             failed: false,
             ms: 0.0,
@@ -183,6 +190,10 @@ pub struct SessionStats {
     pub materials_reused: usize,
     /// Times geometry, BVH and lights were built.
     pub scene_builds: usize,
+    /// Bottom-level BVHs built (the world's and each prototype's, at every scene build).
+    pub blas_builds: usize,
+    /// Times a new time code only moved instances (top-level BVH built again, BLASes kept).
+    pub instance_moves: usize,
     /// Times an existing render scene was rebound to new materials (BVH kept).
     pub scene_rebinds: usize,
     /// Parameter blocks rewritten by input edits with live inputs (nothing composed or
@@ -561,6 +572,7 @@ impl Session {
             &mut self.diags,
         );
         self.stats.scene_builds += 1;
+        self.stats.blas_builds += scene.as_ref().map_or(0, |s| s.accel.blas_count());
         self.stats.scene_ms = start.elapsed().as_secs_f64() * 1e3;
         if let Some(scene) = &mut scene {
             scene.material_names = compiled.material_names.clone();
@@ -681,20 +693,61 @@ impl Session {
         }
     }
 
-    /// Moves the stage to `time` (a frame of a shot), redoing only what depends on it, as a
-    /// change would: animated values are read again, compositions whose content changed are
-    /// recompiled, and the render scene is rebound when no geometry, light or camera moved,
-    /// rebuilt (BVH included) when one did. Nothing happens when the stage is at `time`.
+    /// Moves the stage to `time` (a frame of a shot), redoing only what depends on it. When
+    /// only xformOps changed value, and none of them is baked into triangles, the render
+    /// scene's instances move ([`crate::render::Scene::move_to`]: top-level BVH only) and
+    /// nothing is recomposed or recompiled. Otherwise it is as a change: animated values are
+    /// read again, compositions whose content changed are recompiled, and the render scene is
+    /// rebound when no geometry, light or camera moved, rebuilt (BVH included) when one did;
+    /// the report says why. Nothing happens when the stage is at `time`.
     pub fn set_time(&mut self, time: TimeCode) -> UpdateReport {
         let start = Instant::now();
-        if !self.stage.as_ref().is_some_and(|s| s.time() != time) {
+        let Some(stage) = self.stage.as_mut().filter(|s| s.time() != time) else {
             return UpdateReport::nothing(ChangeKind::Value);
-        }
+        };
         self.options.time = Some(time);
-        if let Some(stage) = &mut self.stage {
-            stage.set_time(time);
+        let changed = changed_at(stage, time);
+        stage.set_time(time);
+        let reason = match changed.iter().find(|(id, name)| !places_instances(stage, *id, name)) {
+            Some((id, name)) => format!("`{}.{name}` changed", stage.prim(*id).path),
+            None => {
+                let mut prims: Vec<PrimId> = changed.iter().map(|(id, _)| *id).collect();
+                prims.dedup();
+                match self.move_instances(&prims) {
+                    Ok(true) => {
+                        let mut report = UpdateReport::nothing(ChangeKind::Value);
+                        report.instances_moved = !prims.is_empty();
+                        report.ms = start.elapsed().as_secs_f64() * 1e3;
+                        return report;
+                    }
+                    Ok(false) => String::new(),
+                    Err(why) => why,
+                }
+            }
+        };
+        let mut report = self.redo_from_composition(ChangeKind::Value, start);
+        if report.geometry_rebuilt {
+            report.rebuild_reason = Some(reason);
         }
-        self.redo_from_composition(ChangeKind::Value, start)
+        report
+    }
+
+    /// Moves the prepared scene's instances to the stage's time after the xformOps of
+    /// `changed` changed value (nothing else did). `Ok(false)`: there is no prepared scene
+    /// (nothing to move); `Err`: why the scene must be built again.
+    fn move_instances(&mut self, changed: &[PrimId]) -> Result<bool, String> {
+        let (Some(prepared), Some(compiled), Some(stage)) = (&mut self.prepared, &self.compiled, &self.stage) else {
+            return Ok(false);
+        };
+        if self.composed.as_ref().is_none_or(|c| c.hashes != self.compiled_hashes) {
+            return Ok(false);
+        }
+        let start = Instant::now();
+        prepared.scene.move_to(stage, changed, &compiled.refs(), &mut self.diags).map_err(|e| e.to_string())?;
+        prepared.geometry = fingerprint::geometry_hash(stage);
+        self.stats.instance_moves += usize::from(!changed.is_empty());
+        self.stats.scene_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(true)
     }
 
     /// The wired IR of renderable prim `prim`'s material (`strata ir`), or with `lowered`
@@ -1091,6 +1144,28 @@ pub fn check_file_at(file: &Path, time: Option<TimeCode>) -> (Diagnostics, Sourc
     };
     let diags = std::mem::take(&mut session.diags);
     (diags, session.sources, summary)
+}
+
+/// Whether attribute `name` of prim `id` only places instances (or a light, or the camera):
+/// an xformOp, or a point instancer's points.
+fn places_instances(stage: &Stage, id: PrimId, name: &str) -> bool {
+    name.starts_with("xformOp:")
+        || (stage.prim(id).type_name.as_deref() == Some("PointInstancer")
+            && matches!(name, "positions" | "orientations" | "orientationsf" | "scales"))
+}
+
+/// The attributes whose value at `time` differs from their value now (only those with time
+/// samples can), by prim and name, in stage order.
+fn changed_at(stage: &Stage, time: TimeCode) -> Vec<(PrimId, String)> {
+    let mut changed = Vec::new();
+    for (id, prim) in stage.depth_first() {
+        for attr in prim.attributes.iter().filter(|a| !a.time_samples.is_empty()) {
+            if attr.value_at(time).as_ref() != attr.value.as_ref().map(|(v, _)| v) {
+                changed.push((id, attr.name.clone()));
+            }
+        }
+    }
+    changed
 }
 
 /// The number of files in `sources` (names past the end read `<unknown>`).

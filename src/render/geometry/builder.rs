@@ -4,6 +4,7 @@
 
 use super::emit::{Emitter, emit_prim, span_of};
 use super::*;
+use crate::scene::TimeCode;
 
 /// Builds the triangles of every visible renderable prim of `stage`.
 pub fn build(stage: &Stage, diags: &mut Diagnostics) -> Geometry {
@@ -38,6 +39,22 @@ pub fn build_with_primvars(
     build_within(stage, xforms, options, MAX_TRIANGLES, primvars, diags)
 }
 
+/// As [`build_with_primvars`], for a render scene: a world prim whose placement is animated
+/// (its xformOps or an ancestor's have time samples) becomes an instance of its own geometry,
+/// built in its object space, so another time code moves the instance and keeps its BVH;
+/// unless `stays_in_world` holds for it (its material displaces or emits: dicing and light
+/// sampling work on world triangles), it deforms (`points` are sampled) or it is skinned.
+pub fn build_for_render(
+    stage: &Stage,
+    xforms: &[PrimXform],
+    options: GeometryOptions,
+    primvars: &[String],
+    stays_in_world: &dyn Fn(&Prim) -> bool,
+    diags: &mut Diagnostics,
+) -> Geometry {
+    build_from(stage, xforms, options, MAX_TRIANGLES, primvars, Some(stays_in_world), diags)
+}
+
 /// What a prim is to instancing.
 #[derive(Clone, Copy, PartialEq)]
 enum Role {
@@ -53,6 +70,8 @@ enum Role {
 /// The state of one geometry build.
 struct Builder<'s> {
     stage: &'s Stage,
+    /// For a render scene ([`build_for_render`]): which animated world prims keep world space.
+    stays_in_world: Option<&'s dyn Fn(&Prim) -> bool>,
     xforms: &'s [PrimXform],
     geometry: Geometry,
     budget: usize,
@@ -78,6 +97,18 @@ pub(super) fn build_within(
     options: GeometryOptions,
     budget: usize,
     primvars: &[String],
+    diags: &mut Diagnostics,
+) -> Geometry {
+    build_from(stage, xforms, options, budget, primvars, None, diags)
+}
+
+fn build_from<'s>(
+    stage: &'s Stage,
+    xforms: &'s [PrimXform],
+    options: GeometryOptions,
+    budget: usize,
+    primvars: &[String],
+    stays_in_world: Option<&'s dyn Fn(&Prim) -> bool>,
     diags: &mut Diagnostics,
 ) -> Geometry {
     // Roles: an `instanceable` prim inside another instance is part of that instance's
@@ -108,8 +139,10 @@ pub(super) fn build_within(
     }
     let mut geometry = Geometry::default();
     geometry.primvars.names = primvars.to_vec();
+    geometry.baked = vec![false; stage.len()];
     let mut b = Builder {
         stage,
+        stays_in_world,
         xforms,
         geometry,
         budget,
@@ -127,7 +160,7 @@ pub(super) fn build_within(
             continue;
         }
         match role[i] {
-            Role::Plain => b.world_prim(prim, xforms[i].world, diags),
+            Role::Plain => b.world_prim(id, prim, xforms[i].world, diags),
             Role::InstanceRoot => {
                 let key = &key_of[&id.0];
                 if key_count[key] > 1 {
@@ -136,7 +169,7 @@ pub(super) fn build_within(
                     for (sub, p) in stage.subtree(id) {
                         let xf = xforms[sub.0 as usize];
                         if !xf.hidden && p.type_name.as_deref() != Some("PointInstancer") {
-                            b.world_prim(p, xf.world, diags);
+                            b.world_prim(sub, p, xf.world, diags);
                         } else if !xf.hidden {
                             nested_instancer_warning(p, diags);
                         }
@@ -156,6 +189,7 @@ pub(super) fn build_within(
         )));
     }
     let mut geometry = b.geometry;
+    geometry.singular_instances = b.singular_instances;
     if geometry.degenerate > 0 {
         diags.push(Diagnostic::warning(format!(
             "{} degenerate (zero-area or non-finite) triangle(s) skipped",
@@ -232,14 +266,21 @@ impl Builder<'_> {
         self.geometry.triangles.len() + self.geometry.prototypes.iter().map(|p| p.triangles.len()).sum::<usize>()
     }
 
-    /// A visible renderable prim (or any other prim, which emits nothing) in world space.
-    fn world_prim(&mut self, prim: &Prim, world: DMat4, diags: &mut Diagnostics) {
+    /// A visible renderable prim (or any other prim, which emits nothing) in world space, or
+    /// as an instance of its own when its placement is animated (see [`build_for_render`]).
+    fn world_prim(&mut self, id: PrimId, prim: &Prim, world: DMat4, diags: &mut Diagnostics) {
         if !is_renderable(prim) {
             return;
         }
         // UsdSkel: a skinned prim is emitted from its posed copy.
         let posed = crate::render::geometry::skel::posed_prim(self.stage, self.xforms, prim, world, diags);
+        if posed.is_none() && self.moves_as_instance(id, prim) {
+            self.own_instance(id, prim, world, diags);
+            return;
+        }
         let prim = posed.as_ref().unwrap_or(prim);
+        // Its world transform is in its triangles: a change of it or an ancestor's rebuilds them.
+        self.bake(id, None);
         let index = self.prim_index(prim);
         // GeomSubset material bindings: their faces are renderable prims of their own, so
         // each gets its composed material.
@@ -259,11 +300,28 @@ impl Builder<'_> {
         } else {
             Vec::new()
         };
-        let others = self.triangles_so_far() - self.geometry.triangles.len();
+        let mut buffers = (std::mem::take(&mut self.geometry.triangles), std::mem::take(&mut self.geometry.shapes));
+        self.emit(prim, &mut buffers, world, index, face_prims, diags);
+        (self.geometry.triangles, self.geometry.shapes) = buffers;
+    }
+
+    /// Emits `prim` into `buffers` (triangles, shapes) by `world` as prim `index` (its faces
+    /// as `face_prims` say), within what the budget leaves beside the triangles stored
+    /// elsewhere, and reports what went wrong.
+    fn emit(
+        &mut self,
+        prim: &Prim,
+        buffers: &mut (Vec<Triangle>, Vec<Shape>),
+        world: DMat4,
+        index: u32,
+        face_prims: Vec<u32>,
+        diags: &mut Diagnostics,
+    ) {
+        let others = self.triangles_so_far();
         let g = &mut self.geometry;
         let mut out = Emitter::new(
-            &mut g.triangles,
-            &mut g.shapes,
+            &mut buffers.0,
+            &mut buffers.1,
             &mut g.degenerate,
             &mut g.primvars,
             world,
@@ -276,6 +334,57 @@ impl Builder<'_> {
         let small = out.too_small.map(|(n, p, e)| (n, p, e, out.emitted));
         let (beyond, over) = (out.beyond_extent, out.over_budget);
         self.report(prim, beyond, over, small, diags);
+    }
+
+    /// Whether world prim `id` is built as an instance of its own (see [`build_for_render`]).
+    fn moves_as_instance(&self, id: PrimId, prim: &Prim) -> bool {
+        let Some(stays_in_world) = self.stays_in_world else { return false };
+        let deforms = prim.attribute("points").is_some_and(|a| !a.time_samples.is_empty());
+        !deforms && !stays_in_world(prim) && !transform_sample_times(self.stage, id).is_empty()
+    }
+
+    /// Marks the prims whose transforms a BLAS holds baked in for prim `id`: it and its
+    /// ancestors up to `root` (exclusive; `None`: every ancestor).
+    fn bake(&mut self, id: PrimId, root: Option<PrimId>) {
+        let mut at = Some(id);
+        while let Some(p) = at.filter(|&p| Some(p) != root) {
+            self.geometry.baked[p.0 as usize] = true;
+            at = self.stage.prim(p).parent;
+        }
+    }
+
+    /// World prim `id` as a prototype of its own (its GeomSubsets' prims included), built in
+    /// its object space and placed by its world transform.
+    fn own_instance(&mut self, id: PrimId, prim: &Prim, world: DMat4, diags: &mut Diagnostics) {
+        let stage = self.stage;
+        let index = self.prim_index(prim);
+        let mut members = vec![index];
+        let face_prims = if prim.type_name.as_deref() == Some("Mesh") {
+            material_subsets(
+                stage,
+                prim,
+                0,
+                &mut |subset| {
+                    let subset_index = self.prim_index(subset);
+                    self.geometry.prims[subset_index as usize].subset_of = Some(index);
+                    members.push(subset_index);
+                    members.len() as u32 - 1
+                },
+                diags,
+            )
+        } else {
+            Vec::new()
+        };
+        let mut buffers = (Vec::new(), Vec::new());
+        self.emit(prim, &mut buffers, DMat4::IDENTITY, 0, face_prims, diags);
+        let mut proto = Prototype { triangles: buffers.0, shapes: buffers.1, ..Prototype::default() };
+        proto.prims = members.len() as u32;
+        proto.bounds = bounds_of(&proto.triangles, &proto.shapes);
+        self.geometry.prototypes.push(proto);
+        let prototype = self.geometry.prototypes.len() as u32 - 1;
+        let start = self.geometry.instance_prims.len() as u32;
+        self.geometry.instance_prims.extend(members);
+        self.place(id, prototype, start, world, None, diags);
     }
 
     /// Reports a prim past the extent or the budget, or with triangles too small to intersect.
@@ -337,6 +446,8 @@ impl Builder<'_> {
                 Some((pm, ph)) => {
                     // Transforms already diagnosed by `world_transforms`.
                     let (local, reset) = local_transform(prim, &mut scratch);
+                    // Its transform relative to the root is in the prototype's triangles.
+                    self.bake(id, if reset { None } else { Some(root) });
                     let m = if reset { root_world.inverse() * self.xforms[id.0 as usize].world } else { pm * local };
                     (m, ph || own_hidden(prim))
                 }
@@ -617,9 +728,14 @@ impl Builder<'_> {
         }
         let indices = prim.value("protoIndices").and_then(Value::as_int_array).unwrap_or(&[]);
         let n = indices.len();
+        let shifted = match stage.time() {
+            TimeCode::At(t) => velocity_positions(stage, prim, t),
+            TimeCode::Default => None,
+        };
         let tuples = |name: &str, width: usize, diags: &mut Diagnostics| -> Option<&[f64]> {
             let attr = prim.attribute(name)?;
-            let Some((w, data)) = attr.get()?.as_tuple_array() else {
+            let value = if name == "positions" { shifted.as_ref().or(attr.get()) } else { attr.get() };
+            let Some((w, data)) = value?.as_tuple_array() else {
                 diags.push(instancer_error(prim, name, format!("`{name}` must be an array of {width}-tuples")));
                 return None;
             };
@@ -725,18 +841,126 @@ impl Builder<'_> {
                 continue;
             }
             let (p, prims, local) = placed[indices[k] as usize];
-            let t = DVec3::from_slice(&positions[3 * k..3 * k + 3]);
-            // USD writes quaternions (real, i, j, k).
-            let r = orientations.map_or(DQuat::IDENTITY, |q| {
-                DQuat::from_xyzw(q[4 * k + 1], q[4 * k + 2], q[4 * k + 3], q[4 * k]).normalize()
-            });
-            let s = scales.map_or(DVec3::ONE, |s| DVec3::from_slice(&s[3 * k..3 * k + 3]));
-            // Row-vector USD: proto · scale · orient · translate; column-vector: T R S proto.
-            let m = instancer * DMat4::from_scale_rotation_translation(s, r, t) * local;
+            let m = point_matrix(instancer, positions, orientations, scales, k, local);
             if !self.place(id, p, prims, m, Some((k, positions_span)), diags) {
                 // One extent error per instancer is enough.
                 break;
             }
         }
     }
+}
+
+/// Point `k`'s world transform: `instancer · T R S · local` (column vectors; USD's row
+/// vectors read proto · scale · orient · translate), `local` being its prototype root's own.
+fn point_matrix(
+    instancer: DMat4,
+    positions: &[f64],
+    orientations: Option<&[f64]>,
+    scales: Option<&[f64]>,
+    k: usize,
+    local: DMat4,
+) -> DMat4 {
+    let t = DVec3::from_slice(&positions[3 * k..3 * k + 3]);
+    // USD writes quaternions (real, i, j, k).
+    let r = orientations
+        .map_or(DQuat::IDENTITY, |q| DQuat::from_xyzw(q[4 * k + 1], q[4 * k + 2], q[4 * k + 3], q[4 * k]).normalize());
+    let s = scales.map_or(DVec3::ONE, |s| DVec3::from_slice(&s[3 * k..3 * k + 3]));
+    instancer * DMat4::from_scale_rotation_translation(s, r, t) * local
+}
+
+/// The world transform of every visible point of point instancer `id` at the stage's time,
+/// in the order a build places them, computed as the build computes them (bit for bit);
+/// `None` when its attributes do not make a valid instancer (the build reports why).
+pub fn point_instance_transforms(stage: &Stage, xforms: &[PrimXform], id: PrimId) -> Option<Vec<DMat4>> {
+    let shifted = match stage.time() {
+        TimeCode::At(t) => velocity_positions(stage, stage.prim(id), t),
+        TimeCode::Default => None,
+    };
+    let read = |attr: &crate::scene::Attribute| {
+        if attr.name == "positions" { shifted.clone().or_else(|| attr.get().cloned()) } else { attr.get().cloned() }
+    };
+    points_placed(stage, id, xforms[id.0 as usize].world, &read)
+}
+
+/// [`point_instance_transforms`] at stage time `t` (inside a shutter) with the instancer at
+/// `instancer`: every point attribute as USD reads it at `t` (the prototype roots' own
+/// transforms are the frame's).
+pub fn point_instance_transforms_at(stage: &Stage, id: PrimId, instancer: DMat4, t: f64) -> Option<Vec<DMat4>> {
+    let shifted = velocity_positions(stage, stage.prim(id), t);
+    let read = |attr: &crate::scene::Attribute| {
+        if attr.name == "positions" && shifted.is_some() { shifted.clone() } else { attr.value_at(TimeCode::At(t)) }
+    };
+    points_placed(stage, id, instancer, &read)
+}
+
+/// The point attributes of a point instancer that can move its instances over time.
+pub const POINT_MOTION_ATTRIBUTES: [&str; 5] = ["positions", "orientations", "orientationsf", "scales", "velocities"];
+
+/// `positions` of point instancer `prim` at stage time `t` by USD's rule for `velocities`
+/// (`UsdGeomPointInstancer::ComputeInstanceTransformsAtTime`): when `velocities` has a
+/// sample at the last `positions` sample at or before `t`, with as many entries, the
+/// positions of that sample moved by `velocities × (t − sample) / timeCodesPerSecond`.
+/// `None` when velocities do not apply (positions are then interpolated as any value).
+pub fn velocity_positions(stage: &Stage, prim: &Prim, t: f64) -> Option<Value> {
+    let (positions, velocities) = (prim.attribute("positions")?, prim.attribute("velocities")?);
+    let lower = positions.time_samples.partition_point(|(s, _)| *s <= t).checked_sub(1)?;
+    let (sample, value) = &positions.time_samples[lower];
+    let (_, v) = velocities.time_samples.iter().find(|(s, _)| s == sample)?;
+    let (Some((3, p)), Some((3, v))) = (value.as_tuple_array(), v.as_tuple_array()) else { return None };
+    if p.len() != v.len() {
+        return None;
+    }
+    let dt = (t - sample) / stage.time_codes_per_second();
+    let moved: Vec<f64> = p.iter().zip(v).map(|(p, v)| p + v * dt).collect();
+    Some(Value::TupleArray { width: 3, data: moved.into() })
+}
+
+/// The world transforms of the visible points of point instancer `id` placed under
+/// `instancer`, reading each attribute through `read`.
+fn points_placed(
+    stage: &Stage,
+    id: PrimId,
+    instancer: DMat4,
+    read: &dyn Fn(&crate::scene::Attribute) -> Option<Value>,
+) -> Option<Vec<DMat4>> {
+    let prim = stage.prim(id);
+    let targets: Vec<PrimId> =
+        prim.relationship("prototypes")?.targets.iter().map(|(path, _)| stage.find(path)).collect::<Option<_>>()?;
+    let value = |name: &str| prim.attribute(name).and_then(read);
+    let indices = value("protoIndices");
+    let indices = indices.as_ref().and_then(Value::as_int_array).unwrap_or(&[]);
+    let n = indices.len();
+    let tuples = |name: &str, width: usize| -> Result<Option<Value>, ()> {
+        let Some(value) = value(name) else { return Ok(None) };
+        let (w, data) = value.as_tuple_array().ok_or(())?;
+        let ok = w == width && data.len() / width == n && data.iter().all(|x| x.is_finite());
+        if ok { Ok(Some(value)) } else { Err(()) }
+    };
+    let positions = tuples("positions", 3).ok()??;
+    let orient_name = if prim.attribute("orientationsf").is_some() { "orientationsf" } else { "orientations" };
+    let orientations = tuples(orient_name, 4).ok()?;
+    let scales = tuples("scales", 3).ok()?;
+    fn data(v: &Option<Value>) -> Option<&[f64]> {
+        v.as_ref().and_then(Value::as_tuple_array).map(|(_, d)| d)
+    }
+    let positions = Some(positions);
+    let (positions, orientations_data, scales) = (data(&positions)?, data(&orientations), data(&scales));
+    let ids = value("ids");
+    let ids = ids.as_ref().and_then(Value::as_int_array);
+    let bad_index = indices.iter().any(|&i| i < 0 || i as usize >= targets.len());
+    let zero_quaternion = orientations_data.is_some_and(|q| q.chunks(4).any(|q| q.iter().all(|&c| c == 0.0)));
+    if bad_index || zero_quaternion || ids.is_some_and(|ids| ids.len() != n) {
+        return None;
+    }
+    let invisible = value("invisibleIds");
+    let invisible: HashSet<i64> =
+        invisible.as_ref().and_then(Value::as_int_array).map(|v| v.iter().copied().collect()).unwrap_or_default();
+    let locals: Vec<DMat4> =
+        targets.iter().map(|&p| local_transform(stage.prim(p), &mut Diagnostics::new()).0).collect();
+    let visible = (0..n).filter(|&k| !invisible.contains(&ids.map_or(k as i64, |ids| ids[k])));
+    Some(
+        visible
+            .map(|k| point_matrix(instancer, positions, orientations_data, scales, k, locals[indices[k] as usize]))
+            .collect(),
+    )
 }

@@ -16,14 +16,19 @@ pub mod skel;
 pub mod subdiv;
 pub mod xform;
 
-pub use builder::{build, build_with, build_with_options, build_with_primvars, prototype_key};
+pub use builder::{
+    build, build_for_render, build_with, build_with_options, build_with_primvars, point_instance_transforms,
+    point_instance_transforms_at, prototype_key, velocity_positions,
+};
 
 use crate::compose::binding::{is_bound_subset, is_renderable};
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::render::geometry::primvars::{MAX_COMPONENTS, Primvar, PrimvarLayout, PrimvarRef, PrimvarTable};
 use crate::render::geometry::shapes::{Part, Shape};
 use crate::render::geometry::subdiv::{PolyMesh, catmull_clark, read_tags, refined_faces};
-use crate::render::geometry::xform::{PrimXform, local_transform, value_span, world_transforms};
+use crate::render::geometry::xform::{
+    PrimXform, local_transform, transform_sample_times, value_span, world_transforms,
+};
 use crate::scene::{Prim, PrimId, Stage, Value};
 use glam::{DMat3, DMat4, DQuat, DVec3, Vec2, Vec3};
 use std::collections::{HashMap, HashSet};
@@ -186,19 +191,41 @@ pub struct Geometry {
     /// The primvars materials read, for every triangle and shape that has them (world and
     /// prototypes alike).
     pub primvars: PrimvarTable,
+    /// Per prim of the stage (by id): whether its transform is baked into triangles — a
+    /// world-space prim's and its ancestors', a prototype's inner prims' relative to its
+    /// root. Any other transform places instances only, so it can change without building a
+    /// BLAS again (`render::Scene::move_to`).
+    pub baked: Vec<bool>,
+    /// Instances left out for a singular transform (a zero scale).
+    pub singular_instances: usize,
 }
 
 impl Geometry {
     /// World-space bounds `(min, max)` of every triangle, shape and instance; `None` when empty.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
-        let world = bounds_of(&self.triangles, &self.shapes);
-        let instances = self.instances.iter().filter_map(|i| {
-            let (lo, hi) = self.prototypes[i.prototype as usize].bounds?;
-            Some(crate::render::geometry::shapes::transformed_box(&i.to_world, lo, hi))
-        });
-        let (lo, hi) = world.into_iter().chain(instances).reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))?;
-        Some((lo.as_vec3(), hi.as_vec3()))
+        let prototypes: Vec<_> = self.prototypes.iter().map(|p| p.bounds).collect();
+        placed_bounds(self.world_bounds(), &prototypes, &self.instances)
     }
+
+    /// Bounds `(min, max)` of the world triangles and shapes; `None` when there are none.
+    pub fn world_bounds(&self) -> Option<(DVec3, DVec3)> {
+        bounds_of(&self.triangles, &self.shapes)
+    }
+}
+
+/// World-space bounds of `world` (the world's own geometry) and of `instances` of prototypes
+/// bounded by `prototypes`; `None` when all are empty.
+pub fn placed_bounds(
+    world: Option<(DVec3, DVec3)>,
+    prototypes: &[Option<(DVec3, DVec3)>],
+    instances: &[InstanceDesc],
+) -> Option<(Vec3, Vec3)> {
+    let instances = instances.iter().filter_map(|i| {
+        let (lo, hi) = prototypes[i.prototype as usize]?;
+        Some(crate::render::geometry::shapes::transformed_box(&i.to_world, lo, hi))
+    });
+    let (lo, hi) = world.into_iter().chain(instances).reduce(|(a, b), (c, d)| (a.min(c), b.max(d)))?;
+    Some((lo.as_vec3(), hi.as_vec3()))
 }
 
 /// World-space bounds `(min, max)` of triangles and shapes; `None` when there are none.

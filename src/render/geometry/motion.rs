@@ -97,22 +97,38 @@ impl MotionKeys {
     /// at `inner` (authored sample times, any order; those outside `(a, b)` are ignored) and
     /// wherever a segment had to be halved (see the module documentation).
     pub fn sample(transform_at: &dyn Fn(f64) -> DMat4, a: f64, b: f64, inner: &[f64]) -> MotionKeys {
+        let keys = MotionKeys::sample_all(&|t| vec![transform_at(t)], a, b, inner);
+        keys.into_iter().next().expect("one transform at every time")
+    }
+
+    /// [`MotionKeys::sample`] of several transforms keyed at the same times (a point
+    /// instancer's points): a segment is halved when any of them needs it. Empty when
+    /// `transforms_at` returns different numbers of transforms at two times.
+    pub fn sample_all(transforms_at: &dyn Fn(f64) -> Vec<DMat4>, a: f64, b: f64, inner: &[f64]) -> Vec<MotionKeys> {
         let mut at: Vec<f64> = inner.iter().copied().filter(|&t| t > a && t < b).collect();
         at.push(a);
         at.push(b);
         at.sort_by(f64::total_cmp);
         at.dedup();
-        let mut keys: Vec<(f64, DMat4)> = vec![(a, transform_at(a))];
+        let mut keys: Vec<(f64, Vec<DMat4>)> = vec![(a, transforms_at(a))];
         for pair in at.windows(2) {
-            let end = (pair[1], transform_at(pair[1]));
-            halve(transform_at, *keys.last().expect("a first key"), end, MAX_HALVINGS, &mut keys);
+            let end = (pair[1], transforms_at(pair[1]));
+            let start = keys.last().expect("a first key").clone();
+            halve(transforms_at, start, end.clone(), MAX_HALVINGS, &mut keys);
             keys.push(end);
         }
-        let span = b - a;
-        MotionKeys {
-            times: keys.iter().map(|(t, _)| (((t - a) / span) as f32).clamp(0.0, 1.0)).collect(),
-            transforms: keys.iter().map(|(_, m)| DAffine3::from_mat4(*m)).collect(),
+        let count = keys[0].1.len();
+        if keys.iter().any(|(_, k)| k.len() != count) {
+            return Vec::new();
         }
+        let span = b - a;
+        let times: Vec<f32> = keys.iter().map(|(t, _)| (((t - a) / span) as f32).clamp(0.0, 1.0)).collect();
+        (0..count)
+            .map(|j| MotionKeys {
+                times: times.clone(),
+                transforms: keys.iter().map(|(_, m)| DAffine3::from_mat4(m[j])).collect(),
+            })
+            .collect()
     }
 
     /// Ray times of the keys.
@@ -164,26 +180,30 @@ impl MotionKeys {
 /// Adds the keys strictly between `start` and `end` that linear interpolation needs to stay
 /// within [`KEY_TOLERANCE`] of `transform_at` (depth-first, so in time order).
 fn halve(
-    transform_at: &dyn Fn(f64) -> DMat4,
-    start: (f64, DMat4),
-    end: (f64, DMat4),
+    transforms_at: &dyn Fn(f64) -> Vec<DMat4>,
+    start: (f64, Vec<DMat4>),
+    end: (f64, Vec<DMat4>),
     depth: u32,
-    keys: &mut Vec<(f64, DMat4)>,
+    keys: &mut Vec<(f64, Vec<DMat4>)>,
 ) {
     if depth == 0 {
         return;
     }
     let mid_t = 0.5 * (start.0 + end.0);
-    let mid = transform_at(mid_t);
-    let lerp = (start.1 + end.1) * 0.5;
-    let scale = mid.to_cols_array().iter().fold(1e-300f64, |m, x| m.max(x.abs()));
-    let error = (mid - lerp).to_cols_array().iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    if error <= KEY_TOLERANCE * scale {
+    let mid = transforms_at(mid_t);
+    let strays = |(m, (s, e)): (&DMat4, (&DMat4, &DMat4))| {
+        let lerp = (*s + *e) * 0.5;
+        let scale = m.to_cols_array().iter().fold(1e-300f64, |a, x| a.max(x.abs()));
+        let error = (*m - lerp).to_cols_array().iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        error > KEY_TOLERANCE * scale
+    };
+    let same_count = mid.len() == start.1.len() && mid.len() == end.1.len();
+    if !same_count || !mid.iter().zip(start.1.iter().zip(&end.1)).any(strays) {
         return;
     }
-    halve(transform_at, start, (mid_t, mid), depth - 1, keys);
-    keys.push((mid_t, mid));
-    halve(transform_at, (mid_t, mid), end, depth - 1, keys);
+    halve(transforms_at, start, (mid_t, mid.clone()), depth - 1, keys);
+    keys.push((mid_t, mid.clone()));
+    halve(transforms_at, (mid_t, mid), end, depth - 1, keys);
 }
 
 /// The transform keys of a prim's world placement over `shutter` at frame `frame`, relative
@@ -539,6 +559,72 @@ pub fn report_moving_lights<'a>(
     }
 }
 
+/// The keys of every instance whose placing prim (`placers`, per instance) moves within
+/// `shutter` at the stage's time, by index in `instances` (empty when the shutter is closed).
+pub fn instance_motion(
+    stage: &Stage,
+    placers: &[crate::scene::PrimId],
+    instances: &[InstanceDesc],
+    shutter: Shutter,
+) -> Vec<(u32, MotionKeys)> {
+    let TimeCode::At(frame) = stage.time() else { return Vec::new() };
+    if !shutter.is_open() {
+        return Vec::new();
+    }
+    let mut memo: HashMap<u32, Option<MotionKeys>> = HashMap::new();
+    let mut motion = Vec::new();
+    let mut points_keyed: Option<crate::scene::PrimId> = None;
+    for (i, placer) in placers.iter().enumerate() {
+        if placer.0 as usize >= stage.len() || points_keyed == Some(*placer) {
+            continue;
+        }
+        if let Some(keys) = point_motion(stage, *placer, frame, shutter) {
+            // A point instancer's instances are consecutive, in point order.
+            let run = placers[i..].iter().take_while(|&p| p == placer).count();
+            if keys.len() == run {
+                // A point that stays put keeps its frame transform (and draws no time).
+                let moving = keys.into_iter().enumerate().filter(|(_, k)| !k.is_constant(&k.transforms[0]));
+                motion.extend(moving.map(|(j, k)| ((i + j) as u32, k)));
+            }
+            points_keyed = Some(*placer);
+            continue;
+        }
+        let keys = memo.entry(placer.0).or_insert_with(|| placement_motion(stage, *placer, frame, shutter));
+        if let Some(keys) = keys {
+            motion.push((i as u32, keys.then(DAffine3::from_mat4(instances[i].to_world))));
+        }
+    }
+    motion
+}
+
+/// The keys of each visible point of point instancer `id` over `shutter` at frame `frame`
+/// (USD's instance transforms at every key: positions interpolated or moved by their
+/// velocities, orientations slerped, the instancer's own placement), when any point
+/// attribute is sampled; `None` otherwise (the instancer's placement keys its instances then).
+fn point_motion(stage: &Stage, id: crate::scene::PrimId, frame: f64, shutter: Shutter) -> Option<Vec<MotionKeys>> {
+    let prim = stage.prim(id);
+    if prim.type_name.as_deref() != Some("PointInstancer") {
+        return None;
+    }
+    let mut times = transform_sample_times(stage, id);
+    let mut sampled = false;
+    for name in crate::render::geometry::builder::POINT_MOTION_ATTRIBUTES {
+        if let Some(attr) = prim.attribute(name).filter(|a| !a.time_samples.is_empty()) {
+            sampled = true;
+            times.extend(attr.time_samples.iter().map(|(t, _)| *t));
+        }
+    }
+    if !sampled {
+        return None;
+    }
+    let at = |t: f64| {
+        let instancer = world_transform_at(stage, id, t, &mut Diagnostics::new());
+        crate::render::geometry::point_instance_transforms_at(stage, id, instancer, t).unwrap_or_default()
+    };
+    let (a, b) = (shutter.time(frame, 0.0), shutter.time(frame, 1.0));
+    Some(MotionKeys::sample_all(&at, a, b, &times))
+}
+
 /// What [`apply`] made move.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct MotionStats {
@@ -568,21 +654,11 @@ pub fn apply(
         return (Vec::new(), stats);
     }
     stats.deforming_prims = deform(geometry, stage, frame, shutter, options, diags);
-    let mut motion: Vec<(u32, MotionKeys)> = Vec::new();
+    let mut motion = instance_motion(stage, &geometry.instance_placers, &geometry.instances, shutter);
     let mut memo: HashMap<u32, Option<MotionKeys>> = HashMap::new();
     let mut keys_of = |id: crate::scene::PrimId| {
         memo.entry(id.0).or_insert_with(|| placement_motion(stage, id, frame, shutter)).clone()
     };
-    // Instances of instancing whose placing prim moves.
-    for (i, placer) in geometry.instance_placers.iter().enumerate() {
-        if placer.0 as usize >= stage.len() {
-            continue;
-        }
-        if let Some(keys) = keys_of(*placer) {
-            let to_world = DAffine3::from_mat4(geometry.instances[i].to_world);
-            motion.push((i as u32, keys.then(to_world)));
-        }
-    }
     // World prims that move: each prim's triangles and shapes become a prototype of one prim.
     let moving: Vec<Option<MotionKeys>> = geometry
         .prims

@@ -311,6 +311,16 @@ impl Stage {
         if animated { TimeCode::At(self.start_time_code()) } else { TimeCode::Default }
     }
 
+    /// The root layer's `timeCodesPerSecond`, else its `framesPerSecond`, else 24 (as
+    /// `UsdStage::GetTimeCodesPerSecond`): what velocities, authored per second, are scaled by.
+    pub fn time_codes_per_second(&self) -> f64 {
+        let read = |key: &str| {
+            let value = self.metadata.other.iter().find(|m| m.key == key).and_then(|m| m.value.as_f64());
+            value.filter(|t| t.is_finite() && *t > 0.0)
+        };
+        read("timeCodesPerSecond").or_else(|| read("framesPerSecond")).unwrap_or(24.0)
+    }
+
     /// The root layer's `startTimeCode` (0 when not authored).
     pub fn start_time_code(&self) -> f64 {
         let start = self.metadata.other.iter().find(|m| m.key == "startTimeCode").and_then(|m| m.value.as_f64());

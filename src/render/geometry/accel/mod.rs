@@ -788,58 +788,81 @@ impl Accel {
         instance_prims: Vec<u32>,
         motion: Vec<(u32, MotionKeys)>,
     ) -> Accel {
-        let mut skipped = 0;
-        let mut kept = Vec::with_capacity(instances.len());
-        let mut boxes = Vec::with_capacity(instances.len());
-        let mut keys_of: HashMap<u32, MotionKeys> = motion.into_iter().collect();
-        let mut motions = Vec::with_capacity(keys_of.len());
-        for (index, desc) in instances.iter().enumerate() {
-            let keys = keys_of.remove(&(index as u32));
-            let m = desc.to_world;
-            let det = DMat3::from_mat4(m).determinant();
-            let moving_ok = keys
-                .as_ref()
-                .is_none_or(|k| k.transforms().iter().all(|t| t.is_finite() && t.matrix3.determinant() != 0.0));
-            let bounds = prototypes.get(desc.prototype as usize).and_then(Blas::bounds);
-            let Some((lo, hi)) = bounds.filter(|_| det != 0.0 && det.is_finite() && m.is_finite() && moving_ok) else {
-                skipped += 1;
-                continue;
-            };
-            let (wlo, whi) = match &keys {
-                Some(k) => k.bounds(lo.as_dvec3(), hi.as_dvec3()),
-                None => crate::render::geometry::shapes::transformed_box(&m, lo.as_dvec3(), hi.as_dvec3()),
-            };
-            let (wlo, whi) = (wlo.as_vec3(), whi.as_vec3());
-            if !wlo.is_finite() || !whi.is_finite() {
-                skipped += 1;
-                continue;
-            }
-            let to_world = DAffine3::from_mat4(m);
-            let motion = match keys {
-                Some(k) => {
-                    motions.push(k);
-                    motions.len() as u32 - 1
-                }
-                None => STILL,
-            };
-            kept.push(Instance {
-                to_object: to_world.inverse(),
-                to_world,
-                mirrors: det < 0.0,
-                prototype: desc.prototype,
-                prims: desc.prims,
-                motion,
-            });
-            // Padded like every other box (see `padded_box`), and outward for the f32 rounding
-            // of the transformed corners.
-            let pad = wlo.abs().max(whi.abs()).max_element().max(f32::MIN_POSITIVE) * 1e-6;
-            boxes.push(Padded(Aabb::new((wlo - Vec3::splat(pad)).into(), (whi + Vec3::splat(pad)).into())));
-        }
-        let tlas = BvhSpace::build(boxes);
+        let (instances, tlas, skipped_instances, motions) = place_instances(&prototypes, instances, motion);
         let moves = !motions.is_empty() || prototypes.iter().any(|p| p.deformation.is_some());
-        Accel { world, prototypes, instances: kept, instance_prims, tlas, skipped_instances: skipped, motions, moves }
+        Accel { world, prototypes, instances, instance_prims, tlas, skipped_instances, motions, moves }
     }
 
+    /// Places the same prototypes (each instance's `prototype` and `prims` as before) by new
+    /// transforms and keys: the top level is built again, every BLAS is kept. The result is
+    /// the structure [`Accel::with_moving_instances`] builds from them, bit for bit.
+    pub fn move_instances(&mut self, instances: &[InstanceDesc], motion: Vec<(u32, MotionKeys)>) {
+        let (placed, tlas, skipped, motions) = place_instances(&self.prototypes, instances, motion);
+        self.moves = !motions.is_empty() || self.prototypes.iter().any(|p| p.deformation.is_some());
+        (self.instances, self.tlas, self.skipped_instances, self.motions) = (placed, tlas, skipped, motions);
+    }
+}
+
+/// The traversal's instances of `instances` (the unplaceable skipped and counted), the top
+/// level over their boxes, and the keys of those that move.
+#[allow(clippy::type_complexity)]
+fn place_instances(
+    prototypes: &[Blas],
+    instances: &[InstanceDesc],
+    motion: Vec<(u32, MotionKeys)>,
+) -> (Vec<Instance>, Option<BvhSpace>, usize, Vec<MotionKeys>) {
+    let mut skipped = 0;
+    let mut kept = Vec::with_capacity(instances.len());
+    let mut boxes = Vec::with_capacity(instances.len());
+    let mut keys_of: HashMap<u32, MotionKeys> = motion.into_iter().collect();
+    let mut motions = Vec::with_capacity(keys_of.len());
+    for (index, desc) in instances.iter().enumerate() {
+        let keys = keys_of.remove(&(index as u32));
+        let m = desc.to_world;
+        let det = DMat3::from_mat4(m).determinant();
+        let moving_ok = keys
+            .as_ref()
+            .is_none_or(|k| k.transforms().iter().all(|t| t.is_finite() && t.matrix3.determinant() != 0.0));
+        let bounds = prototypes.get(desc.prototype as usize).and_then(Blas::bounds);
+        let Some((lo, hi)) = bounds.filter(|_| det != 0.0 && det.is_finite() && m.is_finite() && moving_ok) else {
+            skipped += 1;
+            continue;
+        };
+        let (wlo, whi) = match &keys {
+            Some(k) => k.bounds(lo.as_dvec3(), hi.as_dvec3()),
+            None => crate::render::geometry::shapes::transformed_box(&m, lo.as_dvec3(), hi.as_dvec3()),
+        };
+        let (wlo, whi) = (wlo.as_vec3(), whi.as_vec3());
+        if !wlo.is_finite() || !whi.is_finite() {
+            skipped += 1;
+            continue;
+        }
+        let to_world = DAffine3::from_mat4(m);
+        let motion = match keys {
+            Some(k) => {
+                motions.push(k);
+                motions.len() as u32 - 1
+            }
+            None => STILL,
+        };
+        kept.push(Instance {
+            to_object: to_world.inverse(),
+            to_world,
+            mirrors: det < 0.0,
+            prototype: desc.prototype,
+            prims: desc.prims,
+            motion,
+        });
+        // Padded like every other box (see `padded_box`), and outward for the f32 rounding
+        // of the transformed corners.
+        let pad = wlo.abs().max(whi.abs()).max_element().max(f32::MIN_POSITIVE) * 1e-6;
+        boxes.push(Padded(Aabb::new((wlo - Vec3::splat(pad)).into(), (whi + Vec3::splat(pad)).into())));
+    }
+    let tlas = BvhSpace::build(boxes);
+    (kept, tlas, skipped, motions)
+}
+
+impl Accel {
     /// Number of triangles stored (unique geometry: each prototype's once).
     pub fn triangle_count(&self) -> usize {
         self.world.triangle_count() + self.prototypes.iter().map(Blas::triangle_count).sum::<usize>()
