@@ -8,9 +8,10 @@ the script clones one, `resources/` only, into target/materialx). For each docum
 - its `surfacematerial`s are bound to one sphere each in a generated USD scene
   (`@doc.mtlx@</MaterialX/Materials/NAME>`, as USD's MaterialX plugin names them);
 - a document with node graphs but no material (most of stdlib's) is wrapped as MaterialX's
-  own render tests do: each graph output of a type strata reads becomes the emission of a
-  `surface` (`uniform_edf` of the output, converted to color3), one material per output, in a
-  copy of the document written beside it;
+  own render tests do: each graph output of a type strata reads (and each top-level output of
+  a node) becomes the emission of a `surface` (`uniform_edf` of the output, converted to
+  color3), each graph's surface shader output the surface of a material, one material per
+  output, in a copy of the document written beside it;
 
 then `strata check SCENE` runs once per document. Counted: documents, materials checked,
 documents that check clean, with warnings, with errors (a diagnostic, exit 1), and crashes
@@ -73,6 +74,15 @@ def wrap_outputs(path, tree):
     outputs += [(None, o) for o in root.findall("output") if o.get("nodename")]
     for graph, out in outputs:
         kind = out.get("type")
+        if kind == "surfaceshader" and graph is not None:
+            # A graph's surface shader output is a material's surface (pbrlib's BSDF tests).
+            tag = f"{graph.get('name')}_{out.get('name')}"
+            material = ET.SubElement(root, "surfacematerial", name=f"strata_m_{tag}", type="material")
+            ET.SubElement(
+                material, "input", name="surfaceshader", type="surfaceshader", nodegraph=graph.get("name"), output=out.get("name")
+            )
+            names.append(f"strata_m_{tag}")
+            continue
         if kind not in CONVERTIBLE:
             continue
         tag = f"{graph.get('name')}_{out.get('name')}" if graph is not None else f"top_{out.get('name')}"

@@ -143,6 +143,16 @@ pub fn translate(xml: &str) -> Result<Translation, Problem> {
 
 type Node<'a, 'i> = roxmltree::Node<'a, 'i>;
 
+/// A shader, where it lives, and the prims holding it under its material, outermost first.
+type Located<'a, 'i> = (Node<'a, 'i>, Place<'a, 'i>, Vec<Node<'a, 'i>>);
+
+/// The node that `graph`'s output `output` (else its first output) reads.
+fn graph_output<'a, 'i>(graph: Node<'a, 'i>, output: Option<&str>) -> Option<Node<'a, 'i>> {
+    let mut outputs = graph.children().filter(|c| c.is_element() && c.tag_name().name() == "output");
+    let found = outputs.find(|o| output.is_none() || o.attribute("name") == output)?;
+    child_named(graph, found.attribute("nodename")?)
+}
+
 /// Where a node lives: at the document's top level or inside a node graph; a graph that
 /// implements one of the document's own node definitions is written once per `instance` of
 /// that node.
@@ -229,39 +239,27 @@ impl<'a, 'i> Translator<'a, 'i> {
         pick(&|d| version_fits(d) && type_fits(d)).or_else(|| pick(&type_fits)).or_else(|| candidates.first().copied())
     }
 
-    /// The shader node a material input reads, and where it lives: through `nodename`
-    /// (a node, or the shader inside a document-defined node's graph), `nodegraph`/`output`
-    /// (the shader inside a graph) and `interfacename` (the enclosing graph's input).
-    fn shader_of(
-        &self,
-        input: Node<'a, 'i>,
-        place: Place<'a, 'i>,
-        depth: usize,
-    ) -> Option<(Node<'a, 'i>, Place<'a, 'i>)> {
+    /// The shader node a material input reads, where it lives, and the prims that hold it
+    /// under the material (graphs and document-defined nodes, outermost first): through
+    /// `nodename` (a node, or the shader inside a document-defined node's graph),
+    /// `nodegraph`/`output` (the shader inside a graph) and `interfacename` (the enclosing
+    /// graph's input).
+    fn shader_of(&self, input: Node<'a, 'i>, place: Place<'a, 'i>, depth: usize) -> Option<Located<'a, 'i>> {
         if depth > 16 {
             return None;
         }
-        let graph_output = |graph: Node<'a, 'i>, output: Option<&str>| {
-            let outputs = graph.children().filter(|c| c.is_element() && c.tag_name().name() == "output");
-            let mut outputs = outputs.filter(|o| output.is_none() || o.attribute("name") == output);
-            outputs.next().and_then(|o| o.attribute("nodename")).and_then(|n| child_named(graph, n))
-        };
         match connection_of(input)? {
             Connection::Node(name, _) => {
                 let node = match place.graph {
                     Some(graph) => child_named(graph, name),
                     None => self.top.get(name).copied(),
                 }?;
-                match self.implementation(node) {
-                    Some((_, graph)) => {
-                        Some((graph_output(graph, None)?, Place { graph: Some(graph), instance: Some(node) }))
-                    }
-                    None => Some((node, place)),
-                }
+                self.enter(node, place, place.instance.or(place.graph).into_iter().collect())
             }
             Connection::Graph(name, output) => {
                 let graph = self.top.get(name).copied().filter(|g| is_graph(*g))?;
-                Some((graph_output(graph, output)?, Place { graph: Some(graph), instance: None }))
+                let node = graph_output(graph, output)?;
+                self.enter(node, Place { graph: Some(graph), instance: None }, vec![graph])
             }
             Connection::Interface(name) => {
                 let source = match place.instance {
@@ -270,6 +268,23 @@ impl<'a, 'i> Translator<'a, 'i> {
                 }?;
                 self.shader_of(source, Place::TOP, depth + 1)
             }
+        }
+    }
+
+    /// `node` at `place` inside `holders` as a shader: itself, or for a node the document
+    /// defines, the shader its graph outputs.
+    fn enter(
+        &self,
+        node: Node<'a, 'i>,
+        place: Place<'a, 'i>,
+        mut holders: Vec<Node<'a, 'i>>,
+    ) -> Option<Located<'a, 'i>> {
+        match self.implementation(node) {
+            Some((_, graph)) => {
+                holders.push(node);
+                Some((graph_output(graph, None)?, Place { graph: Some(graph), instance: Some(node) }, holders))
+            }
+            None => Some((node, place, holders)),
         }
     }
 
@@ -322,7 +337,7 @@ impl<'a, 'i> Translator<'a, 'i> {
                 }
                 continue;
             }
-            let Some((shader, at)) = self.shader_of(input, place, 0) else {
+            let Some((shader, _, holders)) = self.shader_of(input, place, 0) else {
                 let message = match connection_of(input) {
                     Some(Connection::Interface(name)) => {
                         format!("material input reads the graph's input `{name}`, which connects to no shader")
@@ -340,19 +355,14 @@ impl<'a, 'i> Translator<'a, 'i> {
                 Some("volumeshader") => "volume",
                 _ => "surface",
             };
-            // A shader inside a graph is written with its graph (under the instance's name
-            // for a document-defined node).
-            let container = at.instance.or(at.graph);
-            let shader_path = match container {
-                Some(c) => format!(
-                    "{path}/{}/{}",
-                    identifier(c.attribute("name").unwrap_or("")),
-                    identifier(shader.attribute("name").unwrap_or(""))
-                ),
-                None => format!("{path}/{}", identifier(shader.attribute("name").unwrap_or(""))),
-            };
-            terminals.push((terminal, shader, shader_path, container.is_none()));
-            self.reach(container.unwrap_or(shader), &mut needed);
+            // A shader inside a graph is written with its graph (a document-defined node as
+            // the graph of its definition, under the node's name).
+            let mut shader_path = path.clone();
+            for prim in holders.iter().chain([&shader]) {
+                let _ = write!(shader_path, "/{}", identifier(prim.attribute("name").unwrap_or("")));
+            }
+            terminals.push((terminal, shader, shader_path, holders.is_empty()));
+            self.reach(holders.first().copied().unwrap_or(shader), &mut needed);
         }
         // A top-level surface shader's values become the Material's interface, as usdMtlx does.
         let surface = terminals.iter().find(|(t, _, _, top)| *t == "surface" && *top).map(|(_, s, _, _)| *s);
