@@ -724,6 +724,10 @@ pub fn nodedef_id(node: Node) -> String {
         }
         _ if matches!(ty, "BSDF" | "EDF" | "VDF") => format!("ND_{category}"),
         "surface" | "surface_unlit" if ty == "surfaceshader" => format!("ND_{category}"),
+        // pbrlib's utility nodes have one definition each, named by category alone.
+        "artistic_ior" | "roughness_anisotropy" | "roughness_dual" | "glossiness_anisotropy" | "blackbody" => {
+            format!("ND_{category}")
+        }
         "convert" => format!("ND_convert_{in_ty}_{ty}"),
         // 1.39 names normal maps by the type of `scale`.
         "normalmap" => format!("ND_normalmap_{}", input_type("scale").unwrap_or("float")),
@@ -925,5 +929,50 @@ mod tests {
         assert!(messages.iter().any(|m| m.contains("`lots` is not a finite number")), "{messages:?}");
         assert!(messages.iter().any(|m| m.contains("`nowhere`")), "{messages:?}");
         assert!(doc[t.warnings[0].range.clone()].starts_with("<input"), "{:?}", t.warnings);
+    }
+
+    #[test]
+    fn document_defined_nodes_are_their_definition_s_graph_per_version() {
+        // MaterialX's own test document: two versions of `myimage`, each a graph reading a
+        // different default file; an instance takes the version it names, else the default.
+        let doc = include_str!("../../tests/fixtures/mtlx/suite/TestSuite/stdlib/version/multiple_version_test.mtlx");
+        let t = translate(doc).expect("translates");
+        assert!(t.warnings.is_empty(), "{:?}", t.warnings);
+        let wrap = |instance: &str| {
+            let extra = format!(
+                "<uniform_edf name=\"e\" type=\"EDF\"><input name=\"color\" type=\"color3\" nodename=\"{instance}\" /></uniform_edf>\
+                 <surface name=\"s\" type=\"surfaceshader\"><input name=\"edf\" type=\"EDF\" nodename=\"e\" /></surface>\
+                 <surfacematerial name=\"m\" type=\"material\"><input name=\"surfaceshader\" type=\"surfaceshader\" nodename=\"s\" /></surfacematerial></materialx>"
+            );
+            translate(&doc.replace("</materialx>", &extra)).expect("translates").usda
+        };
+        for (instance, file) in [
+            ("image_version1_instance", "grid.png"),
+            ("image_version2_instance", "cloth.png"),
+            ("image_version2_implicit_instance", "cloth.png"),
+        ] {
+            let usda = wrap(instance);
+            let graph = usda.find(&format!("def NodeGraph \"{instance}\"")).unwrap_or_else(|| panic!("{usda}"));
+            let graph = &usda[graph..];
+            let inputs = &graph[..graph.find("def Shader").unwrap()];
+            assert!(inputs.contains(&format!("asset inputs:file = @resources/Images/{file}@")), "{instance}: {inputs}");
+            assert!(graph.contains(".inputs:file>"), "the image reads the graph's input: {graph}");
+        }
+        // No NodeGraph is written for the definitions themselves.
+        assert!(!t.usda.contains("NG_myimage"), "{}", t.usda);
+    }
+
+    #[test]
+    fn graph_inputs_default_to_their_geometric_property() {
+        let doc = include_str!("../../tests/fixtures/mtlx/suite/TestSuite/stdlib/defaultgeomprop/defaultgeomprop.mtlx");
+        let t = translate(doc).expect("translates");
+        assert!(t.warnings.is_empty(), "{:?}", t.warnings);
+        let graph = "/MaterialX/Materials/defaultgeomprop/checkerboard1";
+        assert!(
+            t.usda.contains(&format!("float2 inputs:texcoord.connect = <{graph}/strata_geomprop_UV0.outputs:out>")),
+            "{}",
+            t.usda
+        );
+        assert!(t.usda.contains("uniform token info:id = \"ND_texcoord_vector2\""), "{}", t.usda);
     }
 }
