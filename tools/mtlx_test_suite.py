@@ -8,9 +8,10 @@ the script clones one, `resources/` only, into target/materialx). For each docum
 - its `surfacematerial`s are bound to one sphere each in a generated USD scene
   (`@doc.mtlx@</MaterialX/Materials/NAME>`, as USD's MaterialX plugin names them);
 - a document with node graphs but no material (most of stdlib's) is wrapped as MaterialX's
-  own render tests do: each graph output of a type strata reads becomes the emission of a
-  `surface` (`uniform_edf` of the output, converted to color3), one material per output, in a
-  copy of the document written beside it;
+  own render tests do: each graph output of a type strata reads (and each top-level output of
+  a node) becomes the emission of a `surface` (`uniform_edf` of the output, converted to
+  color3), each graph's surface shader output the surface of a material, one material per
+  output, in a copy of the document written beside it;
 
 then `strata check SCENE` runs once per document. Counted: documents, materials checked,
 documents that check clean, with warnings, with errors (a diagnostic, exit 1), and crashes
@@ -47,26 +48,56 @@ def locate(materialx):
     return root
 
 
+def materials_of(root):
+    """The Materials strata's translation makes of a document (src/scene/mtlx.rs): its
+    top-level surface materials (and instances of material nodes the document defines), and
+    each node graph output of type material (named after the graph, `graph_output` when the
+    graph has several)."""
+    names = [m.get("name") for m in root if m.get("type") == "material" and m.tag not in ("volumematerial", "output")]
+    for graph in root.findall("nodegraph"):
+        if graph.get("nodedef"):
+            continue
+        outputs = [o for o in graph.findall("output") if o.get("type") == "material"]
+        for out in outputs:
+            names.append(graph.get("name") if len(outputs) == 1 else f"{graph.get('name')}_{out.get('name')}")
+    return names
+
+
 def wrap_outputs(path, tree):
     """A copy of the document beside it with a material per convertible node-graph output;
     its path and the material names, or (None, []) when it has none."""
     root = tree.getroot()
     names = []
-    for graph in root.findall("nodegraph"):
-        for out in graph.findall("output"):
-            kind = out.get("type")
-            if kind not in CONVERTIBLE:
-                continue
+    # Graph outputs (not of graphs that implement a node definition) and the document's
+    # top-level outputs (of nodes).
+    outputs = [(g, o) for g in root.findall("nodegraph") if not g.get("nodedef") for o in g.findall("output")]
+    outputs += [(None, o) for o in root.findall("output") if o.get("nodename")]
+    for graph, out in outputs:
+        kind = out.get("type")
+        if kind == "surfaceshader" and graph is not None:
+            # A graph's surface shader output is a material's surface (pbrlib's BSDF tests).
             tag = f"{graph.get('name')}_{out.get('name')}"
-            convert = ET.SubElement(root, "convert", name=f"strata_c_{tag}", type="color3")
-            ET.SubElement(convert, "input", name="in", type=kind, nodegraph=graph.get("name"), output=out.get("name"))
-            edf = ET.SubElement(root, "uniform_edf", name=f"strata_e_{tag}", type="EDF")
-            ET.SubElement(edf, "input", name="color", type="color3", nodename=f"strata_c_{tag}")
-            surface = ET.SubElement(root, "surface", name=f"strata_s_{tag}", type="surfaceshader")
-            ET.SubElement(surface, "input", name="edf", type="EDF", nodename=f"strata_e_{tag}")
             material = ET.SubElement(root, "surfacematerial", name=f"strata_m_{tag}", type="material")
-            ET.SubElement(material, "input", name="surfaceshader", type="surfaceshader", nodename=f"strata_s_{tag}")
+            ET.SubElement(
+                material, "input", name="surfaceshader", type="surfaceshader", nodegraph=graph.get("name"), output=out.get("name")
+            )
             names.append(f"strata_m_{tag}")
+            continue
+        if kind not in CONVERTIBLE:
+            continue
+        tag = f"{graph.get('name')}_{out.get('name')}" if graph is not None else f"top_{out.get('name')}"
+        convert = ET.SubElement(root, "convert", name=f"strata_c_{tag}", type="color3")
+        if graph is not None:
+            ET.SubElement(convert, "input", name="in", type=kind, nodegraph=graph.get("name"), output=out.get("name"))
+        else:
+            ET.SubElement(convert, "input", name="in", type=kind, nodename=out.get("nodename"))
+        edf = ET.SubElement(root, "uniform_edf", name=f"strata_e_{tag}", type="EDF")
+        ET.SubElement(edf, "input", name="color", type="color3", nodename=f"strata_c_{tag}")
+        surface = ET.SubElement(root, "surface", name=f"strata_s_{tag}", type="surfaceshader")
+        ET.SubElement(surface, "input", name="edf", type="EDF", nodename=f"strata_e_{tag}")
+        material = ET.SubElement(root, "surfacematerial", name=f"strata_m_{tag}", type="material")
+        ET.SubElement(material, "input", name="surfaceshader", type="surfaceshader", nodename=f"strata_s_{tag}")
+        names.append(f"strata_m_{tag}")
     if not names:
         return None, []
     wrapped = path[: -len(".mtlx")] + ".strata_wrapped.mtlx"
@@ -99,7 +130,7 @@ def check(strata, path):
         tree = ET.parse(path)
     except ET.ParseError:
         tree = None
-    materials = [] if tree is None else [m.get("name") for m in tree.getroot().iter("surfacematerial")]
+    materials = [] if tree is None else materials_of(tree.getroot())
     target = path
     if tree is not None and not materials:
         wrapped, materials = wrap_outputs(path, tree)

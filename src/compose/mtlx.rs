@@ -121,7 +121,7 @@ pub fn node_function(id: &str) -> Option<String> {
     let (node, types) = split_id(id)?;
     if node == "normalmap" {
         // `ND_normalmap` (1.38), `ND_normalmap_float`/`_vector2` (1.39: the type of `scale`).
-        return Some("mx_normalmap_color3".into());
+        return Some(if types == "vector2" { "mx_normalmap_vector2" } else { "mx_normalmap_color3" }.into());
     }
     if matches!(node, "combine2" | "combine3") {
         // Named by the type they build; the library's variant takes floats.

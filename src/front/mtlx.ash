@@ -407,11 +407,10 @@ shader mx_tiledimage_float(string file = "", string decode = "raw", string color
                           "periodic", "periodic", color(default_)).r;
 }
 
-// normalmap: a tangent-space normal in [0, 1] encoding, xy scaled by `scale`, to world space
-// (MaterialX 1.38's `in`, `scale`, `normal`, `tangent`; the frame from dPdu when no tangent
-// is connected).
-shader mx_normalmap_color3(color in_ = color(0.5, 0.5, 1.0), float scale = 1.0, color normal_ = color(N),
-                           color tangent = color(0.0), output color out) {
+// normalmap: a tangent-space normal in [0, 1] encoding, xy scaled by `scale` (a float, or a
+// vector2 per axis in 1.39's ND_normalmap_vector2), to world space (MaterialX's `in`, `scale`,
+// `normal`, `tangent`; the frame from dPdu when no tangent is connected).
+color mx_normalmap(color in_, float scale_x, float scale_y, color normal_, color tangent) {
     vector n = normalize(vector(normal_));
     vector t = vector(tangent);
     if (length(t) < 1e-8) {
@@ -424,8 +423,16 @@ shader mx_normalmap_color3(color in_ = color(0.5, 0.5, 1.0), float scale = 1.0, 
     t = normalize(t);
     vector b = cross(n, t);
     vector m = vector(in_) * 2.0 - 1.0;
-    vector w = t * (m.x * scale) + b * (m.y * scale) + n * m.z;
-    out = length(w) > 1e-8 ? color(normalize(w)) : color(n);
+    vector w = t * (m.x * scale_x) + b * (m.y * scale_y) + n * m.z;
+    return length(w) > 1e-8 ? color(normalize(w)) : color(n);
+}
+shader mx_normalmap_color3(color in_ = color(0.5, 0.5, 1.0), float scale = 1.0, color normal_ = color(N),
+                           color tangent = color(0.0), output color out) {
+    out = mx_normalmap(in_, scale, scale, normal_, tangent);
+}
+shader mx_normalmap_vector2(color in_ = color(0.5, 0.5, 1.0), color scale = color(1.0, 1.0, 0.0),
+                            color normal_ = color(N), color tangent = color(0.0), output color out) {
+    out = mx_normalmap(in_, scale.r, scale.g, normal_, tangent);
 }
 
 // ---- pbrlib: BSDF and EDF nodes on the closure built-ins ------------------------------------

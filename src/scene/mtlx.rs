@@ -90,25 +90,46 @@ pub fn translate(xml: &str) -> Result<Translation, Problem> {
             ),
         });
     }
-    let mut t = Translator { warnings: Vec::new(), top: HashMap::new(), outputs: HashMap::new() };
+    let mut t = Translator { warnings: Vec::new(), top: HashMap::new(), outputs: HashMap::new(), defs: HashMap::new() };
     for child in root.children().filter(|c| c.is_element()) {
         if let Some(name) = child.attribute("name") {
             t.top.insert(name.to_string(), child);
         }
     }
+    t.collect_definitions(root);
     t.collect_outputs(root);
     let mut out = String::from("#usda 1.0\n\ndef \"MaterialX\"\n{\n    def \"Materials\"\n    {\n");
     let mut seen = HashSet::new();
     for child in root.children().filter(|c| c.is_element()) {
         let Some(name) = child.attribute("name") else { continue };
         if child.attribute("type") == Some("material") && seen.insert(identifier(name)) {
-            t.material(&mut out, child);
+            t.material(&mut out, name, child, Place::TOP);
+        }
+    }
+    // A graph whose output is a material (MaterialX renders it as one): a Material named
+    // after the graph (`<graph>_<output>` when it has several).
+    for graph in root.children().filter(|c| is_graph(*c) && c.attribute("nodedef").is_none()) {
+        let Some(graph_name) = graph.attribute("name") else { continue };
+        let materials: Vec<Node> = graph
+            .children()
+            .filter(|o| o.is_element() && o.tag_name().name() == "output" && o.attribute("type") == Some("material"))
+            .collect();
+        for output in &materials {
+            let Some(node) = output.attribute("nodename").and_then(|n| child_named(graph, n)) else { continue };
+            let name = match materials.len() {
+                1 => graph_name.to_string(),
+                _ => format!("{graph_name}_{}", output.attribute("name").unwrap_or("out")),
+            };
+            if seen.insert(identifier(&name)) {
+                t.material(&mut out, &name, node, Place { graph: Some(graph), instance: None });
+            }
         }
     }
     out.push_str("    }\n\n    def \"NodeGraphs\"\n    {\n");
-    for child in root.children().filter(|c| c.is_element() && c.tag_name().name() == "nodegraph") {
+    // Graphs that implement a node definition are definitions: their instances carry them.
+    for child in root.children().filter(|c| is_graph(*c) && c.attribute("nodedef").is_none()) {
         let Some(name) = child.attribute("name") else { continue };
-        t.node_graph(&mut out, child, &format!("/MaterialX/NodeGraphs/{}", identifier(name)), 2);
+        t.node_graph(&mut out, child, &format!("/MaterialX/NodeGraphs/{}", identifier(name)), 2, None, None);
     }
     out.push_str("    }\n}\n");
     for child in root.children().filter(|c| c.is_element()) {
@@ -122,6 +143,50 @@ pub fn translate(xml: &str) -> Result<Translation, Problem> {
 
 type Node<'a, 'i> = roxmltree::Node<'a, 'i>;
 
+/// A shader, where it lives, and the prims holding it under its material, outermost first.
+type Located<'a, 'i> = (Node<'a, 'i>, Place<'a, 'i>, Vec<Node<'a, 'i>>);
+
+/// The node that `graph`'s output `output` (else its first output) reads.
+fn graph_output<'a, 'i>(graph: Node<'a, 'i>, output: Option<&str>) -> Option<Node<'a, 'i>> {
+    let mut outputs = graph.children().filter(|c| c.is_element() && c.tag_name().name() == "output");
+    let found = outputs.find(|o| output.is_none() || o.attribute("name") == output)?;
+    child_named(graph, found.attribute("nodename")?)
+}
+
+/// Where a node lives: at the document's top level or inside a node graph; a graph that
+/// implements one of the document's own node definitions is written once per `instance` of
+/// that node.
+#[derive(Clone, Copy)]
+struct Place<'a, 'i> {
+    graph: Option<Node<'a, 'i>>,
+    instance: Option<Node<'a, 'i>>,
+}
+
+impl Place<'_, '_> {
+    const TOP: Self = Place { graph: None, instance: None };
+}
+
+fn is_graph(node: Node) -> bool {
+    node.is_element() && node.tag_name().name() == "nodegraph"
+}
+
+/// The node that reads geometric property `name` (MaterialX's standard `geompropdef`s), as a
+/// node definition id and its `space` input.
+fn geomprop_node(name: &str) -> Option<(&'static str, Option<&'static str>)> {
+    Some(match name {
+        "UV0" => ("ND_texcoord_vector2", None),
+        "Nworld" => ("ND_normal_vector3", None),
+        "Nobject" => ("ND_normal_vector3", Some("object")),
+        "Pworld" => ("ND_position_vector3", None),
+        "Pobject" => ("ND_position_vector3", Some("object")),
+        "Tworld" => ("ND_tangent_vector3", None),
+        "Tobject" => ("ND_tangent_vector3", Some("object")),
+        "Bworld" => ("ND_bitangent_vector3", None),
+        "Bobject" => ("ND_bitangent_vector3", Some("object")),
+        _ => return None,
+    })
+}
+
 struct Translator<'a, 'i> {
     warnings: Vec<Problem>,
     /// The document's top-level elements by name.
@@ -129,11 +194,98 @@ struct Translator<'a, 'i> {
     /// Outputs other elements connect to, per producing element (by its node id): its
     /// `outputs:` to declare, with their MaterialX types.
     outputs: HashMap<roxmltree::NodeId, Vec<(String, String)>>,
+    /// The document's own node definitions that a node graph implements, by node category:
+    /// (`<nodedef>`, `<nodegraph nodedef=...>`).
+    defs: HashMap<String, Vec<(Node<'a, 'i>, Node<'a, 'i>)>>,
 }
 
 impl<'a, 'i> Translator<'a, 'i> {
     fn warn(&mut self, at: Node, message: String) {
         self.warnings.push(Problem { range: tag_range(at), message });
+    }
+
+    /// Records the node definitions the document implements with its own node graphs.
+    fn collect_definitions(&mut self, root: Node<'a, 'i>) {
+        for graph in root.children().filter(|c| is_graph(*c)) {
+            let Some(def_name) = graph.attribute("nodedef") else { continue };
+            let def = root
+                .children()
+                .find(|c| c.is_element() && c.tag_name().name() == "nodedef" && c.attribute("name") == Some(def_name));
+            match def.and_then(|d| d.attribute("node").map(|category| (d, category))) {
+                Some((def, category)) => self.defs.entry(category.to_string()).or_default().push((def, graph)),
+                None => self.warn(
+                    graph,
+                    format!("the graph implements `{def_name}`, which the document does not define; it is ignored"),
+                ),
+            }
+        }
+    }
+
+    /// The document's definition of `node` and the graph implementing it, if the document
+    /// defines its category: the version the node asks for (else the default version), of the
+    /// node's type.
+    fn implementation(&self, node: Node<'a, 'i>) -> Option<(Node<'a, 'i>, Node<'a, 'i>)> {
+        let candidates = self.defs.get(node.tag_name().name())?;
+        let version_fits = |def: &Node| match node.attribute("version") {
+            Some(v) => def.attribute("version") == Some(v),
+            None => def.attribute("isdefaultversion") == Some("true") || candidates.len() == 1,
+        };
+        let type_fits = |def: &Node| {
+            let ty = node.attribute("type");
+            ty == Some("multioutput")
+                || def.children().any(|o| o.tag_name().name() == "output" && o.attribute("type") == ty)
+        };
+        let pick = |fits: &dyn Fn(&Node) -> bool| candidates.iter().find(|(d, _)| fits(d)).copied();
+        pick(&|d| version_fits(d) && type_fits(d)).or_else(|| pick(&type_fits)).or_else(|| candidates.first().copied())
+    }
+
+    /// The shader node a material input reads, where it lives, and the prims that hold it
+    /// under the material (graphs and document-defined nodes, outermost first): through
+    /// `nodename` (a node, or the shader inside a document-defined node's graph),
+    /// `nodegraph`/`output` (the shader inside a graph) and `interfacename` (the enclosing
+    /// graph's input).
+    fn shader_of(&self, input: Node<'a, 'i>, place: Place<'a, 'i>, depth: usize) -> Option<Located<'a, 'i>> {
+        if depth > 16 {
+            return None;
+        }
+        match connection_of(input)? {
+            Connection::Node(name, _) => {
+                let node = match place.graph {
+                    Some(graph) => child_named(graph, name),
+                    None => self.top.get(name).copied(),
+                }?;
+                self.enter(node, place, place.instance.or(place.graph).into_iter().collect())
+            }
+            Connection::Graph(name, output) => {
+                let graph = self.top.get(name).copied().filter(|g| is_graph(*g))?;
+                let node = graph_output(graph, output)?;
+                self.enter(node, Place { graph: Some(graph), instance: None }, vec![graph])
+            }
+            Connection::Interface(name) => {
+                let source = match place.instance {
+                    Some(instance) => inputs(instance).find(|i| i.attribute("name") == Some(name)),
+                    None => inputs(place.graph?).find(|i| i.attribute("name") == Some(name)),
+                }?;
+                self.shader_of(source, Place::TOP, depth + 1)
+            }
+        }
+    }
+
+    /// `node` at `place` inside `holders` as a shader: itself, or for a node the document
+    /// defines, the shader its graph outputs.
+    fn enter(
+        &self,
+        node: Node<'a, 'i>,
+        place: Place<'a, 'i>,
+        mut holders: Vec<Node<'a, 'i>>,
+    ) -> Option<Located<'a, 'i>> {
+        match self.implementation(node) {
+            Some((_, graph)) => {
+                holders.push(node);
+                Some((graph_output(graph, None)?, Place { graph: Some(graph), instance: Some(node) }, holders))
+            }
+            None => Some((node, place, holders)),
+        }
     }
 
     /// Records, for every `nodename` connection, the output it reads on its producer.
@@ -155,27 +307,47 @@ impl<'a, 'i> Translator<'a, 'i> {
         }
     }
 
-    /// `/MaterialX/Materials/<name>` and the network it uses.
-    fn material(&mut self, out: &mut String, material: Node<'a, 'i>) {
-        let name = identifier(material.attribute("name").unwrap_or("material"));
+    /// `/MaterialX/Materials/<name>` and the network it uses, for material node `material`
+    /// living at `place` (or the document-defined material node `material` stands for).
+    fn material(&mut self, out: &mut String, name: &str, material: Node<'a, 'i>, place: Place<'a, 'i>) {
+        let (material, place) = match (place.graph, self.implementation(material)) {
+            (None, Some((_, graph))) => {
+                let output = graph.children().find(|o| {
+                    o.is_element() && o.tag_name().name() == "output" && o.attribute("type") == Some("material")
+                });
+                match output.and_then(|o| o.attribute("nodename")).and_then(|n| child_named(graph, n)) {
+                    Some(node) => (node, Place { graph: Some(graph), instance: Some(material) }),
+                    None => (material, place),
+                }
+            }
+            _ => (material, place),
+        };
+        let name = identifier(name);
         let path = format!("/MaterialX/Materials/{name}");
         let _ = writeln!(out, "        def Material \"{name}\"\n        {{");
         // The nodes and graphs the material's shaders reach, each copied once under it.
         let mut needed: Vec<Node> = Vec::new();
         let mut terminals = Vec::new();
         for input in inputs(material) {
-            let Some(shader_name) = input.attribute("nodename") else {
-                self.warn(
-                    input,
-                    format!("material input `{}` connects to no shader node", input.attribute("name").unwrap_or("")),
-                );
+            if connection_of(input).is_none() {
+                // `value=""` is MaterialX's way of saying "no shader".
+                if input.attribute("value") != Some("") {
+                    let input_name = input.attribute("name").unwrap_or("");
+                    self.warn(input, format!("material input `{input_name}` connects to no shader node"));
+                }
                 continue;
-            };
-            let Some(shader) = self.top.get(shader_name).copied() else {
-                self.warn(
-                    input,
-                    format!("material input names node `{shader_name}`, which the document does not define"),
-                );
+            }
+            let Some((shader, _, holders)) = self.shader_of(input, place, 0) else {
+                let message = match connection_of(input) {
+                    Some(Connection::Interface(name)) => {
+                        format!("material input reads the graph's input `{name}`, which connects to no shader")
+                    }
+                    _ => {
+                        let target = input.attribute("nodename").or(input.attribute("nodegraph")).unwrap_or("");
+                        format!("material input names node `{target}`, which the document does not define")
+                    }
+                };
+                self.warn(input, message);
                 continue;
             };
             let terminal = match input.attribute("type").or(shader.attribute("type")) {
@@ -183,11 +355,17 @@ impl<'a, 'i> Translator<'a, 'i> {
                 Some("volumeshader") => "volume",
                 _ => "surface",
             };
-            terminals.push((terminal, shader));
-            self.reach(shader, &mut needed);
+            // A shader inside a graph is written with its graph (a document-defined node as
+            // the graph of its definition, under the node's name).
+            let mut shader_path = path.clone();
+            for prim in holders.iter().chain([&shader]) {
+                let _ = write!(shader_path, "/{}", identifier(prim.attribute("name").unwrap_or("")));
+            }
+            terminals.push((terminal, shader, shader_path, holders.is_empty()));
+            self.reach(holders.first().copied().unwrap_or(shader), &mut needed);
         }
-        // The surface shader's values become the Material's interface, as usdMtlx does.
-        let surface = terminals.iter().find(|(t, _)| *t == "surface").map(|(_, s)| *s);
+        // A top-level surface shader's values become the Material's interface, as usdMtlx does.
+        let surface = terminals.iter().find(|(t, _, _, top)| *t == "surface" && *top).map(|(_, s, _, _)| *s);
         let mut promoted = HashSet::new();
         if let Some(shader) = surface {
             for input in inputs(shader) {
@@ -201,18 +379,20 @@ impl<'a, 'i> Translator<'a, 'i> {
                 }
             }
         }
-        for (terminal, shader) in &terminals {
-            let shader_name = identifier(shader.attribute("name").unwrap_or(""));
-            let _ = writeln!(
-                out,
-                "            token outputs:mtlx:{terminal}.connect = <{path}/{shader_name}.outputs:{}>",
-                shader_output(*shader)
-            );
+        for (terminal, shader, shader_path, _) in &terminals {
+            let output = shader_output(*shader);
+            let _ =
+                writeln!(out, "            token outputs:mtlx:{terminal}.connect = <{shader_path}.outputs:{output}>");
+        }
+        if !terminals.iter().any(|(t, ..)| *t == "surface") {
+            // A material without a surface shader still is one: it shades with the default
+            // substance, after a warning, when bound.
+            let _ = writeln!(out, "            token outputs:mtlx:surface");
         }
         for node in needed {
-            if node.tag_name().name() == "nodegraph" {
+            if is_graph(node) {
                 let graph_name = identifier(node.attribute("name").unwrap_or(""));
-                self.node_graph(out, node, &format!("{path}/{graph_name}"), 3);
+                self.node_graph(out, node, &format!("{path}/{graph_name}"), 3, Some(&path), None);
             } else {
                 self.node(out, node, &path, 3, &promoted);
             }
@@ -232,9 +412,7 @@ impl<'a, 'i> Translator<'a, 'i> {
                 continue;
             }
             stack.push((n, true));
-            if n.tag_name().name() == "nodegraph" {
-                continue;
-            }
+            // A node's inputs, or a graph's interface inputs, read top-level elements.
             for input in inputs(n) {
                 let target = input.attribute("nodename").or(input.attribute("nodegraph"));
                 let Some(target) = target else { continue };
@@ -246,14 +424,56 @@ impl<'a, 'i> Translator<'a, 'i> {
         }
     }
 
-    /// A `NodeGraph` prim at `path` for `<nodegraph>` `graph`.
-    fn node_graph(&mut self, out: &mut String, graph: Node<'a, 'i>, path: &str, depth: usize) {
+    /// A `NodeGraph` prim at `path` for `<nodegraph>` `graph`. Its interface inputs connect
+    /// to prims under `scope` (the prim holding the graph; `None`: values only); for the graph
+    /// of a document-defined node, the interface is the definition's inputs, set by `instance`.
+    fn node_graph(
+        &mut self,
+        out: &mut String,
+        graph: Node<'a, 'i>,
+        path: &str,
+        depth: usize,
+        scope: Option<&str>,
+        instance: Option<Node<'a, 'i>>,
+    ) {
         let pad = "    ".repeat(depth);
-        let name = identifier(graph.attribute("name").unwrap_or("graph"));
+        let name = path.rsplit('/').next().unwrap_or("graph");
         let _ = writeln!(out, "{pad}def NodeGraph \"{name}\"\n{pad}{{");
-        for input in inputs(graph) {
-            let Some(input_name) = input.attribute("name") else { continue };
-            if let Some(decl) = self.value_decl(input, &format!("inputs:{}", identifier(input_name))) {
+        let interface: Vec<Node> = match instance.and_then(|i| self.implementation(i)) {
+            Some((def, _)) => inputs(def).collect(),
+            None => inputs(graph).collect(),
+        };
+        let mut geometry = BTreeSet::new();
+        for declared in interface {
+            let Some(input_name) = declared.attribute("name") else { continue };
+            let attr = format!("inputs:{}", identifier(input_name));
+            let input =
+                instance.and_then(|i| inputs(i).find(|x| x.attribute("name") == Some(input_name))).unwrap_or(declared);
+            let usd_ty = usd_type(input.attribute("type").unwrap_or("float")).unwrap_or("token");
+            if let Some(line) = scope.and_then(|scope| self.connection_line(input, &attr, usd_ty, scope)) {
+                let _ = writeln!(out, "{pad}    {line}");
+                continue;
+            }
+            let property = input.attribute("defaultgeomprop").or(input.attribute("geomprop"));
+            if let (None, Some(property)) = (input.attribute("value"), property) {
+                // The geometric property is read by a node in the graph (usdMtlx leaves the
+                // input unset and lets the renderer's default apply).
+                match geomprop_node(property) {
+                    Some(node) => {
+                        let _ = writeln!(
+                            out,
+                            "{pad}    {usd_ty} {attr}.connect = <{path}/strata_geomprop_{property}.outputs:out>"
+                        );
+                        geometry.insert((property, node));
+                    }
+                    None => self.warn(
+                        input,
+                        format!("geometric property `{property}` is not read; `{input_name}` keeps its default"),
+                    ),
+                }
+                continue;
+            }
+            if let Some(decl) = self.value_decl(input, &attr) {
                 let _ = writeln!(out, "{pad}    {decl}");
             }
         }
@@ -278,9 +498,19 @@ impl<'a, 'i> Translator<'a, 'i> {
                 }
             }
         }
+        for (property, (id, space)) in geometry {
+            let _ = writeln!(out, "{pad}    def Shader \"strata_geomprop_{property}\"\n{pad}    {{");
+            let _ = writeln!(out, "{pad}        uniform token info:id = \"{id}\"");
+            if let Some(space) = space {
+                let _ = writeln!(out, "{pad}        string inputs:space = \"{space}\"");
+            }
+            let ty = if id == "ND_texcoord_vector2" { "float2" } else { "float3" };
+            let _ = writeln!(out, "{pad}        {ty} outputs:out\n{pad}    }}\n");
+        }
         for node in graph.children().filter(|c| c.is_element()) {
             let tag = node.tag_name().name();
-            if NON_NODES.contains(&tag) {
+            // Material nodes in a graph become Materials of their own (`translate`).
+            if NON_NODES.contains(&tag) || node.attribute("type") == Some("material") {
                 continue;
             }
             if tag == "nodegraph" {
@@ -296,6 +526,30 @@ impl<'a, 'i> Translator<'a, 'i> {
         let _ = writeln!(out, "{pad}}}\n");
     }
 
+    /// `type attr.connect = <...>` for a connected input of a node or graph under `scope`; a
+    /// top-level node's `interfacename` reads the document's top-level `<input>` (its value).
+    fn connection_line(&mut self, input: Node<'a, 'i>, attr: &str, usd_ty: &str, scope: &str) -> Option<String> {
+        Some(match connection_of(input)? {
+            Connection::Node(target, output) => {
+                format!("{usd_ty} {attr}.connect = <{scope}/{}.outputs:{}>", identifier(target), identifier(output))
+            }
+            Connection::Graph(graph, output) => {
+                let output = output.map(str::to_string).or_else(|| self.first_output(graph));
+                let output = output.unwrap_or_else(|| "out".into());
+                format!("{usd_ty} {attr}.connect = <{scope}/{}.outputs:{}>", identifier(graph), identifier(&output))
+            }
+            Connection::Interface(interface) => {
+                let owner = input.parent_element();
+                let at_top = owner.and_then(|o| o.parent_element()).is_some_and(|p| p.tag_name().name() == "materialx");
+                let document_input = self.top.get(interface).copied().filter(|n| n.tag_name().name() == "input");
+                match document_input {
+                    Some(source) if at_top && !owner.is_some_and(is_graph) => return self.value_decl(source, attr),
+                    _ => format!("{usd_ty} {attr}.connect = <{scope}.inputs:{}>", identifier(interface)),
+                }
+            }
+        })
+    }
+
     /// A `Shader` prim for node `node`; connections resolve against `scope`, the prim it is
     /// written under (its graph, or the material its top-level network was copied into). Inputs in
     /// `promoted` connect to the Material's interface input of the same name.
@@ -307,8 +561,13 @@ impl<'a, 'i> Translator<'a, 'i> {
         depth: usize,
         promoted: &HashSet<roxmltree::NodeId>,
     ) {
-        let pad = "    ".repeat(depth);
         let name = identifier(node.attribute("name").unwrap_or("node"));
+        if let Some((_, graph)) = self.implementation(node) {
+            // A node the document defines by a graph: the graph, under the node's name.
+            self.node_graph(out, graph, &format!("{scope}/{name}"), depth, Some(scope), Some(node));
+            return;
+        }
+        let pad = "    ".repeat(depth);
         let id = nodedef_id(node);
         let _ = writeln!(out, "{pad}def Shader \"{name}\"\n{pad}{{\n{pad}    uniform token info:id = \"{id}\"");
         for input in inputs(node) {
@@ -326,29 +585,11 @@ impl<'a, 'i> Translator<'a, 'i> {
                 let _ = writeln!(out, "{pad}    {usd_ty} {attr}.connect = <{scope}.{attr}>");
                 continue;
             }
-            match connection_of(input) {
-                Some(Connection::Node(target, output)) => {
-                    let _ = writeln!(
-                        out,
-                        "{pad}    {usd_ty} {attr}.connect = <{scope}/{}.outputs:{}>",
-                        identifier(target),
-                        identifier(output)
-                    );
+            match self.connection_line(input, &attr, usd_ty, scope) {
+                Some(line) => {
+                    let _ = writeln!(out, "{pad}    {line}");
                 }
-                Some(Connection::Graph(graph, output)) => {
-                    let output = output.map(str::to_string).or_else(|| self.first_output(graph));
-                    let output = output.unwrap_or_else(|| "out".into());
-                    let _ = writeln!(
-                        out,
-                        "{pad}    {usd_ty} {attr}.connect = <{scope}/{}.outputs:{}>",
-                        identifier(graph),
-                        identifier(&output)
-                    );
-                }
-                Some(Connection::Interface(interface)) => {
-                    let _ =
-                        writeln!(out, "{pad}    {usd_ty} {attr}.connect = <{scope}.inputs:{}>", identifier(interface));
-                }
+                None if connection_of(input).is_some() => {}
                 None => {
                     if let Some(decl) = self.value_decl(input, &attr) {
                         let _ = writeln!(out, "{pad}    {decl}");
@@ -483,6 +724,10 @@ pub fn nodedef_id(node: Node) -> String {
         }
         _ if matches!(ty, "BSDF" | "EDF" | "VDF") => format!("ND_{category}"),
         "surface" | "surface_unlit" if ty == "surfaceshader" => format!("ND_{category}"),
+        // pbrlib's utility nodes have one definition each, named by category alone.
+        "artistic_ior" | "roughness_anisotropy" | "roughness_dual" | "glossiness_anisotropy" | "blackbody" => {
+            format!("ND_{category}")
+        }
         "convert" => format!("ND_convert_{in_ty}_{ty}"),
         // 1.39 names normal maps by the type of `scale`.
         "normalmap" => format!("ND_normalmap_{}", input_type("scale").unwrap_or("float")),
@@ -684,5 +929,50 @@ mod tests {
         assert!(messages.iter().any(|m| m.contains("`lots` is not a finite number")), "{messages:?}");
         assert!(messages.iter().any(|m| m.contains("`nowhere`")), "{messages:?}");
         assert!(doc[t.warnings[0].range.clone()].starts_with("<input"), "{:?}", t.warnings);
+    }
+
+    #[test]
+    fn document_defined_nodes_are_their_definition_s_graph_per_version() {
+        // MaterialX's own test document: two versions of `myimage`, each a graph reading a
+        // different default file; an instance takes the version it names, else the default.
+        let doc = include_str!("../../tests/fixtures/mtlx/suite/TestSuite/stdlib/version/multiple_version_test.mtlx");
+        let t = translate(doc).expect("translates");
+        assert!(t.warnings.is_empty(), "{:?}", t.warnings);
+        let wrap = |instance: &str| {
+            let extra = format!(
+                "<uniform_edf name=\"e\" type=\"EDF\"><input name=\"color\" type=\"color3\" nodename=\"{instance}\" /></uniform_edf>\
+                 <surface name=\"s\" type=\"surfaceshader\"><input name=\"edf\" type=\"EDF\" nodename=\"e\" /></surface>\
+                 <surfacematerial name=\"m\" type=\"material\"><input name=\"surfaceshader\" type=\"surfaceshader\" nodename=\"s\" /></surfacematerial></materialx>"
+            );
+            translate(&doc.replace("</materialx>", &extra)).expect("translates").usda
+        };
+        for (instance, file) in [
+            ("image_version1_instance", "grid.png"),
+            ("image_version2_instance", "cloth.png"),
+            ("image_version2_implicit_instance", "cloth.png"),
+        ] {
+            let usda = wrap(instance);
+            let graph = usda.find(&format!("def NodeGraph \"{instance}\"")).unwrap_or_else(|| panic!("{usda}"));
+            let graph = &usda[graph..];
+            let inputs = &graph[..graph.find("def Shader").unwrap()];
+            assert!(inputs.contains(&format!("asset inputs:file = @resources/Images/{file}@")), "{instance}: {inputs}");
+            assert!(graph.contains(".inputs:file>"), "the image reads the graph's input: {graph}");
+        }
+        // No NodeGraph is written for the definitions themselves.
+        assert!(!t.usda.contains("NG_myimage"), "{}", t.usda);
+    }
+
+    #[test]
+    fn graph_inputs_default_to_their_geometric_property() {
+        let doc = include_str!("../../tests/fixtures/mtlx/suite/TestSuite/stdlib/defaultgeomprop/defaultgeomprop.mtlx");
+        let t = translate(doc).expect("translates");
+        assert!(t.warnings.is_empty(), "{:?}", t.warnings);
+        let graph = "/MaterialX/Materials/defaultgeomprop/checkerboard1";
+        assert!(
+            t.usda.contains(&format!("float2 inputs:texcoord.connect = <{graph}/strata_geomprop_UV0.outputs:out>")),
+            "{}",
+            t.usda
+        );
+        assert!(t.usda.contains("uniform token info:id = \"ND_texcoord_vector2\""), "{}", t.usda);
     }
 }
