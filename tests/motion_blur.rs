@@ -171,7 +171,6 @@ fn a_sliding_point_instance_blurs_into_the_analytic_coverage_profile() {
     assert_follows_the_profile(&render(&path, SPP), SPP, "point instance, velocities");
 }
 
-
 /// The alpha channel of `image` (rendered at `spp`) against [`coverage`] of the sliding
 /// sphere over a whole-frame shutter, pixel by pixel within 4σ of its sample count; it also
 /// tells the shutter's length and the time apart.
