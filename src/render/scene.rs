@@ -290,21 +290,14 @@ impl Scene {
         let parts = Parts::gather(stage, material_of_prim, materials, options, diags)?;
         let Parts { geometry, prim_material, lights, camera, camera_path, default_lit, displaced, bounds, motion } =
             parts;
-        let placement = Placement {
-            instances: geometry.instances.clone(),
-            placers: geometry.instance_placers.clone(),
-            prototype_bounds: geometry.prototypes.iter().map(|p| p.bounds).collect(),
-            world_bounds: geometry.world_bounds(),
-            world_animated: geometry.prims.iter().any(|p| {
-                stage.find(&p.path).is_some_and(|id| {
-                    geometry.baked.get(id.0 as usize).copied().unwrap_or(false) && time_varying(stage, id)
-                })
-            }),
-            baked: geometry.baked.clone(),
-            singular: motion.singular,
-            camera: camera_path.as_deref().and_then(|p| stage.find(p)),
-            options: options.clone(),
-        };
+        // What a frame change needs to move instances; the build's vectors move in below.
+        let prototype_bounds = geometry.prototypes.iter().map(|p| p.bounds).collect();
+        let world_bounds = geometry.world_bounds();
+        let world_animated = geometry.prims.iter().any(|p| {
+            stage.find(&p.path).is_some_and(|id| {
+                geometry.baked.get(id.0 as usize).copied().unwrap_or(false) && time_varying(stage, id)
+            })
+        });
         let accel = Accel::with_moving_instances(
             Blas::new(geometry.triangles, geometry.shapes),
             geometry.prototypes.into_iter().map(|p| Blas::deforming(p.triangles, p.shapes, p.deformation)).collect(),
@@ -312,6 +305,17 @@ impl Scene {
             geometry.instance_prims,
             motion.instances,
         );
+        let placement = Placement {
+            instances: geometry.instances,
+            placers: geometry.instance_placers,
+            prototype_bounds,
+            world_bounds,
+            world_animated,
+            baked: geometry.baked,
+            singular: motion.singular,
+            camera: camera_path.as_deref().and_then(|p| stage.find(p)),
+            options: options.clone(),
+        };
         let scene_radius = (bounds.1 - bounds.0).length() / 2.0;
         let light_power: f32 = lights.iter().filter(|l| !l.is_infinite()).map(|l| l.power(scene_radius)).sum();
         let emitters = Emitters::build(&accel, geometry.prims.len(), &prim_material, materials, light_power);
