@@ -1076,3 +1076,99 @@ fn the_public_suite_subset_shades_with_the_values_its_documents_give() {
     let got = emitted_at(&code.unwrap_or_else(|| panic!("{rendered}")), 0.5, 0.5);
     assert!(close(got, [0.829147, 0.4841412, 0.4841412]), "{got:?}");
 }
+
+/// Asserts two closure values have the same kinds, layering bits and weights, and parameters
+/// within a relative `tolerance` (for values computed through divisions by small numbers).
+fn assert_terms_within(got: &ClosureSum, want: &ClosureSum, tolerance: f32) {
+    for (k, (g, w)) in got.terms.iter().zip(&want.terms).enumerate() {
+        let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tolerance * y.abs().max(1.0));
+        assert!(
+            g.kind == w.kind && g.above == w.above && close(&g.weight, &w.weight) && close(&g.params, &w.params),
+            "term {k}: got {g:?}\nwant {w:?}"
+        );
+    }
+}
+
+#[test]
+fn artistic_ior_and_the_roughness_nodes_drive_a_conductor_as_the_specification_defines() {
+    // A conductor whose ior and extinction come from artistic_ior and whose GGX α comes from a
+    // roughness node, as pbrlib graphs (and MaterialX's conductor test) wire it.
+    let shader = |name: &str, id: &str, inputs: &str, outputs: &str| {
+        format!("    def Shader \"{name}\" {{\n        uniform token info:id = \"{id}\"\n{inputs}{outputs}    }}\n")
+    };
+    let network = |roughness_node: &str, roughness_inputs: &str| {
+        [
+            shader(
+                "A",
+                "ND_artistic_ior",
+                "        color3f inputs:reflectivity = (0.9, 0.5, 0.2)\n        color3f inputs:edge_color = (0.3, 0.6, 1)\n",
+                "        color3f outputs:ior\n        color3f outputs:extinction\n",
+            ),
+            shader("R", roughness_node, roughness_inputs, "        float2 outputs:out\n"),
+            shader(
+                "C",
+                "ND_conductor_bsdf",
+                "        color3f inputs:ior.connect = </M/A.outputs:ior>\n        \
+                 color3f inputs:extinction.connect = </M/A.outputs:extinction>\n        \
+                 float2 inputs:roughness.connect = </M/R.outputs:out>\n",
+                "        token outputs:out\n",
+            ),
+            shader(
+                "S",
+                "ND_surface",
+                "        token inputs:bsdf.connect = </M/C.outputs:out>\n",
+                "        token outputs:surface\n",
+            ),
+        ]
+        .concat()
+    };
+    // Gulbrandsen's mapping by hand: r = 0.2, g = 1 gives n = n_min = 0.8 / 1.2 = 2/3 and
+    // k² = ((5/3)² 0.2 − (1/3)²) / 0.8 = 5/9; r = 0.5, g = 0.6: n = 0.4 (1 + √½) / (1 − √½)
+    // + 0.6 / 3 = 2.531371; r = 0.9, g = 0.3: n = 0.7 · 37.9737 + 0.3 · 0.0526 = 26.597356.
+    let n = [26.597356f32, 2.531371, 0.666667];
+    let k = [17.386207f32, 2.789334, 0.745356];
+    // The property the mapping is built on: the normal-incidence reflectance of n + ik is r.
+    for (c, r) in [0.9f32, 0.5, 0.2].into_iter().enumerate() {
+        let f0 = ((n[c] - 1.0).powi(2) + k[c] * k[c]) / ((n[c] + 1.0).powi(2) + k[c] * k[c]);
+        assert!((f0 - r).abs() < 1e-5, "channel {c}: F0 {f0}, reflectivity {r}");
+    }
+    // Every roughness node below makes α = 0.09 (perceptual 0.3) or an anisotropic pair whose
+    // geometric mean is 0.09: roughness_anisotropy(0.3, 0.5) is (0.09 / √0.5, 0.09 √0.5).
+    let want = by_hand(&format!(
+        "bsdf = conductor_bsdf(color({}, {}, {}), color({}, {}, {}), 0.3);",
+        n[0], n[1], n[2], k[0], k[1], k[2]
+    ));
+    let cases = [
+        ("ND_roughness_anisotropy", "        float inputs:roughness = 0.3\n", false),
+        (
+            "ND_roughness_anisotropy",
+            "        float inputs:roughness = 0.3\n        float inputs:anisotropy = 0.5\n",
+            true,
+        ),
+        ("ND_glossiness_anisotropy", "        float inputs:glossiness = 0.7\n", false),
+        ("ND_roughness_dual", "        float2 inputs:roughness = (0.3, -1)\n", false),
+    ];
+    for (node, inputs, anisotropic) in cases {
+        let text = format!(
+            "def Material \"M\" {{\n    token outputs:mtlx:surface.connect = </M/S.outputs:surface>\n{}}}",
+            network(node, inputs)
+        );
+        let (code, rendered) = compiled(&text);
+        let code = code.unwrap_or_else(|| panic!("{node}: {rendered}"));
+        assert_eq!(
+            rendered.contains("an anisotropic α is read as its geometric mean"),
+            anisotropic,
+            "{node}: {rendered}"
+        );
+        assert_eq!(rendered.matches("warning").count(), anisotropic as usize, "{node}: {rendered}");
+        assert_terms_within(&sum_at(&code), &want, 1e-5);
+    }
+    // MaterialX's conductor test: reflectivity and edge colour white (r clamped to 0.99, so
+    // n = 0.01 / 1.99, k² = (n + 1)² 0.99 − (n − 1)²) / 0.01), roughness 0.2.
+    let (code, rendered) = suite_target("TestSuite/pbrlib/bsdf/conductor.mtlx", &["shade", "test_conductor", "out"]);
+    let code = code.unwrap_or_else(|| panic!("{rendered}"));
+    let n = 0.01f32 / 1.99;
+    let k = (((n + 1.0).powi(2) * 0.99 - (n - 1.0).powi(2)) / 0.01).sqrt();
+    let want = by_hand(&format!("bsdf = conductor_bsdf(color({n}), color({k}), 0.2);"));
+    assert_terms_within(&sum_at(&code), &want, 1e-4);
+}

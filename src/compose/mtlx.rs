@@ -325,15 +325,24 @@ const UNREAD_NODE_INPUTS: &[(&str, &str, &str)] = &[
     ("*", "retroreflective", "lobes are not retroreflective"),
     ("ND_conductor_bsdf", "thinfilm_thickness", "no thin-film iridescence on conductors"),
     ("ND_generalized_schlick_bsdf", "thinfilm_thickness", "no thin-film iridescence on generalized_schlick_bsdf"),
-    ("*", "roughness", "lobes are isotropic: an anisotropic α is read as its geometric mean"),
+    ("*", "roughness", ANISOTROPIC_ALPHA),
     ("ND_generalized_schlick_bsdf", "scatter_mode", "generalized_schlick_bsdf reflects only"),
     ("ND_sheen_bsdf", "mode", "sheen is Conty and Kulla's Charlie sheen"),
+    // The roughness nodes make the α pair the lobes read as its geometric mean.
+    ("ND_roughness_anisotropy", "anisotropy", ANISOTROPIC_ALPHA),
+    ("ND_glossiness_anisotropy", "anisotropy", ANISOTROPIC_ALPHA),
 ];
 
-/// Reports what a pbrlib BSDF node `id` does not honour of input `input` set to `setting`:
+/// What strata does with an anisotropic GGX α (a pair that differs per direction).
+const ANISOTROPIC_ALPHA: &str = "lobes are isotropic: an anisotropic α is read as its geometric mean";
+
+/// pbrlib's nodes that make a BSDF's roughness, whose inputs [`report_node_input`] also reads.
+const ROUGHNESS_NODES: &[&str] = &["ND_roughness_anisotropy", "ND_glossiness_anisotropy"];
+
+/// Reports what a pbrlib BSDF (or roughness) node `id` does not honour of input `input` set to `setting`:
 /// each (input, what) kind once per run.
 pub fn report_node_input(id: &str, input: &str, setting: Setting, at: Span, diags: &mut Diagnostics) {
-    if !PBRLIB.iter().any(|(nd, _)| *nd == id && nd.ends_with("_bsdf")) {
+    if !PBRLIB.iter().any(|(nd, _)| *nd == id && nd.ends_with("_bsdf")) && !ROUGHNESS_NODES.contains(&id) {
         return;
     }
     let Some((_, _, what)) =

@@ -435,6 +435,49 @@ shader mx_normalmap_vector2(color in_ = color(0.5, 0.5, 1.0), color scale = colo
     out = mx_normalmap(in_, scale.r, scale.g, normal_, tangent);
 }
 
+// ---- pbrlib: utility nodes (MaterialX's physically based shading nodes specification) -------
+
+// artistic_ior (Gulbrandsen 2014, "Artist Friendly Metallic Fresnel"): the complex IOR n + ik
+// whose normal-incidence reflectance ((n − 1)² + k²) / ((n + 1)² + k²) is `reflectivity` r
+// (clamped to [0, 0.99]); `edge_color` g moves n from n_max = (1 + √r) / (1 − √r) (g = 0) to
+// n_min = (1 − r) / (1 + r) (g = 1), and k² = ((n + 1)² r − (n − 1)²) / (1 − r) (0 when negative).
+float mx_artistic_n(float reflectivity, float edge) {
+    float r = clamp(reflectivity, 0.0, 0.99);
+    float n_min = (1.0 - r) / (1.0 + r);
+    float n_max = (1.0 + sqrt(r)) / (1.0 - sqrt(r));
+    return n_max * (1.0 - edge) + n_min * edge;
+}
+float mx_artistic_k(float reflectivity, float n) {
+    float r = clamp(reflectivity, 0.0, 0.99);
+    return sqrt(max(((n + 1.0) * (n + 1.0) * r - (n - 1.0) * (n - 1.0)) / (1.0 - r), 0.0));
+}
+shader mx_artistic_ior_color3(color reflectivity = color(0.944, 0.776, 0.373), color edge_color = color(0.998, 0.981, 0.751),
+                              output color ior, output color extinction) {
+    ior = color(mx_artistic_n(reflectivity.r, edge_color.r), mx_artistic_n(reflectivity.g, edge_color.g),
+                mx_artistic_n(reflectivity.b, edge_color.b));
+    extinction = color(mx_artistic_k(reflectivity.r, ior.r), mx_artistic_k(reflectivity.g, ior.g),
+                       mx_artistic_k(reflectivity.b, ior.b));
+}
+// roughness_anisotropy: GGX α = roughness² (clamped to [1e-8, 1]) along tangent and bitangent;
+// an anisotropy a > 0 stretches it to (min(α / s, 1), α s), s = √(1 − min(a, 0.98)).
+color mx_anisotropic_alpha(float roughness, float anisotropy) {
+    float alpha = clamp(roughness * roughness, 1e-8, 1.0);
+    float s = sqrt(1.0 - clamp(anisotropy, 0.0, 0.98));
+    return anisotropy > 0.0 ? color(min(alpha / s, 1.0), alpha * s, 0.0) : color(alpha, alpha, 0.0);
+}
+shader mx_roughness_anisotropy_color3(float roughness = 0.0, float anisotropy = 0.0, output color out) {
+    out = mx_anisotropic_alpha(roughness, anisotropy);
+}
+// glossiness_anisotropy: roughness_anisotropy of roughness 1 − glossiness.
+shader mx_glossiness_anisotropy_color3(float glossiness = 1.0, float anisotropy = 0.0, output color out) {
+    out = mx_anisotropic_alpha(1.0 - glossiness, anisotropy);
+}
+// roughness_dual: α = roughness² per direction (clamped to [1e-8, 1]); a negative y is x.
+shader mx_roughness_dual_color3(color roughness = color(0.0), output color out) {
+    float y = roughness.g < 0.0 ? roughness.r : roughness.g;
+    out = color(clamp(roughness.r * roughness.r, 1e-8, 1.0), clamp(y * y, 1e-8, 1.0), 0.0);
+}
+
 // ---- pbrlib: BSDF and EDF nodes on the closure built-ins ------------------------------------
 // A BSDF node is its lobe times `weight`; `layer`/`mix`/`add`/`multiply` are the closure
 // algebra (MaterialX's `mix(fg, bg, m)` is `bg·(1 − m) + fg·m`). MaterialX's microfacet
