@@ -1172,3 +1172,21 @@ fn artistic_ior_and_the_roughness_nodes_drive_a_conductor_as_the_specification_d
     let want = by_hand(&format!("bsdf = conductor_bsdf(color({n}), color({k}), 0.2);"));
     assert_terms_within(&sum_at(&code), &want, 1e-4);
 }
+
+#[test]
+fn a_library_graph_referenced_from_usd_keeps_its_interface_connections() {
+    // NG_tint multiplies its input `base` (connected to the top-level constant (0.2, 0.4, 0.6))
+    // by `gain` 0.5; a USD network references the graph straight from /MaterialX/NodeGraphs and
+    // overrides nothing: base_color (0.1, 0.2, 0.3), and standard_surface's diffuse is 0.8 of it.
+    let text = "def Material \"M\" {\n    token outputs:mtlx:surface.connect = </M/S.outputs:surface>\n    \
+                def Shader \"S\" {\n        uniform token info:id = \"ND_standard_surface_surfaceshader\"\n        \
+                color3f inputs:base_color.connect = </M/G.outputs:out>\n        token outputs:surface\n    }\n    \
+                def NodeGraph \"G\" (prepend references = @library_graph.mtlx@</MaterialX/NodeGraphs/NG_tint>) {}\n}";
+    let (code, rendered) = compiled(text);
+    let code = code.unwrap_or_else(|| panic!("{rendered}"));
+    assert!(rendered.is_empty(), "{rendered}");
+    let base =
+        lobes_at(&code, 0.5, 0.5).into_iter().find(|t| t.kind == ClosureKind::OrenNayar as u32).expect("diffuse");
+    let want = [0.08f32, 0.16, 0.24];
+    assert!((0..3).all(|k| (base.params[k] - want[k]).abs() < 1e-6), "{:?}, want {want:?}", &base.params[..3]);
+}

@@ -11,7 +11,8 @@
 //!   and node graphs a material uses are copied under it, so a reference to
 //!   `</MaterialX/Materials/M>` carries its whole network;
 //! - every `<nodegraph>` becomes `/MaterialX/NodeGraphs/<name>`, a `NodeGraph` with its
-//!   interface inputs and outputs;
+//!   interface inputs and outputs (and, beyond usdMtlx, copies of the top-level nodes its
+//!   interface inputs read, so a reference to the graph keeps those connections);
 //! - `nodename`/`output`, `nodegraph`/`output` and `interfacename` become `.connect`s;
 //!   `colorspace` (inherited from the enclosing elements) becomes the `colorSpace` metadata of
 //!   colour and filename inputs; `fileprefix` is prefixed to filename values; inputs bound to a
@@ -138,6 +139,9 @@ pub fn translate(xml: &str) -> Result<Translation, Problem> {
             t.warn(child, format!("`<{tag}>` has no `name`; it is ignored"));
         }
     }
+    // A library graph and the materials using it reach the same elements: report each once.
+    let mut reported = HashSet::new();
+    t.warnings.retain(|w| reported.insert((w.range.start, w.message.clone())));
     Ok(Translation { usda: out, warnings: t.warnings })
 }
 
@@ -425,7 +429,8 @@ impl<'a, 'i> Translator<'a, 'i> {
     }
 
     /// A `NodeGraph` prim at `path` for `<nodegraph>` `graph`. Its interface inputs connect
-    /// to prims under `scope` (the prim holding the graph; `None`: values only); for the graph
+    /// to prims under `scope` (the prim holding the graph; `None`, a library graph: to the
+    /// top-level elements it reads, copied inside it); for the graph
     /// of a document-defined node, the interface is the definition's inputs, set by `instance`.
     fn node_graph(
         &mut self,
@@ -439,6 +444,30 @@ impl<'a, 'i> Translator<'a, 'i> {
         let pad = "    ".repeat(depth);
         let name = path.rsplit('/').next().unwrap_or("graph");
         let _ = writeln!(out, "{pad}def NodeGraph \"{name}\"\n{pad}{{");
+        // A library graph (`/MaterialX/NodeGraphs/<name>`, which USD may reference straight)
+        // carries the top-level nodes and graphs its interface reads inside it, so that its
+        // interface connections travel with a reference to it (usdMtlx drops them).
+        let mut carried = Vec::new();
+        let scope = match (scope, instance) {
+            (None, None) => {
+                self.reach(graph, &mut carried);
+                carried.retain(|n| n.id() != graph.id());
+                let (clashes, kept): (Vec<Node>, Vec<Node>) = carried
+                    .into_iter()
+                    .partition(|n| n.attribute("name").and_then(|m| child_named(graph, m)).is_some());
+                carried = kept;
+                for clash in clashes {
+                    let clash_name = clash.attribute("name").unwrap_or("");
+                    let message = format!(
+                        "graph `{name}` reads top-level `{clash_name}` and has a node of that name; \
+                         /MaterialX/NodeGraphs/{name} reads its own node"
+                    );
+                    self.warn(clash, message);
+                }
+                Some(path)
+            }
+            _ => scope,
+        };
         let interface: Vec<Node> = match instance.and_then(|i| self.implementation(i)) {
             Some((def, _)) => inputs(def).collect(),
             None => inputs(graph).collect(),
@@ -522,6 +551,14 @@ impl<'a, 'i> Translator<'a, 'i> {
                 continue;
             }
             self.node(out, node, path, depth + 1, &HashSet::new());
+        }
+        for node in carried {
+            if is_graph(node) {
+                let graph_name = identifier(node.attribute("name").unwrap_or(""));
+                self.node_graph(out, node, &format!("{path}/{graph_name}"), depth + 1, Some(path), None);
+            } else {
+                self.node(out, node, path, depth + 1, &HashSet::new());
+            }
         }
         let _ = writeln!(out, "{pad}}}\n");
     }
@@ -974,5 +1011,33 @@ mod tests {
             t.usda
         );
         assert!(t.usda.contains("uniform token info:id = \"ND_texcoord_vector2\""), "{}", t.usda);
+    }
+
+    #[test]
+    fn a_library_graph_carries_the_top_level_nodes_its_interface_reads() {
+        let doc = r#"<materialx>
+  <constant name="c" type="color3"><input name="value" type="color3" value="0.2, 0.4, 0.6" /></constant>
+  <nodegraph name="NG_inner"><input name="x" type="color3" nodename="c" />
+    <output name="out" type="color3" interfacename="x" /></nodegraph>
+  <nodegraph name="NG">
+    <input name="base" type="color3" nodename="c" />
+    <input name="other" type="color3" nodegraph="NG_inner" output="out" />
+    <multiply name="m" type="color3"><input name="in1" type="color3" interfacename="base" /></multiply>
+    <output name="out" type="color3" nodename="m" />
+  </nodegraph>
+</materialx>"#;
+        let t = translate(doc).unwrap();
+        assert!(t.warnings.is_empty(), "{:?}", t.warnings);
+        for line in [
+            "color3f inputs:base.connect = </MaterialX/NodeGraphs/NG/c.outputs:out>",
+            "color3f inputs:other.connect = </MaterialX/NodeGraphs/NG/NG_inner.outputs:out>",
+            "color3f inputs:x.connect = </MaterialX/NodeGraphs/NG/c.outputs:out>",
+            "color3f inputs:x.connect = </MaterialX/NodeGraphs/NG_inner/c.outputs:out>",
+        ] {
+            assert!(t.usda.contains(line), "missing `{line}` in\n{}", t.usda);
+        }
+        // The constant is written once inside each library graph that reads it (NG's copy of
+        // NG_inner reads NG's).
+        assert_eq!(t.usda.matches("def Shader \"c\"").count(), 2, "{}", t.usda);
     }
 }
