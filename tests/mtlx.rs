@@ -1190,3 +1190,115 @@ fn a_library_graph_referenced_from_usd_keeps_its_interface_connections() {
     let want = [0.08f32, 0.16, 0.24];
     assert!((0..3).all(|k| (base.params[k] - want[k]).abs() < 1e-6), "{:?}, want {want:?}", &base.params[..3]);
 }
+
+/// The directional albedo per channel of a closure value for outgoing `wo` at cosine `mu`, by
+/// BSDF sampling in layering `mode`: (reflected, transmitted).
+fn albedo_split(sum: &ClosureSum, mu: f32, n: usize, mode: LayeringMode) -> (glam::Vec3, glam::Vec3) {
+    let b = ClosureBsdf::from_sum(sum, mode);
+    let wo = glam::Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
+    let mut rng = Rng::new(41, (mu * 1000.0) as u64, 0);
+    let (mut up, mut down) = (glam::DVec3::ZERO, glam::DVec3::ZERO);
+    for _ in 0..n {
+        let uc = rng.uniform();
+        if let Some(s) = b.sample(wo, uc, rng.uniform2()) {
+            let w = (s.f * s.wi.z.abs() / s.pdf).as_dvec3();
+            if s.wi.z > 0.0 { up += w } else { down += w }
+        }
+    }
+    ((up / n as f64).as_vec3(), (down / n as f64).as_vec3())
+}
+
+#[test]
+fn subsurface_is_a_reported_lambertian_transmitter_that_conserves_energy() {
+    // MaterialX's subsurface_bsdf as the diffuse transmission the issue allows: its closed form
+    // is the Lambertian transmitter, f = colour / π on the far side and 0 on the near side, so
+    // its directional albedo is its colour at every angle, all of it transmitted.
+    let network = |colour: &str, weight: f32, coated: bool| {
+        let shader = |name: &str, id: &str, inputs: String, output: &str| {
+            format!(
+                "    def Shader \"{name}\" {{\n        uniform token info:id = \"{id}\"\n{inputs}        token outputs:{output}\n    }}\n"
+            )
+        };
+        let sss = shader(
+            "B",
+            "ND_subsurface_bsdf",
+            format!(
+                "        color3f inputs:color = {colour}\n        float inputs:weight = {weight}\n        color3f inputs:radius = (1, 0.5, 0.25)\n"
+            ),
+            "out",
+        );
+        let top = if coated {
+            shader("D", "ND_dielectric_bsdf", "        float2 inputs:roughness = (0.09, 0.09)\n".into(), "out")
+                + &shader(
+                    "L",
+                    "ND_layer_bsdf",
+                    "        token inputs:top.connect = </M/D.outputs:out>\n        token inputs:base.connect = </M/B.outputs:out>\n".into(),
+                    "out",
+                )
+        } else {
+            String::new()
+        };
+        let bsdf = if coated { "L" } else { "B" };
+        let surface = shader(
+            "S",
+            "ND_surface",
+            format!("        token inputs:bsdf.connect = </M/{bsdf}.outputs:out>\n"),
+            "surface",
+        );
+        let text = format!(
+            "def Material \"M\" {{\n    token outputs:mtlx:surface.connect = </M/S.outputs:surface>\n{sss}{top}{surface}}}"
+        );
+        let (code, rendered) = compiled(&text);
+        let code = code.unwrap_or_else(|| panic!("{rendered}"));
+        // Reported, once: no light travels under the surface.
+        assert_eq!(rendered.matches("warning").count(), 1, "{rendered}");
+        assert!(rendered.contains("subsurface_bsdf is approximated by diffuse transmission"), "{rendered}");
+        let mut sum = ClosureSum::default();
+        for (k, t) in lobes_at(&code, 0.5, 0.5).into_iter().enumerate() {
+            sum.terms[k] = t;
+        }
+        sum
+    };
+    // Alone: the closed form, pointwise and as an albedo (per channel, several angles).
+    let colour = glam::Vec3::new(0.3, 0.6, 0.9);
+    let alone = network("(0.3, 0.6, 0.9)", 1.0, false);
+    let b = ClosureBsdf::from_sum(&alone, LayeringMode::AlbedoScaling);
+    let wo = glam::Vec3::new(0.6, 0.0, 0.8);
+    let through = glam::Vec3::new(-0.2, 0.5, -0.7).normalize();
+    assert!((b.eval(wo, through) - colour / std::f32::consts::PI).abs().max_element() < 1e-6);
+    assert_eq!(b.eval(wo, through * glam::Vec3::new(1.0, 1.0, -1.0)), glam::Vec3::ZERO, "nothing reflected");
+    let n = 40_000;
+    let mut figures = Vec::new();
+    for mu in [0.1f32, 0.5, 1.0] {
+        let (up, down) = albedo_split(&alone, mu, n, LayeringMode::AlbedoScaling);
+        assert!(up == glam::Vec3::ZERO && (down - colour).abs().max_element() < 1e-4, "μ {mu}: {up} / {down}");
+        // White: a furnace, 1 within 1 %; half weight transmits half.
+        let (_, white) = albedo_split(&network("(1, 1, 1)", 1.0, false), mu, n, LayeringMode::AlbedoScaling);
+        assert!((white - glam::Vec3::ONE).abs().max_element() < 0.01, "μ {mu}: white {white}");
+        let (_, half) = albedo_split(&network("(1, 1, 1)", 0.5, false), mu, n, LayeringMode::AlbedoScaling);
+        assert!((half - glam::Vec3::splat(0.5)).abs().max_element() < 0.01, "μ {mu}: half {half}");
+        // Under a rough dielectric coat (pbrlib's layer): the coat reflects what it reflects
+        // alone, the white transmitter passes the rest on, so the furnace stays at 1 within
+        // 1 %; a coloured one never exceeds 1. (The random walk does not walk a transmitting
+        // base: it falls back to albedo scaling, sample for sample, as closure.rs documents.)
+        let coat_alone = {
+            let d = by_hand("bsdf = dielectric_bsdf(color(1.0), 1.5, 0.3, \"R\");");
+            albedo_split(&d, mu, n, LayeringMode::AlbedoScaling).0
+        };
+        let coated_white = network("(1, 1, 1)", 1.0, true);
+        let (up, down) = albedo_split(&coated_white, mu, n, LayeringMode::AlbedoScaling);
+        let total = up + down;
+        figures
+            .push(format!("μ {mu}: reflected {:.4} (coat alone {:.4}), transmitted {:.4}", up.x, coat_alone.x, down.x));
+        assert!((total - glam::Vec3::ONE).abs().max_element() < 0.01, "μ {mu}: coated white {total}");
+        assert!((up - coat_alone).abs().max_element() < 0.01, "μ {mu}: reflected {up} vs coat {coat_alone}");
+        assert_eq!(
+            albedo_split(&coated_white, mu, n, LayeringMode::RandomWalk),
+            (up, down),
+            "μ {mu}: the walk's fallback"
+        );
+        let (up, down) = albedo_split(&network("(0.3, 0.6, 0.9)", 1.0, true), mu, n, LayeringMode::AlbedoScaling);
+        assert!((up + down).max_element() <= 1.0 + 0.005, "μ {mu}: coated colour {}", up + down);
+    }
+    eprintln!("subsurface_bsdf (white) under a dielectric (η 1.5, r 0.3):\n{}", figures.join("\n"));
+}
