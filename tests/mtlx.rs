@@ -1302,3 +1302,34 @@ fn subsurface_is_a_reported_lambertian_transmitter_that_conserves_energy() {
     }
     eprintln!("subsurface_bsdf (white) under a dielectric (η 1.5, r 0.3):\n{}", figures.join("\n"));
 }
+
+#[test]
+fn open_pbr_specular_weight_modulates_the_ior_as_the_1_1_specification_gives() {
+    // OpenPBR 1.1, equation modulated_ior: η' = (1 + ε) / (1 − ε), ε = √(ξ F_s). By hand:
+    // ξ = 0.25 on η = 1.5 (F_s = 0.04): ε = 0.1, η' = 1.1 / 0.9 = 11/9; ξ = 2: ε = √0.08,
+    // η' = 1.7887885; transmission at η = 1.33, ξ = 0.25: η' = 1.1524249. The lobe keeps
+    // weight 1 (1.0 scaled it by ξ) and reflects ξ F_s at normal incidence.
+    let first_lobe = |inputs: &str| {
+        let (code, rendered) = compiled(&open_pbr(inputs, ""));
+        let code = code.unwrap_or_else(|| panic!("{rendered}"));
+        assert!(rendered.is_empty(), "{rendered}");
+        described(&lobes_at(&code, 0.5, 0.5), 6)
+    };
+    let f0 = |eta: f32| ((eta - 1.0) / (eta + 1.0)).powi(2);
+    for (xi, eta, mode) in [(0.25f32, 11.0f32 / 9.0, 0.0f32), (2.0, 1.7887885, 0.0)] {
+        let got = first_lobe(&format!("        float inputs:specular_weight = {xi}"));
+        let (kind, weight, params) = &got[0];
+        assert!(*kind == ClosureKind::Dielectric && *weight == [1.0; 3], "ξ {xi}: {got:?}");
+        assert!((params[3] - eta).abs() < 1e-5 && params[5] == mode, "ξ {xi}: ior {}, want {eta}", params[3]);
+        assert!((f0(params[3]) - xi * 0.04).abs() < 1e-6, "ξ {xi}: F0 {}", f0(params[3]));
+        assert_eq!(got[1].0, ClosureKind::OrenNayar, "ξ {xi}: the base stays under it");
+    }
+    let got = first_lobe(
+        "        float inputs:specular_weight = 0.25\n        float inputs:transmission_weight = 1\n        float inputs:specular_ior = 1.33",
+    );
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert!((got[0].2[3] - 1.1524249).abs() < 1e-5 && got[0].2[5] == 2.0, "glass {got:?}");
+    // ξ = 0: η' = 1, nothing to reflect, and the diffuse base is the only lobe.
+    let got = first_lobe("        float inputs:specular_weight = 0");
+    assert_eq!(got.iter().map(|l| l.0).collect::<Vec<_>>(), [ClosureKind::OrenNayar]);
+}

@@ -586,8 +586,9 @@ substance mx_surface {
 // terms vanish and a single lobe remains in the limiting cases. Per parameter:
 // - metal: GGX with the F82-tint Fresnel (generalized Schlick: F0 base_weight · base_color,
 //   F82 tint specular_color, exponent 5), weighted by specular_weight in OpenPBR;
-// - specular: a GGX dielectric reflection (specular_color tint, specular_ior) weighted by
-//   specular_weight (OpenPBR 1.0's scaled Fresnel; 1.1 modulates the IOR instead);
+// - specular: a GGX dielectric reflection (specular_color tint, specular_ior); OpenPBR 1.1's
+//   specular_weight modulates the IOR (mx_modulated_ior), Standard Surface's `specular`
+//   weights the lobe;
 // - transmission: the rough dielectric with reflection and transmission, transmission_color
 //   as its tint, no volume (depth, scatter and dispersion are reported);
 // - subsurface: diffuse reflection of subsurface_color (no light travels under the surface;
@@ -633,6 +634,17 @@ float mx_dielectric_f0(float eta) {
     float r = (eta - 1.0) / (eta + 1.0);
     return r * r;
 }
+// OpenPBR 1.1's specular weight ξ (specification, "Specular", equation modulated_ior): the
+// IOR ratio η' = (1 + ε) / (1 − ε), ε = sgn(η − 1) √(ξ F_s), F_s = ((1 − η) / (1 + η))², so
+// the reflectance at normal incidence is ξ F_s (ξ clamped to [0, 1 / F_s]); ξ = 0 is η' = 1,
+// no reflection. The ratio is taken against the ambient medium (the coat is not in it).
+float mx_modulated_ior(float ior, float weight) {
+    float eta = clamp(ior, 1.0, 4.0);
+    float fs = mx_dielectric_f0(eta);
+    float e = fs > 0.0 ? sqrt(clamp(weight, 0.0, 1.0 / fs) * fs) : 0.0;
+    // ξ = 1 is η itself, exactly (the round trip through ε rounds in the last bit).
+    return weight == 1.0 ? eta : (1.0 + e) / max(1.0 - e, 1e-6);
+}
 color mx_coat_darkening(color base_albedo, float base_roughness, float coat_ior, float amount) {
     float eta = clamp(coat_ior, 1.0, 4.0);
     float k_rough = 1.0 - (1.0 - mx_fresnel_hemispherical_albedo(eta)) / (eta * eta);
@@ -668,13 +680,17 @@ shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0
     color base = clamp(base_color * base_weight, 0.0, 1.0);
     color diffuse_colour = mix(base, clamp(subsurface_color, 0.0, 1.0), clamp(subsurface_weight, 0.0, 1.0));
     closure diffuse = oren_nayar_diffuse_bsdf(diffuse_colour, clamp(base_diffuse_roughness, 0.0, 1.0), 1.0);
-    closure dielectric = mx_dielectric_base(diffuse, specular_weight, specular_color, r, specular_ior, transmission_weight,
-                                            transmission_color, thin_film_weight, thin_film_thickness * 1000.0, thin_film_ior);
+    // The modulated IOR serves reflection and transmission alike; a weight of 0 (η' = 1,
+    // no reflection) drops the specular lobe, so the limiting cases stay single lobes.
+    float ior = mx_modulated_ior(specular_ior, specular_weight);
+    closure dielectric = mx_dielectric_base(diffuse, specular_weight > 0.0 ? 1.0 : 0.0, specular_color, r, ior,
+                                            transmission_weight, transmission_color, thin_film_weight,
+                                            thin_film_thickness * 1000.0, thin_film_ior);
     closure metal = mx_f82_metal(base, specular_color, r) * clamp(specular_weight, 0.0, 1.0);
     // The base's albedo at normal incidence and roughness estimate, for the coat's darkening:
     // its slabs' albedos mixed by their weights (the glass returns only its reflection).
     float m = clamp(base_metalness, 0.0, 1.0);
-    float fs = clamp(clamp(specular_weight, 0.0, 1.0) * mx_dielectric_f0(clamp(specular_ior, 1.0, 4.0)), 0.0, 1.0);
+    float fs = mx_dielectric_f0(clamp(ior, 1.0, 4.0));
     color e_specular = clamp(specular_color, 0.0, 1.0) * fs;
     color e_opaque = e_specular + diffuse_colour * (color(1.0) - e_specular);
     color e_dielectric = mix(e_opaque, e_specular, clamp(transmission_weight, 0.0, 1.0));
