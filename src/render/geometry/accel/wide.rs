@@ -70,10 +70,14 @@ impl WideBvh {
     /// decoded box still holds the box built over.
     pub(super) fn from_cwbvh(cw: &CwBvh) -> WideBvh {
         let empty = Node {
-            bounds: [[f32::INFINITY; 8], [f32::INFINITY; 8], [f32::INFINITY; 8], [f32::NEG_INFINITY; 8], [
-                f32::NEG_INFINITY;
-                8
-            ], [f32::NEG_INFINITY; 8]],
+            bounds: [
+                [f32::INFINITY; 8],
+                [f32::INFINITY; 8],
+                [f32::INFINITY; 8],
+                [f32::NEG_INFINITY; 8],
+                [f32::NEG_INFINITY; 8],
+                [f32::NEG_INFINITY; 8],
+            ],
             child: [0; 8],
             count: [0; 8],
         };
@@ -83,7 +87,7 @@ impl WideBvh {
             .map(|n| {
                 let mut out = empty;
                 let e = n.compute_extent();
-                let p = Vec3::from(n.p);
+                let p = n.p;
                 for i in 0..8 {
                     if n.is_child_empty(i) {
                         continue;
@@ -189,7 +193,7 @@ fn min_x86(a: f32, b: f32) -> f32 {
 fn scalar_hits(node: &Node, ray: &WideRay, tmax: f32) -> (u32, [f32; 8]) {
     let mut mask = 0;
     let mut near = [0.0; 8];
-    for i in 0..8 {
+    for (i, near) in near.iter_mut().enumerate() {
         let slab = |row: usize, axis: usize| (node.bounds[row][i] - ray.o[axis]) * ray.inv[axis];
         let mut t0 = ray.tmin;
         let mut t1 = f32::INFINITY;
@@ -198,7 +202,7 @@ fn scalar_hits(node: &Node, ray: &WideRay, tmax: f32) -> (u32, [f32; 8]) {
             t1 = min_x86(slab(ray.far[axis], axis), t1);
         }
         let t1 = min_x86(t1 * FAR_GROWTH, tmax);
-        near[i] = t0;
+        *near = t0;
         mask |= u32::from(t0 <= t1) << i;
     }
     (mask, near)
@@ -572,11 +576,9 @@ mod tests {
                 let mut found = None;
                 for id in first..first + count {
                     let b = &boxes[cw.primitive_indices[id as usize] as usize];
-                    if let Some(t) = entry(b, o, d, tmax).filter(|&t| t > 0.0) {
-                        if best.is_none_or(|x| t < x) {
-                            best = Some(t);
-                            found = Some(t as f32);
-                        }
+                    if let Some(t) = entry(b, o, d, tmax).filter(|&t| t > 0.0 && best.is_none_or(|x| t < x)) {
+                        best = Some(t);
+                        found = Some(t as f32);
                     }
                 }
                 found.unwrap_or(f32::INFINITY)
