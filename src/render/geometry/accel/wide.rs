@@ -208,6 +208,25 @@ fn scalar_hits(node: &Node, ray: &WideRay, tmax: f32) -> (u32, [f32; 8]) {
     (mask, near)
 }
 
+/// Asks the cache for node `index` (all four lines), a stacked child: the traversal comes
+/// back to it after the nearer children, and by then it is in the cache rather than a miss
+/// on the path (the next node's address depends on the current node's test, so the processor
+/// cannot fetch ahead by itself).
+#[inline(always)]
+fn prefetch(bvh: &WideBvh, index: u32) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let node = bvh.nodes.as_ptr().wrapping_add(index as usize).cast::<i8>();
+        // SAFETY: SSE is part of x86-64, and a prefetch never faults.
+        unsafe {
+            for line in 0..4 {
+                _mm_prefetch::<_MM_HINT_T0>(node.wrapping_add(64 * line));
+            }
+        }
+    }
+}
+
 /// The traversal stack: on the thread's stack, or on the heap for a BVH deeper than
 /// [`LOCAL_STACK`] allows.
 macro_rules! stack_slots {
@@ -280,6 +299,9 @@ fn closest_with<F: FnMut(f32, u32, u32) -> f32>(
                     while mask != 0 {
                         let e = entry(mask.trailing_zeros() as usize);
                         mask &= mask - 1;
+                        if e.count == 0 {
+                            prefetch(bvh, e.child);
+                        }
                         let mut j = len;
                         // SAFETY: slots below `len` were written.
                         while j > base && unsafe { slots[j - 1].assume_init() }.t < e.t {
@@ -353,6 +375,7 @@ fn any_with<F: FnMut(u32, u32) -> bool>(
                     return true;
                 }
             } else {
+                prefetch(bvh, n.child[i]);
                 slots[len] = MaybeUninit::new(n.child[i]);
                 len += 1;
             }
