@@ -575,7 +575,7 @@ fn scale_chart(dir: &Path) -> Result<String, String> {
         "Sphere on a mesh floor, camera and clipping range scaled alike, 24x24 px at 16 spp; values relative to scale 1.".into(),
         format!("coverage (mean alpha) {}", fmt(&coverage)),
         format!("mean radiance {}", fmt(&radiance)),
-        "Holds from 1e-12 to 3e5 (each BVH traversed in a power-of-two-scaled space, past obvhs' absolute 1e-4 cull).".into(),
+        "Holds from 1e-12 to 3e5 (each BVH traversed in a power-of-two-scaled space with the ray's own tmin: obvhs' absolute 1e-4 cull is gone).".into(),
         "Refused with a located error: triangles under 1e-11 units (geometry::MIN_TRIANGLE_EDGE), coordinates beyond 1e7 (MAX_EXTENT). tests/scene_scale.rs.".into(),
     ];
     crate::cli::plot::loglog(

@@ -5,20 +5,20 @@
 //! memory grows with unique geometry, not with copies. A scene without instances has no top
 //! level at all: its rays traverse the world BLAS only, as a single-level BVH would.
 //!
-//! Each BVH is an obvhs compressed-wide BVH (CWBVH: 8 children per 80-byte node, child boxes
-//! quantised to 8 bits, children visited in ray-octant order, occlusion stopping at the first
-//! hit) over triangles and shapes alike, traversed with an AVX2 node test where the CPU has
-//! one (`wide.rs`, chosen at run time), with a watertight ray/triangle test (Woop, Benthin &
-//! Wald 2013), so rays through shared edges and vertices never slip between triangles, and
-//! robust ray origins so secondary rays do not re-hit their own surface. `benches/bvh.rs`
-//! measures it against Embree.
+//! Each BVH is built by obvhs as a compressed-wide BVH (CWBVH: 8 children per node) over
+//! triangles and shapes alike and kept in strata's own layout (`wide.rs`): the same tree with
+//! each node's 8 child boxes as f32 lanes, tested in one pass with AVX2 where the CPU has it
+//! (chosen at run time), children visited nearest first, occlusion stopping at the first hit,
+//! a leaf a range of primitives tested together. The ray/triangle test is watertight (Woop,
+//! Benthin & Wald 2013), so rays through shared edges and vertices never slip between
+//! triangles, and ray origins are robust so secondary rays do not re-hit their own surface.
+//! `benches/bvh.rs` measures it against Embree.
 //!
-//! obvhs culls every box whose exit distance along the ray is below an absolute 1e-4
-//! (`cwbvh::node::EPSILON`, applied instead of the ray's `tmin`): in a scene a few 1e-4 units
-//! across every camera ray missed everything. So each BVH is built and traversed in its own
-//! space, scaled by a power of two that brings its extent to 2³⁰ ([`BvhSpace`]); the
-//! scaling is exact in f32, the primitive tests run unscaled, and the cull falls to 1e-13 of
-//! the extent, far below f32's resolution there (6e-8), at every scene scale.
+//! obvhs' own traversal culled every box whose exit distance along the ray was below an
+//! absolute 1e-4 (`cwbvh::node::EPSILON`): in a scene a few 1e-4 units across every camera
+//! ray missed everything. Each BVH is still built and traversed in its own space, scaled by a
+//! power of two that brings its extent to 2³⁰ ([`BvhSpace`]): the scaling is exact in f32,
+//! the primitive tests run unscaled, and obvhs' builder sees every scene at one scale.
 
 use crate::render::geometry::Triangle;
 use crate::render::geometry::motion::{Deformation, MotionKeys};
@@ -29,9 +29,7 @@ use glam::{DAffine3, DMat3, Vec2, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
-use obvhs::cwbvh::CwBvh;
 use obvhs::cwbvh::builder::build_cwbvh;
-use obvhs::ray::Ray;
 use std::collections::HashMap;
 use std::time::Duration;
 
@@ -43,6 +41,7 @@ mod wide;
 use attrs::AttrTable;
 pub use batched::PLOC_BATCH;
 use batched::{Padded, build_batched};
+use wide::{WideBvh, WideRay};
 
 // Defined below the BVH (geometry produces instances; shapes bound their own hit points), so
 // the render modules import in one direction: accel → geometry → shapes.
@@ -103,7 +102,10 @@ const MAX_SCALED_ORIGIN: f32 = 1.267_650_6e30;
 /// and distances go in multiplied by `scale`, and distances come out divided by it, both
 /// exactly (a power of two changes only the exponent).
 pub(crate) struct BvhSpace {
-    bvh: CwBvh,
+    bvh: WideBvh,
+    /// The primitive (box) index of each leaf primitive, in leaf order; emptied when the
+    /// leaves are renumbered to the primitives' own order (a BLAS's groups).
+    primitive_indices: Vec<u32>,
     scale: f32,
     /// The most boxes one PLOC build was given (see [`PLOC_BATCH`]).
     largest_batch: usize,
@@ -127,7 +129,7 @@ impl BvhSpace {
             return None;
         }
         let params = BvhBuildParams::medium_build();
-        let (bvh, largest_batch) = if boxes.len() <= PLOC_BATCH {
+        let (cw, largest_batch) = if boxes.len() <= PLOC_BATCH {
             (build_cwbvh(&boxes, params, &mut Duration::default()), boxes.len())
         } else {
             let (mut bvh2, largest) = build_batched(&boxes);
@@ -137,29 +139,29 @@ impl BvhSpace {
             ReinsertionOptimizer::default().run(&mut bvh2, params.reinsertion_batch_ratio, None);
             (convert::bvh2_to_cwbvh(&bvh2, params.max_prims_per_leaf), largest)
         };
-        Some(BvhSpace { bvh, scale, largest_batch })
+        let bvh = WideBvh::from_cwbvh(&cw);
+        Some(BvhSpace { bvh, primitive_indices: cw.primitive_indices, scale, largest_batch })
     }
 
-    /// The ray `o + t d`, `t` in `(tmin, tmax)`, in the scaled space, with the factor `k`
-    /// that takes `t` to the scaled ray's parameter. The direction is brought to a length
-    /// near 1 by a power of two too: obvhs' cull is on the parameter, and object-space
-    /// directions (an instance's inverse scale) can be far from unit length. `None` (no hit)
-    /// when the scaled origin lies beyond 2¹⁰⁰, where obvhs' box tests (origin times an
-    /// inverse direction up to 2²³) and scaled hit distances could overflow f32: an origin
-    /// 2⁷⁰ times farther out than the BVH's extent, where all of its geometry is below f32's
+    /// The ray `o + t d`, `t` in `(tmin, tmax)`, in the scaled space, with the scaled `tmax`
+    /// and the factor `k` that takes `t` to the scaled ray's parameter. The direction is
+    /// brought to a length near 1 by a power of two too (object-space directions, under an
+    /// instance's inverse scale, can be far from unit length). `None` (no hit) when the scaled
+    /// origin lies beyond 2¹⁰⁰, where scaled hit distances could overflow f32: an origin 2⁷⁰
+    /// times farther out than the BVH's extent, where all of its geometry is below f32's
     /// resolution at the origin.
     #[inline]
-    fn ray(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(Ray, f32)> {
+    fn ray(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(WideRay, f32, f32)> {
         let so = o * self.scale;
         let e = exponent(d.abs().max_element());
         let k = self.scale * pow2(e);
         if !so.is_finite() || so.abs().max_element() >= MAX_SCALED_ORIGIN || !k.is_normal() {
             return None;
         }
-        // obvhs picks the traversal octant from sign bits: a -0.0 component would select the
-        // wrong one and miss everything, so negative zeros become +0.0 (-0 + 0 = +0).
+        // Negative zeros become +0.0 (-0 + 0 = +0): the node test then enters every box
+        // through its min face on that axis, as for any other zero.
         let sd = d * pow2(-e) + Vec3::ZERO;
-        Some((Ray::new(so.into(), sd.into(), tmin * k, tmax * k), k))
+        Some((WideRay::new(so, sd, tmin * k), tmax * k, k))
     }
 }
 
@@ -185,8 +187,7 @@ fn unscale(t: f32, k: f32, tmax: f32) -> f32 {
 impl BvhSpace {
     /// Bytes held by the nodes and primitive indices.
     fn bytes(&self) -> usize {
-        self.bvh.nodes.len() * std::mem::size_of::<obvhs::cwbvh::node::CwBvhNode>()
-            + self.bvh.primitive_indices.len() * 4
+        self.bvh.bytes() + self.primitive_indices.len() * 4
     }
 }
 
@@ -207,12 +208,10 @@ pub struct Blas {
     /// What a hit reads besides the positions.
     attrs: AttrTable,
     shapes: Vec<Shape>,
-    /// The BVH's primitives are groups of primitives with bit-identical bounding boxes:
-    /// BVH primitive `id` holds `group_members[group_start[id]..group_start[id + 1]]`,
-    /// primitive indices as in [`Hit::index`]. Groups are stored in the BVH's leaf order, so
-    /// a leaf's groups are adjacent and no index table lies between a leaf and its members.
-    /// A flat BLAS has one group: its finite primitives.
-    group_start: Vec<u32>,
+    /// The BVH's primitives are groups of primitives with bit-identical bounding boxes,
+    /// stored here member by member in the BVH's leaf order (primitive indices as in
+    /// [`Hit::index`]): each BVH leaf is a range of this table, its groups' members. A flat
+    /// BLAS holds its finite primitives.
     group_members: Vec<u32>,
     /// Object-space bounds `(min, max)` of the finite primitives; `None` when there are none.
     bounds: Option<(Vec3, Vec3)>,
@@ -238,8 +237,9 @@ fn padded_box(lo: Vec3, hi: Vec3) -> Option<[u32; 6]> {
 }
 
 /// A BVH over `bounds` (`(min, max)` per primitive), grouping bit-identical boxes; returns
-/// the BVH (`None` when no box is finite) and the groups as `(group_start, group_members)`.
-fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (Option<BvhSpace>, Vec<u32>, Vec<u32>) {
+/// the BVH (`None` when no box is finite), its leaves ranges of the returned primitive
+/// indices (the groups' members in leaf order).
+fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (Option<BvhSpace>, Vec<u32>) {
     // Primitives with bit-identical boxes (copies of one mesh at one place) become one BVH
     // primitive: PLOC merges only mutually-nearest pairs, and among n equal boxes every
     // pass merges one pair, so n coincident copies cost O(n²) to build.
@@ -280,9 +280,9 @@ fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (O
         }
     }
     drop((next, group_of_primitive));
-    let Some(mut space) = BvhSpace::build(boxes) else { return (None, group_start, group_members) };
+    let Some(mut space) = BvhSpace::build(boxes) else { return (None, group_members) };
     // The groups in leaf order (obvhs' primitive ids); the id-to-group table is then unused.
-    let leaf_order = std::mem::take(&mut space.bvh.primitive_indices);
+    let leaf_order = std::mem::take(&mut space.primitive_indices);
     let mut leaf_start = Vec::with_capacity(leaf_order.len() + 1);
     let mut leaf_members = Vec::with_capacity(group_members.len());
     leaf_start.push(0);
@@ -291,7 +291,12 @@ fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (O
         leaf_members.extend_from_slice(&group_members[group_start[g] as usize..group_start[g + 1] as usize]);
         leaf_start.push(leaf_members.len() as u32);
     }
-    (Some(space), leaf_start, leaf_members)
+    // Each leaf's groups are adjacent in leaf order: the leaf becomes its members' range.
+    space.bvh.remap_leaves(|first, count| {
+        let (a, b) = (leaf_start[first as usize], leaf_start[(first + count) as usize]);
+        (a, b - a)
+    });
+    (Some(space), leaf_members)
 }
 
 impl Blas {
@@ -326,19 +331,19 @@ impl Blas {
         let count = positions.len() + shapes.len();
         let all_bounds =
             positions.iter().enumerate().map(tri_bounds).chain(shapes.iter().enumerate().map(shape_bounds));
-        let (bvh, group_start, group_members) = if count <= FLAT_PRIMITIVES {
+        let (bvh, group_members) = if count <= FLAT_PRIMITIVES {
             // Primitives with non-finite bounds are left out, as the BVH leaves them out.
             let finite: Vec<u32> = all_bounds
                 .enumerate()
                 .filter(|(_, (lo, hi))| lo.is_finite() && hi.is_finite())
                 .map(|(i, _)| i as u32)
                 .collect();
-            (None, vec![0, finite.len() as u32], finite)
+            (None, finite)
         } else {
             build_grouped(all_bounds, count)
         };
         let deformation = deformation.map(Box::new);
-        Blas { bvh, positions, attrs, shapes, group_start, group_members, bounds, deformation }
+        Blas { bvh, positions, attrs, shapes, group_members, bounds, deformation }
     }
 
     /// The most primitives one PLOC build was given while building this BVH: at most
@@ -374,7 +379,7 @@ impl Blas {
         self.positions.len() * size_of::<[Vec3; 3]>()
             + self.attrs.bytes()
             + self.shapes.len() * size_of::<Shape>()
-            + (self.group_start.len() + self.group_members.len()) * 4
+            + self.group_members.len() * 4
             + bvh
     }
 
@@ -418,12 +423,6 @@ impl Blas {
             };
             self.shapes[j].intersect(o, d, tmin, tmax).map(|t| (t, 0.0, 0.0))
         }
-    }
-
-    /// The leaf slots (indices into `group_members`) of BVH primitive `id`.
-    #[inline]
-    fn group(&self, id: usize) -> std::ops::Range<usize> {
-        self.group_start[id] as usize..self.group_start[id + 1] as usize
     }
 
     /// Whether the BLAS holds no primitive that a ray can hit.
@@ -479,12 +478,12 @@ impl Blas {
         let Some(space) = self.bvh.as_ref() else {
             return self.intersect_flat::<KZ, DEFORMS>(&pre, o, d, tmin, tmax, time);
         };
-        let (ray, k) = space.ray(o, d, tmin, tmax)?;
+        let (ray, scaled_tmax, k) = space.ray(o, d, tmin, tmax)?;
         let mut best = None;
-        wide::closest(&space.bvh, ray, |r, id| {
-            let mut closest = unscale(r.tmax, k, tmax);
+        wide::closest(&space.bvh, &ray, scaled_tmax, |limit, first, count| {
+            let mut closest = unscale(limit, k, tmax);
             let mut found = false;
-            for k in self.group(id) {
+            for k in first as usize..(first + count) as usize {
                 if let Some((t, b1, b2)) = self.hit_slot::<KZ, DEFORMS>(&pre, o, d, k, tmin, closest, time) {
                     best = Some((t, self.group_members[k], b1, b2));
                     closest = t;
@@ -559,10 +558,10 @@ impl Blas {
             return (0..self.group_members.len())
                 .any(|k| self.hit_slot::<KZ, DEFORMS>(&pre, o, d, k, tmin, tmax, time).is_some());
         };
-        let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return false };
-        wide::any(&space.bvh, ray, |r, id| {
-            let tmax = unscale(r.tmax, k, tmax);
-            self.group(id).any(|k| self.hit_slot::<KZ, DEFORMS>(&pre, o, d, k, tmin, tmax, time).is_some())
+        let Some((ray, scaled_tmax, _)) = space.ray(o, d, tmin, tmax) else { return false };
+        wide::any(&space.bvh, &ray, scaled_tmax, |first, count| {
+            (first as usize..(first + count) as usize)
+                .any(|k| self.hit_slot::<KZ, DEFORMS>(&pre, o, d, k, tmin, tmax, time).is_some())
         })
     }
 
@@ -927,25 +926,28 @@ impl Accel {
             self.world.intersect(o, d, tmin, tmax).map(|(t, index, b1, b2)| Hit { t, index, instance: WORLD, b1, b2 });
         let Some(space) = &self.tlas else { return best };
         let tmax = best.map_or(tmax, |h| h.t);
-        let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return best };
+        let Some((ray, scaled_tmax, k)) = space.ray(o, d, tmin, tmax) else { return best };
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
-        wide::closest(&space.bvh, ray, |r, id| {
-            let i = space.bvh.primitive_indices[id];
-            let inst = &self.instances[i as usize];
-            let (to_object, _) = inst.transforms_at(&self.motions, time);
-            let oo = to_object.transform_point3(od).as_vec3();
-            let ob = to_object.transform_vector3(dd).as_vec3();
-            // A nearly singular instance can overflow f32 in object space: no hit there.
-            if !oo.is_finite() || !ob.is_finite() || ob == Vec3::ZERO {
-                return f32::INFINITY;
-            }
-            match self.prototypes[inst.prototype as usize].intersect_at(oo, ob, tmin, unscale(r.tmax, k, tmax), time) {
-                Some((t, index, b1, b2)) => {
-                    best = Some(Hit { t, index, instance: i, b1, b2 });
-                    t * k
+        wide::closest(&space.bvh, &ray, scaled_tmax, |limit, first, count| {
+            let mut limit = limit;
+            let mut found = false;
+            for &i in &space.primitive_indices[first as usize..(first + count) as usize] {
+                let inst = &self.instances[i as usize];
+                let (to_object, _) = inst.transforms_at(&self.motions, time);
+                let oo = to_object.transform_point3(od).as_vec3();
+                let ob = to_object.transform_vector3(dd).as_vec3();
+                // A nearly singular instance can overflow f32 in object space: no hit there.
+                if !oo.is_finite() || !ob.is_finite() || ob == Vec3::ZERO {
+                    continue;
                 }
-                None => f32::INFINITY,
+                let prototype = &self.prototypes[inst.prototype as usize];
+                if let Some((t, index, b1, b2)) = prototype.intersect_at(oo, ob, tmin, unscale(limit, k, tmax), time) {
+                    best = Some(Hit { t, index, instance: i, b1, b2 });
+                    limit = t * k;
+                    found = true;
+                }
             }
+            if found { limit } else { f32::INFINITY }
         });
         best
     }
@@ -964,15 +966,17 @@ impl Accel {
             return true;
         }
         let Some(space) = &self.tlas else { return false };
-        let Some((ray, k)) = space.ray(o, d, tmin, tmax) else { return false };
+        let Some((ray, scaled_tmax, _)) = space.ray(o, d, tmin, tmax) else { return false };
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
-        wide::any(&space.bvh, ray, |r, id| {
-            let inst = &self.instances[space.bvh.primitive_indices[id] as usize];
-            let (to_object, _) = inst.transforms_at(&self.motions, time);
-            let oo = to_object.transform_point3(od).as_vec3();
-            let ob = to_object.transform_vector3(dd).as_vec3();
-            let finite = oo.is_finite() && ob.is_finite() && ob != Vec3::ZERO;
-            finite && self.prototypes[inst.prototype as usize].occluded_at(oo, ob, tmin, unscale(r.tmax, k, tmax), time)
+        wide::any(&space.bvh, &ray, scaled_tmax, |first, count| {
+            space.primitive_indices[first as usize..(first + count) as usize].iter().any(|&i| {
+                let inst = &self.instances[i as usize];
+                let (to_object, _) = inst.transforms_at(&self.motions, time);
+                let oo = to_object.transform_point3(od).as_vec3();
+                let ob = to_object.transform_vector3(dd).as_vec3();
+                let finite = oo.is_finite() && ob.is_finite() && ob != Vec3::ZERO;
+                finite && self.prototypes[inst.prototype as usize].occluded_at(oo, ob, tmin, tmax, time)
+            })
         })
     }
 

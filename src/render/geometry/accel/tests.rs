@@ -20,10 +20,10 @@ fn closest_hit_and_barycentrics() {
     assert!(accel.intersect(Vec3::new(-0.5, -0.5, 0.0), -Vec3::Z, 0.0, f32::INFINITY).is_none());
 }
 
-/// obvhs culls boxes left within 1e-4 of the ray origin (its `EPSILON`, in whatever
-/// units the BVH is built in); each BVH's space is scaled so that this is no distance at
-/// any scene scale. A floor hit from 1e-5 of the scene's size above, at scales 1e-9 to
-/// 1e5, directly and through an instance (object space at unit size, the top level at `s`).
+/// obvhs' traversal culled boxes left within 1e-4 of the ray origin (its `EPSILON`, in
+/// whatever units the BVH was built in); strata's traversal uses the ray's own `tmin`, in a
+/// power-of-two-scaled space. A floor hit from 1e-5 of the scene's size above, at scales 1e-9
+/// to 1e5, directly and through an instance (object space at unit size, the top level at `s`).
 #[test]
 fn hits_close_to_the_origin_at_every_scale() {
     for s in [1e-9f32, 1e-6, 1e-3, 1.0, 1e5] {

@@ -1,19 +1,23 @@
-//! Traversal of obvhs' compressed wide BVH (8 children per node, child boxes quantised to
-//! 8 bits against the node's box, children visited nearest-octant first) with the node test
-//! run on the machine's vector units: on CPUs with AVX2 (detected at run time, so the binary
-//! still runs on baseline x86-64) all 8 child boxes are tested in one 8-lane pass, their
-//! 8-bit coordinates widened with one instruction per axis bound; elsewhere obvhs' own SSE
-//! test (two 4-lane passes over coordinates converted one by one) runs.
+//! strata's own 8-wide BVH and its traversal. The tree is obvhs' compressed-wide BVH (built
+//! there, or converted from a BVH2 in `convert.rs`), node for node, with each node's 8 child
+//! boxes stored uncompressed as f32 lanes (SoA) instead of 8-bit offsets from a quantisation
+//! frame: a ray tests them with no decode, and on CPUs with AVX2 (detected at run time, so
+//! the binary still runs on baseline x86-64) all 8 in one 8-lane pass. A node is 256 bytes
+//! (four cache lines) against obvhs' 80: the compressed node cost a ray ~4x Embree's
+//! instructions per node (dequantisation, the octant-order bit juggling of its traversal).
 //!
-//! Both tests do the same f32 operations in the same order (a multiply, then an add: no
-//! fused multiply-add), so they accept exactly the same boxes and a render is bit-identical
-//! on either path.
+//! The traversal visits children nearest entry distance first (sorted per node, Embree's
+//! order) and skips a stacked child whose entry lies beyond the closest hit found since it
+//! was stacked; occlusion rays stop at the first hit and test a node's leaves before
+//! descending. A leaf child is a range of consecutive primitives, so its primitives are
+//! tested together, with no per-primitive callback from the traversal.
+//!
+//! The AVX2 and the scalar node test do the same f32 operations in the same order (subtract,
+//! multiply, then min/max with the x86 rule "a NaN operand yields the second"), so they accept
+//! the same boxes with the same entry distances, and a render is bit-identical on either path.
 
-use glam::{UVec2, Vec3A, uvec2};
+use glam::Vec3;
 use obvhs::cwbvh::CwBvh;
-use obvhs::cwbvh::node::CwBvhNode;
-use obvhs::faststack::FastStack;
-use obvhs::ray::Ray;
 use std::mem::MaybeUninit;
 
 /// Whether the AVX2 path runs (std caches the CPUID query: one load per call).
@@ -29,245 +33,410 @@ fn has_avx2() -> bool {
     }
 }
 
-/// Visits the primitives whose leaf boxes `ray` meets, nearest first as far as the octant
-/// order knows; `on_primitive(ray, id)` returns the hit distance in the ray's parameter, or
-/// anything not below `ray.tmax` for no hit, and the ray is shortened to each hit.
-#[inline]
-pub(super) fn closest(bvh: &CwBvh, ray: Ray, mut on_primitive: impl FnMut(&Ray, usize) -> f32) {
-    #[cfg(target_arch = "x86_64")]
-    if has_avx2() {
-        // SAFETY: the CPU has AVX2 (checked just above).
-        unsafe { avx2::closest(bvh, ray, &mut on_primitive) };
-        return;
-    }
-    closest_with(bvh, ray, &mut on_primitive, |node, ray, oct| node.intersect_ray(ray, oct));
+/// The far distance of a box is multiplied by this before the overlap test: the f32 slab
+/// distances are each within 1 + 2γ(3) of the exact ones (pbrt-v4's "Robust Ray–Bounds
+/// Intersections"), so a box the exact ray meets is never rejected by rounding.
+const FAR_GROWTH: f32 = 1.0 + 4.0 * f32::EPSILON;
+
+/// One node: up to 8 children, each an inner node or a leaf (a range of primitives).
+#[derive(Clone, Copy)]
+#[repr(C, align(64))]
+pub(super) struct Node {
+    /// Child boxes, one lane per child: min x, min y, min z, max x, max y, max z. An empty
+    /// slot's box is (+∞, −∞), which no ray meets.
+    bounds: [[f32; 8]; 6],
+    /// An inner child's node index, or a leaf's first primitive.
+    child: [u32; 8],
+    /// A leaf's primitive count; 0 for an inner child.
+    count: [u32; 8],
 }
 
-/// Whether `on_primitive(ray, id)` holds for any primitive whose leaf box `ray` meets; stops
-/// at the first that does.
-#[inline]
-pub(super) fn any(bvh: &CwBvh, ray: Ray, mut on_primitive: impl FnMut(&Ray, usize) -> bool) -> bool {
-    #[cfg(target_arch = "x86_64")]
-    if has_avx2() {
-        // SAFETY: the CPU has AVX2 (checked just above).
-        return unsafe { avx2::any(bvh, ray, &mut on_primitive) };
-    }
-    any_with(bvh, ray, &mut on_primitive, |node, ray, oct| node.intersect_ray(ray, oct))
+/// A BVH of [`Node`]s; node 0 is the root (its own box is never tested: its children's are).
+pub(super) struct WideBvh {
+    nodes: Vec<Node>,
+    /// The most entries a traversal's stack can hold: on any root-to-leaf path, the sum of
+    /// each node's children less the one descended into.
+    stack_need: usize,
 }
 
-/// obvhs' traversal depth bound (`TRAVERSAL_STACK_SIZE`, crate-private there; its builders
-/// keep compressed-wide BVHs shallower).
-const STACK_SIZE: usize = 32;
+/// Stack entries a traversal keeps on the thread's stack (3 KiB); a deeper BVH (the
+/// sum along one path exceeding it: hundreds of levels, which the builders do not produce
+/// on real geometry) gets a heap stack of its own size.
+const LOCAL_STACK: usize = 256;
 
-/// The node groups still to visit. obvhs' own stack is an array it zeroes for every ray
-/// (256 bytes, a memset per traversal that the profile showed); this one starts
-/// uninitialised and reads only what it wrote.
-struct Stack {
-    slots: [MaybeUninit<UVec2>; STACK_SIZE],
-    len: usize,
-}
-
-impl Stack {
-    #[inline(always)]
-    fn new() -> Stack {
-        Stack { slots: [MaybeUninit::uninit(); STACK_SIZE], len: 0 }
-    }
-}
-
-impl FastStack<UVec2> for Stack {
-    /// Pushes `v`; when full, overwrites the top as obvhs' stack does (a depth its builders
-    /// never produce).
-    #[inline(always)]
-    fn push(&mut self, v: UVec2) {
-        self.slots[self.len] = MaybeUninit::new(v);
-        self.len = (self.len + 1).min(STACK_SIZE - 1);
-    }
-
-    /// Pops the top; the traversal calls it only when the stack is not empty.
-    #[inline(always)]
-    fn pop_fast(&mut self) -> UVec2 {
-        self.pop().unwrap_or_default()
-    }
-
-    #[inline(always)]
-    fn pop(&mut self) -> Option<UVec2> {
-        self.len = self.len.checked_sub(1)?;
-        // SAFETY: slots below `len` were written by `push`.
-        Some(unsafe { self.slots[self.len].assume_init() })
-    }
-
-    #[inline(always)]
-    fn len(&self) -> usize {
-        self.len
-    }
-
-    #[inline(always)]
-    fn is_empty(&self) -> bool {
-        self.len == 0
-    }
-
-    #[inline(always)]
-    fn clear(&mut self) {
-        self.len = 0;
-    }
-}
-
-/// obvhs' `Traversal` (the fields its `traverse!` macro reads) over [`Stack`].
-struct State {
-    stack: Stack,
-    current_group: UVec2,
-    primitive_group: UVec2,
-    oct_inv4: u32,
-    primitive_id: u32,
-    hitmask: u32,
-}
-
-impl State {
-    /// The state at the root of `bvh` for a ray along `direction` (obvhs' `new_traversal`).
-    #[inline(always)]
-    fn new(bvh: &CwBvh, direction: Vec3A) -> State {
-        // The octant, inverted, in each byte: children are visited nearest-octant first.
-        let oct_inv4 = (if direction.x < 0.0 { 0 } else { 0x0404_0404 })
-            | (if direction.y < 0.0 { 0 } else { 0x0202_0202 })
-            | (if direction.z < 0.0 { 0 } else { 0x0101_0101 });
-        State {
-            stack: Stack::new(),
-            current_group: if bvh.nodes.is_empty() { UVec2::ZERO } else { uvec2(0, 0x8000_0000) },
-            primitive_group: UVec2::ZERO,
-            oct_inv4,
-            primitive_id: 0,
-            hitmask: 0,
+impl WideBvh {
+    /// `cw`'s tree with its child boxes decoded: each quantised bound `p + q·2^e` is computed
+    /// in f32, and since the encoder rounded `q` outward and f32 rounding is monotone, the
+    /// decoded box still holds the box built over.
+    pub(super) fn from_cwbvh(cw: &CwBvh) -> WideBvh {
+        let empty = Node {
+            bounds: [
+                [f32::INFINITY; 8],
+                [f32::INFINITY; 8],
+                [f32::INFINITY; 8],
+                [f32::NEG_INFINITY; 8],
+                [f32::NEG_INFINITY; 8],
+                [f32::NEG_INFINITY; 8],
+            ],
+            child: [0; 8],
+            count: [0; 8],
+        };
+        let nodes: Vec<Node> = cw
+            .nodes
+            .iter()
+            .map(|n| {
+                let mut out = empty;
+                let e = n.compute_extent();
+                let p = n.p;
+                for i in 0..8 {
+                    if n.is_child_empty(i) {
+                        continue;
+                    }
+                    let lo = [n.child_min_x[i], n.child_min_y[i], n.child_min_z[i]];
+                    let hi = [n.child_max_x[i], n.child_max_y[i], n.child_max_z[i]];
+                    for axis in 0..3 {
+                        out.bounds[axis][i] = p[axis] + f32::from(lo[axis]) * e[axis];
+                        out.bounds[axis + 3][i] = p[axis] + f32::from(hi[axis]) * e[axis];
+                    }
+                    if n.is_leaf(i) {
+                        (out.child[i], out.count[i]) = n.child_primitives(i);
+                    } else {
+                        out.child[i] = n.child_node_index(i);
+                    }
+                }
+                out
+            })
+            .collect();
+        // Children follow their parents in obvhs' node order, so one backward pass sees
+        // every child's need before its parent's; otherwise the bound of a stack that holds
+        // every child of every node.
+        let mut need = vec![0usize; nodes.len()];
+        let mut ordered = true;
+        for (index, node) in nodes.iter().enumerate().rev() {
+            let children = (0..8).filter(|&i| node.bounds[0][i] <= node.bounds[3][i]).count();
+            let mut deepest = 0;
+            for i in (0..8).filter(|&i| node.count[i] == 0 && node.bounds[0][i] <= node.bounds[3][i]) {
+                let c = node.child[i] as usize;
+                ordered &= c > index && c < nodes.len();
+                deepest = deepest.max(need.get(c).copied().unwrap_or(0));
+            }
+            need[index] = children.saturating_sub(1) + deepest;
         }
+        let stack_need = if ordered { need.first().copied().unwrap_or(0) + 1 } else { 7 * nodes.len() + 1 };
+        WideBvh { nodes, stack_need }
     }
-}
 
-/// `hits` (`node`'s hit mask), after asking the cache for the inner children it names.
-/// Which node comes next depends on the one being tested, so the processor cannot fetch
-/// ahead by itself: on a BVH larger than the cache a traversal waits on every node's first
-/// load (a third of its time on 10⁵ triangles, by `perf`). The children queued here are
-/// in the cache by the time the traversal comes back to them.
-#[inline(always)]
-fn prefetched(bvh: &CwBvh, node: &CwBvhNode, hits: u32, state: &State) -> u32 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        let mut inner = hits >> 24;
-        while inner != 0 {
-            // As obvhs' traversal finds the child: its slot, then its place among the
-            // node's inner children.
-            let slot = inner.trailing_zeros() ^ (state.oct_inv4 & 0xff);
-            inner &= inner - 1;
-            let rank = (u32::from(node.imask) & ((1 << slot) - 1)).count_ones();
-            let child = bvh.nodes.as_ptr().wrapping_add((node.child_base_idx + rank) as usize).cast::<i8>();
-            // SAFETY: SSE is part of x86-64, and a prefetch never faults (the address is a
-            // child of this node anyway). A node is 80 bytes: two cache lines.
-            unsafe {
-                _mm_prefetch::<_MM_HINT_T0>(child);
-                _mm_prefetch::<_MM_HINT_T0>(child.wrapping_add(79));
+    /// Renumbers each leaf's primitives: `(first, count)` becomes `map(first, count)`.
+    pub(super) fn remap_leaves(&mut self, map: impl Fn(u32, u32) -> (u32, u32)) {
+        for node in &mut self.nodes {
+            for i in 0..8 {
+                if node.count[i] != 0 {
+                    (node.child[i], node.count[i]) = map(node.child[i], node.count[i]);
+                }
             }
         }
     }
-    hits
+
+    /// Bytes held by the nodes.
+    pub(super) fn bytes(&self) -> usize {
+        self.nodes.len() * std::mem::size_of::<Node>()
+    }
 }
 
-/// [`closest`] with the node test `node_hits` (obvhs' `ray_traverse`).
+/// A ray prepared for the node tests: `o + t d`, `t` from `tmin`, with `1/d` per axis and,
+/// per axis, which bound row the ray enters through (the max row when it runs down the axis).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct WideRay {
+    o: [f32; 3],
+    inv: [f32; 3],
+    near: [usize; 3],
+    far: [usize; 3],
+    tmin: f32,
+}
+
+impl WideRay {
+    /// The ray `o + t d`, `t > tmin`. A zero component of `d` gives an infinite inverse: the
+    /// slab test then says inside or outside exactly, except a ray lying in the slab's plane
+    /// (0·∞ = NaN), where that axis is ignored (the box is kept).
+    #[inline]
+    pub(super) fn new(o: Vec3, d: Vec3, tmin: f32) -> WideRay {
+        let inv = [1.0 / d.x, 1.0 / d.y, 1.0 / d.z];
+        let near = [0, 1, 2].map(|a| if inv[a] < 0.0 { a + 3 } else { a });
+        let far = near.map(|n| (n + 3) % 6);
+        WideRay { o: o.to_array(), inv, near, far, tmin }
+    }
+}
+
+/// A child still to visit: its entry distance and what [`Node`] says of it.
+#[derive(Clone, Copy)]
+struct Entry {
+    t: f32,
+    child: u32,
+    count: u32,
+}
+
+/// `a` if it is above `b`, else `b` (a NaN `a` or `b` gives `b`), as x86's `maxps`.
 #[inline(always)]
-fn closest_with<F: FnMut(&Ray, usize) -> f32>(
-    bvh: &CwBvh,
-    ray: Ray,
-    on_primitive: &mut F,
-    node_hits: impl Fn(&CwBvhNode, &Ray, u32) -> u32,
+fn max_x86(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+/// `a` if it is below `b`, else `b`, as x86's `minps`.
+#[inline(always)]
+fn min_x86(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// The children of `node` that the ray meets within `tmax`: a bit per child, and each
+/// child's entry distance (meaningful where the bit is set).
+#[inline(always)]
+fn scalar_hits(node: &Node, ray: &WideRay, tmax: f32) -> (u32, [f32; 8]) {
+    let mut mask = 0;
+    let mut near = [0.0; 8];
+    for (i, near) in near.iter_mut().enumerate() {
+        let slab = |row: usize, axis: usize| (node.bounds[row][i] - ray.o[axis]) * ray.inv[axis];
+        let mut t0 = ray.tmin;
+        let mut t1 = f32::INFINITY;
+        for axis in 0..3 {
+            t0 = max_x86(slab(ray.near[axis], axis), t0);
+            t1 = min_x86(slab(ray.far[axis], axis), t1);
+        }
+        let t1 = min_x86(t1 * FAR_GROWTH, tmax);
+        *near = t0;
+        mask |= u32::from(t0 <= t1) << i;
+    }
+    (mask, near)
+}
+
+/// Asks the cache for node `index` (all four lines), a stacked child: the traversal comes
+/// back to it after the nearer children, and by then it is in the cache rather than a miss
+/// on the path (the next node's address depends on the current node's test, so the processor
+/// cannot fetch ahead by itself).
+#[inline(always)]
+fn prefetch(bvh: &WideBvh, index: u32) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let node = bvh.nodes.as_ptr().wrapping_add(index as usize).cast::<i8>();
+        // SAFETY: SSE is part of x86-64, and a prefetch never faults.
+        unsafe {
+            for line in 0..4 {
+                _mm_prefetch::<_MM_HINT_T0>(node.wrapping_add(64 * line));
+            }
+        }
+    }
+}
+
+/// The traversal stack: on the thread's stack, or on the heap for a BVH deeper than
+/// [`LOCAL_STACK`] allows.
+macro_rules! stack_slots {
+    ($bvh:expr, $local:ident, $heap:ident) => {{
+        if $bvh.stack_need <= LOCAL_STACK {
+            &mut $local[..]
+        } else {
+            $heap = vec![MaybeUninit::<Entry>::uninit(); $bvh.stack_need];
+            &mut $heap[..]
+        }
+    }};
+}
+
+/// Visits the leaves whose boxes the ray meets, nearest entry first; `on_leaf(tmax, first,
+/// count)` tests the leaf's primitives against the ray shortened to `tmax` and returns the
+/// closest hit's distance, or anything not below `tmax` for none. The ray starts at `tmax`.
+#[inline]
+pub(super) fn closest(bvh: &WideBvh, ray: &WideRay, tmax: f32, mut on_leaf: impl FnMut(f32, u32, u32) -> f32) {
+    #[cfg(target_arch = "x86_64")]
+    if has_avx2() {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        unsafe { avx2::closest(bvh, ray, tmax, &mut on_leaf) };
+        return;
+    }
+    closest_with(bvh, ray, tmax, &mut on_leaf, scalar_hits);
+}
+
+/// Whether `on_leaf(first, count)` holds for any leaf whose box the ray meets within `tmax`;
+/// stops at the first that does.
+#[inline]
+pub(super) fn any(bvh: &WideBvh, ray: &WideRay, tmax: f32, mut on_leaf: impl FnMut(u32, u32) -> bool) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if has_avx2() {
+        // SAFETY: the CPU has AVX2 (checked just above).
+        return unsafe { avx2::any(bvh, ray, tmax, &mut on_leaf) };
+    }
+    any_with(bvh, ray, tmax, &mut on_leaf, scalar_hits)
+}
+
+/// [`closest`] with the node test `hits`.
+#[inline(always)]
+fn closest_with<F: FnMut(f32, u32, u32) -> f32>(
+    bvh: &WideBvh,
+    ray: &WideRay,
+    mut tmax: f32,
+    on_leaf: &mut F,
+    hits: impl Fn(&Node, &WideRay, f32) -> (u32, [f32; 8]),
 ) {
-    let mut ray = ray;
-    let mut state = State::new(bvh, ray.direction);
-    let mut node: &CwBvhNode;
-    obvhs::traverse!(bvh, node, state, prefetched(bvh, node, node_hits(node, &ray, state.oct_inv4), &state), {
-        let t = on_primitive(&ray, state.primitive_id as usize);
-        if t < ray.tmax {
-            ray.tmax = t;
+    if bvh.nodes.is_empty() {
+        return;
+    }
+    let mut local = [MaybeUninit::<Entry>::uninit(); LOCAL_STACK];
+    let mut heap;
+    let slots: &mut [MaybeUninit<Entry>] = stack_slots!(bvh, local, heap);
+    let mut len = 0;
+    let mut next = Entry { t: ray.tmin, child: 0, count: 0 };
+    loop {
+        let mut descend = false;
+        if next.count == 0 {
+            let node = &bvh.nodes[next.child as usize];
+            let (mut mask, near) = hits(node, ray, tmax);
+            if mask != 0 {
+                let entry = |i: usize| Entry { t: near[i], child: node.child[i], count: node.count[i] };
+                if mask & (mask - 1) == 0 {
+                    next = entry(mask.trailing_zeros() as usize);
+                } else {
+                    // Insertion sort onto the stack, farthest deepest; the nearest is then
+                    // taken off the top.
+                    let base = len;
+                    while mask != 0 {
+                        let e = entry(mask.trailing_zeros() as usize);
+                        mask &= mask - 1;
+                        if e.count == 0 {
+                            prefetch(bvh, e.child);
+                        }
+                        let mut j = len;
+                        // SAFETY: slots below `len` were written.
+                        while j > base && unsafe { slots[j - 1].assume_init() }.t < e.t {
+                            slots[j] = slots[j - 1];
+                            j -= 1;
+                        }
+                        slots[j] = MaybeUninit::new(e);
+                        len += 1;
+                    }
+                    len -= 1;
+                    // SAFETY: written just above.
+                    next = unsafe { slots[len].assume_init() };
+                }
+                descend = true;
+            }
+        } else {
+            let t = on_leaf(tmax, next.child, next.count);
+            if t < tmax {
+                tmax = t;
+            }
         }
-    });
+        if descend {
+            continue;
+        }
+        // The next stacked child that may still hold a closer hit.
+        loop {
+            if len == 0 {
+                return;
+            }
+            len -= 1;
+            // SAFETY: slots below `len` were written.
+            next = unsafe { slots[len].assume_init() };
+            if next.t <= tmax {
+                break;
+            }
+        }
+    }
 }
 
-/// [`any`] with the node test `node_hits` (obvhs' `ray_traverse_miss`).
+/// [`any`] with the node test `hits`.
 #[inline(always)]
-fn any_with<F: FnMut(&Ray, usize) -> bool>(
-    bvh: &CwBvh,
-    ray: Ray,
-    on_primitive: &mut F,
-    node_hits: impl Fn(&CwBvhNode, &Ray, u32) -> u32,
+fn any_with<F: FnMut(u32, u32) -> bool>(
+    bvh: &WideBvh,
+    ray: &WideRay,
+    tmax: f32,
+    on_leaf: &mut F,
+    hits: impl Fn(&Node, &WideRay, f32) -> (u32, [f32; 8]),
 ) -> bool {
-    let mut state = State::new(bvh, ray.direction);
-    let mut node: &CwBvhNode;
-    obvhs::traverse!(bvh, node, state, prefetched(bvh, node, node_hits(node, &ray, state.oct_inv4), &state), {
-        if on_primitive(&ray, state.primitive_id as usize) {
-            return true;
+    if bvh.nodes.is_empty() {
+        return false;
+    }
+    let mut local = [MaybeUninit::<u32>::uninit(); LOCAL_STACK];
+    let mut heap;
+    let slots: &mut [MaybeUninit<u32>] = if bvh.stack_need <= LOCAL_STACK {
+        &mut local[..]
+    } else {
+        heap = vec![MaybeUninit::<u32>::uninit(); bvh.stack_need];
+        &mut heap[..]
+    };
+    let mut len = 0;
+    let mut node = 0u32;
+    loop {
+        let n = &bvh.nodes[node as usize];
+        let (mut mask, _) = hits(n, ray, tmax);
+        // The node's leaves first: any hit ends the ray.
+        while mask != 0 {
+            let i = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            if n.count[i] != 0 {
+                if on_leaf(n.child[i], n.count[i]) {
+                    return true;
+                }
+            } else {
+                prefetch(bvh, n.child[i]);
+                slots[len] = MaybeUninit::new(n.child[i]);
+                len += 1;
+            }
         }
-    });
-    false
+        if len == 0 {
+            return false;
+        }
+        len -= 1;
+        // SAFETY: slots below `len` were written.
+        node = unsafe { slots[len].assume_init() };
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use glam::Vec3A;
-    use obvhs::cwbvh::CwBvh;
-    use obvhs::cwbvh::node::CwBvhNode;
-    use obvhs::ray::Ray;
+    use super::{FAR_GROWTH, Node, WideBvh, WideRay};
     use std::arch::x86_64::*;
-
-    /// obvhs' cull of boxes whose exit distance is below this (`cwbvh::node::EPSILON`,
-    /// crate-private there), applied instead of the ray's `tmin` (see `BvhSpace`).
-    const EPSILON: f32 = 1e-4;
 
     /// [`super::closest`] with the AVX2 node test.
     #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn closest<F: FnMut(&Ray, usize) -> f32>(bvh: &CwBvh, ray: Ray, on_primitive: &mut F) {
-        super::closest_with(bvh, ray, on_primitive, |node, ray, oct| node_hits(node, ray, oct));
+    pub(super) unsafe fn closest<F: FnMut(f32, u32, u32) -> f32>(
+        bvh: &WideBvh,
+        ray: &WideRay,
+        tmax: f32,
+        on_leaf: &mut F,
+    ) {
+        super::closest_with(bvh, ray, tmax, on_leaf, |node, ray, tmax| node_hits(node, ray, tmax));
     }
 
     /// [`super::any`] with the AVX2 node test.
     #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn any<F: FnMut(&Ray, usize) -> bool>(bvh: &CwBvh, ray: Ray, on_primitive: &mut F) -> bool {
-        super::any_with(bvh, ray, on_primitive, |node, ray, oct| node_hits(node, ray, oct))
+    pub(super) unsafe fn any<F: FnMut(u32, u32) -> bool>(
+        bvh: &WideBvh,
+        ray: &WideRay,
+        tmax: f32,
+        on_leaf: &mut F,
+    ) -> bool {
+        super::any_with(bvh, ray, tmax, on_leaf, |node, ray, tmax| node_hits(node, ray, tmax))
     }
 
-    /// The 8 quantised coordinates `q` as f32 lanes (exact).
+    /// [`super::scalar_hits`] on 8 lanes (the same operations in the same order).
     #[target_feature(enable = "avx2")]
     #[inline]
-    fn widen(q: &[u8; 8]) -> __m256 {
-        // SAFETY: reads the 8 bytes of `q`.
-        let bytes = unsafe { _mm_loadl_epi64(q.as_ptr().cast()) };
-        _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(bytes))
-    }
-
-    /// obvhs' `CwBvhNode::intersect_ray` on 8 lanes: the node's hit mask (children to
-    /// visit in the high byte, leaf primitives in the low 24 bits).
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(super) fn node_hits(node: &CwBvhNode, ray: &Ray, oct_inv4: u32) -> u32 {
-        let scale = node.compute_extent() * ray.inv_direction;
-        let origin = (Vec3A::from(node.p) - ray.origin) * ray.inv_direction;
-        // Entry and exit distances along one axis: a ray going down that axis enters
-        // through the boxes' upper faces.
-        let slabs = |lo: &[u8; 8], hi: &[u8; 8], negative: bool, scale: f32, origin: f32| {
-            let (near, far) = if negative { (widen(hi), widen(lo)) } else { (widen(lo), widen(hi)) };
-            let (s, o) = (_mm256_set1_ps(scale), _mm256_set1_ps(origin));
-            (_mm256_add_ps(_mm256_mul_ps(near, s), o), _mm256_add_ps(_mm256_mul_ps(far, s), o))
+    pub(super) fn node_hits(node: &Node, ray: &WideRay, tmax: f32) -> (u32, [f32; 8]) {
+        // SAFETY: each row is 8 f32 (unaligned loads: the rows are 32-byte aligned anyway).
+        let row = |r: usize| unsafe { _mm256_loadu_ps(node.bounds[r].as_ptr()) };
+        let slab = |r: usize, axis: usize| {
+            _mm256_mul_ps(_mm256_sub_ps(row(r), _mm256_set1_ps(ray.o[axis])), _mm256_set1_ps(ray.inv[axis]))
         };
-        let (x0, x1) = slabs(&node.child_min_x, &node.child_max_x, ray.direction.x < 0.0, scale.x, origin.x);
-        let (y0, y1) = slabs(&node.child_min_y, &node.child_max_y, ray.direction.y < 0.0, scale.y, origin.y);
-        let (z0, z1) = slabs(&node.child_min_z, &node.child_max_z, ray.direction.z < 0.0, scale.z, origin.z);
-        let tmin = _mm256_max_ps(_mm256_max_ps(x0, _mm256_max_ps(y0, z0)), _mm256_set1_ps(EPSILON));
-        let tmax = _mm256_min_ps(_mm256_min_ps(x1, _mm256_min_ps(y1, z1)), _mm256_set1_ps(ray.tmax));
-        let met = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_LE_OQ>(tmin, tmax));
-        // Each child met contributes its bits shifted to its place (obvhs' loop over the
-        // met children, here in the lanes: no branch per child).
-        let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
-        let lanes = |bytes: u64| _mm256_cvtepu8_epi32(_mm_cvtsi64_si128(bytes as i64));
-        let bits = _mm256_and_si256(_mm256_sllv_epi32(lanes(child_bits8), lanes(bit_index8)), met);
-        let half = _mm_or_si128(_mm256_castsi256_si128(bits), _mm256_extracti128_si256::<1>(bits));
-        let pair = _mm_or_si128(half, _mm_unpackhi_epi64(half, half));
-        _mm_cvtsi128_si32(_mm_or_si128(pair, _mm_srli_epi64::<32>(pair))) as u32
+        let mut t0 = _mm256_set1_ps(ray.tmin);
+        let mut t1 = _mm256_set1_ps(f32::INFINITY);
+        for axis in 0..3 {
+            t0 = _mm256_max_ps(slab(ray.near[axis], axis), t0);
+            t1 = _mm256_min_ps(slab(ray.far[axis], axis), t1);
+        }
+        let t1 = _mm256_min_ps(_mm256_mul_ps(t1, _mm256_set1_ps(FAR_GROWTH)), _mm256_set1_ps(tmax));
+        let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32;
+        let mut near = [0.0f32; 8];
+        // SAFETY: `near` holds 8 f32.
+        unsafe { _mm256_storeu_ps(near.as_mut_ptr(), t0) };
+        (mask, near)
     }
 }
 
@@ -277,59 +446,169 @@ mod tests {
     use glam::Vec3A;
     use obvhs::aabb::Aabb;
     use obvhs::cwbvh::builder::build_cwbvh;
-    use obvhs::ray::Ray;
 
-    /// The AVX2 node test accepts exactly the boxes obvhs' SSE test accepts, node by node,
-    /// for rays in every octant (including axis-parallel ones).
+    /// A small deterministic generator in [-1, 1).
+    fn generator(mut seed: u32) -> impl FnMut() -> f32 {
+        move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed as f32 / u32::MAX as f32 * 2.0 - 1.0
+        }
+    }
+
+    /// Boxes, the wide BVH over them, and a ray generator (some rays axis-parallel).
+    fn scene() -> (Vec<Aabb>, WideBvh, CwBvh) {
+        let mut next = generator(1);
+        let boxes: Vec<Aabb> = (0..500)
+            .map(|_| {
+                let c = Vec3A::new(next(), next(), next()) * 100.0;
+                let h = Vec3A::new(next().abs(), next().abs(), next().abs()) * 3.0;
+                Aabb::new(c - h, c + h)
+            })
+            .collect();
+        let cw = build_cwbvh(&boxes, obvhs::BvhBuildParams::medium_build(), &mut Default::default());
+        (boxes, WideBvh::from_cwbvh(&cw), cw)
+    }
+
+    /// Rays from around the boxes: half aimed near a box's centre, the rest anywhere.
+    fn rays(boxes: &[Aabb]) -> Vec<(Vec3, Vec3, f32)> {
+        let mut next = generator(9);
+        (0..400)
+            .map(|r| {
+                let o = Vec3::new(next(), next(), next()) * 150.0;
+                let jitter = Vec3::new(next(), next(), next());
+                let target = if r % 2 == 0 {
+                    let b = &boxes[r * 7 % boxes.len()];
+                    Vec3::from(b.min + b.max) * 0.5 + jitter * 2.0
+                } else {
+                    jitter * 1e4
+                };
+                let mut d = target - o;
+                if r % 7 == 0 {
+                    d.y = 0.0;
+                }
+                if r % 11 == 0 {
+                    d.x = 0.0;
+                }
+                (o, d.normalize(), 150.0 + 300.0 * next().abs())
+            })
+            .collect()
+    }
+
+    /// The slab test in f64 against the box built over: where the segment enters it, if it
+    /// meets it.
+    fn entry(b: &Aabb, o: Vec3, d: Vec3, tmax: f32) -> Option<f64> {
+        let (mut t0, mut t1) = (0.0f64, tmax as f64);
+        for a in 0..3 {
+            let (lo, hi, o, d) = (b.min[a] as f64, b.max[a] as f64, o[a] as f64, d[a] as f64);
+            if d == 0.0 {
+                if o < lo || o > hi {
+                    return None;
+                }
+                continue;
+            }
+            let (x, y) = ((lo - o) / d, (hi - o) / d);
+            t0 = t0.max(x.min(y));
+            t1 = t1.min(x.max(y));
+        }
+        (t0 <= t1).then_some(t0)
+    }
+
+    /// The AVX2 node test accepts exactly the boxes the scalar test accepts, with the same
+    /// entry distances, node by node, for rays in every octant (including axis-parallel ones).
     #[test]
-    fn avx2_node_test_matches_obvhs_on_every_node() {
+    fn avx2_node_test_matches_the_scalar_test_on_every_node() {
         #[cfg(target_arch = "x86_64")]
         {
             if !has_avx2() {
                 return;
             }
-            let mut seed = 1u32;
-            let mut next = move || {
-                seed ^= seed << 13;
-                seed ^= seed >> 17;
-                seed ^= seed << 5;
-                seed as f32 / u32::MAX as f32 * 2.0 - 1.0
-            };
-            let boxes: Vec<Aabb> = (0..500)
-                .map(|_| {
-                    let c = Vec3A::new(next(), next(), next()) * 100.0;
-                    let h = Vec3A::new(next().abs(), next().abs(), next().abs()) * 3.0;
-                    Aabb::new(c - h, c + h)
-                })
-                .collect();
-            let bvh = build_cwbvh(&boxes, obvhs::BvhBuildParams::medium_build(), &mut Default::default());
-            let mut compared = 0;
-            for r in 0..400 {
-                let mut d = Vec3A::new(next(), next(), next());
-                if r % 7 == 0 {
-                    d.y = 0.0;
-                }
-                let ray = Ray::new(
-                    Vec3A::new(next(), next(), next()) * 150.0,
-                    d.normalize(),
-                    0.0,
-                    50.0 + 200.0 * next().abs(),
-                );
-                let oct = bvh.new_traversal(ray.direction).oct_inv4;
+            let (boxes, bvh, _) = scene();
+            let mut met = 0;
+            for (r, (o, d, tmax)) in rays(&boxes).into_iter().enumerate() {
+                let ray = WideRay::new(o, d, 0.0);
                 for node in &bvh.nodes {
+                    let (mask, near) = scalar_hits(node, &ray, tmax);
                     // SAFETY: AVX2 is present (checked above).
-                    let wide = unsafe { avx2_node_hits(node, &ray, oct) };
-                    assert_eq!(wide, node.intersect_ray(&ray, oct), "ray {r}");
-                    compared += u32::from(wide != 0);
+                    let (wide_mask, wide_near) = unsafe { avx2_node_hits(node, &ray, tmax) };
+                    assert_eq!(mask, wide_mask, "ray {r}");
+                    for i in (0..8).filter(|i| mask >> i & 1 == 1) {
+                        assert_eq!(near[i].to_bits(), wide_near[i].to_bits(), "ray {r}");
+                    }
+                    met += mask.count_ones();
                 }
             }
-            assert!(compared > 100, "the rays must meet some boxes ({compared})");
+            assert!(met > 100, "the rays must meet some boxes ({met})");
         }
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn avx2_node_hits(node: &obvhs::cwbvh::node::CwBvhNode, ray: &Ray, oct: u32) -> u32 {
-        avx2::node_hits(node, ray, oct)
+    fn avx2_node_hits(node: &Node, ray: &WideRay, tmax: f32) -> (u32, [f32; 8]) {
+        avx2::node_hits(node, ray, tmax)
+    }
+
+    /// Every primitive whose box the segment meets (by an f64 slab test on the box built
+    /// over) is handed to the leaf callback, by both traversals, and each primitive at most
+    /// once; the decoded node boxes hold the boxes built over.
+    #[test]
+    fn traversals_reach_every_box_the_ray_meets() {
+        let (boxes, bvh, cw) = scene();
+        assert!(bvh.stack_need > 1 && bvh.stack_need <= LOCAL_STACK, "{}", bvh.stack_need);
+        for (r, (o, d, tmax)) in rays(&boxes).into_iter().enumerate() {
+            let ray = WideRay::new(o, d, 0.0);
+            let mut seen = vec![0u32; boxes.len()];
+            // With the ray never shortened, the closest-hit traversal visits every leaf met.
+            closest(&bvh, &ray, tmax, |_, first, count| {
+                for id in first..first + count {
+                    seen[cw.primitive_indices[id as usize] as usize] += 1;
+                }
+                f32::INFINITY
+            });
+            let mut any_seen = vec![0u32; boxes.len()];
+            let stopped = any(&bvh, &ray, tmax, |first, count| {
+                for id in first..first + count {
+                    any_seen[cw.primitive_indices[id as usize] as usize] += 1;
+                }
+                false
+            });
+            assert!(!stopped);
+            for (i, b) in boxes.iter().enumerate() {
+                assert!(seen[i] <= 1 && any_seen[i] <= 1, "ray {r}, box {i} visited twice");
+                if entry(b, o, d, tmax).is_some() {
+                    assert_eq!(seen[i], 1, "ray {r} meets box {i}: closest traversal missed it");
+                    assert_eq!(any_seen[i], 1, "ray {r} meets box {i}: any traversal missed it");
+                }
+            }
+        }
+    }
+
+    /// The closest-hit traversal, told each box's entry distance as its hit, finds the
+    /// brute-force nearest entry: the nearest-first order and the cull of stacked children
+    /// beyond the hit never drop a nearer box (boxes holding the origin, entered at 0, left out).
+    #[test]
+    fn closest_hit_finds_the_nearest_box() {
+        let (boxes, bvh, cw) = scene();
+        let mut checked = 0;
+        for (o, d, tmax) in rays(&boxes) {
+            let ray = WideRay::new(o, d, 0.0);
+            let nearest = boxes.iter().filter_map(|b| entry(b, o, d, tmax)).filter(|&t| t > 0.0).reduce(f64::min);
+            let mut best: Option<f64> = None;
+            closest(&bvh, &ray, tmax, |_, first, count| {
+                let mut found = None;
+                for id in first..first + count {
+                    let b = &boxes[cw.primitive_indices[id as usize] as usize];
+                    if let Some(t) = entry(b, o, d, tmax).filter(|&t| t > 0.0 && best.is_none_or(|x| t < x)) {
+                        best = Some(t);
+                        found = Some(t as f32);
+                    }
+                }
+                found.unwrap_or(f32::INFINITY)
+            });
+            assert_eq!(best, nearest);
+            checked += usize::from(nearest.is_some());
+        }
+        assert!(checked > 80, "{checked}");
     }
 }
