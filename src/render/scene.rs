@@ -79,6 +79,10 @@ struct Placement {
     world_animated: bool,
     /// Instances the build left out for a singular transform.
     singular: bool,
+    /// World prims built as prototypes of their own because they deform.
+    deforming: Vec<geometry::Deforming>,
+    /// A world-space prim deforms: the world's BLAS changes with the time code.
+    deforming_in_world: bool,
     /// The Camera prim looked through.
     camera: Option<PrimId>,
     /// The scene options it was built with.
@@ -313,6 +317,8 @@ impl Scene {
             world_animated,
             baked: geometry.baked,
             singular: motion.singular,
+            deforming: geometry.deforming,
+            deforming_in_world: geometry.deforming_in_world,
             camera: camera_path.as_deref().and_then(|p| stage.find(p)),
             options: options.clone(),
         };
@@ -342,23 +348,41 @@ impl Scene {
     }
 
     /// Moves the scene to the stage's time when, since it was built, only transforms that
-    /// place instances changed (`changed`: the prims whose xformOps did): instance transforms
-    /// (and their keys under an open shutter), the top-level BVH, the camera, the lights and
-    /// the emitters' light power are computed again, exactly as a build at this time computes
-    /// them, and every BLAS is kept. The scene is untouched and the reason returned when that
-    /// would not be what a build makes (a transform baked into triangles changed, displaced
+    /// place instances changed (`changed`: the prims whose xformOps did) and the shapes of
+    /// deforming prims built as prototypes of their own (`reshaped`: the prims and attributes
+    /// that changed; see [`geometry::Geometry::deforming`]): those prototypes' BLASes are
+    /// built again, instance transforms (and their keys under an open shutter), the top-level
+    /// BVH, the camera, the lights and the emitters' light power are computed again, exactly
+    /// as a build at this time computes them, and every other BLAS is kept. Returns the
+    /// number of BLASes built. The scene is untouched and the reason returned when that would
+    /// not be what a build makes (a transform baked into triangles changed, displaced
     /// geometry is diced for a camera, an instance became singular, …).
     pub fn move_to(
         &mut self,
         stage: &Stage,
         changed: &[PrimId],
+        reshaped: &[(PrimId, String)],
         materials: &[&dyn MaterialCode],
         diags: &mut Diagnostics,
-    ) -> Result<(), NeedsRebuild> {
+    ) -> Result<usize, NeedsRebuild> {
         let why = |s: String| Err(NeedsRebuild(s));
         let p = &self.placement;
         if let Some(&id) = changed.iter().find(|id| p.baked.get(id.0 as usize).copied().unwrap_or(true)) {
             return why(format!("`{}` moved geometry built in world space", stage.prim(id).path));
+        }
+        let skinned = p.deforming.iter().any(|d| d.skinned);
+        let reshapes_prototype = |id: PrimId| {
+            p.deforming.iter().any(|d| d.id == id)
+                || (skinned && stage.prim(id).type_name.as_deref() == Some("SkelAnimation"))
+        };
+        if let Some((id, name)) = reshaped.iter().find(|(id, _)| !reshapes_prototype(*id)) {
+            return why(format!("`{}.{name}` changed", stage.prim(*id).path));
+        }
+        if p.deforming_in_world && !(changed.is_empty() && reshaped.is_empty()) {
+            return why("a prim built in world space deforms (its material displaces or emits)".into());
+        }
+        if self.shutter.is_open() && !p.deforming.is_empty() {
+            return why("a prim deforms under an open shutter: its keys are the frame's".into());
         }
         if self.shutter.is_open() && p.world_animated {
             return why("a world-space prim is animated under an open shutter".into());
@@ -369,14 +393,34 @@ impl Scene {
         if p.singular {
             return why("an instance had a singular transform".into());
         }
-        if changed.is_empty() && !self.shutter.is_open() {
-            return Ok(());
+        if changed.is_empty() && reshaped.is_empty() && !self.shutter.is_open() {
+            return Ok(0);
         }
         let xforms = world_transforms(stage, diags);
-        let Some(instances) = instances_at(stage, &xforms, p) else {
+        // The deforming prototypes whose shape may have changed: a skinned one's follows its
+        // placement, its skeleton's and its animation, which any change may be.
+        let anything = !changed.is_empty() || !reshaped.is_empty();
+        let reshapes = |d: &&geometry::Deforming| (d.skinned && anything) || reshaped.iter().any(|(id, _)| *id == d.id);
+        if p.deforming.iter().any(|d| reshapes(&d)) && !self.primvars.names.is_empty() {
+            return why("a deforming prim's primvars are stored in one table with every other prim's".into());
+        }
+        let mut rebuilt = Vec::new();
+        for d in p.deforming.iter().filter(reshapes) {
+            let proto = geometry::deforming_prototype(stage, &xforms, d.id, p.options.geometry, diags);
+            let bounds = proto.as_ref().and_then(|proto| proto.bounds);
+            if bounds.is_none() || p.prototype_bounds[d.prototype as usize].is_none() {
+                return why(format!("`{}` became or was empty or hidden", stage.prim(d.id).path));
+            }
+            rebuilt.push((d.prototype, proto.expect("bounds are some")));
+        }
+        let mut prototype_bounds = p.prototype_bounds.clone();
+        for (index, proto) in &rebuilt {
+            prototype_bounds[*index as usize] = proto.bounds;
+        }
+        let Some(instances) = instances_at(stage, &xforms, p, &prototype_bounds) else {
             return why("a point instancer's points or an instance's transform cannot be placed".into());
         };
-        let bounds = geometry::placed_bounds(p.world_bounds, &p.prototype_bounds, &instances)
+        let bounds = geometry::placed_bounds(p.world_bounds, &prototype_bounds, &instances)
             .unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
         crate::render::support::report_unsupported(stage, &xforms, diags);
         let chosen = p.camera.map(|id| (id, stage.prim(id)));
@@ -384,13 +428,18 @@ impl Scene {
         let motion = motion::instance_motion(stage, &p.placers, &instances, self.shutter);
         self.camera_motion = chosen.and_then(|(id, _)| motion::camera_motion(stage, id, self.shutter));
         self.motion.moving_instances = motion.len();
+        let blas_builds = rebuilt.len();
+        for (index, proto) in rebuilt {
+            self.accel.replace_prototype(index, Blas::new(proto.triangles, proto.shapes));
+        }
         self.accel.move_instances(&instances, motion);
         let scene_radius = (bounds.1 - bounds.0).length() / 2.0;
         let light_power: f32 = lights.iter().filter(|l| !l.is_infinite()).map(|l| l.power(scene_radius)).sum();
         self.emitters = Emitters::build(&self.accel, self.prims.len(), &self.prim_material, materials, light_power);
         (self.lights, self.camera, self.default_lights, self.bounds) = (lights, camera, default_lit, bounds);
         self.placement.instances = instances;
-        Ok(())
+        self.placement.prototype_bounds = prototype_bounds;
+        Ok(blas_builds)
     }
 
     /// Everything [`Scene::from_stage`] reports — geometry, materials of prims, lights,
@@ -469,7 +518,12 @@ fn time_varying(stage: &Stage, id: PrimId) -> bool {
 /// transform, or by its point instancer's point, as a build computes them; `None` when one
 /// cannot be placed as before (a point instancer's points changed in number or became
 /// invalid, a transform became singular or left the extent).
-fn instances_at(stage: &Stage, xforms: &[PrimXform], placement: &Placement) -> Option<Vec<InstanceDesc>> {
+fn instances_at(
+    stage: &Stage,
+    xforms: &[PrimXform],
+    placement: &Placement,
+    prototype_bounds: &[Option<(DVec3, DVec3)>],
+) -> Option<Vec<InstanceDesc>> {
     let mut out = placement.instances.clone();
     let mut i = 0;
     while i < out.len() {
@@ -497,7 +551,7 @@ fn instances_at(stage: &Stage, xforms: &[PrimXform], placement: &Placement) -> O
     }
     let placeable = out.iter().all(|desc| {
         let det = glam::DMat3::from_mat4(desc.to_world).determinant();
-        let Some((lo, hi)) = placement.prototype_bounds[desc.prototype as usize] else { return true };
+        let Some((lo, hi)) = prototype_bounds[desc.prototype as usize] else { return true };
         let (wlo, whi) = crate::render::geometry::shapes::transformed_box(&desc.to_world, lo, hi);
         det != 0.0
             && det.is_finite()
@@ -529,6 +583,10 @@ impl Parts {
                 .and_then(|m| materials.get(m))
                 .is_some_and(|code| code.info().layers.iter().any(|l| l.displacement_bound.is_some() || l.has_emission))
         };
+        let chosen = match &options.camera {
+            Some(path) => stage.find(path).map(|id| (id, stage.prim(id))),
+            None => stage.depth_first().find(|(_, p)| p.type_name.as_deref() == Some("Camera")),
+        };
         let mut geometry = geometry::build_for_render(stage, &xforms, options.geometry, &read, &stays_in_world, diags);
         let mut prim_material = Vec::with_capacity(geometry.prims.len());
         for prim in &geometry.prims {
@@ -545,10 +603,6 @@ impl Parts {
         }
         crate::render::support::report_unsupported(stage, &xforms, diags);
         let bounds = geometry.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
-        let chosen = match &options.camera {
-            Some(path) => stage.find(path).map(|id| (id, stage.prim(id))),
-            None => stage.depth_first().find(|(_, p)| p.type_name.as_deref() == Some("Camera")),
-        };
         let camera_path = chosen.map(|(_, prim)| prim.path.clone());
         let (lights, camera, default_lit) = lights_and_camera(stage, &xforms, chosen, bounds, options, diags);
         if diags.error_count() > errors {

@@ -190,7 +190,8 @@ pub struct SessionStats {
     pub materials_reused: usize,
     /// Times geometry, BVH and lights were built.
     pub scene_builds: usize,
-    /// Bottom-level BVHs built (the world's and each prototype's, at every scene build).
+    /// Bottom-level BVHs built (the world's and each prototype's at every scene build, and a
+    /// deforming prim's when a new time code builds only its own).
     pub blas_builds: usize,
     /// Times a new time code only moved instances (top-level BVH built again, BLASes kept).
     pub instance_moves: usize,
@@ -708,15 +709,18 @@ impl Session {
         self.options.time = Some(time);
         let changed = changed_at(stage, time);
         stage.set_time(time);
-        let reason = match changed.iter().find(|(id, name)| !places_instances(stage, *id, name)) {
+        let other = |(id, name): &&(PrimId, String)| !places_instances(stage, *id, name) && !reshapes(stage, *id, name);
+        let reason = match changed.iter().find(other) {
             Some((id, name)) => format!("`{}.{name}` changed", stage.prim(*id).path),
             None => {
-                let mut prims: Vec<PrimId> = changed.iter().map(|(id, _)| *id).collect();
+                let (moved, reshaped): (Vec<_>, Vec<_>) =
+                    changed.into_iter().partition(|(id, name)| places_instances(stage, *id, name));
+                let mut prims: Vec<PrimId> = moved.iter().map(|(id, _)| *id).collect();
                 prims.dedup();
-                match self.move_instances(&prims) {
+                match self.move_instances(&prims, &reshaped) {
                     Ok(true) => {
                         let mut report = UpdateReport::nothing(ChangeKind::Value);
-                        report.instances_moved = !prims.is_empty();
+                        report.instances_moved = !prims.is_empty() || !reshaped.is_empty();
                         report.ms = start.elapsed().as_secs_f64() * 1e3;
                         return report;
                     }
@@ -733,9 +737,10 @@ impl Session {
     }
 
     /// Moves the prepared scene's instances to the stage's time after the xformOps of
-    /// `changed` changed value (nothing else did). `Ok(false)`: there is no prepared scene
-    /// (nothing to move); `Err`: why the scene must be built again.
-    fn move_instances(&mut self, changed: &[PrimId]) -> Result<bool, String> {
+    /// `changed` changed value and the shapes of `reshaped` (nothing else did), building
+    /// the BLASes of deforming prims again. `Ok(false)`: there is no prepared scene (nothing
+    /// to move); `Err`: why the scene must be built again.
+    fn move_instances(&mut self, changed: &[PrimId], reshaped: &[(PrimId, String)]) -> Result<bool, String> {
         let (Some(prepared), Some(compiled), Some(stage)) = (&mut self.prepared, &self.compiled, &self.stage) else {
             return Ok(false);
         };
@@ -743,9 +748,13 @@ impl Session {
             return Ok(false);
         }
         let start = Instant::now();
-        prepared.scene.move_to(stage, changed, &compiled.refs(), &mut self.diags).map_err(|e| e.to_string())?;
+        let built = prepared
+            .scene
+            .move_to(stage, changed, reshaped, &compiled.refs(), &mut self.diags)
+            .map_err(|e| e.to_string())?;
         prepared.geometry = fingerprint::geometry_hash(stage);
-        self.stats.instance_moves += usize::from(!changed.is_empty());
+        self.stats.instance_moves += usize::from(!changed.is_empty() || !reshaped.is_empty());
+        self.stats.blas_builds += built;
         self.stats.scene_ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(true)
     }
@@ -1151,7 +1160,15 @@ pub fn check_file_at(file: &Path, time: Option<TimeCode>) -> (Diagnostics, Sourc
 fn places_instances(stage: &Stage, id: PrimId, name: &str) -> bool {
     name.starts_with("xformOp:")
         || (stage.prim(id).type_name.as_deref() == Some("PointInstancer")
-            && matches!(name, "positions" | "orientations" | "orientationsf" | "scales"))
+            && crate::render::geometry::POINT_MOTION_ATTRIBUTES.contains(&name))
+}
+
+/// Whether attribute `name` of prim `id` only shapes a prim that may deform (its points or
+/// normals, or a skeleton's animation): the render scene may build that prim's BLAS alone
+/// again ([`crate::render::Scene::move_to`] decides).
+fn reshapes(stage: &Stage, id: PrimId, name: &str) -> bool {
+    matches!(name, "points" | "normals" | "primvars:normals" | "primvars:normals:indices")
+        || stage.prim(id).type_name.as_deref() == Some("SkelAnimation")
 }
 
 /// The attributes whose value at `time` differs from their value now (only those with time

@@ -41,9 +41,11 @@ pub fn build_with_primvars(
 
 /// As [`build_with_primvars`], for a render scene: a world prim whose placement is animated
 /// (its xformOps or an ancestor's have time samples) becomes an instance of its own geometry,
-/// built in its object space, so another time code moves the instance and keeps its BVH;
-/// unless `stays_in_world` holds for it (its material displaces or emits: dicing and light
-/// sampling work on world triangles), it deforms (`points` are sampled) or it is skinned.
+/// built in its object space, so another time code moves the instance and keeps its BVH; a
+/// world prim that deforms ([`deforms`]) becomes one too ([`Geometry::deforming`]), so
+/// another time code builds only its BVH again. Both stay in world space when
+/// `stays_in_world` holds for them (their material displaces or emits: dicing and light
+/// sampling work on world triangles).
 pub fn build_for_render(
     stage: &Stage,
     xforms: &[PrimXform],
@@ -52,7 +54,40 @@ pub fn build_for_render(
     stays_in_world: &dyn Fn(&Prim) -> bool,
     diags: &mut Diagnostics,
 ) -> Geometry {
-    build_from(stage, xforms, options, MAX_TRIANGLES, primvars, Some(stays_in_world), diags)
+    build_from(Builder::new(stage, xforms, options, MAX_TRIANGLES, primvars, Some(stays_in_world)), diags)
+}
+
+/// Whether world prim `id`'s shape changes with time: its `points` have time samples, or it
+/// is skinned and something that poses it is sampled (its skeleton, its animation, its own
+/// placement, which skinning ignores: its posed points in its own space change when it moves).
+pub fn deforms(stage: &Stage, id: PrimId, prim: &Prim) -> bool {
+    prim.attribute("points").is_some_and(|a| !a.time_samples.is_empty()) || skinned_and_animated(stage, id)
+}
+
+fn skinned_and_animated(stage: &Stage, id: PrimId) -> bool {
+    crate::render::geometry::skel::skinning_sample_times(stage, id)
+        .is_some_and(|t| !t.is_empty() || !transform_sample_times(stage, id).is_empty())
+}
+
+/// The prototype a render build ([`build_for_render`]) makes of deforming world prim `id`
+/// ([`Geometry::deforming`]) at the stage's time, bit for bit: `move_to` builds only its BVH
+/// again. `None` when it is hidden or no longer renderable. Materials must read no primvars
+/// (the build stores those in one table for the whole scene).
+pub fn deforming_prototype(
+    stage: &Stage,
+    xforms: &[PrimXform],
+    id: PrimId,
+    options: GeometryOptions,
+    diags: &mut Diagnostics,
+) -> Option<Prototype> {
+    let prim = stage.prim(id);
+    if xforms[id.0 as usize].hidden || !is_renderable(prim) {
+        return None;
+    }
+    let mut b = Builder::new(stage, xforms, options, MAX_TRIANGLES, &[], None);
+    let world = xforms[id.0 as usize].world;
+    let posed = crate::render::geometry::skel::posed_prim(stage, xforms, prim, world, diags);
+    Some(b.own_prototype(posed.as_ref().unwrap_or(prim), diags).0)
 }
 
 /// What a prim is to instancing.
@@ -99,18 +134,12 @@ pub(super) fn build_within(
     primvars: &[String],
     diags: &mut Diagnostics,
 ) -> Geometry {
-    build_from(stage, xforms, options, budget, primvars, None, diags)
+    build_from(Builder::new(stage, xforms, options, budget, primvars, None), diags)
 }
 
-fn build_from<'s>(
-    stage: &'s Stage,
-    xforms: &'s [PrimXform],
-    options: GeometryOptions,
-    budget: usize,
-    primvars: &[String],
-    stays_in_world: Option<&'s dyn Fn(&Prim) -> bool>,
-    diags: &mut Diagnostics,
-) -> Geometry {
+/// The geometry of every visible renderable prim of `b`'s stage, built by `b`.
+fn build_from(mut b: Builder<'_>, diags: &mut Diagnostics) -> Geometry {
+    let (stage, xforms) = (b.stage, b.xforms);
     // Roles: an `instanceable` prim inside another instance is part of that instance's
     // prototype (nested instancing is flattened into it).
     let mut role = vec![Role::Plain; stage.len()];
@@ -137,23 +166,6 @@ fn build_from<'s>(
             key_of.insert(id.0, key);
         }
     }
-    let mut geometry = Geometry::default();
-    geometry.primvars.names = primvars.to_vec();
-    geometry.baked = vec![false; stage.len()];
-    let mut b = Builder {
-        stage,
-        stays_in_world,
-        xforms,
-        geometry,
-        budget,
-        prim_index: HashMap::new(),
-        prototype_of: HashMap::new(),
-        over_budget: false,
-        singular_instances: 0,
-        subdiv_level: options.subdiv_level,
-        max_instances: MAX_INSTANCES
-            .min(usize::try_from(crate::input::memory_budget() / INSTANCE_BYTES).unwrap_or(usize::MAX)),
-    };
     for (id, prim) in stage.depth_first() {
         let i = id.0 as usize;
         if inside[i] || xforms[i].hidden {
@@ -251,7 +263,36 @@ fn own_hidden(prim: &Prim) -> bool {
         || matches!(prim.value("purpose").and_then(Value::as_str), Some("guide" | "proxy"))
 }
 
-impl Builder<'_> {
+impl<'s> Builder<'s> {
+    /// A build of `stage` (its transforms `xforms`) within `budget` triangles, storing the
+    /// primvars named in `primvars`; `stays_in_world` as for [`build_for_render`].
+    fn new(
+        stage: &'s Stage,
+        xforms: &'s [PrimXform],
+        options: GeometryOptions,
+        budget: usize,
+        primvars: &[String],
+        stays_in_world: Option<&'s dyn Fn(&Prim) -> bool>,
+    ) -> Builder<'s> {
+        let mut geometry = Geometry::default();
+        geometry.primvars.names = primvars.to_vec();
+        geometry.baked = vec![false; stage.len()];
+        Builder {
+            stage,
+            stays_in_world,
+            xforms,
+            geometry,
+            budget,
+            prim_index: HashMap::new(),
+            prototype_of: HashMap::new(),
+            over_budget: false,
+            singular_instances: 0,
+            subdiv_level: options.subdiv_level,
+            max_instances: MAX_INSTANCES
+                .min(usize::try_from(crate::input::memory_budget() / INSTANCE_BYTES).unwrap_or(usize::MAX)),
+        }
+    }
+
     /// The index of the renderable prim at `prim`'s path, added when new.
     fn prim_index(&mut self, prim: &Prim) -> u32 {
         let prims = &mut self.geometry.prims;
@@ -272,11 +313,21 @@ impl Builder<'_> {
         if !is_renderable(prim) {
             return;
         }
-        // UsdSkel: a skinned prim is emitted from its posed copy.
+        // UsdSkel: a skinned prim is emitted from its posed copy (in its own space).
         let posed = crate::render::geometry::skel::posed_prim(self.stage, self.xforms, prim, world, diags);
-        if posed.is_none() && self.moves_as_instance(id, prim) {
-            self.own_instance(id, prim, world, diags);
-            return;
+        match self.moves_as_instance(id, prim) {
+            Some(deforming) => {
+                let prototype = self.own_instance(id, posed.as_ref().unwrap_or(prim), world, diags);
+                if deforming {
+                    let skinned = posed.is_some();
+                    self.geometry.deforming.push(Deforming { id, prototype, skinned });
+                }
+                return;
+            }
+            None if self.stays_in_world.is_some() && deforms(self.stage, id, prim) => {
+                self.geometry.deforming_in_world = true;
+            }
+            None => {}
         }
         let prim = posed.as_ref().unwrap_or(prim);
         // Its world transform is in its triangles: a change of it or an ancestor's rebuilds them.
@@ -336,11 +387,13 @@ impl Builder<'_> {
         self.report(prim, beyond, over, small, diags);
     }
 
-    /// Whether world prim `id` is built as an instance of its own (see [`build_for_render`]).
-    fn moves_as_instance(&self, id: PrimId, prim: &Prim) -> bool {
-        let Some(stays_in_world) = self.stays_in_world else { return false };
-        let deforms = prim.attribute("points").is_some_and(|a| !a.time_samples.is_empty());
-        !deforms && !stays_in_world(prim) && !transform_sample_times(self.stage, id).is_empty()
+    /// Whether world prim `id` is built as an instance of its own (see [`build_for_render`]):
+    /// `Some(true)` because it deforms, `Some(false)` because only its placement moves.
+    fn moves_as_instance(&self, id: PrimId, prim: &Prim) -> Option<bool> {
+        let stays_in_world = self.stays_in_world?;
+        let deforming = deforms(self.stage, id, prim);
+        let moves = deforming || !transform_sample_times(self.stage, id).is_empty();
+        (moves && !stays_in_world(prim)).then_some(deforming)
     }
 
     /// Marks the prims whose transforms a BLAS holds baked in for prim `id`: it and its
@@ -354,8 +407,20 @@ impl Builder<'_> {
     }
 
     /// World prim `id` as a prototype of its own (its GeomSubsets' prims included), built in
-    /// its object space and placed by its world transform.
-    fn own_instance(&mut self, id: PrimId, prim: &Prim, world: DMat4, diags: &mut Diagnostics) {
+    /// its object space and placed by its world transform; returns the prototype's index.
+    fn own_instance(&mut self, id: PrimId, prim: &Prim, world: DMat4, diags: &mut Diagnostics) -> u32 {
+        let (proto, members) = self.own_prototype(prim, diags);
+        self.geometry.prototypes.push(proto);
+        let prototype = self.geometry.prototypes.len() as u32 - 1;
+        let start = self.geometry.instance_prims.len() as u32;
+        self.geometry.instance_prims.extend(members);
+        self.place(id, prototype, start, world, None, diags);
+        prototype
+    }
+
+    /// `prim` built in its object space as a prototype of its own (its GeomSubsets' prims
+    /// included, numbered after it), and the renderable prims of its prim table.
+    fn own_prototype(&mut self, prim: &Prim, diags: &mut Diagnostics) -> (Prototype, Vec<u32>) {
         let stage = self.stage;
         let index = self.prim_index(prim);
         let mut members = vec![index];
@@ -380,11 +445,7 @@ impl Builder<'_> {
         let mut proto = Prototype { triangles: buffers.0, shapes: buffers.1, ..Prototype::default() };
         proto.prims = members.len() as u32;
         proto.bounds = bounds_of(&proto.triangles, &proto.shapes);
-        self.geometry.prototypes.push(proto);
-        let prototype = self.geometry.prototypes.len() as u32 - 1;
-        let start = self.geometry.instance_prims.len() as u32;
-        self.geometry.instance_prims.extend(members);
-        self.place(id, prototype, start, world, None, diags);
+        (proto, members)
     }
 
     /// Reports a prim past the extent or the budget, or with triangles too small to intersect.
@@ -728,13 +789,13 @@ impl Builder<'_> {
         }
         let indices = prim.value("protoIndices").and_then(Value::as_int_array).unwrap_or(&[]);
         let n = indices.len();
-        let shifted = match stage.time() {
-            TimeCode::At(t) => velocity_positions(stage, prim, t),
-            TimeCode::Default => None,
+        let moved = match stage.time() {
+            TimeCode::At(t) => point_extrapolation(stage, prim, t),
+            TimeCode::Default => PointExtrapolation::default(),
         };
         let tuples = |name: &str, width: usize, diags: &mut Diagnostics| -> Option<&[f64]> {
             let attr = prim.attribute(name)?;
-            let value = if name == "positions" { shifted.as_ref().or(attr.get()) } else { attr.get() };
+            let value = moved.of(name).or(attr.get());
             let Some((w, data)) = value?.as_tuple_array() else {
                 diags.push(instancer_error(prim, name, format!("`{name}` must be an array of {width}-tuples")));
                 return None;
@@ -872,13 +933,11 @@ fn point_matrix(
 /// in the order a build places them, computed as the build computes them (bit for bit);
 /// `None` when its attributes do not make a valid instancer (the build reports why).
 pub fn point_instance_transforms(stage: &Stage, xforms: &[PrimXform], id: PrimId) -> Option<Vec<DMat4>> {
-    let shifted = match stage.time() {
-        TimeCode::At(t) => velocity_positions(stage, stage.prim(id), t),
-        TimeCode::Default => None,
+    let moved = match stage.time() {
+        TimeCode::At(t) => point_extrapolation(stage, stage.prim(id), t),
+        TimeCode::Default => PointExtrapolation::default(),
     };
-    let read = |attr: &crate::scene::Attribute| {
-        if attr.name == "positions" { shifted.clone().or_else(|| attr.get().cloned()) } else { attr.get().cloned() }
-    };
+    let read = |attr: &crate::scene::Attribute| moved.of(&attr.name).or(attr.get()).cloned();
     points_placed(stage, id, xforms[id.0 as usize].world, &read)
 }
 
@@ -886,33 +945,109 @@ pub fn point_instance_transforms(stage: &Stage, xforms: &[PrimXform], id: PrimId
 /// `instancer`: every point attribute as USD reads it at `t` (the prototype roots' own
 /// transforms are the frame's).
 pub fn point_instance_transforms_at(stage: &Stage, id: PrimId, instancer: DMat4, t: f64) -> Option<Vec<DMat4>> {
-    let shifted = velocity_positions(stage, stage.prim(id), t);
-    let read = |attr: &crate::scene::Attribute| {
-        if attr.name == "positions" && shifted.is_some() { shifted.clone() } else { attr.value_at(TimeCode::At(t)) }
-    };
+    let moved = point_extrapolation(stage, stage.prim(id), t);
+    let read =
+        |attr: &crate::scene::Attribute| moved.of(&attr.name).cloned().or_else(|| attr.value_at(TimeCode::At(t)));
     points_placed(stage, id, instancer, &read)
 }
 
 /// The point attributes of a point instancer that can move its instances over time.
-pub const POINT_MOTION_ATTRIBUTES: [&str; 5] = ["positions", "orientations", "orientationsf", "scales", "velocities"];
+pub const POINT_MOTION_ATTRIBUTES: [&str; 7] =
+    ["positions", "orientations", "orientationsf", "scales", "velocities", "accelerations", "angularVelocities"];
 
-/// `positions` of point instancer `prim` at stage time `t` by USD's rule for `velocities`
-/// (`UsdGeomPointInstancer::ComputeInstanceTransformsAtTime`): when `velocities` has a
-/// sample at the last `positions` sample at or before `t`, with as many entries, the
-/// positions of that sample moved by `velocities × (t − sample) / timeCodesPerSecond`.
-/// `None` when velocities do not apply (positions are then interpolated as any value).
-pub fn velocity_positions(stage: &Stage, prim: &Prim, t: f64) -> Option<Value> {
-    let (positions, velocities) = (prim.attribute("positions")?, prim.attribute("velocities")?);
-    let lower = positions.time_samples.partition_point(|(s, _)| *s <= t).checked_sub(1)?;
-    let (sample, value) = &positions.time_samples[lower];
-    let (_, v) = velocities.time_samples.iter().find(|(s, _)| s == sample)?;
-    let (Some((3, p)), Some((3, v))) = (value.as_tuple_array(), v.as_tuple_array()) else { return None };
-    if p.len() != v.len() {
-        return None;
+/// A point instancer's `positions`, orientations and `scales` at a time by USD's rules for
+/// velocities ([`point_extrapolation`]); `None` where the authored values are read as any
+/// value (interpolated).
+#[derive(Debug, Default)]
+pub struct PointExtrapolation {
+    /// The positions.
+    pub positions: Option<Value>,
+    /// The orientations, of the attribute USD reads (`orientationsf` when authored).
+    pub orientations: Option<(&'static str, Value)>,
+    /// The scales.
+    pub scales: Option<Value>,
+}
+
+impl PointExtrapolation {
+    /// The value of attribute `name` this extrapolation replaces, if it does.
+    pub fn of(&self, name: &str) -> Option<&Value> {
+        match (name, &self.orientations) {
+            ("positions", _) => self.positions.as_ref(),
+            ("scales", _) => self.scales.as_ref(),
+            (name, Some((n, v))) if *n == name => Some(v),
+            _ => None,
+        }
     }
-    let dt = (t - sample) / stage.time_codes_per_second();
-    let moved: Vec<f64> = p.iter().zip(v).map(|(p, v)| p + v * dt).collect();
-    Some(Value::TupleArray { width: 3, data: moved.into() })
+}
+
+/// An attribute's time samples around `t` as USD brackets them for velocities: the last
+/// sample at or before `t` (the first when `t` precedes it), the first after `t` (or that
+/// same sample when none follows), and the lower sample's value; `None` without samples.
+fn bracket(attr: &crate::scene::Attribute, t: f64) -> Option<(f64, f64, &Value)> {
+    let samples = &attr.time_samples;
+    let after = samples.partition_point(|(s, _)| *s <= t);
+    let (lower, value) = samples.get(after.saturating_sub(1))?;
+    let upper = samples.get(after).map_or(*lower, |(s, _)| *s);
+    Some((*lower, upper, value))
+}
+
+/// The data of `value` when it is an array of `width`-tuples.
+fn tuples_of(value: &Value, width: usize) -> Option<&[f64]> {
+    value.as_tuple_array().filter(|(w, _)| *w == width).map(|(_, d)| d)
+}
+
+/// `positions`, orientations and `scales` of point instancer `prim` at stage time `t` by
+/// `UsdGeomPointInstancer::ComputeInstanceTransformsAtTime`'s rules, `t` being also its base
+/// time. `velocities` apply when their samples bracket `t` as `positions`' do, with as many
+/// entries: the positions of the lower sample move by `v·dt + a·dt²/2`, `a` being
+/// `accelerations` bracketed as the velocities are (else 0), `dt = (t − sample) /
+/// timeCodesPerSecond`. `angularVelocities` (degrees per second) apply likewise with the
+/// orientations: each turns by `|ω|·dt` degrees about `ω`, after its orientation. When either
+/// applies, USD reads positions, orientations and scales at their lower sample, not
+/// interpolated. All `None` when neither applies.
+pub fn point_extrapolation(stage: &Stage, prim: &Prim, t: f64) -> PointExtrapolation {
+    let sampled = |name: &str| prim.attribute(name).and_then(|a| bracket(a, t));
+    // `name`'s 3-tuples when its samples bracket `t` as `base`'s do, with `count` of them.
+    let aligned = |name: &str, base: Option<(f64, f64, &Value)>, count: usize| {
+        let (lower, upper, _) = base?;
+        let (l, u, value) = sampled(name)?;
+        tuples_of(value, 3).filter(|d| (l, u) == (lower, upper) && d.len() == 3 * count)
+    };
+    let orient_name = if prim.attribute("orientationsf").is_some() { "orientationsf" } else { "orientations" };
+    let (positions, orientations) = (sampled("positions"), sampled(orient_name));
+    let count = |base: Option<(f64, f64, &Value)>, width| {
+        base.and_then(|(_, _, v)| tuples_of(v, width)).map_or(0, <[f64]>::len) / width
+    };
+    let velocities = aligned("velocities", positions, count(positions, 3));
+    let angular = aligned("angularVelocities", orientations, count(orientations, 4));
+    if velocities.is_none() && angular.is_none() {
+        return PointExtrapolation::default();
+    }
+    let dt = |sample: f64| (t - sample) / stage.time_codes_per_second();
+    let tuples = |data: Vec<f64>, width: usize| Value::TupleArray { width, data: data.into() };
+    let positions = positions.map(|(sample, _, value)| {
+        let (Some(p), Some(v)) = (tuples_of(value, 3), velocities) else { return value.clone() };
+        let a = aligned("accelerations", sampled("velocities"), p.len() / 3);
+        let dt = dt(sample);
+        tuples((0..p.len()).map(|i| p[i] + dt * (v[i] + a.map_or(0.0, |a| dt * a[i] * 0.5))).collect(), 3)
+    });
+    let orientations = orientations.map(|(sample, _, value)| {
+        let (Some(q), Some(w)) = (tuples_of(value, 4), angular) else { return (orient_name, value.clone()) };
+        let dt = dt(sample);
+        let turned = q.chunks(4).zip(w.chunks(3)).flat_map(|(q, w)| {
+            let w = DVec3::from_slice(w);
+            let turn = match w.try_normalize() {
+                Some(axis) => DQuat::from_axis_angle(axis, (dt * w.length()).to_radians()),
+                None => DQuat::IDENTITY,
+            };
+            // USD writes quaternions (real, i, j, k).
+            let r = turn * DQuat::from_xyzw(q[1], q[2], q[3], q[0]);
+            [r.w, r.x, r.y, r.z]
+        });
+        (orient_name, tuples(turned.collect(), 4))
+    });
+    let scales = sampled("scales").map(|(_, _, value)| value.clone());
+    PointExtrapolation { positions, orientations, scales }
 }
 
 /// The world transforms of the visible points of point instancer `id` placed under

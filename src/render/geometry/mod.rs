@@ -17,8 +17,9 @@ pub mod subdiv;
 pub mod xform;
 
 pub use builder::{
-    build, build_for_render, build_with, build_with_options, build_with_primvars, point_instance_transforms,
-    point_instance_transforms_at, prototype_key, velocity_positions,
+    POINT_MOTION_ATTRIBUTES, PointExtrapolation, build, build_for_render, build_with, build_with_options,
+    build_with_primvars, deforming_prototype, deforms, point_extrapolation, point_instance_transforms,
+    point_instance_transforms_at, prototype_key,
 };
 
 use crate::compose::binding::{is_bound_subset, is_renderable};
@@ -198,6 +199,24 @@ pub struct Geometry {
     pub baked: Vec<bool>,
     /// Instances left out for a singular transform (a zero scale).
     pub singular_instances: usize,
+    /// World prims whose shape changes with time, each built as a prototype of its own
+    /// (by index in `prototypes`), so that another time code builds that BLAS again and
+    /// keeps the others ([`deforming_prototype`], `render::Scene::move_to`).
+    pub deforming: Vec<Deforming>,
+    /// A world-space prim deforms (its material displaces or emits):
+    /// another time code must build the world's BLAS again.
+    pub deforming_in_world: bool,
+}
+
+/// A world prim built as a prototype of its own because its shape changes with time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Deforming {
+    /// The prim.
+    pub id: PrimId,
+    /// Its prototype.
+    pub prototype: u32,
+    /// Posed by a skeleton: its shape follows its skeleton, its animation and its own placement.
+    pub skinned: bool,
 }
 
 impl Geometry {

@@ -341,6 +341,10 @@ type StagesAt = HashMap<u64, (Stage, Vec<crate::render::geometry::xform::PrimXfo
 ///   copy of the stage at that time: keys at the samples of its points, its skeleton's
 ///   placement and its animation.
 /// - Otherwise its `points` (and placement) are read at each key time.
+///
+/// With `object_space` (a prim the build made a prototype of its own, placed by its world
+/// transform, which keys its instance) the keys are in its own space: its placement is left
+/// out (a skinned prim's posed points are still relative to its placement at each time).
 #[allow(clippy::too_many_arguments)]
 fn deformation_of(
     stage: &Stage,
@@ -351,6 +355,7 @@ fn deformation_of(
     names: &[String],
     frame_emitted: &Emitted,
     stages: &mut StagesAt,
+    object_space: bool,
     diags: &mut Diagnostics,
 ) -> Option<Deformation> {
     let prim = stage.prim(id);
@@ -373,13 +378,13 @@ fn deformation_of(
     times.sort_by(f64::total_cmp);
     times.dedup();
     let quiet = &mut Diagnostics::new();
+    let placement_at = |t: f64, quiet: &mut Diagnostics| {
+        if object_space { DMat4::IDENTITY } else { world_transform_at(stage, id, t, quiet) }
+    };
     if skinned.is_none() {
         // Cheap test first: the points and placement are the frame's at every key.
-        let at_frame = (points.value_at(TimeCode::At(frame)), world_transform_at(stage, id, frame, quiet));
-        if times
-            .iter()
-            .all(|&t| (points.value_at(TimeCode::At(t)), world_transform_at(stage, id, t, quiet)) == at_frame)
-        {
+        let at_frame = (points.value_at(TimeCode::At(frame)), placement_at(frame, quiet));
+        if times.iter().all(|&t| (points.value_at(TimeCode::At(t)), placement_at(t, quiet)) == at_frame) {
             return None;
         }
     }
@@ -394,13 +399,14 @@ fn deformation_of(
             let world = xforms[id.0 as usize].world;
             let prim_at = at.prim(id);
             let posed = crate::render::geometry::skel::posed_prim(at, xforms, prim_at, world, quiet);
-            emit_at(posed.as_ref().unwrap_or(prim_at), world, options, names)
+            let placed = if object_space { DMat4::IDENTITY } else { world };
+            emit_at(posed.as_ref().unwrap_or(prim_at), placed, options, names)
         } else {
             let mut posed = prim.clone();
             if let Some(attr) = posed.attributes.iter_mut().find(|a| a.name == "points") {
                 attr.value = points.value_at(TimeCode::At(t)).map(|v| (v, attr.span));
             }
-            emit_at(&posed, world_transform_at(stage, id, t, quiet), options, names)
+            emit_at(&posed, placement_at(t, quiet), options, names)
         };
         if (emitted.0.len(), emitted.1.len()) != (frame_emitted.0.len(), frame_emitted.1.len()) {
             diags.push(
@@ -476,7 +482,7 @@ fn deform(
         );
         let names = geometry.primvars.names.clone();
         let Some(deformation) =
-            deformation_of(stage, id, frame, shutter, options, &names, &frame_emitted, &mut stages, diags)
+            deformation_of(stage, id, frame, shutter, options, &names, &frame_emitted, &mut stages, false, diags)
         else {
             continue;
         };
@@ -495,12 +501,7 @@ fn deform(
                 s
             })
             .collect();
-        // Bounds over every key (the frame's positions need not be inside the shutter).
-        let boxes = (0..proto.triangles.len())
-            .map(|i| deformation.bounds(i))
-            .chain(proto.shapes.iter().enumerate().map(|(j, s)| deformation.shape_bounds(j, s.world_bounds())));
-        proto.bounds =
-            boxes.reduce(|(a, b), (c, d)| (a.min(c), b.max(d))).map(|(lo, hi)| (lo.as_dvec3(), hi.as_dvec3()));
+        proto.bounds = keyed_bounds(&proto, &deformation);
         proto.deformation = Some(deformation);
         geometry.prototypes.push(proto);
         let prims = geometry.instance_prims.len() as u32;
@@ -511,7 +512,36 @@ fn deform(
         geometry.instance_placers.push(crate::scene::PrimId(u32::MAX));
         deforming += 1;
     }
+    // Deforming prims the build made prototypes of their own: keyed in their own space (their
+    // instance's placement keys move them). Those with GeomSubsets are left to transform blur.
+    for d in geometry.deforming.clone() {
+        let proto = &geometry.prototypes[d.prototype as usize];
+        if proto.prims != 1 || proto.deformation.is_some() {
+            continue;
+        }
+        let frame_emitted: Emitted =
+            (proto.triangles.iter().map(|t| t.p).collect(), proto.shapes.iter().map(shape_centre).collect());
+        let names = geometry.primvars.names.clone();
+        let Some(deformation) =
+            deformation_of(stage, d.id, frame, shutter, options, &names, &frame_emitted, &mut stages, true, diags)
+        else {
+            continue;
+        };
+        let proto = &mut geometry.prototypes[d.prototype as usize];
+        proto.bounds = keyed_bounds(proto, &deformation);
+        proto.deformation = Some(deformation);
+        deforming += 1;
+    }
     deforming
+}
+
+/// The bounds of `proto` over every key of `deformation` (the frame's positions need not be
+/// inside the shutter).
+fn keyed_bounds(proto: &Prototype, deformation: &Deformation) -> Option<(DVec3, DVec3)> {
+    let boxes = (0..proto.triangles.len())
+        .map(|i| deformation.bounds(i))
+        .chain(proto.shapes.iter().enumerate().map(|(j, s)| deformation.shape_bounds(j, s.world_bounds())));
+    boxes.reduce(|(a, b), (c, d)| (a.min(c), b.max(d))).map(|(lo, hi)| (lo.as_dvec3(), hi.as_dvec3()))
 }
 
 /// Warns once for each light of `lights` (prim paths) that moves or changes while `shutter`

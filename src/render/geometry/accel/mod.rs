@@ -792,6 +792,12 @@ impl Accel {
         Accel { world, prototypes, instances, instance_prims, tlas, skipped_instances, motions, moves }
     }
 
+    /// Replaces prototype `index`'s BLAS (a deforming prim's, built again at another time
+    /// code); [`Accel::move_instances`] must follow to place the instances over its new box.
+    pub fn replace_prototype(&mut self, index: u32, blas: Blas) {
+        self.prototypes[index as usize] = blas;
+    }
+
     /// Places the same prototypes (each instance's `prototype` and `prims` as before) by new
     /// transforms and keys: the top level is built again, every BLAS is kept. The result is
     /// the structure [`Accel::with_moving_instances`] builds from them, bit for bit.
