@@ -311,7 +311,7 @@ impl Builder<'_> {
     fn emit(
         &mut self,
         prim: &Prim,
-        buffers: &mut (Vec<Triangle>, Vec<Shape>),
+        buffers: &mut (Triangles, Vec<Shape>),
         world: DMat4,
         index: u32,
         face_prims: Vec<u32>,
@@ -375,7 +375,7 @@ impl Builder<'_> {
         } else {
             Vec::new()
         };
-        let mut buffers = (Vec::new(), Vec::new());
+        let mut buffers = (Triangles::new(), Vec::new());
         self.emit(prim, &mut buffers, DMat4::IDENTITY, 0, face_prims, diags);
         let mut proto = Prototype { triangles: buffers.0, shapes: buffers.1, ..Prototype::default() };
         proto.prims = members.len() as u32;

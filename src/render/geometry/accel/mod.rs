@@ -20,12 +20,12 @@
 //! scaling is exact in f32, the primitive tests run unscaled, and the cull falls to 1e-13 of
 //! the extent, far below f32's resolution there (6e-8), at every scene scale.
 
-use crate::render::geometry::Triangle;
 use crate::render::geometry::motion::{Deformation, MotionKeys};
 use crate::render::geometry::primvars::PrimvarRef;
 use crate::render::geometry::shapes::Shape;
+use crate::render::geometry::triangles::Triangles;
 use crate::render::material::frame::Frame;
-use glam::{DAffine3, DMat3, Vec2, Vec3, Vec3A};
+use glam::{DAffine3, DMat3, Vec2, Vec3};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
@@ -35,9 +35,10 @@ use obvhs::ray::Ray;
 use std::collections::HashMap;
 use std::time::Duration;
 
-mod attrs;
+pub(in crate::render::geometry) mod attrs;
 mod batched;
 mod convert;
+mod group;
 mod wide;
 
 use attrs::AttrTable;
@@ -240,26 +241,8 @@ fn padded_box(lo: Vec3, hi: Vec3) -> Option<[u32; 6]> {
 /// A BVH over `bounds` (`(min, max)` per primitive), grouping bit-identical boxes; returns
 /// the BVH (`None` when no box is finite) and the groups as `(group_start, group_members)`.
 fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (Option<BvhSpace>, Vec<u32>, Vec<u32>) {
-    // Primitives with bit-identical boxes (copies of one mesh at one place) become one BVH
-    // primitive: PLOC merges only mutually-nearest pairs, and among n equal boxes every
-    // pass merges one pair, so n coincident copies cost O(n²) to build.
-    // FNV, not std's SipHash: keys are our own boxes, and hashing was a sixth of the build
-    // of a 10⁶-triangle mesh.
-    let mut group_of_box: HashMap<[u32; 6], u32, fnv::FnvBuildHasher> =
-        HashMap::with_capacity_and_hasher(count, fnv::FnvBuildHasher::default());
-    let mut boxes: Vec<Padded> = Vec::new();
-    let mut group_of_primitive: Vec<u32> = Vec::with_capacity(count);
-    for (lo, hi) in bounds {
-        let group = match padded_box(lo, hi) {
-            Some(key) => *group_of_box.entry(key).or_insert_with(|| {
-                let [lx, ly, lz, hx, hy, hz] = key.map(f32::from_bits);
-                boxes.push(Padded(Aabb::new(Vec3A::new(lx, ly, lz), Vec3A::new(hx, hy, hz))));
-                boxes.len() as u32 - 1
-            }),
-            None => u32::MAX,
-        };
-        group_of_primitive.push(group);
-    }
+    // Primitives with bit-identical boxes share one BVH primitive (see `group`).
+    let (boxes, group_of_primitive) = group::group_identical(bounds, count);
     // Counting sort of primitive indices by group: the groups' lists, back to back.
     let mut group_start = vec![0u32; boxes.len() + 1];
     for &g in group_of_primitive.iter().filter(|&&g| g != u32::MAX) {
@@ -268,9 +251,8 @@ fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (O
     for g in 0..boxes.len() {
         group_start[g + 1] += group_start[g];
     }
-    // The box table and the per-primitive groups are freed before the BVH is built: on a
-    // mesh of distinct boxes the table is the largest allocation here (build peak memory).
-    drop(group_of_box);
+    // Each group's members; the per-primitive groups are freed before the BVH is built
+    // (build peak memory).
     let mut next = group_start.clone();
     let mut group_members = vec![0u32; group_start[boxes.len()] as usize];
     for (index, &g) in group_of_primitive.iter().enumerate() {
@@ -298,16 +280,15 @@ impl Blas {
     /// Builds a BVH over `triangles` and `shapes` (none needed when there are none).
     /// Primitives with non-finite bounds are kept (indices stay valid) but can never be hit;
     /// the geometry stage reports them before this.
-    pub fn new(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Blas {
+    pub fn new(triangles: impl Into<Triangles>, shapes: Vec<Shape>) -> Blas {
         Blas::deforming(triangles, shapes, None)
     }
 
     /// [`Blas::new`] whose triangles move by `deformation` (one position per triangle and key,
     /// see [`crate::render::geometry::motion`]) when it is given.
-    pub fn deforming(triangles: Vec<Triangle>, shapes: Vec<Shape>, deformation: Option<Deformation>) -> Blas {
-        // The triangles are split into what the traversal reads and what a hit reads, and
-        // freed, before the BVH is built (build peak memory).
-        let (positions, attrs) = AttrTable::take(triangles);
+    pub fn deforming(triangles: impl Into<Triangles>, shapes: Vec<Shape>, deformation: Option<Deformation>) -> Blas {
+        // Emission stored the triangles as what the traversal reads and what a hit reads.
+        let (positions, attrs) = triangles.into().into_parts();
         let tri_bounds = |(i, p): (usize, &[Vec3; 3])| match &deformation {
             Some(d) => d.bounds(i),
             None => (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2])),
@@ -764,7 +745,7 @@ pub struct Accel {
 
 impl Accel {
     /// A single-level structure over world-space `triangles` and `shapes` (no instances).
-    pub fn new(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Accel {
+    pub fn new(triangles: impl Into<Triangles>, shapes: Vec<Shape>) -> Accel {
         Accel::with_instances(Blas::new(triangles, shapes), Vec::new(), &[], Vec::new())
     }
 
