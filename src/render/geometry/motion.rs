@@ -447,8 +447,8 @@ fn deform(
     diags: &mut Diagnostics,
 ) -> usize {
     let mut counts = vec![(0usize, 0usize); geometry.prims.len()];
-    for t in &geometry.triangles {
-        counts[t.prim as usize].0 += 1;
+    for i in 0..geometry.triangles.len() {
+        counts[geometry.triangles.prim(i) as usize].0 += 1;
     }
     for s in &geometry.shapes {
         counts[s.prim as usize].1 += 1;
@@ -471,7 +471,11 @@ fn deform(
         let Some(id) = stage.find(&geometry.prims[prim].path) else { continue };
         let mine = |p: u32| p == prim as u32;
         let frame_emitted: Emitted = (
-            geometry.triangles.iter().filter(|t| mine(t.prim)).map(|t| t.p).collect(),
+            // Positions and prims only: a whole `Triangle` is rebuilt per read (its flat normal).
+            (0..geometry.triangles.len())
+                .filter(|&i| mine(geometry.triangles.prim(i)))
+                .map(|i| geometry.triangles.positions()[i])
+                .collect(),
             geometry.shapes.iter().filter(|s| mine(s.prim)).map(shape_centre).collect(),
         );
         let names = geometry.primvars.names.clone();
