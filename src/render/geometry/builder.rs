@@ -362,7 +362,7 @@ impl<'s> Builder<'s> {
     fn emit(
         &mut self,
         prim: &Prim,
-        buffers: &mut (Vec<Triangle>, Vec<Shape>),
+        buffers: &mut (Triangles, Vec<Shape>),
         world: DMat4,
         index: u32,
         face_prims: Vec<u32>,
@@ -440,7 +440,7 @@ impl<'s> Builder<'s> {
         } else {
             Vec::new()
         };
-        let mut buffers = (Vec::new(), Vec::new());
+        let mut buffers = (Triangles::new(), Vec::new());
         self.emit(prim, &mut buffers, DMat4::IDENTITY, 0, face_prims, diags);
         let mut proto = Prototype { triangles: buffers.0, shapes: buffers.1, ..Prototype::default() };
         proto.prims = members.len() as u32;

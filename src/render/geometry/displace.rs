@@ -35,7 +35,7 @@ use crate::diag::{Diagnostic, Diagnostics};
 use crate::render::camera::Camera;
 use crate::render::geometry::primvars::PrimvarRef;
 use crate::render::geometry::shapes::Shape;
-use crate::render::geometry::{Geometry, Triangle};
+use crate::render::geometry::{Geometry, Triangle, Triangles};
 use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
@@ -230,7 +230,7 @@ fn weld_key(group: WeldGroup, p: Vec3) -> (WeldGroup, [u32; 3]) {
 impl Base {
     /// Welds the corners of `triangles` and of the base meshes of `shapes`, each within the
     /// [`WeldGroup`] `group_of` gives its prim.
-    fn build(triangles: Vec<Triangle>, shapes: Vec<Shape>, group_of: impl Fn(u32) -> WeldGroup) -> Base {
+    fn build(triangles: Triangles, shapes: Vec<Shape>, group_of: impl Fn(u32) -> WeldGroup) -> Base {
         let mut base =
             Base { vertices: Vec::new(), faces: Vec::new(), sources: Vec::new(), shapes, creases: HashSet::new() };
         let mut index: HashMap<(WeldGroup, [u32; 3]), u32> = HashMap::new();
@@ -601,7 +601,7 @@ pub fn displace(
             moves[p as usize] = false;
         }
     }
-    let (diced, kept): (Vec<Triangle>, Vec<Triangle>) =
+    let (diced, kept): (Triangles, Triangles) =
         std::mem::take(&mut geometry.triangles).into_iter().partition(|t| moves[t.prim as usize]);
     let (diced_shapes, kept_shapes): (Vec<Shape>, Vec<Shape>) =
         std::mem::take(&mut geometry.shapes).into_iter().partition(|s| moves[s.prim as usize]);
@@ -724,7 +724,7 @@ pub fn displace(
             + vertices.capacity() * (size_of::<Vertex>() + size_of::<f32>() + size_of::<Vec3>())
             + faces.capacity() * size_of::<Face>()
     };
-    let before = geometry.triangles.len();
+    let (before, bytes_before) = (geometry.triangles.len(), geometry.triangles.bytes());
     geometry.triangles.reserve_exact(faces.len());
     let table = &mut geometry.primvars;
     geometry.triangles.extend(faces.iter().map(|f| {
@@ -748,7 +748,7 @@ pub fn displace(
         rate,
         clamped: evaluated.clamped.values().map(|(c, _)| c).sum(),
         non_finite: evaluated.non_finite.values().map(|(c, _)| c).sum(),
-        bytes: micro * std::mem::size_of::<Triangle>(),
+        bytes: geometry.triangles.bytes() - bytes_before,
         scratch_bytes,
         ms: start.elapsed().as_secs_f64() * 1e3,
     };

@@ -26,7 +26,7 @@ pub(super) fn emit_prim(prim: &Prim, out: &mut Emitter, diags: &mut Diagnostics)
 
 /// Transforms local-space triangles and shapes to the target space and appends them.
 pub(super) struct Emitter<'g> {
-    pub(super) triangles: &'g mut Vec<Triangle>,
+    pub(super) triangles: &'g mut Triangles,
     pub(super) shapes: &'g mut Vec<Shape>,
     pub(super) degenerate: &'g mut usize,
     pub(super) m: DMat4,
@@ -58,7 +58,7 @@ pub(super) struct Emitter<'g> {
 
 impl<'g> Emitter<'g> {
     pub(super) fn new(
-        triangles: &'g mut Vec<Triangle>,
+        triangles: &'g mut Triangles,
         shapes: &'g mut Vec<Shape>,
         degenerate: &'g mut usize,
         table: &'g mut PrimvarTable,

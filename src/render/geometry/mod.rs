@@ -14,7 +14,10 @@ pub mod primvars;
 pub mod shapes;
 pub mod skel;
 pub mod subdiv;
+pub mod triangles;
 pub mod xform;
+
+pub use triangles::Triangles;
 
 pub use builder::{
     POINT_MOTION_ATTRIBUTES, PointExtrapolation, build, build_for_render, build_with, build_with_options,
@@ -155,7 +158,7 @@ pub struct GeomPrim {
 #[derive(Clone, Debug, Default)]
 pub struct Prototype {
     /// Triangles in prototype space; `prim` is prototype-local.
-    pub triangles: Vec<Triangle>,
+    pub triangles: Triangles,
     /// Analytic surfaces in prototype space; `prim` is prototype-local.
     pub shapes: Vec<Shape>,
     /// Number of prototype-local prims.
@@ -171,7 +174,7 @@ pub struct Prototype {
 #[derive(Clone, Debug, Default)]
 pub struct Geometry {
     /// World-space triangles (of prims that are not instanced).
-    pub triangles: Vec<Triangle>,
+    pub triangles: Triangles,
     /// Analytic surfaces.
     pub shapes: Vec<Shape>,
     /// Renderable, visible prims, indexed by [`Triangle::prim`] and the instance prim table.
@@ -248,12 +251,12 @@ pub fn placed_bounds(
 }
 
 /// World-space bounds `(min, max)` of triangles and shapes; `None` when there are none.
-fn bounds_of(triangles: &[Triangle], shapes: &[Shape]) -> Option<(DVec3, DVec3)> {
+fn bounds_of(triangles: &Triangles, shapes: &[Shape]) -> Option<(DVec3, DVec3)> {
     let shape_corners = shapes.iter().flat_map(|s| {
         let (lo, hi) = s.world_bounds();
         [lo, hi]
     });
-    let mut it = triangles.iter().flat_map(|t| t.p).chain(shape_corners);
+    let mut it = triangles.positions().iter().flatten().copied().chain(shape_corners);
     let first = it.next()?;
     let (lo, hi) = it.fold((first, first), |(lo, hi), p| (lo.min(p), hi.max(p)));
     Some((lo.as_dvec3(), hi.as_dvec3()))
@@ -363,7 +366,7 @@ def Mesh "M" { uniform token subdivisionScheme = "none"
             assert!(t.cross().normalize().dot(Vec3::Y) > 0.99);
             assert_eq!(t.n[0], Vec3::Y);
         }
-        assert_eq!(g.triangles[0].uv[1], Vec2::new(0.0, 1.0));
+        assert_eq!(g.triangles.get(0).uv[1], Vec2::new(0.0, 1.0));
     }
 
     #[test]

@@ -28,7 +28,7 @@ use crate::render::geometry::emit::{Emitter, emit_prim};
 use crate::render::geometry::primvars::PrimvarTable;
 use crate::render::geometry::shapes::transformed_box;
 use crate::render::geometry::xform::{transform_sample_times, world_transform_at};
-use crate::render::geometry::{Geometry, GeometryOptions, InstanceDesc, Prototype, Triangle, bounds_of};
+use crate::render::geometry::{Geometry, GeometryOptions, InstanceDesc, Prototype, Triangle, Triangles, bounds_of};
 use crate::scene::{Prim, Stage, TimeCode, Value};
 use glam::{DAffine3, DMat4, DVec3, Vec3};
 use std::collections::HashMap;
@@ -322,12 +322,12 @@ fn shape_centre(shape: &crate::render::geometry::shapes::Shape) -> Vec3 {
 /// `prim`, placed by `world`, emitted as the frame's build emits it (same primvar table,
 /// subdivision level).
 fn emit_at(prim: &Prim, world: DMat4, options: GeometryOptions, names: &[String]) -> Emitted {
-    let (mut triangles, mut shapes, mut degenerate) = (Vec::new(), Vec::new(), 0);
+    let (mut triangles, mut shapes, mut degenerate) = (Triangles::new(), Vec::new(), 0);
     let mut table = PrimvarTable { names: names.to_vec(), ..PrimvarTable::default() };
     let mut out = Emitter::new(&mut triangles, &mut shapes, &mut degenerate, &mut table, world, 0, usize::MAX);
     out.subdiv_level = options.subdiv_level;
     emit_prim(prim, &mut out, &mut Diagnostics::new());
-    (triangles.into_iter().map(|t| t.p).collect(), shapes.iter().map(shape_centre).collect())
+    (triangles.into_parts().0, shapes.iter().map(shape_centre).collect())
 }
 
 /// Copies of the stage at key times, shared by every skinned prim of one build (each copy is
@@ -453,8 +453,8 @@ fn deform(
     diags: &mut Diagnostics,
 ) -> usize {
     let mut counts = vec![(0usize, 0usize); geometry.prims.len()];
-    for t in &geometry.triangles {
-        counts[t.prim as usize].0 += 1;
+    for i in 0..geometry.triangles.len() {
+        counts[geometry.triangles.prim(i) as usize].0 += 1;
     }
     for s in &geometry.shapes {
         counts[s.prim as usize].1 += 1;
@@ -477,7 +477,11 @@ fn deform(
         let Some(id) = stage.find(&geometry.prims[prim].path) else { continue };
         let mine = |p: u32| p == prim as u32;
         let frame_emitted: Emitted = (
-            geometry.triangles.iter().filter(|t| mine(t.prim)).map(|t| t.p).collect(),
+            // Positions and prims only: a whole `Triangle` is rebuilt per read (its flat normal).
+            (0..geometry.triangles.len())
+                .filter(|&i| mine(geometry.triangles.prim(i)))
+                .map(|i| geometry.triangles.positions()[i])
+                .collect(),
             geometry.shapes.iter().filter(|s| mine(s.prim)).map(shape_centre).collect(),
         );
         let names = geometry.primvars.names.clone();
@@ -486,7 +490,7 @@ fn deform(
         else {
             continue;
         };
-        let (triangles, rest): (Vec<Triangle>, Vec<Triangle>) =
+        let (triangles, rest): (Triangles, Triangles) =
             std::mem::take(&mut geometry.triangles).into_iter().partition(|t| mine(t.prim));
         geometry.triangles = rest;
         let (shapes, rest): (Vec<_>, Vec<_>) =

@@ -10,8 +10,12 @@ use glam::{Vec2, Vec3};
 /// "No entry" in [`AttrTable`]'s per-triangle slot tables.
 const NONE: u32 = u32::MAX;
 
+/// In `uv_of`: the prim has texture coordinates, and they are [`PARAMETRIC_UV`] (a hit reads
+/// them as `None`, as it reads [`NONE`]; only [`Triangle::has_uv`] tells the two apart).
+const PARAMETRIC_OWN: u32 = u32::MAX - 1;
+
 /// The texture coordinates of a triangle without its own: the parametric `(0,0), (1,0), (0,1)`.
-pub(super) const PARAMETRIC_UV: [Vec2; 3] = [Vec2::ZERO, Vec2::X, Vec2::Y];
+pub(in crate::render::geometry) const PARAMETRIC_UV: [Vec2; 3] = [Vec2::ZERO, Vec2::X, Vec2::Y];
 
 /// What a triangle needs only after it was hit.
 #[derive(Clone, Copy, Debug)]
@@ -26,81 +30,82 @@ pub(super) struct TriangleAttrs {
     pub(super) primvars: PrimvarRef,
 }
 
-/// Per-triangle attributes, stored only where they carry information.
-#[derive(Default)]
-pub(super) struct AttrTable {
+/// Per-triangle attributes, stored only where they carry information. The optional columns
+/// (`normal_of`, `uv_of`, `primvars`) stay empty until a triangle needs them, so a mesh
+/// without normals or primvars never allocates them, not even while it is emitted.
+#[derive(Clone, Debug, Default)]
+pub(in crate::render::geometry) struct AttrTable {
     prims: Vec<u32>,
     /// Per triangle its entry in `normals`, or [`NONE`] (its flat normal at every corner);
     /// empty when no triangle has an entry.
     normal_of: Vec<u32>,
     normals: Vec<[Vec3; 3]>,
-    /// Per triangle its entry in `uvs`, or [`NONE`] ([`PARAMETRIC_UV`]); empty when none has one.
+    /// Per triangle its entry in `uvs`, [`NONE`] (no coordinates of its own) or
+    /// [`PARAMETRIC_OWN`]; empty when every triangle is [`NONE`].
     uv_of: Vec<u32>,
     uvs: Vec<[Vec2; 3]>,
     /// Per triangle its primvars; empty when no triangle has any.
     primvars: Vec<PrimvarRef>,
 }
 
-impl AttrTable {
-    /// The attributes of `triangles`, which are consumed from the back and freed as they go
-    /// (so the triangles and the table are never both whole in memory: build peak), with
-    /// their positions, in order.
-    pub(super) fn take(mut triangles: Vec<Triangle>) -> (Vec<[Vec3; 3]>, AttrTable) {
-        let count = triangles.len();
-        // The vectors below are filled back to front (reversed at the end); `triangles`
-        // gives its memory back each time this many have been taken.
-        let step = (count / 16).max(1 << 12);
-        let mut positions = Vec::with_capacity(count);
-        let mut table = AttrTable {
-            prims: Vec::with_capacity(count),
-            normal_of: Vec::with_capacity(count),
-            uv_of: Vec::with_capacity(count),
-            primvars: Vec::with_capacity(count),
-            ..AttrTable::default()
-        };
-        while let Some(t) = triangles.pop() {
-            positions.push(t.p);
-            table.prims.push(t.prim);
-            table.primvars.push(t.primvars);
-            if t.n == [flat_normal(t.p); 3] {
-                table.normal_of.push(NONE);
-            } else {
-                table.normal_of.push(table.normals.len() as u32);
-                table.normals.push(t.n);
-            }
-            if t.has_uv && t.uv != PARAMETRIC_UV {
-                table.uv_of.push(table.uvs.len() as u32);
-                table.uvs.push(t.uv);
-            } else {
-                table.uv_of.push(NONE);
-            }
-            if triangles.capacity() - triangles.len() >= step {
-                triangles.shrink_to_fit();
-            }
+/// Appends `value` to the optional column `column`, first filling it with `absent` up to
+/// `len` entries when it was left empty so far.
+fn push_optional<T: Copy + PartialEq>(column: &mut Vec<T>, len: usize, value: T, absent: T) {
+    if column.is_empty() {
+        if value == absent {
+            return;
         }
-        positions.reverse();
-        table.finish();
-        (positions, table)
+        column.resize(len, absent);
+    }
+    column.push(value);
+}
+
+impl AttrTable {
+    /// Appends the attributes of `t` (its positions are the caller's).
+    pub(in crate::render::geometry) fn push(&mut self, t: &Triangle) {
+        let len = self.prims.len();
+        self.prims.push(t.prim);
+        push_optional(&mut self.primvars, len, t.primvars, PrimvarRef::NONE);
+        let normal = if t.n == [flat_normal(t.p); 3] {
+            NONE
+        } else {
+            self.normals.push(t.n);
+            self.normals.len() as u32 - 1
+        };
+        push_optional(&mut self.normal_of, len, normal, NONE);
+        let uv = match (t.has_uv, t.uv == PARAMETRIC_UV) {
+            (false, _) => NONE,
+            (true, true) => PARAMETRIC_OWN,
+            (true, false) => {
+                self.uvs.push(t.uv);
+                self.uvs.len() as u32 - 1
+            }
+        };
+        push_optional(&mut self.uv_of, len, uv, NONE);
     }
 
-    /// Puts the back-to-front vectors in order and drops the tables nothing needs.
-    fn finish(&mut self) {
-        self.prims.reverse();
-        self.primvars.reverse();
-        for (of, entries) in [(&mut self.normal_of, self.normals.len()), (&mut self.uv_of, self.uvs.len())] {
-            of.reverse();
-            if entries == 0 {
-                *of = Vec::new();
-            } else {
-                // Entries were numbered back to front too.
-                of.iter_mut().filter(|k| **k != NONE).for_each(|k| *k = entries as u32 - 1 - *k);
-            }
+    /// Triangle `i` as it was pushed, given its positions `p` (without coordinates of its
+    /// own, with [`PARAMETRIC_UV`]).
+    pub(in crate::render::geometry) fn triangle(&self, i: usize, p: [Vec3; 3]) -> Triangle {
+        let a = self.get(i);
+        let uv_of = self.uv_of.get(i).copied().unwrap_or(NONE);
+        Triangle {
+            p,
+            n: a.n.unwrap_or([flat_normal(p); 3]),
+            uv: a.uv.unwrap_or(PARAMETRIC_UV),
+            prim: a.prim,
+            has_uv: uv_of != NONE,
+            primvars: a.primvars,
         }
-        self.normals.reverse();
-        self.uvs.reverse();
-        if self.primvars.iter().all(|p| *p == PrimvarRef::NONE) {
-            self.primvars = Vec::new();
-        }
+    }
+
+    /// Room for `additional` more triangles in the column every triangle has an entry in.
+    pub(in crate::render::geometry) fn reserve_exact(&mut self, additional: usize) {
+        self.prims.reserve_exact(additional);
+    }
+
+    /// Frees the columns' spare room.
+    pub(in crate::render::geometry) fn shrink_to_fit(&mut self) {
         for v in [&mut self.prims, &mut self.normal_of, &mut self.uv_of] {
             v.shrink_to_fit();
         }
@@ -116,7 +121,7 @@ impl AttrTable {
 
     /// The prim of triangle `i`, if there is one.
     #[inline]
-    pub(super) fn prim(&self, i: usize) -> Option<u32> {
+    pub(in crate::render::geometry) fn prim(&self, i: usize) -> Option<u32> {
         self.prims.get(i).copied()
     }
 
@@ -124,7 +129,7 @@ impl AttrTable {
     /// the parametric coordinates).
     #[inline]
     pub(super) fn get(&self, i: usize) -> TriangleAttrs {
-        let entry = |of: &[u32]| of.get(i).copied().filter(|&k| k != NONE).map(|k| k as usize);
+        let entry = |of: &[u32]| of.get(i).copied().filter(|&k| k < PARAMETRIC_OWN).map(|k| k as usize);
         TriangleAttrs {
             n: entry(&self.normal_of).map(|k| self.normals[k]),
             uv: entry(&self.uv_of).map(|k| self.uvs[k]),
@@ -134,7 +139,7 @@ impl AttrTable {
     }
 
     /// Bytes held.
-    pub(super) fn bytes(&self) -> usize {
+    pub(in crate::render::geometry) fn bytes(&self) -> usize {
         use std::mem::size_of;
         (self.prims.len() + self.normal_of.len() + self.uv_of.len()) * 4
             + self.normals.len() * size_of::<[Vec3; 3]>()
@@ -146,6 +151,12 @@ impl AttrTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn table_of(triangles: &[Triangle]) -> AttrTable {
+        let mut table = AttrTable::default();
+        triangles.iter().for_each(|t| table.push(t));
+        table
+    }
 
     /// Every triangle reads back exactly as it was given, whichever attributes it had, and
     /// what carries no information is not stored.
@@ -162,7 +173,8 @@ mod tests {
             let primvars = if k % 7 == 0 { PrimvarRef { layout: 1, offset: k } } else { PrimvarRef::NONE };
             triangles.push(Triangle { p: pos, n, uv, prim: k / 10, has_uv, primvars });
         }
-        let (positions, table) = AttrTable::take(triangles.clone());
+        let positions: Vec<[Vec3; 3]> = triangles.iter().map(|t| t.p).collect();
+        let table = table_of(&triangles);
         assert_eq!(table.len(), triangles.len());
         for (i, t) in triangles.iter().enumerate() {
             assert_eq!(positions[i], t.p);
@@ -178,7 +190,8 @@ mod tests {
             .iter()
             .map(|t| Triangle { n: [flat_normal(t.p); 3], has_uv: false, primvars: PrimvarRef::NONE, ..*t })
             .collect();
-        let (_, table) = AttrTable::take(flat);
+        let mut table = table_of(&flat);
+        table.shrink_to_fit();
         assert_eq!(table.bytes(), 4 * triangles.len());
     }
 }

@@ -20,12 +20,12 @@
 //! power of two that brings its extent to 2³⁰ ([`BvhSpace`]): the scaling is exact in f32,
 //! the primitive tests run unscaled, and obvhs' builder sees every scene at one scale.
 
-use crate::render::geometry::Triangle;
 use crate::render::geometry::motion::{Deformation, MotionKeys};
 use crate::render::geometry::primvars::PrimvarRef;
 use crate::render::geometry::shapes::Shape;
+use crate::render::geometry::triangles::Triangles;
 use crate::render::material::frame::Frame;
-use glam::{DAffine3, DMat3, Vec2, Vec3, Vec3A};
+use glam::{DAffine3, DMat3, Vec2, Vec3};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
@@ -33,7 +33,7 @@ use obvhs::cwbvh::builder::build_cwbvh;
 use std::collections::HashMap;
 use std::time::Duration;
 
-mod attrs;
+pub(in crate::render::geometry) mod attrs;
 mod batched;
 mod convert;
 mod wide;
@@ -268,9 +268,8 @@ fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (O
     for g in 0..boxes.len() {
         group_start[g + 1] += group_start[g];
     }
-    // The box table and the per-primitive groups are freed before the BVH is built: on a
-    // mesh of distinct boxes the table is the largest allocation here (build peak memory).
-    drop(group_of_box);
+    // Each group's members; the per-primitive groups are freed before the BVH is built
+    // (build peak memory).
     let mut next = group_start.clone();
     let mut group_members = vec![0u32; group_start[boxes.len()] as usize];
     for (index, &g) in group_of_primitive.iter().enumerate() {
@@ -303,16 +302,15 @@ impl Blas {
     /// Builds a BVH over `triangles` and `shapes` (none needed when there are none).
     /// Primitives with non-finite bounds are kept (indices stay valid) but can never be hit;
     /// the geometry stage reports them before this.
-    pub fn new(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Blas {
+    pub fn new(triangles: impl Into<Triangles>, shapes: Vec<Shape>) -> Blas {
         Blas::deforming(triangles, shapes, None)
     }
 
     /// [`Blas::new`] whose triangles move by `deformation` (one position per triangle and key,
     /// see [`crate::render::geometry::motion`]) when it is given.
-    pub fn deforming(triangles: Vec<Triangle>, shapes: Vec<Shape>, deformation: Option<Deformation>) -> Blas {
-        // The triangles are split into what the traversal reads and what a hit reads, and
-        // freed, before the BVH is built (build peak memory).
-        let (positions, attrs) = AttrTable::take(triangles);
+    pub fn deforming(triangles: impl Into<Triangles>, shapes: Vec<Shape>, deformation: Option<Deformation>) -> Blas {
+        // Emission stored the triangles as what the traversal reads and what a hit reads.
+        let (positions, attrs) = triangles.into().into_parts();
         let tri_bounds = |(i, p): (usize, &[Vec3; 3])| match &deformation {
             Some(d) => d.bounds(i),
             None => (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2])),
@@ -763,7 +761,7 @@ pub struct Accel {
 
 impl Accel {
     /// A single-level structure over world-space `triangles` and `shapes` (no instances).
-    pub fn new(triangles: Vec<Triangle>, shapes: Vec<Shape>) -> Accel {
+    pub fn new(triangles: impl Into<Triangles>, shapes: Vec<Shape>) -> Accel {
         Accel::with_instances(Blas::new(triangles, shapes), Vec::new(), &[], Vec::new())
     }
 

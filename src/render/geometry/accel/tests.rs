@@ -1,4 +1,5 @@
 use super::*;
+use crate::render::geometry::Triangle;
 use glam::DMat4;
 use glam::Vec2;
 
@@ -272,7 +273,7 @@ fn agrees_with_brute_force(
     tris: &[[Vec3; 3]],
     rays: Vec<([f32; 3], [f32; 3], f32)>,
 ) -> Result<(), proptest::test_runner::TestCaseError> {
-    let accel = Accel::new(tris.iter().map(|&p| tri(p)).collect(), Vec::new());
+    let accel = Accel::new(tris.iter().map(|&p| tri(p)).collect::<Vec<_>>(), Vec::new());
     for (o, d, length) in rays {
         let (o, d) = (Vec3::from(o), Vec3::from(d).normalize_or_zero());
         if d == Vec3::ZERO {
