@@ -25,7 +25,7 @@ use crate::render::geometry::primvars::PrimvarRef;
 use crate::render::geometry::shapes::Shape;
 use crate::render::geometry::triangles::Triangles;
 use crate::render::material::frame::Frame;
-use glam::{DAffine3, DMat3, Vec2, Vec3};
+use glam::{DAffine3, DMat3, Vec2, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
