@@ -16,7 +16,7 @@ mod lobes;
 mod reference;
 
 use crate::abi::layering::{self, Relief};
-use crate::abi::{Closure, ClosureSum, Globals, MaterialCode, PrimvarValues, ShaderError};
+use crate::abi::{Closure, ClosureSum, ClosureTerm, Globals, MaterialCode, PrimvarValues, ShaderError};
 use crate::render::geometry::accel::{Accel, Hit, WORLD, offset_ray_origin};
 use crate::render::geometry::primvars::{PrimvarRef, PrimvarSlot};
 use crate::render::light::emitter::Emitter;
@@ -253,6 +253,9 @@ pub struct Context<'a> {
     /// Whether every material has a layer whose mask is 1 at compile time: then no surface
     /// lets light through and shadow rays can stop at their first hit, in any order.
     pub all_opaque: bool,
+    /// Whether any light can be hit by a ray ([`Light::is_hittable`]): a scene lit only by
+    /// a dome, distant or point lights skips the search for crossed area lights at every ray.
+    pub hittable_lights: bool,
     /// How next-event estimation chooses a light (by power; see [`LightSelection`]).
     pub light_selection: LightSelection,
     /// Per material, its primvar reads resolved against [`Scene::primvars`]
@@ -539,12 +542,14 @@ impl Context<'_> {
         lobes: &mut Lobes,
     ) -> Result<(), Invalid> {
         let n = layer_normal(material, g, layer)?;
-        material.surface_sum(g, layer, closure).map_err(Invalid::Shader)?;
-        if closure.has_non_finite() {
+        // Only the terms the shader writes are read (the rest of `closure` may be stale).
+        let written = material.surface_terms(g, layer, closure).map_err(Invalid::Shader)?;
+        let terms = &closure.terms[..written.min(closure.terms.len())];
+        if terms.iter().any(ClosureTerm::is_non_finite) {
             return Err(Invalid::NonFiniteClosure);
         }
         let lobe = lobes.push_slot();
-        lobe.bsdf.set_sum(closure, self.params.layering);
+        lobe.bsdf.set_terms(terms, self.params.layering);
         // Glass needs to know inside from outside, so its frame keeps the outward side
         // (wo.z < 0 means the ray travels inside); every other closure faces the ray.
         let n = if lobe.bsdf.oriented() {
@@ -556,7 +561,7 @@ impl Context<'_> {
         };
         (lobe.weight, lobe.frame, lobe.layer) = (weight, Frame::from_normal(n), layer);
         // Terms with a normal of their own (`with_normal`) turn into its frame.
-        lobe.bsdf.set_term_normals(closure, &lobe.frame, lobe.frame.to_local(-d));
+        lobe.bsdf.set_term_normals(terms, &lobe.frame, lobe.frame.to_local(-d));
         Ok(())
     }
 
@@ -755,6 +760,9 @@ impl Context<'_> {
     /// hidden from the camera contribute nothing.
     fn area_emission(&self, o: Vec3, d: Vec3, tmax: f32, from: &Scatter, camera_ray: bool) -> Vec3 {
         let mut sum = Vec3::ZERO;
+        if !self.hittable_lights {
+            return sum;
+        }
         for (i, light) in self.scene.lights.iter().enumerate().filter(|(_, l)| l.visible_to_camera || !camera_ray) {
             if let Some((le, _)) = light.hit(o, d, tmax) {
                 sum += le * from.mis(light, d, self.light_selection.pmf(i));
