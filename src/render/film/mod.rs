@@ -15,7 +15,7 @@ pub mod sum;
 use crate::abi::ChannelKind;
 use crate::abi::{MaterialCode, ShaderError};
 use crate::render::integrator::{
-    ChannelMap, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams, Scratch,
+    ChannelMap, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams, PickStratum, Scratch,
 };
 use crate::render::material::closure::LayeringMode;
 use crate::render::sampling::sampler::{PathSampler, SamplerKind, Slot};
@@ -742,11 +742,10 @@ fn render_impl(
                     camera.ray(film, lens)
                 };
                 // Stratified over the pixel's samples: sample k picks in [k, k + 1) / spp.
-                let u_pick = ((sample as f32 + sampler.get1(Slot::LayerPick)) / settings.spp as f32)
-                    .min(1.0 - f32::EPSILON / 2.0);
+                let first_pick = PickStratum { index: sample, count: settings.spp };
                 row.stats.samples += 1;
                 px.samples += 1;
-                match ctx.trace(ray.o, ray.d, ray.tmin, ray.tmax, u_pick, &mut sampler, scratch) {
+                match ctx.trace(ray.o, ray.d, ray.tmin, ray.tmax, first_pick, &mut sampler, scratch) {
                     Ok(r) if r.radiance.is_finite() && r.albedo.is_finite() && r.normal.is_finite() => {
                         row.stats.pass_through_limit += u64::from(r.pass_limit);
                         // Fixed-size arrays, not chained iterators: the adds unroll (a chain of

@@ -68,6 +68,25 @@ impl LayerMode {
 /// Most transparent surfaces one ray passes straight through before it is absorbed.
 pub const MAX_PASS_THROUGH: u32 = 64;
 
+/// Where the layer pick at a camera ray's first surface lies: sample `index` of a pixel's
+/// `count` picks in `[index, index + 1) / count` (stratified over the pixel's samples,
+/// which removes most of the variance of the pick where the camera sees blended layers).
+#[derive(Clone, Copy, Debug)]
+pub struct PickStratum {
+    /// The sample's index among the pixel's samples.
+    pub index: u32,
+    /// The pixel's samples.
+    pub count: u32,
+}
+
+impl PickStratum {
+    /// The pick number, drawn only when a pick needs one (numbers are counter based:
+    /// skipping it changes no other decision's).
+    fn number(self, sampler: &PathSampler) -> f32 {
+        ((self.index as f32 + sampler.get1(Slot::LayerPick)) / self.count as f32).min(1.0 - f32::EPSILON / 2.0)
+    }
+}
+
 /// Path-tracing parameters.
 #[derive(Clone, Copy, Debug)]
 pub struct PathParams {
@@ -786,9 +805,8 @@ impl Context<'_> {
     }
 
     /// Traces one camera ray. Channels of the first visible hit are left in `s.channels`.
-    /// `u_first_pick` is the uniform number that picks the layer (or transparency) at the
-    /// first surface the ray meets: the film stratifies it over a pixel's samples, which
-    /// removes most of the variance of the pick where the camera sees blended layers.
+    /// `first_pick` places the number that picks the layer (or transparency) at the first
+    /// surface the ray meets.
     #[allow(clippy::too_many_arguments)]
     pub fn trace(
         &self,
@@ -796,7 +814,7 @@ impl Context<'_> {
         mut d: Vec3,
         mut tmin: f32,
         mut tmax: f32,
-        u_first_pick: f32,
+        first_pick: PickStratum,
         sampler: &mut PathSampler,
         s: &mut Scratch,
     ) -> Result<SampleResult, Invalid> {
@@ -835,8 +853,12 @@ impl Context<'_> {
             let sp = surface_point(accel, self.scene, o, d, &hit, s.time);
             // The pick at the vertex's first surface has a dimension of its own; each
             // pass through a transparent pick takes another, so later decisions keep theirs.
+            // A stochastic pick that cannot go two ways draws no number.
+            let certain = self.layer_modes[sp.material] != LayerMode::Weighted
+                && layering::pick_is_certain(&self.materials[sp.material].info().layers);
             let u_layer = match (bounces, vertex_passes) {
-                (0, 0) => u_first_pick,
+                _ if certain => 0.0,
+                (0, 0) => first_pick.number(sampler),
                 (_, 0) => sampler.get1(Slot::LayerPick),
                 _ => sampler.pass_pick(vertex_passes),
             };
