@@ -666,9 +666,12 @@ impl Context<'_> {
         sampler: &PathSampler,
         s: &mut Scratch,
     ) -> Result<Vec3, Invalid> {
-        let choice = self.light_selection.sample(sampler.get1(Slot::LightChoice));
+        // The light and the point on it from one 2D number (the choice takes the first
+        // coordinate and passes on its rescaled remainder, as Mitsuba does): choice and point
+        // are stratified together, where two independent dimensions would not be.
         let u = sampler.get2(Slot::LightPoint);
-        let Some((pick, select_pdf)) = choice else { return Ok(Vec3::ZERO) };
+        let Some((pick, select_pdf, ux)) = self.light_selection.sample_remapped(u.x) else { return Ok(Vec3::ZERO) };
+        let u = Vec2::new(ux, u.y);
         let ls = match self.scene.lights.get(pick) {
             Some(light) => light.sample_li(p, light_side(&s.lobes, ng, wo), u),
             None => {

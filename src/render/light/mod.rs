@@ -485,6 +485,13 @@ impl LightSelection {
         (pmf > 0.0).then_some((i, pmf))
     }
 
+    /// [`LightSelection::sample`], also returning `u` rescaled to [0, 1) within the chosen
+    /// light's share (see [`Distribution1D::sample_discrete_remapped`]).
+    pub fn sample_remapped(&self, u: f32) -> Option<(usize, f32, f32)> {
+        let (i, pmf, rest) = self.distribution.as_ref()?.sample_discrete_remapped(u);
+        (pmf > 0.0).then_some((i, pmf, rest))
+    }
+
     /// The probability of choosing light `i`.
     pub fn pmf(&self, i: usize) -> f32 {
         self.distribution.as_ref().map_or(0.0, |d| d.discrete_pdf(i))
