@@ -46,6 +46,13 @@ pub fn is_opaque(layers: &[LayerInfo]) -> bool {
     layers.iter().any(LayerInfo::hides_below)
 }
 
+/// Whether [`pick`] gives the same answer whatever `u`: the top layer that picks hides
+/// everything below ([`LayerInfo::hides_below`]), or no layer picks. Such a surface (most
+/// single-layer materials) needs no pick number.
+pub fn pick_is_certain(layers: &[LayerInfo]) -> bool {
+    layers.iter().rev().find(|l| l.picks()).is_none_or(LayerInfo::hides_below)
+}
+
 /// The layer picked by the uniform number `u ∈ [0, 1)`, or `None` for transparency, walking
 /// from the top and evaluating masks (`mask_of`) only until a layer is picked (paper 5.3).
 /// One number serves every step: after a miss it is rescaled to [0, 1) within the miss.
@@ -272,6 +279,36 @@ mod tests {
         assert_eq!(pick_weights(&layers, &[1.0, 1.0], &mut w), 0.0);
         assert_eq!(w, [1.0, 0.0]);
         assert_eq!(transmittance::<()>(&layers, |_| Ok(0.5)).unwrap(), 0.5);
+    }
+
+    /// The integrator draws no pick number where `pick_is_certain`: there every `u` (and any
+    /// value of the masks not known at compile time) must pick the same.
+    #[test]
+    fn a_certain_pick_is_the_same_for_every_number() {
+        let kinds = [(false, None), (true, None), (true, Some(1.0)), (true, Some(0.5)), (true, Some(0.0))];
+        let mut certain = 0;
+        for a in kinds {
+            for b in kinds {
+                for c in kinds {
+                    let layers = [layer(a.0, None, a.1), layer(b.0, None, b.1), layer(c.0, None, c.1)];
+                    let picks: Vec<_> = (0..64)
+                        .flat_map(|k| [0.0, 0.3, 0.7, 1.0].map(|m| (k, m)))
+                        .map(|(k, m)| {
+                            let u = (k as f32 + 0.5) / 64.0;
+                            pick::<()>(&layers, u, |i| Ok(layers[i].constant_mask.unwrap_or(m))).unwrap()
+                        })
+                        .collect();
+                    let same = picks.iter().all(|p| *p == picks[0]);
+                    if pick_is_certain(&layers) {
+                        certain += 1;
+                        assert!(same, "{layers:?}: {picks:?}");
+                    }
+                }
+            }
+        }
+        // The top picking layer opaque (the top one: 25 stacks; below a surfaceless top: 5;
+        // below two: 1), or nothing picks (1).
+        assert_eq!(certain, 32);
     }
 
     #[test]

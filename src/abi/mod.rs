@@ -251,6 +251,16 @@ pub struct ClosureTerm {
 }
 
 impl ClosureTerm {
+    /// Whether the term is not empty (kind not `None`) and has a NaN or infinite weight or
+    /// parameter.
+    #[inline]
+    pub fn is_non_finite(&self) -> bool {
+        // The largest magnitude's bits: at or above the exponent's all-ones, infinite or NaN.
+        let magnitude = |m: u32, x: &f32| m.max(x.to_bits() & 0x7fff_ffff);
+        self.kind != ClosureKind::None as u32
+            && self.weight.iter().fold(0, magnitude).max(self.params.iter().fold(0, magnitude)) >= 0x7f80_0000
+    }
+
     /// A single closure with unit weight.
     pub fn from_closure(c: &Closure) -> ClosureTerm {
         let mut params = [0.0; TERM_PARAMS];
@@ -285,11 +295,7 @@ impl ClosureSum {
     /// Empty terms are skipped, as every reader skips them (most of a material's are empty).
     #[inline]
     pub fn has_non_finite(&self) -> bool {
-        self.terms.iter().filter(|t| t.kind != ClosureKind::None as u32).any(|t| {
-            // The largest magnitude's bits: at or above the exponent's all-ones, infinite or NaN.
-            let magnitude = |m: u32, x: &f32| m.max(x.to_bits() & 0x7fff_ffff);
-            t.weight.iter().fold(0, magnitude).max(t.params.iter().fold(0, magnitude)) >= 0x7f80_0000
-        })
+        self.terms.iter().any(ClosureTerm::is_non_finite)
     }
 
     /// The first non-empty term as a single closure (parameters past the eighth dropped), or
@@ -439,6 +445,15 @@ pub trait MaterialCode: Send + Sync {
         *out = ClosureSum::single(&single);
         Ok(())
     }
+    /// [`MaterialCode::surface_sum`] for a caller that reads only the leading terms it says:
+    /// writes the terms the shader may fill and returns how many (every later term is empty
+    /// in the value, but `out` keeps whatever it held there). The renderer's shading points
+    /// skip clearing and scanning the unused terms (most closures have one of
+    /// [`MAX_CLOSURE_TERMS`]). The default writes the whole value.
+    fn surface_terms(&self, g: &Globals, layer: usize, out: &mut ClosureSum) -> Result<usize, ShaderError> {
+        self.surface_sum(g, layer, out)?;
+        Ok(MAX_CLOSURE_TERMS)
+    }
     /// Writes each layer's displacement height (0 without a displacement product).
     fn displacement(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError>;
     /// Writes one layer's shading normal (`g.n` without a normal product).
@@ -498,6 +513,9 @@ impl MaterialCode for ParameterInstance {
     }
     fn surface_sum(&self, g: &Globals, layer: usize, out: &mut ClosureSum) -> Result<(), ShaderError> {
         self.class.surface_sum(&self.with_block(g), layer, out)
+    }
+    fn surface_terms(&self, g: &Globals, layer: usize, out: &mut ClosureSum) -> Result<usize, ShaderError> {
+        self.class.surface_terms(&self.with_block(g), layer, out)
     }
     fn displacement(&self, g: &Globals, out: &mut [f32]) -> Result<(), ShaderError> {
         self.class.displacement(&self.with_block(g), out)

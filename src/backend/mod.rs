@@ -14,7 +14,7 @@ pub mod interp;
 pub mod jit;
 pub mod object;
 
-use crate::abi::{Closure, ClosureSum, Globals, MaterialCode, MaterialInfo, ShaderError, Status};
+use crate::abi::{Closure, ClosureSum, Globals, MAX_CLOSURE_TERMS, MaterialCode, MaterialInfo, ShaderError, Status};
 use crate::compose::ComposedMaterial;
 use crate::diag::Diagnostics;
 use crate::front::library::Library;
@@ -63,6 +63,24 @@ pub struct Entries<E> {
     normal: Vec<Option<E>>,
     channels: Vec<Option<E>>,
     emission: Vec<Option<E>>,
+    /// Per layer, how many leading closure terms its surface entry writes, every word of
+    /// them (`None`: not known to, so the whole value is cleared first).
+    surface_terms: Vec<Option<usize>>,
+}
+
+/// The terms `f` writes, when its outputs are exactly the words of its first terms (the
+/// lowering writes the terms that may be non-empty, each whole).
+fn written_terms(f: &ssa::Function) -> Option<usize> {
+    let term_words = ClosureSum::WORDS / MAX_CLOSURE_TERMS;
+    let mut written = [false; ClosureSum::WORDS];
+    for inst in f.blocks.iter().flat_map(|b| &b.insts) {
+        if let ssa::Inst::Out(word, _) = inst.inst {
+            *written.get_mut(word as usize)? = true;
+        }
+    }
+    let words = written.iter().rposition(|&w| w).map_or(0, |last| last + 1);
+    let terms = words.div_ceil(term_words);
+    written[..terms * term_words].iter().all(|&w| w).then_some(terms)
 }
 
 impl<E: Copy> Entries<E> {
@@ -76,13 +94,14 @@ impl<E: Copy> Entries<E> {
             normal: vec![None; n],
             channels: vec![None; n],
             emission: vec![None; n],
+            surface_terms: vec![None; n],
         };
         for (i, f) in module.functions.iter().enumerate() {
             let h = Some(handle(i));
             match f.kind {
                 EntryKind::Mask(l) => e.mask[l] = h,
                 EntryKind::Displacement => e.displacement = h,
-                EntryKind::Surface(l) => e.surface[l] = h,
+                EntryKind::Surface(l) => (e.surface[l], e.surface_terms[l]) = (h, written_terms(f)),
                 EntryKind::Normal(l) => e.normal[l] = h,
                 EntryKind::Channels(l) => e.channels[l] = h,
                 EntryKind::Emission(l) => e.emission[l] = h,
@@ -161,6 +180,25 @@ impl<R: Runner> MaterialCode for Material<R> {
                 *out = ClosureSum::default();
                 Ok(())
             }
+        }
+    }
+
+    fn surface_terms(&self, g: &Globals, layer: usize, out: &mut ClosureSum) -> Result<usize, ShaderError> {
+        let entry = self.entries.surface.get(layer).copied().flatten();
+        match (entry, self.entries.surface_terms.get(layer).copied().flatten()) {
+            (Some(e), Some(terms)) => {
+                // SAFETY: as in `surface_sum`.
+                let w = unsafe {
+                    std::slice::from_raw_parts_mut((out as *mut ClosureSum).cast::<u32>(), ClosureSum::WORDS)
+                };
+                ShaderError::check(self.runner.run(e, g, w))?;
+                Ok(terms)
+            }
+            (Some(_), None) => {
+                self.surface_sum(g, layer, out)?;
+                Ok(MAX_CLOSURE_TERMS)
+            }
+            (None, _) => Ok(0),
         }
     }
 

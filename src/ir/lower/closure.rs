@@ -219,7 +219,7 @@ impl FnLower<'_> {
 
 #[cfg(test)]
 mod tests {
-    use crate::abi::{ClosureKind, ClosureSum, Globals, MaterialCode};
+    use crate::abi::{self, ClosureKind, ClosureSum, Globals, MaterialCode};
     use crate::backend::{BackendKind, Compiler};
     use crate::compose::{ComposedLayer, ComposedMaterial, MaterialRef, Slot};
     use crate::diag::{Diagnostics, SourceMap};
@@ -275,6 +275,16 @@ mod tests {
         };
         let sums: Vec<ClosureSum> = codes.iter().map(read).collect();
         assert_eq!(sums[0], sums[1], "JIT and interpreter disagree");
+        // `surface_terms` writes the same leading terms over a stale buffer, and every term
+        // past them is empty in the whole value (so the renderer, reading only those, sees it).
+        for (code, sum) in codes.iter().zip(&sums) {
+            let mut stale = ClosureSum::default();
+            stale.terms.iter_mut().for_each(|t| (t.kind, t.weight) = (u32::MAX, [f32::NAN; 3]));
+            let written = code.surface_terms(&Globals::default(), 0, &mut stale).expect("runs");
+            assert!(written < abi::MAX_CLOSURE_TERMS, "{written} terms: the entry's writes were not recognised");
+            assert_eq!(stale.terms[..written], sum.terms[..written]);
+            assert!(sum.terms[written..].iter().all(|t| *t == abi::ClosureTerm::default()), "{written}: {sum:?}");
+        }
         sums[0]
             .terms
             .iter()

@@ -15,7 +15,7 @@ pub mod sum;
 use crate::abi::ChannelKind;
 use crate::abi::{MaterialCode, ShaderError};
 use crate::render::integrator::{
-    ChannelMap, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams, Scratch,
+    ChannelMap, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams, PickStratum, Scratch,
 };
 use crate::render::material::closure::LayeringMode;
 use crate::render::sampling::sampler::{PathSampler, SamplerKind, Slot};
@@ -699,6 +699,7 @@ fn render_impl(
             layering: settings.layering,
         },
         all_opaque: materials.iter().all(|m| crate::render::integrator::is_opaque(*m)),
+        hittable_lights: scene.lights.iter().any(|l| l.is_hittable()),
         light_selection: crate::render::light::LightSelection::with_emitters(
             &scene.lights,
             &scene.emitters.list.iter().map(|e| e.power).collect::<Vec<_>>(),
@@ -741,22 +742,22 @@ fn render_impl(
                     camera.ray(film, lens)
                 };
                 // Stratified over the pixel's samples: sample k picks in [k, k + 1) / spp.
-                let u_pick = ((sample as f32 + sampler.get1(Slot::LayerPick)) / settings.spp as f32)
-                    .min(1.0 - f32::EPSILON / 2.0);
+                let first_pick = PickStratum { index: sample, count: settings.spp };
                 row.stats.samples += 1;
                 px.samples += 1;
-                match ctx.trace(ray.o, ray.d, ray.tmin, ray.tmax, u_pick, &mut sampler, scratch) {
+                match ctx.trace(ray.o, ray.d, ray.tmin, ray.tmax, first_pick, &mut sampler, scratch) {
                     Ok(r) if r.radiance.is_finite() && r.albedo.is_finite() && r.normal.is_finite() => {
                         row.stats.pass_through_limit += u64::from(r.pass_limit);
-                        let sums = &mut px.builtin;
-                        for (k, v) in
-                            r.radiance.to_array().into_iter().chain([r.alpha]).chain(r.albedo.to_array()).enumerate()
-                        {
-                            sums[k].add(v);
+                        // Fixed-size arrays, not chained iterators: the adds unroll (a chain of
+                        // three iterators cost about 100 instructions a sample).
+                        let (sums, (c, a)) = (&mut px.builtin, (r.radiance, r.albedo));
+                        for (sum, v) in sums[..7].iter_mut().zip([c.x, c.y, c.z, r.alpha, a.x, a.y, a.z]) {
+                            sum.add(v);
                         }
                         if r.alpha > 0.0 {
-                            for (k, v) in r.normal.to_array().into_iter().chain(r.position.to_array()).enumerate() {
-                                sums[7 + k].add(v);
+                            let (n, p) = (r.normal, r.position);
+                            for (sum, v) in sums[7..].iter_mut().zip([n.x, n.y, n.z, p.x, p.y, p.z]) {
+                                sum.add(v);
                             }
                             px.hits += 1;
                             if let Some(prim) = r.prim {

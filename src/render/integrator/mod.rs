@@ -16,7 +16,7 @@ mod lobes;
 mod reference;
 
 use crate::abi::layering::{self, Relief};
-use crate::abi::{Closure, ClosureSum, Globals, MaterialCode, PrimvarValues, ShaderError};
+use crate::abi::{Closure, ClosureSum, ClosureTerm, Globals, MaterialCode, PrimvarValues, ShaderError};
 use crate::render::geometry::accel::{Accel, Hit, WORLD, offset_ray_origin};
 use crate::render::geometry::primvars::{PrimvarRef, PrimvarSlot};
 use crate::render::light::emitter::Emitter;
@@ -67,6 +67,25 @@ impl LayerMode {
 
 /// Most transparent surfaces one ray passes straight through before it is absorbed.
 pub const MAX_PASS_THROUGH: u32 = 64;
+
+/// Where the layer pick at a camera ray's first surface lies: sample `index` of a pixel's
+/// `count` picks in `[index, index + 1) / count` (stratified over the pixel's samples,
+/// which removes most of the variance of the pick where the camera sees blended layers).
+#[derive(Clone, Copy, Debug)]
+pub struct PickStratum {
+    /// The sample's index among the pixel's samples.
+    pub index: u32,
+    /// The pixel's samples.
+    pub count: u32,
+}
+
+impl PickStratum {
+    /// The pick number, drawn only when a pick needs one (numbers are counter based:
+    /// skipping it changes no other decision's).
+    fn number(self, sampler: &PathSampler) -> f32 {
+        ((self.index as f32 + sampler.get1(Slot::LayerPick)) / self.count as f32).min(1.0 - f32::EPSILON / 2.0)
+    }
+}
 
 /// Path-tracing parameters.
 #[derive(Clone, Copy, Debug)]
@@ -253,6 +272,9 @@ pub struct Context<'a> {
     /// Whether every material has a layer whose mask is 1 at compile time: then no surface
     /// lets light through and shadow rays can stop at their first hit, in any order.
     pub all_opaque: bool,
+    /// Whether any light can be hit by a ray ([`Light::is_hittable`]): a scene lit only by
+    /// a dome, distant or point lights skips the search for crossed area lights at every ray.
+    pub hittable_lights: bool,
     /// How next-event estimation chooses a light (by power; see [`LightSelection`]).
     pub light_selection: LightSelection,
     /// Per material, its primvar reads resolved against [`Scene::primvars`]
@@ -539,12 +561,14 @@ impl Context<'_> {
         lobes: &mut Lobes,
     ) -> Result<(), Invalid> {
         let n = layer_normal(material, g, layer)?;
-        material.surface_sum(g, layer, closure).map_err(Invalid::Shader)?;
-        if closure.has_non_finite() {
+        // Only the terms the shader writes are read (the rest of `closure` may be stale).
+        let written = material.surface_terms(g, layer, closure).map_err(Invalid::Shader)?;
+        let terms = &closure.terms[..written.min(closure.terms.len())];
+        if terms.iter().any(ClosureTerm::is_non_finite) {
             return Err(Invalid::NonFiniteClosure);
         }
         let lobe = lobes.push_slot();
-        lobe.bsdf.set_sum(closure, self.params.layering);
+        lobe.bsdf.set_terms(terms, self.params.layering);
         // Glass needs to know inside from outside, so its frame keeps the outward side
         // (wo.z < 0 means the ray travels inside); every other closure faces the ray.
         let n = if lobe.bsdf.oriented() {
@@ -556,7 +580,7 @@ impl Context<'_> {
         };
         (lobe.weight, lobe.frame, lobe.layer) = (weight, Frame::from_normal(n), layer);
         // Terms with a normal of their own (`with_normal`) turn into its frame.
-        lobe.bsdf.set_term_normals(closure, &lobe.frame, lobe.frame.to_local(-d));
+        lobe.bsdf.set_term_normals(terms, &lobe.frame, lobe.frame.to_local(-d));
         Ok(())
     }
 
@@ -642,9 +666,12 @@ impl Context<'_> {
         sampler: &PathSampler,
         s: &mut Scratch,
     ) -> Result<Vec3, Invalid> {
-        let choice = self.light_selection.sample(sampler.get1(Slot::LightChoice));
+        // The light and the point on it from one 2D number (the choice takes the first
+        // coordinate and passes on its rescaled remainder, as Mitsuba does): choice and point
+        // are stratified together, where two independent dimensions would not be.
         let u = sampler.get2(Slot::LightPoint);
-        let Some((pick, select_pdf)) = choice else { return Ok(Vec3::ZERO) };
+        let Some((pick, select_pdf, ux)) = self.light_selection.sample_remapped(u.x) else { return Ok(Vec3::ZERO) };
+        let u = Vec2::new(ux, u.y);
         let ls = match self.scene.lights.get(pick) {
             Some(light) => light.sample_li(p, light_side(&s.lobes, ng, wo), u),
             None => {
@@ -755,6 +782,9 @@ impl Context<'_> {
     /// hidden from the camera contribute nothing.
     fn area_emission(&self, o: Vec3, d: Vec3, tmax: f32, from: &Scatter, camera_ray: bool) -> Vec3 {
         let mut sum = Vec3::ZERO;
+        if !self.hittable_lights {
+            return sum;
+        }
         for (i, light) in self.scene.lights.iter().enumerate().filter(|(_, l)| l.visible_to_camera || !camera_ray) {
             if let Some((le, _)) = light.hit(o, d, tmax) {
                 sum += le * from.mis(light, d, self.light_selection.pmf(i));
@@ -778,9 +808,8 @@ impl Context<'_> {
     }
 
     /// Traces one camera ray. Channels of the first visible hit are left in `s.channels`.
-    /// `u_first_pick` is the uniform number that picks the layer (or transparency) at the
-    /// first surface the ray meets: the film stratifies it over a pixel's samples, which
-    /// removes most of the variance of the pick where the camera sees blended layers.
+    /// `first_pick` places the number that picks the layer (or transparency) at the first
+    /// surface the ray meets.
     #[allow(clippy::too_many_arguments)]
     pub fn trace(
         &self,
@@ -788,7 +817,7 @@ impl Context<'_> {
         mut d: Vec3,
         mut tmin: f32,
         mut tmax: f32,
-        u_first_pick: f32,
+        first_pick: PickStratum,
         sampler: &mut PathSampler,
         s: &mut Scratch,
     ) -> Result<SampleResult, Invalid> {
@@ -827,8 +856,12 @@ impl Context<'_> {
             let sp = surface_point(accel, self.scene, o, d, &hit, s.time);
             // The pick at the vertex's first surface has a dimension of its own; each
             // pass through a transparent pick takes another, so later decisions keep theirs.
+            // A stochastic pick that cannot go two ways draws no number.
+            let certain = self.layer_modes[sp.material] != LayerMode::Weighted
+                && layering::pick_is_certain(&self.materials[sp.material].info().layers);
             let u_layer = match (bounces, vertex_passes) {
-                (0, 0) => u_first_pick,
+                _ if certain => 0.0,
+                (0, 0) => first_pick.number(sampler),
                 (_, 0) => sampler.get1(Slot::LayerPick),
                 _ => sampler.pass_pick(vertex_passes),
             };

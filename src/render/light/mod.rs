@@ -214,6 +214,15 @@ pub struct LightSample {
 }
 
 impl Light {
+    /// Whether a ray can hit the light (rect, disk, sphere, cylinder): the kinds for which
+    /// [`Light::hit`] can return a hit.
+    pub fn is_hittable(&self) -> bool {
+        matches!(
+            self.kind,
+            LightKind::Rect { .. } | LightKind::Disk { .. } | LightKind::Sphere { .. } | LightKind::Cylinder { .. }
+        )
+    }
+
     /// Whether the light is at infinity (dome, distant).
     pub fn is_infinite(&self) -> bool {
         matches!(self.kind, LightKind::Dome { .. } | LightKind::Distant { .. })
@@ -476,6 +485,13 @@ impl LightSelection {
         (pmf > 0.0).then_some((i, pmf))
     }
 
+    /// [`LightSelection::sample`], also returning `u` rescaled to [0, 1) within the chosen
+    /// light's share (see [`Distribution1D::sample_discrete_remapped`]).
+    pub fn sample_remapped(&self, u: f32) -> Option<(usize, f32, f32)> {
+        let (i, pmf, rest) = self.distribution.as_ref()?.sample_discrete_remapped(u);
+        (pmf > 0.0).then_some((i, pmf, rest))
+    }
+
     /// The probability of choosing light `i`.
     pub fn pmf(&self, i: usize) -> f32 {
         self.distribution.as_ref().map_or(0.0, |d| d.discrete_pdf(i))
@@ -734,6 +750,36 @@ def CylinderLight "C" { float inputs:length = 3  float inputs:radius = 0.4
 
     /// A sphere 2e-5 radians across (a bulb seen from afar) still subtends its solid angle
     /// `π (r/d)²`: `1 − cos` of its cone must not round to 0, which would make it black.
+    /// The integrator looks for crossed lights only when one `is_hittable`: a ray must be
+    /// able to hit exactly those (a light with area seen from outside it covers some of the
+    /// 4096 directions).
+    #[test]
+    fn exactly_the_hittable_lights_are_hit_by_rays() {
+        let all = lights(
+            r#"#usda 1.0
+def RectLight "R" { float inputs:width = 2  float inputs:height = 2  double3 xformOp:translate = (0, 0, 3)
+    uniform token[] xformOpOrder = ["xformOp:translate"] }
+def DiskLight "D" { float inputs:radius = 1  double3 xformOp:translate = (0, 0, 3)
+    uniform token[] xformOpOrder = ["xformOp:translate"] }
+def SphereLight "S" { float inputs:radius = 0.5  double3 xformOp:translate = (-2, 1, 1)
+    uniform token[] xformOpOrder = ["xformOp:translate"] }
+def SphereLight "P" { bool treatAsPoint = true  double3 xformOp:translate = (1, 1, 1)
+    uniform token[] xformOpOrder = ["xformOp:translate"] }
+def CylinderLight "C" { float inputs:length = 3  float inputs:radius = 0.4  double3 xformOp:translate = (0, -2, 0)
+    uniform token[] xformOpOrder = ["xformOp:translate"] }
+def DistantLight "Sun" { float inputs:angle = 10 }
+def DomeLight "Dome" {}"#,
+        );
+        assert_eq!(all.len(), 7);
+        let mut rng = Rng::new(3, 0, 0);
+        let directions: Vec<Vec3> = (0..4096).map(|_| uniform_sphere(rng.uniform2())).collect();
+        for light in &all {
+            let hits = directions.iter().filter(|&&d| light.hit(Vec3::ZERO, d, f32::INFINITY).is_some()).count();
+            assert_eq!(hits > 0, light.is_hittable(), "{:?}: {hits} of 4096 rays hit it", light.kind);
+        }
+        assert_eq!(all.iter().filter(|l| l.is_hittable()).count(), 4);
+    }
+
     #[test]
     fn a_far_small_sphere_keeps_its_solid_angle() {
         let l = lights("#usda 1.0\ndef SphereLight \"Bulb\" { float inputs:radius = 1e-4 }\n");

@@ -195,17 +195,23 @@ impl ClosureBsdf {
     /// [`ClosureBsdf::from_sum`] in place: the integrator decodes each shading point's closure
     /// into the slot it keeps, rather than moving a value of all [`MAX_CLOSURE_TERMS`] terms.
     pub fn set_sum(&mut self, sum: &ClosureSum, mode: LayeringMode) {
+        self.set_terms(&sum.terms, mode);
+    }
+
+    /// [`ClosureBsdf::set_sum`] of the value whose terms are `terms` and then empty ones (a
+    /// shader's leading terms: [`crate::abi::MaterialCode::surface_terms`]).
+    pub fn set_terms(&mut self, terms: &[ClosureTerm], mode: LayeringMode) {
         let clamped = clamped_weight;
         // The terms that are not empty; most materials have one, decoded without the general
         // renumbering below.
         let mut live = 0u32;
-        for (k, t) in sum.terms.iter().enumerate() {
+        for (k, t) in terms.iter().enumerate().take(MAX_CLOSURE_TERMS) {
             if is_live(t) {
                 live |= 1 << k;
             }
         }
         if live.count_ones() <= 1 {
-            match sum.terms.get(live.trailing_zeros() as usize) {
+            match terms.get(live.trailing_zeros() as usize) {
                 Some(t) => self.set_lobes(&[(Lobe::from_term(t), clamped(t), 0)], mode),
                 None => self.set_lobes(&[], mode),
             }
@@ -214,7 +220,7 @@ impl ClosureBsdf {
         let mut lobes = [(Lobe::Bsdf(Bsdf::Black), Vec3::ZERO, 0u8); MAX_CLOSURE_TERMS];
         let mut position = [usize::MAX; MAX_CLOSURE_TERMS];
         let mut len = 0;
-        for (k, t) in sum.terms.iter().enumerate() {
+        for (k, t) in terms.iter().enumerate().take(MAX_CLOSURE_TERMS) {
             if live & (1 << k) == 0 {
                 continue;
             }
@@ -298,13 +304,13 @@ impl ClosureBsdf {
     /// direction in it. A normal on the far side of the frame is flipped (as the shading
     /// normal is), one tilted away from `wo` bent towards it ([`MIN_TILTED_COS`]); a normal
     /// within 1e-6 of the shading normal is none, so such a closure is today's bit for bit.
-    pub fn set_term_normals(&mut self, sum: &ClosureSum, frame: &Frame, wo: Vec3) {
+    pub fn set_term_normals(&mut self, terms: &[ClosureTerm], frame: &Frame, wo: Vec3) {
         // Most closures have none: one pass over the words before any decoding.
-        if !sum.terms.iter().any(|t| term_normal(t).is_some()) {
+        if !terms.iter().any(|t| term_normal(t).is_some()) {
             return;
         }
         let mut i = 0;
-        for t in sum.terms.iter() {
+        for t in terms.iter() {
             if !is_live(t) {
                 continue;
             }

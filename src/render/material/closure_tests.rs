@@ -397,7 +397,7 @@ fn tilted_coat_over_diffuse(rough: f32, n: Vec3, wo: Vec3) -> ClosureBsdf {
     sum.terms[0] = term(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, rough, 0.0, 0.0, 0.0, n.x, n.y, n.z]);
     sum.terms[1] = ClosureTerm { above: 1, ..term(ClosureKind::Diffuse, &[0.8, 0.8, 0.8]) };
     let mut b = ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling);
-    b.set_term_normals(&sum, &Frame::from_normal(Vec3::Z), wo);
+    b.set_term_normals(&sum.terms, &Frame::from_normal(Vec3::Z), wo);
     b
 }
 

@@ -160,6 +160,16 @@ impl Distribution1D {
         (x, pdf, i)
     }
 
+    /// Samples a piece as [`Distribution1D::sample_discrete`] does, and also returns where
+    /// `u` fell within the piece, rescaled to [0, 1): `(index, probability, remainder)`. The
+    /// remainder is uniform and independent of the choice, so one number can make both.
+    pub fn sample_discrete_remapped(&self, u: f32) -> (usize, f32, f32) {
+        let i = self.find(u);
+        let width = self.cdf[i + 1] - self.cdf[i];
+        let rest = if width > 0.0 { ((u - self.cdf[i]) / width).clamp(0.0, 1.0 - f32::EPSILON / 2.0) } else { 0.0 };
+        (i, self.discrete_pdf(i), rest)
+    }
+
     /// Samples a piece: `(index, probability)`.
     pub fn sample_discrete(&self, u: f32) -> (usize, f32) {
         let i = self.find(u);
@@ -234,6 +244,33 @@ impl Distribution2D {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The light choice hands its remainder to the point on the light: the piece must be the
+    /// one `sample_discrete` picks, and the remainder place `u` within it, so that over a
+    /// stratified `u` each piece's remainders are stratified over [0, 1) too.
+    #[test]
+    fn a_remapped_choice_is_the_choice_and_its_remainder_is_uniform() {
+        let d = Distribution1D::new(&[0.5, 0.0, 2.0, 1.5]);
+        let n = 4000;
+        let mut rests: Vec<Vec<f32>> = vec![Vec::new(); 4];
+        for k in 0..n {
+            let u = (k as f32 + 0.5) / n as f32;
+            let (i, pmf, rest) = d.sample_discrete_remapped(u);
+            assert_eq!((i, pmf), d.sample_discrete(u));
+            assert!((0.0..1.0).contains(&rest), "{rest}");
+            let back = d.cdf[i] + rest * (d.cdf[i + 1] - d.cdf[i]);
+            assert!((back - u).abs() < 1e-5, "{u} -> piece {i}, {rest} -> {back}");
+            rests[i].push(rest);
+        }
+        assert!(rests[1].is_empty());
+        for (i, r) in rests.iter().enumerate().filter(|(_, r)| !r.is_empty()) {
+            // Stratified: the sorted remainders are evenly spaced over [0, 1).
+            let m = r.len() as f32;
+            for (j, x) in r.iter().enumerate() {
+                assert!((x - (j as f32 + 0.5) / m).abs() < 1.5 / m, "piece {i}: {j}th remainder {x} of {m}");
+            }
+        }
+    }
 
     #[test]
     fn rng_is_deterministic_and_uniform() {

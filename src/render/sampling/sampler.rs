@@ -58,9 +58,11 @@ pub enum Slot {
     Lens,
     /// The layer pick at the surface a vertex's ray meets first.
     LayerPick,
-    /// Which light to sample.
+    /// Which light to sample: no longer drawn (the light is chosen by [`Slot::LightPoint`]'s
+    /// first coordinate, whose remainder places the point), kept so later slots keep their
+    /// dimensions.
     LightChoice,
-    /// Where on the light (2D).
+    /// Which light, and where on it (2D: the first coordinate chooses the light).
     LightPoint,
     /// Which triangle of an emissive mesh.
     EmitterTriangle,
