@@ -22,7 +22,7 @@ tests/fixtures/compose_around/ what USD composes around (issue 19, item 1)
                        no defaultPrim
   binding_missing      `material:binding` and a slot binding to prims that do not exist
   materialx            a MaterialX document referenced as a layer: usd-core has no MaterialX
-                       plugin here, so no .expected (tests/mtlx.rs checks what strata reads)
+                       plugin here, so no .expected (tests/mtlx/ checks what strata reads)
   malformed            a referenced layer with a syntax error
 
 For each case CASE.usda (plus the layers it names), CASE.expected holds what usd-core
@@ -708,7 +708,7 @@ def compose_around():
         }
     ''')
     # usd-core without usdMtlx composes /World/Materials empty: not an oracle for strata,
-    # which reads the document (tests/mtlx.rs, `a_referenced_document_binds_like_usd`).
+    # which reads the document (tests/mtlx/, `a_referenced_document_binds_like_usd`).
 
     write(d, "broken.usda", '''
         #usda 1.0
