@@ -351,7 +351,8 @@ impl Scene {
     /// place instances changed (`changed`: the prims whose xformOps did) and the shapes of
     /// deforming prims built as prototypes of their own (`reshaped`: the prims and attributes
     /// that changed; see [`geometry::Geometry::deforming`]): those prototypes' BLASes are
-    /// built again, instance transforms (and their keys under an open shutter), the top-level
+    /// built again (under an open shutter every deforming prototype's, keyed over the new
+    /// frame's shutter), instance transforms (and their keys under an open shutter), the top-level
     /// BVH, the camera, the lights and the emitters' light power are computed again, exactly
     /// as a build at this time computes them, and every other BLAS is kept. Returns the
     /// number of BLASes built. The scene is untouched and the reason returned when that would
