@@ -501,7 +501,29 @@ fn a_new_time_code_builds_only_the_deforming_prims_bvhs() {
     // A ground and a prop stay; a cloth's points change and a skinned arm bends every frame.
     // The oracle: a fresh session opened at that frame; the counters show the static props
     // built once.
-    let mut session = farm_scene_at("deforming.usda", 1.0);
+    frames_build_only_the_deforming_prims_bvhs("deforming.usda");
+}
+
+#[test]
+fn under_an_open_shutter_a_new_time_code_keys_only_the_deforming_prims_again() {
+    // The same under an open shutter: the cloth's and the arm's deformation keys are the
+    // frame's (its shutter interval), so a new frame builds their BVHs again with keys at its
+    // own times, and still not the ground's and the prop's. The cloth's points are the same
+    // at every whole frame (only inside the shutters do they differ): it is built again for
+    // the shutter alone.
+    frames_build_only_the_deforming_prims_bvhs("deforming_blur.usda");
+    let deforming = |session: &Session| session.scene().expect("prepared").motion.deforming_prims;
+    let mut session = farm_scene_at("deforming_blur.usda", 1.0);
+    assert_eq!(deforming(&session), 2, "the cloth and the arm deform inside every frame's shutter");
+    session.set_time(strata::scene::TimeCode::At(2.0));
+    assert_eq!(deforming(&session), 2, "moved to frame 2: they still deform");
+}
+
+/// Frames 2 and 3 of `tests/in/farm/NAME` (a cloth and a skinned arm that deform, a ground
+/// and a prop that stay) move the scene: only the two deforming prims' BVHs are built again,
+/// and each frame renders what a fresh session opened at it renders, bit for bit.
+fn frames_build_only_the_deforming_prims_bvhs(name: &str) {
+    let mut session = farm_scene_at(name, 1.0);
     let mut images = vec![render(&mut session)];
     assert_eq!(session.stats().blas_builds, 3, "the world's (ground, prop), the cloth's, the arm's");
     for time in [2.0, 3.0] {
@@ -512,8 +534,8 @@ fn a_new_time_code_builds_only_the_deforming_prims_bvhs() {
         assert_eq!(after.scene_builds, before.scene_builds, "{time}: the ground and the prop are built once");
         assert_eq!(after.blas_builds, before.blas_builds + 2, "{time}: the cloth's and the arm's BVHs only");
         let image = render(&mut session);
-        assert!(image == render(&mut farm_scene_at("deforming.usda", time)), "frame {time} differs from a fresh one");
-        assert!(!images.contains(&image), "frame {time} looks like an earlier one: the test proves nothing");
+        assert!(image == render(&mut farm_scene_at(name, time)), "{name}: frame {time} differs from a fresh one");
+        assert!(!images.contains(&image), "{name}: frame {time} looks like an earlier one: the test proves nothing");
         images.push(image);
     }
 }

@@ -351,7 +351,8 @@ impl Scene {
     /// place instances changed (`changed`: the prims whose xformOps did) and the shapes of
     /// deforming prims built as prototypes of their own (`reshaped`: the prims and attributes
     /// that changed; see [`geometry::Geometry::deforming`]): those prototypes' BLASes are
-    /// built again, instance transforms (and their keys under an open shutter), the top-level
+    /// built again (under an open shutter every deforming prototype's, keyed over the new
+    /// frame's shutter), instance transforms (and their keys under an open shutter), the top-level
     /// BVH, the camera, the lights and the emitters' light power are computed again, exactly
     /// as a build at this time computes them, and every other BLAS is kept. Returns the
     /// number of BLASes built. The scene is untouched and the reason returned when that would
@@ -378,11 +379,8 @@ impl Scene {
         if let Some((id, name)) = reshaped.iter().find(|(id, _)| !reshapes_prototype(*id)) {
             return why(format!("`{}.{name}` changed", stage.prim(*id).path));
         }
-        if p.deforming_in_world && !(changed.is_empty() && reshaped.is_empty()) {
+        if p.deforming_in_world && (self.shutter.is_open() || !(changed.is_empty() && reshaped.is_empty())) {
             return why("a prim built in world space deforms (its material displaces or emits)".into());
-        }
-        if self.shutter.is_open() && !p.deforming.is_empty() {
-            return why("a prim deforms under an open shutter: its keys are the frame's".into());
         }
         if self.shutter.is_open() && p.world_animated {
             return why("a world-space prim is animated under an open shutter".into());
@@ -398,9 +396,12 @@ impl Scene {
         }
         let xforms = world_transforms(stage, diags);
         // The deforming prototypes whose shape may have changed: a skinned one's follows its
-        // placement, its skeleton's and its animation, which any change may be.
+        // placement, its skeleton's and its animation, which any change may be. Under an open
+        // shutter every one: its deformation keys are the frame's.
         let anything = !changed.is_empty() || !reshaped.is_empty();
-        let reshapes = |d: &&geometry::Deforming| (d.skinned && anything) || reshaped.iter().any(|(id, _)| *id == d.id);
+        let open = self.shutter.is_open();
+        let reshapes =
+            |d: &&geometry::Deforming| open || (d.skinned && anything) || reshaped.iter().any(|(id, _)| *id == d.id);
         if p.deforming.iter().any(|d| reshapes(&d)) && !self.primvars.names.is_empty() {
             return why("a deforming prim's primvars are stored in one table with every other prim's".into());
         }
@@ -411,10 +412,14 @@ impl Scene {
             if bounds.is_none() || p.prototype_bounds[d.prototype as usize].is_none() {
                 return why(format!("`{}` became or was empty or hidden", stage.prim(d.id).path));
             }
-            rebuilt.push((d.prototype, proto.expect("bounds are some")));
+            rebuilt.push((d.prototype, d.id, proto.expect("bounds are some")));
         }
+        let own = rebuilt.iter_mut().map(|(_, id, proto)| (*id, proto));
+        let names = &self.primvars.names;
+        self.motion.deforming_prims =
+            motion::key_deforming_prototypes(own, stage, self.shutter, p.options.geometry, names, diags);
         let mut prototype_bounds = p.prototype_bounds.clone();
-        for (index, proto) in &rebuilt {
+        for (index, _, proto) in &rebuilt {
             prototype_bounds[*index as usize] = proto.bounds;
         }
         let Some(instances) = instances_at(stage, &xforms, p, &prototype_bounds) else {
@@ -429,8 +434,8 @@ impl Scene {
         self.camera_motion = chosen.and_then(|(id, _)| motion::camera_motion(stage, id, self.shutter));
         self.motion.moving_instances = motion.len();
         let blas_builds = rebuilt.len();
-        for (index, proto) in rebuilt {
-            self.accel.replace_prototype(index, Blas::new(proto.triangles, proto.shapes));
+        for (index, _, proto) in rebuilt {
+            self.accel.replace_prototype(index, Blas::deforming(proto.triangles, proto.shapes, proto.deformation));
         }
         self.accel.move_instances(&instances, motion);
         let scene_radius = (bounds.1 - bounds.0).length() / 2.0;

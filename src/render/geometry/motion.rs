@@ -469,7 +469,7 @@ fn deform(
         v
     };
     let mut stages = StagesAt::new();
-    let mut deforming = 0;
+    let mut deformed = 0;
     for prim in 0..geometry.prims.len() {
         if counts[prim] == (0, 0) || has_subsets[prim] || geometry.prims[prim].subset_of.is_some() {
             continue;
@@ -514,24 +514,64 @@ fn deform(
         geometry.instances.push(InstanceDesc { to_world: DMat4::IDENTITY, prototype, prims });
         // The keys hold its placement already: it is placed by no prim that could move it again.
         geometry.instance_placers.push(crate::scene::PrimId(u32::MAX));
-        deforming += 1;
+        deformed += 1;
     }
     // Deforming prims the build made prototypes of their own: keyed in their own space (their
-    // instance's placement keys move them). Those with GeomSubsets are left to transform blur.
-    for d in geometry.deforming.clone() {
-        let proto = &geometry.prototypes[d.prototype as usize];
+    // instance's placement keys move them).
+    let deforming = geometry.deforming.clone();
+    let names = geometry.primvars.names.clone();
+    let own =
+        geometry.prototypes.iter_mut().enumerate().filter_map(|(index, proto)| {
+            deforming.iter().find(|d| d.prototype as usize == index).map(|d| (d.id, proto))
+        });
+    deformed + key_own_prototypes(own, stage, frame, shutter, options, &names, &mut stages, diags)
+}
+
+/// Keys each `(prim, prototype)` of `prototypes` — deforming world prims the build made
+/// prototypes of their own, built at the stage's time — over `shutter` in their own space,
+/// as a build keys them (see [`deformation_of`]), and bounds them over every key; returns
+/// how many deform. `names`: the primvar table's names. A scene moved to a new time code
+/// builds those prototypes again and keys them here, since their keys are the frame's.
+pub fn key_deforming_prototypes<'a>(
+    prototypes: impl Iterator<Item = (crate::scene::PrimId, &'a mut Prototype)>,
+    stage: &Stage,
+    shutter: Shutter,
+    options: GeometryOptions,
+    names: &[String],
+    diags: &mut Diagnostics,
+) -> usize {
+    let TimeCode::At(frame) = stage.time() else { return 0 };
+    if !shutter.is_open() {
+        return 0;
+    }
+    key_own_prototypes(prototypes, stage, frame, shutter, options, names, &mut StagesAt::new(), diags)
+}
+
+/// [`key_deforming_prototypes`] at `frame`, sharing the stage copies of `stages`. Those
+/// with GeomSubsets (more than one prim) are left to transform blur.
+#[allow(clippy::too_many_arguments)]
+fn key_own_prototypes<'a>(
+    prototypes: impl Iterator<Item = (crate::scene::PrimId, &'a mut Prototype)>,
+    stage: &Stage,
+    frame: f64,
+    shutter: Shutter,
+    options: GeometryOptions,
+    names: &[String],
+    stages: &mut StagesAt,
+    diags: &mut Diagnostics,
+) -> usize {
+    let mut deforming = 0;
+    for (id, proto) in prototypes {
         if proto.prims != 1 || proto.deformation.is_some() {
             continue;
         }
         let frame_emitted: Emitted =
             (proto.triangles.iter().map(|t| t.p).collect(), proto.shapes.iter().map(shape_centre).collect());
-        let names = geometry.primvars.names.clone();
         let Some(deformation) =
-            deformation_of(stage, d.id, frame, shutter, options, &names, &frame_emitted, &mut stages, true, diags)
+            deformation_of(stage, id, frame, shutter, options, names, &frame_emitted, stages, true, diags)
         else {
             continue;
         };
-        let proto = &mut geometry.prototypes[d.prototype as usize];
         proto.bounds = keyed_bounds(proto, &deformation);
         proto.deformation = Some(deformation);
         deforming += 1;
