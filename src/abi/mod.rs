@@ -420,6 +420,9 @@ pub struct MaterialInfo {
     pub primvars: Vec<PrimvarInfo>,
     /// Floats of [`Globals::primvars`] the material reads (flags and components).
     pub primvar_floats: usize,
+    /// No entry point reads [`Globals::st_footprint`] (no filtered texture lookup): the
+    /// renderer may leave it at zero. `false`, the default, is always safe.
+    pub ignores_footprint: bool,
 }
 
 /// The entry points of one compiled material. The JIT and the interpreter both implement it;

@@ -158,6 +158,12 @@ fn lower_here(lib: &Library, wired: &WiredMaterial, options: LowerOptions, diags
     }
     info.primvar_floats = primvars.iter().map(|p: &PrimvarInfo| p.offset + 1 + p.width).max().unwrap_or(0);
     info.primvars = primvars;
+    let footprint = ssa::globals::ST_FOOTPRINT..ssa::globals::ST_FOOTPRINT + 4;
+    info.ignores_footprint = !functions
+        .iter()
+        .flat_map(|f| &f.blocks)
+        .flat_map(|b| &b.insts)
+        .any(|i| matches!(i.inst, Inst::Global(g) if footprint.contains(&g)));
     Module { info, functions, strings }
 }
 

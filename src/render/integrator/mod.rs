@@ -387,8 +387,9 @@ impl Context<'_> {
         let facing = if sp.ns.dot(d) > 0.0 { -sp.ns } else { sp.ns };
         let mut g = self.globals(sp, facing, d, &mut s.primvars);
         // The footprint is that of the surface's own `st` (or parametric) coordinates: a
-        // material that reads other coordinates (a `st0` primvar) is left unfiltered.
-        if !info.primvars.iter().any(|p| p.width > 1 && p.name != "st") {
+        // material that reads other coordinates (a `st0` primvar) is left unfiltered, and one
+        // that filters no texture does not need it.
+        if !info.ignores_footprint && !info.primvars.iter().any(|p| p.width > 1 && p.name != "st") {
             g.st_footprint = st_footprint(sp, d, footprint);
         }
         s.emitted = Vec3::ZERO;
@@ -489,10 +490,13 @@ impl Context<'_> {
             // meet the same closure (a material with constant parameters) compute it once.
             // (`trace` has cleared `s.channels`.)
             let mut best = -1.0;
+            // A diffuse lobe's albedo is its parameter: read, not memoised (comparing and
+            // copying a closure costs more than that).
             for lobe in s.lobes.iter() {
-                let a = match s.albedo_memo {
-                    Some((bsdf, a)) if bsdf == lobe.bsdf => a,
-                    _ => {
+                let a = match (lobe.bsdf.stored_albedo(), &s.albedo_memo) {
+                    (Some(a), _) => a,
+                    (None, Some((bsdf, a))) if *bsdf == lobe.bsdf => *a,
+                    (None, _) => {
                         let a = lobe.bsdf.albedo();
                         s.albedo_memo = Some((lobe.bsdf, a));
                         a
@@ -656,12 +660,15 @@ impl Context<'_> {
     }
 
     /// Direct light at a shading point by sampling one light (chosen by
-    /// [`Context::light_selection`]), MIS-weighted. `p_error` bounds `p`'s rounding error.
+    /// [`Context::light_selection`]), MIS-weighted. `p_error` bounds `p`'s rounding error;
+    /// `light_n` is the lobes' [`light_side`] (the path loop keeps it for the next vertex's MIS).
+    #[allow(clippy::too_many_arguments)]
     fn direct(
         &self,
         p: Vec3,
         p_error: Vec3,
         ng: Vec3,
+        light_n: Vec3,
         wo: Vec3,
         sampler: &PathSampler,
         s: &mut Scratch,
@@ -673,7 +680,7 @@ impl Context<'_> {
         let Some((pick, select_pdf, ux)) = self.light_selection.sample_remapped(u.x) else { return Ok(Vec3::ZERO) };
         let u = Vec2::new(ux, u.y);
         let ls = match self.scene.lights.get(pick) {
-            Some(light) => light.sample_li(p, light_side(&s.lobes, ng, wo), u),
+            Some(light) => light.sample_li(p, light_n, u),
             None => {
                 let Some(emitter) = self.scene.emitters.list.get(pick - self.scene.lights.len()) else {
                     return Ok(Vec3::ZERO);
@@ -907,15 +914,21 @@ impl Context<'_> {
                 break;
             }
             let wo = -d;
-            out.radiance += throughput * self.direct(sp.p, sp.p_error, sp.ng, wo, sampler, s)?;
-            // Sample the next direction from the picked lobe(s).
-            let uc = sampler.get1(Slot::Lobe);
+            let light_n = light_side(&s.lobes, sp.ng, wo);
+            out.radiance += throughput * self.direct(sp.p, sp.p_error, sp.ng, light_n, wo, sampler, s)?;
+            // Sample the next direction from the picked lobe(s). A single lobe that makes no
+            // choice of its own (Lambert, metal) draws no lobe number: numbers are counter
+            // based, so skipping it changes no other decision's, and the image not a bit.
+            let uc = match &s.lobes[..] {
+                [only] if !only.bsdf.reads_choice() => 0.5,
+                _ => sampler.get1(Slot::Lobe),
+            };
             let u2 = sampler.get2(Slot::Direction);
             let Some(next) = sample_lobes(&s.lobes, wo, uc, u2) else { break };
             let wi = next.wi;
             throughput *= next.weight;
             compression *= next.compression;
-            from = Scatter { p: sp.p, n: light_side(&s.lobes, sp.ng, wo), pdf: next.pdf };
+            from = Scatter { p: sp.p, n: light_n, pdf: next.pdf };
             if !throughput.is_finite() {
                 // Reported by the caller as a non-finite sample.
                 out.radiance = Vec3::NAN;

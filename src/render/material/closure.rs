@@ -492,6 +492,19 @@ impl ClosureBsdf {
         albedo.clamp(Vec3::ZERO, Vec3::ONE)
     }
 
+    /// [`ClosureBsdf::albedo`] when it costs nothing to compute: a single unit-weight lobe
+    /// whose albedo is a parameter ([`Lobe::stored_albedo`]).
+    pub fn stored_albedo(&self) -> Option<Vec3> {
+        self.single().and_then(Lobe::stored_albedo)
+    }
+
+    /// Whether [`ClosureBsdf::sample`] reads `uc`: to choose between terms, or for the one
+    /// term's own choice ([`Lobe::reads_choice`]). A caller may pass any number in [0, 1) where
+    /// it does not (a Lambert surface draws no lobe number).
+    pub fn reads_choice(&self) -> bool {
+        self.len != 1 || self.terms[0].lobe.reads_choice()
+    }
+
     /// Whether a non-delta term transmits (light sampling must then cover both sides).
     pub fn transmits(&self) -> bool {
         self.terms().iter().any(|t| t.lobe.transmits())

@@ -460,6 +460,19 @@ impl Lobe {
         }
     }
 
+    /// [`Lobe::albedo`] where it is a parameter of the lobe rather than an integral (diffuse
+    /// lobes): callers that memoise the integral skip the memo for these.
+    pub fn stored_albedo(&self) -> Option<Vec3> {
+        match *self {
+            Lobe::Bsdf(Bsdf::Black) => Some(Vec3::ZERO),
+            Lobe::Bsdf(Bsdf::Diffuse { albedo })
+            | Lobe::OrenNayar { albedo, .. }
+            | Lobe::Burley { albedo, .. }
+            | Lobe::Translucent { albedo } => Some(albedo),
+            _ => None,
+        }
+    }
+
     /// Whether the lobe has a non-delta part that transmits.
     pub fn transmits(&self) -> bool {
         match *self {
@@ -467,6 +480,12 @@ impl Lobe {
             Lobe::Translucent { .. } => true,
             _ => false,
         }
+    }
+
+    /// Whether [`Lobe::sample`] reads its component number `uc` (coat or base, reflection or
+    /// transmission): a lobe that does not can be sampled without drawing one.
+    pub fn reads_choice(&self) -> bool {
+        matches!(self, Lobe::Bsdf(Bsdf::Glossy { .. } | Bsdf::Glass { .. }) | Lobe::Interface { .. })
     }
 
     /// Whether the lobe tells inside from outside (its frame keeps the outward side).

@@ -146,9 +146,10 @@ impl PathSampler {
                 // In the reversed-bit domain (see `owen_hash`): `index` is the shuffled
                 // sample index reversed, whose Sobol dimension 0 is the index itself.
                 let index = owen_hash(self.sample_reversed, key as u32);
-                let x = owen_hash(index.reverse_bits(), (key >> 32) as u32).reverse_bits();
-                let y = owen_hash(sobol_1_reversed(index), mix64(key) as u32).reverse_bits();
-                Vec2::new(unit(x), unit(y))
+                let (index_bits, y_bits) = reversed_and_sobol_1(index);
+                let x = owen_hash(index_bits, (key >> 32) as u32);
+                let y = owen_hash(y_bits, mix64(key) as u32);
+                Vec2::new(unit_reversed(x), unit_reversed(y))
             }
         }
     }
@@ -161,7 +162,7 @@ impl PathSampler {
             }
             SamplerKind::Sobol => {
                 let index = owen_hash(self.sample_reversed, key as u32);
-                unit(owen_hash(index.reverse_bits(), (key >> 32) as u32).reverse_bits())
+                unit_reversed(owen_hash(reversed_and_sobol_1(index).0, (key >> 32) as u32))
             }
         }
     }
@@ -214,6 +215,29 @@ fn unit(bits: u32) -> f32 {
     (bits >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
 }
 
+/// `unit(bits.reverse_bits())`: the top 24 bits of the reversal are the low 24 bits of `bits`
+/// reversed, three byte-table lookups (a 32-bit reversal is some fifteen instructions on
+/// baseline x86-64, which has no instruction for it).
+#[inline]
+fn unit_reversed(bits: u32) -> f32 {
+    let r = &REVERSED_BYTES;
+    let top = (u32::from(r[(bits & 0xff) as usize]) << 16)
+        | (u32::from(r[(bits >> 8 & 0xff) as usize]) << 8)
+        | u32::from(r[(bits >> 16 & 0xff) as usize]);
+    top as f32 * (1.0 / (1u32 << 24) as f32)
+}
+
+/// Each byte with its bits in reverse order.
+const REVERSED_BYTES: [u8; 256] = {
+    let mut table = [0u8; 256];
+    let mut byte = 0;
+    while byte < 256 {
+        table[byte] = (byte as u8).reverse_bits();
+        byte += 1;
+    }
+    table
+};
+
 /// Sobol dimension 0 (van der Corput in base 2) of point `index`, as 32 bits of fraction.
 #[cfg(test)]
 fn sobol_0(index: u32) -> u32 {
@@ -240,22 +264,31 @@ const SOBOL_1_DIRECTIONS: [u32; 32] = {
     v
 };
 
-/// `sobol_1` in the reversed-bit domain: `sobol_1_reversed(i.reverse_bits())` is
-/// `sobol_1(i).reverse_bits()`. The map is linear over GF(2), so it is the XOR of four
-/// byte-table lookups (4 KiB) instead of a loop over the 32 bits of a shuffled index.
+/// `(z.reverse_bits(), sobol_1_reversed(z))` from one set of table lookups: both maps are
+/// linear over GF(2), so each is the XOR of its images of `z`'s four bytes, and one 8 KiB
+/// table holds the two images side by side (the sampler needs both for every 2D number).
 #[inline]
-fn sobol_1_reversed(z: u32) -> u32 {
-    let t = &SOBOL_1_REVERSED_BYTES;
-    t[0][(z & 0xff) as usize]
+fn reversed_and_sobol_1(z: u32) -> (u32, u32) {
+    let t = &REVERSED_AND_SOBOL_1_BYTES;
+    let both = t[0][(z & 0xff) as usize]
         ^ t[1][(z >> 8 & 0xff) as usize]
         ^ t[2][(z >> 16 & 0xff) as usize]
-        ^ t[3][(z >> 24) as usize]
+        ^ t[3][(z >> 24) as usize];
+    (both as u32, (both >> 32) as u32)
 }
 
-/// Entry `[b][byte]`: the XOR, over the set bits t of `byte`, of the reversed direction number
-/// that bit 8b + t of a reversed index selects (bit j of a reversed index is bit 31 − j of it).
-const SOBOL_1_REVERSED_BYTES: [[u32; 256]; 4] = {
-    let mut table = [[0u32; 256]; 4];
+/// `sobol_1` in the reversed-bit domain: `sobol_1_reversed(i.reverse_bits())` is
+/// `sobol_1(i).reverse_bits()`.
+#[cfg(test)]
+fn sobol_1_reversed(z: u32) -> u32 {
+    reversed_and_sobol_1(z).1
+}
+
+/// Entry `[b][byte]`: in the low half, `byte << 8b` reversed; in the high half, the XOR over
+/// the set bits t of `byte` of the reversed direction number that bit 8b + t of a reversed
+/// index selects (bit j of a reversed index is bit 31 − j of it).
+const REVERSED_AND_SOBOL_1_BYTES: [[u64; 256]; 4] = {
+    let mut table = [[0u64; 256]; 4];
     let mut b = 0;
     while b < 4 {
         let mut byte = 0;
@@ -268,7 +301,8 @@ const SOBOL_1_REVERSED_BYTES: [[u32; 256]; 4] = {
                 }
                 t += 1;
             }
-            table[b][byte] = bits;
+            let reversed = ((byte as u32) << (8 * b)).reverse_bits();
+            table[b][byte] = (bits as u64) << 32 | reversed as u64;
             byte += 1;
         }
         b += 1;
@@ -343,6 +377,22 @@ mod tests {
             let key = s.dimension_key(Slot::Roulette as u32);
             let index = nested_uniform_scramble(sample, key as u32);
             assert_eq!(s.get1(Slot::Roulette), unit(nested_uniform_scramble(sobol_0(index), (key >> 32) as u32)));
+        }
+    }
+
+    /// The byte tables reverse exactly: the index and the 24 bits a number keeps.
+    #[test]
+    fn table_reversals_match_reverse_bits() {
+        let mut state = 0x0fed_cba9_8765_4321u64;
+        for _ in 0..10_000 {
+            state = mix64(state);
+            let z = state as u32;
+            assert_eq!(reversed_and_sobol_1(z).0, z.reverse_bits(), "{z:#x}");
+            assert_eq!(unit_reversed(z), unit(z.reverse_bits()), "{z:#x}");
+        }
+        for z in [0u32, 1, 0x80, 0x100, 0x00ff_ffff, 0xff00_0000, u32::MAX] {
+            assert_eq!(reversed_and_sobol_1(z).0, z.reverse_bits(), "{z:#x}");
+            assert_eq!(unit_reversed(z), unit(z.reverse_bits()), "{z:#x}");
         }
     }
 
