@@ -503,3 +503,45 @@ fn thin_film_reflectance_matches_the_characteristic_matrix_at_normal_incidence()
     assert!(s.delta && (s.f * s.wi.z / s.pdf - want).abs().max_element() < 1e-5, "{:?} vs {want}", s.f);
     assert!((want.x - want.z).abs() > 0.01, "iridescent: {want}");
 }
+
+/// What the integrator skips on the word of `reads_choice` and `stored_albedo` holds: a
+/// closure that reads no choice samples the same for every `uc`, one that reads it samples
+/// differently for some `uc`, and a stored albedo is the one `albedo` computes.
+#[test]
+fn choice_and_stored_albedo_claims_hold() {
+    let glossy = lobe(ClosureKind::Glossy, &[0.5, 0.5, 0.5, 0.8, 0.8, 0.8, 0.3, 1.5]);
+    let glass = lobe(ClosureKind::Glass, &[1.0, 1.0, 1.0, 0.3, 1.5]);
+    let cases = [
+        (one(diffuse(0.7)), false),
+        (one(metal(0.3)), false),
+        (one(oren_nayar(0.6, 0.5, true)), false),
+        (one(burley(0.6, 0.5)), false),
+        (one(sheen(0.6, 0.5)), false),
+        (one(schlick(0.3)), false),
+        (one(glossy), true),
+        (one(glass), true),
+        (layered(coat(0.2, 1.5), diffuse(0.7), LayeringMode::AlbedoScaling), true),
+    ];
+    let mut rng = Pcg32::new(11, 5);
+    for (k, (b, reads)) in cases.iter().enumerate() {
+        assert_eq!(b.reads_choice(), *reads, "case {k}");
+        let mut differs = false;
+        for _ in 0..256 {
+            let wo = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, 0.2 + rng.f32()).normalize();
+            let u = rng.vec2();
+            let key = |uc: f32| b.sample(wo, uc, u).map(|s| (s.wi, s.f, s.pdf, s.delta));
+            let first = key(0.0);
+            for uc in [0.25, 0.5, 0.75, 0.999] {
+                if key(uc) != first {
+                    differs = true;
+                }
+            }
+        }
+        assert_eq!(differs, *reads, "case {k}: sampling depends on uc: {differs}");
+        if let Some(a) = b.stored_albedo() {
+            assert_eq!(a, b.albedo(), "case {k}");
+        }
+    }
+    assert_eq!(one(diffuse(0.7)).stored_albedo(), Some(Vec3::splat(0.7)));
+    assert_eq!(one(glossy).stored_albedo(), None);
+}
