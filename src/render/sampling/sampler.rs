@@ -384,13 +384,11 @@ mod tests {
     #[test]
     fn table_reversals_match_reverse_bits() {
         let mut state = 0x0fed_cba9_8765_4321u64;
-        for _ in 0..10_000 {
+        let random = (0..10_000).map(|_| {
             state = mix64(state);
-            let z = state as u32;
-            assert_eq!(reversed_and_sobol_1(z).0, z.reverse_bits(), "{z:#x}");
-            assert_eq!(unit_reversed(z), unit(z.reverse_bits()), "{z:#x}");
-        }
-        for z in [0u32, 1, 0x80, 0x100, 0x00ff_ffff, 0xff00_0000, u32::MAX] {
+            state as u32
+        });
+        for z in random.chain([0u32, 1, 0x80, 0x100, 0x00ff_ffff, 0xff00_0000, u32::MAX]) {
             assert_eq!(reversed_and_sobol_1(z).0, z.reverse_bits(), "{z:#x}");
             assert_eq!(unit_reversed(z), unit(z.reverse_bits()), "{z:#x}");
         }
