@@ -22,7 +22,7 @@ use std::mem::MaybeUninit;
 
 /// Whether the AVX2 path runs (std caches the CPUID query: one load per call).
 #[inline]
-fn has_avx2() -> bool {
+pub(super) fn has_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")
