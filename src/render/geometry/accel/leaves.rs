@@ -203,9 +203,10 @@ impl LeafTriangles {
 
     /// The closest hit `(slot, t, b1, b2)` among the triangles in slots `first..first +
     /// count` with `t` in `(tmin, tmax)`; the lowest slot among equal distances, as a test
-    /// slot by slot would find.
+    /// slot by slot would find. By AVX2 when `AVX2`, which is true only on a path that found
+    /// the CPU has it (one call per leaf into AVX2 code, where the block test inlines).
     #[inline(always)]
-    pub(super) fn closest<const KZ: usize>(
+    pub(super) fn closest<const KZ: usize, const AVX2: bool>(
         &self,
         pre: &RayPre<KZ>,
         first: u32,
@@ -213,27 +214,78 @@ impl LeafTriangles {
         tmin: f32,
         tmax: f32,
     ) -> Option<(u32, f32, f32, f32)> {
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            // SAFETY: `AVX2` is true only where the CPU has AVX2.
+            return unsafe { avx2::closest(self, pre, first, count, tmin, tmax) };
+        }
+        self.closest_by(pre, first, count, tmin, tmax, scalar_block_hits)
+    }
+
+    /// Whether any triangle in slots `first..first + count` is hit with `t` in `(tmin, tmax)`
+    /// (by AVX2 when `AVX2`, as [`LeafTriangles::closest`]).
+    #[inline(always)]
+    pub(super) fn any<const KZ: usize, const AVX2: bool>(
+        &self,
+        pre: &RayPre<KZ>,
+        first: u32,
+        count: u32,
+        tmin: f32,
+        tmax: f32,
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            // SAFETY: `AVX2` is true only where the CPU has AVX2.
+            return unsafe { avx2::any(self, pre, first, count, tmin, tmax) };
+        }
+        self.any_by(pre, first, count, tmin, tmax, scalar_block_hits)
+    }
+
+    /// [`LeafTriangles::closest`] with the block test `hits`.
+    #[inline(always)]
+    fn closest_by<const KZ: usize>(
+        &self,
+        pre: &RayPre<KZ>,
+        first: u32,
+        count: u32,
+        tmin: f32,
+        tmax: f32,
+        hits: impl Fn(&Block, &RayPre<KZ>, u32, f32, f32) -> LaneHits,
+    ) -> Option<(u32, f32, f32, f32)> {
         let mut best = None;
         let mut closest = tmax;
         for (k, lanes) in blocks_of(first, count) {
-            let hits = block_hits(&self.blocks[k], pre, lanes, tmin, closest);
-            let mut mask = hits.mask;
+            let found = hits(&self.blocks[k], pre, lanes, tmin, closest);
+            let mut mask = found.mask;
             while mask != 0 {
                 let l = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
-                if hits.t[l] < closest {
-                    closest = hits.t[l];
-                    best = Some(((k * LANES + l) as u32, hits.t[l], hits.b1[l], hits.b2[l]));
+                if found.t[l] < closest {
+                    closest = found.t[l];
+                    best = Some(((k * LANES + l) as u32, found.t[l], found.b1[l], found.b2[l]));
                 }
             }
         }
         best
     }
 
-    /// Whether any triangle in slots `first..first + count` is hit with `t` in `(tmin, tmax)`.
+    /// [`LeafTriangles::any`] with the block test `hits`.
     #[inline(always)]
-    pub(super) fn any<const KZ: usize>(&self, pre: &RayPre<KZ>, first: u32, count: u32, tmin: f32, tmax: f32) -> bool {
-        blocks_of(first, count).any(|(k, lanes)| block_hits(&self.blocks[k], pre, lanes, tmin, tmax).mask != 0)
+    fn any_by<const KZ: usize>(
+        &self,
+        pre: &RayPre<KZ>,
+        first: u32,
+        count: u32,
+        tmin: f32,
+        tmax: f32,
+        hits: impl Fn(&Block, &RayPre<KZ>, u32, f32, f32) -> LaneHits,
+    ) -> bool {
+        for (k, lanes) in blocks_of(first, count) {
+            if hits(&self.blocks[k], pre, lanes, tmin, tmax).mask != 0 {
+                return true;
+            }
+        }
+        false
     }
 }
 
@@ -249,26 +301,9 @@ fn blocks_of(first: u32, count: u32) -> impl Iterator<Item = (usize, u32)> {
 }
 
 /// The lanes of `lanes` whose triangle the ray hits within `(tmin, tmax)` (other lanes'
-/// bits are clear), by AVX2 where the CPU has it.
+/// bits are clear), lane by lane with [`RayPre::intersect`].
 #[inline(always)]
-fn block_hits<const KZ: usize>(block: &Block, pre: &RayPre<KZ>, lanes: u32, tmin: f32, tmax: f32) -> LaneHits {
-    #[cfg(target_arch = "x86_64")]
-    if super::wide::has_avx2() {
-        // SAFETY: the CPU has AVX2 (checked just above).
-        return unsafe { avx2::block_hits(block, pre, lanes, tmin, tmax) };
-    }
-    scalar_block_hits(block, pre, lanes, tmin, tmax)
-}
-
-/// [`block_hits`] lane by lane with [`RayPre::intersect`].
-#[inline(always)]
-fn scalar_block_hits<const KZ: usize>(
-    block: &Block,
-    pre: &RayPre<KZ>,
-    lanes: u32,
-    tmin: f32,
-    tmax: f32,
-) -> LaneHits {
+fn scalar_block_hits<const KZ: usize>(block: &Block, pre: &RayPre<KZ>, lanes: u32, tmin: f32, tmax: f32) -> LaneHits {
     let mut hits = LaneHits { mask: 0, t: [0.0; LANES], b1: [0.0; LANES], b2: [0.0; LANES] };
     let mut todo = lanes;
     while todo != 0 {
@@ -284,8 +319,36 @@ fn scalar_block_hits<const KZ: usize>(
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{Block, LANES, LaneHits, RayPre, edge_f64, gamma};
+    use super::{Block, LANES, LaneHits, LeafTriangles, RayPre, edge_f64, gamma};
     use std::arch::x86_64::*;
+
+    /// [`LeafTriangles::closest`] with the AVX2 block test.
+    #[target_feature(enable = "avx2")]
+    pub(super) fn closest<const KZ: usize>(
+        leaves: &LeafTriangles,
+        pre: &RayPre<KZ>,
+        first: u32,
+        count: u32,
+        tmin: f32,
+        tmax: f32,
+    ) -> Option<(u32, f32, f32, f32)> {
+        leaves.closest_by(pre, first, count, tmin, tmax, |b, pre, lanes, tmin, tmax| {
+            block_hits(b, pre, lanes, tmin, tmax)
+        })
+    }
+
+    /// [`LeafTriangles::any`] with the AVX2 block test.
+    #[target_feature(enable = "avx2")]
+    pub(super) fn any<const KZ: usize>(
+        leaves: &LeafTriangles,
+        pre: &RayPre<KZ>,
+        first: u32,
+        count: u32,
+        tmin: f32,
+        tmax: f32,
+    ) -> bool {
+        leaves.any_by(pre, first, count, tmin, tmax, |b, pre, lanes, tmin, tmax| block_hits(b, pre, lanes, tmin, tmax))
+    }
 
     /// [`super::scalar_block_hits`] on 8 lanes: [`RayPre::intersect`]'s operations in its
     /// order, its early returns as lane masks.
@@ -372,11 +435,16 @@ mod avx2 {
         let delta_z = mul(splat(gamma(3)), max_z);
         let delta_x = mul(splat(gamma(5)), add(max_x, max_z));
         let delta_y = mul(splat(gamma(5)), add(max_y, max_z));
-        let delta_e =
-            mul(splat(2.0), add(add(mul(mul(splat(gamma(2)), max_x), max_y), mul(delta_y, max_x)), mul(delta_x, max_y)));
+        let delta_e = mul(
+            splat(2.0),
+            add(add(mul(mul(splat(gamma(2)), max_x), max_y), mul(delta_y, max_x)), mul(delta_x, max_y)),
+        );
         let max_e = max3(e0, e1, e2);
         let delta_t = mul(
-            mul(splat(3.0), add(add(mul(mul(splat(gamma(3)), max_e), max_z), mul(delta_e, max_z)), mul(delta_z, max_e))),
+            mul(
+                splat(3.0),
+                add(add(mul(mul(splat(gamma(3)), max_e), max_z), mul(delta_e, max_z)), mul(delta_z, max_e)),
+            ),
             abs(inv),
         );
         let out_of_range = or(or(le(t, delta_t), le(t, splat(tmin))), ge(t, splat(tmax)));
@@ -454,12 +522,38 @@ mod tests {
             .collect()
     }
 
-    /// Runs `f` with the ray's precomputation for its dominant axis.
-    fn with_pre(o: Vec3, d: Vec3, f: &mut dyn FnMut(&dyn Fn(&LeafTriangles, u32, u32, f32) -> Option<(u32, f32, f32, f32)>)) {
+    /// [`LeafTriangles::closest`] and [`LeafTriangles::any`] for the ray `o + t d` on the
+    /// scalar path and, where the CPU has it, the AVX2 path.
+    #[allow(clippy::type_complexity)]
+    fn leaf_tests(
+        leaves: &LeafTriangles,
+        o: Vec3,
+        d: Vec3,
+        first: u32,
+        count: u32,
+    ) -> Vec<(Option<(u32, f32, f32, f32)>, bool)> {
+        fn both<const KZ: usize>(
+            l: &LeafTriangles,
+            pre: &RayPre<KZ>,
+            first: u32,
+            count: u32,
+        ) -> Vec<(Option<(u32, f32, f32, f32)>, bool)> {
+            let mut out = vec![(
+                l.closest::<KZ, false>(pre, first, count, 0.0, f32::INFINITY),
+                l.any::<KZ, false>(pre, first, count, 0.0, f32::INFINITY),
+            )];
+            if super::super::wide::has_avx2() {
+                out.push((
+                    l.closest::<KZ, true>(pre, first, count, 0.0, f32::INFINITY),
+                    l.any::<KZ, true>(pre, first, count, 0.0, f32::INFINITY),
+                ));
+            }
+            out
+        }
         match dominant_axis(d) {
-            0 => f(&|l, first, count, tmax| l.closest(&RayPre::<0>::new(o, d), first, count, 0.0, tmax)),
-            1 => f(&|l, first, count, tmax| l.closest(&RayPre::<1>::new(o, d), first, count, 0.0, tmax)),
-            _ => f(&|l, first, count, tmax| l.closest(&RayPre::<2>::new(o, d), first, count, 0.0, tmax)),
+            0 => both(leaves, &RayPre::<0>::new(o, d), first, count),
+            1 => both(leaves, &RayPre::<1>::new(o, d), first, count),
+            _ => both(leaves, &RayPre::<2>::new(o, d), first, count),
         }
     }
 
@@ -527,8 +621,9 @@ mod tests {
         avx2::block_hits(b, pre, lanes, 0.0, tmax)
     }
 
-    /// A leaf's closest hit over its blocks, for leaves of every length at every offset
-    /// (straddling blocks or not), equals the scalar test's slot by slot, first of equals.
+    /// A leaf's closest hit over its blocks, on either path, for leaves of every length at
+    /// every offset (straddling blocks or not), equals the scalar test's slot by slot, first
+    /// of equals; the occlusion test agrees.
     #[test]
     fn leaf_closest_is_the_nearest_of_the_slot_by_slot_test() {
         let tris = triangles();
@@ -559,9 +654,10 @@ mod tests {
                     closest = t;
                 }
             }
-            with_pre(o, d, &mut |closest_in| {
-                assert_eq!(closest_in(&leaves, first, count, f32::INFINITY), expected, "ray {r}");
-            });
+            for (closest, any) in leaf_tests(&leaves, o, d, first, count) {
+                assert_eq!(closest, expected, "ray {r}");
+                assert_eq!(any, expected.is_some(), "ray {r}");
+            }
             found += usize::from(expected.is_some());
         }
         assert!(found > 50, "{found}");

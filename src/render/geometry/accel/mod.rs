@@ -9,7 +9,8 @@
 //! triangles and shapes alike and kept in strata's own layout (`wide.rs`): the same tree with
 //! each node's 8 child boxes as f32 lanes, tested in one pass with AVX2 where the CPU has it
 //! (chosen at run time), children visited nearest first, occlusion stopping at the first hit,
-//! a leaf a range of primitives tested together. The ray/triangle test is watertight (Woop,
+//! a leaf a range of primitives whose triangles are stored together in leaf order and tested
+//! 8 at a time (`leaves.rs`). The ray/triangle test is watertight (Woop,
 //! Benthin & Wald 2013), so rays through shared edges and vertices never slip between
 //! triangles, and ray origins are robust so secondary rays do not re-hit their own surface.
 //! `benches/bvh.rs` measures it against Embree.
@@ -452,6 +453,8 @@ impl Blas {
         }
     }
 
+    /// [`Blas::intersect_at`] with the deformation known as a constant, compiled for AVX2
+    /// where the CPU has it: the whole traversal then is, so its node and leaf tests inline.
     #[inline(always)]
     fn intersect_when<const DEFORMS: bool>(
         &self,
@@ -461,17 +464,49 @@ impl Blas {
         tmax: f32,
         time: f32,
     ) -> Option<(f32, u32, f32, f32)> {
+        #[cfg(target_arch = "x86_64")]
+        if wide::has_avx2() {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { self.intersect_avx2::<DEFORMS>(o, d, tmin, tmax, time) };
+        }
+        self.intersect_axis::<DEFORMS, false>(o, d, tmin, tmax, time)
+    }
+
+    /// [`Blas::intersect_axis`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn intersect_avx2<const DEFORMS: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> Option<(f32, u32, f32, f32)> {
+        self.intersect_axis::<DEFORMS, true>(o, d, tmin, tmax, time)
+    }
+
+    /// [`Blas::intersect_when`] on the AVX2 path or not (`AVX2` true only where the CPU has it).
+    #[inline(always)]
+    fn intersect_axis<const DEFORMS: bool, const AVX2: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> Option<(f32, u32, f32, f32)> {
         // One branch per ray on the direction's largest axis, not one per triangle test.
         match dominant_axis(d) {
-            0 => self.intersect_along::<0, DEFORMS>(o, d, tmin, tmax, time),
-            1 => self.intersect_along::<1, DEFORMS>(o, d, tmin, tmax, time),
-            _ => self.intersect_along::<2, DEFORMS>(o, d, tmin, tmax, time),
+            0 => self.intersect_along::<0, DEFORMS, AVX2>(o, d, tmin, tmax, time),
+            1 => self.intersect_along::<1, DEFORMS, AVX2>(o, d, tmin, tmax, time),
+            _ => self.intersect_along::<2, DEFORMS, AVX2>(o, d, tmin, tmax, time),
         }
     }
 
     /// [`Blas::intersect_when`] for a ray whose largest direction component is axis `KZ`.
     #[inline(always)]
-    fn intersect_along<const KZ: usize, const DEFORMS: bool>(
+    fn intersect_along<const KZ: usize, const DEFORMS: bool, const AVX2: bool>(
         &self,
         o: Vec3,
         d: Vec3,
@@ -481,13 +516,13 @@ impl Blas {
     ) -> Option<(f32, u32, f32, f32)> {
         let pre = RayPre::<KZ>::new(o, d);
         let Some(space) = self.bvh.as_ref() else {
-            return self.intersect_flat::<KZ, DEFORMS>(&pre, o, d, tmin, tmax, time);
+            return self.intersect_flat::<KZ, DEFORMS, AVX2>(&pre, o, d, tmin, tmax, time);
         };
         let (ray, scaled_tmax, k) = space.ray(o, d, tmin, tmax)?;
         let mut best = None;
-        wide::closest(&space.bvh, &ray, scaled_tmax, |limit, first, count| {
+        wide::closest_in::<AVX2>(&space.bvh, &ray, scaled_tmax, |limit, first, count| {
             let closest = unscale(limit, k, tmax);
-            match self.leaf_closest::<KZ, DEFORMS>(&pre, o, d, first, count, tmin, closest, time) {
+            match self.leaf_closest::<KZ, DEFORMS, AVX2>(&pre, o, d, first, count, tmin, closest, time) {
                 Some(hit) => {
                     best = Some(hit);
                     hit.0 * k
@@ -503,7 +538,7 @@ impl Blas {
     /// at a time, then its shapes one by one.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn leaf_closest<const KZ: usize, const DEFORMS: bool>(
+    fn leaf_closest<const KZ: usize, const DEFORMS: bool, const AVX2: bool>(
         &self,
         pre: &RayPre<KZ>,
         o: Vec3,
@@ -526,7 +561,7 @@ impl Blas {
             }
             return best;
         }
-        if let Some((slot, t, b1, b2)) = self.triangles.closest(pre, first, count, tmin, tmax) {
+        if let Some((slot, t, b1, b2)) = self.triangles.closest::<KZ, AVX2>(pre, first, count, tmin, tmax) {
             best = Some((t, self.group_members[slot as usize], b1, b2));
             closest = t;
         }
@@ -544,7 +579,7 @@ impl Blas {
     /// Whether any primitive in slots `first..first + count` is hit within `(tmin, tmax)`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn leaf_any<const KZ: usize, const DEFORMS: bool>(
+    fn leaf_any<const KZ: usize, const DEFORMS: bool, const AVX2: bool>(
         &self,
         pre: &RayPre<KZ>,
         o: Vec3,
@@ -559,7 +594,7 @@ impl Blas {
         if DEFORMS && self.deformation.is_some() {
             return slots.any(|k| self.hit_slot::<KZ, DEFORMS>(pre, o, d, k, tmin, tmax, time).is_some());
         }
-        self.triangles.any(pre, first, count, tmin, tmax)
+        self.triangles.any::<KZ, AVX2>(pre, first, count, tmin, tmax)
             || (!self.shapes.is_empty()
                 && slots.any(|k| {
                     self.group_members[k] as usize >= self.triangles.len()
@@ -570,7 +605,7 @@ impl Blas {
     /// [`Blas::intersect`] without a BVH: every primitive tested.
     #[allow(clippy::too_many_arguments)]
     #[inline]
-    fn intersect_flat<const KZ: usize, const DEFORMS: bool>(
+    fn intersect_flat<const KZ: usize, const DEFORMS: bool, const AVX2: bool>(
         &self,
         pre: &RayPre<KZ>,
         o: Vec3,
@@ -579,7 +614,7 @@ impl Blas {
         tmax: f32,
         time: f32,
     ) -> Option<(f32, u32, f32, f32)> {
-        self.leaf_closest::<KZ, DEFORMS>(pre, o, d, 0, self.group_members.len() as u32, tmin, tmax, time)
+        self.leaf_closest::<KZ, DEFORMS, AVX2>(pre, o, d, 0, self.group_members.len() as u32, tmin, tmax, time)
     }
 
     /// Whether anything lies on `o + t d` within `(tmin, tmax)`.
@@ -598,18 +633,45 @@ impl Blas {
         }
     }
 
+    /// [`Blas::occluded_at`] with the deformation known as a constant, compiled for AVX2 where
+    /// the CPU has it (as [`Blas::intersect_when`]).
     #[inline(always)]
     fn occluded_when<const DEFORMS: bool>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if wide::has_avx2() {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { self.occluded_avx2::<DEFORMS>(o, d, tmin, tmax, time) };
+        }
+        self.occluded_axis::<DEFORMS, false>(o, d, tmin, tmax, time)
+    }
+
+    /// [`Blas::occluded_axis`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn occluded_avx2<const DEFORMS: bool>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
+        self.occluded_axis::<DEFORMS, true>(o, d, tmin, tmax, time)
+    }
+
+    /// [`Blas::occluded_when`] on the AVX2 path or not (`AVX2` true only where the CPU has it).
+    #[inline(always)]
+    fn occluded_axis<const DEFORMS: bool, const AVX2: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> bool {
         match dominant_axis(d) {
-            0 => self.occluded_along::<0, DEFORMS>(o, d, tmin, tmax, time),
-            1 => self.occluded_along::<1, DEFORMS>(o, d, tmin, tmax, time),
-            _ => self.occluded_along::<2, DEFORMS>(o, d, tmin, tmax, time),
+            0 => self.occluded_along::<0, DEFORMS, AVX2>(o, d, tmin, tmax, time),
+            1 => self.occluded_along::<1, DEFORMS, AVX2>(o, d, tmin, tmax, time),
+            _ => self.occluded_along::<2, DEFORMS, AVX2>(o, d, tmin, tmax, time),
         }
     }
 
     /// [`Blas::occluded_when`] for a ray whose largest direction component is axis `KZ`.
     #[inline(always)]
-    fn occluded_along<const KZ: usize, const DEFORMS: bool>(
+    fn occluded_along<const KZ: usize, const DEFORMS: bool, const AVX2: bool>(
         &self,
         o: Vec3,
         d: Vec3,
@@ -620,11 +682,11 @@ impl Blas {
         let pre = RayPre::<KZ>::new(o, d);
         let Some(space) = self.bvh.as_ref() else {
             let all = self.group_members.len() as u32;
-            return self.leaf_any::<KZ, DEFORMS>(&pre, o, d, 0, all, tmin, tmax, time);
+            return self.leaf_any::<KZ, DEFORMS, AVX2>(&pre, o, d, 0, all, tmin, tmax, time);
         };
         let Some((ray, scaled_tmax, _)) = space.ray(o, d, tmin, tmax) else { return false };
-        wide::any(&space.bvh, &ray, scaled_tmax, |first, count| {
-            self.leaf_any::<KZ, DEFORMS>(&pre, o, d, first, count, tmin, tmax, time)
+        wide::any_in::<AVX2>(&space.bvh, &ray, scaled_tmax, |first, count| {
+            self.leaf_any::<KZ, DEFORMS, AVX2>(&pre, o, d, first, count, tmin, tmax, time)
         })
     }
 
