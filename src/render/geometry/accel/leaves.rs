@@ -389,26 +389,7 @@ mod avx2 {
         let on_edge = or(or(eq(e0, zero), eq(e1, zero)), eq(e2, zero));
         let redo = _mm256_movemask_ps(on_edge) as u32 & lanes;
         if redo != 0 {
-            // Rare (a ray through an edge or a vertex, or an empty slot): those lanes' edge
-            // functions again in f64, as the scalar test does.
-            let lanes_of = |v: __m256| {
-                let mut out = [0.0f32; LANES];
-                // SAFETY: `out` holds 8 f32.
-                unsafe { _mm256_storeu_ps(out.as_mut_ptr(), v) };
-                out
-            };
-            let [x0, y0, x1, y1, x2, y2] = [x0, y0, x1, y1, x2, y2].map(lanes_of);
-            let mut e = [e0, e1, e2].map(lanes_of);
-            let mut todo = redo;
-            while todo != 0 {
-                let l = todo.trailing_zeros() as usize;
-                todo &= todo - 1;
-                e[0][l] = edge_f64(x1[l], y2[l], y1[l], x2[l]);
-                e[1][l] = edge_f64(x2[l], y0[l], y2[l], x0[l]);
-                e[2][l] = edge_f64(x0[l], y1[l], y0[l], x1[l]);
-            }
-            // SAFETY: each holds 8 f32.
-            [e0, e1, e2] = e.map(|v| unsafe { _mm256_loadu_ps(v.as_ptr()) });
+            [e0, e1, e2] = edges_in_f64([x0, y0, x1, y1, x2, y2], [e0, e1, e2], redo);
         }
         // Rejected lanes, each test as the scalar test's early return.
         let below = or(or(lt(e0, zero), lt(e1, zero)), lt(e2, zero));
@@ -462,6 +443,33 @@ mod avx2 {
             _mm256_storeu_ps(hits.b2.as_mut_ptr(), mul(e2, inv));
         }
         hits
+    }
+
+    /// The edge functions of the lanes in `redo` computed again in f64, as the scalar test
+    /// does where one is exactly zero: rare (a ray through an edge or a vertex, or an empty
+    /// slot), so kept out of line and the block test small enough to inline.
+    #[cold]
+    #[inline(never)]
+    #[target_feature(enable = "avx2")]
+    fn edges_in_f64(xy: [__m256; 6], e: [__m256; 3], redo: u32) -> [__m256; 3] {
+        let lanes_of = |v: __m256| {
+            let mut out = [0.0f32; LANES];
+            // SAFETY: `out` holds 8 f32.
+            unsafe { _mm256_storeu_ps(out.as_mut_ptr(), v) };
+            out
+        };
+        let [x0, y0, x1, y1, x2, y2] = xy.map(lanes_of);
+        let mut e = e.map(lanes_of);
+        let mut todo = redo;
+        while todo != 0 {
+            let l = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            e[0][l] = edge_f64(x1[l], y2[l], y1[l], x2[l]);
+            e[1][l] = edge_f64(x2[l], y0[l], y2[l], x0[l]);
+            e[2][l] = edge_f64(x0[l], y1[l], y0[l], x1[l]);
+        }
+        // SAFETY: each holds 8 f32.
+        e.map(|v| unsafe { _mm256_loadu_ps(v.as_ptr()) })
     }
 }
 
