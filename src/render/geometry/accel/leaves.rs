@@ -387,7 +387,15 @@ mod avx2 {
         let gt = |a, b| _mm256_cmp_ps::<_CMP_GT_OQ>(a, b);
         let ge = |a, b| _mm256_cmp_ps::<_CMP_GE_OQ>(a, b);
         let on_edge = or(or(eq(e0, zero), eq(e1, zero)), eq(e2, zero));
-        let redo = _mm256_movemask_ps(on_edge) as u32 & lanes;
+        let mut redo = _mm256_movemask_ps(on_edge) as u32 & lanes;
+        if redo != 0 {
+            // A triangle with two equal corners (a mesh's pole) has an exactly zero edge
+            // function on every ray, and its other two are exact negatives, so its
+            // determinant is zero in f32 as in f64: it needs no redo, only the rejection.
+            let same = |xa, ya, xb, yb| _mm256_and_ps(eq(xa, xb), eq(ya, yb));
+            let degenerate = or(or(same(x0, y0, x1, y1), same(x1, y1, x2, y2)), same(x0, y0, x2, y2));
+            redo &= !(_mm256_movemask_ps(degenerate) as u32);
+        }
         if redo != 0 {
             [e0, e1, e2] = edges_in_f64([x0, y0, x1, y1, x2, y2], [e0, e1, e2], redo);
         }
@@ -475,21 +483,12 @@ mod avx2 {
 
 #[cfg(test)]
 mod tests {
+    use super::super::wide::tests::generator;
     use super::*;
-
-    /// A small deterministic generator in [-1, 1).
-    fn generator(mut seed: u32) -> impl FnMut() -> f32 {
-        move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 17;
-            seed ^= seed << 5;
-            seed as f32 / u32::MAX as f32 * 2.0 - 1.0
-        }
-    }
 
     /// 64 triangles: a fan of 8 around the origin sharing edges and a vertex (rays through
     /// those take the f64 edge path), then random ones of every size and orientation, four
-    /// of them one triangle.
+    /// of them one triangle, three with two equal corners.
     fn triangles() -> Vec<[Vec3; 3]> {
         let mut next = generator(3);
         let ring = |k: usize| {
@@ -505,6 +504,10 @@ mod tests {
         // Coincident copies: the first slot among equal distances must win.
         let copied = out[32];
         out[33..36].fill(copied);
+        // Triangles with two equal corners, as at a tessellated sphere's poles.
+        out[40][1] = out[40][0];
+        out[41][2] = out[41][1];
+        out[42][2] = out[42][0];
         out
     }
 

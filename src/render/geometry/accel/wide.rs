@@ -477,14 +477,14 @@ mod avx2 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use glam::Vec3A;
     use obvhs::aabb::Aabb;
     use obvhs::cwbvh::builder::build_cwbvh;
 
-    /// A small deterministic generator in [-1, 1).
-    fn generator(mut seed: u32) -> impl FnMut() -> f32 {
+    /// A small deterministic generator in [-1, 1) (the leaf tests' too).
+    pub(in crate::render::geometry::accel) fn generator(mut seed: u32) -> impl FnMut() -> f32 {
         move || {
             seed ^= seed << 13;
             seed ^= seed >> 17;
