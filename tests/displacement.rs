@@ -354,7 +354,7 @@ substance Rough {
 /// Micro-triangles of the displaced prims (the world BVH's triangles) of `path`.
 fn micro_triangles(path: &Path) -> (Vec<[Vec3; 3]>, Scene) {
     let (scene, _) = built(path, Some("/Cam"), (200, 150), BackendKind::Jit, true);
-    let triangles = scene.accel.world_triangles().to_vec();
+    let triangles = scene.accel.world_triangles();
     (triangles, scene)
 }
 
@@ -908,7 +908,7 @@ fn touching_prims_are_displaced_separately() {
 
     let key = |t: &[Vec3; 3]| t.map(|p| p.to_array().map(f32::to_bits));
     let mut with_floor: HashMap<_, usize> = HashMap::new();
-    for t in together.accel.world_triangles() {
+    for t in &together.accel.world_triangles() {
         *with_floor.entry(key(t)).or_default() += 1;
     }
     let box_triangles = alone.accel.world_triangles();

@@ -3,7 +3,8 @@
 //! coordinates only where the prim has them, primvar references only once some triangle has
 //! them). Emission appends straight into these tables, so a mesh never exists as whole
 //! [`Triangle`]s (112 bytes each): a 10⁶-triangle mesh with `st` holds 68 bytes per triangle
-//! here, and the BLAS takes the tables as they are.
+//! here, and the BLAS takes the attribute table as it is and moves the positions into its
+//! BVH's leaf order (`accel/leaves.rs`).
 
 use crate::render::geometry::Triangle;
 use crate::render::geometry::accel::attrs::AttrTable;

@@ -722,7 +722,7 @@ impl Context<'_> {
     ) -> Result<Option<LightSample>, Invalid> {
         let Some(es) = emitter.sample(u_triangle, u) else { return Ok(None) };
         let accel = &self.scene.accel;
-        let Some(tri) = accel.world_triangles().get(es.triangle as usize) else { return Ok(None) };
+        let Some(tri) = accel.world_triangle(es.triangle as usize) else { return Ok(None) };
         let q = tri[0] * (1.0 - es.b1 - es.b2) + tri[1] * es.b1 + tri[2] * es.b2;
         let to = q - p;
         let dist2 = to.length_squared();

@@ -141,11 +141,10 @@ impl Emitters {
         if !emissive.contains(&true) {
             return Emitters::default();
         }
-        let positions = accel.world_triangles();
         let mut found: Vec<Option<Found>> = vec![None; prim_count];
         let layers = materials.iter().map(|m| m.info().layers.len()).max().unwrap_or(0);
         let (mut masks, mut weights) = (vec![0.0f32; layers], vec![0.0f32; layers]);
-        for (index, tri) in positions.iter().enumerate() {
+        for (index, tri) in (0..).map_while(|i| accel.world_triangle(i)).enumerate() {
             let centroid = Hit { t: 1.0, index: index as u32, instance: WORLD, b1: 1.0 / 3.0, b2: 1.0 / 3.0 };
             let prim = accel.prim_of(&centroid) as usize;
             if !emissive.get(prim).copied().unwrap_or(false) {

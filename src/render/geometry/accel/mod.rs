@@ -9,7 +9,8 @@
 //! triangles and shapes alike and kept in strata's own layout (`wide.rs`): the same tree with
 //! each node's 8 child boxes as f32 lanes, tested in one pass with AVX2 where the CPU has it
 //! (chosen at run time), children visited nearest first, occlusion stopping at the first hit,
-//! a leaf a range of primitives tested together. The ray/triangle test is watertight (Woop,
+//! a leaf a range of primitives whose triangles are stored together in leaf order and tested
+//! 8 at a time (`leaves.rs`). The ray/triangle test is watertight (Woop,
 //! Benthin & Wald 2013), so rays through shared edges and vertices never slip between
 //! triangles, and ray origins are robust so secondary rays do not re-hit their own surface.
 //! `benches/bvh.rs` measures it against Embree.
@@ -36,11 +37,13 @@ use std::time::Duration;
 pub(in crate::render::geometry) mod attrs;
 mod batched;
 mod convert;
+mod leaves;
 mod wide;
 
 use attrs::AttrTable;
 pub use batched::PLOC_BATCH;
 use batched::{Padded, build_batched};
+use leaves::{LeafTriangles, RayPre, dominant_axis};
 use wide::{WideBvh, WideRay};
 
 // Defined below the BVH (geometry produces instances; shapes bound their own hit points), so
@@ -201,10 +204,9 @@ pub const FLAT_PRIMITIVES: usize = 8;
 pub struct Blas {
     /// `None` when the BLAS is flat: every primitive in `group_members` is tested.
     bvh: Option<BvhSpace>,
-    /// Triangle positions, the only triangle data the intersection loop reads. (A second
-    /// copy in the BVH's leaf order, so a leaf's triangles are adjacent as in Embree's leaves,
-    /// measured no faster beyond noise on 3·10⁵ triangles, at 36 more bytes per triangle.)
-    positions: Vec<[Vec3; 3]>,
+    /// Triangle positions, the only triangle data the intersection loop reads, in the slots
+    /// of `group_members` (the BVH's leaf order) and tested 8 at a time (`leaves.rs`).
+    triangles: LeafTriangles,
     /// What a hit reads besides the positions.
     attrs: AttrTable,
     shapes: Vec<Shape>,
@@ -215,7 +217,7 @@ pub struct Blas {
     group_members: Vec<u32>,
     /// Object-space bounds `(min, max)` of the finite primitives; `None` when there are none.
     bounds: Option<(Vec3, Vec3)>,
-    /// A deforming mesh's triangles keyed over the shutter (`positions` then hold them at the
+    /// A deforming mesh's triangles keyed over the shutter (`triangles` then hold them at the
     /// frame, and the boxes cover every key).
     deformation: Option<Box<Deformation>>,
 }
@@ -342,7 +344,10 @@ impl Blas {
             build_grouped(all_bounds, count)
         };
         let deformation = deformation.map(Box::new);
-        Blas { bvh, positions, attrs, shapes, group_members, bounds, deformation }
+        // The positions move into leaf order; the emission-order table is freed.
+        let triangles = LeafTriangles::new(&positions, &group_members);
+        drop(positions);
+        Blas { bvh, triangles, attrs, shapes, group_members, bounds, deformation }
     }
 
     /// The most primitives one PLOC build was given while building this BVH: at most
@@ -353,7 +358,7 @@ impl Blas {
 
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
-        self.positions.len()
+        self.triangles.len()
     }
 
     /// Number of analytic shape parts.
@@ -361,9 +366,11 @@ impl Blas {
         self.shapes.len()
     }
 
-    /// The triangles' vertex positions, as intersected.
-    pub fn triangle_positions(&self) -> &[[Vec3; 3]] {
-        &self.positions
+    /// Triangle `i`'s vertex positions, as intersected (NaN for a triangle with a non-finite
+    /// corner, which is never intersected); `None` past the last triangle.
+    #[inline]
+    pub fn triangle(&self, i: usize) -> Option<[Vec3; 3]> {
+        self.triangles.triangle(i)
     }
 
     /// Object-space bounds of the finite primitives.
@@ -375,7 +382,7 @@ impl Blas {
     pub fn bytes(&self) -> usize {
         use std::mem::size_of;
         let bvh = self.bvh.as_ref().map_or(0, BvhSpace::bytes);
-        self.positions.len() * size_of::<[Vec3; 3]>()
+        self.triangles.bytes()
             + self.attrs.bytes()
             + self.shapes.len() * size_of::<Shape>()
             + self.group_members.len() * 4
@@ -408,13 +415,13 @@ impl Blas {
         time: f32,
     ) -> Option<(f32, f32, f32)> {
         let i = self.group_members[k] as usize;
-        if let Some(p) = self.positions.get(i) {
+        if i < self.triangles.len() {
             match (DEFORMS, &self.deformation) {
                 (true, Some(keys)) => pre.intersect(&keys.at(i, time), tmin, tmax),
-                _ => pre.intersect(p, tmin, tmax),
+                _ => pre.intersect(&self.triangles.at_slot(k), tmin, tmax),
             }
         } else {
-            let j = i - self.positions.len();
+            let j = i - self.triangles.len();
             // A deforming prototype's shapes (a Points prim's spheres) move by a translation.
             let o = match (DEFORMS, &self.deformation) {
                 (true, Some(keys)) => o - keys.shape_offset(j, time),
@@ -446,6 +453,8 @@ impl Blas {
         }
     }
 
+    /// [`Blas::intersect_at`] with the deformation known as a constant, compiled for AVX2
+    /// where the CPU has it: the whole traversal then is, so its node and leaf tests inline.
     #[inline(always)]
     fn intersect_when<const DEFORMS: bool>(
         &self,
@@ -455,17 +464,49 @@ impl Blas {
         tmax: f32,
         time: f32,
     ) -> Option<(f32, u32, f32, f32)> {
+        #[cfg(target_arch = "x86_64")]
+        if wide::has_avx2() {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { self.intersect_avx2::<DEFORMS>(o, d, tmin, tmax, time) };
+        }
+        self.intersect_axis::<DEFORMS, false>(o, d, tmin, tmax, time)
+    }
+
+    /// [`Blas::intersect_axis`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn intersect_avx2<const DEFORMS: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> Option<(f32, u32, f32, f32)> {
+        self.intersect_axis::<DEFORMS, true>(o, d, tmin, tmax, time)
+    }
+
+    /// [`Blas::intersect_when`] on the AVX2 path or not (`AVX2` true only where the CPU has it).
+    #[inline(always)]
+    fn intersect_axis<const DEFORMS: bool, const AVX2: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> Option<(f32, u32, f32, f32)> {
         // One branch per ray on the direction's largest axis, not one per triangle test.
         match dominant_axis(d) {
-            0 => self.intersect_along::<0, DEFORMS>(o, d, tmin, tmax, time),
-            1 => self.intersect_along::<1, DEFORMS>(o, d, tmin, tmax, time),
-            _ => self.intersect_along::<2, DEFORMS>(o, d, tmin, tmax, time),
+            0 => self.intersect_along::<0, DEFORMS, AVX2>(o, d, tmin, tmax, time),
+            1 => self.intersect_along::<1, DEFORMS, AVX2>(o, d, tmin, tmax, time),
+            _ => self.intersect_along::<2, DEFORMS, AVX2>(o, d, tmin, tmax, time),
         }
     }
 
     /// [`Blas::intersect_when`] for a ray whose largest direction component is axis `KZ`.
     #[inline(always)]
-    fn intersect_along<const KZ: usize, const DEFORMS: bool>(
+    fn intersect_along<const KZ: usize, const DEFORMS: bool, const AVX2: bool>(
         &self,
         o: Vec3,
         d: Vec3,
@@ -475,29 +516,96 @@ impl Blas {
     ) -> Option<(f32, u32, f32, f32)> {
         let pre = RayPre::<KZ>::new(o, d);
         let Some(space) = self.bvh.as_ref() else {
-            return self.intersect_flat::<KZ, DEFORMS>(&pre, o, d, tmin, tmax, time);
+            return self.intersect_flat::<KZ, DEFORMS, AVX2>(&pre, o, d, tmin, tmax, time);
         };
         let (ray, scaled_tmax, k) = space.ray(o, d, tmin, tmax)?;
         let mut best = None;
-        wide::closest(&space.bvh, &ray, scaled_tmax, |limit, first, count| {
-            let mut closest = unscale(limit, k, tmax);
-            let mut found = false;
-            for k in first as usize..(first + count) as usize {
-                if let Some((t, b1, b2)) = self.hit_slot::<KZ, DEFORMS>(&pre, o, d, k, tmin, closest, time) {
-                    best = Some((t, self.group_members[k], b1, b2));
-                    closest = t;
-                    found = true;
+        wide::closest_in::<AVX2>(&space.bvh, &ray, scaled_tmax, |limit, first, count| {
+            let closest = unscale(limit, k, tmax);
+            match self.leaf_closest::<KZ, DEFORMS, AVX2>(&pre, o, d, first, count, tmin, closest, time) {
+                Some(hit) => {
+                    best = Some(hit);
+                    hit.0 * k
                 }
+                None => f32::INFINITY,
             }
-            if found { closest * k } else { f32::INFINITY }
         });
         best
+    }
+
+    /// The closest hit `(t, index, b1, b2)` among the primitives in slots `first..first +
+    /// count` of `group_members` (a leaf), `t` in `(tmin, tmax)`: a still BLAS's triangles 8
+    /// at a time, then its shapes one by one.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn leaf_closest<const KZ: usize, const DEFORMS: bool, const AVX2: bool>(
+        &self,
+        pre: &RayPre<KZ>,
+        o: Vec3,
+        d: Vec3,
+        first: u32,
+        count: u32,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> Option<(f32, u32, f32, f32)> {
+        let slots = first as usize..(first + count) as usize;
+        let mut best = None;
+        let mut closest = tmax;
+        if DEFORMS && self.deformation.is_some() {
+            for k in slots {
+                if let Some((t, b1, b2)) = self.hit_slot::<KZ, DEFORMS>(pre, o, d, k, tmin, closest, time) {
+                    best = Some((t, self.group_members[k], b1, b2));
+                    closest = t;
+                }
+            }
+            return best;
+        }
+        if let Some((slot, t, b1, b2)) = self.triangles.closest::<KZ, AVX2>(pre, first, count, tmin, tmax) {
+            best = Some((t, self.group_members[slot as usize], b1, b2));
+            closest = t;
+        }
+        if !self.shapes.is_empty() {
+            for k in slots.filter(|&k| self.group_members[k] as usize >= self.triangles.len()) {
+                if let Some((t, b1, b2)) = self.hit_slot::<KZ, DEFORMS>(pre, o, d, k, tmin, closest, time) {
+                    best = Some((t, self.group_members[k], b1, b2));
+                    closest = t;
+                }
+            }
+        }
+        best
+    }
+
+    /// Whether any primitive in slots `first..first + count` is hit within `(tmin, tmax)`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn leaf_any<const KZ: usize, const DEFORMS: bool, const AVX2: bool>(
+        &self,
+        pre: &RayPre<KZ>,
+        o: Vec3,
+        d: Vec3,
+        first: u32,
+        count: u32,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> bool {
+        let mut slots = first as usize..(first + count) as usize;
+        if DEFORMS && self.deformation.is_some() {
+            return slots.any(|k| self.hit_slot::<KZ, DEFORMS>(pre, o, d, k, tmin, tmax, time).is_some());
+        }
+        self.triangles.any::<KZ, AVX2>(pre, first, count, tmin, tmax)
+            || (!self.shapes.is_empty()
+                && slots.any(|k| {
+                    self.group_members[k] as usize >= self.triangles.len()
+                        && self.hit_slot::<KZ, DEFORMS>(pre, o, d, k, tmin, tmax, time).is_some()
+                }))
     }
 
     /// [`Blas::intersect`] without a BVH: every primitive tested.
     #[allow(clippy::too_many_arguments)]
     #[inline]
-    fn intersect_flat<const KZ: usize, const DEFORMS: bool>(
+    fn intersect_flat<const KZ: usize, const DEFORMS: bool, const AVX2: bool>(
         &self,
         pre: &RayPre<KZ>,
         o: Vec3,
@@ -506,15 +614,7 @@ impl Blas {
         tmax: f32,
         time: f32,
     ) -> Option<(f32, u32, f32, f32)> {
-        let mut best = None;
-        let mut closest = tmax;
-        for k in 0..self.group_members.len() {
-            if let Some((t, b1, b2)) = self.hit_slot::<KZ, DEFORMS>(pre, o, d, k, tmin, closest, time) {
-                best = Some((t, self.group_members[k], b1, b2));
-                closest = t;
-            }
-        }
-        best
+        self.leaf_closest::<KZ, DEFORMS, AVX2>(pre, o, d, 0, self.group_members.len() as u32, tmin, tmax, time)
     }
 
     /// Whether anything lies on `o + t d` within `(tmin, tmax)`.
@@ -533,18 +633,45 @@ impl Blas {
         }
     }
 
+    /// [`Blas::occluded_at`] with the deformation known as a constant, compiled for AVX2 where
+    /// the CPU has it (as [`Blas::intersect_when`]).
     #[inline(always)]
     fn occluded_when<const DEFORMS: bool>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if wide::has_avx2() {
+            // SAFETY: the CPU has AVX2 (checked just above).
+            return unsafe { self.occluded_avx2::<DEFORMS>(o, d, tmin, tmax, time) };
+        }
+        self.occluded_axis::<DEFORMS, false>(o, d, tmin, tmax, time)
+    }
+
+    /// [`Blas::occluded_axis`] compiled for AVX2.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn occluded_avx2<const DEFORMS: bool>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
+        self.occluded_axis::<DEFORMS, true>(o, d, tmin, tmax, time)
+    }
+
+    /// [`Blas::occluded_when`] on the AVX2 path or not (`AVX2` true only where the CPU has it).
+    #[inline(always)]
+    fn occluded_axis<const DEFORMS: bool, const AVX2: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> bool {
         match dominant_axis(d) {
-            0 => self.occluded_along::<0, DEFORMS>(o, d, tmin, tmax, time),
-            1 => self.occluded_along::<1, DEFORMS>(o, d, tmin, tmax, time),
-            _ => self.occluded_along::<2, DEFORMS>(o, d, tmin, tmax, time),
+            0 => self.occluded_along::<0, DEFORMS, AVX2>(o, d, tmin, tmax, time),
+            1 => self.occluded_along::<1, DEFORMS, AVX2>(o, d, tmin, tmax, time),
+            _ => self.occluded_along::<2, DEFORMS, AVX2>(o, d, tmin, tmax, time),
         }
     }
 
     /// [`Blas::occluded_when`] for a ray whose largest direction component is axis `KZ`.
     #[inline(always)]
-    fn occluded_along<const KZ: usize, const DEFORMS: bool>(
+    fn occluded_along<const KZ: usize, const DEFORMS: bool, const AVX2: bool>(
         &self,
         o: Vec3,
         d: Vec3,
@@ -554,13 +681,12 @@ impl Blas {
     ) -> bool {
         let pre = RayPre::<KZ>::new(o, d);
         let Some(space) = self.bvh.as_ref() else {
-            return (0..self.group_members.len())
-                .any(|k| self.hit_slot::<KZ, DEFORMS>(&pre, o, d, k, tmin, tmax, time).is_some());
+            let all = self.group_members.len() as u32;
+            return self.leaf_any::<KZ, DEFORMS, AVX2>(&pre, o, d, 0, all, tmin, tmax, time);
         };
         let Some((ray, scaled_tmax, _)) = space.ray(o, d, tmin, tmax) else { return false };
-        wide::any(&space.bvh, &ray, scaled_tmax, |first, count| {
-            (first as usize..(first + count) as usize)
-                .any(|k| self.hit_slot::<KZ, DEFORMS>(&pre, o, d, k, tmin, tmax, time).is_some())
+        wide::any_in::<AVX2>(&space.bvh, &ray, scaled_tmax, |first, count| {
+            self.leaf_any::<KZ, DEFORMS, AVX2>(&pre, o, d, first, count, tmin, tmax, time)
         })
     }
 
@@ -579,7 +705,7 @@ impl Blas {
     ) -> (SurfaceGeom, Option<[Vec3; 3]>) {
         let i = index as usize;
         let deformed = |p: [Vec3; 3]| self.deformation.as_ref().map_or(p, |keys| keys.at(i, time));
-        match self.positions.get(i).copied().map(deformed) {
+        match self.triangles.triangle(i).map(deformed) {
             Some(p) => {
                 let a = self.attrs.get(i);
                 let b0 = 1.0 - b1 - b2;
@@ -613,7 +739,7 @@ impl Blas {
                 (geom, Some(p))
             }
             None => {
-                let j = i - self.positions.len();
+                let j = i - self.triangles.len();
                 let shape = &self.shapes[j];
                 let h = match &self.deformation {
                     Some(keys) => {
@@ -890,9 +1016,17 @@ impl Accel {
         (blas, self.instances.len() * size_of::<Instance>() + self.instance_prims.len() * 4 + tlas)
     }
 
-    /// The world (not instanced) triangles' vertex positions, as intersected.
-    pub fn world_triangles(&self) -> &[[Vec3; 3]] {
-        self.world.triangle_positions()
+    /// World (not instanced) triangle `i`'s vertex positions, as intersected (see
+    /// [`Blas::triangle`]); `None` past the last.
+    #[inline]
+    pub fn world_triangle(&self, i: usize) -> Option<[Vec3; 3]> {
+        self.world.triangle(i)
+    }
+
+    /// Every world triangle's vertex positions, in their own order (a copy: the BLAS keeps
+    /// them in its leaf order).
+    pub fn world_triangles(&self) -> Vec<[Vec3; 3]> {
+        (0..self.world.triangle_count()).filter_map(|i| self.world.triangle(i)).collect()
     }
 
     /// The renderable prim a hit belongs to.
@@ -1047,104 +1181,6 @@ impl Accel {
         };
         geom.prim = self.instance_prims[(inst.prims + local.prim) as usize];
         geom
-    }
-}
-
-/// The axis of `d`'s largest component (the first of equals, from the last): the watertight
-/// test shears along it.
-#[inline]
-fn dominant_axis(d: Vec3) -> usize {
-    let a = d.abs();
-    if a.x > a.y {
-        if a.x > a.z { 0 } else { 2 }
-    } else if a.y > a.z {
-        1
-    } else {
-        2
-    }
-}
-
-/// Per-ray precomputation of the watertight test (pbrt-v4's, after Woop, Benthin & Wald
-/// 2013) for a ray whose largest direction component is axis `KZ` ([`dominant_axis`]): the
-/// permutation that makes that component z is in the type, so the test reads each vertex's
-/// coordinates directly, and the shear that maps the ray to +z is stored. The test runs in
-/// f32 on the compact positions; its rounding is bounded (see [`RayPre::intersect`]) so a
-/// hit is never reported behind the origin, and hit points carry an error bound that
-/// [`offset_ray_origin`] moves past.
-struct RayPre<const KZ: usize> {
-    o: Vec3,
-    /// `(−dx/dz, −dy/dz, 1/dz)` in the permuted axes.
-    s: Vec3,
-}
-
-impl<const KZ: usize> RayPre<KZ> {
-    /// The permuted x and y axes: the two after `KZ`, cyclically (so the permutation keeps
-    /// the handedness).
-    const KX: usize = (KZ + 1) % 3;
-    const KY: usize = (KZ + 2) % 3;
-
-    #[inline(always)]
-    fn new(o: Vec3, d: Vec3) -> RayPre<KZ> {
-        let s = Vec3::new(-d[Self::KX] / d[KZ], -d[Self::KY] / d[KZ], 1.0 / d[KZ]);
-        RayPre { o, s }
-    }
-
-    /// `(t, b1, b2)` of a hit with `t` in `(tmin, tmax)`. Inlined into the traversal's leaf
-    /// loop: a call per triangle test spilled the sheared ray around it.
-    #[inline(always)]
-    fn intersect(&self, p: &[Vec3; 3], tmin: f32, tmax: f32) -> Option<(f32, f32, f32)> {
-        // Translate to the ray origin, permute, shear.
-        let shear = |v: Vec3| {
-            let v = v - self.o;
-            let z = v[KZ];
-            (v[Self::KX] + self.s.x * z, v[Self::KY] + self.s.y * z, z)
-        };
-        let (x0, y0, z0) = shear(p[0]);
-        let (x1, y1, z1) = shear(p[1]);
-        let (x2, y2, z2) = shear(p[2]);
-        // Edge functions; an exact zero may be a rounding artefact on an edge, so it is
-        // decided in f64 (where the products of f32 values are exact).
-        let (mut e0, mut e1, mut e2) = (x1 * y2 - y1 * x2, x2 * y0 - y2 * x0, x0 * y1 - y0 * x1);
-        if e0 == 0.0 || e1 == 0.0 || e2 == 0.0 {
-            let d = |a: f32, b: f32, c: f32, e: f32| (a as f64 * b as f64 - c as f64 * e as f64) as f32;
-            e0 = d(x1, y2, y1, x2);
-            e1 = d(x2, y0, y2, x0);
-            e2 = d(x0, y1, y0, x1);
-        }
-        if (e0 < 0.0 || e1 < 0.0 || e2 < 0.0) && (e0 > 0.0 || e1 > 0.0 || e2 > 0.0) {
-            return None;
-        }
-        let det = e0 + e1 + e2;
-        if det == 0.0 {
-            return None;
-        }
-        let (z0, z1, z2) = (z0 * self.s.z, z1 * self.s.z, z2 * self.s.z);
-        let t_scaled = e0 * z0 + e1 * z1 + e2 * z2;
-        // Range test before the division: t in (0, tmax).
-        if det < 0.0 && (t_scaled >= 0.0 || t_scaled < tmax * det) {
-            return None;
-        }
-        if det > 0.0 && (t_scaled <= 0.0 || t_scaled > tmax * det) {
-            return None;
-        }
-        let inv = 1.0 / det;
-        let t = t_scaled * inv;
-        // A conservative bound on t's rounding error (pbrt-v4, "Conservative Ray–Bounds
-        // Intersections"): a t within it of zero may really be behind the origin — a ray
-        // leaving the surface that re-hits it — so it is no hit.
-        let max_z = z0.abs().max(z1.abs()).max(z2.abs());
-        let max_x = x0.abs().max(x1.abs()).max(x2.abs());
-        let max_y = y0.abs().max(y1.abs()).max(y2.abs());
-        let delta_z = gamma(3) * max_z;
-        let delta_x = gamma(5) * (max_x + max_z);
-        let delta_y = gamma(5) * (max_y + max_z);
-        let delta_e = 2.0 * (gamma(2) * max_x * max_y + delta_y * max_x + delta_x * max_y);
-        let max_e = e0.abs().max(e1.abs()).max(e2.abs());
-        let delta_t = 3.0 * (gamma(3) * max_e * max_z + delta_e * max_z + delta_z * max_e) * inv.abs();
-        if t <= delta_t || t <= tmin || t >= tmax {
-            return None;
-        }
-        Some((t, e1 * inv, e2 * inv))
     }
 }
 

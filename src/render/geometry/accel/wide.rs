@@ -22,7 +22,7 @@ use std::mem::MaybeUninit;
 
 /// Whether the AVX2 path runs (std caches the CPUID query: one load per call).
 #[inline]
-fn has_avx2() -> bool {
+pub(super) fn has_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx2")
@@ -266,6 +266,42 @@ pub(super) fn any(bvh: &WideBvh, ray: &WideRay, tmax: f32, mut on_leaf: impl FnM
     any_with(bvh, ray, tmax, &mut on_leaf, scalar_hits)
 }
 
+/// [`closest`] on the AVX2 path or not, chosen by the caller: `AVX2` is true only where the
+/// CPU has AVX2, in a caller compiled for it, so that the node test and `on_leaf` inline.
+#[inline(always)]
+pub(super) fn closest_in<const AVX2: bool>(
+    bvh: &WideBvh,
+    ray: &WideRay,
+    tmax: f32,
+    mut on_leaf: impl FnMut(f32, u32, u32) -> f32,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        // SAFETY: `AVX2` is true only where the CPU has AVX2.
+        let hits = |node: &Node, ray: &WideRay, tmax: f32| unsafe { avx2::node_hits(node, ray, tmax) };
+        closest_with(bvh, ray, tmax, &mut on_leaf, hits);
+        return;
+    }
+    closest_with(bvh, ray, tmax, &mut on_leaf, scalar_hits);
+}
+
+/// [`any`] on the AVX2 path or not, chosen by the caller (see [`closest_in`]).
+#[inline(always)]
+pub(super) fn any_in<const AVX2: bool>(
+    bvh: &WideBvh,
+    ray: &WideRay,
+    tmax: f32,
+    mut on_leaf: impl FnMut(u32, u32) -> bool,
+) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if AVX2 {
+        // SAFETY: `AVX2` is true only where the CPU has AVX2.
+        let hits = |node: &Node, ray: &WideRay, tmax: f32| unsafe { avx2::node_hits(node, ray, tmax) };
+        return any_with(bvh, ray, tmax, &mut on_leaf, hits);
+    }
+    any_with(bvh, ray, tmax, &mut on_leaf, scalar_hits)
+}
+
 /// [`closest`] with the node test `hits`.
 #[inline(always)]
 fn closest_with<F: FnMut(f32, u32, u32) -> f32>(
@@ -441,14 +477,14 @@ mod avx2 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use glam::Vec3A;
     use obvhs::aabb::Aabb;
     use obvhs::cwbvh::builder::build_cwbvh;
 
-    /// A small deterministic generator in [-1, 1).
-    fn generator(mut seed: u32) -> impl FnMut() -> f32 {
+    /// A small deterministic generator in [-1, 1) (the leaf tests' too).
+    pub(in crate::render::geometry::accel) fn generator(mut seed: u32) -> impl FnMut() -> f32 {
         move || {
             seed ^= seed << 13;
             seed ^= seed >> 17;
