@@ -241,6 +241,33 @@ fn open_nonblocking(path: &Path) -> std::io::Result<std::fs::File> {
     options.open(path)
 }
 
+/// The first `prefix` bytes of `path` (all of it when shorter) and whether they are the whole
+/// file, checked and recorded as [`read_bytes`] checks and records the whole: what a header
+/// reader needs without reading megabytes of pixels. A package-relative path reads its whole
+/// member (a compressed member has no cheaper prefix).
+pub fn read_prefix(path: &Path, prefix: u64) -> Result<(Vec<u8>, bool), InputError> {
+    if split_package_path(path).is_some() {
+        return read_bytes(path).map(|bytes| (bytes, true));
+    }
+    let max_bytes = limits().max_file_bytes;
+    let file = open_nonblocking(path)?;
+    let meta = file.metadata()?;
+    if !meta.is_file() {
+        return Err(InputError::NotAFile { what: describe(meta.file_type()) });
+    }
+    if meta.len() > max_bytes {
+        return Err(InputError::TooLarge { size: meta.len(), limit: max_bytes });
+    }
+    let want = prefix.min(max_bytes);
+    let mut bytes = Vec::with_capacity(meta.len().min(want) as usize);
+    // One byte more than wanted tells whether the file goes on.
+    file.take(want.saturating_add(1)).read_to_end(&mut bytes)?;
+    let whole = bytes.len() as u64 <= want;
+    bytes.truncate(want as usize);
+    record_read(path, &meta);
+    Ok((bytes, whole))
+}
+
 /// Reads the whole of `path` if it is a regular file of at most `max_bytes` bytes.
 pub fn read_bytes_limited(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputError> {
     let file = open_nonblocking(path)?;
