@@ -852,8 +852,8 @@ mod tests {
         assert!(all_resident(&content, &chain), "the whole chain is made ahead");
         assert!(content.levels.iter().all(|l| l.last_use.load(Ordering::Relaxed) == 0), "kept as first to go");
         assert!(!prefetch_content(&content, guard), "a resident texture is not decoded again");
-        for k in 0..chain.len() {
-            assert_eq!(level(&content, k), chain[k]);
+        for (k, want) in chain.iter().enumerate() {
+            assert_eq!(&level(&content, k), want);
         }
         assert_eq!(decodes.load(Ordering::Relaxed), 1);
         assert!(content.levels.iter().all(|l| l.last_use.load(Ordering::Relaxed) > 0), "read since");
