@@ -318,7 +318,12 @@ fn render_frame(
             },
             default_lights: args.default_lights,
         };
+        // Textures decode on a core the scene build leaves idle; stopped when the render
+        // starts, so it never competes with the render's threads.
+        let cores = settings.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+        let ahead = (cores > 1).then(strata::runtime::texture::Prefetch::start);
         prepared = session.prepare(&options).is_some();
+        drop(ahead);
     }
     let rebuilt = session.stats().scene_builds > builds && builds > 0;
     let time = session.stage().map_or(TimeCode::Default, |s| s.time());

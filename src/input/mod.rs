@@ -241,8 +241,8 @@ fn open_nonblocking(path: &Path) -> std::io::Result<std::fs::File> {
     options.open(path)
 }
 
-/// Reads the whole of `path` if it is a regular file of at most `max_bytes` bytes.
-pub fn read_bytes_limited(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputError> {
+/// Opens `path` if it is a regular file of at most `max_bytes` bytes, with its metadata.
+fn open_regular(path: &Path, max_bytes: u64) -> Result<(std::fs::File, std::fs::Metadata), InputError> {
     let file = open_nonblocking(path)?;
     // Checked on the open handle: the path cannot be swapped for a FIFO after the check.
     let meta = file.metadata()?;
@@ -252,6 +252,32 @@ pub fn read_bytes_limited(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputE
     if meta.len() > max_bytes {
         return Err(InputError::TooLarge { size: meta.len(), limit: max_bytes });
     }
+    Ok((file, meta))
+}
+
+/// The first `prefix` bytes of `path` (all of it when shorter) and whether they are the whole
+/// file, checked and recorded as [`read_bytes`] checks and records the whole: what a header
+/// reader needs without reading megabytes of pixels. A package-relative path reads its whole
+/// member (a compressed member has no cheaper prefix).
+pub fn read_prefix(path: &Path, prefix: u64) -> Result<(Vec<u8>, bool), InputError> {
+    if split_package_path(path).is_some() {
+        return read_bytes(path).map(|bytes| (bytes, true));
+    }
+    let max_bytes = limits().max_file_bytes;
+    let (file, meta) = open_regular(path, max_bytes)?;
+    let want = prefix.min(max_bytes);
+    let mut bytes = Vec::with_capacity(meta.len().min(want) as usize);
+    // One byte more than wanted tells whether the file goes on.
+    file.take(want.saturating_add(1)).read_to_end(&mut bytes)?;
+    let whole = bytes.len() as u64 <= want;
+    bytes.truncate(want as usize);
+    record_read(path, &meta);
+    Ok((bytes, whole))
+}
+
+/// Reads the whole of `path` if it is a regular file of at most `max_bytes` bytes.
+pub fn read_bytes_limited(path: &Path, max_bytes: u64) -> Result<Vec<u8>, InputError> {
+    let (file, meta) = open_regular(path, max_bytes)?;
     // `len` is a hint (files under /proc report 0; a file can grow): read at most one byte
     // past the limit, so a file that grew is caught without reading all of it.
     let mut bytes = Vec::with_capacity(meta.len() as usize);
@@ -525,6 +551,18 @@ mod tests {
         assert!(matches!(read_text(&path), Err(InputError::NotText)));
         let missing = read_bytes(&dir.path().join("missing")).unwrap_err();
         assert_eq!(missing.to_string(), "No such file or directory (os error 2)");
+    }
+
+    #[test]
+    fn a_prefix_is_read_checked_and_recorded_like_the_whole_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("image.bin");
+        std::fs::write(&path, b"0123456789").unwrap();
+        assert_eq!(read_prefix(&path, 4).unwrap(), (b"0123".to_vec(), false));
+        assert_eq!(read_prefix(&path, 10).unwrap(), (b"0123456789".to_vec(), true), "exactly the file");
+        assert_eq!(read_prefix(&path, 64).unwrap(), (b"0123456789".to_vec(), true));
+        assert!(was_read(&path), "a prefix read is an input read");
+        assert!(matches!(read_prefix(dir.path(), 4), Err(InputError::NotAFile { .. })));
     }
 
     #[test]

@@ -249,33 +249,47 @@ impl Image {
     /// [`Image::downsample`] of 8-bit texels, bit for bit: the same sums of the same linear
     /// values in the same order, read through one table per channel instead of
     /// [`Image::value`]'s per-texel dispatch (mip chains of 8-bit textures were most of a
-    /// textured scene's preparation).
+    /// textured scene's preparation), with the channel count a constant so the per-texel loop
+    /// unrolls and indexes without bounds checks.
     fn downsample_u8(&self, source: &[u8]) -> Image {
+        match self.channels {
+            1 => self.downsample_u8_with::<1>(source),
+            2 => self.downsample_u8_with::<2>(source),
+            3 => self.downsample_u8_with::<3>(source),
+            _ => self.downsample_u8_with::<4>(source),
+        }
+    }
+
+    /// [`Image::downsample_u8`] for `C` channels.
+    fn downsample_u8_with<const C: usize>(&self, source: &[u8]) -> Image {
         let (w, h) = ((self.width / 2).max(1), (self.height / 2).max(1));
-        let c = self.channels;
         let raw: [f32; 256] = std::array::from_fn(|i| f32::from(i as u8) * (1.0 / 255.0));
-        let srgb_of: [bool; 4] = std::array::from_fn(|k| self.srgb && self.is_colour(k));
-        let tables: [&[f32; 256]; 4] = srgb_of.map(|srgb| if srgb { &*SRGB_U8 } else { &raw });
-        let row = self.width * c;
-        let mut out = Vec::with_capacity(w * h * c);
-        for y in 0..h {
-            let rows = [(2 * y).min(self.height - 1) * row, (2 * y + 1).min(self.height - 1) * row];
-            for x in 0..w {
-                let cols = [(2 * x).min(self.width - 1) * c, (2 * x + 1).min(self.width - 1) * c];
-                for k in 0..c {
+        let srgb_of: [bool; C] = std::array::from_fn(|k| self.srgb && self.is_colour(k));
+        let tables: [&[f32; 256]; C] = srgb_of.map(|srgb| if srgb { &*SRGB_U8 } else { &raw });
+        let row = self.width * C;
+        let buckets = &*SRGB_U8_OF_BUCKET;
+        // A width of 1 repeats its one column (the 2x2 block's right half is the left).
+        let right = if self.width == 1 { 0 } else { C };
+        let mut out = vec![0u8; w * h * C];
+        for (y, out_row) in out.chunks_exact_mut(w * C).enumerate() {
+            let top = &source[(2 * y).min(self.height - 1) * row..][..row];
+            let bottom = &source[(2 * y + 1).min(self.height - 1) * row..][..row];
+            for (x, texel) in out_row.chunks_exact_mut(C).enumerate() {
+                let (a, b) = (&top[2 * x * C..][..right + C], &bottom[2 * x * C..][..right + C]);
+                for k in 0..C {
                     let table = tables[k];
-                    let mut sum = 0.0;
-                    for &r in &rows {
-                        for &col in &cols {
-                            sum += table[usize::from(source[r + col + k])];
-                        }
-                    }
+                    // The order of `downsample_texel_by_texel`: top left, top right, bottom
+                    // left, bottom right.
+                    let sum = table[usize::from(a[k])]
+                        + table[usize::from(a[right + k])]
+                        + table[usize::from(b[k])]
+                        + table[usize::from(b[right + k])];
                     let v = 0.25 * sum;
-                    out.push(if srgb_of[k] { nearest_srgb_u8(v) } else { round_unit_to_u8(v) });
+                    texel[k] = if srgb_of[k] { bucketed_srgb_u8(buckets, v) } else { round_unit_to_u8(v) };
                 }
             }
         }
-        Image { width: w, height: h, channels: c, srgb: self.srgb, texels: Texels::U8(out) }
+        Image { width: w, height: h, channels: C, srgb: self.srgb, texels: Texels::U8(out) }
     }
 }
 
@@ -296,6 +310,32 @@ const SRGB_BUCKETS: usize = 4096;
 static SRGB_U8_FIRST_AT_LEAST: LazyLock<[u8; SRGB_BUCKETS]> = LazyLock::new(|| {
     std::array::from_fn(|j| SRGB_U8.partition_point(|&t| t < j as f32 / SRGB_BUCKETS as f32).min(255) as u8)
 });
+
+/// Per bucket `j` of linear `[0, 1]` (as [`SRGB_U8_FIRST_AT_LEAST`]), the code
+/// [`nearest_srgb_u8`] gives every value in it, or 256 where it changes inside the bucket (255
+/// of the 4096 buckets). The code is monotonic in the value, so one that is equal at both ends
+/// of a bucket is the code throughout.
+static SRGB_U8_OF_BUCKET: LazyLock<[u16; SRGB_BUCKETS]> = LazyLock::new(|| {
+    std::array::from_fn(|j| {
+        let low = j as f32 / SRGB_BUCKETS as f32;
+        let high = f32::from_bits(((j + 1) as f32 / SRGB_BUCKETS as f32).to_bits() - 1);
+        let code = nearest_srgb_u8(low);
+        if nearest_srgb_u8(high) == code { u16::from(code) } else { 256 }
+    })
+});
+
+/// [`nearest_srgb_u8`] read from its bucket where the bucket has one code (`buckets` is
+/// [`SRGB_U8_OF_BUCKET`], passed in so a loop dereferences it once).
+#[inline]
+fn bucketed_srgb_u8(buckets: &[u16; SRGB_BUCKETS], v: f32) -> u8 {
+    if (0.0..1.0).contains(&v) {
+        let code = buckets[(v * SRGB_BUCKETS as f32) as usize];
+        if code < 256 {
+            return code as u8;
+        }
+    }
+    nearest_srgb_u8(v)
+}
 
 /// The 8-bit sRGB code whose table entry is nearest linear `v` (what the lookup reads back).
 fn nearest_srgb_u8(v: f32) -> u8 {
@@ -358,7 +398,7 @@ pub(crate) mod tests {
     #[test]
     fn eight_bit_mips_are_bit_identical_to_texel_by_texel_averaging() {
         let mut seed = 12345u32;
-        for (w, h) in [(7, 5), (64, 33), (1, 9), (2, 2)] {
+        for (w, h) in [(7, 5), (64, 33), (1, 9), (9, 1), (2, 2), (1, 1), (130, 67)] {
             for c in 1..=4 {
                 for srgb in [false, true] {
                     let texels = (0..w * h * c)
@@ -393,6 +433,14 @@ pub(crate) mod tests {
         let grid = (0..=100_000).map(|i| i as f32 / 100_000.0);
         for v in entries.chain(midpoints).chain(grid).chain([-0.5, 0.0, 1.0, 1.5, f32::NAN]) {
             assert_eq!(nearest_srgb_u8(v), searched(v), "{v}");
+            assert_eq!(bucketed_srgb_u8(&SRGB_U8_OF_BUCKET, v), searched(v), "{v}");
+        }
+        // Every bucket's ends, and the floats beside them.
+        for j in 0..=SRGB_BUCKETS as u32 {
+            let edge = j as f32 / SRGB_BUCKETS as f32;
+            for v in [f32::from_bits(edge.to_bits().wrapping_sub(1)), edge, f32::from_bits(edge.to_bits() + 1)] {
+                assert_eq!(bucketed_srgb_u8(&SRGB_U8_OF_BUCKET, v), searched(v), "{v}");
+            }
         }
         for v in (0..=255 * 64).map(|i| i as f32 / (255.0 * 64.0)).chain([-1.0, 2.0, f32::NAN]) {
             assert_eq!(round_unit_to_u8(v), (v.clamp(0.0, 1.0) * 255.0).round() as u8, "{v}");

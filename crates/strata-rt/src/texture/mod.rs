@@ -103,6 +103,12 @@ pub trait TexelSource: Send + Sync {
     /// The finest level, at the source's precision, of the size the texture was registered
     /// with.
     fn decode(&self) -> Result<Image, String>;
+
+    /// The bytes its finest level and mip chain will take, when known before decoding (a
+    /// file's header): [`prefetch`] decodes only what fits the budget's free room.
+    fn resident_bytes(&self) -> Option<u64> {
+        None
+    }
 }
 
 /// An image held in memory (tests, generated images): decoding copies it.
@@ -111,6 +117,10 @@ struct InMemory(Image);
 impl TexelSource for InMemory {
     fn decode(&self) -> Result<Image, String> {
         Ok(self.0.clone())
+    }
+
+    fn resident_bytes(&self) -> Option<u64> {
+        Some(self.0.bytes() + self.0.bytes() / 3)
     }
 }
 
@@ -362,9 +372,20 @@ fn make_room(residency: &mut Residency, incoming: u64, guard: &Guard) {
 /// the way are kept only in room the budget has free, as the first to be evicted. So a miss
 /// of a coarse level never decodes the file while a finer level is resident, and a budget
 /// smaller than the textures keeps the levels lookups reach instead of whole chains.
+///
+/// `ahead` (a [`prefetch`], no lookup waiting): no level is requested, so every level made is
+/// kept only in free room, as the first to be evicted.
 #[cold]
-fn load_level<R>(content: &Content, index: usize, guard: &Guard, read: impl FnOnce(&Image) -> R) -> Option<R> {
-    MISSES.fetch_add(1, Ordering::Relaxed);
+fn load_level<R>(
+    content: &Content,
+    index: usize,
+    guard: &Guard,
+    ahead: bool,
+    read: impl FnOnce(&Image) -> R,
+) -> Option<R> {
+    if !ahead {
+        MISSES.fetch_add(1, Ordering::Relaxed);
+    }
     let _decoding = content.decoding.lock().ok()?;
     if let Some(image) = content.levels[index].image.get(guard) {
         return Some(read(image)); // another thread made it meanwhile
@@ -416,7 +437,7 @@ fn load_level<R>(content: &Content, index: usize, guard: &Guard, read: impl FnOn
     let now = CLOCK.fetch_add(1, Ordering::Relaxed) + 1;
     // The wanted level and coarser, coarsest first: when the budget is small the coarse
     // levels stay. Then the finer levels made on the way, coarsest first, into free room.
-    let requested = (index..first + owned.len()).rev().map(|l| (l, true));
+    let requested = (index..first + owned.len()).rev().map(|l| (l, !ahead));
     let on_the_way = (first..index).rev().map(|l| (l, false));
     for (l, requested) in requested.chain(on_the_way) {
         let Some(image) = owned[l - first].take() else { continue };
@@ -452,7 +473,36 @@ fn with_level<R>(content: &Content, index: usize, guard: &Guard, read: impl FnOn
         }
         return Some(read(image));
     }
-    load_level(content, index, guard, read)
+    load_level(content, index, guard, false, read)
+}
+
+/// Decodes texture `id` and makes its mip chain ahead of its first lookup (on a thread that
+/// would otherwise idle while the render scene is built), when nothing of it is resident and
+/// its levels fit in the room the budget has free; they are kept as the first to be evicted,
+/// as levels nobody asked for. Returns whether it decoded. A texture whose size is not known
+/// before decoding is left to its first lookup.
+pub fn prefetch(id: i32) -> bool {
+    let Some(entry) = entry(id) else { return false };
+    let guard = &epoch::pin();
+    entry.content.get(guard).is_some_and(|content| prefetch_content(content, guard))
+}
+
+/// [`prefetch`] of one texture's content.
+fn prefetch_content(content: &Content, guard: &Guard) -> bool {
+    if content.failed.load(Ordering::Relaxed) || content.levels.iter().any(|l| l.image.get(guard).is_some()) {
+        return false;
+    }
+    let Some(bytes) = content.source.resident_bytes() else { return false };
+    let resident = RESIDENCY.lock().map(|r| r.resident).unwrap_or(u64::MAX);
+    if resident.saturating_add(bytes) > memory_budget() {
+        return false;
+    }
+    load_level(content, 0, guard, true, |_| ()).is_some()
+}
+
+/// The number of textures registered so far (ids `0..count`).
+pub fn count() -> usize {
+    COUNT.load(Ordering::Acquire)
 }
 
 /// The id of the texture registered under `name`, if any.
@@ -727,6 +777,10 @@ mod tests {
             self.1.fetch_add(1, Ordering::Relaxed);
             Ok(self.0.clone())
         }
+
+        fn resident_bytes(&self) -> Option<u64> {
+            Some(self.0.bytes() + self.0.bytes() / 3)
+        }
     }
 
     /// An unregistered texture of `image` (no other test's eviction reaches it), its decode
@@ -788,6 +842,50 @@ mod tests {
         assert_eq!(level(&content, 0), chain[0], "resident");
         assert_eq!(decodes.load(Ordering::Relaxed), 1);
         evict(&content, 0..);
+    }
+
+    #[test]
+    fn a_prefetched_texture_is_read_without_another_decode() {
+        let (content, decodes, chain) = counted(grey(64, 48, |x, y| ((x * 13 + y * 7) % 256) as u8));
+        let guard = &epoch::pin();
+        assert!(prefetch_content(&content, guard));
+        assert!(all_resident(&content, &chain), "the whole chain is made ahead");
+        assert!(content.levels.iter().all(|l| l.last_use.load(Ordering::Relaxed) == 0), "kept as first to go");
+        assert!(!prefetch_content(&content, guard), "a resident texture is not decoded again");
+        for (k, want) in chain.iter().enumerate() {
+            assert_eq!(&level(&content, k), want);
+        }
+        assert_eq!(decodes.load(Ordering::Relaxed), 1);
+        assert!(content.levels.iter().all(|l| l.last_use.load(Ordering::Relaxed) > 0), "read since");
+        evict(&content, 0..);
+    }
+
+    #[test]
+    fn a_texture_larger_than_the_free_room_is_not_prefetched() {
+        // 2^16 x 2^15 texels of one byte: 2.7 GiB with its chain, over the default budget
+        // (tests never raise it). Never decoded.
+        struct Huge(Arc<AtomicUsize>);
+        impl TexelSource for Huge {
+            fn decode(&self) -> Result<Image, String> {
+                self.0.fetch_add(1, Ordering::Relaxed);
+                Err("not decoded in this test".into())
+            }
+            fn resident_bytes(&self) -> Option<u64> {
+                Some((1 << 31) + (1 << 31) / 3)
+            }
+        }
+        let decodes = Arc::new(AtomicUsize::new(0));
+        let content = Content::new(1 << 16, 1 << 15, Box::new(Huge(Arc::clone(&decodes))));
+        assert!(!prefetch_content(&content, &epoch::pin()));
+        assert_eq!(decodes.load(Ordering::Relaxed), 0);
+        // Nor one whose size is unknown before decoding.
+        struct Unsized;
+        impl TexelSource for Unsized {
+            fn decode(&self) -> Result<Image, String> {
+                panic!("decoded ahead without a known size")
+            }
+        }
+        assert!(!prefetch_content(&Content::new(4, 4, Box::new(Unsized)), &epoch::pin()));
     }
 
     #[test]
