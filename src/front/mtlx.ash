@@ -654,14 +654,18 @@ color mx_coat_darkening(color base_albedo, float base_roughness, float coat_ior,
     return mix(color(1.0), delta, clamp(amount, 0.0, 1.0));
 }
 
-// A clear coat of `weight` over `base`, which it tints by `coat_color`, shaded about
-// `coat_normal` (world space; unset, the zero vector: the surface's unperturbed normal N, as
-// both specifications default it to Nworld, so a bumped base keeps a smooth coat).
-closure mx_coated(closure base, float weight, color coat_color, float roughness, float ior, color coat_normal) {
+// A clear coat of `weight` over `base`, which it tints by `coat_color` and darkens by
+// `darkening` (OpenPBR's coat darkening; color(1.0): none), shaded about `coat_normal` (world
+// space; unset, the zero vector: the surface's unperturbed normal N, as both specifications
+// default it to Nworld, so a bumped base keeps a smooth coat). The coat records the darkening
+// (`with_darkening`): the random-walk layering simulates the internal reflections it stands
+// for and divides it back out, so the base is not darkened twice.
+closure mx_coated(closure base, float weight, color coat_color, float roughness, float ior, color coat_normal,
+                  color darkening) {
     float c = clamp(weight, 0.0, 1.0);
     vector n = length(vector(coat_normal)) > 1e-8 ? normalize(vector(coat_normal)) : vector(N);
     closure coat = with_normal(dielectric_bsdf(color(1.0), clamp(ior, 1.0, 4.0), clamp(roughness, 0.0, 1.0), "R"), n);
-    return layer(coat * c, base * mix(color(1.0), clamp(coat_color, 0.0, 1.0), c));
+    return layer(with_darkening(coat, darkening) * c, base * darkening * mix(color(1.0), clamp(coat_color, 0.0, 1.0), c));
 }
 
 shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0.8, 0.8), float base_diffuse_roughness = 0.0,
@@ -697,7 +701,7 @@ shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0
     color e_base = mix(e_dielectric, base * clamp(specular_weight, 0.0, 1.0), m);
     float base_roughness = mix(mix(1.0, r0, fs), r0, m);
     color darkening = mx_coat_darkening(e_base, base_roughness, coat_ior, c * clamp(coat_darkening, 0.0, 1.0));
-    closure coated = mx_coated(mix(dielectric, metal, m) * darkening, c, coat_color, rc, coat_ior, coat_normal);
+    closure coated = mx_coated(mix(dielectric, metal, m), c, coat_color, rc, coat_ior, coat_normal, darkening);
     bsdf = layer(sheen_bsdf(clamp(fuzz_color, 0.0, 1.0), clamp(fuzz_roughness, 0.0, 1.0)) * clamp(fuzz_weight, 0.0, 1.0), coated);
 }
 
@@ -721,7 +725,7 @@ shader mx_standard_surface_bsdf(float base = 0.8, color base_color = color(1.0),
     closure dielectric = mx_dielectric_base(opaque, specular, specular_color, r, specular_IOR, transmission, transmission_color,
                                             thin_film_thickness > 0.0 ? 1.0 : 0.0, thin_film_thickness, thin_film_IOR);
     bsdf = mx_coated(mix(dielectric, mx_f82_metal(albedo, specular_color, r), clamp(metalness, 0.0, 1.0)), c, coat_color, rc,
-                     coat_IOR, coat_normal);
+                     coat_IOR, coat_normal, color(1.0));
 }
 
 // MaterialX's `surface_unlit`: emission · emission_color as emitted radiance and no BSDF

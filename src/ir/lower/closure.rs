@@ -161,6 +161,14 @@ impl FnLower<'_> {
         Lv::Scalars(self.closure_set_params(c, abi::TERM_THIN_FILM, film, Kinds::Only(ClosureKind::Dielectric)).0)
     }
 
+    /// `with_darkening(c, factor)`: `1 − factor` in the darkening words
+    /// ([`abi::TERM_DARKENING`]) of every dielectric term of `c`; other terms are unchanged.
+    pub(super) fn closure_with_darkening(&mut self, c: &[ssa::Value], factor: &[ssa::Value]) -> Lv {
+        let one = self.b.fconst(1.0);
+        let removed: Vec<ssa::Value> = factor.iter().map(|&f| self.b.binary(BinOp::FSub, one, f)).collect();
+        Lv::Scalars(self.closure_set_params(c, abi::TERM_DARKENING, &removed, Kinds::Only(ClosureKind::Dielectric)).0)
+    }
+
     /// `c` with `values` in parameter words `at..` of every term of the `kinds`: a term of a
     /// kind known when compiling is set or not, one of a kind known only when running by a
     /// select. Also whether a term of a known kind was left out.

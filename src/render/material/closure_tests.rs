@@ -2,7 +2,7 @@
 //! against evaluation, reciprocity, sample/eval/pdf consistency, closed forms, and albedo
 //! scaling against the random walk.
 
-use crate::abi::{Closure, ClosureKind, ClosureSum, ClosureTerm};
+use crate::abi::{Closure, ClosureKind, ClosureSum, ClosureTerm, TERM_DARKENING, TERM_PARAMS};
 use crate::render::material::bsdf::Bsdf;
 use crate::render::material::chi2::*;
 use crate::render::material::closure::{ClosureBsdf, LayeringMode};
@@ -13,7 +13,7 @@ use glam::{Vec2, Vec3};
 // ---------------------------------------------------------------- builders
 
 fn term(kind: ClosureKind, params: &[f32]) -> ClosureTerm {
-    let mut t = ClosureTerm { kind: kind as u32, above: 0, weight: [1.0; 3], params: [0.0; 11] };
+    let mut t = ClosureTerm { kind: kind as u32, above: 0, weight: [1.0; 3], params: [0.0; TERM_PARAMS] };
     t.params[..params.len()].copy_from_slice(params);
     t
 }
@@ -357,7 +357,7 @@ fn degenerate_closure_sums_stay_finite() {
             t.kind = (k as u32 + i as u32 * 3) % 12;
             t.above = rng.next_u32() & 0xff;
             t.weight = [0, 1, 2].map(|_| specials[rng.next_u32() as usize % specials.len()]);
-            t.params = [0; 11].map(|_| specials[rng.next_u32() as usize % specials.len()]);
+            t.params = [0; TERM_PARAMS].map(|_| specials[rng.next_u32() as usize % specials.len()]);
         }
         for mode in [LayeringMode::AlbedoScaling, LayeringMode::RandomWalk] {
             let b = ClosureBsdf::from_sum(&sum, mode);
@@ -502,4 +502,41 @@ fn thin_film_reflectance_matches_the_characteristic_matrix_at_normal_incidence()
     let want = thin_film(1.0, 1.5, 1.33, 250.0);
     assert!(s.delta && (s.f * s.wi.z / s.pdf - want).abs().max_element() < 1e-5, "{:?} vs {want}", s.f);
     assert!((want.x - want.z).abs() > 0.01, "iridescent: {want}");
+}
+
+/// A coat that records a darkening factor (`with_darkening`): albedo scaling ignores the
+/// record (the factor in the base's weight stands for the internal reflections it omits), the
+/// random walk divides it back out (it follows those reflections itself).
+#[test]
+fn the_walk_undoes_a_recorded_darkening_and_albedo_scaling_keeps_it() {
+    let factor = [0.6f32, 0.75, 0.9];
+    // (base weighted by the factor, the coat recording it)
+    let sum = |weighted: bool, recorded: bool| {
+        let mut s = ClosureSum::default();
+        s.terms[0] = term(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, 0.3, 0.0]);
+        s.terms[1] = term(ClosureKind::Diffuse, &[0.5, 0.5, 0.5]);
+        s.terms[1].above = 1;
+        for k in 0..3 {
+            if recorded {
+                s.terms[0].params[TERM_DARKENING + k] = 1.0 - factor[k];
+            }
+            if weighted {
+                s.terms[1].weight[k] = factor[k];
+            }
+        }
+        s
+    };
+    let eval = |s: ClosureSum, mode, wo, wi| ClosureBsdf::from_sum(&s, mode).eval(wo, wi);
+    let mut rng = Pcg32::new(23, 5);
+    let mut darker = 0;
+    for _ in 0..200 {
+        let (wo, wi) = (rng.dir(), rng.dir());
+        let plain = eval(sum(false, false), LayeringMode::RandomWalk, wo, wi);
+        let undone = eval(sum(true, true), LayeringMode::RandomWalk, wo, wi);
+        assert!((plain - undone).abs().max_element() <= 1e-5 * plain.max_element() + 1e-7, "{plain} vs {undone}");
+        let kept = eval(sum(true, true), LayeringMode::AlbedoScaling, wo, wi);
+        assert_eq!(kept, eval(sum(true, false), LayeringMode::AlbedoScaling, wo, wi));
+        darker += (kept.x < eval(sum(false, false), LayeringMode::AlbedoScaling, wo, wi).x) as usize;
+    }
+    assert!(darker > 50, "albedo scaling keeps the darkening: {darker} of 200 darker");
 }
