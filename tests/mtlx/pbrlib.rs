@@ -278,7 +278,10 @@ fn thin_film_and_unlit_surfaces_reach_their_closures() {
         let words = &filmed[0].params[at..at + 3];
         assert!((words[0] - 300.0).abs() < 1e-3 && words[1] == 1.33 && words[2] == 0.75, "{kind:?}: {:?}", filmed[0]);
     }
-    assert!(rendered.contains("the film colours the specular reflection and the metal, not the transmission"), "{rendered}");
+    assert!(
+        rendered.contains("the film colours the specular reflection and the metal, not the transmission"),
+        "{rendered}"
+    );
     // surface_unlit: emission · emission_color is the emission product, no BSDF.
     let text = "def Material \"M\" {\n    token outputs:mtlx:surface.connect = </M/S.outputs:surface>\n    \
                 def Shader \"S\" {\n        uniform token info:id = \"ND_surface_unlit\"\n        \

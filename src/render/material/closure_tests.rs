@@ -2,7 +2,9 @@
 //! against evaluation, reciprocity, sample/eval/pdf consistency, closed forms, and albedo
 //! scaling against the random walk.
 
-use crate::abi::{Closure, ClosureKind, ClosureSum, ClosureTerm, TERM_DARKENING, TERM_NORMAL, TERM_PARAMS, thin_film_words};
+use crate::abi::{
+    Closure, ClosureKind, ClosureSum, ClosureTerm, TERM_DARKENING, TERM_NORMAL, TERM_PARAMS, thin_film_words,
+};
 use crate::render::material::bsdf::Bsdf;
 use crate::render::material::chi2::*;
 use crate::render::material::closure::{ClosureBsdf, LayeringMode};
@@ -48,7 +50,9 @@ fn schlick(rough: f32) -> Lobe {
 /// film of index 1.4 covering 0.8 of it.
 fn filmed(l: Lobe) -> Lobe {
     let mut t = match l {
-        Lobe::Specular { .. } => term(ClosureKind::GeneralizedSchlick, &[0.9, 0.6, 0.3, 0.8, 0.7, 0.9, 1.0, 1.0, 1.0, 5.0]),
+        Lobe::Specular { .. } => {
+            term(ClosureKind::GeneralizedSchlick, &[0.9, 0.6, 0.3, 0.8, 0.7, 0.9, 1.0, 1.0, 1.0, 5.0])
+        }
         _ => term(ClosureKind::Metal, &[0.95, 0.64, 0.54, 1.0, 0.8, 0.6]),
     };
     let (kind, rough) = match l {
@@ -558,7 +562,10 @@ fn a_thin_film_on_metals_matches_the_characteristic_matrix_and_vanishes_in_the_l
                     .iter()
                     .map(|&l| film_on_conductor_by_matrix(film as f64, eta[c] as f64, k[c] as f64, d as f64, l) / 3.0)
                     .sum();
-                assert!((got[c] as f64 - want).abs() < 1e-4, "film {film}, {d} nm on {eta}+i{k}, channel {c}: {got} vs {want}");
+                assert!(
+                    (got[c] as f64 - want).abs() < 1e-4,
+                    "film {film}, {d} nm on {eta}+i{k}, channel {c}: {got} vs {want}"
+                );
             }
         }
         for cos in [1.0f32, 0.8, 0.5, 0.2, 0.03] {
@@ -589,7 +596,10 @@ fn a_thin_film_on_metals_matches_the_characteristic_matrix_and_vanishes_in_the_l
     assert!((f.eval(0.6) - mixed).abs().max_element() < 1e-6, "{} vs {mixed}", f.eval(0.6));
     // Weight 0 or thickness 0: no film, the plain metal.
     for film in [[300.0, 1.4, 0.0], [0.0, 1.4, 1.0]] {
-        assert!(matches!(Lobe::from_term(&with_film(ClosureKind::Conductor, &conductor, film)), Lobe::Bsdf(Bsdf::Metal { .. })));
+        assert!(matches!(
+            Lobe::from_term(&with_film(ClosureKind::Conductor, &conductor, film)),
+            Lobe::Bsdf(Bsdf::Metal { .. })
+        ));
     }
     let metal = [0.95, 0.64, 0.54, 1.0, 0.8, 0.6, 0.0];
     assert!(matches!(fresnel_of(&with_film(ClosureKind::Metal, &metal, [300.0, 1.4, 1.0])), Fresnel::Conductor { .. }));

@@ -108,9 +108,13 @@ impl Fresnel {
                     None => bare,
                     Some(film) => film.cover(
                         bare,
-                        film_on_schlick(cos, film.eta, film.thickness, |c2| {
-                            schlick_f82(c2, color0, color82, color90, exponent)
-                        }, color0),
+                        film_on_schlick(
+                            cos,
+                            film.eta,
+                            film.thickness,
+                            |c2| schlick_f82(c2, color0, color82, color90, exponent),
+                            color0,
+                        ),
                     ),
                 }
             }
