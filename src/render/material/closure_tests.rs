@@ -627,12 +627,12 @@ fn the_walk_undoes_a_recorded_darkening_and_albedo_scaling_keeps_it() {
         s.terms[0] = term(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, 0.3, 0.0]);
         s.terms[1] = term(ClosureKind::Diffuse, &[0.5, 0.5, 0.5]);
         s.terms[1].above = 1;
-        for k in 0..3 {
+        for (k, &f) in factor.iter().enumerate() {
             if recorded {
-                s.terms[0].params[TERM_DARKENING + k] = 1.0 - factor[k];
+                s.terms[0].params[TERM_DARKENING + k] = 1.0 - f;
             }
             if weighted {
-                s.terms[1].weight[k] = factor[k];
+                s.terms[1].weight[k] = f;
             }
         }
         s
