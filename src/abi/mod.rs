@@ -167,18 +167,23 @@ pub enum ClosureKind {
     Diffuse = 1,
     /// GGX dielectric coat over diffuse: `[albedo rgb, specular rgb, roughness, ior]`.
     Glossy = 2,
-    /// GGX conductor: `[reflectivity rgb, edge_tint rgb, roughness]`.
+    /// GGX conductor: `[reflectivity rgb, edge_tint rgb, roughness, film thickness, film ior,
+    /// film weight]` ([`thin_film_words`]).
     Metal = 3,
     /// Rough dielectric: `[tint rgb, roughness, ior]`.
     Glass = 4,
-    /// GGX conductor from its complex index: `[eta rgb, k rgb, roughness]`.
+    /// GGX conductor from its complex index: `[eta rgb, k rgb, roughness, film thickness, film
+    /// ior, film weight]` ([`thin_film_words`]).
     Conductor = 5,
     /// GGX dielectric interface: `[tint rgb, ior, roughness, scatter, film thickness (nm),
-    /// film ior]`, scatter 0 reflects only (a coat), 1 transmits only, 2 does both; a film
-    /// thickness of 0 is no thin film.
+    /// film ior, film weight, darkening rgb]`, scatter 0 reflects only (a coat), 1 transmits
+    /// only, 2 does both; a film thickness or weight of 0 is no thin film
+    /// ([`thin_film_words`]); darkening ([`TERM_DARKENING`]) is what a coat's darkening
+    /// removed from the terms under it.
     Dielectric = 6,
     /// GGX reflection with the generalized Schlick Fresnel and F82 tint:
-    /// `[color0 rgb, color82 rgb, color90 rgb, exponent, roughness]`.
+    /// `[color0 rgb, color82 rgb, color90 rgb, exponent, roughness, film thickness, film ior,
+    /// film weight]` ([`thin_film_words`]).
     GeneralizedSchlick = 7,
     /// Oren–Nayar diffuse: `[albedo rgb, roughness, energy_compensation (0 or 1)]`.
     OrenNayar = 8,
@@ -226,16 +231,33 @@ pub struct Closure {
 /// compile-time error at the operator that overflows, never a silent drop.
 pub const MAX_CLOSURE_TERMS: usize = 8;
 /// Parameter words of one [`ClosureTerm`].
-pub const TERM_PARAMS: usize = 11;
+pub const TERM_PARAMS: usize = 15;
 /// Where a term's own shading normal starts in its parameters (three words, world space; zero:
 /// the layer's shading normal), set by `with_normal`. Every kind's parameters end before it
 /// but [`ClosureKind::GeneralizedSchlick`]'s, which has no normal of its own.
-pub const TERM_NORMAL: usize = 8;
-/// Where a [`ClosureKind::Dielectric`] term's thin film is in its parameters: thickness in
-/// nanometres (0: none) and the film's index, set by `with_thin_film`.
-pub const TERM_THIN_FILM: usize = 6;
+pub const TERM_NORMAL: usize = 12;
+/// Where a term's thin film is in its parameters, for the kinds that take one: three words,
+/// thickness in nanometres, the film's index and its weight (coverage; thickness or weight 0:
+/// none), set by `with_thin_film`. Dielectrics at 6 (their reflection; a transmitting one
+/// keeps its plain Fresnel), metals and conductors at 7, generalized Schlick at 11.
+pub const fn thin_film_words(kind: ClosureKind) -> Option<usize> {
+    match kind {
+        ClosureKind::Dielectric => Some(6),
+        ClosureKind::Metal | ClosureKind::Conductor => Some(7),
+        ClosureKind::GeneralizedSchlick => Some(11),
+        _ => None,
+    }
+}
+/// The kinds [`thin_film_words`] places a film in.
+pub const THIN_FILM_KINDS: [ClosureKind; 4] =
+    [ClosureKind::Dielectric, ClosureKind::Metal, ClosureKind::Conductor, ClosureKind::GeneralizedSchlick];
+/// Where a [`ClosureKind::Dielectric`] term (a coat) records the darkening applied to the
+/// terms under it: `1 − factor` per channel (0: none), set by `with_darkening`. Albedo
+/// scaling ignores it (the factor stands in for the coat's internal reflections, which it
+/// omits); the random walk simulates those reflections and divides the factor back out.
+pub const TERM_DARKENING: usize = 9;
 
-/// One weighted lobe of a [`ClosureSum`]. Field order is the C ABI (16 words).
+/// One weighted lobe of a [`ClosureSum`]. Field order is the C ABI (20 words).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ClosureTerm {

@@ -256,7 +256,7 @@ const UNREAD_SURFACE_INPUTS: &[(&str, &str, &str)] = &[
     (
         "open_pbr_surface",
         "thin_film_weight",
-        "the film colours the dielectric's specular reflection only (not the metal, not transmission)",
+        "the film colours the specular reflection and the metal, not the transmission",
     ),
     ("open_pbr_surface", "geometry_thin_walled", "surfaces are never thin-walled"),
     ("open_pbr_surface", "geometry_tangent", "reflection is isotropic: tangents are not read"),
@@ -276,7 +276,7 @@ const UNREAD_SURFACE_INPUTS: &[(&str, &str, &str)] = &[
     (
         "standard_surface",
         "thin_film_thickness",
-        "the film colours the dielectric's specular reflection only (not the metal, not transmission)",
+        "the film colours the specular reflection and the metal, not the transmission",
     ),
     ("standard_surface", "thin_walled", "surfaces are never thin-walled"),
     ("mx_surface", "thin_walled", "surfaces are never thin-walled"),
@@ -323,8 +323,6 @@ const UNREAD_NODE_INPUTS: &[(&str, &str, &str)] = &[
     ("ND_generalized_schlick_bsdf", "normal", "generalized_schlick_bsdf uses the shading normal"),
     ("*", "tangent", "lobes are isotropic: tangents are not read"),
     ("*", "retroreflective", "lobes are not retroreflective"),
-    ("ND_conductor_bsdf", "thinfilm_thickness", "no thin-film iridescence on conductors"),
-    ("ND_generalized_schlick_bsdf", "thinfilm_thickness", "no thin-film iridescence on generalized_schlick_bsdf"),
     ("*", "roughness", ANISOTROPIC_ALPHA),
     ("ND_generalized_schlick_bsdf", "scatter_mode", "generalized_schlick_bsdf reflects only"),
     ("ND_sheen_bsdf", "mode", "sheen is Conty and Kulla's Charlie sheen"),

@@ -125,9 +125,14 @@ intrinsics! {
     // with_normal(c, n): every term of `c` shaded about its own world-space normal `n` (zero:
     // the layer's shading normal); generalized_schlick_bsdf terms have no room for one.
     WithNormal = "with_normal": Fixed(&[CL, V], CL),
-    // with_thin_film(c, thickness_nm, ior): a thin film on every dielectric_bsdf term of `c`
-    // (Airy interference in its Fresnel; thickness 0: none).
-    WithThinFilm = "with_thin_film": Fixed(&[CL, F, F], CL),
+    // with_thin_film(c, thickness_nm, ior, weight): a thin film on every dielectric, metal,
+    // conductor and generalized Schlick term of `c` (Airy interference in its reflection's
+    // Fresnel, mixed in by `weight`; thickness or weight 0: none).
+    WithThinFilm = "with_thin_film": Fixed(&[CL, F, F, F], CL),
+    // with_darkening(coat, factor): records on every dielectric_bsdf term of `coat` that the
+    // terms under it were multiplied by `factor` for the coat's internal reflections (OpenPBR's
+    // coat_darkening), so the random-walk layering, which simulates them, divides it back out.
+    WithDarkening = "with_darkening": Fixed(&[CL, C], CL),
 }
 
 impl Intrinsic {
@@ -152,7 +157,10 @@ impl Intrinsic {
     /// Whether this builds or combines BSDF closures.
     pub fn is_closure(self) -> bool {
         self.closure_kind().is_some()
-            || matches!(self, Intrinsic::Layer | Intrinsic::WithNormal | Intrinsic::WithThinFilm)
+            || matches!(
+                self,
+                Intrinsic::Layer | Intrinsic::WithNormal | Intrinsic::WithThinFilm | Intrinsic::WithDarkening
+            )
     }
 
     /// The lobe a BSDF constructor builds (its arguments, flattened, are the lobe's

@@ -493,6 +493,13 @@ float mx_isotropic_roughness(color alpha) {
     return sqrt(sqrt(clamp(alpha.r, 0.0, 1.0) * clamp(alpha.g, 0.0, 1.0)));
 }
 
+// MaterialX 1.39's `thinfilm_thickness` (nm) and `thinfilm_ior` inputs of the specular lobes:
+// a film over the whole lobe. No film (thickness 0) leaves the lobe's words as it wrote them.
+closure mx_thinfilm(closure lobe, float thickness, float ior) {
+    float filmed = thickness > 0.0 ? 1.0 : 0.0;
+    return with_thin_film(lobe, max(thickness, 0.0), filmed > 0.0 ? clamp(ior, 1.0, 4.0) : 0.0, filmed);
+}
+
 shader mx_oren_nayar_diffuse_bsdf(float weight = 1.0, color color_ = color(0.18), float roughness = 0.0,
                                   color normal_ = color(0.0), int energy_compensation = 0, output closure out) {
     closure lobe = oren_nayar_diffuse_bsdf(clamp(color_, 0.0, 1.0), clamp(roughness, 0.0, 1.0), energy_compensation != 0 ? 1.0 : 0.0);
@@ -508,25 +515,23 @@ shader mx_dielectric_bsdf(float weight = 1.0, color tint = color(1.0), float ior
                           float thinfilm_ior = 1.5, color normal_ = color(0.0), color tangent = color(0.0),
                           string distribution = "ggx", string scatter_mode = "R", output closure out) {
     closure lobe = dielectric_bsdf(clamp(tint, 0.0, 1.0), clamp(ior, 1.0, 4.0), mx_isotropic_roughness(roughness), scatter_mode);
-    // No film (thickness 0) leaves the lobe's words as dielectric_bsdf wrote them.
-    float film_ior = thinfilm_thickness > 0.0 ? clamp(thinfilm_ior, 1.0, 4.0) : 0.0;
-    closure filmed = with_thin_film(lobe, max(thinfilm_thickness, 0.0), film_ior);
-    out = with_normal(filmed, vector(normal_)) * clamp(weight, 0.0, 1.0);
+    out = with_normal(mx_thinfilm(lobe, thinfilm_thickness, thinfilm_ior), vector(normal_)) * clamp(weight, 0.0, 1.0);
 }
 shader mx_conductor_bsdf(float weight = 1.0, color ior = color(0.183, 0.421, 1.373), color extinction = color(3.424, 2.346, 1.770),
                          color roughness = color(0.05, 0.05, 0.0), int retroreflective = 0, float thinfilm_thickness = 0.0,
                          float thinfilm_ior = 1.5, color normal_ = color(0.0), color tangent = color(0.0),
                          string distribution = "ggx", output closure out) {
-    out = with_normal(conductor_bsdf(ior, extinction, mx_isotropic_roughness(roughness)), vector(normal_)) * clamp(weight, 0.0, 1.0);
+    closure lobe = conductor_bsdf(ior, extinction, mx_isotropic_roughness(roughness));
+    out = with_normal(mx_thinfilm(lobe, thinfilm_thickness, thinfilm_ior), vector(normal_)) * clamp(weight, 0.0, 1.0);
 }
 shader mx_generalized_schlick_bsdf(float weight = 1.0, color color0 = color(1.0), color color82 = color(1.0),
                                    color color90 = color(1.0), float exponent = 5.0, color roughness = color(0.05, 0.05, 0.0),
                                    int retroreflective = 0, float thinfilm_thickness = 0.0, float thinfilm_ior = 1.5,
                                    color normal_ = color(0.0), color tangent = color(0.0), string distribution = "ggx",
                                    string scatter_mode = "R", output closure out) {
-    out = generalized_schlick_bsdf(clamp(color0, 0.0, 1.0), clamp(color82, 0.0, 1.0), clamp(color90, 0.0, 1.0), exponent,
-                                   mx_isotropic_roughness(roughness))
-          * clamp(weight, 0.0, 1.0);
+    closure lobe = generalized_schlick_bsdf(clamp(color0, 0.0, 1.0), clamp(color82, 0.0, 1.0), clamp(color90, 0.0, 1.0),
+                                            exponent, mx_isotropic_roughness(roughness));
+    out = mx_thinfilm(lobe, thinfilm_thickness, thinfilm_ior) * clamp(weight, 0.0, 1.0);
 }
 shader mx_sheen_bsdf(float weight = 1.0, color color_ = color(1.0), float roughness = 0.3, color normal_ = color(0.0),
                      string mode = "conty_kulla", output closure out) {
@@ -597,20 +602,27 @@ substance mx_surface {
 //   mix(1, coat_color, coat_weight); in OpenPBR the coat roughens the specular lobes below
 //   (r' = mix(r, min(1, (r⁴ + 2 r_c⁴)^¼), coat_weight)), in Standard Surface by
 //   coat_affect_roughness · coat · coat_roughness towards 1; in OpenPBR the coat darkens the
-//   base by its internal reflections (coat_darkening, below);
+//   base by its internal reflections (coat_darkening, below; the random walk undoes it);
+// - thin film: an Airy film on the specular reflection and the metal (mx_film), not on the
+//   transmission (reported);
 // - fuzz (OpenPBR, over the coat) and sheen (Standard Surface, over the diffuse): Charlie sheen;
 // - emission: the `emission` product; opacity: the layer mask.
 // Roughness is perceptual (GGX alpha = roughness²), as both specifications define it.
 
-// The dielectric base both surfaces share (see above).
-// The specular reflection is under a thin film of `film_weight` (`film_thickness` nm, index
-// `film_ior`; weight 0: none), mixed as OpenPBR mixes its film in.
+// The thin film both surfaces put on their specular reflection and metal: `weight` of it
+// (`thickness` nm, index `ior`; weight 0: none) mixed into the Fresnel curve, as OpenPBR
+// mixes its film in.
+closure mx_film(closure lobe, float weight, float thickness, float ior) {
+    return with_thin_film(lobe, max(thickness, 0.0), clamp(ior, 1.0, 4.0), clamp(weight, 0.0, 1.0));
+}
+
+// The dielectric base both surfaces share (see above), its specular reflection under the film
+// (`mx_film`).
 closure mx_dielectric_base(closure opaque, float specular_weight, color specular_color, float roughness, float ior,
                            float transmission, color transmission_color, float film_weight, float film_thickness,
                            float film_ior) {
     closure bare = dielectric_bsdf(clamp(specular_color, 0.0, 1.0), clamp(ior, 1.0, 4.0), roughness, "R");
-    closure filmed = with_thin_film(bare, max(film_thickness, 0.0), clamp(film_ior, 1.0, 4.0));
-    closure specular = mix(bare, filmed, clamp(film_weight, 0.0, 1.0)) * clamp(specular_weight, 0.0, 1.0);
+    closure specular = mx_film(bare, film_weight, film_thickness, film_ior) * clamp(specular_weight, 0.0, 1.0);
     closure glass = dielectric_bsdf(clamp(transmission_color, 0.0, 1.0), clamp(ior, 1.0001, 4.0), roughness, "RT");
     return mix(layer(specular, opaque), glass, clamp(transmission, 0.0, 1.0));
 }
@@ -654,14 +666,18 @@ color mx_coat_darkening(color base_albedo, float base_roughness, float coat_ior,
     return mix(color(1.0), delta, clamp(amount, 0.0, 1.0));
 }
 
-// A clear coat of `weight` over `base`, which it tints by `coat_color`, shaded about
-// `coat_normal` (world space; unset, the zero vector: the surface's unperturbed normal N, as
-// both specifications default it to Nworld, so a bumped base keeps a smooth coat).
-closure mx_coated(closure base, float weight, color coat_color, float roughness, float ior, color coat_normal) {
+// A clear coat of `weight` over `base`, which it tints by `coat_color` and darkens by
+// `darkening` (OpenPBR's coat darkening; color(1.0): none), shaded about `coat_normal` (world
+// space; unset, the zero vector: the surface's unperturbed normal N, as both specifications
+// default it to Nworld, so a bumped base keeps a smooth coat). The coat records the darkening
+// (`with_darkening`): the random-walk layering simulates the internal reflections it stands
+// for and divides it back out, so the base is not darkened twice.
+closure mx_coated(closure base, float weight, color coat_color, float roughness, float ior, color coat_normal,
+                  color darkening) {
     float c = clamp(weight, 0.0, 1.0);
     vector n = length(vector(coat_normal)) > 1e-8 ? normalize(vector(coat_normal)) : vector(N);
     closure coat = with_normal(dielectric_bsdf(color(1.0), clamp(ior, 1.0, 4.0), clamp(roughness, 0.0, 1.0), "R"), n);
-    return layer(coat * c, base * mix(color(1.0), clamp(coat_color, 0.0, 1.0), c));
+    return layer(with_darkening(coat, darkening) * c, base * darkening * mix(color(1.0), clamp(coat_color, 0.0, 1.0), c));
 }
 
 shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0.8, 0.8), float base_diffuse_roughness = 0.0,
@@ -686,7 +702,8 @@ shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0
     closure dielectric = mx_dielectric_base(diffuse, specular_weight > 0.0 ? 1.0 : 0.0, specular_color, r, ior,
                                             transmission_weight, transmission_color, thin_film_weight,
                                             thin_film_thickness * 1000.0, thin_film_ior);
-    closure metal = mx_f82_metal(base, specular_color, r) * clamp(specular_weight, 0.0, 1.0);
+    closure metal = mx_film(mx_f82_metal(base, specular_color, r), thin_film_weight, thin_film_thickness * 1000.0, thin_film_ior)
+                    * clamp(specular_weight, 0.0, 1.0);
     // The base's albedo at normal incidence and roughness estimate, for the coat's darkening:
     // its slabs' albedos mixed by their weights (the glass returns only its reflection).
     float m = clamp(base_metalness, 0.0, 1.0);
@@ -697,7 +714,7 @@ shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0
     color e_base = mix(e_dielectric, base * clamp(specular_weight, 0.0, 1.0), m);
     float base_roughness = mix(mix(1.0, r0, fs), r0, m);
     color darkening = mx_coat_darkening(e_base, base_roughness, coat_ior, c * clamp(coat_darkening, 0.0, 1.0));
-    closure coated = mx_coated(mix(dielectric, metal, m) * darkening, c, coat_color, rc, coat_ior, coat_normal);
+    closure coated = mx_coated(mix(dielectric, metal, m), c, coat_color, rc, coat_ior, coat_normal, darkening);
     bsdf = layer(sheen_bsdf(clamp(fuzz_color, 0.0, 1.0), clamp(fuzz_roughness, 0.0, 1.0)) * clamp(fuzz_weight, 0.0, 1.0), coated);
 }
 
@@ -720,8 +737,9 @@ shader mx_standard_surface_bsdf(float base = 0.8, color base_color = color(1.0),
                            diffuse);
     closure dielectric = mx_dielectric_base(opaque, specular, specular_color, r, specular_IOR, transmission, transmission_color,
                                             thin_film_thickness > 0.0 ? 1.0 : 0.0, thin_film_thickness, thin_film_IOR);
-    bsdf = mx_coated(mix(dielectric, mx_f82_metal(albedo, specular_color, r), clamp(metalness, 0.0, 1.0)), c, coat_color, rc,
-                     coat_IOR, coat_normal);
+    closure metal = mx_film(mx_f82_metal(albedo, specular_color, r), thin_film_thickness > 0.0 ? 1.0 : 0.0, thin_film_thickness,
+                            thin_film_IOR);
+    bsdf = mx_coated(mix(dielectric, metal, clamp(metalness, 0.0, 1.0)), c, coat_color, rc, coat_IOR, coat_normal, color(1.0));
 }
 
 // MaterialX's `surface_unlit`: emission · emission_color as emitted radiance and no BSDF

@@ -492,6 +492,7 @@ fn intrinsic_value(i: Intrinsic, a: &[Value]) -> Result<Value, Stop> {
         | TranslucentBsdf
         | Layer
         | WithNormal
-        | WithThinFilm => return Err(Stop::NotConstant),
+        | WithThinFilm
+        | WithDarkening => return Err(Stop::NotConstant),
     })
 }

@@ -467,7 +467,8 @@ fn the_coat_darkens_a_lambert_base_as_the_interfaced_lambertian_does() {
     // fraction K = 1 − (1 − E_F) / η² returns by internal reflection (E_F the hemispherical
     // Fresnel albedo, integrated here from the exact Fresnel, not the specification's fit).
     // Two references: that closed form, and the random-walk layering, which follows the
-    // internal reflections themselves (with coat_darkening 0, so the walk alone darkens).
+    // internal reflections themselves, so it must give the same with coat_darkening 1 (the coat
+    // records the factor and the walk divides it back out) as with 0.
     let (rho, eta) = (0.5f64, 1.5f64);
     let n = 200_000;
     let e_f: f64 = (0..n).map(|k| (k as f64 + 0.5) / n as f64).map(|mu| 2.0 * fresnel(mu, eta) * mu / n as f64).sum();
@@ -496,12 +497,19 @@ fn the_coat_darkens_a_lambert_base_as_the_interfaced_lambertian_does() {
     let (plain, _) = directional_albedo(&surface(0.0), 1.0, 200_000);
     let walk = ClosureBsdf::from_sum(&surface(0.0), LayeringMode::RandomWalk);
     let walked = walk::directional_albedo(&walk, 1.0, 400_000, 7) as f64;
+    let walk_darkened = ClosureBsdf::from_sum(&surface(1.0), LayeringMode::RandomWalk);
+    let walked_darkened = walk::directional_albedo(&walk_darkened, 1.0, 400_000, 7) as f64;
     eprintln!(
         "coat (η {eta}) over Lambert ρ {rho} at normal incidence: darkened {darkened:.4} ± {se:.4}, \
-         interfaced Lambertian {interfaced:.4}, random walk {walked:.4}, undarkened {plain:.4}"
+         interfaced Lambertian {interfaced:.4}, random walk {walked:.4} (coat_darkening 1: {walked_darkened:.4}), \
+         undarkened {plain:.4}"
     );
     assert!((darkened - interfaced).abs() < 0.003 + 4.0 * se, "darkened {darkened} vs closed form {interfaced}");
     assert!((walked - interfaced).abs() < 0.01, "random walk {walked} vs closed form {interfaced}");
+    assert!(
+        (walked_darkened - interfaced).abs() < 0.01,
+        "random walk with coat_darkening 1: {walked_darkened} vs closed form {interfaced} (darkened twice?)"
+    );
     // Without darkening the base shows its albedo through the coat's transmission alone.
     let undarkened = f0 + (1.0 - f0) * rho;
     assert!((plain - undarkened).abs() < 0.003 + 4.0 * se, "coat_darkening 0: {plain} vs {undarkened}");

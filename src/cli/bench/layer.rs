@@ -8,7 +8,7 @@ use glam::{Vec2, Vec3};
 use std::fmt::Write;
 use std::path::Path;
 use std::time::Instant;
-use strata::abi::{ClosureKind, ClosureSum, ClosureTerm};
+use strata::abi::{ClosureKind, ClosureSum, ClosureTerm, TERM_PARAMS};
 use strata::render::material::closure::walk::directional_albedo;
 use strata::render::material::closure::{ClosureBsdf, LayeringMode};
 
@@ -21,9 +21,11 @@ const BASE_ALBEDO: f32 = 0.5;
 /// `layer(dielectric_bsdf(1, 1.5, r, "R"), diffuse_bsdf(base))` as compiled code returns it.
 fn coated(roughness: f32, base: f32) -> ClosureSum {
     let mut sum = ClosureSum::default();
-    let mut coat = ClosureTerm { kind: ClosureKind::Dielectric as u32, above: 0, weight: [1.0; 3], params: [0.0; 11] };
+    let mut coat =
+        ClosureTerm { kind: ClosureKind::Dielectric as u32, above: 0, weight: [1.0; 3], params: [0.0; TERM_PARAMS] };
     coat.params[..6].copy_from_slice(&[1.0, 1.0, 1.0, 1.5, roughness, 0.0]);
-    let mut diffuse = ClosureTerm { kind: ClosureKind::Diffuse as u32, above: 1, weight: [1.0; 3], params: [0.0; 11] };
+    let mut diffuse =
+        ClosureTerm { kind: ClosureKind::Diffuse as u32, above: 1, weight: [1.0; 3], params: [0.0; TERM_PARAMS] };
     diffuse.params[..3].copy_from_slice(&[base; 3]);
     sum.terms[0] = coat;
     sum.terms[1] = diffuse;

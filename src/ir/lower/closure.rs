@@ -155,10 +155,24 @@ impl FnLower<'_> {
         Lv::Scalars(out)
     }
 
-    /// `with_thin_film(c, thickness, ior)`: a thin film (thickness in nm, its index) on every
-    /// dielectric term of `c` ([`abi::TERM_THIN_FILM`]); other terms are unchanged.
+    /// `with_thin_film(c, thickness, ior, weight)`: a thin film (thickness in nm, its index,
+    /// its coverage) on every term of `c` of a kind that takes one ([`abi::thin_film_words`]:
+    /// dielectrics, metals, conductors, generalized Schlick); other terms are unchanged.
     pub(super) fn closure_with_thin_film(&mut self, c: &[ssa::Value], film: &[ssa::Value]) -> Lv {
-        Lv::Scalars(self.closure_set_params(c, abi::TERM_THIN_FILM, film, Kinds::Only(ClosureKind::Dielectric)).0)
+        let mut out = c.to_vec();
+        for kind in abi::THIN_FILM_KINDS {
+            let at = abi::thin_film_words(kind).expect("a kind that takes a film");
+            out = self.closure_set_params(&out, at, film, Kinds::Only(kind)).0;
+        }
+        Lv::Scalars(out)
+    }
+
+    /// `with_darkening(c, factor)`: `1 − factor` in the darkening words
+    /// ([`abi::TERM_DARKENING`]) of every dielectric term of `c`; other terms are unchanged.
+    pub(super) fn closure_with_darkening(&mut self, c: &[ssa::Value], factor: &[ssa::Value]) -> Lv {
+        let one = self.b.fconst(1.0);
+        let removed: Vec<ssa::Value> = factor.iter().map(|&f| self.b.binary(BinOp::FSub, one, f)).collect();
+        Lv::Scalars(self.closure_set_params(c, abi::TERM_DARKENING, &removed, Kinds::Only(ClosureKind::Dielectric)).0)
     }
 
     /// `c` with `values` in parameter words `at..` of every term of the `kinds`: a term of a

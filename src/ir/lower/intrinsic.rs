@@ -149,9 +149,10 @@ impl FnLower<'_> {
             Layer => self.closure_concat(&a[0], &a[1], true, at),
             WithNormal => self.closure_with_normal(&a[0], &a[1], at),
             WithThinFilm => {
-                let film = [a[1][0], a[2][0]];
+                let film = [a[1][0], a[2][0], a[3][0]];
                 self.closure_with_thin_film(&a[0], &film)
             }
+            WithDarkening => self.closure_with_darkening(&a[0], &a[1]),
             DielectricBsdf => {
                 // The scatter mode string becomes the lobe's last parameter: 0 R, 1 T, 2 RT.
                 let Some(mode) = self.constant_string(&args[3], frame, "the scatter mode") else {

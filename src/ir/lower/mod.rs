@@ -104,7 +104,7 @@ fn lower_here(lib: &Library, wired: &WiredMaterial, options: LowerOptions, diags
         if let Some(surface) = &layer.surface {
             functions.push(cx.entry(EntryKind::Surface(l), closure::CLOSURE_WORDS as u32, |f| {
                 // Only the terms that may be non-empty are written; the caller clears the rest
-                // (`MaterialCode::surface_sum`), so a single lobe costs 16 words, not 128.
+                // (`MaterialCode::surface_sum`), so a single lobe costs 20 words, not 160.
                 let closure = f.operand(surface, Type::CLOSURE).scalars();
                 let live = f.live_terms(&closure);
                 f.out_words(0, &closure[..live * closure::TERM_WORDS]);

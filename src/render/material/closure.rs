@@ -29,7 +29,7 @@
 //! shading frame. The attenuation of the terms under it keeps using the shading frame's
 //! cosines, and a walk over a stack with a tilted term falls back to albedo scaling.
 
-use crate::abi::{ClosureKind, ClosureSum, ClosureTerm, MAX_CLOSURE_TERMS, TERM_NORMAL};
+use crate::abi::{ClosureKind, ClosureSum, ClosureTerm, MAX_CLOSURE_TERMS, TERM_DARKENING, TERM_NORMAL};
 use crate::render::material::bsdf::{Bsdf, BsdfSample, finish};
 use crate::render::material::frame::Frame;
 use crate::render::material::lobes::Lobe;
@@ -75,6 +75,9 @@ pub(crate) struct Term {
     /// The rotation from the shading frame to the frame of the term's own normal, if it has
     /// one that differs ([`ClosureBsdf::set_term_normals`]).
     tilt: Option<Quat>,
+    /// The factor the shader multiplied the terms under this one by for its internal
+    /// reflections ([`TERM_DARKENING`]; 1: none). Only the random walk reads it.
+    pub(crate) darkening: Vec3,
 }
 
 impl Term {
@@ -130,6 +133,17 @@ fn clamped_weight(t: &ClosureTerm) -> Vec3 {
     Vec3::from_array(t.weight.map(|w| if w.is_nan() { 0.0 } else { w.clamp(0.0, 1.0) }))
 }
 
+/// The darkening factor a coat term records ([`TERM_DARKENING`]), each channel in [0, 1]
+/// (1: none, also for other kinds and non-finite words).
+#[inline]
+fn darkening(t: &ClosureTerm) -> Vec3 {
+    if t.kind != ClosureKind::Dielectric as u32 {
+        return Vec3::ONE;
+    }
+    let removed = Vec3::from_slice(&t.params[TERM_DARKENING..TERM_DARKENING + 3]);
+    if removed.is_finite() { (Vec3::ONE - removed).clamp(Vec3::ZERO, Vec3::ONE) } else { Vec3::ONE }
+}
+
 /// Whether a term is decoded (not empty, some weight).
 #[inline]
 fn is_live(t: &ClosureTerm) -> bool {
@@ -178,6 +192,7 @@ const EMPTY_TERM: Term = Term {
     inv_norm: Vec3::ZERO,
     importance: 0.0,
     tilt: None,
+    darkening: Vec3::ONE,
 };
 
 /// Attenuations `a_i(μ)` of every term (see the module docs).
@@ -236,7 +251,14 @@ impl ClosureBsdf {
             lobes[len] = (Lobe::from_term(t), weight, above);
             len += 1;
         }
-        self.set_lobes(&lobes[..len], mode)
+        self.set_lobes(&lobes[..len], mode);
+        if self.layered && mode == LayeringMode::RandomWalk {
+            for (k, &p) in position.iter().enumerate() {
+                if p < len {
+                    self.terms[p].darkening = darkening(&terms[k]);
+                }
+            }
+        }
     }
 
     /// The closure with no terms (black).
@@ -265,7 +287,8 @@ impl ClosureBsdf {
             let lobe = if covered & (1 << i) != 0 { lobe.covering() } else { lobe };
             let above = above & ((1u16 << i) - 1) as u8;
             b.layered |= above != 0;
-            b.terms[i] = Term { lobe, weight, above, inv_norm: Vec3::ONE, importance: 0.0, tilt: None };
+            b.terms[i] =
+                Term { lobe, weight, above, inv_norm: Vec3::ONE, importance: 0.0, tilt: None, darkening: Vec3::ONE };
             b.len = i + 1;
         }
         for t in b.terms.iter_mut().take(old_len).skip(b.len) {
@@ -555,7 +578,10 @@ pub mod walk {
     //! outside keeps its tint; transmission and internal reflection are untinted), the base is the
     //! weighted sum of the terms under it, and a weighted coat `w` is `w · walk + (1 − w) · base`
     //! (what albedo scaling computes too). Other stacks (several tops, nested layers, a
-    //! non-dielectric top, a transmitting base) fall back to albedo scaling.
+    //! non-dielectric top, a transmitting base) fall back to albedo scaling. A coat that
+    //! records a darkening factor (`with_darkening`, OpenPBR's `coat_darkening`: the shader's
+    //! stand-in for the internal reflections albedo scaling omits) has it divided back out of
+    //! the base's weights, since the walk follows those reflections itself.
     //!
     //! `eval` is an unbiased stochastic estimate (one walk, next-event connections at every base
     //! bounce, MIS between connecting through the coat and through the base as pbrt-v4 does),
@@ -579,6 +605,18 @@ pub mod walk {
         interface: Interface,
         tint: Vec3,
         base: u8,
+        /// `1 / darkening` of the top ([`super::Term::darkening`]): the walk follows the
+        /// coat's internal reflections itself, so the base terms get back the weight the
+        /// shader's darkening (standing in for them under albedo scaling) took away.
+        undarken: Vec3,
+    }
+
+    impl Stack {
+        /// The weight of base term `t` as the walk uses it (undarkened, at most 1).
+        #[inline]
+        fn base_weight(&self, t: &super::Term) -> Vec3 {
+            (t.weight * self.undarken).min(Vec3::ONE)
+        }
     }
 
     /// A rough dielectric interface, outside above (`z > 0`), index `eta` below.
@@ -689,7 +727,9 @@ pub mod walk {
                 base |= 1 << i;
             }
         }
-        (eta > 1.0).then_some(Stack { top, interface: Interface { ggx, eta }, tint, base })
+        let darkening = terms[top].darkening;
+        let undarken = Vec3::select(darkening.cmpgt(Vec3::splat(1e-3)), darkening.recip(), Vec3::ONE);
+        (eta > 1.0).then_some(Stack { top, interface: Interface { ggx, eta }, tint, base, undarken })
     }
 
     /// The base: the weighted sum of the terms under the top, evaluated inside the slab.
@@ -697,7 +737,7 @@ pub mod walk {
         let mut f = Vec3::ZERO;
         for (i, t) in b.terms().iter().enumerate() {
             if s.base & (1 << i) != 0 {
-                f += t.weight * t.lobe.eval(wo, wi);
+                f += s.base_weight(t) * t.lobe.eval(wo, wi);
             }
         }
         f
@@ -709,7 +749,7 @@ pub mod walk {
         let mut total = 0.0;
         for (i, t) in b.terms().iter().enumerate() {
             if s.base & (1 << i) != 0 {
-                p[i] = (t.weight * t.lobe.albedo()).max_element().max(1e-4);
+                p[i] = (s.base_weight(t) * t.lobe.albedo()).max_element().max(1e-4);
                 total += p[i];
             }
         }
@@ -729,7 +769,7 @@ pub mod walk {
         let t = &b.terms()[k];
         let bs = t.lobe.sample(wo, uc, rng.vec2())?;
         if bs.delta {
-            return Some((bs.wi, bs.f * t.weight, bs.pdf * p[k], true));
+            return Some((bs.wi, bs.f * s.base_weight(t), bs.pdf * p[k], true));
         }
         let pdf = base_pdf(b, s, wo, bs.wi);
         (pdf > 0.0).then_some((bs.wi, base_f(b, s, wo, bs.wi), pdf, false))

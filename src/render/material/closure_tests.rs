@@ -2,7 +2,9 @@
 //! against evaluation, reciprocity, sample/eval/pdf consistency, closed forms, and albedo
 //! scaling against the random walk.
 
-use crate::abi::{Closure, ClosureKind, ClosureSum, ClosureTerm};
+use crate::abi::{
+    Closure, ClosureKind, ClosureSum, ClosureTerm, TERM_DARKENING, TERM_NORMAL, TERM_PARAMS, thin_film_words,
+};
 use crate::render::material::bsdf::Bsdf;
 use crate::render::material::chi2::*;
 use crate::render::material::closure::{ClosureBsdf, LayeringMode};
@@ -13,7 +15,7 @@ use glam::{Vec2, Vec3};
 // ---------------------------------------------------------------- builders
 
 fn term(kind: ClosureKind, params: &[f32]) -> ClosureTerm {
-    let mut t = ClosureTerm { kind: kind as u32, above: 0, weight: [1.0; 3], params: [0.0; 11] };
+    let mut t = ClosureTerm { kind: kind as u32, above: 0, weight: [1.0; 3], params: [0.0; TERM_PARAMS] };
     t.params[..params.len()].copy_from_slice(params);
     t
 }
@@ -42,6 +44,26 @@ fn sheen(c: f32, rough: f32) -> Lobe {
 }
 fn schlick(rough: f32) -> Lobe {
     lobe(ClosureKind::GeneralizedSchlick, &[0.9, 0.6, 0.3, 0.8, 0.7, 0.9, 1.0, 1.0, 1.0, 5.0, rough])
+}
+
+/// `l` (a metal or generalized Schlick lobe built by [`metal`] or [`schlick`]) under a 300 nm
+/// film of index 1.4 covering 0.8 of it.
+fn filmed(l: Lobe) -> Lobe {
+    let mut t = match l {
+        Lobe::Specular { .. } => {
+            term(ClosureKind::GeneralizedSchlick, &[0.9, 0.6, 0.3, 0.8, 0.7, 0.9, 1.0, 1.0, 1.0, 5.0])
+        }
+        _ => term(ClosureKind::Metal, &[0.95, 0.64, 0.54, 1.0, 0.8, 0.6]),
+    };
+    let (kind, rough) = match l {
+        Lobe::Specular { ggx, .. } => (ClosureKind::GeneralizedSchlick, ggx.alpha.sqrt()),
+        Lobe::Bsdf(Bsdf::Metal { ggx, .. }) => (ClosureKind::Metal, ggx.alpha.sqrt()),
+        other => panic!("no film on {other:?}"),
+    };
+    t.params[if kind == ClosureKind::Metal { 6 } else { 10 }] = rough;
+    let at = thin_film_words(kind).unwrap();
+    t.params[at..at + 3].copy_from_slice(&[300.0, 1.4, 0.8]);
+    Lobe::from_term(&t)
 }
 
 fn one(l: Lobe) -> ClosureBsdf {
@@ -125,7 +147,7 @@ fn smooth_lobes_reflect_their_fresnel_curves() {
     let f0 = ((eta - 1.0).powi(2) + k * k) / ((eta + 1.0).powi(2) + k * k);
     assert!((fresnel_conductor(1.0, 0.2, 3.9) as f64 - f0).abs() < 1e-6);
     let Lobe::Specular { fresnel, .. } = schlick(0.0) else { panic!("a specular lobe") };
-    let Fresnel::Schlick { color0, color82, color90, exponent } = fresnel else { panic!("schlick") };
+    let Fresnel::Schlick { color0, color82, color90, exponent, .. } = fresnel else { panic!("schlick") };
     let c = 1.0f32 / 7.0;
     let plain = color0 + (color90 - color0) * (1.0 - c).powf(exponent);
     assert!((fresnel.eval(c) - plain * color82).abs().max_element() < 1e-5);
@@ -277,6 +299,8 @@ fn zoo() -> Vec<(String, ClosureBsdf)> {
         v.push((format!("sheen r={r}"), one(sheen(0.8, r))));
         v.push((format!("coat r={r}"), one(coat(r, 1.5))));
         v.push((format!("schlick r={r}"), one(schlick(r))));
+        v.push((format!("filmed metal r={r}"), one(filmed(metal(r)))));
+        v.push((format!("filmed schlick r={r}"), one(filmed(schlick(r)))));
         v.push((format!("coat/diffuse r={r}"), layered(coat(r, 1.5), diffuse(0.8), s)));
         v.push((format!("coat/metal r={r}"), layered(coat(r, 1.5), metal(0.4), s)));
         v.push((format!("sheen/eon r={r}"), layered(sheen(0.7, r), oren_nayar(0.8, 0.5, true), s)));
@@ -357,7 +381,7 @@ fn degenerate_closure_sums_stay_finite() {
             t.kind = (k as u32 + i as u32 * 3) % 12;
             t.above = rng.next_u32() & 0xff;
             t.weight = [0, 1, 2].map(|_| specials[rng.next_u32() as usize % specials.len()]);
-            t.params = [0; 11].map(|_| specials[rng.next_u32() as usize % specials.len()]);
+            t.params = [0; TERM_PARAMS].map(|_| specials[rng.next_u32() as usize % specials.len()]);
         }
         for mode in [LayeringMode::AlbedoScaling, LayeringMode::RandomWalk] {
             let b = ClosureBsdf::from_sum(&sum, mode);
@@ -394,7 +418,8 @@ fn term_choice_covers_every_term() {
 fn tilted_coat_over_diffuse(rough: f32, n: Vec3, wo: Vec3) -> ClosureBsdf {
     use crate::render::material::frame::Frame;
     let mut sum = ClosureSum::default();
-    sum.terms[0] = term(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, rough, 0.0, 0.0, 0.0, n.x, n.y, n.z]);
+    sum.terms[0] = term(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, rough, 0.0]);
+    sum.terms[0].params[TERM_NORMAL..TERM_NORMAL + 3].copy_from_slice(&n.to_array());
     sum.terms[1] = ClosureTerm { above: 1, ..term(ClosureKind::Diffuse, &[0.8, 0.8, 0.8]) };
     let mut b = ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling);
     b.set_term_normals(&sum.terms, &Frame::from_normal(Vec3::Z), wo);
@@ -494,7 +519,7 @@ fn thin_film_reflectance_matches_the_characteristic_matrix_at_normal_incidence()
     }
     // A smooth "R" dielectric term with a 250 nm film of 1.33: its delta reflection at normal
     // incidence is the film's reflectance, and the colour differs per channel.
-    let t = term(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, 0.0, 0.0, 250.0, 1.33]);
+    let t = term(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, 0.0, 0.0, 250.0, 1.33, 1.0]);
     let mut sum = ClosureSum::default();
     sum.terms[0] = t;
     let b = ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling);
@@ -544,4 +569,126 @@ fn choice_and_stored_albedo_claims_hold() {
     }
     assert_eq!(one(diffuse(0.7)).stored_albedo(), Some(Vec3::splat(0.7)));
     assert_eq!(one(glossy).stored_albedo(), None);
+
+/// Reflectance at normal incidence of a film (index `n2`, `d` nm) on a conductor of complex
+/// index `n3 + i k3`, by the characteristic matrix as [`film_reflectance_by_matrix`] (the
+/// substrate's admittance complex, in Born and Wolf's `n − i k` convention for this matrix).
+fn film_on_conductor_by_matrix(n2: f64, n3: f64, k3: f64, d: f64, lambda: f64) -> f64 {
+    let delta = 2.0 * std::f64::consts::PI * n2 * d / lambda;
+    let (cd, sd) = (delta.cos(), delta.sin());
+    let y = (n3, -k3);
+    // B = cos δ + i sin δ · y / n2, C = i n2 sin δ + y cos δ.
+    let b = (cd - sd * y.1 / n2, sd * y.0 / n2);
+    let c = (y.0 * cd, n2 * sd + y.1 * cd);
+    let (num, den) = ((b.0 - c.0, b.1 - c.1), (b.0 + c.0, b.1 + c.1));
+    (num.0 * num.0 + num.1 * num.1) / (den.0 * den.0 + den.1 * den.1)
+}
+
+/// The thin film on a metal: at normal incidence the characteristic-matrix reflectance of the
+/// film on the complex substrate; a film of index 1 (air) or no thickness leaves the metal's
+/// own Fresnel curve at every angle (for the generalized Schlick metal too); the weight mixes
+/// bare and filmed curves; and metal, conductor and Schlick terms carry it from their words.
+#[test]
+fn a_thin_film_on_metals_matches_the_characteristic_matrix_and_vanishes_in_the_limits() {
+    use crate::render::material::lobes::{Film, film_on_conductor};
+    use crate::render::material::microfacet::fresnel_conductor3;
+    let bands = [[600.0, 630.0, 670.0], [500.0, 530.0, 560.0], [415.0, 445.0, 475.0]];
+    // Gold-like and aluminium-like complex indices per channel.
+    let metals = [(Vec3::new(0.18, 0.42, 1.37), Vec3::new(3.42, 2.35, 1.77)), (Vec3::splat(1.2), Vec3::splat(7.0))];
+    for (eta, k) in metals {
+        for (film, d) in [(1.33f32, 120.0f32), (1.5, 300.0), (2.2, 80.0), (1.4, 900.0)] {
+            let got = film_on_conductor(1.0, eta, k, film, d);
+            for (c, band) in bands.iter().enumerate() {
+                let want: f64 = band
+                    .iter()
+                    .map(|&l| film_on_conductor_by_matrix(film as f64, eta[c] as f64, k[c] as f64, d as f64, l) / 3.0)
+                    .sum();
+                assert!(
+                    (got[c] as f64 - want).abs() < 1e-4,
+                    "film {film}, {d} nm on {eta}+i{k}, channel {c}: {got} vs {want}"
+                );
+            }
+        }
+        for cos in [1.0f32, 0.8, 0.5, 0.2, 0.03] {
+            let bare = fresnel_conductor3(cos, eta, k);
+            for (film, d) in [(1.0f32, 400.0f32), (1.6, 0.0)] {
+                let got = film_on_conductor(cos, eta, k, film, d);
+                assert!((got - bare).abs().max_element() < 1e-4, "cos {cos}, film {film} {d} nm: {got} vs {bare}");
+            }
+        }
+    }
+    // Terms: a metal's, a conductor's and a Schlick's film words reach their Fresnel curve.
+    let fresnel_of = |t: &ClosureTerm| match Lobe::from_term(t) {
+        Lobe::Specular { fresnel, .. } => fresnel,
+        other => panic!("not a filmed specular lobe: {other:?}"),
+    };
+    let with_film = |kind: ClosureKind, params: &[f32], film: [f32; 3]| {
+        let mut t = term(kind, params);
+        let at = thin_film_words(kind).unwrap();
+        t.params[at..at + 3].copy_from_slice(&film);
+        t
+    };
+    let (eta, k) = metals[0];
+    let conductor = [eta.x, eta.y, eta.z, k.x, k.y, k.z, 0.0];
+    let f = fresnel_of(&with_film(ClosureKind::Conductor, &conductor, [300.0, 1.4, 1.0]));
+    assert_eq!(f.eval(1.0), film_on_conductor(1.0, eta, k, 1.4, 300.0));
+    let f = fresnel_of(&with_film(ClosureKind::Conductor, &conductor, [300.0, 1.4, 0.25]));
+    let mixed = fresnel_conductor3(0.6, eta, k).lerp(film_on_conductor(0.6, eta, k, 1.4, 300.0), 0.25);
+    assert!((f.eval(0.6) - mixed).abs().max_element() < 1e-6, "{} vs {mixed}", f.eval(0.6));
+    // Weight 0 or thickness 0: no film, the plain metal.
+    for film in [[300.0, 1.4, 0.0], [0.0, 1.4, 1.0]] {
+        assert!(matches!(
+            Lobe::from_term(&with_film(ClosureKind::Conductor, &conductor, film)),
+            Lobe::Bsdf(Bsdf::Metal { .. })
+        ));
+    }
+    let metal = [0.95, 0.64, 0.54, 1.0, 0.8, 0.6, 0.0];
+    assert!(matches!(fresnel_of(&with_film(ClosureKind::Metal, &metal, [300.0, 1.4, 1.0])), Fresnel::Conductor { .. }));
+    let schlick = [0.9, 0.6, 0.3, 0.8, 0.7, 0.9, 1.0, 1.0, 1.0, 5.0, 0.0];
+    let bare = fresnel_of(&term(ClosureKind::GeneralizedSchlick, &schlick));
+    let air = fresnel_of(&with_film(ClosureKind::GeneralizedSchlick, &schlick, [400.0, 1.0, 1.0]));
+    let thin = fresnel_of(&with_film(ClosureKind::GeneralizedSchlick, &schlick, [300.0, 1.5, 1.0]));
+    for cos in [1.0f32, 0.7, 0.3, 0.05] {
+        assert!((air.eval(cos) - bare.eval(cos)).abs().max_element() < 1e-5, "{} vs {}", air.eval(cos), bare.eval(cos));
+    }
+    assert!((thin.eval(1.0) - bare.eval(1.0)).abs().max_element() > 0.02, "the film changes the colour");
+    let Fresnel::Schlick { film: Some(Film { weight, .. }), .. } = thin else { panic!("{thin:?}") };
+    assert_eq!(weight, 1.0);
+}
+
+/// A coat that records a darkening factor (`with_darkening`): albedo scaling ignores the
+/// record (the factor in the base's weight stands for the internal reflections it omits), the
+/// random walk divides it back out (it follows those reflections itself).
+#[test]
+fn the_walk_undoes_a_recorded_darkening_and_albedo_scaling_keeps_it() {
+    let factor = [0.6f32, 0.75, 0.9];
+    // (base weighted by the factor, the coat recording it)
+    let sum = |weighted: bool, recorded: bool| {
+        let mut s = ClosureSum::default();
+        s.terms[0] = term(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, 0.3, 0.0]);
+        s.terms[1] = term(ClosureKind::Diffuse, &[0.5, 0.5, 0.5]);
+        s.terms[1].above = 1;
+        for (k, &f) in factor.iter().enumerate() {
+            if recorded {
+                s.terms[0].params[TERM_DARKENING + k] = 1.0 - f;
+            }
+            if weighted {
+                s.terms[1].weight[k] = f;
+            }
+        }
+        s
+    };
+    let eval = |s: ClosureSum, mode, wo, wi| ClosureBsdf::from_sum(&s, mode).eval(wo, wi);
+    let mut rng = Pcg32::new(23, 5);
+    let mut darker = 0;
+    for _ in 0..200 {
+        let (wo, wi) = (rng.dir(), rng.dir());
+        let plain = eval(sum(false, false), LayeringMode::RandomWalk, wo, wi);
+        let undone = eval(sum(true, true), LayeringMode::RandomWalk, wo, wi);
+        assert!((plain - undone).abs().max_element() <= 1e-5 * plain.max_element() + 1e-7, "{plain} vs {undone}");
+        let kept = eval(sum(true, true), LayeringMode::AlbedoScaling, wo, wi);
+        assert_eq!(kept, eval(sum(true, false), LayeringMode::AlbedoScaling, wo, wi));
+        darker += (kept.x < eval(sum(false, false), LayeringMode::AlbedoScaling, wo, wi).x) as usize;
+    }
+    assert!(darker > 50, "albedo scaling keeps the darkening: {darker} of 200 darker");
 }

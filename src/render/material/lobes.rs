@@ -6,7 +6,7 @@
 //! Conventions are [`crate::render::material::bsdf`]'s: local frame, `eval` without the cosine,
 //! reflection lobes two-sided, transmitting ones oriented (`wo.z < 0` is inside).
 
-use crate::abi::{ClosureKind, ClosureTerm, TERM_THIN_FILM};
+use crate::abi::{ClosureKind, ClosureTerm, thin_film_words};
 use crate::render::material::albedo;
 use crate::render::material::bsdf::{
     Bsdf, BsdfSample, colour, cosine_hemisphere, finish, flip_z, ior, microfacet_reflection_pdf, reflect, roughness,
@@ -30,12 +30,20 @@ pub enum Fresnel {
     ThinFilm {
         /// Index of refraction of the substrate in [1, 4].
         eta: f32,
-        /// Index of refraction of the film in [1, 4].
-        film_eta: f32,
-        /// Film thickness in nanometres (> 0).
-        thickness: f32,
+        /// The film.
+        film: Film,
     },
-    /// MaterialX's generalized Schlick with Hoffman's F82 tint.
+    /// A conductor of complex index `eta + i k` under a thin film ([`film_on_conductor`]);
+    /// without a film a conductor is a [`Bsdf::Metal`].
+    Conductor {
+        /// Real part of the complex index, per channel.
+        eta: Vec3,
+        /// Imaginary part (extinction), per channel.
+        k: Vec3,
+        /// The film.
+        film: Film,
+    },
+    /// MaterialX's generalized Schlick with Hoffman's F82 tint, under a thin film if any.
     Schlick {
         /// Reflectance at normal incidence.
         color0: Vec3,
@@ -45,7 +53,37 @@ pub enum Fresnel {
         color90: Vec3,
         /// Exponent of the Schlick curve.
         exponent: f32,
+        /// A thin film over it ([`film_on_schlick`]).
+        film: Option<Film>,
     },
+}
+
+/// A thin film on a reflecting surface (OpenPBR `thin_film_*`, MaterialX `thinfilm_*`): the
+/// Fresnel curve is `mix(bare, filmed, weight)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Film {
+    /// Index of refraction of the film in [1, 4].
+    pub eta: f32,
+    /// Thickness in nanometres (> 0).
+    pub thickness: f32,
+    /// Coverage in (0, 1].
+    pub weight: f32,
+}
+
+impl Film {
+    /// Decodes a term's three film words (thickness nm, index, weight; layout in
+    /// [`crate::abi::thin_film_words`]): `None` when the thickness or the weight is 0.
+    pub fn from_words(p: &[f32]) -> Option<Film> {
+        let thickness = sanitize(p[0], 0.0, 1e5, 0.0);
+        let weight = sanitize(p[2], 0.0, 1.0, 0.0);
+        (thickness > 0.0 && weight > 0.0).then(|| Film { eta: ior(p[1]), thickness, weight })
+    }
+
+    /// `mix(bare, filmed, weight)`, exactly `filmed` at weight 1.
+    #[inline]
+    fn cover(&self, bare: Vec3, filmed: Vec3) -> Vec3 {
+        if self.weight >= 1.0 { filmed } else { bare.lerp(filmed, self.weight) }
+    }
 }
 
 /// cos θ where the F82 tint applies (MaterialX `mx_fresnel_hoffman_schlick`).
@@ -57,16 +95,143 @@ impl Fresnel {
     pub fn eval(&self, cos: f32) -> Vec3 {
         match *self {
             Fresnel::Dielectric { eta } => Vec3::splat(fresnel_dielectric(cos, eta)),
-            Fresnel::ThinFilm { eta, film_eta, thickness } => thin_film(cos, eta, film_eta, thickness),
-            Fresnel::Schlick { color0, color82, color90, exponent } => {
-                let x = cos.clamp(0.0, 1.0);
-                let factor = 1.0 / (COS_F82 * (1.0 - COS_F82).powi(6));
-                let a = color0.lerp(color90, (1.0 - COS_F82).powf(exponent)) * (Vec3::ONE - color82) * factor;
-                let f = color0.lerp(color90, (1.0 - x).powf(exponent)) - a * (x * (1.0 - x).powi(6));
-                f.clamp(Vec3::ZERO, Vec3::ONE)
+            Fresnel::ThinFilm { eta, film } => {
+                let filmed = thin_film(cos, eta, film.eta, film.thickness);
+                if film.weight >= 1.0 { filmed } else { film.cover(Vec3::splat(fresnel_dielectric(cos, eta)), filmed) }
+            }
+            Fresnel::Conductor { eta, k, film } => {
+                film.cover(fresnel_conductor3(cos, eta, k), film_on_conductor(cos, eta, k, film.eta, film.thickness))
+            }
+            Fresnel::Schlick { color0, color82, color90, exponent, film } => {
+                let bare = schlick_f82(cos, color0, color82, color90, exponent);
+                match film {
+                    None => bare,
+                    Some(film) => film.cover(
+                        bare,
+                        film_on_schlick(
+                            cos,
+                            film.eta,
+                            film.thickness,
+                            |c2| schlick_f82(c2, color0, color82, color90, exponent),
+                            color0,
+                        ),
+                    ),
+                }
             }
         }
     }
+}
+
+/// MaterialX's generalized Schlick curve with Hoffman's F82 tint at `cos` (clamped to [0, 1]).
+#[inline]
+fn schlick_f82(cos: f32, color0: Vec3, color82: Vec3, color90: Vec3, exponent: f32) -> Vec3 {
+    let x = cos.clamp(0.0, 1.0);
+    let factor = 1.0 / (COS_F82 * (1.0 - COS_F82).powi(6));
+    let a = color0.lerp(color90, (1.0 - COS_F82).powf(exponent)) * (Vec3::ONE - color82) * factor;
+    let f = color0.lerp(color90, (1.0 - x).powf(exponent)) - a * (x * (1.0 - x).powi(6));
+    f.clamp(Vec3::ZERO, Vec3::ONE)
+}
+
+/// A complex number: what a conductor's amplitude reflection coefficients need.
+#[derive(Clone, Copy, Debug)]
+struct Complex {
+    re: f32,
+    im: f32,
+}
+
+impl Complex {
+    fn new(re: f32, im: f32) -> Complex {
+        Complex { re, im }
+    }
+    fn add(self, o: Complex) -> Complex {
+        Complex::new(self.re + o.re, self.im + o.im)
+    }
+    fn sub(self, o: Complex) -> Complex {
+        Complex::new(self.re - o.re, self.im - o.im)
+    }
+    fn mul(self, o: Complex) -> Complex {
+        Complex::new(self.re * o.re - self.im * o.im, self.re * o.im + self.im * o.re)
+    }
+    fn scale(self, x: f32) -> Complex {
+        Complex::new(self.re * x, self.im * x)
+    }
+    fn div(self, o: Complex) -> Complex {
+        let d = o.re * o.re + o.im * o.im;
+        Complex::new((self.re * o.re + self.im * o.im) / d, (self.im * o.re - self.re * o.im) / d)
+    }
+    /// The principal square root (real part ≥ 0).
+    fn sqrt(self) -> Complex {
+        let r = self.re.hypot(self.im);
+        let re = (0.5 * (r + self.re)).max(0.0).sqrt();
+        let im = (0.5 * (r - self.re)).max(0.0).sqrt();
+        Complex::new(re, if self.im < 0.0 { -im } else { im })
+    }
+}
+
+/// The Airy reflectance of a film (index `film_eta`, `thickness` nm) seen from air at `cos`,
+/// per RGB channel averaged over its band ([`FILM_WAVELENGTHS`]) and over s and p: the
+/// air|film amplitudes are real, `substrate(channel, cos θ2)` gives the film|substrate ones
+/// `(r_s, r_p)` at the angle inside the film, and `|r12 + r23 e^{iδ}|² / |1 + r12 r23 e^{iδ}|²`
+/// with the round trip's phase δ (Belcour and Barla 2017 before their spectral integration).
+fn film_over(cos: f32, film_eta: f32, thickness: f32, substrate: impl Fn(usize, f32) -> (Complex, Complex)) -> Vec3 {
+    let cos1 = cos.clamp(0.0, 1.0);
+    let sin2 = 1.0 - cos1 * cos1;
+    let cos2 = (1.0 - sin2 / (film_eta * film_eta)).max(0.0).sqrt();
+    let n2 = film_eta;
+    let r12s = (cos1 - n2 * cos2) / (cos1 + n2 * cos2);
+    let r12p = (n2 * cos1 - cos2) / (n2 * cos1 + cos2);
+    let airy = |r12: f32, r23: Complex, (sin_d, cos_d): (f32, f32)| {
+        let w = r23.mul(Complex::new(cos_d, sin_d));
+        let num = (r12 + w.re) * (r12 + w.re) + w.im * w.im;
+        let den = (1.0 + r12 * w.re) * (1.0 + r12 * w.re) + (r12 * w.im) * (r12 * w.im);
+        (num / den).clamp(0.0, 1.0)
+    };
+    let path = 4.0 * PI * film_eta * thickness * cos2;
+    let mut r = Vec3::ZERO;
+    for (c, band) in FILM_WAVELENGTHS.iter().enumerate() {
+        let (r23s, r23p) = substrate(c, cos2);
+        for lambda in band {
+            let phase = (path / lambda).sin_cos();
+            r[c] += 0.5 * (airy(r12s, r23s, phase) + airy(r12p, r23p, phase)) / 3.0;
+        }
+    }
+    r
+}
+
+/// Reflectance of a conductor (complex index `eta + i k` per channel) under a film (index
+/// `film_eta`, `thickness` nm) seen from air at `cos` ([`film_over`]). With a film of index 1
+/// (or no thickness) it is the conductor's own Fresnel reflectance.
+pub fn film_on_conductor(cos: f32, eta: Vec3, k: Vec3, film_eta: f32, thickness: f32) -> Vec3 {
+    let cos1 = cos.clamp(0.0, 1.0);
+    let sin2 = 1.0 - cos1 * cos1;
+    film_over(cos, film_eta, thickness, |c, cos2| {
+        // N3 cos θ3 = √(N3² − n2² sin² θ2) = √(N3² − sin² θ1) (Snell across the film).
+        let n3 = Complex::new(eta[c], k[c]);
+        let n3_sq = n3.mul(n3);
+        let n3_cos3 = n3_sq.sub(Complex::new(sin2, 0.0)).sqrt();
+        let n2_cos2 = Complex::new(film_eta * cos2, 0.0);
+        let rs = n2_cos2.sub(n3_cos3).div(n2_cos2.add(n3_cos3));
+        // r_p = (N3 cos θ2 − n2 cos θ3) / (N3 cos θ2 + n2 cos θ3), both sides times N3.
+        let (a, b) = (n3_sq.scale(cos2), n3_cos3.scale(film_eta));
+        let rp = a.sub(b).div(a.add(b));
+        (rs, rp)
+    })
+}
+
+/// Reflectance of a generalized Schlick surface under a film ([`film_over`]), as MaterialX
+/// approximates it: the film|surface reflectance is the Schlick curve `bare(cos θ2)` at the
+/// angle inside the film, its phase 0 or π by whether the index equivalent to `color0` is
+/// above the film's (an index has no imaginary part to give more).
+fn film_on_schlick(cos: f32, film_eta: f32, thickness: f32, bare: impl Fn(f32) -> Vec3, color0: Vec3) -> Vec3 {
+    film_over(cos, film_eta, thickness, |c, cos2| {
+        let f0 = color0[c].clamp(0.0, 0.999).sqrt();
+        let n3 = (1.0 + f0) / (1.0 - f0);
+        let amplitude = bare(cos2)[c].sqrt();
+        // The signs of the dielectric coefficients at normal incidence (r_p's convention is
+        // r_s's negated there).
+        let rs = if n3 > film_eta { -amplitude } else { amplitude };
+        (Complex::new(rs, 0.0), Complex::new(-rs, 0.0))
+    })
 }
 
 /// Wavelengths (nm) each RGB channel averages the thin-film reflectance over: three per band
@@ -104,6 +269,13 @@ pub fn thin_film(cos: f32, eta: f32, film_eta: f32, thickness: f32) -> Vec3 {
         }
     }
     r
+}
+
+/// The thin film a term carries, if its kind takes one ([`crate::abi::thin_film_words`]).
+#[inline]
+fn film_of(t: &ClosureTerm) -> Option<Film> {
+    let at = thin_film_words(ClosureKind::from_u32(t.kind))?;
+    Film::from_words(&t.params[at..at + 3])
 }
 
 /// One lobe of a closure term; Copy, sanitised, allocation-free like [`Bsdf`].
@@ -194,11 +366,9 @@ impl Lobe {
             ClosureKind::Dielectric => {
                 let (tint, eta, ggx) = (colour(&p[0..3]), ior(p[3]), roughness(p[4]));
                 // A thin film (reflection only; a transmitting interface keeps its plain Fresnel).
-                let thickness = sanitize(p[TERM_THIN_FILM], 0.0, 1e5, 0.0);
-                let fresnel = if thickness > 0.0 {
-                    Fresnel::ThinFilm { eta, film_eta: ior(p[TERM_THIN_FILM + 1]), thickness }
-                } else {
-                    Fresnel::Dielectric { eta }
+                let fresnel = match film_of(t) {
+                    Some(film) => Fresnel::ThinFilm { eta, film },
+                    None => Fresnel::Dielectric { eta },
                 };
                 match sanitize(p[5], 0.0, 2.0, 2.0).round() as u32 {
                     0 => Lobe::Specular { fresnel, tint, ggx },
@@ -216,6 +386,7 @@ impl Lobe {
                     color82: colour(&p[3..6]),
                     color90: colour(&p[6..9]),
                     exponent: sanitize(p[9], 0.0, 100.0, 5.0),
+                    film: film_of(t),
                 },
                 tint: Vec3::ONE,
                 ggx: roughness(p[10]),
@@ -231,7 +402,14 @@ impl Lobe {
             _ => {
                 let mut closure = crate::abi::Closure { kind: t.kind, params: [0.0; 8] };
                 closure.params.copy_from_slice(&p[..8]);
-                Lobe::Bsdf(Bsdf::from_closure(&closure))
+                let bsdf = Bsdf::from_closure(&closure);
+                // A metal under a thin film: its Fresnel curve becomes the film's.
+                match (bsdf, film_of(t)) {
+                    (Bsdf::Metal { eta, k, ggx, .. }, Some(film)) => {
+                        Lobe::Specular { fresnel: Fresnel::Conductor { eta, k, film }, tint: Vec3::ONE, ggx }
+                    }
+                    _ => Lobe::Bsdf(bsdf),
+                }
             }
         }
     }
@@ -426,7 +604,7 @@ impl Lobe {
                 let r = ggx.alpha.sqrt();
                 tint * match fresnel {
                     Fresnel::Dielectric { eta } => Vec3::splat(albedo::dielectric_reflection(mu, r, eta)),
-                    Fresnel::Schlick { .. } | Fresnel::ThinFilm { .. } => {
+                    Fresnel::Schlick { .. } | Fresnel::ThinFilm { .. } | Fresnel::Conductor { .. } => {
                         fresnel.eval(mu) * albedo::ggx_reflection(mu, r)
                     }
                 }
