@@ -89,7 +89,7 @@ for t in [1800.0, 2500.0, 3500.0, 5000.0, 6500.0, 10000.0, 20000.0]:
 
 # ---- component min/max --------------------------------------------------------------------------
 case("ND_mincomponent_vector3", ["float3 inputs:in = (0.3, 0.2, 0.7)"], [0.2] * 3, 1e-6, "min")
-case("ND_maxcomponent_color3", ["color3f inputs:in = (0.3, 0.9, 0.7)"], [0.9] * 3, 1e-6, "max")
+case("ND_maxcomponent_color3", ["color3f inputs:in = (0.3, 0.7, 0.9)"], [0.9] * 3, 1e-6, "max")
 # A vector2's z (0 in strata's triple) is not a component.
 case("ND_mincomponent_vector2", ["float2 inputs:in = (0.3, 0.6)"], [0.3] * 3, 1e-6, "min")
 case("ND_maxcomponent_vector2", ["float2 inputs:in = (0.3, 0.6)"], [0.6] * 3, 1e-6, "max")

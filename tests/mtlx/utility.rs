@@ -282,7 +282,8 @@ fn node_values_match_an_independent_implementation() {
         };
         let got = emitted_at(&code, 0.25, 0.75);
         if (0..3).any(|k| (got[k] - want[k]).abs() > tolerance) || !rendered.is_empty() {
-            failures.push(format!("{id} {inputs:?}: got {got:?}, {reference} gives {want:?} (± {tolerance})\n{rendered}"));
+            failures
+                .push(format!("{id} {inputs:?}: got {got:?}, {reference} gives {want:?} (± {tolerance})\n{rendered}"));
         }
         checked += 1;
     }
@@ -294,7 +295,8 @@ fn node_values_match_an_independent_implementation() {
 fn space_transforms_are_the_identity_in_world_space_and_report_other_spaces() {
     for id in ["ND_transformpoint_vector3", "ND_transformvector_vector3", "ND_transformnormal_vector3"] {
         let input = "float3 inputs:in = (0.25, -0.5, 2)";
-        let (code, rendered) = compiled(&emitting(id, &[input, "string inputs:fromspace = \"world\"", "string inputs:tospace = \"\""]));
+        let (code, rendered) =
+            compiled(&emitting(id, &[input, "string inputs:fromspace = \"world\"", "string inputs:tospace = \"\""]));
         let code = code.unwrap_or_else(|| panic!("{id}: {rendered}"));
         assert!(rendered.is_empty(), "{id}: {rendered}");
         assert_eq!(emitted_at(&code, 0.25, 0.75), [0.25, -0.5, 2.0], "{id}");
