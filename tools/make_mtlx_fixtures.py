@@ -248,9 +248,9 @@ ODD = {
     "unknown_node": """<?xml version="1.0"?>
 <materialx version="1.39">
   <nodegraph name="NG">
-    <hsvadjust name="adjust" type="color3">
+    <blur name="adjust" type="color3">
       <input name="in" type="color3" value="0.5, 0.2, 0.1" />
-    </hsvadjust>
+    </blur>
     <output name="out" type="color3" nodename="adjust" />
   </nodegraph>
   <open_pbr_surface name="SR" type="surfaceshader">

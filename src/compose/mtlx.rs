@@ -123,6 +123,10 @@ pub fn node_function(id: &str) -> Option<String> {
         // `ND_normalmap` (1.38), `ND_normalmap_float`/`_vector2` (1.39: the type of `scale`).
         return Some(if types == "vector2" { "mx_normalmap_vector2" } else { "mx_normalmap_color3" }.into());
     }
+    if matches!(node, "mincomponent" | "maxcomponent") && types == "vector2" {
+        // A vector2 travels with z = 0, which is not one of its components.
+        return Some(format!("mx_{node}_vector2"));
+    }
     if matches!(node, "combine2" | "combine3") {
         // Named by the type they build; the library's variant takes floats.
         return Some(format!("mx_{node}_float"));
@@ -424,6 +428,9 @@ mod tests {
         assert_eq!(node_function("ND_convert_vector3_vector2").as_deref(), Some("mx_convert_color3_vector2"));
         assert_eq!(node_function("ND_normalmap").as_deref(), Some("mx_normalmap_color3"));
         assert_eq!(node_function("ND_add_color4"), None);
+        assert_eq!(node_function("ND_mincomponent_vector2").as_deref(), Some("mx_mincomponent_vector2"));
+        assert_eq!(node_function("ND_maxcomponent_vector3").as_deref(), Some("mx_maxcomponent_color3"));
+        assert_eq!(node_function("ND_blackbody").as_deref(), Some("mx_blackbody_color3"));
         // pbrlib: closures by definition id, EDFs as colours.
         assert_eq!(node_function("ND_layer_bsdf").as_deref(), Some("mx_layer_bsdf"));
         assert_eq!(node_function("ND_multiply_bsdfF").as_deref(), Some("mx_multiply_bsdfF"));

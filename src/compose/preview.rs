@@ -569,6 +569,15 @@ impl<'s> Builder<'_, 's> {
                         .kind("MaterialX space approximated"),
                 );
             }
+            // transformpoint/vector/normal: "" is the working space, which is world space.
+            (_, "fromspace" | "tospace") if !token.is_empty() && token != "world" => {
+                self.diags.push(
+                    Diagnostic::warning(format!("transform `{input}` `{token}` is read as world space"))
+                        .at(span, "this value")
+                        .note("strata shades in world space: a transform between spaces is the identity")
+                        .kind("MaterialX space approximated"),
+                );
+            }
             ("UsdUVTexture", "file") if token.contains("<UDIM>") => {
                 self.diags.push(Diagnostic::error("UDIM texture sets are not supported").at(span, "a `<UDIM>` path"));
             }

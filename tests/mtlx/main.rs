@@ -526,7 +526,7 @@ fn what_the_surfaces_approximate_is_reported_once_per_kind() {
     // An ND_ node strata lacks: one warning naming it, the input keeps its default.
     let text = "def Material \"M\" (prepend references = @odd/unknown_node.mtlx@</MaterialX/Materials/M>) {}";
     let (code, rendered) = compiled(text);
-    assert_eq!(rendered.matches("MaterialX node `ND_hsvadjust_color3` is not implemented").count(), 1, "{rendered}");
+    assert_eq!(rendered.matches("MaterialX node `ND_blur_color3` is not implemented").count(), 1, "{rendered}");
     let lobes = lobes_at(&code.expect("compiles"), 0.5, 0.5);
     let base = lobes.iter().find(|t| t.kind == ClosureKind::OrenNayar as u32).expect("a diffuse base");
     assert_eq!(&base.params[..3], &[0.8, 0.8, 0.8], "base_color falls back to OpenPBR's default");
@@ -540,7 +540,7 @@ fn odd_documents_compile_or_say_why_and_none_panics() {
         ("not_materialx", "not a MaterialX document"),
         ("entity", "malformed MaterialX document"),
         ("empty", "that this reference targets does not exist"),
-        ("unknown_node", "`ND_hsvadjust_color3` is not implemented"),
+        ("unknown_node", "`ND_blur_color3` is not implemented"),
         ("color4", ""),
         ("dangling", "`missing`, which the document does not define"),
         ("unsupported_lobes", "is not supported"),

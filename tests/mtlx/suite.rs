@@ -149,6 +149,12 @@ fn the_public_suite_subset_shades_with_the_values_its_documents_give() {
     let (code, rendered) = suite_target(doc, &["emit", "test_colorcorrect", "out", "color3"]);
     let got = emitted_at(&code.unwrap_or_else(|| panic!("{rendered}")), 0.5, 0.5);
     assert!(close(got, [0.829147, 0.4841412, 0.4841412]), "{got:?}");
+    // rgbtohsv then hsvtorgb gives the document's colour back.
+    let doc = "TestSuite/stdlib/adjustment/hsvtorgb.mtlx";
+    let (code, rendered) =
+        suite_target(doc, &["emit", "rgb_to_hsv_to_rgb_color3", "rgb_to_hsv_to_rgb_color3_out", "color3"]);
+    let got = emitted_at(&code.unwrap_or_else(|| panic!("{rendered}")), 0.5, 0.5);
+    assert!(close(got, [0.2, 0.2, 0.8]), "{got:?}");
 }
 
 /// Asserts two closure values have the same kinds, layering bits and weights, and parameters

@@ -247,3 +247,64 @@ fn open_pbr_specular_weight_modulates_the_ior_as_the_1_1_specification_gives() {
     let got = first_lobe("        float inputs:specular_weight = 0");
     assert_eq!(got.iter().map(|l| l.0).collect::<Vec<_>>(), [ClosureKind::OrenNayar]);
 }
+
+/// A Material `/M` whose surface is an unlit MaterialX surface emitting node `id`'s output
+/// (`inputs`: USDA lines): the emission carries any value, unclamped.
+fn emitting(id: &str, inputs: &[&str]) -> String {
+    let inputs: String = inputs.iter().map(|line| format!("        {line}\n")).collect();
+    format!(
+        "def Material \"M\" {{\n    token outputs:mtlx:surface.connect = </M/S.outputs:surface>\n    \
+         def Shader \"S\" {{\n        uniform token info:id = \"ND_surface_unlit\"\n        \
+         color3f inputs:emission_color.connect = </M/N.outputs:out>\n        token outputs:surface\n    }}\n    \
+         def Shader \"N\" {{\n        uniform token info:id = \"{id}\"\n{inputs}        color3f outputs:out\n    }}\n}}"
+    )
+}
+
+#[test]
+fn node_values_match_an_independent_implementation() {
+    // tests/fixtures/mtlx/node_values.txt: per case a node, its inputs and the value a second
+    // implementation gives (colorsys for HSV, Planck's law against the CIE 1931 tables for
+    // blackbody, the shapes' geometry and brute-force tilings), written by
+    // tools/make_mtlx_node_values.py.
+    let table = std::fs::read_to_string(format!("{DIR}/node_values.txt")).expect("node_values.txt");
+    let mut failures = Vec::new();
+    let mut checked = 0;
+    for line in table.lines().filter(|l| !l.starts_with('#') && !l.is_empty()) {
+        let fields: Vec<&str> = line.split('\t').collect();
+        let [id, inputs, want, tolerance, reference] = fields[..] else { panic!("malformed line `{line}`") };
+        let inputs: Vec<&str> = inputs.split(" ; ").filter(|s| !s.is_empty()).collect();
+        let want: Vec<f32> = want.split(' ').map(|x| x.parse().expect("a number")).collect();
+        let tolerance: f32 = tolerance.parse().expect("a tolerance");
+        let (code, rendered) = compiled(&emitting(id, &inputs));
+        let Some(code) = code else {
+            failures.push(format!("{id} {inputs:?}: does not compile:\n{rendered}"));
+            continue;
+        };
+        let got = emitted_at(&code, 0.25, 0.75);
+        if (0..3).any(|k| (got[k] - want[k]).abs() > tolerance) || !rendered.is_empty() {
+            failures
+                .push(format!("{id} {inputs:?}: got {got:?}, {reference} gives {want:?} (± {tolerance})\n{rendered}"));
+        }
+        checked += 1;
+    }
+    assert!(checked >= 100, "{checked} cases");
+    assert!(failures.is_empty(), "{} of {checked} cases fail: {failures:#?}", failures.len());
+}
+
+#[test]
+fn space_transforms_are_the_identity_in_world_space_and_report_other_spaces() {
+    for id in ["ND_transformpoint_vector3", "ND_transformvector_vector3", "ND_transformnormal_vector3"] {
+        let input = "float3 inputs:in = (0.25, -0.5, 2)";
+        let (code, rendered) =
+            compiled(&emitting(id, &[input, "string inputs:fromspace = \"world\"", "string inputs:tospace = \"\""]));
+        let code = code.unwrap_or_else(|| panic!("{id}: {rendered}"));
+        assert!(rendered.is_empty(), "{id}: {rendered}");
+        assert_eq!(emitted_at(&code, 0.25, 0.75), [0.25, -0.5, 2.0], "{id}");
+        // Object space is world space to strata: the same value, and a warning that says so.
+        let (code, rendered) = compiled(&emitting(id, &[input, "string inputs:fromspace = \"object\""]));
+        let code = code.unwrap_or_else(|| panic!("{id}: {rendered}"));
+        assert!(rendered.contains("transform `fromspace` `object` is read as world space"), "{id}: {rendered}");
+        assert_eq!(rendered.matches("warning").count(), 1, "{id}: {rendered}");
+        assert_eq!(emitted_at(&code, 0.25, 0.75), [0.25, -0.5, 2.0], "{id}");
+    }
+}
