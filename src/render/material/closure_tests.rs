@@ -569,6 +569,7 @@ fn choice_and_stored_albedo_claims_hold() {
     }
     assert_eq!(one(diffuse(0.7)).stored_albedo(), Some(Vec3::splat(0.7)));
     assert_eq!(one(glossy).stored_albedo(), None);
+}
 
 /// Reflectance at normal incidence of a film (index `n2`, `d` nm) on a conductor of complex
 /// index `n3 + i k3`, by the characteristic matrix as [`film_reflectance_by_matrix`] (the
