@@ -92,6 +92,17 @@ fn a_16384_squared_texture_under_a_small_budget_reads_correctly() {
         let got = lookup(id, s, t, 0);
         assert_eq!(got, ((x ^ y) & 255) as f32 / 255.0, "texel ({x}, {y})");
     }
+    // Level 0 is read by bands of rows: the band of a texel just read stays, no decode.
+    let decodes = texture::stats().decodes;
+    let (x, y) = (12345usize, 6789usize);
+    let (s, t) = ((x as f32 + 0.5) / HUGE as f32, 1.0 - (y as f32 + 0.5) / HUGE as f32);
+    assert_eq!(lookup(id, s, t, 0), ((x ^ y) & 255) as f32 / 255.0);
+    assert_eq!(texture::stats().decodes, decodes, "its band is resident");
+    // Between the last row and the first (repeat wrap): two bands, half of each texel.
+    let (x, s) = (777usize, (777.0 + 0.5) / HUGE as f32);
+    let seam = lookup(id, s, 1.0, 0);
+    let want = (((x ^ (HUGE - 1)) & 255) + (x & 255)) as f32 / 2.0 / 255.0;
+    assert!((seam - want).abs() < 1e-6, "{seam} against {want}");
     // The whole texture in one footprint: the mean of (x ^ y) & 255 over all texels, 127.5.
     let mean = lookup_with(Filter::Trilinear, id, 0.5, 0.5, 0, [2.0, 0.0, 0.0, 2.0]);
     assert!((mean - 0.5).abs() < 2.0 / 255.0, "{mean}");

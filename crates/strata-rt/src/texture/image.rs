@@ -3,6 +3,7 @@
 //! lookups in the parent module read levels through these types.
 
 use super::{Texture, wrap_index};
+use std::ops::Range;
 use std::sync::LazyLock;
 
 /// Texels at the precision of their source, row-major, top row first, channels interleaved.
@@ -34,6 +35,27 @@ impl Texels {
             Texels::U16(v) | Texels::F16(v) => v.len(),
             Texels::F32(v) => v.len(),
         }
+    }
+
+    /// A copy of values `range`.
+    fn copy_range(&self, range: Range<usize>) -> Texels {
+        match self {
+            Texels::U8(v) => Texels::U8(v[range].to_vec()),
+            Texels::U16(v) => Texels::U16(v[range].to_vec()),
+            Texels::F16(v) => Texels::F16(v[range].to_vec()),
+            Texels::F32(v) => Texels::F32(v[range].to_vec()),
+        }
+    }
+
+    /// Appends `other`'s values; false (and nothing appended) when its precision differs.
+    fn extend_from(&mut self, other: &Texels) -> bool {
+        match (self, other) {
+            (Texels::U8(a), Texels::U8(b)) => a.extend_from_slice(b),
+            (Texels::U16(a), Texels::U16(b)) | (Texels::F16(a), Texels::F16(b)) => a.extend_from_slice(b),
+            (Texels::F32(a), Texels::F32(b)) => a.extend_from_slice(b),
+            _ => return false,
+        }
+        true
     }
 }
 
@@ -123,6 +145,24 @@ impl Image {
             && self.width.checked_mul(self.height).and_then(|n| n.checked_mul(self.channels)) == Some(self.texels.len())
     }
 
+    /// Rows `rows` of this image as an image of their own (a band of a level).
+    pub fn rows(&self, rows: Range<usize>) -> Image {
+        let row = self.width * self.channels;
+        let texels = self.texels.copy_range(rows.start * row..rows.end * row);
+        Image { width: self.width, height: rows.len(), channels: self.channels, srgb: self.srgb, texels }
+    }
+
+    /// Appends `below`'s rows under this image's; false (nothing appended) when their
+    /// width, channels, colour space or precision differ.
+    pub fn append_rows(&mut self, below: &Image) -> bool {
+        let alike = (self.width, self.channels, self.srgb) == (below.width, below.channels, below.srgb);
+        if !alike || !self.texels.extend_from(&below.texels) {
+            return false;
+        }
+        self.height += below.height;
+        true
+    }
+
     /// Where logical channel `channel` (0..=3: r, g, b, a) is stored, or `None` when the image
     /// has no alpha (it reads 1). Grey images give their one value to r, g and b.
     #[inline]
@@ -165,34 +205,39 @@ impl Image {
     /// Nearest-texel lookup at texel coordinates (x, y) (texel centres at half integers).
     #[inline]
     pub(super) fn nearest(&self, x: f32, y: f32, channel: usize, wrap_s: i32, wrap_t: i32) -> f32 {
-        let (xi, yi) = (x.floor() as i64, y.floor() as i64);
-        match (wrap_index(xi, self.width, wrap_s), wrap_index(yi, self.height, wrap_t)) {
-            (Some(xi), Some(yi)) => match self.stored_channel(channel) {
-                Some(k) => self.value((yi * self.width + xi) * self.channels + k, k),
-                None => 1.0,
-            },
-            _ => 0.0,
+        match wrap_index(y.floor() as i64, self.height, wrap_t) {
+            Some(row) => self.texel(row, x.floor() as i64, channel, wrap_s),
+            None => 0.0,
         }
+    }
+
+    /// Channel `channel` of the texel at integer column `xi` (wrapped by `wrap_s`) of row
+    /// `row`: 0 where the wrap mode makes it black, 1 for alpha the image lacks.
+    #[inline]
+    pub(super) fn texel(&self, row: usize, xi: i64, channel: usize, wrap_s: i32) -> f32 {
+        match (wrap_index(xi, self.width, wrap_s), self.stored_channel(channel)) {
+            (Some(x), Some(k)) => self.value((row * self.width + x) * self.channels + k, k),
+            (Some(_), None) => 1.0,
+            (None, _) => 0.0,
+        }
+    }
+
+    /// Row `row` (none: a black row) interpolated between columns `x0` and `x0 + 1` at
+    /// fraction `fx`: one half of [`Image::bilinear`], which a level read by bands of rows
+    /// does row by row.
+    #[inline]
+    pub(super) fn row_lerp(&self, row: Option<usize>, x0: i64, fx: f32, channel: usize, wrap_s: i32) -> f32 {
+        let Some(row) = row else { return 0.0 };
+        let (a, b) = (self.texel(row, x0, channel, wrap_s), self.texel(row, x0 + 1, channel, wrap_s));
+        a + (b - a) * fx
     }
 
     /// Bilinear lookup at texel coordinates (x, y) (texel centres at half integers).
     #[inline]
     pub(super) fn bilinear(&self, x: f32, y: f32, channel: usize, wrap_s: i32, wrap_t: i32) -> f32 {
-        let (x, y) = (f64::from(x) - 0.5, f64::from(y) - 0.5);
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-        let stored = self.stored_channel(channel);
-        let at = |xi: i64, yi: i64| match (wrap_index(xi, self.width, wrap_s), wrap_index(yi, self.height, wrap_t)) {
-            (Some(xi), Some(yi)) => match stored {
-                Some(k) => self.value((yi * self.width + xi) * self.channels + k, k),
-                None => 1.0,
-            },
-            _ => 0.0,
-        };
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let (a, b, c, d) = (at(x0, y0), at(x0 + 1, y0), at(x0, y0 + 1), at(x0 + 1, y0 + 1));
-        let top = a + (b - a) * fx;
-        let bottom = c + (d - c) * fx;
+        let ((x0, fx), (y0, fy)) = (bilinear_corner(x), bilinear_corner(y));
+        let row = |yi: i64| self.row_lerp(wrap_index(yi, self.height, wrap_t), x0, fx, channel, wrap_s);
+        let (top, bottom) = (row(y0), row(y0 + 1));
         top + (bottom - top) * fy
     }
 
@@ -290,6 +335,74 @@ impl Image {
             }
         }
         Image { width: w, height: h, channels: C, srgb: self.srgb, texels: Texels::U8(out) }
+    }
+}
+
+/// The first of the two texels a bilinear lookup at texel coordinate `x` reads along an axis,
+/// and the weight of the second.
+#[inline]
+pub(super) fn bilinear_corner(x: f32) -> (i64, f32) {
+    let x = f64::from(x) - 0.5;
+    let x0 = x.floor();
+    (x0 as i64, (x - x0) as f32)
+}
+
+/// Builds a mip chain from the finest level's rows as they are decoded, top to bottom,
+/// without any level whole: each level holds at most the one row waiting for its pair. Each
+/// row of a coarser level is [`Image::downsample`] of its two rows (one for a level one row
+/// high), so the levels are those of downsampling the whole image, bit for bit.
+pub struct MipCascade {
+    /// Height of each level, finest first.
+    heights: Vec<usize>,
+    /// Per level, its last row when it still waits for the row below it.
+    pending: Vec<Option<Image>>,
+}
+
+impl MipCascade {
+    /// A cascade for a `width × height` image (every level down to 1×1).
+    pub fn new(width: usize, height: usize) -> MipCascade {
+        let levels = level_count(width, height);
+        let heights = (0..levels).map(|l| (height >> l).max(1)).collect();
+        MipCascade { heights, pending: vec![None; levels] }
+    }
+
+    /// Takes the finest level's next rows (`first_row` is how many came before) and hands
+    /// `out(level, first_row, rows)` every run of rows of every level they complete, the
+    /// finest level's own included.
+    pub fn push(&mut self, first_row: usize, rows: &Image, out: &mut dyn FnMut(usize, usize, &Image)) {
+        self.feed(0, first_row, rows, out);
+    }
+
+    fn feed(&mut self, level: usize, first_row: usize, rows: &Image, out: &mut dyn FnMut(usize, usize, &Image)) {
+        if rows.height == 0 {
+            return;
+        }
+        out(level, first_row, rows);
+        if level + 1 >= self.heights.len() {
+            return;
+        }
+        if self.heights[level] == 1 {
+            // A level of one row halves in width only: its row pairs with itself.
+            return self.feed(level + 1, 0, &rows.downsample(), out);
+        }
+        let merged;
+        let (start, rows) = match self.pending[level].take() {
+            Some(mut above) => {
+                above.append_rows(rows);
+                merged = above;
+                (first_row - 1, &merged)
+            }
+            None => (first_row, rows),
+        };
+        // A run starts on an even row here; an odd last row waits for its pair (or, as the
+        // last row of a level of odd height, has none and no part in the next level).
+        if rows.height % 2 == 1 {
+            self.pending[level] = Some(rows.rows(rows.height - 1..rows.height));
+        }
+        if rows.height >= 2 {
+            // An odd height downsamples to its pairs, the last row left out.
+            self.feed(level + 1, start / 2, &rows.downsample(), out);
+        }
     }
 }
 
@@ -444,6 +557,58 @@ pub(crate) mod tests {
         }
         for v in (0..=255 * 64).map(|i| i as f32 / (255.0 * 64.0)).chain([-1.0, 2.0, f32::NAN]) {
             assert_eq!(round_unit_to_u8(v), (v.clamp(0.0, 1.0) * 255.0).round() as u8, "{v}");
+        }
+    }
+
+    /// Levels a [`MipCascade`] makes from `image`'s rows handed over `chunk` rows at a time.
+    fn cascaded(image: &Image, chunk: usize) -> Vec<Image> {
+        let mut levels: Vec<Option<Image>> = vec![None; level_count(image.width, image.height)];
+        let mut cascade = MipCascade::new(image.width, image.height);
+        for first in (0..image.height).step_by(chunk) {
+            let rows = image.rows(first..(first + chunk).min(image.height));
+            cascade.push(first, &rows, &mut |level, first_row, rows| match &mut levels[level] {
+                Some(made) => {
+                    assert_eq!(made.height, first_row, "level {level}: rows in order");
+                    assert!(made.append_rows(rows));
+                }
+                slot => {
+                    assert_eq!(first_row, 0, "level {level} starts at its top row");
+                    *slot = Some(rows.clone());
+                }
+            });
+        }
+        levels.into_iter().map(|l| l.expect("every level made")).collect()
+    }
+
+    #[test]
+    fn a_cascade_of_row_pairs_makes_the_levels_of_downsampling_the_whole_image() {
+        let mut seed = 777u32;
+        let mut next = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            seed >> 8
+        };
+        for (w, h) in [(7, 5), (5, 7), (1, 9), (9, 1), (1, 1), (13, 2), (130, 67), (33, 65), (64, 64)] {
+            for c in 1..=4 {
+                for kind in 0..4 {
+                    let n = w * h * c;
+                    let texels = match kind {
+                        0 => Texels::U8((0..n).map(|_| next() as u8).collect()),
+                        1 => Texels::U16((0..n).map(|_| next() as u16).collect()),
+                        2 => Texels::F16((0..n).map(|_| f32_to_f16((next() % 5000) as f32 / 700.0)).collect()),
+                        _ => Texels::F32((0..n).map(|_| (next() % 100_000) as f32 / 3e4).collect()),
+                    };
+                    let srgb = kind < 2 && next() % 2 == 0;
+                    let image = Image { width: w, height: h, channels: c, srgb, texels };
+                    let mut whole = vec![image.clone()];
+                    while whole.len() < level_count(w, h) {
+                        let coarser = whole[whole.len() - 1].downsample();
+                        whole.push(coarser);
+                    }
+                    for chunk in [1, 2, 3, 16, h] {
+                        assert_eq!(cascaded(&image, chunk), whole, "{w}x{h}x{c} kind {kind} srgb {srgb} by {chunk}");
+                    }
+                }
+            }
         }
     }
 

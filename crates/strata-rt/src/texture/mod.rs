@@ -32,7 +32,7 @@ use std::sync::{Mutex, OnceLock};
 mod image;
 #[cfg(test)]
 use image::tests::grey;
-pub use image::{Image, Texels, f16_to_f32, f32_to_f16, level_count};
+pub use image::{Image, MipCascade, Texels, f16_to_f32, f32_to_f16, level_count};
 
 /// Wrap mode: tile the image (the default).
 pub const WRAP_REPEAT: i32 = 0;
@@ -104,6 +104,15 @@ pub trait TexelSource: Send + Sync {
     /// with.
     fn decode(&self) -> Result<Image, String>;
 
+    /// The finest level's rows, top to bottom, handed to `rows` a run at a time (images of
+    /// whole rows, all of one precision, channel count and colour space), so no level need be
+    /// whole in memory; `rows` returns false when it needs no more. The default hands over
+    /// [`TexelSource::decode`]'s image at once; a format read by rows (PNG) overrides it.
+    fn decode_rows(&self, rows: &mut dyn FnMut(&Image) -> bool) -> Result<(), String> {
+        rows(&self.decode()?);
+        Ok(())
+    }
+
     /// The bytes its finest level and mip chain will take, when known before decoding (a
     /// file's header): [`prefetch`] decodes only what fits the budget's free room.
     fn resident_bytes(&self) -> Option<u64> {
@@ -173,12 +182,32 @@ impl<T: Send + 'static> Drop for Slot<T> {
     }
 }
 
-/// One mip level's residency.
+/// One mip level's residency (or one band's of a level read by bands).
 struct Level {
     image: Slot<Image>,
     /// The residency clock when last read (an epoch, advanced per miss, not per lookup, so
     /// lookups write it only when it changed).
     last_use: AtomicU64,
+    /// Set once the level proved larger than the whole budget: from then on it is read by
+    /// bands of [`BAND_ROWS`] rows, each a unit of residency, and never made whole.
+    banded: AtomicBool,
+    /// The level's rows by [`BAND_ROWS`] (none for a band itself).
+    bands: Box<[Level]>,
+}
+
+/// Rows of a band: a level larger than the budget is decoded, kept and evicted by bands of
+/// this many rows (4 MiB of a 16384-wide RGBA 8-bit level).
+pub const BAND_ROWS: usize = 64;
+
+impl Level {
+    fn new(bands: usize) -> Level {
+        Level {
+            image: Slot::new(None),
+            last_use: AtomicU64::new(0),
+            banded: AtomicBool::new(false),
+            bands: (0..bands).map(|_| Level::new(0)).collect(),
+        }
+    }
 }
 
 /// A texture's pixels: where they come from and which levels are resident.
@@ -199,7 +228,7 @@ struct Content {
 impl Content {
     fn new(width: usize, height: usize, source: Box<dyn TexelSource>) -> Content {
         let levels = (0..level_count(width, height))
-            .map(|_| Level { image: Slot::new(None), last_use: AtomicU64::new(0) })
+            .map(|l| Level::new(level_size(width, height, l).1.div_ceil(BAND_ROWS)))
             .collect();
         Content {
             source,
@@ -210,6 +239,24 @@ impl Content {
             failed: AtomicBool::new(false),
             retired: AtomicBool::new(false),
         }
+    }
+}
+
+/// The width and height of level `level` of a `width × height` texture.
+fn level_size(width: usize, height: usize, level: usize) -> (usize, usize) {
+    ((width >> level).max(1), (height >> level).max(1))
+}
+
+impl Content {
+    /// Every unit of residency: each level and each band of a level.
+    fn held(&self) -> impl Iterator<Item = &Level> {
+        self.levels.iter().flat_map(|level| std::iter::once(level).chain(level.bands.iter()))
+    }
+
+    /// The rows of band `band` of level `level`.
+    fn band_rows(&self, level: usize, band: usize) -> std::ops::Range<usize> {
+        let height = level_size(self.width, self.height, level).1;
+        band * BAND_ROWS..((band + 1) * BAND_ROWS).min(height)
     }
 }
 
@@ -329,7 +376,7 @@ pub fn evict_all() {
     let Ok(mut residency) = RESIDENCY.lock() else { return };
     let guard = &epoch::pin();
     for content in entries().filter_map(|entry| entry.content.get(guard)) {
-        for level in content.levels.iter() {
+        for level in content.held() {
             if let Some(old) = level.image.swap(None, guard) {
                 residency.resident = residency.resident.saturating_sub(old.bytes());
             }
@@ -347,7 +394,7 @@ fn make_room(residency: &mut Residency, incoming: u64, guard: &Guard) {
         // fit keeps its coarse levels).
         let mut victim: Option<(u64, u64, &Level)> = None;
         for content in entries().filter_map(|entry| entry.content.get(guard)) {
-            for level in content.levels.iter() {
+            for level in content.held() {
                 let Some(image) = level.image.get(guard) else { continue };
                 let key = (level.last_use.load(Ordering::Relaxed), u64::MAX - image.bytes());
                 if victim.is_none_or(|(t, b, _)| key < (t, b)) {
@@ -364,8 +411,10 @@ fn make_room(residency: &mut Residency, incoming: u64, guard: &Guard) {
 }
 
 /// Runs `read` on level `index` of `content`, made when it is not resident: downsampled from
-/// the nearest resident finer level, or, when none is, from the source decoded again (formats
-/// without tiles decode whole). `None` when the source fails.
+/// the nearest resident finer level, or, when none is, from the source's rows streamed through
+/// a [`MipCascade`] (no level is made whole that could not stay). `None` when the source
+/// fails, or when the level proved larger than the whole budget: it is marked
+/// [`Level::banded`] and read by bands from then on ([`load_band`]).
 ///
 /// What is kept: the wanted level and the coarser ones made with it (a third of its size;
 /// trilinear reads the next coarser level) are made room for; finer levels a decode made on
@@ -390,46 +439,43 @@ fn load_level<R>(
     if let Some(image) = content.levels[index].image.get(guard) {
         return Some(read(image)); // another thread made it meanwhile
     }
-    if content.failed.load(Ordering::Relaxed) {
+    if content.failed.load(Ordering::Relaxed) || content.levels[index].banded.load(Ordering::Relaxed) {
         return None;
     }
     let finer = (0..index).rev().find_map(|j| content.levels[j].image.get(guard).map(|image| (j, image)));
-    let decoded = match finer {
-        Some(_) => None,
+    let (first, result, mut owned) = match finer {
+        Some((first, base)) => {
+            // Levels first + 1 on, each from the one above: down to the wanted level, then on
+            // through the coarser levels that are not resident.
+            let mut made: Vec<Image> = Vec::new();
+            loop {
+                let next = first + 1 + made.len();
+                if next >= content.levels.len() || (next > index && content.levels[next].image.get(guard).is_some()) {
+                    break;
+                }
+                let image = made.last().unwrap_or(base).downsample();
+                made.push(image);
+            }
+            let result = read(if index == first { base } else { &made[index - first - 1] });
+            // Owned images by level - first (the resident base is already in place).
+            (first, result, std::iter::once(None).chain(made.into_iter().map(Some)).collect::<Vec<_>>())
+        }
         None => {
             DECODES.fetch_add(1, Ordering::Relaxed);
-            match content.source.decode() {
-                Ok(image)
-                    if image.is_consistent() && (image.width, image.height) == (content.width, content.height) =>
-                {
-                    Some(image)
+            let owned = match stream_levels(content, index, ahead, guard) {
+                Streamed::Levels(owned) => owned,
+                Streamed::TooLarge => {
+                    content.levels[index].banded.store(true, Ordering::Relaxed);
+                    return None;
                 }
-                _ => {
+                Streamed::Failed => {
                     content.failed.store(true, Ordering::Relaxed);
                     return None;
                 }
-            }
+            };
+            (0, read(owned[index].as_ref()?), owned)
         }
     };
-    let (first, base) = match (finer, &decoded) {
-        (Some(found), _) => found,
-        (None, Some(image)) => (0, image),
-        (None, None) => return None,
-    };
-    // Levels first + 1 on, each from the one above: down to the wanted level, then on
-    // through the coarser levels that are not resident.
-    let mut made: Vec<Image> = Vec::new();
-    loop {
-        let next = first + 1 + made.len();
-        if next >= content.levels.len() || (next > index && content.levels[next].image.get(guard).is_some()) {
-            break;
-        }
-        let image = made.last().unwrap_or(base).downsample();
-        made.push(image);
-    }
-    let result = read(if index == first { base } else { &made[index - first - 1] });
-    // Owned images by level - first (a resident base is already in place).
-    let mut owned: Vec<Option<Image>> = std::iter::once(decoded).chain(made.into_iter().map(Some)).collect();
     let Ok(mut residency) = RESIDENCY.lock() else { return Some(result) };
     if content.retired.load(Ordering::Relaxed) {
         return Some(result); // its file changed meanwhile: these texels are stale
@@ -440,24 +486,293 @@ fn load_level<R>(
     let requested = (index..first + owned.len()).rev().map(|l| (l, !ahead));
     let on_the_way = (first..index).rev().map(|l| (l, false));
     for (l, requested) in requested.chain(on_the_way) {
-        let Some(image) = owned[l - first].take() else { continue };
-        let level = &content.levels[l];
-        let bytes = image.bytes();
-        // A level larger than the whole budget evicts nothing: it could not stay anyway.
-        if requested && bytes <= memory_budget() {
-            make_room(&mut residency, bytes, guard);
+        if let Some(image) = owned[l - first].take() {
+            keep(&mut residency, &content.levels[l], image, requested.then_some(now), guard);
         }
-        if residency.resident.saturating_add(bytes) > memory_budget() || level.image.get(guard).is_some() {
-            continue; // does not fit: used for this lookup, not kept
-        }
-        residency.resident += bytes;
-        // Levels nobody asked for are the first candidates for eviction.
-        level.last_use.store(if requested { now } else { 0 }, Ordering::Relaxed);
-        level.image.swap(Some(image), guard);
     }
     drop(residency);
     guard.flush(); // what was evicted is freed as soon as no lookup can hold it
     Some(result)
+}
+
+/// Puts `image` in `level` (a level or a band) when it fits the budget: a requested one
+/// (`now`: the clock of the miss) evicts what it needs; one nobody asked for goes only into
+/// free room, as the first candidate for eviction. A level already resident is left as is.
+fn keep(residency: &mut Residency, level: &Level, image: Image, now: Option<u64>, guard: &Guard) {
+    let bytes = image.bytes();
+    // A level larger than the whole budget evicts nothing: it could not stay anyway.
+    if now.is_some() && bytes <= memory_budget() {
+        make_room(residency, bytes, guard);
+    }
+    if residency.resident.saturating_add(bytes) > memory_budget() || level.image.get(guard).is_some() {
+        return; // does not fit: used for this lookup, not kept
+    }
+    residency.resident += bytes;
+    level.last_use.store(now.unwrap_or(0), Ordering::Relaxed);
+    level.image.swap(Some(image), guard);
+}
+
+/// What streaming a source's rows through the mip cascade gave.
+enum Streamed {
+    /// Per level, the image made whole (levels that were not wanted or could not fit: none).
+    Levels(Vec<Option<Image>>),
+    /// The wanted level is larger than the whole budget: nothing was made.
+    TooLarge,
+    /// The source failed or handed rows that do not match its size.
+    Failed,
+}
+
+/// Bytes per texel of `rows` (channels times bytes per value).
+fn texel_bytes(rows: &Image) -> u64 {
+    (rows.channels * rows.texels.bytes_per_value()) as u64
+}
+
+/// Whether `rows` may follow `seen` rows of a `width × height` texture's finest level.
+fn rows_fit(rows: &Image, width: usize, height: usize, seen: usize) -> bool {
+    rows.width == width && (1..=4).contains(&rows.channels) && rows.is_consistent() && seen + rows.height <= height
+}
+
+/// Streams `content`'s source through a [`MipCascade`] for a miss of level `index`, keeping
+/// whole only the levels that may stay: the wanted level and the coarser ones not resident
+/// (each within the budget), and finer ones (`on the way`) within the room free now. The
+/// wanted level is checked against the budget when the first rows tell the texel size.
+fn stream_levels(content: &Content, index: usize, ahead: bool, guard: &Guard) -> Streamed {
+    let (width, height) = (content.width, content.height);
+    let (budget, count) = (memory_budget(), content.levels.len());
+    let free = budget.saturating_sub(RESIDENCY.lock().map(|r| r.resident).unwrap_or(u64::MAX));
+    let mut cascade = MipCascade::new(width, height);
+    let mut made: Vec<Option<Image>> = vec![None; count];
+    let mut wanted: Option<Vec<bool>> = None;
+    let (mut seen, mut bad, mut too_large) = (0, false, false);
+    let decoded = content.source.decode_rows(&mut |rows| {
+        if !rows_fit(rows, width, height, seen) {
+            bad = true;
+            return false;
+        }
+        let wanted = wanted.get_or_insert_with(|| {
+            let bytes = |l| {
+                let (w, h) = level_size(width, height, l);
+                (w * h) as u64 * texel_bytes(rows)
+            };
+            too_large = !ahead && bytes(index) > budget;
+            // Coarsest first, so the coarsest on-the-way levels take the free room first.
+            let mut room = free;
+            let mut plan: Vec<bool> = (0..count)
+                .rev()
+                .map(|l| match l.cmp(&index) {
+                    std::cmp::Ordering::Less => {
+                        let fits = bytes(l) <= room;
+                        room -= if fits { bytes(l) } else { 0 };
+                        fits
+                    }
+                    std::cmp::Ordering::Equal => true,
+                    std::cmp::Ordering::Greater => {
+                        let level = &content.levels[l];
+                        bytes(l) <= budget && level.image.get(guard).is_none() && !level.banded.load(Ordering::Relaxed)
+                    }
+                })
+                .collect();
+            plan.reverse();
+            plan
+        });
+        if too_large {
+            return false;
+        }
+        cascade.push(seen, rows, &mut |level, _, rows| {
+            if wanted[level] {
+                match &mut made[level] {
+                    Some(image) => _ = image.append_rows(rows),
+                    slot => *slot = Some(rows.clone()),
+                }
+            }
+        });
+        seen += rows.height;
+        true
+    });
+    if too_large {
+        return Streamed::TooLarge;
+    }
+    if decoded.is_err() || bad || seen != height {
+        return Streamed::Failed;
+    }
+    Streamed::Levels(made)
+}
+
+/// Runs `read` on band `band` of level `level` (a level larger than the budget, read by
+/// bands), made when not resident by streaming the source's rows through the cascade until
+/// the band is complete (decoding stops there). Other bands of the level passed on the way
+/// are kept in the room the budget has free, as the first to be evicted. `None` when the
+/// source fails.
+#[cold]
+fn load_band<R>(
+    content: &Content,
+    level: usize,
+    band: usize,
+    guard: &Guard,
+    read: impl FnOnce(&Image) -> R,
+) -> Option<R> {
+    MISSES.fetch_add(1, Ordering::Relaxed);
+    let _decoding = content.decoding.lock().ok()?;
+    let bands = &content.levels[level].bands;
+    if let Some(image) = bands[band].image.get(guard) {
+        return Some(read(image)); // another thread made it meanwhile
+    }
+    if content.failed.load(Ordering::Relaxed) {
+        return None;
+    }
+    DECODES.fetch_add(1, Ordering::Relaxed);
+    let (width, height) = (content.width, content.height);
+    let mut room = memory_budget().saturating_sub(RESIDENCY.lock().map(|r| r.resident).unwrap_or(u64::MAX));
+    let mut cascade = MipCascade::new(width, height);
+    // The bands made, by band index (at most the wanted one and those fitting the room).
+    let mut made: Vec<(usize, Image)> = Vec::new();
+    let (mut seen, mut bad, mut done) = (0, false, false);
+    let decoded = content.source.decode_rows(&mut |rows| {
+        if !rows_fit(rows, width, height, seen) {
+            bad = true;
+            return false;
+        }
+        cascade.push(seen, rows, &mut |l, first, rows| {
+            if l != level || done {
+                return;
+            }
+            // Split the run at band boundaries; each piece appends to its band or is dropped.
+            let mut y = first;
+            while y < first + rows.height {
+                let b = y / BAND_ROWS;
+                let range = content.band_rows(level, b);
+                let piece = rows.rows(y - first..range.end.min(first + rows.height) - first);
+                let start = y == range.start;
+                y += piece.height;
+                let bytes = (range.len() * rows.width) as u64 * texel_bytes(rows);
+                match made.last_mut() {
+                    Some((at, image)) if *at == b => _ = image.append_rows(&piece),
+                    _ if start && (b == band || (b < band && bytes <= room)) => {
+                        if b != band {
+                            room -= bytes;
+                        }
+                        made.push((b, piece));
+                    }
+                    _ => {}
+                }
+                if b == band && y == range.end {
+                    done = true;
+                    return;
+                }
+            }
+        });
+        seen += rows.height;
+        !done
+    });
+    if decoded.is_err() || bad || !done {
+        content.failed.store(true, Ordering::Relaxed);
+        return None;
+    }
+    let (_, wanted) = made.pop()?;
+    let result = read(&wanted);
+    let Ok(mut residency) = RESIDENCY.lock() else { return Some(result) };
+    if content.retired.load(Ordering::Relaxed) {
+        return Some(result);
+    }
+    let now = CLOCK.fetch_add(1, Ordering::Relaxed) + 1;
+    keep(&mut residency, &bands[band], wanted, Some(now), guard);
+    for (b, image) in made.into_iter().rev() {
+        keep(&mut residency, &bands[b], image, None, guard);
+    }
+    drop(residency);
+    guard.flush();
+    Some(result)
+}
+
+/// Runs `read` on band `band` of level `level` of `content` (one read by bands), loading it
+/// on a miss.
+#[inline]
+fn with_band<R>(
+    content: &Content,
+    level: usize,
+    band: usize,
+    guard: &Guard,
+    read: impl FnOnce(&Image) -> R,
+) -> Option<R> {
+    MY_SHARD.with(|&shard| FETCHES[shard].0.fetch_add(1, Ordering::Relaxed));
+    let held = &content.levels[level].bands[band];
+    if let Some(image) = held.image.get(guard) {
+        let now = CLOCK.load(Ordering::Relaxed);
+        if held.last_use.load(Ordering::Relaxed) != now {
+            held.last_use.store(now, Ordering::Relaxed);
+        }
+        return Some(read(image));
+    }
+    load_band(content, level, band, guard, read)
+}
+
+/// Row `row` of level `level` read through its band: `read(band, row within the band)`;
+/// `None` for a black row (no row) or a source that fails.
+#[inline]
+fn with_row<R>(
+    content: &Content,
+    level: usize,
+    row: Option<usize>,
+    guard: &Guard,
+    read: impl FnOnce(&Image, usize) -> R,
+) -> Option<R> {
+    let row = row?;
+    with_band(content, level, row / BAND_ROWS, guard, |band| read(band, row % BAND_ROWS))
+}
+
+/// A texel read of level `level` of `content`: `whole` on the level when it is (or can be)
+/// made whole, else `banded` with the level's size, through its bands.
+#[inline]
+fn read_level(
+    content: &Content,
+    level: usize,
+    guard: &Guard,
+    whole: impl FnOnce(&Image) -> f32,
+    banded: impl FnOnce(usize, usize) -> f32,
+) -> f32 {
+    let held = &content.levels[level];
+    if !held.banded.load(Ordering::Relaxed) {
+        if let Some(value) = with_level(content, level, guard, whole) {
+            return value;
+        }
+        if !held.banded.load(Ordering::Relaxed) {
+            return 0.0; // the source failed
+        }
+    }
+    let (w, h) = level_size(content.width, content.height, level);
+    banded(w, h)
+}
+
+/// Bilinear lookup of level `level` at (s, t) in [0, 1]² (t down the rows), whole or by bands
+/// (the same arithmetic, row by row).
+#[inline]
+fn bilinear_at(
+    content: &Content,
+    level: usize,
+    s: f32,
+    t: f32,
+    channel: usize,
+    wrap: (i32, i32),
+    guard: &Guard,
+) -> f32 {
+    let (wrap_s, wrap_t) = wrap;
+    read_level(
+        content,
+        level,
+        guard,
+        |image| image.bilinear(s * image.width as f32, t * image.height as f32, channel, wrap_s, wrap_t),
+        |w, h| {
+            let ((x0, fx), (y0, fy)) = (image::bilinear_corner(s * w as f32), image::bilinear_corner(t * h as f32));
+            let row = |yi: i64| {
+                with_row(content, level, wrap_index(yi, h, wrap_t), guard, |band, y| {
+                    band.row_lerp(Some(y), x0, fx, channel, wrap_s)
+                })
+                .unwrap_or(0.0)
+            };
+            let (top, bottom) = (row(y0), row(y0 + 1));
+            top + (bottom - top) * fy
+        },
+    )
 }
 
 /// Runs `read` on level `index` of `content`, loading it on a miss; `None` when it cannot be
@@ -489,7 +804,7 @@ pub fn prefetch(id: i32) -> bool {
 
 /// [`prefetch`] of one texture's content.
 fn prefetch_content(content: &Content, guard: &Guard) -> bool {
-    if content.failed.load(Ordering::Relaxed) || content.levels.iter().any(|l| l.image.get(guard).is_some()) {
+    if content.failed.load(Ordering::Relaxed) || content.held().any(|l| l.image.get(guard).is_some()) {
         return false;
     }
     let Some(bytes) = content.source.resident_bytes() else { return false };
@@ -561,7 +876,7 @@ pub fn replace_source(id: i32, width: usize, height: usize, source: Box<dyn Texe
     let guard = &epoch::pin();
     if let Some(old) = entry.content.swap(Some(fresh), guard) {
         old.retired.store(true, Ordering::Relaxed);
-        for level in old.levels.iter() {
+        for level in old.held() {
             if let Some(image) = level.image.swap(None, guard) {
                 residency.resident = residency.resident.saturating_sub(image.bytes());
             }
@@ -644,12 +959,8 @@ pub fn lookup_with(filter: Filter, id: i32, s: f32, t: f32, mode: i32, footprint
     let (ax, ay) = ((finite(dsdx) * w, finite(dtdx) * h), (finite(dsdy) * w, finite(dtdy) * h));
     let (la, lb) = (ax.0.hypot(ax.1), ay.0.hypot(ay.1));
     let (major_axis, major, minor) = if la >= lb { (ax, la, lb) } else { (ay, lb, la) };
-    let sample_level = |level: usize, s: f32, t: f32| {
-        with_level(content, level, guard, |image| {
-            image.bilinear(s * image.width as f32, t * image.height as f32, channel, wrap_s, wrap_t)
-        })
-        .unwrap_or(0.0)
-    };
+    let sample_level =
+        |level: usize, s: f32, t: f32| bilinear_at(content, level, s, t, channel, (wrap_s, wrap_t), guard);
     let last = content.levels.len() - 1;
     let trilinear = |lod: f32, s: f32, t: f32| {
         if lod <= 0.0 {
@@ -662,9 +973,17 @@ pub fn lookup_with(filter: Filter, id: i32, s: f32, t: f32, mode: i32, footprint
         if frac <= 0.0 || fine >= last { a } else { a + (sample_level(fine + 1, s, t) - a) * frac }
     };
     match filter {
-        Filter::Nearest => {
-            with_level(content, 0, guard, |image| image.nearest(s * w, t * h, channel, wrap_s, wrap_t)).unwrap_or(0.0)
-        }
+        Filter::Nearest => read_level(
+            content,
+            0,
+            guard,
+            |image| image.nearest(s * w, t * h, channel, wrap_s, wrap_t),
+            |_, height| {
+                let row = wrap_index((t * h).floor() as i64, height, wrap_t);
+                with_row(content, 0, row, guard, |band, y| band.texel(y, (s * w).floor() as i64, channel, wrap_s))
+                    .unwrap_or(0.0)
+            },
+        ),
         Filter::Bilinear => sample_level(0, s, t),
         Filter::Trilinear => trilinear(major.max(1.0).log2(), s, t),
         Filter::Anisotropic => {
