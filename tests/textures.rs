@@ -151,3 +151,65 @@ fn footprint_filtering_removes_aliasing_at_grazing_angles_and_changes_nothing_up
         assert_eq!(albedo(&close, 128, 1, filter), bilinear, "{filter:?} changed the image where texels are large");
     }
 }
+
+/// The texel of the 16384² test PNG at (x, y): three 8-bit channels of formulas (each row
+/// repeats every 256 texels, so the file deflates to a few MB).
+fn huge_texel(x: usize, y: usize) -> [u8; 3] {
+    [((x ^ y) & 255) as u8, ((x + y) & 255) as u8, (y & 255) as u8]
+}
+
+/// A real 16384 x 16384 RGB PNG file (768 MiB of texels, 256 MiB at level 1) under a 64 MiB
+/// texture budget: its rows are decoded as a band of them is reached, never the whole image,
+/// and the texels read are the formula's that wrote the file. (Its peak memory, measured with
+/// `/usr/bin/time -v`, is in README's Texture pipeline.)
+#[test]
+fn a_16384_squared_png_under_a_64_mib_budget_reads_the_texels_that_made_it() {
+    const SIDE: usize = 16384;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("huge.png");
+    {
+        let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+        let mut encoder = png::Encoder::new(file, SIDE as u32, SIDE as u32);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder.set_compression(png::Compression::Fast);
+        let mut writer = encoder.write_header().unwrap();
+        let mut stream = writer.stream_writer().unwrap();
+        let mut row = vec![0u8; SIDE * 3];
+        for y in 0..SIDE {
+            for (x, texel) in row.chunks_exact_mut(3).enumerate() {
+                texel.copy_from_slice(&huge_texel(x, y));
+            }
+            std::io::Write::write_all(&mut stream, &row).unwrap();
+        }
+        stream.finish().unwrap();
+    }
+    assert!(std::fs::metadata(&path).unwrap().len() < 64 << 20, "a compressible pattern");
+    let budget = 64 << 20;
+    strata::runtime::texture::set_memory_budget(Some(budget));
+    let id = strata::runtime::texture::register_file_as(&path, strata::runtime::texture::ColorSpace::Raw).unwrap();
+    let centre =
+        |x: usize, y: usize, texels: usize| ((x as f32 + 0.5) / texels as f32, 1.0 - (y as f32 + 0.5) / texels as f32);
+    // Finest-level reads at texel centres give the texel exactly: top, middle and bottom bands.
+    for (x, y) in [(0, 0), (12345, 6789), (8191, 8000), (SIDE - 1, SIDE - 2), (5, SIDE - 1)] {
+        let (s, t) = centre(x, y, SIDE);
+        for (channel, want) in huge_texel(x, y).into_iter().enumerate() {
+            let got = strata_rt::texture::lookup_with(Filter::Bilinear, id, s, t, channel as i32, [0.0; 4]);
+            assert_eq!(got, f32::from(want) / 255.0, "texel ({x}, {y}) channel {channel}");
+        }
+    }
+    // A footprint of 4 texels reads level 2 (48 MiB: it fits the budget whole): at its
+    // texel centres, the mean of the 4 x 4 block (two 8-bit roundings on the way).
+    for (x, y) in [(1000, 2000), (4095, 17)] {
+        let (s, t) = centre(x, y, SIDE / 4);
+        let footprint = [4.0 / SIDE as f32, 0.0, 0.0, 4.0 / SIDE as f32];
+        for channel in 0..3 {
+            let block: f32 =
+                (0..16).map(|k| f32::from(huge_texel(4 * x + k % 4, 4 * y + k / 4)[channel])).sum::<f32>() / 16.0;
+            let got = strata_rt::texture::lookup_with(Filter::Trilinear, id, s, t, channel as i32, footprint);
+            assert!((got - block / 255.0).abs() <= 1.0 / 255.0 + 1e-6, "level 2 ({x}, {y}) channel {channel}: {got}");
+        }
+    }
+    let stats = strata_rt::texture::stats();
+    assert!(stats.resident_bytes <= budget, "{stats:?}");
+}

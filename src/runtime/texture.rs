@@ -405,6 +405,76 @@ pub fn decode_image(bytes: &[u8], name: Option<&Path>, space: ColorSpace, max_pi
     Ok(image)
 }
 
+/// Rows a PNG hands over at a time: 1 MiB of a 16384-wide RGBA 8-bit image.
+const PNG_ROWS: usize = 16;
+
+/// [`decode_image`]'s texels handed to `rows` a run of rows at a time, top to bottom, until it
+/// returns false. A non-interlaced PNG is decoded row by row (the `png` crate's row reader,
+/// with the `image` crate's transformations: the same texels), so a texture larger than the
+/// memory budget is never whole in memory; other formats (and interlaced PNGs) are decoded
+/// whole and handed over at once.
+pub fn decode_image_rows(
+    bytes: &[u8],
+    name: Option<&Path>,
+    space: ColorSpace,
+    max_pixels: u64,
+    rows: &mut dyn FnMut(Image) -> bool,
+) -> Result<(), String> {
+    let header = read_header(bytes, name, space, max_pixels)?;
+    let reader = bytes.starts_with(b"\x89PNG\r\n\x1a\n").then(|| png_row_reader(bytes, &header)).flatten();
+    let Some(mut reader) = reader else {
+        rows(decode_image(bytes, name, space, max_pixels)?);
+        return Ok(());
+    };
+    let (width, height, channels) = (header.width as usize, header.height as usize, header.channels);
+    let values = PNG_ROWS * width * channels;
+    let empty = || {
+        let texels = if header.bytes_per_channel == 2 {
+            Texels::U16(Vec::with_capacity(values))
+        } else {
+            Texels::U8(Vec::with_capacity(values))
+        };
+        Image { width, height: 0, channels, srgb: header.srgb, texels }
+    };
+    let mut run = empty();
+    let mut decoded = 0;
+    while let Some(row) = reader.next_row().map_err(|e| e.to_string())? {
+        match &mut run.texels {
+            Texels::U16(v) => v.extend(row.data().chunks_exact(2).map(|b| u16::from_be_bytes([b[0], b[1]]))),
+            Texels::U8(v) => v.extend_from_slice(row.data()),
+            _ => unreachable!("PNG texels are 8 or 16 bit"),
+        }
+        (run.height, decoded) = (run.height + 1, decoded + 1);
+        if (run.height == PNG_ROWS || decoded == height) && !rows(std::mem::replace(&mut run, empty())) {
+            return Ok(());
+        }
+    }
+    if decoded != height {
+        return Err(format!("the image data ends after {decoded} of {height} rows"));
+    }
+    Ok(())
+}
+
+/// A row reader for a non-interlaced PNG whose expanded rows have the channels and depth
+/// `header` promises (as the `image` crate decodes it: palettes, low bit depths and
+/// transparency chunks expanded); `None` for any other (decoded whole instead).
+fn png_row_reader<'a>(bytes: &'a [u8], header: &TextureHeader) -> Option<png::Reader<Cursor<&'a [u8]>>> {
+    let mut decoder = png::Decoder::new(Cursor::new(bytes));
+    decoder.set_transformations(png::Transformations::EXPAND);
+    let reader = decoder.read_info().ok()?;
+    let (color, depth) = reader.output_color_type();
+    let bytes_per_channel = match depth {
+        png::BitDepth::Eight => 1,
+        png::BitDepth::Sixteen => 2,
+        _ => return None,
+    };
+    let info = reader.info();
+    let same = (info.width, info.height) == (header.width, header.height)
+        && color.samples() == header.channels
+        && bytes_per_channel == header.bytes_per_channel;
+    (same && !info.interlaced).then_some(reader)
+}
+
 /// A texture file decoded when a lookup first reaches it (and again after eviction).
 struct FileSource {
     /// The file as read (canonical, package paths included).
@@ -421,6 +491,11 @@ impl strata_rt::texture::TexelSource for FileSource {
     fn decode(&self) -> Result<Image, String> {
         let bytes = input::read_bytes(&self.canonical).map_err(|e| e.to_string())?;
         decode_image(&bytes, Some(&self.name), self.space, self.max_pixels)
+    }
+
+    fn decode_rows(&self, rows: &mut dyn FnMut(Image) -> bool) -> Result<(), String> {
+        let bytes = input::read_bytes(&self.canonical).map_err(|e| e.to_string())?;
+        decode_image_rows(&bytes, Some(&self.name), self.space, self.max_pixels, rows)
     }
 
     fn resident_bytes(&self) -> Option<u64> {
@@ -724,6 +799,79 @@ pub(crate) mod tests {
         let id = strata_rt::texture::register_image("test:half-exr".into(), image).unwrap();
         assert_eq!(lookup(id, 0.75, 0.5, 0), 1.5);
         assert_eq!(lookup(id, 0.75, 0.5, 2), 0.0, "NaN reads 0");
+    }
+
+    /// A PNG of `color` at `depth` bits whose samples are `sample(index)` (big-endian at 16).
+    fn png_of(w: u32, h: u32, color: png::ColorType, depth: png::BitDepth, sample: impl Fn(usize) -> u16) -> Vec<u8> {
+        let n = w as usize * h as usize * color.samples();
+        let data: Vec<u8> = match depth {
+            png::BitDepth::Sixteen => (0..n).flat_map(|i| sample(i).to_be_bytes()).collect(),
+            _ => (0..n).map(|i| sample(i) as u8).collect(),
+        };
+        let mut bytes = Vec::new();
+        let mut encoder = png::Encoder::new(&mut bytes, w, h);
+        encoder.set_color(color);
+        encoder.set_depth(depth);
+        let mut writer = encoder.write_header().expect("header");
+        writer.write_image_data(&data).expect("data");
+        writer.finish().expect("finish");
+        bytes
+    }
+
+    #[test]
+    fn png_rows_and_their_cascade_give_the_texels_and_levels_of_the_whole_image_path() {
+        use png::{BitDepth, ColorType};
+        let colors = [ColorType::Grayscale, ColorType::GrayscaleAlpha, ColorType::Rgb, ColorType::Rgba];
+        let mut checked = 0;
+        for (w, h) in [(37, 21), (1, 40), (40, 1), (17, 16), (64, 33)] {
+            for color in colors {
+                for depth in [BitDepth::Eight, BitDepth::Sixteen] {
+                    let bytes = png_of(w, h, color, depth, |i| (i as u16).wrapping_mul(40_503) ^ 0x5a5a);
+                    for space in [ColorSpace::Auto, ColorSpace::Srgb, ColorSpace::Raw] {
+                        let whole = decode_image(&bytes, None, space, 1 << 20).unwrap();
+                        let mut chain = vec![whole.clone()];
+                        while chain.len() < strata_rt::texture::level_count(whole.width, whole.height) {
+                            let next = chain[chain.len() - 1].downsample();
+                            chain.push(next);
+                        }
+                        let mut levels: Vec<Option<Image>> = vec![None; chain.len()];
+                        let mut cascade = strata_rt::texture::MipCascade::new(whole.width, whole.height);
+                        let (mut seen, mut runs) = (0, 0);
+                        decode_image_rows(&bytes, None, space, 1 << 20, &mut |rows| {
+                            cascade.push(seen, &rows, &mut |level, _, rows| match &mut levels[level] {
+                                Some(made) => assert!(made.append_rows(rows)),
+                                slot => *slot = Some(rows.clone()),
+                            });
+                            (seen, runs) = (seen + rows.height, runs + 1);
+                            true
+                        })
+                        .unwrap();
+                        assert_eq!(runs, (h as usize).div_ceil(PNG_ROWS), "read by runs of rows");
+                        let levels: Vec<Image> = levels.into_iter().map(Option::unwrap).collect();
+                        assert_eq!(levels, chain, "{w}x{h} {color:?} {depth:?} {space:?}");
+                        checked += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(checked, 5 * 4 * 2 * 3);
+        // A palette image expands to RGB as the whole-image path decodes it; reading stops
+        // when asked.
+        let mut bytes = Vec::new();
+        let mut encoder = png::Encoder::new(&mut bytes, 3, 40);
+        encoder.set_color(ColorType::Indexed);
+        encoder.set_palette(vec![255, 0, 0, 0, 128, 255]);
+        let mut writer = encoder.write_header().unwrap();
+        writer.write_image_data(&(0..120).map(|i| (i % 2) as u8).collect::<Vec<_>>()).unwrap();
+        writer.finish().unwrap();
+        let whole = decode_image(&bytes, None, ColorSpace::Auto, 1 << 20).unwrap();
+        let mut first = None;
+        decode_image_rows(&bytes, None, ColorSpace::Auto, 1 << 20, &mut |rows| {
+            first = Some(rows);
+            false
+        })
+        .unwrap();
+        assert_eq!(first, Some(whole.rows(0..PNG_ROWS)));
     }
 
     #[test]

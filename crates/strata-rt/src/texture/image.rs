@@ -47,6 +47,15 @@ impl Texels {
         }
     }
 
+    /// Room for `more` values without reallocating.
+    fn reserve_exact(&mut self, more: usize) {
+        match self {
+            Texels::U8(v) => v.reserve_exact(more),
+            Texels::U16(v) | Texels::F16(v) => v.reserve_exact(more),
+            Texels::F32(v) => v.reserve_exact(more),
+        }
+    }
+
     /// Appends `other`'s values; false (and nothing appended) when its precision differs.
     fn extend_from(&mut self, other: &Texels) -> bool {
         match (self, other) {
@@ -150,6 +159,11 @@ impl Image {
         let row = self.width * self.channels;
         let texels = self.texels.copy_range(rows.start * row..rows.end * row);
         Image { width: self.width, height: rows.len(), channels: self.channels, srgb: self.srgb, texels }
+    }
+
+    /// Room for `rows` more rows without reallocating.
+    pub fn reserve_rows(&mut self, rows: usize) {
+        self.texels.reserve_exact(rows * self.width * self.channels);
     }
 
     /// Appends `below`'s rows under this image's; false (nothing appended) when their

@@ -107,9 +107,10 @@ pub trait TexelSource: Send + Sync {
     /// The finest level's rows, top to bottom, handed to `rows` a run at a time (images of
     /// whole rows, all of one precision, channel count and colour space), so no level need be
     /// whole in memory; `rows` returns false when it needs no more. The default hands over
-    /// [`TexelSource::decode`]'s image at once; a format read by rows (PNG) overrides it.
-    fn decode_rows(&self, rows: &mut dyn FnMut(&Image) -> bool) -> Result<(), String> {
-        rows(&self.decode()?);
+    /// [`TexelSource::decode`]'s image at once (kept as it is when it may stay, not copied);
+    /// a format read by rows (PNG) overrides it.
+    fn decode_rows(&self, rows: &mut dyn FnMut(Image) -> bool) -> Result<(), String> {
+        rows(self.decode()?);
         Ok(())
     }
 
@@ -545,14 +546,14 @@ fn stream_levels(content: &Content, index: usize, ahead: bool, guard: &Guard) ->
     let mut wanted: Option<Vec<bool>> = None;
     let (mut seen, mut bad, mut too_large) = (0, false, false);
     let decoded = content.source.decode_rows(&mut |rows| {
-        if !rows_fit(rows, width, height, seen) {
+        if !rows_fit(&rows, width, height, seen) {
             bad = true;
             return false;
         }
         let wanted = wanted.get_or_insert_with(|| {
             let bytes = |l| {
                 let (w, h) = level_size(width, height, l);
-                (w * h) as u64 * texel_bytes(rows)
+                (w * h) as u64 * texel_bytes(&rows)
             };
             too_large = !ahead && bytes(index) > budget;
             // Coarsest first, so the coarsest on-the-way levels take the free room first.
@@ -578,15 +579,26 @@ fn stream_levels(content: &Content, index: usize, ahead: bool, guard: &Guard) ->
         if too_large {
             return false;
         }
-        cascade.push(seen, rows, &mut |level, _, rows| {
-            if wanted[level] {
+        // The finest level handed over whole (a source decoded whole) is kept, not copied.
+        let whole = rows.height == height && wanted[0];
+        cascade.push(seen, &rows, &mut |level, _, rows| {
+            if wanted[level] && !(level == 0 && whole) {
                 match &mut made[level] {
                     Some(image) => _ = image.append_rows(rows),
-                    slot => *slot = Some(rows.clone()),
+                    slot => {
+                        // Room for the whole level at once: growing by doubling would peak
+                        // at one and a half times its size.
+                        let mut image = rows.clone();
+                        image.reserve_rows(level_size(width, height, level).1 - rows.height);
+                        *slot = Some(image);
+                    }
                 }
             }
         });
         seen += rows.height;
+        if whole {
+            made[0] = Some(rows);
+        }
         true
     });
     if too_large {
@@ -628,11 +640,11 @@ fn load_band<R>(
     let mut made: Vec<(usize, Image)> = Vec::new();
     let (mut seen, mut bad, mut done) = (0, false, false);
     let decoded = content.source.decode_rows(&mut |rows| {
-        if !rows_fit(rows, width, height, seen) {
+        if !rows_fit(&rows, width, height, seen) {
             bad = true;
             return false;
         }
-        cascade.push(seen, rows, &mut |l, first, rows| {
+        cascade.push(seen, &rows, &mut |l, first, rows| {
             if l != level || done {
                 return;
             }
