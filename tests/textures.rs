@@ -172,7 +172,9 @@ fn a_16384_squared_png_under_a_64_mib_budget_reads_the_texels_that_made_it() {
         let mut encoder = png::Encoder::new(file, SIDE as u32, SIDE as u32);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
-        encoder.set_compression(png::Compression::Fast);
+        // zlib level 1 finds the rows' 768-byte period (fdeflate's fast modes do not).
+        encoder.set_deflate_compression(png::DeflateCompression::Level(1));
+        encoder.set_filter(png::Filter::NoFilter);
         let mut writer = encoder.write_header().unwrap();
         let mut stream = writer.stream_writer().unwrap();
         let mut row = vec![0u8; SIDE * 3];
@@ -185,6 +187,10 @@ fn a_16384_squared_png_under_a_64_mib_budget_reads_the_texels_that_made_it() {
         stream.finish().unwrap();
     }
     assert!(std::fs::metadata(&path).unwrap().len() < 64 << 20, "a compressible pattern");
+    // 2^28 texels: twice the default limit (`--max-texture-pixels`).
+    let mut limits = strata::input::limits();
+    limits.max_texture_pixels = 1 << 28;
+    strata::input::set_limits(limits);
     let budget = 64 << 20;
     strata::runtime::texture::set_memory_budget(Some(budget));
     let id = strata::runtime::texture::register_file_as(&path, strata::runtime::texture::ColorSpace::Raw).unwrap();
