@@ -189,8 +189,10 @@ struct Level {
     /// The residency clock when last read (an epoch, advanced per miss, not per lookup, so
     /// lookups write it only when it changed).
     last_use: AtomicU64,
-    /// Set once the level proved larger than the whole budget: from then on it is read by
-    /// bands of [`BAND_ROWS`] rows, each a unit of residency, and never made whole.
+    /// Set once the level proved larger than half the budget: from then on it is read by
+    /// bands of [`BAND_ROWS`] rows, each a unit of residency, and never made whole (a level
+    /// that filled the budget would evict every band and be evicted by the next band miss,
+    /// each miss a decode of the file).
     banded: AtomicBool,
     /// The level's rows by [`BAND_ROWS`] (none for a band itself).
     bands: Box<[Level]>,
@@ -414,7 +416,7 @@ fn make_room(residency: &mut Residency, incoming: u64, guard: &Guard) {
 /// Runs `read` on level `index` of `content`, made when it is not resident: downsampled from
 /// the nearest resident finer level, or, when none is, from the source's rows streamed through
 /// a [`MipCascade`] (no level is made whole that could not stay). `None` when the source
-/// fails, or when the level proved larger than the whole budget: it is marked
+/// fails, or when the level proved larger than half the budget: it is marked
 /// [`Level::banded`] and read by bands from then on ([`load_band`]).
 ///
 /// What is kept: the wanted level and the coarser ones made with it (a third of its size;
@@ -517,7 +519,7 @@ fn keep(residency: &mut Residency, level: &Level, image: Image, now: Option<u64>
 enum Streamed {
     /// Per level, the image made whole (levels that were not wanted or could not fit: none).
     Levels(Vec<Option<Image>>),
-    /// The wanted level is larger than the whole budget: nothing was made.
+    /// The wanted level is larger than half the budget: nothing was made.
     TooLarge,
     /// The source failed or handed rows that do not match its size.
     Failed,
@@ -535,7 +537,7 @@ fn rows_fit(rows: &Image, width: usize, height: usize, seen: usize) -> bool {
 
 /// Streams `content`'s source through a [`MipCascade`] for a miss of level `index`, keeping
 /// whole only the levels that may stay: the wanted level and the coarser ones not resident
-/// (each within the budget), and finer ones (`on the way`) within the room free now. The
+/// (each within half the budget), and finer ones (`on the way`) within the room free now. The
 /// wanted level is checked against the budget when the first rows tell the texel size.
 fn stream_levels(content: &Content, index: usize, ahead: bool, guard: &Guard) -> Streamed {
     let (width, height) = (content.width, content.height);
@@ -555,7 +557,7 @@ fn stream_levels(content: &Content, index: usize, ahead: bool, guard: &Guard) ->
                 let (w, h) = level_size(width, height, l);
                 (w * h) as u64 * texel_bytes(&rows)
             };
-            too_large = !ahead && bytes(index) > budget;
+            too_large = !ahead && bytes(index) > budget / 2;
             // Coarsest first, so the coarsest on-the-way levels take the free room first.
             let mut room = free;
             let mut plan: Vec<bool> = (0..count)
@@ -569,7 +571,9 @@ fn stream_levels(content: &Content, index: usize, ahead: bool, guard: &Guard) ->
                     std::cmp::Ordering::Equal => true,
                     std::cmp::Ordering::Greater => {
                         let level = &content.levels[l];
-                        bytes(l) <= budget && level.image.get(guard).is_none() && !level.banded.load(Ordering::Relaxed)
+                        bytes(l) <= budget / 2
+                            && level.image.get(guard).is_none()
+                            && !level.banded.load(Ordering::Relaxed)
                     }
                 })
                 .collect();
@@ -610,7 +614,7 @@ fn stream_levels(content: &Content, index: usize, ahead: bool, guard: &Guard) ->
     Streamed::Levels(made)
 }
 
-/// Runs `read` on band `band` of level `level` (a level larger than the budget, read by
+/// Runs `read` on band `band` of level `level` (a level larger than half the budget, read by
 /// bands), made when not resident by streaming the source's rows through the cascade until
 /// the band is complete (decoding stops there). Other bands of the level passed on the way
 /// are kept in the room the budget has free, as the first to be evicted. `None` when the
