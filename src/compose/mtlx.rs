@@ -76,14 +76,16 @@ pub fn split_id(id: &str) -> Option<(&str, &str)> {
     Some((rest, ""))
 }
 
-/// The variant a type takes in the node library: `float`, or `color3` for the triples
-/// (color3, vector3, vector2, with or without MaterialX's `FA` float-argument suffix).
+/// The variant a type takes in the node library: `float`, `color3` for the triples (color3,
+/// vector3, vector2) or `color4` for the 4-channel types (color4, vector4: a colour and a
+/// float `_a`), with or without MaterialX's `FA` float-argument suffix.
 fn variant(ty: &str) -> Option<&'static str> {
     let ty = ty.strip_suffix("FA").unwrap_or(ty);
     let ty = ty.split('_').next().unwrap_or(ty);
     match ty {
         "float" => Some("float"),
         "color3" | "vector3" | "vector2" | "" => Some("color3"),
+        "color4" | "vector4" => Some("color4"),
         _ => None,
     }
 }
@@ -127,6 +129,12 @@ pub fn node_function(id: &str) -> Option<String> {
         // A vector2 travels with z = 0, which is not one of its components.
         return Some(format!("mx_{node}_vector2"));
     }
+    if node == "combine2" && types == "vector4VV" {
+        return Some("mx_combine2_vector4VV".into());
+    }
+    if node == "combine2" && matches!(types, "color4CF" | "vector4VF") {
+        return Some("mx_combine2_color4".into());
+    }
     if matches!(node, "combine2" | "combine3") {
         // Named by the type they build; the library's variant takes floats.
         return Some(format!("mx_{node}_float"));
@@ -135,8 +143,13 @@ pub fn node_function(id: &str) -> Option<String> {
         let (from, to) = types.split_once('_')?;
         return match (variant(from)?, to) {
             ("float", to) if variant(to)? == "color3" => Some("mx_convert_float_color3".into()),
+            ("float", "color4" | "vector4") => Some("mx_convert_float_color4".into()),
             ("color3", "vector2") => Some("mx_convert_color3_vector2".into()),
             ("color3", to) if variant(to)? == "color3" => Some("mx_convert_color3_color3".into()),
+            ("color3", "color4" | "vector4") => Some("mx_convert_color3_color4".into()),
+            ("color4", "vector2") => Some("mx_convert_color4_vector2".into()),
+            ("color4", to) if variant(to)? == "color3" => Some("mx_convert_color4_color3".into()),
+            ("color4", "color4" | "vector4") => Some("mx_convert_color4_color4".into()),
             _ => None,
         };
     }
@@ -427,7 +440,19 @@ mod tests {
         assert_eq!(node_function("ND_convert_float_color3").as_deref(), Some("mx_convert_float_color3"));
         assert_eq!(node_function("ND_convert_vector3_vector2").as_deref(), Some("mx_convert_color3_vector2"));
         assert_eq!(node_function("ND_normalmap").as_deref(), Some("mx_normalmap_color3"));
-        assert_eq!(node_function("ND_add_color4"), None);
+        assert_eq!(node_function("ND_add_color4").as_deref(), Some("mx_add_color4"));
+        assert_eq!(node_function("ND_multiply_vector4FA").as_deref(), Some("mx_multiply_color4"));
+        assert_eq!(node_function("ND_mix_color4_color4").as_deref(), Some("mx_mix_color4"));
+        assert_eq!(node_function("ND_convert_color4_vector3").as_deref(), Some("mx_convert_color4_color3"));
+        assert_eq!(node_function("ND_convert_vector2_vector4").as_deref(), Some("mx_convert_color3_color4"));
+        assert_eq!(node_function("ND_convert_vector4_color4").as_deref(), Some("mx_convert_color4_color4"));
+        assert_eq!(node_function("ND_convert_color4_vector2").as_deref(), Some("mx_convert_color4_vector2"));
+        assert_eq!(node_function("ND_convert_float_vector4").as_deref(), Some("mx_convert_float_color4"));
+        assert_eq!(node_function("ND_combine2_vector4VF").as_deref(), Some("mx_combine2_color4"));
+        assert_eq!(node_function("ND_combine2_vector4VV").as_deref(), Some("mx_combine2_vector4VV"));
+        assert_eq!(node_function("ND_combine4_color4").as_deref(), Some("mx_combine4_color4"));
+        // Integer- and boolean-selected variants are not in the library's naming.
+        assert_eq!(node_function("ND_ifgreater_color4I"), None);
         assert_eq!(node_function("ND_mincomponent_vector2").as_deref(), Some("mx_mincomponent_vector2"));
         assert_eq!(node_function("ND_maxcomponent_vector3").as_deref(), Some("mx_maxcomponent_color3"));
         assert_eq!(node_function("ND_blackbody").as_deref(), Some("mx_blackbody_color3"));
