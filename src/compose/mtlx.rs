@@ -198,7 +198,7 @@ fn canonical_space(space: &str) -> &str {
         "gamma18" => "g18_rec709",
         "gamma22" => "g22_rec709",
         "gamma24" => "rec709_display",
-        "lin_srgb" | "Utility - Linear - sRGB" | "Linear Rec.709 (sRGB)" => "lin_rec709",
+        "lin_srgb" | "Utility - Linear - sRGB" | "Linear Rec.709 (sRGB)" | "lin_rec709_scene" => "lin_rec709",
         "Utility - sRGB - Texture" | "sRGB - Texture" => "srgb_texture",
         "ACEScg" | "lin_ap1_scene" => "acescg",
         "ACES2065-1" | "lin_ap0" => "lin_ap0",
@@ -486,5 +486,7 @@ mod tests {
         assert_eq!(to_working_space("gamma22", [0.5; 3]), to_working_space("g22_rec709", [0.5; 3]));
         assert_eq!(to_working_space("rec709_display", [0.5; 3]).unwrap()[0], 0.5f32.powf(2.4));
         assert_eq!(texture_decode("Utility - sRGB - Texture"), texture_decode("srgb_texture"));
+        // The ACES 2 OCIO config's alias of linear Rec.709 (MaterialX's color_management.mtlx).
+        assert_eq!(to_working_space("lin_rec709_scene", [0.5, 0.25, 2.0]), Some([0.5, 0.25, 2.0]));
     }
 }
