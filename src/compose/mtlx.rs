@@ -440,17 +440,22 @@ mod tests {
         assert_eq!(node_function("ND_convert_float_color3").as_deref(), Some("mx_convert_float_color3"));
         assert_eq!(node_function("ND_convert_vector3_vector2").as_deref(), Some("mx_convert_color3_vector2"));
         assert_eq!(node_function("ND_normalmap").as_deref(), Some("mx_normalmap_color3"));
-        assert_eq!(node_function("ND_add_color4").as_deref(), Some("mx_add_color4"));
-        assert_eq!(node_function("ND_multiply_vector4FA").as_deref(), Some("mx_multiply_color4"));
-        assert_eq!(node_function("ND_mix_color4_color4").as_deref(), Some("mx_mix_color4"));
-        assert_eq!(node_function("ND_convert_color4_vector3").as_deref(), Some("mx_convert_color4_color3"));
-        assert_eq!(node_function("ND_convert_vector2_vector4").as_deref(), Some("mx_convert_color3_color4"));
-        assert_eq!(node_function("ND_convert_vector4_color4").as_deref(), Some("mx_convert_color4_color4"));
-        assert_eq!(node_function("ND_convert_color4_vector2").as_deref(), Some("mx_convert_color4_vector2"));
-        assert_eq!(node_function("ND_convert_float_vector4").as_deref(), Some("mx_convert_float_color4"));
-        assert_eq!(node_function("ND_combine2_vector4VF").as_deref(), Some("mx_combine2_color4"));
-        assert_eq!(node_function("ND_combine2_vector4VV").as_deref(), Some("mx_combine2_vector4VV"));
-        assert_eq!(node_function("ND_combine4_color4").as_deref(), Some("mx_combine4_color4"));
+        // color4 and vector4: one `_color4` variant (a colour and a float `_a`).
+        for (id, function) in [
+            ("ND_add_color4", "mx_add_color4"),
+            ("ND_multiply_vector4FA", "mx_multiply_color4"),
+            ("ND_mix_color4_color4", "mx_mix_color4"),
+            ("ND_convert_color4_vector3", "mx_convert_color4_color3"),
+            ("ND_convert_vector2_vector4", "mx_convert_color3_color4"),
+            ("ND_convert_vector4_color4", "mx_convert_color4_color4"),
+            ("ND_convert_color4_vector2", "mx_convert_color4_vector2"),
+            ("ND_convert_float_vector4", "mx_convert_float_color4"),
+            ("ND_combine2_vector4VF", "mx_combine2_color4"),
+            ("ND_combine2_vector4VV", "mx_combine2_vector4VV"),
+            ("ND_combine4_color4", "mx_combine4_color4"),
+        ] {
+            assert_eq!(node_function(id).as_deref(), Some(function), "{id}");
+        }
         // Integer- and boolean-selected variants are not in the library's naming.
         assert_eq!(node_function("ND_ifgreater_color4I"), None);
         assert_eq!(node_function("ND_mincomponent_vector2").as_deref(), Some("mx_mincomponent_vector2"));
