@@ -3,7 +3,7 @@
 values a second, independent implementation gives, for `cargo test --release --test mtlx
 node_values`. Each line is one case, tab-separated:
 
-  node id    USDA input lines (joined by ' ; ')    expected r g b    tolerance    where from
+  node id    USDA input lines (joined by ' ; ')    expected r g b [a]    tolerance    where from
 
 The references, none of them strata's code:
   rgbtohsv, hsvtorgb, hsvadjust   Python's colorsys (the hexcone model the specification names)
@@ -14,6 +14,10 @@ The references, none of them strata's code:
                                   is the error of Kang et al.'s (2002) fit that strata evaluates
                                   (at most 5.4e-4 in xy, 5.4e-3 in Rec.709, 1667-25000 K)
   mincomponent, maxcomponent      min/max over the type's components
+  color4/vector4 variants         numpy on 4-vectors (the specification's formulas; the alpha
+                                  compositing nodes Porter and Duff's operators as the
+                                  specification tabulates them); the fourth expected value is
+                                  the fourth channel, which the test reads through a connection
   circle, cloverleaf, hexagon     the shapes by their geometry (the hexagon as a polygon through
   tiled*                          its six corners), tilings by brute force over every centre of
                                   the lattice within reach
@@ -94,6 +98,154 @@ case("ND_maxcomponent_color3", ["color3f inputs:in = (0.3, 0.7, 0.9)"], [0.9] * 
 case("ND_mincomponent_vector2", ["float2 inputs:in = (0.3, 0.6)"], [0.3] * 3, 1e-6, "min")
 case("ND_maxcomponent_vector2", ["float2 inputs:in = (0.3, 0.6)"], [0.6] * 3, 1e-6, "max")
 
+# ---- color4 / vector4 ---------------------------------------------------------------------------
+# Four expected values: the fourth (alpha, w) is read through a connection (the test extracts
+# channel 3 downstream). numpy evaluates the specification's formulas on 4-vectors; the
+# compositing nodes are Porter and Duff's operators as the specification tabulates them.
+
+
+def f4(c):
+    return "(" + ", ".join(repr(float(v)) for v in c) + ")"
+
+
+def v4(c):
+    return np.array(c, dtype=np.float64)
+
+
+A, B = v4([0.2, -0.5, 1.5, 0.4]), v4([0.7, 0.25, -2.0, 0.8])
+P4 = v4([0.8, 0.4, 0.3, 0.6])
+# No ties for round (0.5 rounds either way by the specification); ln of both signs. (The
+# emission the test reads is none when no channel of it is positive: every case has one.)
+R, L4 = v4([0.2, -0.7, 1.3, 0.4]), v4([0.8, 1.5, 2.0, 0.6])
+for node, want in [("add", A + B), ("subtract", A - B), ("multiply", A * B), ("divide", A / B),
+                   ("modulo", A - B * np.floor(A / B)), ("min", np.minimum(A, B)), ("max", np.maximum(A, B)),
+                   ("safepower", np.sign(A) * np.abs(A) ** B), ("atan2", np.arctan2(A, B))]:
+    for ty, usd in [("color4", "color4f"), ("vector4", "float4")]:
+        names = ("iny", "inx") if node == "atan2" else ("in1", "in2")
+        case(f"ND_{node}_{ty}", [f"{usd} inputs:{names[0]} = {f4(A)}", f"{usd} inputs:{names[1]} = {f4(B)}"], want, 1e-5,
+             "numpy")
+# FA variants: the float fills all four channels.
+case("ND_add_vector4FA", [f"float4 inputs:in1 = {f4(A)}", "float inputs:in2 = 0.3"], A + 0.3, 1e-6, "numpy")
+case("ND_multiply_color4FA", [f"color4f inputs:in1 = {f4(A)}", "float inputs:in2 = 2.5"], A * 2.5, 1e-6, "numpy")
+case("ND_power_color4", [f"color4f inputs:in1 = {f4(P4)}", f"color4f inputs:in2 = {f4(B)}"], P4 ** B, 1e-5, "numpy")
+for node, fn in [("absval", np.abs), ("sign", np.sign), ("floor", np.floor), ("ceil", np.ceil), ("round", np.round),
+                 ("fract", lambda x: x - np.floor(x)), ("sqrt", lambda x: np.sqrt(np.maximum(x, 0))),
+                 ("exp", np.exp), ("sin", np.sin), ("cos", np.cos), ("tan", np.tan),
+                 ("asin", lambda x: np.arcsin(np.clip(x, -1, 1))), ("acos", lambda x: np.arccos(np.clip(x, -1, 1)))]:
+    case(f"ND_{node}_vector4", [f"float4 inputs:in = {f4(R)}"], fn(R), 1e-5, "numpy")
+case("ND_ln_vector4", [f"float4 inputs:in = {f4(L4)}"], np.log(L4), 1e-5, "numpy")
+LOW, HIGH = v4([0.0, -0.2, 0.5, 0.5]), v4([0.5, 0.0, 1.0, 1.0])
+case("ND_clamp_color4", [f"color4f inputs:in = {f4(A)}", f"color4f inputs:low = {f4(LOW)}", f"color4f inputs:high = {f4(HIGH)}"],
+     np.minimum(np.maximum(A, LOW), HIGH), 1e-6, "numpy")
+case("ND_clamp_vector4FA", [f"float4 inputs:in = {f4(A)}", "float inputs:low = 0.3", "float inputs:high = 0.6"],
+     np.clip(A, 0.3, 0.6), 1e-6, "numpy")
+case("ND_invert_vector4", [f"float4 inputs:in = {f4(A)}"], 1.0 - A, 1e-6, "numpy")
+case("ND_invert_color4FA", [f"color4f inputs:in = {f4(A)}", "float inputs:amount = 2.0"], 2.0 - A, 1e-6, "numpy")
+OL, OH = v4([1.0, 0.0, -1.0, 2.0]), v4([2.0, 4.0, 1.0, 3.0])
+case("ND_remap_color4", [f"color4f inputs:in = {f4(A)}", f"color4f inputs:inlow = {f4(LOW)}", f"color4f inputs:inhigh = {f4(HIGH)}",
+                         f"color4f inputs:outlow = {f4(OL)}", f"color4f inputs:outhigh = {f4(OH)}"],
+     OL + (A - LOW) * (OH - OL) / (HIGH - LOW), 1e-5, "numpy")
+
+
+def smoothstep(x, lo, hi):
+    t = np.clip((x - lo) / (hi - lo), 0, 1)
+    return t * t * (3 - 2 * t)
+
+
+X = v4([0.1, 0.3, 0.45, 0.9])
+case("ND_smoothstep_vector4", [f"float4 inputs:in = {f4(X)}", "float4 inputs:low = (0.0, 0.2, 0.4, 0.6)",
+                               "float4 inputs:high = (0.5, 0.6, 0.5, 1.0)"],
+     smoothstep(X, v4([0, 0.2, 0.4, 0.6]), v4([0.5, 0.6, 0.5, 1.0])), 1e-5, "numpy")
+case("ND_smoothstep_color4FA", [f"color4f inputs:in = {f4(X)}", "float inputs:low = 0.2", "float inputs:high = 0.8"],
+     smoothstep(X, 0.2, 0.8), 1e-5, "numpy")
+case("ND_mincomponent_color4", ["color4f inputs:in = (0.5, 0.3, 0.9, 0.1)"], [0.1] * 3, 1e-6, "min")
+case("ND_maxcomponent_vector4", ["float4 inputs:in = (0.5, 0.3, 0.2, 0.7)"], [0.7] * 3, 1e-6, "max")
+case("ND_dotproduct_vector4", [f"float4 inputs:in1 = {f4(A)}", f"float4 inputs:in2 = {f4(P4)}"], [A @ P4] * 3, 1e-5, "numpy")
+case("ND_magnitude_vector4", [f"float4 inputs:in = {f4(A)}"], [np.linalg.norm(A)] * 3, 1e-5, "numpy")
+case("ND_distance_vector4", [f"float4 inputs:in1 = {f4(A)}", f"float4 inputs:in2 = {f4(B)}"], [np.linalg.norm(A - B)] * 3, 1e-5,
+     "numpy")
+case("ND_normalize_vector4", [f"float4 inputs:in = {f4(A)}"], A / np.linalg.norm(A), 1e-6, "numpy")
+
+# Compositing: mix and the blend nodes (alpha blends like a colour channel).
+FG, BG = v4([0.9, 0.2, 0.4, 0.6]), v4([0.1, 0.5, 0.8, 0.7])
+M4 = v4([0.25, 0.5, 0.75, 0.3])
+case("ND_mix_color4", [f"color4f inputs:fg = {f4(FG)}", f"color4f inputs:bg = {f4(BG)}", "float inputs:mix = 0.3"],
+     FG * 0.3 + BG * 0.7, 1e-6, "numpy")
+case("ND_mix_vector4_vector4", [f"float4 inputs:fg = {f4(FG)}", f"float4 inputs:bg = {f4(BG)}", f"float4 inputs:mix = {f4(M4)}"],
+     FG * M4 + BG * (1 - M4), 1e-6, "numpy")
+blends = {
+    "plus": FG + BG, "minus": BG - FG, "difference": np.abs(BG - FG), "screen": 1 - (1 - FG) * (1 - BG),
+    "burn": 1 - (1 - BG) / FG, "dodge": BG / (1 - FG),
+}
+for node, result in blends.items():
+    case(f"ND_{node}_color4", [f"color4f inputs:fg = {f4(FG)}", f"color4f inputs:bg = {f4(BG)}", "float inputs:mix = 0.6"],
+         0.6 * result + 0.4 * BG, 1e-5, "numpy")
+case("ND_inside_color4", [f"color4f inputs:in = {f4(FG)}", "float inputs:mask = 0.4"], FG * 0.4, 1e-6, "numpy")
+case("ND_outside_color4", [f"color4f inputs:in = {f4(FG)}", "float inputs:mask = 0.4"], FG * 0.6, 1e-6, "numpy")
+
+
+def porter_duff(node, F, B):
+    """The specification's table: RGB and alpha of fg F over/in/... bg B (f, b their alphas)."""
+    f, b = F[3], B[3]
+    rgb, a = {
+        "over": (F[:3] + B[:3] * (1 - f), f + b * (1 - f)),
+        "in": (F[:3] * b, f * b),
+        "out": (F[:3] * (1 - b), f * (1 - b)),
+        "mask": (B[:3] * f, b * f),
+        "matte": (F[:3] * f + B[:3] * (1 - f), f + b * (1 - f)),
+        "disjointover": (F[:3] + B[:3] if f + b <= 1 else F[:3] + B[:3] * (1 - f) / b, min(f + b, 1.0)),
+    }[node]
+    return np.append(rgb, a)
+
+
+for node in ["over", "in", "out", "mask", "matte", "disjointover"]:
+    for fg, bg, mix in [(FG, BG, 1.0), (v4([0.3, 0.6, 0.2, 0.25]), v4([0.5, 0.1, 0.9, 0.5]), 0.7)]:
+        want = mix * porter_duff(node, fg, bg) + (1 - mix) * bg
+        case(f"ND_{node}_color4", [f"color4f inputs:fg = {f4(fg)}", f"color4f inputs:bg = {f4(bg)}", f"float inputs:mix = {mix}"],
+             want, 1e-6, "Porter-Duff")
+case("ND_premult_color4", [f"color4f inputs:in = {f4(FG)}"], np.append(FG[:3] * FG[3], FG[3]), 1e-6, "numpy")
+case("ND_unpremult_color4", [f"color4f inputs:in = {f4(FG)}"], np.append(FG[:3] / FG[3], FG[3]), 1e-6, "numpy")
+case("ND_unpremult_color4", ["color4f inputs:in = (0.3, 0.2, 0.1, 0.0)"], [0.3, 0.2, 0.1, 0.0], 1e-6,
+     "specification (alpha 0: unchanged)")
+
+# Adjustment: the colour channels as color3 (colorsys for HSV); alpha passes through.
+case("ND_luminance_color4", ["color4f inputs:in = (0.8, 0.4, 0.2, 0.35)"],
+     [0.8 * 0.2722287 + 0.4 * 0.6740818 + 0.2 * 0.0536895] * 3 + [0.35], 1e-6, "ACEScg luma")
+case("ND_rgbtohsv_color4", ["color4f inputs:in = (0.8, 0.4, 0.2, 0.35)"], list(colorsys.rgb_to_hsv(0.8, 0.4, 0.2)) + [0.35], 1e-5,
+     "colorsys")
+case("ND_hsvtorgb_color4", ["color4f inputs:in = (0.3, 0.5, 0.6, 0.9)"], list(colorsys.hsv_to_rgb(0.3, 0.5, 0.6)) + [0.9], 1e-5,
+     "colorsys")
+
+# Conditionals and channels.
+case("ND_ifgreater_color4", ["float inputs:value1 = 2.0", "float inputs:value2 = 1.0", f"color4f inputs:in1 = {f4(FG)}",
+                             f"color4f inputs:in2 = {f4(BG)}"], FG, 0.0, "value1 > value2")
+case("ND_ifgreatereq_vector4", ["float inputs:value1 = 0.5", "float inputs:value2 = 1.0", f"float4 inputs:in1 = {f4(FG)}",
+                                f"float4 inputs:in2 = {f4(BG)}"], BG, 0.0, "value1 < value2")
+case("ND_ifequal_color4", ["float inputs:value1 = 1.0", "float inputs:value2 = 1.0", f"color4f inputs:in1 = {f4(FG)}",
+                           f"color4f inputs:in2 = {f4(BG)}"], FG, 0.0, "value1 = value2")
+case("ND_switch_vector4", [f"float4 inputs:in{k + 1} = {f4(A + k)}" for k in range(5)] + ["float inputs:which = 3"], A + 3, 1e-6,
+     "in4")
+case("ND_constant_color4", [f"color4f inputs:value = {f4(FG)}"], FG, 0.0, "value")
+case("ND_dot_vector4", [f"float4 inputs:in = {f4(A)}"], A, 0.0, "in")
+for k in range(4):
+    case("ND_extract_vector4", [f"float4 inputs:in = {f4(P4)}", f"int inputs:index = {k}"], [P4[k]] * 3, 0.0, f"channel {k}")
+case("ND_combine4_color4", ["float inputs:in1 = 0.1", "float inputs:in2 = 0.2", "float inputs:in3 = 0.3", "float inputs:in4 = 0.4"],
+     [0.1, 0.2, 0.3, 0.4], 1e-7, "channels")
+case("ND_combine2_color4CF", ["color3f inputs:in1 = (0.1, 0.2, 0.3)", "float inputs:in2 = 0.4"], [0.1, 0.2, 0.3, 0.4], 1e-7,
+     "channels")
+case("ND_combine2_vector4VV", ["float2 inputs:in1 = (0.1, 0.2)", "float2 inputs:in2 = (0.3, 0.4)"], [0.1, 0.2, 0.3, 0.4], 1e-7,
+     "channels")
+case("ND_convert_float_vector4", ["float inputs:in = 0.6"], [0.6] * 4, 1e-7, "every channel")
+case("ND_convert_color3_color4", ["color3f inputs:in = (0.1, 0.2, 0.3)"], [0.1, 0.2, 0.3, 1.0], 1e-7, "alpha 1")
+case("ND_convert_vector2_vector4", ["float2 inputs:in = (0.1, 0.2)"], [0.1, 0.2, 0.0, 1.0], 1e-7, "z 0, w 1")
+case("ND_convert_vector4_color4", [f"float4 inputs:in = {f4(A)}"], A, 1e-7, "the same channels")
+case("ND_convert_color4_color3", [f"color4f inputs:in = {f4(FG)}"], FG[:3], 1e-7, "alpha dropped")
+case("ND_convert_vector4_vector2", [f"float4 inputs:in = {f4(A)}"], [A[0], A[1], 0.0], 1e-7, "z and w dropped")
+case("ND_ramplr_color4", [f"color4f inputs:valuel = {f4(FG)}", f"color4f inputs:valuer = {f4(BG)}",
+                          "float2 inputs:texcoord = (0.3, 0.9)"], FG * 0.7 + BG * 0.3, 1e-6, "linear in u")
+case("ND_splittb_vector4", [f"float4 inputs:valuet = {f4(FG)}", f"float4 inputs:valueb = {f4(BG)}",
+                            "float2 inputs:texcoord = (0.3, 0.4)"], BG, 0.0, "v below the centre")
+
 # ---- shapes -------------------------------------------------------------------------------------
 
 
@@ -162,7 +314,7 @@ for texcoord in [(0.3, 0.4), (0.1, 0.12), (0.47, 0.2), (0.8, 0.95), (0.55, 0.43)
             tiled_case(name, texcoord, (3.0, 2.0), (0.1, -0.2), 0.8, staggered)
 
 with open(OUT, "w") as f:
-    f.write("# Written by tools/make_mtlx_node_values.py: node, inputs, expected r g b, tolerance, reference.\n")
+    f.write("# Written by tools/make_mtlx_node_values.py: node, inputs, expected r g b [a], tolerance, reference.\n")
     for c in cases:
         f.write("\t".join(c) + "\n")
 print(f"{len(cases)} cases -> {os.path.normpath(OUT)}")

@@ -31,8 +31,8 @@ import xml.etree.ElementTree as ET
 
 SETS = ["TestSuite/stdlib", "TestSuite/pbrlib", "Examples"]
 REPO = "https://github.com/AcademySoftwareFoundation/MaterialX"
-# Output types a `convert` to color3 reads (strata's float and triple variants).
-CONVERTIBLE = {"float", "color3", "vector3", "vector2"}
+# Output types a `convert` to color3 reads (strata's float, triple and 4-channel variants).
+CONVERTIBLE = {"float", "color3", "vector3", "vector2", "color4", "vector4"}
 
 
 def locate(materialx):

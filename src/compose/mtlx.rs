@@ -76,14 +76,16 @@ pub fn split_id(id: &str) -> Option<(&str, &str)> {
     Some((rest, ""))
 }
 
-/// The variant a type takes in the node library: `float`, or `color3` for the triples
-/// (color3, vector3, vector2, with or without MaterialX's `FA` float-argument suffix).
+/// The variant a type takes in the node library: `float`, `color3` for the triples (color3,
+/// vector3, vector2) or `color4` for the 4-channel types (color4, vector4: a colour and a
+/// float `_a`), with or without MaterialX's `FA` float-argument suffix.
 fn variant(ty: &str) -> Option<&'static str> {
     let ty = ty.strip_suffix("FA").unwrap_or(ty);
     let ty = ty.split('_').next().unwrap_or(ty);
     match ty {
         "float" => Some("float"),
         "color3" | "vector3" | "vector2" | "" => Some("color3"),
+        "color4" | "vector4" => Some("color4"),
         _ => None,
     }
 }
@@ -127,6 +129,12 @@ pub fn node_function(id: &str) -> Option<String> {
         // A vector2 travels with z = 0, which is not one of its components.
         return Some(format!("mx_{node}_vector2"));
     }
+    if node == "combine2" && types == "vector4VV" {
+        return Some("mx_combine2_vector4VV".into());
+    }
+    if node == "combine2" && matches!(types, "color4CF" | "vector4VF") {
+        return Some("mx_combine2_color4".into());
+    }
     if matches!(node, "combine2" | "combine3") {
         // Named by the type they build; the library's variant takes floats.
         return Some(format!("mx_{node}_float"));
@@ -135,8 +143,13 @@ pub fn node_function(id: &str) -> Option<String> {
         let (from, to) = types.split_once('_')?;
         return match (variant(from)?, to) {
             ("float", to) if variant(to)? == "color3" => Some("mx_convert_float_color3".into()),
+            ("float", "color4" | "vector4") => Some("mx_convert_float_color4".into()),
             ("color3", "vector2") => Some("mx_convert_color3_vector2".into()),
             ("color3", to) if variant(to)? == "color3" => Some("mx_convert_color3_color3".into()),
+            ("color3", "color4" | "vector4") => Some("mx_convert_color3_color4".into()),
+            ("color4", "vector2") => Some("mx_convert_color4_vector2".into()),
+            ("color4", to) if variant(to)? == "color3" => Some("mx_convert_color4_color3".into()),
+            ("color4", "color4" | "vector4") => Some("mx_convert_color4_color4".into()),
             _ => None,
         };
     }
@@ -185,7 +198,7 @@ fn canonical_space(space: &str) -> &str {
         "gamma18" => "g18_rec709",
         "gamma22" => "g22_rec709",
         "gamma24" => "rec709_display",
-        "lin_srgb" | "Utility - Linear - sRGB" | "Linear Rec.709 (sRGB)" => "lin_rec709",
+        "lin_srgb" | "Utility - Linear - sRGB" | "Linear Rec.709 (sRGB)" | "lin_rec709_scene" => "lin_rec709",
         "Utility - sRGB - Texture" | "sRGB - Texture" => "srgb_texture",
         "ACEScg" | "lin_ap1_scene" => "acescg",
         "ACES2065-1" | "lin_ap0" => "lin_ap0",
@@ -427,7 +440,24 @@ mod tests {
         assert_eq!(node_function("ND_convert_float_color3").as_deref(), Some("mx_convert_float_color3"));
         assert_eq!(node_function("ND_convert_vector3_vector2").as_deref(), Some("mx_convert_color3_vector2"));
         assert_eq!(node_function("ND_normalmap").as_deref(), Some("mx_normalmap_color3"));
-        assert_eq!(node_function("ND_add_color4"), None);
+        // color4 and vector4: one `_color4` variant (a colour and a float `_a`).
+        for (id, function) in [
+            ("ND_add_color4", "mx_add_color4"),
+            ("ND_multiply_vector4FA", "mx_multiply_color4"),
+            ("ND_mix_color4_color4", "mx_mix_color4"),
+            ("ND_convert_color4_vector3", "mx_convert_color4_color3"),
+            ("ND_convert_vector2_vector4", "mx_convert_color3_color4"),
+            ("ND_convert_vector4_color4", "mx_convert_color4_color4"),
+            ("ND_convert_color4_vector2", "mx_convert_color4_vector2"),
+            ("ND_convert_float_vector4", "mx_convert_float_color4"),
+            ("ND_combine2_vector4VF", "mx_combine2_color4"),
+            ("ND_combine2_vector4VV", "mx_combine2_vector4VV"),
+            ("ND_combine4_color4", "mx_combine4_color4"),
+        ] {
+            assert_eq!(node_function(id).as_deref(), Some(function), "{id}");
+        }
+        // Integer- and boolean-selected variants are not in the library's naming.
+        assert_eq!(node_function("ND_ifgreater_color4I"), None);
         assert_eq!(node_function("ND_mincomponent_vector2").as_deref(), Some("mx_mincomponent_vector2"));
         assert_eq!(node_function("ND_maxcomponent_vector3").as_deref(), Some("mx_maxcomponent_color3"));
         assert_eq!(node_function("ND_blackbody").as_deref(), Some("mx_blackbody_color3"));
@@ -461,5 +491,7 @@ mod tests {
         assert_eq!(to_working_space("gamma22", [0.5; 3]), to_working_space("g22_rec709", [0.5; 3]));
         assert_eq!(to_working_space("rec709_display", [0.5; 3]).unwrap()[0], 0.5f32.powf(2.4));
         assert_eq!(texture_decode("Utility - sRGB - Texture"), texture_decode("srgb_texture"));
+        // The ACES 2 OCIO config's alias of linear Rec.709 (MaterialX's color_management.mtlx).
+        assert_eq!(to_working_space("lin_rec709_scene", [0.5, 0.25, 2.0]), Some([0.5, 0.25, 2.0]));
     }
 }

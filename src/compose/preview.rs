@@ -417,7 +417,9 @@ impl<'s> Builder<'_, 's> {
                 continue;
             };
             let ty = param.ty;
-            let alpha = func.param(&format!("{name}_a")).map(|(i, _)| i);
+            // A 4-channel input's fourth channel (see `front/mtlx_color4.ash`).
+            let alpha =
+                func.param(&mtlx::port_name(&format!("{usd_name}_a"))).filter(|(_, p)| !p.output).map(|(i, _)| i);
             let image_file = name == "file" && func.param("decode").is_some();
             let mut seen = Vec::new();
             match producer(self.stage, prim, attr, true, &mut seen, self.diags) {
@@ -431,6 +433,12 @@ impl<'s> Builder<'_, 's> {
                         Ok(v) => {
                             self.check_token(id, name, &v, *span);
                             mtlx::report_node_input(id, usd_name, mtlx::Setting::Value(&v), attr.span, self.diags);
+                            if let (Some(a), UsdValue::Float(x)) = (alpha, value)
+                                && (*x as f32).is_finite()
+                            {
+                                // A float promotes to all four channels.
+                                args[a] = Some(Source::Const(Value::Float(*x as f32), Type::FLOAT));
+                            }
                             args[index] = Some(Source::Const(v, ty));
                             if let (Some(a), UsdValue::Tuple(t)) = (alpha, value)
                                 && let [_, _, _, w] = t.as_slice()
@@ -459,6 +467,9 @@ impl<'s> Builder<'_, 's> {
                         continue;
                     }
                     mtlx::report_node_input(id, usd_name, mtlx::Setting::Driven, attr.span, self.diags);
+                    if let Some(a) = alpha {
+                        args[a] = self.alpha_of(&source, from, output);
+                    }
                     args[index] = Some(source);
                 }
             }
@@ -475,6 +486,20 @@ impl<'s> Builder<'_, 's> {
         });
         self.memo.insert(prim.path.clone(), Some(node));
         Some(node)
+    }
+
+    /// What drives the fourth channel of a 4-channel input connected to `source` (of type
+    /// `from`, output `output`): a float fills all four channels; a 4-channel output carries
+    /// its own in its `_a` output; any other output leaves the input's default.
+    fn alpha_of(&self, source: &Source, from: Type, output: &Attribute) -> Option<Source> {
+        if from == Type::FLOAT {
+            return Some(source.clone());
+        }
+        let Source::Node { node, .. } = source else { return None };
+        let name = output.name.strip_prefix("outputs:").unwrap_or(&output.name);
+        let func = self.lib.function(self.nodes[*node].func);
+        let (param, _) = func.param(&format!("{name}_a")).filter(|(_, p)| p.output && p.ty == Type::FLOAT)?;
+        Some(Source::Node { node: *node, param })
     }
 
     /// Loads a UsdUVTexture's file now, so that a missing or broken image is reported at the

@@ -12,8 +12,12 @@ use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 /// The source of the built-in node library.
-pub const PRELUDE: &str =
-    concat!(include_str!("prelude.ash"), include_str!("mtlx.ash"), include_str!("mtlx_stdlib.ash"));
+pub const PRELUDE: &str = concat!(
+    include_str!("prelude.ash"),
+    include_str!("mtlx.ash"),
+    include_str!("mtlx_stdlib.ash"),
+    include_str!("mtlx_color4.ash")
+);
 
 /// Index of a graph in a [`Library`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]

@@ -769,6 +769,16 @@ pub fn nodedef_id(node: Node) -> String {
         // 1.39 names normal maps by the type of `scale`.
         "normalmap" => format!("ND_normalmap_{}", input_type("scale").unwrap_or("float")),
         "extract" => format!("ND_extract_{in_ty}"),
+        // A 4-channel combine2 is named by what it combines: a triple and a float (CF, VF) or
+        // two vector2s (VV).
+        "combine2" if matches!(ty, "color4" | "vector4") => {
+            let by = match (ty, input_type("in1")) {
+                (_, Some("vector2")) => "VV",
+                ("color4", _) => "CF",
+                _ => "VF",
+            };
+            format!("ND_combine2_{ty}{by}")
+        }
         // Nodes that reduce a vector are named by the vector's type.
         "magnitude" | "mincomponent" | "maxcomponent" => format!("ND_{category}_{in_ty}"),
         "dotproduct" | "distance" => format!("ND_{category}_{}", input_type("in1").unwrap_or("vector3")),

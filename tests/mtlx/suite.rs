@@ -155,6 +155,31 @@ fn the_public_suite_subset_shades_with_the_values_its_documents_give() {
         suite_target(doc, &["emit", "rgb_to_hsv_to_rgb_color3", "rgb_to_hsv_to_rgb_color3_out", "color3"]);
     let got = emitted_at(&code.unwrap_or_else(|| panic!("{rendered}")), 0.5, 0.5);
     assert!(close(got, [0.2, 0.2, 0.8]), "{got:?}");
+    // color4/vector4 graphs (their colour channels; the fourth is checked in node_values):
+    // the same round trip, luminance (ACEScg luma of (1, 0.75, 0.5)), combine, extract.
+    let emit = |doc: &str, graph: &str, output: &str, ty: &str| {
+        let (code, rendered) = suite_target(doc, &["emit", graph, output, ty]);
+        emitted_at(&code.unwrap_or_else(|| panic!("{graph}: {rendered}")), 0.5, 0.5)
+    };
+    let got = emit(doc, "rgb_to_hsv_to_rgb_color4", "rgb_to_hsv_to_rgb_color4_out", "color4");
+    assert!(close(got, [0.2, 0.2, 0.8]), "{got:?}");
+    let luma = 0.2722287 + 0.75 * 0.6740818 + 0.5 * 0.0536895;
+    let got = emit("TestSuite/stdlib/adjustment/luminance.mtlx", "luminance_color4", "luminance_color4_out", "color4");
+    assert!(close(got, [luma; 3]), "{got:?}");
+    for (graph, ty) in [
+        ("combine_color4", "color4"),
+        ("combine_vector4", "vector4"),
+        ("combine_color4CF", "color4"),
+        ("combine_vector4VF", "vector4"),
+        ("combine_vector4VV", "vector4"),
+    ] {
+        let got = emit("TestSuite/stdlib/channel/combine.mtlx", graph, "out", ty);
+        assert!(close(got, [0.5, 1.0, 0.25]), "{graph}: {got:?}");
+    }
+    for graph in ["extract_color4", "extract_vector4"] {
+        let got = emit("TestSuite/stdlib/channel/extract.mtlx", graph, "out", "float");
+        assert!(close(got, [0.25; 3]), "{graph}: {got:?}");
+    }
 }
 
 /// Asserts two closure values have the same kinds, layering bits and weights, and parameters

@@ -260,11 +260,26 @@ fn emitting(id: &str, inputs: &[&str]) -> String {
     )
 }
 
+/// As [`emitting`], with the fourth channel of node `id`'s 4-channel output emitted in red
+/// (green and blue 1: an emission none of whose channels is positive is none) by way of a
+/// downstream `extract`.
+fn emitting_alpha(id: &str, inputs: &[&str]) -> String {
+    emitting(id, inputs).replace("</M/N.outputs:out>", "</M/Y.outputs:out>").replace(
+        "        color3f outputs:out\n    }\n}",
+        "        color3f outputs:out\n    }\n    def Shader \"X\" {\n        uniform token info:id = \"ND_extract_color4\"\n        \
+         color4f inputs:in.connect = </M/N.outputs:out>\n        int inputs:index = 3\n        float outputs:out\n    }\n    \
+         def Shader \"Y\" {\n        uniform token info:id = \"ND_combine3_color3\"\n        \
+         float inputs:in1.connect = </M/X.outputs:out>\n        float inputs:in2 = 1\n        float inputs:in3 = 1\n        \
+         color3f outputs:out\n    }\n}",
+    )
+}
+
 #[test]
 fn node_values_match_an_independent_implementation() {
     // tests/fixtures/mtlx/node_values.txt: per case a node, its inputs and the value a second
     // implementation gives (colorsys for HSV, Planck's law against the CIE 1931 tables for
-    // blackbody, the shapes' geometry and brute-force tilings), written by
+    // blackbody, the shapes' geometry and brute-force tilings, numpy for the color4/vector4
+    // variants, whose fourth value is read through a connection), written by
     // tools/make_mtlx_node_values.py.
     let table = std::fs::read_to_string(format!("{DIR}/node_values.txt")).expect("node_values.txt");
     let mut failures = Vec::new();
@@ -280,14 +295,23 @@ fn node_values_match_an_independent_implementation() {
             failures.push(format!("{id} {inputs:?}: does not compile:\n{rendered}"));
             continue;
         };
-        let got = emitted_at(&code, 0.25, 0.75);
-        if (0..3).any(|k| (got[k] - want[k]).abs() > tolerance) || !rendered.is_empty() {
+        let mut got = emitted_at(&code, 0.25, 0.75).to_vec();
+        if want.len() == 4 {
+            // The fourth channel, through a connection to a node that extracts it.
+            let (code, rendered) = compiled(&emitting_alpha(id, &inputs));
+            got.push(code.map_or(f32::NAN, |code| emitted_at(&code, 0.25, 0.75)[0]));
+            if !rendered.is_empty() {
+                failures.push(format!("{id} {inputs:?} (alpha):\n{rendered}"));
+            }
+        }
+        let off = |k: usize| got[k].is_nan() || (got[k] - want[k]).abs() > tolerance;
+        if (0..want.len()).any(off) || !rendered.is_empty() {
             failures
                 .push(format!("{id} {inputs:?}: got {got:?}, {reference} gives {want:?} (± {tolerance})\n{rendered}"));
         }
         checked += 1;
     }
-    assert!(checked >= 100, "{checked} cases");
+    assert!(checked >= 200, "{checked} cases");
     assert!(failures.is_empty(), "{} of {checked} cases fail: {failures:#?}", failures.len());
 }
 
