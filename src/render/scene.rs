@@ -312,19 +312,7 @@ impl Scene {
 
     /// The BVHs, emitters and placement of what [`Parts::gather`] read from the stage.
     fn assemble(parts: Parts, materials: &[&dyn MaterialCode], options: &SceneOptions) -> Scene {
-        let Parts {
-            geometry,
-            prim_material,
-            lights,
-            camera,
-            camera_path,
-            camera_prim,
-            default_lit,
-            displaced,
-            bounds,
-            motion,
-            world_animated,
-        } = parts;
+        let Parts { geometry, motion, displaced, bounds, .. } = parts;
         // What a frame change needs to move instances; the build's vectors move in below.
         let prototype_bounds = geometry.prototypes.iter().map(|p| p.bounds).collect();
         let world_bounds = geometry.world_bounds();
@@ -340,30 +328,30 @@ impl Scene {
             placers: geometry.instance_placers,
             prototype_bounds,
             world_bounds,
-            world_animated,
+            world_animated: parts.world_animated,
             baked: geometry.baked,
             singular: motion.singular,
             deforming: geometry.deforming,
             deforming_in_world: geometry.deforming_in_world,
-            camera: camera_prim,
+            camera: parts.camera_prim,
             options: options.clone(),
         };
         let scene_radius = (bounds.1 - bounds.0).length() / 2.0;
-        let light_power: f32 = lights.iter().filter(|l| !l.is_infinite()).map(|l| l.power(scene_radius)).sum();
-        let emitters = Emitters::build(&accel, geometry.prims.len(), &prim_material, materials, light_power);
+        let light_power: f32 = parts.lights.iter().filter(|l| !l.is_infinite()).map(|l| l.power(scene_radius)).sum();
+        let emitters = Emitters::build(&accel, geometry.prims.len(), &parts.prim_material, materials, light_power);
         Scene {
             displaced: displaced.prims,
             displacement: displaced.stats,
-            default_lights: default_lit,
+            default_lights: parts.default_lit,
             degenerate_triangles: geometry.degenerate,
             accel,
             prims: geometry.prims,
             primvars: geometry.primvars,
-            prim_material,
-            lights,
+            prim_material: parts.prim_material,
+            lights: parts.lights,
             emitters,
-            camera,
-            camera_path,
+            camera: parts.camera,
+            camera_path: parts.camera_path,
             material_names: Vec::new(),
             bounds,
             shutter: motion.shutter,
