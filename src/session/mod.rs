@@ -570,8 +570,9 @@ impl Session {
     /// the session gives its stage up once the geometry is emitted, before the BVH build, so
     /// a large mesh's stage arrays and its BVH build are not held at once. The image is the
     /// same. Afterwards the session renders and fingerprints the prepared scene, but has no
-    /// stage: [`Session::stage`] is `None`, updates ([`Session::set_time`], changes) find
-    /// nothing to do, and a `prepare` with other options fails.
+    /// stage: [`Session::stage`] is `None`, [`Session::set_time`] finds nothing to do, a
+    /// `prepare` with other options fails, and a change has no stage to redo from unless it
+    /// is a layer's (which reads the stage again).
     pub fn prepare_releasing_stage(&mut self, options: &SceneOptions) -> Option<&crate::render::Scene> {
         self.compile()?;
         let fresh = self.prepared.as_ref().is_some_and(|p| format!("{:?}", p.options) == format!("{options:?}"));
