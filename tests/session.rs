@@ -539,3 +539,27 @@ fn frames_build_only_the_deforming_prims_bvhs(name: &str) {
         images.push(image);
     }
 }
+
+/// A one-shot render's session gives its stage up before the BVH build (the memory peak of a
+/// large mesh): the scene it prepares renders what a session keeping its stage renders, bit
+/// for bit, at the stage's time (an animated scene at frame 3, whose moved camera and
+/// instances make a wrong time visible); the time stays known (the EXR's metadata), and
+/// updates find no stage.
+#[test]
+fn a_session_that_releases_its_stage_renders_the_same_image() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/in/farm/moving.usda");
+    let time = strata::scene::TimeCode::At(3.0);
+    let options = SessionOptions { time: Some(time), ..SessionOptions::default() };
+    let mut released = Session::open(SceneSource::File(scene), options);
+    if released.prepare_releasing_stage(&SceneOptions::default()).is_none() {
+        panic!("{}", released.diagnostics().render(released.sources()));
+    }
+    assert!(released.stage().is_none(), "the stage is given up");
+    assert_eq!(released.time(), time);
+    let image = render(&mut released);
+    assert!(image == render(&mut moving_at(3.0)), "differs from a session that keeps its stage");
+    assert!(image != render(&mut moving_at(1.0)), "frame 1 looks like frame 3: the test proves nothing");
+    let report = released.set_time(strata::scene::TimeCode::At(4.0));
+    assert!(!report.instances_moved && !report.geometry_rebuilt && report.recompiled == 0, "{report:?}");
+    assert!(released.fingerprint(&settings()).is_some(), "a released session still fingerprints its scene");
+}

@@ -234,7 +234,9 @@ pub fn render(args: &RenderArgs) -> Result<(), Failure> {
         let update = frame.map(|f| session.set_time(TimeCode::At(f as f64)));
         // A later frame's "compile" is its update: new time, recompiled materials, rebuilt scene.
         let prepare_start = if k == 0 { compile_start } else { frame_start };
-        let rendered = render_frame(args, &mut session, outputs, frame, prepare_start)?;
+        // One frame: no update follows, so the stage goes before the BVH build (memory peak).
+        let last = frames.len() == 1;
+        let rendered = render_frame(args, &mut session, outputs, frame, prepare_start, last)?;
         if let (Some(frame), Some(update)) = (frame, update) {
             let what = if k == 0 {
                 "first frame: everything built".to_string()
@@ -291,13 +293,15 @@ struct Rendered {
     rebuilt: bool,
 }
 
-/// Renders the session's current time into `outputs` (a partial file for a split).
+/// Renders the session's current time into `outputs` (a partial file for a split). With
+/// `last`, no update follows: the session gives its stage up before the BVH build.
 fn render_frame(
     args: &RenderArgs,
     session: &mut Session,
     outputs: strata::render::PreparedOutputs,
     frame: Option<i64>,
     compile_start: std::time::Instant,
+    last: bool,
 ) -> Result<Rendered, Failure> {
     let mut settings = args.settings.clone();
     let mut prepared = false;
@@ -322,11 +326,11 @@ fn render_frame(
         // starts, so it never competes with the render's threads.
         let cores = settings.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
         let ahead = (cores > 1).then(strata::runtime::texture::Prefetch::start);
-        prepared = session.prepare(&options).is_some();
+        prepared = if last { session.prepare_releasing_stage(&options) } else { session.prepare(&options) }.is_some();
         drop(ahead);
     }
     let rebuilt = session.stats().scene_builds > builds && builds > 0;
-    let time = session.stage().map_or(TimeCode::Default, |s| s.time());
+    let time = session.time();
     let diags = session.take_diagnostics();
     report(&diags, session.sources())?;
     let warnings = diags.warning_count();

@@ -292,16 +292,30 @@ impl Scene {
         diags: &mut Diagnostics,
     ) -> Option<Scene> {
         let parts = Parts::gather(stage, material_of_prim, materials, options, diags)?;
-        let Parts { geometry, prim_material, lights, camera, camera_path, default_lit, displaced, bounds, motion } =
-            parts;
+        Some(Scene::assemble(parts, materials, options))
+    }
+
+    /// [`Scene::build`] from a stage it takes, and drops once the geometry is emitted: the
+    /// stage's arrays are given back before the BVH build, where a million-triangle mesh
+    /// peaks. For a render that follows no update (a one-shot `strata render`).
+    pub fn build_releasing_stage(
+        stage: Stage,
+        material_of_prim: &dyn Fn(&str) -> Option<usize>,
+        materials: &[&dyn MaterialCode],
+        options: &SceneOptions,
+        diags: &mut Diagnostics,
+    ) -> Option<Scene> {
+        let parts = Parts::gather(&stage, material_of_prim, materials, options, diags)?;
+        drop(stage);
+        Some(Scene::assemble(parts, materials, options))
+    }
+
+    /// The BVHs, emitters and placement of what [`Parts::gather`] read from the stage.
+    fn assemble(parts: Parts, materials: &[&dyn MaterialCode], options: &SceneOptions) -> Scene {
+        let Parts { geometry, motion, displaced, bounds, .. } = parts;
         // What a frame change needs to move instances; the build's vectors move in below.
         let prototype_bounds = geometry.prototypes.iter().map(|p| p.bounds).collect();
         let world_bounds = geometry.world_bounds();
-        let world_animated = geometry.prims.iter().any(|p| {
-            stage.find(&p.path).is_some_and(|id| {
-                geometry.baked.get(id.0 as usize).copied().unwrap_or(false) && time_varying(stage, id)
-            })
-        });
         let accel = Accel::with_moving_instances(
             Blas::new(geometry.triangles, geometry.shapes),
             geometry.prototypes.into_iter().map(|p| Blas::deforming(p.triangles, p.shapes, p.deformation)).collect(),
@@ -314,37 +328,37 @@ impl Scene {
             placers: geometry.instance_placers,
             prototype_bounds,
             world_bounds,
-            world_animated,
+            world_animated: parts.world_animated,
             baked: geometry.baked,
             singular: motion.singular,
             deforming: geometry.deforming,
             deforming_in_world: geometry.deforming_in_world,
-            camera: camera_path.as_deref().and_then(|p| stage.find(p)),
+            camera: parts.camera_prim,
             options: options.clone(),
         };
         let scene_radius = (bounds.1 - bounds.0).length() / 2.0;
-        let light_power: f32 = lights.iter().filter(|l| !l.is_infinite()).map(|l| l.power(scene_radius)).sum();
-        let emitters = Emitters::build(&accel, geometry.prims.len(), &prim_material, materials, light_power);
-        Some(Scene {
+        let light_power: f32 = parts.lights.iter().filter(|l| !l.is_infinite()).map(|l| l.power(scene_radius)).sum();
+        let emitters = Emitters::build(&accel, geometry.prims.len(), &parts.prim_material, materials, light_power);
+        Scene {
             displaced: displaced.prims,
             displacement: displaced.stats,
-            default_lights: default_lit,
+            default_lights: parts.default_lit,
             degenerate_triangles: geometry.degenerate,
             accel,
             prims: geometry.prims,
             primvars: geometry.primvars,
-            prim_material,
-            lights,
+            prim_material: parts.prim_material,
+            lights: parts.lights,
             emitters,
-            camera,
-            camera_path,
+            camera: parts.camera,
+            camera_path: parts.camera_path,
             material_names: Vec::new(),
             bounds,
             shutter: motion.shutter,
             camera_motion: motion.camera,
             motion: motion.stats,
             placement,
-        })
+        }
     }
 
     /// Moves the scene to the stage's time when, since it was built, only transforms that
@@ -467,10 +481,14 @@ struct Parts {
     lights: Vec<Light>,
     camera: Camera,
     camera_path: Option<String>,
+    /// The stage's prim at `camera_path`.
+    camera_prim: Option<PrimId>,
     default_lit: bool,
     displaced: crate::render::geometry::displace::Displaced,
     bounds: (Vec3, Vec3),
     motion: Motion,
+    /// Whether a prim built in world space has time-varying values.
+    world_animated: bool,
 }
 
 /// What moves while the shutter is open (see [`crate::render::geometry::motion`]).
@@ -632,7 +650,25 @@ impl Parts {
         motion::report_moving_lights(stage, lights.iter().map(|l| l.path.as_str()), shutter, diags);
         let camera_motion = chosen.and_then(|(id, _)| motion::camera_motion(stage, id, shutter));
         let motion = Motion { shutter, instances, camera: camera_motion, stats, singular };
-        Some(Parts { geometry, prim_material, lights, camera, camera_path, default_lit, displaced, bounds, motion })
+        let world_animated = geometry.prims.iter().any(|p| {
+            stage.find(&p.path).is_some_and(|id| {
+                geometry.baked.get(id.0 as usize).copied().unwrap_or(false) && time_varying(stage, id)
+            })
+        });
+        let camera_prim = camera_path.as_deref().and_then(|p| stage.find(p));
+        Some(Parts {
+            geometry,
+            prim_material,
+            lights,
+            camera,
+            camera_path,
+            camera_prim,
+            default_lit,
+            displaced,
+            bounds,
+            motion,
+            world_animated,
+        })
     }
 }
 

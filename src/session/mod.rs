@@ -315,6 +315,8 @@ pub struct Session {
     /// Compiled code by material content hash (the current materials').
     code: HashMap<u64, Arc<dyn MaterialCode>>,
     prepared: Option<Prepared>,
+    /// The stage's time when [`Session::prepare_releasing_stage`] gave it up.
+    released_time: Option<TimeCode>,
     stats: SessionStats,
     /// Slots muted or soloed in memory (a live view's look edits).
     slot_filter: SlotFilter,
@@ -341,6 +343,7 @@ impl Session {
             compiler: Compiler::new(options.backend, options.passes),
             code: HashMap::new(),
             prepared: None,
+            released_time: None,
             stats: SessionStats::default(),
             slot_filter: SlotFilter::default(),
         };
@@ -563,29 +566,57 @@ impl Session {
         self.prepared.as_ref().map(|p| &p.scene)
     }
 
+    /// [`Session::prepare`] for a render that no update follows (a one-shot `strata render`):
+    /// the session gives its stage up once the geometry is emitted, before the BVH build, so
+    /// a large mesh's stage arrays and its BVH build are not held at once. The image is the
+    /// same. Afterwards the session renders and fingerprints the prepared scene, but has no
+    /// stage: [`Session::stage`] is `None`, [`Session::set_time`] finds nothing to do, a
+    /// `prepare` with other options fails, and a change has no stage to redo from unless it
+    /// is a layer's (which reads the stage again).
+    pub fn prepare_releasing_stage(&mut self, options: &SceneOptions) -> Option<&crate::render::Scene> {
+        self.compile()?;
+        let fresh = self.prepared.as_ref().is_some_and(|p| format!("{:?}", p.options) == format!("{options:?}"));
+        if !fresh {
+            self.build_scene_with(options.clone(), true)?;
+        }
+        self.prepared.as_ref().map(|p| &p.scene)
+    }
+
     fn build_scene(&mut self, options: SceneOptions) -> Option<()> {
-        let (stage, compiled) = (self.stage.as_ref()?, self.compiled.as_ref()?);
+        self.build_scene_with(options, false)
+    }
+
+    /// Builds the render scene; with `release`, from the stage taken out of the session.
+    fn build_scene_with(&mut self, options: SceneOptions, release: bool) -> Option<()> {
+        let (Some(stage), Some(compiled)) = (self.stage.as_ref(), self.compiled.as_ref()) else { return None };
         let start = Instant::now();
         let refs = compiled.refs();
-        let mut scene = crate::render::Scene::build(
-            stage,
-            &|p| compiled.prim_material.get(p).copied(),
-            &refs,
-            &options,
-            &mut self.diags,
-        );
+        let material_of_prim = |p: &str| compiled.prim_material.get(p).copied();
+        let geometry = fingerprint::geometry_hash(stage);
+        let mut scene = if release {
+            let stage = self.stage.take()?;
+            self.released_time = Some(stage.time());
+            crate::render::Scene::build_releasing_stage(stage, &material_of_prim, &refs, &options, &mut self.diags)
+        } else {
+            crate::render::Scene::build(stage, &material_of_prim, &refs, &options, &mut self.diags)
+        };
         self.stats.scene_builds += 1;
         self.stats.blas_builds += scene.as_ref().map_or(0, |s| s.accel.blas_count());
         self.stats.scene_ms = start.elapsed().as_secs_f64() * 1e3;
         if let Some(scene) = &mut scene {
             scene.material_names = compiled.material_names.clone();
         }
-        let geometry = fingerprint::geometry_hash(stage);
         self.prepared = scene.map(|scene| {
             let material_key = material_key(&scene, &refs, &self.compiled_hashes);
             Prepared { scene, options, geometry, material_key }
         });
         self.prepared.as_ref().map(|_| ())
+    }
+
+    /// The stage's time; once [`Session::prepare_releasing_stage`] gave the stage up, the
+    /// time it was at.
+    pub fn time(&self) -> TimeCode {
+        self.stage.as_ref().map(Stage::time).or(self.released_time).unwrap_or(TimeCode::Default)
     }
 
     /// The prepared render scene, if [`Session::prepare`] succeeded.

@@ -1,11 +1,14 @@
-//! The bottom-up build of one large BVH2: median splits down to PLOC batches, built in
-//! parallel and stitched (moved out of `accel/mod.rs` as is).
+//! The bottom-up build of one large BVH2: coincident primitives grouped, median splits down
+//! to PLOC batches, built in parallel and stitched (moved out of `accel/mod.rs` as is).
 
+use super::BvhSpace;
+use glam::{Vec3, Vec3A};
 use obvhs::Boundable;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::Bvh2;
 use obvhs::bvh2::node::Bvh2Node;
 use obvhs::ploc::{PlocBuilder, PlocSearchDistance, SortPrecision};
+use std::hash::BuildHasher;
 
 /// The most primitives one PLOC build is given. PLOC merges only mutually nearest
 /// neighbours, and where the merge cost grows steadily along the sorted order (the thin
@@ -98,6 +101,96 @@ pub(super) fn build_batched(boxes: &[Padded]) -> (Bvh2, usize) {
         nodes.extend(moved);
     }
     (Bvh2 { nodes, primitive_indices, max_depth, ..Default::default() }, largest)
+}
+
+/// A primitive's box, padded, as exact bits (the key that groups coincident primitives);
+/// `None` when it is not finite.
+fn padded_box(lo: Vec3, hi: Vec3) -> Option<[u32; 6]> {
+    if !lo.is_finite() || !hi.is_finite() {
+        return None;
+    }
+    // obvhs' quantised CWBVH nodes can lose a flat (zero-thickness) box entirely, e.g. a
+    // scene that is one axis-aligned plane, so every box gets a thickness. The padding is
+    // relative to the primitive's own coordinates, not the scene's: padding by the scene's
+    // size made every triangle of a small object far from the origin (or in a scene with
+    // one distant object) the same box, on which the PLOC builder is quadratic.
+    let pad = lo.abs().max(hi.abs()).max_element().max(f32::MIN_POSITIVE) * 1e-6;
+    let (lo, hi) = (lo - Vec3::splat(pad), hi + Vec3::splat(pad));
+    Some([lo.x, lo.y, lo.z, hi.x, hi.y, hi.z].map(f32::to_bits))
+}
+
+/// A BVH over `bounds` (`(min, max)` per primitive), grouping bit-identical boxes; returns
+/// the BVH (`None` when no box is finite), its leaves ranges of the returned primitive
+/// indices (the groups' members in leaf order).
+pub(super) fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (Option<BvhSpace>, Vec<u32>) {
+    // Primitives with bit-identical boxes (copies of one mesh at one place) become one BVH
+    // primitive: PLOC merges only mutually-nearest pairs, and among n equal boxes every
+    // pass merges one pair, so n coincident copies cost O(n²) to build.
+    // FNV, not std's SipHash: keys are our own boxes, and hashing was a sixth of the build
+    // of a 10⁶-triangle mesh. The table holds group numbers only, looked up by their boxes
+    // (5 B a slot with its control byte, where a map holding the 24-byte keys took 29): it
+    // was the largest allocation of a 10⁶-triangle mesh's build (61 MB, now 10).
+    let hasher = fnv::FnvBuildHasher::default();
+    let key_of = |b: &Padded| [b.0.min.x, b.0.min.y, b.0.min.z, b.0.max.x, b.0.max.y, b.0.max.z].map(f32::to_bits);
+    let mut group_of_box: hashbrown::HashTable<u32> = hashbrown::HashTable::with_capacity(count);
+    let mut boxes: Vec<Padded> = Vec::new();
+    let mut group_of_primitive: Vec<u32> = Vec::with_capacity(count);
+    for (lo, hi) in bounds {
+        let group = match padded_box(lo, hi) {
+            Some(key) => {
+                let hash = hasher.hash_one(key);
+                match group_of_box.find(hash, |&g| key_of(&boxes[g as usize]) == key) {
+                    Some(&g) => g,
+                    None => {
+                        let [lx, ly, lz, hx, hy, hz] = key.map(f32::from_bits);
+                        boxes.push(Padded(Aabb::new(Vec3A::new(lx, ly, lz), Vec3A::new(hx, hy, hz))));
+                        let g = boxes.len() as u32 - 1;
+                        group_of_box.insert_unique(hash, g, |&g| hasher.hash_one(key_of(&boxes[g as usize])));
+                        g
+                    }
+                }
+            }
+            None => u32::MAX,
+        };
+        group_of_primitive.push(group);
+    }
+    // Counting sort of primitive indices by group: the groups' lists, back to back.
+    let mut group_start = vec![0u32; boxes.len() + 1];
+    for &g in group_of_primitive.iter().filter(|&&g| g != u32::MAX) {
+        group_start[g as usize + 1] += 1;
+    }
+    for g in 0..boxes.len() {
+        group_start[g + 1] += group_start[g];
+    }
+    // The box table and the per-primitive groups are freed before the BVH is built: on a
+    // mesh of distinct boxes the table is the largest allocation here (build peak memory).
+    drop(group_of_box);
+    let mut next = group_start.clone();
+    let mut group_members = vec![0u32; group_start[boxes.len()] as usize];
+    for (index, &g) in group_of_primitive.iter().enumerate() {
+        if g != u32::MAX {
+            group_members[next[g as usize] as usize] = index as u32;
+            next[g as usize] += 1;
+        }
+    }
+    drop((next, group_of_primitive));
+    let Some(mut space) = BvhSpace::build(boxes) else { return (None, group_members) };
+    // The groups in leaf order (obvhs' primitive ids); the id-to-group table is then unused.
+    let leaf_order = std::mem::take(&mut space.primitive_indices);
+    let mut leaf_start = Vec::with_capacity(leaf_order.len() + 1);
+    let mut leaf_members = Vec::with_capacity(group_members.len());
+    leaf_start.push(0);
+    for &g in &leaf_order {
+        let g = g as usize;
+        leaf_members.extend_from_slice(&group_members[group_start[g] as usize..group_start[g + 1] as usize]);
+        leaf_start.push(leaf_members.len() as u32);
+    }
+    // Each leaf's groups are adjacent in leaf order: the leaf becomes its members' range.
+    space.bvh.remap_leaves(|first, count| {
+        let (a, b) = (leaf_start[first as usize], leaf_start[(first + count) as usize]);
+        (a, b - a)
+    });
+    (Some(space), leaf_members)
 }
 
 /// A box as the BVH builder sees it.

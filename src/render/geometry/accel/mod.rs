@@ -26,7 +26,7 @@ use crate::render::geometry::primvars::PrimvarRef;
 use crate::render::geometry::shapes::Shape;
 use crate::render::geometry::triangles::Triangles;
 use crate::render::material::frame::Frame;
-use glam::{DAffine3, DMat3, Vec2, Vec3, Vec3A};
+use glam::{DAffine3, DMat3, Vec2, Vec3};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use obvhs::bvh2::reinsertion::ReinsertionOptimizer;
@@ -42,7 +42,7 @@ mod wide;
 
 use attrs::AttrTable;
 pub use batched::PLOC_BATCH;
-use batched::{Padded, build_batched};
+use batched::{Padded, build_batched, build_grouped};
 use leaves::{LeafTriangles, RayPre, dominant_axis};
 use wide::{WideBvh, WideRay};
 
@@ -220,85 +220,6 @@ pub struct Blas {
     /// A deforming mesh's triangles keyed over the shutter (`triangles` then hold them at the
     /// frame, and the boxes cover every key).
     deformation: Option<Box<Deformation>>,
-}
-
-/// A primitive's box, padded, as exact bits (the key that groups coincident primitives);
-/// `None` when it is not finite.
-fn padded_box(lo: Vec3, hi: Vec3) -> Option<[u32; 6]> {
-    if !lo.is_finite() || !hi.is_finite() {
-        return None;
-    }
-    // obvhs' quantised CWBVH nodes can lose a flat (zero-thickness) box entirely, e.g. a
-    // scene that is one axis-aligned plane, so every box gets a thickness. The padding is
-    // relative to the primitive's own coordinates, not the scene's: padding by the scene's
-    // size made every triangle of a small object far from the origin (or in a scene with
-    // one distant object) the same box, on which the PLOC builder is quadratic.
-    let pad = lo.abs().max(hi.abs()).max_element().max(f32::MIN_POSITIVE) * 1e-6;
-    let (lo, hi) = (lo - Vec3::splat(pad), hi + Vec3::splat(pad));
-    Some([lo.x, lo.y, lo.z, hi.x, hi.y, hi.z].map(f32::to_bits))
-}
-
-/// A BVH over `bounds` (`(min, max)` per primitive), grouping bit-identical boxes; returns
-/// the BVH (`None` when no box is finite), its leaves ranges of the returned primitive
-/// indices (the groups' members in leaf order).
-fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (Option<BvhSpace>, Vec<u32>) {
-    // Primitives with bit-identical boxes (copies of one mesh at one place) become one BVH
-    // primitive: PLOC merges only mutually-nearest pairs, and among n equal boxes every
-    // pass merges one pair, so n coincident copies cost O(n²) to build.
-    // FNV, not std's SipHash: keys are our own boxes, and hashing was a sixth of the build
-    // of a 10⁶-triangle mesh.
-    let mut group_of_box: HashMap<[u32; 6], u32, fnv::FnvBuildHasher> =
-        HashMap::with_capacity_and_hasher(count, fnv::FnvBuildHasher::default());
-    let mut boxes: Vec<Padded> = Vec::new();
-    let mut group_of_primitive: Vec<u32> = Vec::with_capacity(count);
-    for (lo, hi) in bounds {
-        let group = match padded_box(lo, hi) {
-            Some(key) => *group_of_box.entry(key).or_insert_with(|| {
-                let [lx, ly, lz, hx, hy, hz] = key.map(f32::from_bits);
-                boxes.push(Padded(Aabb::new(Vec3A::new(lx, ly, lz), Vec3A::new(hx, hy, hz))));
-                boxes.len() as u32 - 1
-            }),
-            None => u32::MAX,
-        };
-        group_of_primitive.push(group);
-    }
-    // Counting sort of primitive indices by group: the groups' lists, back to back.
-    let mut group_start = vec![0u32; boxes.len() + 1];
-    for &g in group_of_primitive.iter().filter(|&&g| g != u32::MAX) {
-        group_start[g as usize + 1] += 1;
-    }
-    for g in 0..boxes.len() {
-        group_start[g + 1] += group_start[g];
-    }
-    // The box table and the per-primitive groups are freed before the BVH is built: on a
-    // mesh of distinct boxes the table is the largest allocation here (build peak memory).
-    drop(group_of_box);
-    let mut next = group_start.clone();
-    let mut group_members = vec![0u32; group_start[boxes.len()] as usize];
-    for (index, &g) in group_of_primitive.iter().enumerate() {
-        if g != u32::MAX {
-            group_members[next[g as usize] as usize] = index as u32;
-            next[g as usize] += 1;
-        }
-    }
-    drop((next, group_of_primitive));
-    let Some(mut space) = BvhSpace::build(boxes) else { return (None, group_members) };
-    // The groups in leaf order (obvhs' primitive ids); the id-to-group table is then unused.
-    let leaf_order = std::mem::take(&mut space.primitive_indices);
-    let mut leaf_start = Vec::with_capacity(leaf_order.len() + 1);
-    let mut leaf_members = Vec::with_capacity(group_members.len());
-    leaf_start.push(0);
-    for &g in &leaf_order {
-        let g = g as usize;
-        leaf_members.extend_from_slice(&group_members[group_start[g] as usize..group_start[g + 1] as usize]);
-        leaf_start.push(leaf_members.len() as u32);
-    }
-    // Each leaf's groups are adjacent in leaf order: the leaf becomes its members' range.
-    space.bvh.remap_leaves(|first, count| {
-        let (a, b) = (leaf_start[first as usize], leaf_start[(first + count) as usize]);
-        (a, b - a)
-    });
-    (Some(space), leaf_members)
 }
 
 impl Blas {
