@@ -558,12 +558,7 @@ impl Session {
     /// Builds the render scene (geometry, BVH, lights, camera) with the compiled materials,
     /// or returns the one built with the same `options`. `None` when anything so far failed.
     pub fn prepare(&mut self, options: &SceneOptions) -> Option<&crate::render::Scene> {
-        self.compile()?;
-        let fresh = self.prepared.as_ref().is_some_and(|p| format!("{:?}", p.options) == format!("{options:?}"));
-        if !fresh {
-            self.build_scene(options.clone())?;
-        }
-        self.prepared.as_ref().map(|p| &p.scene)
+        self.prepare_with(options, false)
     }
 
     /// [`Session::prepare`] for a render that no update follows (a one-shot `strata render`):
@@ -574,10 +569,16 @@ impl Session {
     /// `prepare` with other options fails, and a change has no stage to redo from unless it
     /// is a layer's (which reads the stage again).
     pub fn prepare_releasing_stage(&mut self, options: &SceneOptions) -> Option<&crate::render::Scene> {
+        self.prepare_with(options, true)
+    }
+
+    /// Compiles, then builds the scene unless one was prepared with the same options; with
+    /// `release`, from the stage taken out of the session.
+    fn prepare_with(&mut self, options: &SceneOptions, release: bool) -> Option<&crate::render::Scene> {
         self.compile()?;
         let fresh = self.prepared.as_ref().is_some_and(|p| format!("{:?}", p.options) == format!("{options:?}"));
         if !fresh {
-            self.build_scene_with(options.clone(), true)?;
+            self.build_scene_with(options.clone(), release)?;
         }
         self.prepared.as_ref().map(|p| &p.scene)
     }

@@ -79,10 +79,11 @@ impl Film {
         (thickness > 0.0 && weight > 0.0).then(|| Film { eta: ior(p[1]), thickness, weight })
     }
 
-    /// `mix(bare, filmed, weight)`, exactly `filmed` at weight 1.
+    /// `mix(bare, filmed, weight)`, exactly `filmed` at weight 1 (where the bare curve is not
+    /// computed).
     #[inline]
-    fn cover(&self, bare: Vec3, filmed: Vec3) -> Vec3 {
-        if self.weight >= 1.0 { filmed } else { bare.lerp(filmed, self.weight) }
+    fn cover(&self, bare: impl FnOnce() -> Vec3, filmed: Vec3) -> Vec3 {
+        if self.weight >= 1.0 { filmed } else { bare().lerp(filmed, self.weight) }
     }
 }
 
@@ -96,16 +97,15 @@ impl Fresnel {
         match *self {
             Fresnel::Dielectric { eta } => Vec3::splat(fresnel_dielectric(cos, eta)),
             Fresnel::ThinFilm { eta, film } => {
-                let filmed = thin_film(cos, eta, film.eta, film.thickness);
-                if film.weight >= 1.0 { filmed } else { film.cover(Vec3::splat(fresnel_dielectric(cos, eta)), filmed) }
+                film.cover(|| Vec3::splat(fresnel_dielectric(cos, eta)), thin_film(cos, eta, film.eta, film.thickness))
             }
             Fresnel::Conductor { eta, k, film } => {
-                film.cover(fresnel_conductor3(cos, eta, k), film_on_conductor(cos, eta, k, film.eta, film.thickness))
+                film.cover(|| fresnel_conductor3(cos, eta, k), film_on_conductor(cos, eta, k, film.eta, film.thickness))
             }
             Fresnel::Schlick { color0, color82, color90, exponent, film } => {
-                let bare = schlick_f82(cos, color0, color82, color90, exponent);
+                let bare = || schlick_f82(cos, color0, color82, color90, exponent);
                 match film {
-                    None => bare,
+                    None => bare(),
                     Some(film) => film.cover(
                         bare,
                         film_on_schlick(
@@ -245,30 +245,14 @@ const FILM_WAVELENGTHS: [[f32; 3]; 3] = [[600.0, 630.0, 670.0], [500.0, 530.0, 5
 /// averaged (as Belcour and Barla 2017 before their spectral integration). The indices are
 /// ≥ 1, so neither interface totally reflects.
 pub fn thin_film(cos: f32, eta: f32, film_eta: f32, thickness: f32) -> Vec3 {
-    let cos1 = cos.clamp(0.0, 1.0);
-    let sin2 = 1.0 - cos1 * cos1;
-    let cos2 = (1.0 - sin2 / (film_eta * film_eta)).max(0.0).sqrt();
+    let sin2 = 1.0 - cos.clamp(0.0, 1.0).powi(2);
     let cos3 = (1.0 - sin2 / (eta * eta)).max(0.0).sqrt();
-    // Amplitude reflection coefficients at air|film (12) and film|substrate (23).
-    let (n1, n2, n3) = (1.0, film_eta, eta);
-    let r12s = (n1 * cos1 - n2 * cos2) / (n1 * cos1 + n2 * cos2);
-    let r12p = (n2 * cos1 - n1 * cos2) / (n2 * cos1 + n1 * cos2);
-    let r23s = (n2 * cos2 - n3 * cos3) / (n2 * cos2 + n3 * cos3);
-    let r23p = (n3 * cos2 - n2 * cos3) / (n3 * cos2 + n2 * cos3);
-    // |(a + b e^{iδ}) / (1 + a b e^{iδ})|² for real a, b.
-    let airy = |a: f32, b: f32, cos_delta: f32| {
-        let ab = a * b;
-        ((a * a + b * b + 2.0 * ab * cos_delta) / (1.0 + ab * ab + 2.0 * ab * cos_delta)).clamp(0.0, 1.0)
-    };
-    let path = 4.0 * PI * film_eta * thickness * cos2;
-    let mut r = Vec3::ZERO;
-    for (c, band) in FILM_WAVELENGTHS.iter().enumerate() {
-        for lambda in band {
-            let cos_delta = (path / lambda).cos();
-            r[c] += 0.5 * (airy(r12s, r23s, cos_delta) + airy(r12p, r23p, cos_delta)) / 3.0;
-        }
-    }
-    r
+    film_over(cos, film_eta, thickness, |_, cos2| {
+        // Film|substrate amplitudes, real for a dielectric.
+        let rs = (film_eta * cos2 - eta * cos3) / (film_eta * cos2 + eta * cos3);
+        let rp = (eta * cos2 - film_eta * cos3) / (eta * cos2 + film_eta * cos3);
+        (Complex::new(rs, 0.0), Complex::new(rp, 0.0))
+    })
 }
 
 /// The thin film a term carries, if its kind takes one ([`crate::abi::thin_film_words`]).
