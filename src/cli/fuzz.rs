@@ -1,9 +1,9 @@
 //! `strata fuzz`: mutation fuzzing of both front ends and the whole `check` pipeline, on the
 //! stable toolchain (no sanitizer coverage needed).
 //!
-//! The corpus is every `.ash`, `.usda`, `.usdc` and `.usdz` file under the repository's
-//! `scenes/`, `tests/in/`, `tests/fixtures/` and `fuzz/corpus/` (where inputs that once
-//! crashed are kept), plus the prelude. Input `k` of a run is a deterministic function of the
+//! The corpus is every `.ash`, `.usda`, `.usdc`, `.usdz` and `.mtlx` file under the
+//! repository's `scenes/`, `tests/in/`, `tests/fixtures/` and `fuzz/corpus/` (where inputs
+//! that once crashed are kept), plus the prelude. Input `k` of a run is a deterministic function of the
 //! seed and `k`: a corpus file with 1 to 8 mutations. Text is mutated byte-level (replace,
 //! delete, insert, duplicate, splice from another file) or structurally (repeat a span
 //! hundreds of times, swap in an extreme number, insert a token of either language). Binary
@@ -11,7 +11,10 @@
 //! copies, truncation); a package's members are mutated inside, and their CRCs fixed after, so
 //! the zip reader passes them on to the layer readers. Each input goes through `check`
 //! in-process and, for substance files, through lowering and the JIT (every input) and the
-//! interpreter (one in eight); for scenes, one in sixteen is also rendered at 4x4. With
+//! interpreter (one in eight); for scenes, one in sixteen is also rendered at 4x4. A MaterialX
+//! document is checked as a layer and through a scene that binds each of its materials (as
+//! USD's MaterialX plugin names them, `/MaterialX/Materials/NAME`) to a sphere, so its
+//! mutations reach translation, compilation and, one in sixteen, a render. With
 //! `--quick`, inputs are only read and composed (scenes) or parsed (substances): many times
 //! more executions per second, for the readers.
 //!
@@ -42,6 +45,9 @@ use strata::ir::wired::PassOptions;
 /// that relative references between them resolve).
 pub const CORPUS_DIRS: [&str; 4] = ["scenes", "tests/in", "tests/fixtures", "fuzz/corpus"];
 
+/// The kinds of file inputs are made from; every other corpus file is staged as an asset.
+const FUZZED_EXTENSIONS: [&str; 5] = ["ash", "usda", "usdc", "usdz", "mtlx"];
+
 /// Files larger than this are neither mutated nor staged (the corpus is source text).
 const MAX_CORPUS_FILE: u64 = 1 << 20;
 
@@ -59,6 +65,10 @@ impl Entry {
         self.rel.extension().is_some_and(|e| e == "ash")
     }
 
+    fn is_materialx(&self) -> bool {
+        self.rel.extension().is_some_and(|e| e == "mtlx")
+    }
+
     /// A crate or a package: mutated as bytes, not as text.
     fn is_binary(&self) -> bool {
         self.rel.extension().is_some_and(|e| e == "usdc" || e == "usdz") || self.bytes.starts_with(b"PXR-USDC")
@@ -72,7 +82,8 @@ impl Entry {
 /// The files inputs are made from, and the other files they may refer to.
 #[derive(Clone, Debug, Default)]
 pub struct Corpus {
-    /// `.ash`, `.usda`, `.usdc` and `.usdz` files, sorted by path (so input `k` is the same on every machine).
+    /// `.ash`, `.usda`, `.usdc`, `.usdz` and `.mtlx` files, sorted by path (so input `k` is the
+    /// same on every machine).
     pub entries: Vec<Entry>,
     /// Every other staged file (textures and the like), relative path and bytes.
     pub assets: Vec<Entry>,
@@ -96,7 +107,7 @@ impl Corpus {
                     let item = Entry { rel, bytes: std::fs::read(&path)? };
                     // Binary layers and packages are mutated too: the usdc and zip readers must
                     // turn every corrupt crate or package into a diagnostic.
-                    if item.rel.extension().is_some_and(|e| e == "ash" || e == "usda" || e == "usdc" || e == "usdz") {
+                    if item.rel.extension().is_some_and(|e| FUZZED_EXTENSIONS.iter().any(|f| e == *f)) {
                         corpus.entries.push(item);
                     } else {
                         corpus.assets.push(item);
@@ -178,8 +189,8 @@ const ALPHABET: &[u8] = b"{}()[];,.=+-*/<>!&|?:@\"'#_ \n\t0123456789abcxyzeE";
 const EXTREMES: [&str; 12] =
     ["1e38", "-1e39", "3.4e38", "nan", "inf", "-0", "0", "2147483648", "-2147483649", "1e-45", "65536", "1e300"];
 
-/// Tokens of either language worth inserting.
-const TOKENS: [&str; 28] = [
+/// Tokens of the languages (strata's, USD's, MaterialX's XML) worth inserting.
+const TOKENS: [&str; 40] = [
     "substance s { node d = diffuse(); surface = d.bsdf; }",
     "override o { output float x = 1.0; }",
     "shader f(output float o = 0.0) { o = 1.0; }",
@@ -208,6 +219,18 @@ const TOKENS: [&str; 28] = [
     "def Sphere \"S\" { double radius = -1 }",
     "variantSet \"v\" = { \"a\" {} }",
     "asset info:strata:sourceAsset = @missing.ash@",
+    "<input name=\"in\" type=\"color3\" value=\"1e38, nan, -1\" />",
+    "<input name=\"in\" type=\"float\" nodename=\"self\" />",
+    "<input name=\"file\" type=\"filename\" value=\"/dev/zero\" colorspace=\"acescg\" />",
+    "<nodegraph name=\"g\"><output name=\"out\" type=\"color3\" nodename=\"g\" /></nodegraph>",
+    "<image name=\"i\" type=\"color4\"><input name=\"uaddressmode\" type=\"string\" value=\"mirror\" /></image>",
+    "<surfacematerial name=\"m\" type=\"material\"><input name=\"surfaceshader\" type=\"surfaceshader\" nodename=\"m\" /></surfacematerial>",
+    "interfacename=\"missing\" ",
+    "output=\"out\" nodegraph=\"nowhere\" ",
+    "fileprefix=\"../../../../\" ",
+    "<!DOCTYPE m [<!ENTITY a \"aaaaaaaaaa\"><!ENTITY b \"&a;&a;&a;&a;&a;&a;&a;&a;\">]>",
+    "&b;&#0;&#x110000;",
+    "<![CDATA[</materialx>]]>",
 ];
 
 fn mutate(rng: &mut Rng, bytes: &mut Vec<u8>, corpus: &Corpus) {
@@ -410,9 +433,18 @@ pub fn execute(dir: &Path, corpus: &Corpus, which: usize, bytes: &[u8], k: u64, 
         diags.render(&sources).len()
     } else {
         let (diags, sources, summary) = strata::session::check_file(&path);
-        let printed = diags.render(&sources).len() + summary.len();
+        let mut printed = diags.render(&sources).len() + summary.len();
         if entry.is_substance() {
             run_substances(bytes, k.is_multiple_of(8));
+        } else if entry.is_materialx() {
+            // Its materials as a scene binds them: the mutation reaches translation and code.
+            let scene = path.with_extension("fuzz.usda");
+            std::fs::write(&scene, materialx_wrapper(&entry.bytes, &path))?;
+            let (diags, sources, summary) = strata::session::check_file(&scene);
+            printed += diags.render(&sources).len() + summary.len();
+            if k.is_multiple_of(16) && !diags.has_errors() {
+                render_tiny(&scene);
+            }
         } else if k.is_multiple_of(16) && !diags.has_errors() {
             render_tiny(&path);
         }
@@ -420,6 +452,35 @@ pub fn execute(dir: &Path, corpus: &Corpus, which: usize, bytes: &[u8], k: u64, 
     };
     std::fs::write(&path, &entry.bytes)?;
     Ok(printed)
+}
+
+/// Most materials of one MaterialX document a fuzzing scene binds.
+const MATERIALX_MATERIALS: usize = 4;
+
+/// A scene that references the first [`MATERIALX_MATERIALS`] materials of the MaterialX
+/// document `original` (named from the unmutated text, so a mutation that renames or breaks
+/// one leaves a reference to resolve) from `document`, each bound to a sphere of its own.
+fn materialx_wrapper(original: &[u8], document: &Path) -> String {
+    let text = String::from_utf8_lossy(original);
+    let names = ["<surfacematerial ", "<material "].iter().flat_map(|tag| {
+        text.match_indices(tag).filter_map(|(at, _)| {
+            let rest = &text[at..];
+            let name = rest[..rest.find('>')?].split("name=\"").nth(1)?;
+            Some(name[..name.find('"')?].to_string())
+        })
+    });
+    let file = document.file_name().map_or_else(String::new, |f| f.to_string_lossy().into_owned());
+    let mut scene = String::from("#usda 1.0\n");
+    for (i, name) in names.take(MATERIALX_MATERIALS).enumerate() {
+        scene += &format!(
+            "def Material \"M{i}\" (prepend references = @./{file}@</MaterialX/Materials/{name}>) {{}}\n\
+             def Sphere \"S{i}\" (prepend apiSchemas = [\"MaterialBindingAPI\"]) {{\n\
+             \x20   double3 xformOp:translate = ({i}, 0, 0)\n\
+             \x20   uniform token[] xformOpOrder = [\"xformOp:translate\"]\n\
+             \x20   rel material:binding = </M{i}>\n}}\n"
+        );
+    }
+    scene
 }
 
 /// This process's peak resident memory since [`reset_peak_memory`] (bytes; 0 where `/proc`
@@ -860,6 +921,24 @@ mod tests {
             }
         }
         assert!(total > 0 && kept_magic * 10 > total * 8, "{kept_magic} of {total} kept the magic");
+    }
+
+    /// A MaterialX document is fuzzed through a scene that binds its materials: each one
+    /// composes, compiles and reaches a prim, so mutations get past the reader.
+    #[test]
+    fn fuzzed_materialx_documents_reach_their_prims() {
+        let corpus = corpus();
+        let documents: Vec<&Entry> = corpus.entries.iter().filter(|e| e.is_materialx()).collect();
+        assert!(documents.len() > 10, "only {} MaterialX seeds in the corpus", documents.len());
+        let chess = documents.iter().find(|e| e.rel.ends_with("chess_mat.mtlx")).expect("the chess document");
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("chess_mat.mtlx");
+        std::fs::write(&path, &chess.bytes).unwrap();
+        let scene = path.with_extension("fuzz.usda");
+        std::fs::write(&scene, materialx_wrapper(&chess.bytes, &path)).unwrap();
+        let (diags, sources, summary) = strata::session::check_file(&scene);
+        assert!(!diags.has_errors(), "{}", diags.render(&sources));
+        assert!(summary.contains("ok (1 renderable prim(s), 1 distinct material(s))"), "{summary}");
     }
 
     #[test]
