@@ -139,6 +139,13 @@ pub fn node_function(id: &str) -> Option<String> {
         // Named by the type they build; the library's variant takes floats.
         return Some(format!("mx_{node}_float"));
     }
+    if matches!(node, "ifgreater" | "ifgreatereq" | "ifequal" | "switch")
+        && let Some(ty) = types.strip_suffix('I').or_else(|| types.strip_suffix('B').filter(|_| node == "ifequal"))
+    {
+        // Selected by an integer (`…I`) or, for ifequal, a boolean (`…B`: 0 or 1): one
+        // integer-selected variant serves both.
+        return Some(format!("mx_{node}_{}I", variant(ty)?));
+    }
     if node == "convert" {
         let (from, to) = types.split_once('_')?;
         return match (variant(from)?, to) {
@@ -456,8 +463,20 @@ mod tests {
         ] {
             assert_eq!(node_function(id).as_deref(), Some(function), "{id}");
         }
-        // Integer- and boolean-selected variants are not in the library's naming.
-        assert_eq!(node_function("ND_ifgreater_color4I"), None);
+        // Integer- and boolean-selected conditionals: one integer-selected variant.
+        for (id, function) in [
+            ("ND_ifgreater_color4I", Some("mx_ifgreater_color4I")),
+            ("ND_ifgreatereq_vector2I", Some("mx_ifgreatereq_color3I")),
+            ("ND_ifequal_floatB", Some("mx_ifequal_floatI")),
+            ("ND_ifequal_vector4B", Some("mx_ifequal_color4I")),
+            ("ND_switch_vector3I", Some("mx_switch_color3I")),
+            // No boolean-selected ifgreater; no boolean or integer outputs.
+            ("ND_ifgreater_floatB", None),
+            ("ND_ifgreater_booleanI", None),
+            ("ND_ifequal_integerB", None),
+        ] {
+            assert_eq!(node_function(id).as_deref(), function, "{id}");
+        }
         assert_eq!(node_function("ND_mincomponent_vector2").as_deref(), Some("mx_mincomponent_vector2"));
         assert_eq!(node_function("ND_maxcomponent_vector3").as_deref(), Some("mx_maxcomponent_color3"));
         assert_eq!(node_function("ND_blackbody").as_deref(), Some("mx_blackbody_color3"));
