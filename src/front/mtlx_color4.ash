@@ -354,6 +354,16 @@ shader mx_convert_color4_color4(color in_ = color(0.0), float in_a = 0.0, output
     out_a = in_a;
 }
 
+// ---- geometry ----------------------------------------------------------------------------------
+// geompropvalue: a 4-component primvar (color4f, float4), its fourth component the alpha (a
+// primvar with fewer components reads 0 there); `default` with its fourth where the prim has
+// none.
+shader mx_geompropvalue_color4(string geomprop = "", color default_ = color(0.0), float default_a = 0.0, output color out,
+                               output float out_a) {
+    out = primvar(geomprop, default_);
+    out_a = primvar_alpha(geomprop, default_a);
+}
+
 // ---- textures and ramps ----------------------------------------------------------------------
 // image and tiledimage: the fourth channel is the file's alpha (1 for a file without one);
 // `default` (with its fourth channel) outside the image in `constant` mode and for no file.

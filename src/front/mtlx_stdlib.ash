@@ -1,7 +1,8 @@
 
 // ---- MaterialX standard nodes beyond mtlx.ash's core set (MaterialX 1.39 Standard Nodes and
 // pbrlib's blackbody): HSV conversion and adjustment, blackbody colour, component min/max,
-// space transforms, the shape nodes and their tilings. Written from the specification; where
+// space transforms, the shape nodes and their tilings, the conditionals selected by an integer
+// or a boolean, ramp4, fractal2d and the multi-channel noise. Written from the specification; where
 // its prose leaves a choice open, the comment says which was taken. Variants follow mtlx.ash:
 // `_color3` serves color3 and vector3 (and vector2 with z = 0 where z cannot matter).
 

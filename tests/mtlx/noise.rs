@@ -90,7 +90,12 @@ fn multi_channel_noise_is_the_float_noise_at_the_offsets_materialx_defines() {
             // The fourth channel is the float noise at the offset point; the first is the
             // float noise itself; the colour channels are the color3 node's.
             let shifted = [p[0] + offset[0], p[1] + offset[1], p[2] + offset[2]];
-            assert!((values[3] - float(shifted)).abs() <= 1e-6, "{node} at {p:?}: w {} vs {}", values[3], float(shifted));
+            assert!(
+                (values[3] - float(shifted)).abs() <= 1e-6,
+                "{node} at {p:?}: w {} vs {}",
+                values[3],
+                float(shifted)
+            );
             assert_eq!(values[0], float(p), "{node} at {p:?}: x");
             for k in 0..3 {
                 assert_eq!(values[k], colour[k](p), "{node} at {p:?}: channel {k} of the colour node");
