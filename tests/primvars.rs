@@ -48,9 +48,10 @@ fn corner_values_are_usd_cores_flattened_primvars() {
     names.dedup();
     let geometry = build_with_primvars(&stage, &xforms, GeometryOptions::default(), &names, &mut diags);
     assert!(diags.items().is_empty(), "{}", diags.render(&sources));
-    // The material's view: each name read as a triple (a float read is its first component).
+    // The material's view: each name read with four components (a float read is its first
+    // component, a triple's its first three; a color4's fourth is what `primvar_alpha` reads).
     let infos: Vec<PrimvarInfo> =
-        names.iter().enumerate().map(|(i, name)| PrimvarInfo { name: name.clone(), width: 3, offset: 4 * i }).collect();
+        names.iter().enumerate().map(|(i, name)| PrimvarInfo { name: name.clone(), width: 4, offset: 5 * i }).collect();
     let slots = geometry.primvars.slots(&infos);
     // Fan triangulation of the quad (face-vertices 0..4) and the triangle (4..7).
     assert_eq!(oracle.counts, [4, 3]);
@@ -66,9 +67,9 @@ fn corner_values_are_usd_cores_flattened_primvars() {
             for (k, fv) in corners.into_iter().enumerate() {
                 let mut bary = [0.0; 3];
                 bary[k] = 1.0;
-                let mut out = vec![f32::NAN; 4 * names.len()];
+                let mut out = vec![f32::NAN; 5 * names.len()];
                 geometry.primvars.fill(t.primvars, bary, &slots, &mut out);
-                let got = &out[4 * slot..4 * slot + 4];
+                let got = &out[5 * slot..5 * slot + 5];
                 let want = &case.per_face_vertex[fv];
                 let what = format!(
                     "{} ({} {}{}), face-vertex {fv}",
@@ -78,13 +79,13 @@ fn corner_values_are_usd_cores_flattened_primvars() {
                     if case.indexed { ", indexed" } else { "" }
                 );
                 assert_eq!(got[0], 1.0, "{what}: present");
-                for c in 0..3 {
+                for c in 0..4 {
                     let expected = want.get(c).copied().unwrap_or(0.0);
                     assert_eq!(got[1 + c], expected, "{what}: component {c}: got {got:?}, want {want:?}");
                 }
                 // The other names are absent from this mesh: flag and components 0.
                 for (other, _) in names.iter().enumerate().filter(|&(i, n)| i != slot && *n != case.name) {
-                    assert_eq!(&out[4 * other..4 * other + 4], &[0.0; 4], "{what}: {} absent", names[other]);
+                    assert_eq!(&out[5 * other..5 * other + 5], &[0.0; 5], "{what}: {} absent", names[other]);
                 }
                 checked += 1;
             }

@@ -18,6 +18,8 @@ The references, none of them strata's code:
                                   compositing nodes Porter and Duff's operators as the
                                   specification tabulates them); the fourth expected value is
                                   the fourth channel, which the test reads through a connection
+  *I, *B conditionals, switch     the comparison and the selection, exactly (integers past 2^24)
+  ramp4                           numpy's bilinear interpolation of the four corners
   circle, cloverleaf, hexagon     the shapes by their geometry (the hexagon as a polygon through
   tiled*                          its six corners), tilings by brute force over every centre of
                                   the lattice within reach
@@ -245,6 +247,62 @@ case("ND_ramplr_color4", [f"color4f inputs:valuel = {f4(FG)}", f"color4f inputs:
                           "float2 inputs:texcoord = (0.3, 0.9)"], FG * 0.7 + BG * 0.3, 1e-6, "linear in u")
 case("ND_splittb_vector4", [f"float4 inputs:valuet = {f4(FG)}", f"float4 inputs:valueb = {f4(BG)}",
                             "float2 inputs:texcoord = (0.3, 0.4)"], BG, 0.0, "v below the centre")
+
+# ---- conditionals selected by an integer or a boolean; the ten-input switch; ramp4 -------------
+# Integers compare exactly: 2^24 + 1 and 2^24 are one float apart from nothing, so a
+# float-selected implementation gets these cases wrong.
+IN1 = {"float": ("float", 0.3), "color3": ("color3f", (0.1, 0.2, 0.3)), "vector2": ("float2", (0.4, 0.5)),
+       "color4": ("color4f", (0.1, 0.2, 0.3, 0.4))}
+IN2 = {"float": 0.7, "color3": (0.9, 0.8, 0.7), "vector2": (0.6, 0.75), "color4": (0.9, 0.8, 0.7, 0.6)}
+
+
+def usd(v):
+    return repr(float(v)) if np.isscalar(v) else "(" + ", ".join(repr(float(x)) for x in v) + ")"
+
+
+def rgb(v):
+    """The emitted channels of a value (a float fills three; a vector2 has z = 0)."""
+    if np.isscalar(v):
+        return [v] * 3
+    return list(v) + [0.0] if len(v) == 2 else list(v)
+
+
+BIG = 1 << 24
+for node, test in [("ifgreater", lambda a, b: a > b), ("ifgreatereq", lambda a, b: a >= b), ("ifequal", lambda a, b: a == b)]:
+    for ty, (usd_ty, in1) in IN1.items():
+        for v1, v2 in [(3, 2), (2, 2), (-1, 4), (BIG + 1, BIG)]:
+            want = in1 if test(v1, v2) else IN2[ty]
+            case(f"ND_{node}_{ty}I", [f"int inputs:value1 = {v1}", f"int inputs:value2 = {v2}",
+                                      f"{usd_ty} inputs:in1 = {usd(in1)}", f"{usd_ty} inputs:in2 = {usd(IN2[ty])}"],
+                 rgb(want), 0.0, f"{v1} vs {v2}")
+for ty, (usd_ty, in1) in IN1.items():
+    for b1, b2 in [(True, True), (True, False), (False, False), (False, True)]:
+        want = in1 if b1 == b2 else IN2[ty]
+        case(f"ND_ifequal_{ty}B", [f"bool inputs:value1 = {str(b1).lower()}", f"bool inputs:value2 = {str(b2).lower()}",
+                                   f"{usd_ty} inputs:in1 = {usd(in1)}", f"{usd_ty} inputs:in2 = {usd(IN2[ty])}"],
+             rgb(want), 0.0, f"{b1} vs {b2}")
+# switch: input floor(which) + 1, clamped to in1..in10.
+SW = {"float": ("float", lambda k: 0.05 * k), "color3": ("color3f", lambda k: (0.05 * k, 0.5, 1.0 - 0.05 * k)),
+      "vector4": ("float4", lambda k: (0.05 * k, 0.25, 0.5, 0.75 - 0.05 * k))}
+for ty, (usd_ty, value) in SW.items():
+    inputs = [f"{usd_ty} inputs:in{k} = {usd(value(k))}" for k in range(1, 11)]
+    for which in [0, 4, 7, 9, -2, 12]:
+        pick = min(max(which, 0), 9) + 1
+        case(f"ND_switch_{ty}I", inputs + [f"int inputs:which = {which}"], rgb(value(pick)), 1e-7, f"in{pick}")
+    for which in [6.6, 9.5, -0.5]:
+        pick = min(max(math.floor(which), 0), 9) + 1
+        case(f"ND_switch_{ty}", inputs + [f"float inputs:which = {which}"], rgb(value(pick)), 1e-7, f"in{pick}")
+# ramp4: bilinear between the corners (tl at (0, 1), tr (1, 1), bl (0, 0), br (1, 0)), the
+# coordinate clamped to [0, 1].
+CORNERS = {"tl": (0.9, 0.1, 0.2, 0.3), "tr": (0.2, 0.8, 0.1, 0.6), "bl": (0.1, 0.3, 0.9, 0.2), "br": (0.5, 0.5, 0.4, 1.0)}
+for ty, usd_ty, n in [("float", "float", 1), ("color3", "color3f", 3), ("vector2", "float2", 2), ("vector4", "float4", 4)]:
+    corner = {k: np.array(v[:n]) for k, v in CORNERS.items()}
+    for uv in [(0.3, 0.8), (0.75, 0.1), (1.4, -0.2)]:
+        s, t = np.clip(uv, 0.0, 1.0)
+        want = (corner["bl"] * (1 - s) + corner["br"] * s) * (1 - t) + (corner["tl"] * (1 - s) + corner["tr"] * s) * t
+        want = float(want[0]) if n == 1 else want
+        values = [f"{usd_ty} inputs:value{k} = {usd(v[0] if n == 1 else v)}" for k, v in corner.items()]
+        case(f"ND_ramp4_{ty}", values + [f"float2 inputs:texcoord = {f2(*uv)}"], rgb(want), 1e-6, "bilinear")
 
 # ---- shapes -------------------------------------------------------------------------------------
 

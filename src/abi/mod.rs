@@ -151,7 +151,8 @@ pub const PARAMS_LEN_OFFSET: usize = PARAMS_PTR_OFFSET + std::mem::offset_of!(Pr
 pub struct PrimvarInfo {
     /// The primvar's name without `primvars:` (`displayColor`, `st`).
     pub name: String,
-    /// Components read: 1 (float) or 3 (triples).
+    /// Components read: 1 (float), 3 (triples) or 4 (a 4-component primvar, whose fourth
+    /// `primvar_alpha` reads).
     pub width: usize,
     /// Index of its presence flag; the components follow.
     pub offset: usize,

@@ -139,6 +139,13 @@ pub fn node_function(id: &str) -> Option<String> {
         // Named by the type they build; the library's variant takes floats.
         return Some(format!("mx_{node}_float"));
     }
+    if matches!(node, "ifgreater" | "ifgreatereq" | "ifequal" | "switch")
+        && let Some(ty) = types.strip_suffix('I').or_else(|| types.strip_suffix('B').filter(|_| node == "ifequal"))
+    {
+        // Selected by an integer (`…I`) or, for ifequal, a boolean (`…B`: 0 or 1): one
+        // integer-selected variant serves both.
+        return Some(format!("mx_{node}_{}I", variant(ty)?));
+    }
     if node == "convert" {
         let (from, to) = types.split_once('_')?;
         return match (variant(from)?, to) {
@@ -197,7 +204,10 @@ fn canonical_space(space: &str) -> &str {
     match space {
         "gamma18" => "g18_rec709",
         "gamma22" => "g22_rec709",
-        "gamma24" => "rec709_display",
+        "gamma24" | "Gamma 2.4 Encoded Rec.709" => "rec709_display",
+        "Gamma 2.2 Encoded AdobeRGB" => "adobergb",
+        "Linear Rec.2020" => "lin_rec2020",
+        "CIE XYZ-D65 - Scene-referred" => "lin_ciexyzd65",
         "lin_srgb" | "Utility - Linear - sRGB" | "Linear Rec.709 (sRGB)" | "lin_rec709_scene" => "lin_rec709",
         "Utility - sRGB - Texture" | "sRGB - Texture" => "srgb_texture",
         "ACEScg" | "lin_ap1_scene" => "acescg",
@@ -237,6 +247,11 @@ pub fn to_working_space(space: &str, c: [f32; 3]) -> Option<[f32; 3]> {
         [[2.52169, -1.13413, -0.38756], [-0.27648, 1.37272, -0.09624], [-0.01538, -0.15298, 1.16835]];
     const P3: [[f32; 3]; 3] = [[1.22494, -0.22494, 0.0], [-0.04206, 1.04206, 0.0], [-0.01964, -0.07864, 1.09827]];
     const ADOBE: [[f32; 3]; 3] = [[1.39836, -0.39836, 0.0], [0.0, 1.0, 0.0], [0.0, -0.04293, 1.04293]];
+    const REC2020: [[f32; 3]; 3] =
+        [[1.660491, -0.587641, -0.07285], [-0.12455, 1.1329, -0.008349], [-0.018151, -0.100579, 1.11873]];
+    // CIE XYZ to linear Rec.709 (the D65 white of both: no adaptation).
+    const XYZ: [[f32; 3]; 3] =
+        [[3.24097, -1.537383, -0.498611], [-0.969244, 1.875968, 0.041555], [0.05563, -0.203977, 1.056972]];
     Some(match canonical_space(space) {
         "" | "lin_rec709" | "raw" => c,
         "srgb_texture" => c.map(srgb),
@@ -251,6 +266,8 @@ pub fn to_working_space(space: &str, c: [f32; 3]) -> Option<[f32; 3]> {
         "lin_displayp3" => matrix(P3, c),
         "srgb_displayp3" => matrix(P3, c.map(srgb)),
         "lin_adobergb" => matrix(ADOBE, c),
+        "lin_rec2020" => matrix(REC2020, c),
+        "lin_ciexyzd65" => matrix(XYZ, c),
         "adobergb" => matrix(ADOBE, c.map(gamma(2.199_218_8))),
         _ => return None,
     })
@@ -456,8 +473,20 @@ mod tests {
         ] {
             assert_eq!(node_function(id).as_deref(), Some(function), "{id}");
         }
-        // Integer- and boolean-selected variants are not in the library's naming.
-        assert_eq!(node_function("ND_ifgreater_color4I"), None);
+        // Integer- and boolean-selected conditionals: one integer-selected variant.
+        for (id, function) in [
+            ("ND_ifgreater_color4I", Some("mx_ifgreater_color4I")),
+            ("ND_ifgreatereq_vector2I", Some("mx_ifgreatereq_color3I")),
+            ("ND_ifequal_floatB", Some("mx_ifequal_floatI")),
+            ("ND_ifequal_vector4B", Some("mx_ifequal_color4I")),
+            ("ND_switch_vector3I", Some("mx_switch_color3I")),
+            // No boolean-selected ifgreater; no boolean or integer outputs.
+            ("ND_ifgreater_floatB", None),
+            ("ND_ifgreater_booleanI", None),
+            ("ND_ifequal_integerB", None),
+        ] {
+            assert_eq!(node_function(id).as_deref(), function, "{id}");
+        }
         assert_eq!(node_function("ND_mincomponent_vector2").as_deref(), Some("mx_mincomponent_vector2"));
         assert_eq!(node_function("ND_maxcomponent_vector3").as_deref(), Some("mx_maxcomponent_color3"));
         assert_eq!(node_function("ND_blackbody").as_deref(), Some("mx_blackbody_color3"));
@@ -493,5 +522,16 @@ mod tests {
         assert_eq!(texture_decode("Utility - sRGB - Texture"), texture_decode("srgb_texture"));
         // The ACES 2 OCIO config's alias of linear Rec.709 (MaterialX's color_management.mtlx).
         assert_eq!(to_working_space("lin_rec709_scene", [0.5, 0.25, 2.0]), Some([0.5, 0.25, 2.0]));
+        // The ACES studio config's names in ocio_color_management.mtlx: D65's XYZ is Rec.709
+        // white; Rec.2020's red by ITU-R BT.2087's published matrix (1.6605, -0.1246, -0.0182).
+        let white = to_working_space("CIE XYZ-D65 - Scene-referred", [0.95047, 1.0, 1.08883]).unwrap();
+        assert!(white.iter().all(|x| (x - 1.0).abs() < 1e-3), "{white:?}");
+        let red = to_working_space("Linear Rec.2020", [1.0, 0.0, 0.0]).unwrap();
+        assert!((red[0] - 1.6605).abs() < 1e-3 && (red[1] + 0.1246).abs() < 1e-3 && (red[2] + 0.0182).abs() < 1e-3);
+        assert_eq!(
+            to_working_space("Gamma 2.4 Encoded Rec.709", [0.5; 3]),
+            to_working_space("rec709_display", [0.5; 3])
+        );
+        assert_eq!(to_working_space("Gamma 2.2 Encoded AdobeRGB", [0.5; 3]), to_working_space("adobergb", [0.5; 3]));
     }
 }

@@ -106,6 +106,9 @@ intrinsics! {
     Primvar = "primvar": Fixed(&[S, C], C),
     PrimvarFloat = "primvar_float": Fixed(&[S, F], F),
     PrimvarVector = "primvar_vector": Fixed(&[S, V], V),
+    // primvar_alpha(name, fallback): the fourth component of a 4-component primvar (a color4's
+    // alpha, a float4's w), or the fallback where the prim has none.
+    PrimvarAlpha = "primvar_alpha": Fixed(&[S, F], F),
     DiffuseBsdf = "diffuse_bsdf": Fixed(&[C], CL),
     GlossyBsdf = "glossy_bsdf": Fixed(&[C, C, F, F], CL),
     MetalBsdf = "metal_bsdf": Fixed(&[C, C, F], CL),
@@ -151,6 +154,7 @@ impl Intrinsic {
                 | Intrinsic::Primvar
                 | Intrinsic::PrimvarFloat
                 | Intrinsic::PrimvarVector
+                | Intrinsic::PrimvarAlpha
         )
     }
 

@@ -200,17 +200,28 @@ shader mx_ifequal_float(float value1 = 0.0, float value2 = 0.0, float in1 = 0.0,
 shader mx_ifequal_color3(float value1 = 0.0, float value2 = 0.0, color in1 = color(0.0), color in2 = color(0.0), output color out) {
     out = value1 == value2 ? in1 : in2;
 }
-// switch: in<which + 1> (which is truncated; out of range reads in1 below, in5 above... as the
-// specification's "the first input when which < 1"), five inputs as MaterialX 1.38.
-shader mx_switch_float(float in1 = 0.0, float in2 = 0.0, float in3 = 0.0, float in4 = 0.0, float in5 = 0.0, float which = 0.0,
+// switch: input floor(which) + 1, clamped to in1..in10 (MaterialX 1.39 has ten inputs; a
+// `which` below 0 reads in1, one of 9 or more in10). The float `which` is floored; the
+// integer-selected variants (`…I`, mtlx_stdlib.ash) take it as it is.
+float mx_pick_float(int w, float a1, float a2, float a3, float a4, float a5, float a6, float a7, float a8, float a9,
+                    float a10) {
+    return w <= 0 ? a1 : (w == 1 ? a2 : (w == 2 ? a3 : (w == 3 ? a4 : (w == 4 ? a5 : (w == 5 ? a6
+           : (w == 6 ? a7 : (w == 7 ? a8 : (w == 8 ? a9 : a10))))))));
+}
+color mx_pick_color(int w, color a1, color a2, color a3, color a4, color a5, color a6, color a7, color a8, color a9,
+                    color a10) {
+    return w <= 0 ? a1 : (w == 1 ? a2 : (w == 2 ? a3 : (w == 3 ? a4 : (w == 4 ? a5 : (w == 5 ? a6
+           : (w == 6 ? a7 : (w == 7 ? a8 : (w == 8 ? a9 : a10))))))));
+}
+shader mx_switch_float(float in1 = 0.0, float in2 = 0.0, float in3 = 0.0, float in4 = 0.0, float in5 = 0.0, float in6 = 0.0,
+                       float in7 = 0.0, float in8 = 0.0, float in9 = 0.0, float in10 = 0.0, float which = 0.0,
                        output float out) {
-    int w = int(floor(which));
-    out = w <= 0 ? in1 : (w == 1 ? in2 : (w == 2 ? in3 : (w == 3 ? in4 : in5)));
+    out = mx_pick_float(int(floor(which)), in1, in2, in3, in4, in5, in6, in7, in8, in9, in10);
 }
 shader mx_switch_color3(color in1 = color(0.0), color in2 = color(0.0), color in3 = color(0.0), color in4 = color(0.0),
-                        color in5 = color(0.0), float which = 0.0, output color out) {
-    int w = int(floor(which));
-    out = w <= 0 ? in1 : (w == 1 ? in2 : (w == 2 ? in3 : (w == 3 ? in4 : in5)));
+                        color in5 = color(0.0), color in6 = color(0.0), color in7 = color(0.0), color in8 = color(0.0),
+                        color in9 = color(0.0), color in10 = color(0.0), float which = 0.0, output color out) {
+    out = mx_pick_color(int(floor(which)), in1, in2, in3, in4, in5, in6, in7, in8, in9, in10);
 }
 
 // ---- channels ----------------------------------------------------------------------------------
@@ -282,18 +293,22 @@ shader mx_noise3d_color3(color amplitude = color(1.0), float pivot = 0.0, color 
     point p = point(position);
     out = color(snoise(p), snoise(p + point(19.1, 7.3, 5.2)), snoise(p + point(3.7, 41.9, 13.3))) * amplitude + color(pivot);
 }
-// fractal3d: octaves of signed noise, each `lacunarity` finer and `diminish` weaker.
-shader mx_fractal3d_float(float amplitude = 1.0, int octaves = 3, float lacunarity = 2.0, float diminish = 0.5,
-                          color position = color(P), output float out) {
+// fractal3d: octaves of signed noise, each `lacunarity` finer and `diminish` weaker (1 to 12
+// octaves).
+float mx_fractal(point p, int octaves, float lacunarity, float diminish) {
     float sum = 0.0;
     float a = 1.0;
-    point q = point(position);
+    point q = p;
     for (int i = 0; i < clamp(octaves, 1, 12); i++) {
         sum += a * snoise(q);
         a *= diminish;
         q *= lacunarity;
     }
-    out = sum * amplitude;
+    return sum;
+}
+shader mx_fractal3d_float(float amplitude = 1.0, int octaves = 3, float lacunarity = 2.0, float diminish = 0.5,
+                          color position = color(P), output float out) {
+    out = mx_fractal(point(position), octaves, lacunarity, diminish) * amplitude;
 }
 shader mx_cellnoise2d_float(color texcoord = color(u, v, 0.0), output float out) {
     out = cellnoise(point(texcoord.r, texcoord.g, 0.0));

@@ -291,10 +291,13 @@ shader mx_ifequal_color4(float value1 = 0.0, float value2 = 0.0, color in1 = col
 }
 shader mx_switch_color4(color in1 = color(0.0), float in1_a = 0.0, color in2 = color(0.0), float in2_a = 0.0,
                         color in3 = color(0.0), float in3_a = 0.0, color in4 = color(0.0), float in4_a = 0.0,
-                        color in5 = color(0.0), float in5_a = 0.0, float which = 0.0, output color out, output float out_a) {
+                        color in5 = color(0.0), float in5_a = 0.0, color in6 = color(0.0), float in6_a = 0.0,
+                        color in7 = color(0.0), float in7_a = 0.0, color in8 = color(0.0), float in8_a = 0.0,
+                        color in9 = color(0.0), float in9_a = 0.0, color in10 = color(0.0), float in10_a = 0.0,
+                        float which = 0.0, output color out, output float out_a) {
     int w = int(floor(which));
-    out = w <= 0 ? in1 : (w == 1 ? in2 : (w == 2 ? in3 : (w == 3 ? in4 : in5)));
-    out_a = w <= 0 ? in1_a : (w == 1 ? in2_a : (w == 2 ? in3_a : (w == 3 ? in4_a : in5_a)));
+    out = mx_pick_color(w, in1, in2, in3, in4, in5, in6, in7, in8, in9, in10);
+    out_a = mx_pick_float(w, in1_a, in2_a, in3_a, in4_a, in5_a, in6_a, in7_a, in8_a, in9_a, in10_a);
 }
 
 // ---- channels --------------------------------------------------------------------------------
@@ -349,6 +352,16 @@ shader mx_convert_color4_vector2(color in_ = color(0.0), float in_a = 0.0, outpu
 shader mx_convert_color4_color4(color in_ = color(0.0), float in_a = 0.0, output color out, output float out_a) {
     out = in_;
     out_a = in_a;
+}
+
+// ---- geometry ----------------------------------------------------------------------------------
+// geompropvalue: a 4-component primvar (color4f, float4), its fourth component the alpha (a
+// primvar with fewer components reads 0 there); `default` with its fourth where the prim has
+// none.
+shader mx_geompropvalue_color4(string geomprop = "", color default_ = color(0.0), float default_a = 0.0, output color out,
+                               output float out_a) {
+    out = primvar(geomprop, default_);
+    out_a = primvar_alpha(geomprop, default_a);
 }
 
 // ---- textures and ramps ----------------------------------------------------------------------

@@ -1,7 +1,8 @@
 
 // ---- MaterialX standard nodes beyond mtlx.ash's core set (MaterialX 1.39 Standard Nodes and
 // pbrlib's blackbody): HSV conversion and adjustment, blackbody colour, component min/max,
-// space transforms, the shape nodes and their tilings. Written from the specification; where
+// space transforms, the shape nodes and their tilings, the conditionals selected by an integer
+// or a boolean, ramp4, fractal2d and the multi-channel noise. Written from the specification; where
 // its prose leaves a choice open, the comment says which was taken. Variants follow mtlx.ash:
 // `_color3` serves color3 and vector3 (and vector2 with z = 0 where z cannot matter).
 
@@ -179,4 +180,135 @@ shader mx_tiledcloverleafs_color3(color texcoord = color(u, v, 0.0), color uvtil
 shader mx_tiledhexagons_color3(color texcoord = color(u, v, 0.0), color uvtiling = color(1.0, 1.0, 0.0),
                                color uvoffset = color(0.0), float size = 0.5, int staggered = 0, output color out) {
     out = color(mx_tiled_shape(2, texcoord, uvtiling, uvoffset, size, staggered));
+}
+
+// ---- conditionals selected by an integer or a boolean ----------------------------------------
+// `ND_<node>_<type>I` compares integer `value1` and `value2` (`switch`: an integer `which`),
+// `ND_ifequal_<type>B` booleans, which travel as integers 0 and 1 (`compose::mtlx` names the `I`
+// variant for both). Defaults as the specification's node definitions: ifgreater and
+// ifgreatereq 1 and 0, ifequal 0 and 0 (false and false).
+shader mx_ifgreater_floatI(int value1 = 1, int value2 = 0, float in1 = 0.0, float in2 = 0.0, output float out) {
+    out = value1 > value2 ? in1 : in2;
+}
+shader mx_ifgreater_color3I(int value1 = 1, int value2 = 0, color in1 = color(0.0), color in2 = color(0.0), output color out) {
+    out = value1 > value2 ? in1 : in2;
+}
+shader mx_ifgreater_color4I(int value1 = 1, int value2 = 0, color in1 = color(0.0), float in1_a = 0.0, color in2 = color(0.0),
+                            float in2_a = 0.0, output color out, output float out_a) {
+    out = value1 > value2 ? in1 : in2;
+    out_a = value1 > value2 ? in1_a : in2_a;
+}
+shader mx_ifgreatereq_floatI(int value1 = 1, int value2 = 0, float in1 = 0.0, float in2 = 0.0, output float out) {
+    out = value1 >= value2 ? in1 : in2;
+}
+shader mx_ifgreatereq_color3I(int value1 = 1, int value2 = 0, color in1 = color(0.0), color in2 = color(0.0),
+                              output color out) {
+    out = value1 >= value2 ? in1 : in2;
+}
+shader mx_ifgreatereq_color4I(int value1 = 1, int value2 = 0, color in1 = color(0.0), float in1_a = 0.0,
+                              color in2 = color(0.0), float in2_a = 0.0, output color out, output float out_a) {
+    out = value1 >= value2 ? in1 : in2;
+    out_a = value1 >= value2 ? in1_a : in2_a;
+}
+shader mx_ifequal_floatI(int value1 = 0, int value2 = 0, float in1 = 0.0, float in2 = 0.0, output float out) {
+    out = value1 == value2 ? in1 : in2;
+}
+shader mx_ifequal_color3I(int value1 = 0, int value2 = 0, color in1 = color(0.0), color in2 = color(0.0), output color out) {
+    out = value1 == value2 ? in1 : in2;
+}
+shader mx_ifequal_color4I(int value1 = 0, int value2 = 0, color in1 = color(0.0), float in1_a = 0.0, color in2 = color(0.0),
+                          float in2_a = 0.0, output color out, output float out_a) {
+    out = value1 == value2 ? in1 : in2;
+    out_a = value1 == value2 ? in1_a : in2_a;
+}
+shader mx_switch_floatI(float in1 = 0.0, float in2 = 0.0, float in3 = 0.0, float in4 = 0.0, float in5 = 0.0, float in6 = 0.0,
+                        float in7 = 0.0, float in8 = 0.0, float in9 = 0.0, float in10 = 0.0, int which = 0,
+                        output float out) {
+    out = mx_pick_float(which, in1, in2, in3, in4, in5, in6, in7, in8, in9, in10);
+}
+shader mx_switch_color3I(color in1 = color(0.0), color in2 = color(0.0), color in3 = color(0.0), color in4 = color(0.0),
+                         color in5 = color(0.0), color in6 = color(0.0), color in7 = color(0.0), color in8 = color(0.0),
+                         color in9 = color(0.0), color in10 = color(0.0), int which = 0, output color out) {
+    out = mx_pick_color(which, in1, in2, in3, in4, in5, in6, in7, in8, in9, in10);
+}
+shader mx_switch_color4I(color in1 = color(0.0), float in1_a = 0.0, color in2 = color(0.0), float in2_a = 0.0,
+                         color in3 = color(0.0), float in3_a = 0.0, color in4 = color(0.0), float in4_a = 0.0,
+                         color in5 = color(0.0), float in5_a = 0.0, color in6 = color(0.0), float in6_a = 0.0,
+                         color in7 = color(0.0), float in7_a = 0.0, color in8 = color(0.0), float in8_a = 0.0,
+                         color in9 = color(0.0), float in9_a = 0.0, color in10 = color(0.0), float in10_a = 0.0,
+                         int which = 0, output color out, output float out_a) {
+    out = mx_pick_color(which, in1, in2, in3, in4, in5, in6, in7, in8, in9, in10);
+    out_a = mx_pick_float(which, in1_a, in2_a, in3_a, in4_a, in5_a, in6_a, in7_a, in8_a, in9_a, in10_a);
+}
+
+// ---- ramp4: bilinear between the four corners (tl at U = 0, V = 1; br at U = 1, V = 0) ------
+// The texture coordinate is clamped to [0, 1], as ramplr's and ramptb's.
+shader mx_ramp4_float(float valuetl = 0.0, float valuetr = 0.0, float valuebl = 0.0, float valuebr = 0.0,
+                      color texcoord = color(u, v, 0.0), output float out) {
+    float s = clamp(texcoord.r, 0.0, 1.0);
+    out = mix(mix(valuebl, valuebr, s), mix(valuetl, valuetr, s), clamp(texcoord.g, 0.0, 1.0));
+}
+shader mx_ramp4_color3(color valuetl = color(0.0), color valuetr = color(0.0), color valuebl = color(0.0),
+                       color valuebr = color(0.0), color texcoord = color(u, v, 0.0), output color out) {
+    float s = clamp(texcoord.r, 0.0, 1.0);
+    out = mix(mix(valuebl, valuebr, s), mix(valuetl, valuetr, s), clamp(texcoord.g, 0.0, 1.0));
+}
+shader mx_ramp4_color4(color valuetl = color(0.0), float valuetl_a = 0.0, color valuetr = color(0.0), float valuetr_a = 0.0,
+                       color valuebl = color(0.0), float valuebl_a = 0.0, color valuebr = color(0.0), float valuebr_a = 0.0,
+                       color texcoord = color(u, v, 0.0), output color out, output float out_a) {
+    float s = clamp(texcoord.r, 0.0, 1.0);
+    float t = clamp(texcoord.g, 0.0, 1.0);
+    out = mix(mix(valuebl, valuebr, s), mix(valuetl, valuetr, s), t);
+    out_a = mix(mix(valuebl_a, valuebr_a, s), mix(valuetl_a, valuetr_a, s), t);
+}
+
+// ---- noise: fractal2d and the multi-channel variants ------------------------------------------
+// Each channel is the float node's noise (signed Perlin `snoise`) at an offset point: the
+// colour channels at the offsets noise2d_color3 and noise3d_color3 use, the fourth channel of
+// a color4/vector4 where MaterialX's definitions put it: noise2d at (19, 73), noise3d at
+// (19, 73, 29), fractal2d at (19, 193), fractal3d at (19, 193, 17). A fractal channel is the
+// float fractal (`mx_fractal`, mtlx.ash) at the offset point.
+shader mx_noise2d_color4(color amplitude = color(1.0), float amplitude_a = 1.0, float pivot = 0.0,
+                         color texcoord = color(u, v, 0.0), output color out, output float out_a) {
+    point p = point(texcoord.r, texcoord.g, 0.0);
+    out = color(snoise(p), snoise(p + point(19.1, 7.3, 0.0)), snoise(p + point(3.7, 41.9, 0.0))) * amplitude + color(pivot);
+    out_a = snoise(p + point(19.0, 73.0, 0.0)) * amplitude_a + pivot;
+}
+shader mx_noise3d_color4(color amplitude = color(1.0), float amplitude_a = 1.0, float pivot = 0.0, color position = color(P),
+                         output color out, output float out_a) {
+    point p = point(position);
+    out = color(snoise(p), snoise(p + point(19.1, 7.3, 5.2)), snoise(p + point(3.7, 41.9, 13.3))) * amplitude + color(pivot);
+    out_a = snoise(p + point(19.0, 73.0, 29.0)) * amplitude_a + pivot;
+}
+shader mx_fractal2d_float(float amplitude = 1.0, int octaves = 3, float lacunarity = 2.0, float diminish = 0.5,
+                          color texcoord = color(u, v, 0.0), output float out) {
+    out = mx_fractal(point(texcoord.r, texcoord.g, 0.0), octaves, lacunarity, diminish) * amplitude;
+}
+color mx_fractal2d(color texcoord, int octaves, float lacunarity, float diminish) {
+    point p = point(texcoord.r, texcoord.g, 0.0);
+    return color(mx_fractal(p, octaves, lacunarity, diminish), mx_fractal(p + point(19.1, 7.3, 0.0), octaves, lacunarity, diminish),
+                 mx_fractal(p + point(3.7, 41.9, 0.0), octaves, lacunarity, diminish));
+}
+shader mx_fractal2d_color3(color amplitude = color(1.0), int octaves = 3, float lacunarity = 2.0, float diminish = 0.5,
+                           color texcoord = color(u, v, 0.0), output color out) {
+    out = mx_fractal2d(texcoord, octaves, lacunarity, diminish) * amplitude;
+}
+shader mx_fractal2d_color4(color amplitude = color(1.0), float amplitude_a = 1.0, int octaves = 3, float lacunarity = 2.0,
+                           float diminish = 0.5, color texcoord = color(u, v, 0.0), output color out, output float out_a) {
+    out = mx_fractal2d(texcoord, octaves, lacunarity, diminish) * amplitude;
+    out_a = mx_fractal(point(texcoord.r + 19.0, texcoord.g + 193.0, 0.0), octaves, lacunarity, diminish) * amplitude_a;
+}
+color mx_fractal3d(color position, int octaves, float lacunarity, float diminish) {
+    point p = point(position);
+    return color(mx_fractal(p, octaves, lacunarity, diminish), mx_fractal(p + point(19.1, 7.3, 5.2), octaves, lacunarity, diminish),
+                 mx_fractal(p + point(3.7, 41.9, 13.3), octaves, lacunarity, diminish));
+}
+shader mx_fractal3d_color3(color amplitude = color(1.0), int octaves = 3, float lacunarity = 2.0, float diminish = 0.5,
+                           color position = color(P), output color out) {
+    out = mx_fractal3d(position, octaves, lacunarity, diminish) * amplitude;
+}
+shader mx_fractal3d_color4(color amplitude = color(1.0), float amplitude_a = 1.0, int octaves = 3, float lacunarity = 2.0,
+                           float diminish = 0.5, color position = color(P), output color out, output float out_a) {
+    out = mx_fractal3d(position, octaves, lacunarity, diminish) * amplitude;
+    out_a = mx_fractal(point(position) + point(19.0, 193.0, 17.0), octaves, lacunarity, diminish) * amplitude_a;
 }

@@ -479,6 +479,7 @@ fn intrinsic_value(i: Intrinsic, a: &[Value]) -> Result<Value, Stop> {
         | Primvar
         | PrimvarFloat
         | PrimvarVector
+        | PrimvarAlpha
         | DiffuseBsdf
         | GlossyBsdf
         | MetalBsdf

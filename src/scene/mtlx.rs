@@ -766,6 +766,16 @@ pub fn nodedef_id(node: Node) -> String {
             format!("ND_{category}")
         }
         "convert" => format!("ND_convert_{in_ty}_{ty}"),
+        // Conditionals selected by an integer or a boolean name it after the output type.
+        "ifgreater" | "ifgreatereq" | "ifequal" | "switch" => {
+            let selector = input_type(if category == "switch" { "which" } else { "value1" });
+            let by = match selector {
+                Some("integer") => "I",
+                Some("boolean") if category == "ifequal" => "B",
+                _ => "",
+            };
+            format!("ND_{category}_{ty}{by}")
+        }
         // 1.39 names normal maps by the type of `scale`.
         "normalmap" => format!("ND_normalmap_{}", input_type("scale").unwrap_or("float")),
         "extract" => format!("ND_extract_{in_ty}"),

@@ -6,6 +6,7 @@
 
 #[path = "../common/mod.rs"]
 mod common;
+mod noise;
 mod pbrlib;
 mod suite;
 mod utility;

@@ -180,6 +180,11 @@ fn the_public_suite_subset_shades_with_the_values_its_documents_give() {
         let got = emit("TestSuite/stdlib/channel/extract.mtlx", graph, "out", "float");
         assert!(close(got, [0.25; 3]), "{graph}: {got:?}");
     }
+    // ramp4 at the centre: the mean of the four corners the document authors.
+    let ramp = "TestSuite/stdlib/texture/ramp.mtlx";
+    assert!(close(emit(ramp, ".", "fc_ramp3", "color3"), [0.5, 0.5, 0.25]));
+    assert!(close(emit(ramp, ".", "fc_ramp1", "float"), [0.4375; 3]));
+    assert!(close(emit(ramp, ".", "fc_ramp4v", "vector4"), [0.5, 0.5, 0.25]));
 }
 
 /// Asserts two closure values have the same kinds, layering bits and weights, and parameters

@@ -2,6 +2,7 @@
 //! subsurface_bsdf and OpenPBR 1.1's specular weight, against the specification by hand.
 
 use super::*;
+use strata::abi::PrimvarValues;
 
 #[test]
 fn artistic_ior_and_the_roughness_nodes_drive_a_conductor_as_the_specification_defines() {
@@ -331,4 +332,36 @@ fn space_transforms_are_the_identity_in_world_space_and_report_other_spaces() {
         assert_eq!(rendered.matches("warning").count(), 1, "{id}: {rendered}");
         assert_eq!(emitted_at(&code, 0.25, 0.75), [0.25, -0.5, 2.0], "{id}");
     }
+}
+
+#[test]
+fn geompropvalue_color4_reads_a_four_component_primvar_and_its_default_elsewhere() {
+    // The primvar's four components as the renderer lays them out (`MaterialInfo::primvars`:
+    // a presence flag, then the components), and the default where the prim has none.
+    let inputs = ["string inputs:geomprop = \"tint\"", "color4f inputs:default = (0.1, 0.2, 0.3, 0.4)"];
+    let tint = [0.125, 0.1875, 0.25, 0.3125];
+    let evaluate = |network: &str, present: bool| {
+        let (code, rendered) = compiled(network);
+        let code = code.unwrap_or_else(|| panic!("{rendered}"));
+        assert!(rendered.is_empty(), "{rendered}");
+        let mut values = vec![0.0f32; code.info().primvar_floats];
+        for slot in code.info().primvars.iter().filter(|p| p.name == "tint" && present) {
+            values[slot.offset] = 1.0;
+            values[slot.offset + 1..slot.offset + 1 + slot.width].copy_from_slice(&tint[..slot.width]);
+        }
+        let g = Globals {
+            n: [0.0, 0.0, 1.0],
+            ng: [0.0, 0.0, 1.0],
+            primvars: PrimvarValues::new(&values),
+            ..Globals::default()
+        };
+        let mut emitted = [0.0f32; 3];
+        code.emission(&g, 0, &mut emitted).expect("emits");
+        emitted
+    };
+    let id = "ND_geompropvalue_color4";
+    assert_eq!(evaluate(&emitting(id, &inputs), true), [0.125, 0.1875, 0.25]);
+    assert_eq!(evaluate(&emitting_alpha(id, &inputs), true)[0], 0.3125, "the fourth component");
+    assert_eq!(evaluate(&emitting(id, &inputs), false), [0.1, 0.2, 0.3]);
+    assert_eq!(evaluate(&emitting_alpha(id, &inputs), false)[0], 0.4, "the default's fourth");
 }

@@ -21,7 +21,10 @@ impl FnLower<'_> {
             return self.texture_channel(args, frame);
         }
         if matches!(i, Primvar | PrimvarFloat | PrimvarVector) {
-            return self.primvar(args, frame);
+            return self.primvar(args, frame, 0);
+        }
+        if i == PrimvarAlpha {
+            return self.primvar(args, frame, 3);
         }
         // The call, where a closure past its capacity is reported (lowering arguments moves `here`).
         let at = self.here;
@@ -183,7 +186,9 @@ impl FnLower<'_> {
                 let params: Vec<ssa::Value> = a.iter().flatten().copied().collect();
                 self.lobe(kind, &params)
             }
-            Texture | TextureChannel | Primvar | PrimvarFloat | PrimvarVector => unreachable!("handled above"),
+            Texture | TextureChannel | Primvar | PrimvarFloat | PrimvarVector | PrimvarAlpha => {
+                unreachable!("handled above")
+            }
         }
     }
 
@@ -277,11 +282,12 @@ impl FnLower<'_> {
 
     /// `primvar*(name, fallback)`: the name must be known when compiling; it gets a place in
     /// the material's primvar table (`abi::MaterialInfo::primvars`, one per name and width,
-    /// shared by every entry) and the call reads `present ? value : fallback` per component.
-    pub(super) fn primvar(&mut self, args: &[Expr], frame: &mut Frame) -> Lv {
+    /// shared by every entry) and the call reads `present ? value : fallback` per component,
+    /// the fallback's components from component `first` on (`primvar_alpha`: the fourth alone).
+    pub(super) fn primvar(&mut self, args: &[Expr], frame: &mut Frame, first: usize) -> Lv {
         let name = self.constant_string(&args[0], frame, "the primvar name");
         let fallback = self.expr(&args[1], frame).scalars();
-        let width = fallback.len();
+        let width = first + fallback.len();
         let Some(name) = name.filter(|n| !n.is_empty()) else { return Lv::Scalars(fallback) };
         let offset = match self.primvars.iter().find(|p| p.name == name && p.width == width) {
             Some(p) => p.offset,
@@ -299,7 +305,7 @@ impl FnLower<'_> {
                 .iter()
                 .enumerate()
                 .map(|(k, &otherwise)| {
-                    let value = self.b.value(Inst::Primvar(offset + 1 + k as u32), Ty::F32);
+                    let value = self.b.value(Inst::Primvar(offset + 1 + (first + k) as u32), Ty::F32);
                     self.b.select(present, value, otherwise)
                 })
                 .collect(),

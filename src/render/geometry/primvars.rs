@@ -58,8 +58,9 @@ pub struct PrimvarTable {
     pub values: Vec<f32>,
 }
 
-/// Components stored per primvar at most: the shading language reads floats and triples.
-pub const MAX_COMPONENTS: usize = 3;
+/// Components stored per primvar at most: the shading language reads floats, triples and a
+/// 4-component primvar's fourth (`primvar_alpha`).
+pub const MAX_COMPONENTS: usize = 4;
 
 /// A primvar a material reads, resolved against a [`PrimvarTable`]: name id (`u32::MAX` when
 /// no prim has it), and where [`crate::abi::PrimvarInfo`] puts it.
