@@ -5,7 +5,7 @@
 //! plain glass.
 
 use crate::abi::{ClosureKind, ClosureTerm, TERM_PARAMS, thin_film_words};
-use crate::render::material::bsdf::{Bsdf, refract};
+use crate::render::material::bsdf::{Bsdf, BsdfSample, refract};
 use crate::render::material::chi2::*;
 use crate::render::material::lobes::{Film, Lobe};
 use crate::render::material::microfacet::fresnel_dielectric;
@@ -91,23 +91,8 @@ fn a_filmed_glass_reflects_what_the_characteristic_matrix_gives_from_both_sides(
 /// Sampled `f |cos| / pdf`, with the radiance compression undone, per channel: mean and
 /// standard error (delta samples included), and the non-delta part alone (summed in f64).
 fn furnace(l: &Lobe, wo: Vec3, n: usize, seed: u64) -> [(DVec3, DVec3); 2] {
-    let mut rng = Pcg32::new(seed, 3);
-    let mut sums = [[DVec3::ZERO; 2]; 2];
-    for _ in 0..n {
-        if let Some(s) = l.sample(wo, rng.f32(), rng.vec2()) {
-            let w = (s.f * (s.wi.z.abs() / s.pdf * l.compression(wo, s.wi))).as_dvec3();
-            for (k, sum) in sums.iter_mut().enumerate() {
-                if k == 0 || !s.delta {
-                    sum[0] += w;
-                    sum[1] += w * w;
-                }
-            }
-        }
-    }
-    sums.map(|[sum, sum2]| {
-        let mean = sum / n as f64;
-        (mean, ((sum2 / n as f64 - mean * mean).max(DVec3::ZERO) / n as f64).powf(0.5))
-    })
+    let weight = |s: &BsdfSample| (s.f * (s.wi.z.abs() / s.pdf * l.compression(wo, s.wi))).as_dvec3();
+    furnace_weights(|uc, u| l.sample(wo, uc, u), weight, n, seed)
 }
 
 /// The mirror and refracted directions of `wo` with the lobe width α, for graded grids.
