@@ -239,8 +239,9 @@ pub const TERM_PARAMS: usize = 15;
 pub const TERM_NORMAL: usize = 12;
 /// Where a term's thin film is in its parameters, for the kinds that take one: three words,
 /// thickness in nanometres, the film's index and its weight (coverage; thickness or weight 0:
-/// none), set by `with_thin_film`. Dielectrics at 6 (their reflection; a transmitting one
-/// keeps its plain Fresnel), metals and conductors at 7, generalized Schlick at 11.
+/// none), set by `with_thin_film`. Dielectrics at 6 (a transmitting one's microfacets reflect
+/// the film's reflectance and transmit the rest, from either side), metals and conductors
+/// at 7, generalized Schlick at 11.
 pub const fn thin_film_words(kind: ClosureKind) -> Option<usize> {
     match kind {
         ClosureKind::Dielectric => Some(6),

@@ -618,27 +618,28 @@ substance mx_surface {
 //   (r' = mix(r, min(1, (r⁴ + 2 r_c⁴)^¼), coat_weight)), in Standard Surface by
 //   coat_affect_roughness · coat · coat_roughness towards 1; in OpenPBR the coat darkens the
 //   base by its internal reflections (coat_darkening, below; the random walk undoes it);
-// - thin film: an Airy film on the specular reflection and the metal (mx_film), not on the
-//   transmission (reported);
+// - thin film: an Airy film on the specular reflection, the transmission (its microfacets
+//   reflect the film's reflectance and transmit the rest) and the metal (mx_film);
 // - fuzz (OpenPBR, over the coat) and sheen (Standard Surface, over the diffuse): Charlie sheen;
 // - emission: the `emission` product; opacity: the layer mask.
 // Roughness is perceptual (GGX alpha = roughness²), as both specifications define it.
 
-// The thin film both surfaces put on their specular reflection and metal: `weight` of it
+// The thin film both surfaces put on their specular reflection, transmission and metal: `weight` of it
 // (`thickness` nm, index `ior`; weight 0: none) mixed into the Fresnel curve, as OpenPBR
 // mixes its film in.
 closure mx_film(closure lobe, float weight, float thickness, float ior) {
     return with_thin_film(lobe, max(thickness, 0.0), clamp(ior, 1.0, 4.0), clamp(weight, 0.0, 1.0));
 }
 
-// The dielectric base both surfaces share (see above), its specular reflection under the film
-// (`mx_film`).
+// The dielectric base both surfaces share (see above), its specular reflection and its
+// transmission under the film (`mx_film`).
 closure mx_dielectric_base(closure opaque, float specular_weight, color specular_color, float roughness, float ior,
                            float transmission, color transmission_color, float film_weight, float film_thickness,
                            float film_ior) {
     closure bare = dielectric_bsdf(clamp(specular_color, 0.0, 1.0), clamp(ior, 1.0, 4.0), roughness, "R");
     closure specular = mx_film(bare, film_weight, film_thickness, film_ior) * clamp(specular_weight, 0.0, 1.0);
-    closure glass = dielectric_bsdf(clamp(transmission_color, 0.0, 1.0), clamp(ior, 1.0001, 4.0), roughness, "RT");
+    closure glass = mx_film(dielectric_bsdf(clamp(transmission_color, 0.0, 1.0), clamp(ior, 1.0001, 4.0), roughness, "RT"),
+                            film_weight, film_thickness, film_ior);
     return mix(layer(specular, opaque), glass, clamp(transmission, 0.0, 1.0));
 }
 

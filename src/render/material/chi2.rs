@@ -4,8 +4,40 @@
 //! chi2.py), with graded binning around narrow lobes and Šidák-ready p-values.
 
 use crate::render::material::bsdf::BsdfSample;
-use glam::{Vec2, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use std::f64::consts::TAU;
+
+/// A white furnace at one `wo`: mean and standard error, per channel, of the throughput
+/// `weight` (`f |cos θi| / pdf`, or however a test reduces it) of `n` samples drawn with
+/// `sample(uc, u)`, summed in f64, over all samples and over the non-delta part alone (delta
+/// samples count 0 there).
+pub fn furnace_weights(
+    sample: impl Fn(f32, Vec2) -> Option<BsdfSample>,
+    weight: impl Fn(&BsdfSample) -> DVec3,
+    n: usize,
+    seed: u64,
+) -> [(DVec3, DVec3); 2] {
+    let mut rng = Pcg32::new(seed, 3);
+    let mut sums = [[DVec3::ZERO; 2]; 2];
+    for _ in 0..n {
+        let uc = rng.f32();
+        let u = rng.vec2();
+        if let Some(s) = sample(uc, u) {
+            let w = weight(&s);
+            for (k, sum) in sums.iter_mut().enumerate() {
+                if k == 0 || !s.delta {
+                    sum[0] += w;
+                    sum[1] += w * w;
+                }
+            }
+        }
+    }
+    sums.map(|[sum, sum2]| {
+        let mean = sum / n as f64;
+        let var = (sum2 / n as f64 - mean * mean).max(DVec3::ZERO);
+        (mean, DVec3::from_array((var / n as f64).to_array().map(f64::sqrt)))
+    })
+}
 
 /// PCG32 (O'Neill 2014, XSH-RR): a deterministic, seedable stream for the tests.
 pub struct Pcg32 {

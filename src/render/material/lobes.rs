@@ -85,6 +85,39 @@ impl Film {
     fn cover(&self, bare: impl FnOnce() -> Vec3, filmed: Vec3) -> Vec3 {
         if self.weight >= 1.0 { filmed } else { bare().lerp(filmed, self.weight) }
     }
+
+    /// [`Film::on_dielectric`] as the Fresnel term of a glass ([`Bsdf::eval_glass_with`]).
+    #[inline]
+    fn glass(self) -> impl Fn(f32, f32) -> Vec3 + Copy {
+        move |cos, eta| self.on_dielectric(cos, eta)
+    }
+
+    /// The cosine-weighted hemispherical average of [`Film::on_dielectric`] seen from outside
+    /// (kept out of line: the albedo estimate of plain lobes does not carry its code).
+    #[inline(never)]
+    fn average_on_dielectric(self, eta: f32) -> Vec3 {
+        hemispherical_average3(|mu| self.on_dielectric(mu, eta))
+    }
+
+    /// Reflectance of the film on a dielectric of index `eta` at `cos` θ, seen from outside
+    /// (`cos` ≥ 0) or from inside the dielectric (`cos` < 0), covering `weight` of it: a
+    /// lossless stack reflects the same from both sides at Snell-corresponding angles, so from
+    /// inside it is [`thin_film`] at the outside angle, and 1 beyond the critical angle (no
+    /// wave leaves into the air, and the film absorbs nothing). What a filmed glass's
+    /// microfacets reflect ([`Lobe::Interface`]); they transmit the rest.
+    #[inline]
+    pub fn on_dielectric(&self, cos: f32, eta: f32) -> Vec3 {
+        let outside = if cos >= 0.0 {
+            cos
+        } else {
+            let sin2 = eta * eta * (1.0 - cos * cos);
+            if sin2 >= 1.0 {
+                return Vec3::ONE;
+            }
+            (1.0 - sin2).sqrt()
+        };
+        self.cover(|| Vec3::splat(fresnel_dielectric(cos, eta)), thin_film(outside, eta, self.eta, self.thickness))
+    }
 }
 
 /// cos θ where the F82 tint applies (MaterialX `mx_fresnel_hoffman_schlick`).
@@ -268,7 +301,9 @@ pub enum Lobe {
     /// Diffuse, glossy, metal, conductor or glass.
     Bsdf(Bsdf),
     /// `dielectric_bsdf` with transmission: a rough glass interface ([`Bsdf::Glass`]) whose
-    /// reflection is tinted too, or dropped (`reflect == false`, scatter mode "T").
+    /// reflection is tinted too, or dropped (`reflect == false`, scatter mode "T"). Under a
+    /// thin film its microfacets reflect the film's reflectance ([`Film::on_dielectric`]) and
+    /// transmit the rest, from either side.
     Interface {
         /// A [`Bsdf::Glass`].
         glass: Bsdf,
@@ -276,6 +311,8 @@ pub enum Lobe {
         tint: Vec3,
         /// Whether the interface reflects.
         reflect: bool,
+        /// A thin film on the interface.
+        film: Option<Film>,
     },
     /// GGX reflection with a Fresnel curve: `dielectric_bsdf` "R" (a coat) and
     /// `generalized_schlick_bsdf`.
@@ -349,18 +386,20 @@ impl Lobe {
         match kind {
             ClosureKind::Dielectric => {
                 let (tint, eta, ggx) = (colour(&p[0..3]), ior(p[3]), roughness(p[4]));
-                // A thin film (reflection only; a transmitting interface keeps its plain Fresnel).
-                let fresnel = match film_of(t) {
-                    Some(film) => Fresnel::ThinFilm { eta, film },
-                    None => Fresnel::Dielectric { eta },
-                };
+                let film = film_of(t);
                 match sanitize(p[5], 0.0, 2.0, 2.0).round() as u32 {
-                    0 => Lobe::Specular { fresnel, tint, ggx },
+                    0 => {
+                        let fresnel = match film {
+                            Some(film) => Fresnel::ThinFilm { eta, film },
+                            None => Fresnel::Dielectric { eta },
+                        };
+                        Lobe::Specular { fresnel, tint, ggx }
+                    }
                     mode => {
                         let mut closure = crate::abi::Closure { kind: ClosureKind::Glass as u32, params: [0.0; 8] };
                         closure.params[..3].copy_from_slice(&p[0..3]);
                         (closure.params[3], closure.params[4]) = (p[4], p[3]);
-                        Lobe::Interface { glass: Bsdf::from_closure(&closure), tint, reflect: mode == 2 }
+                        Lobe::Interface { glass: Bsdf::from_closure(&closure), tint, reflect: mode == 2, film }
                     }
                 }
             }
@@ -405,8 +444,11 @@ impl Lobe {
             Lobe::Bsdf(Bsdf::Glass { ggx, eta, .. }) => {
                 Lobe::Specular { fresnel: Fresnel::Dielectric { eta }, tint: Vec3::ONE, ggx }
             }
-            Lobe::Interface { glass: Bsdf::Glass { ggx, eta, .. }, tint, reflect } => Lobe::Specular {
-                fresnel: Fresnel::Dielectric { eta },
+            Lobe::Interface { glass: Bsdf::Glass { ggx, eta, .. }, tint, reflect, film } => Lobe::Specular {
+                fresnel: match film {
+                    Some(film) => Fresnel::ThinFilm { eta, film },
+                    None => Fresnel::Dielectric { eta },
+                },
                 tint: if reflect { tint } else { Vec3::ZERO },
                 ggx,
             },
@@ -418,8 +460,11 @@ impl Lobe {
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         let f = match *self {
             Lobe::Bsdf(b) => return b.eval(wo, wi),
-            Lobe::Interface { glass, tint, reflect } => {
-                let f = glass.eval(wo, wi);
+            Lobe::Interface { glass, tint, reflect, film } => {
+                let f = match film {
+                    Some(film) => glass.eval_glass_with(wo, wi, film.glass()),
+                    None => glass.eval(wo, wi),
+                };
                 match (wo.z * wi.z > 0.0, reflect) {
                     (false, _) => f,
                     (true, true) => f * tint,
@@ -445,9 +490,11 @@ impl Lobe {
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         let p = match *self {
             Lobe::Bsdf(b) => return b.pdf(wo, wi),
-            Lobe::Interface { glass, reflect, .. } => {
+            Lobe::Interface { glass, reflect, film, .. } => {
                 if wo.z * wi.z > 0.0 && !reflect {
                     0.0
+                } else if let Some(film) = film {
+                    glass.pdf_glass_with(wo, wi, film.glass())
                 } else {
                     glass.pdf(wo, wi)
                 }
@@ -476,8 +523,11 @@ impl Lobe {
     pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2) -> Option<BsdfSample> {
         match *self {
             Lobe::Bsdf(b) => b.sample(wo, uc, u),
-            Lobe::Interface { glass, tint, reflect } => {
-                let mut s = glass.sample(wo, uc, u)?;
+            Lobe::Interface { glass, tint, reflect, film } => {
+                let mut s = match film {
+                    Some(film) => glass.sample_glass_with(wo, uc, u, film.glass())?,
+                    None => glass.sample(wo, uc, u)?,
+                };
                 if s.wi.z * wo.z > 0.0 {
                     if !reflect {
                         return None;
@@ -607,11 +657,14 @@ impl Lobe {
     pub fn albedo(&self) -> Vec3 {
         match *self {
             Lobe::Bsdf(b) => b.albedo(),
-            Lobe::Interface { glass, tint, reflect } => {
+            Lobe::Interface { glass, tint, reflect, film } => {
                 let Bsdf::Glass { eta, tint: transmitted, .. } = glass else { return Vec3::ZERO };
-                let fav = hemispherical_average(|mu| fresnel_dielectric(mu, eta));
+                let fav = match film {
+                    Some(film) => film.average_on_dielectric(eta),
+                    None => Vec3::splat(hemispherical_average(|mu| fresnel_dielectric(mu, eta))),
+                };
                 let r = if reflect { tint * fav } else { Vec3::ZERO };
-                (r + (1.0 - fav) * transmitted).min(Vec3::ONE)
+                (r + (Vec3::ONE - fav) * transmitted).min(Vec3::ONE)
             }
             Lobe::Specular { .. } | Lobe::Sheen { .. } => {
                 // Each node's directional albedo once for all three channels (it is a table

@@ -2,7 +2,7 @@
 //! lobes ([`lobes`]), a closure value's weighted, layered sum of them ([`closure`], layered by
 //! albedo scaling with the tables of [`albedo`] or by the random walk of `closure::walk`), their GGX
 //! microfacet distribution and Fresnel terms ([`microfacet`]), the shading frames they work in
-//! ([`frame`]), and the χ² statistics the BSDF and layering tests share ([`chi2`]).
+//! ([`frame`]), and the χ² statistics the BSDF, layering and thin-film tests share ([`chi2`]).
 
 pub mod albedo;
 pub mod bsdf;
@@ -11,6 +11,8 @@ pub(crate) mod chi2;
 pub mod closure;
 #[cfg(test)]
 mod closure_tests;
+#[cfg(test)]
+mod film_tests;
 pub mod frame;
 pub mod lobes;
 pub mod microfacet;

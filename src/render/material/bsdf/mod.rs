@@ -221,7 +221,7 @@ impl Bsdf {
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         let f = match *self {
             Bsdf::Black => Vec3::ZERO,
-            Bsdf::Glass { tint, ggx, eta } => glass_eval(tint, ggx, eta, wo, wi),
+            Bsdf::Glass { tint, ggx, eta } => glass_eval(tint, ggx, eta, wo, wi, fresnel_dielectric),
             _ => match upper(wo, wi) {
                 Some((wo, wi)) => self.eval_reflection(wo, wi),
                 None => Vec3::ZERO,
@@ -234,7 +234,7 @@ impl Bsdf {
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         let p = match *self {
             Bsdf::Black => 0.0,
-            Bsdf::Glass { tint, ggx, eta } => glass_pdf(tint, ggx, eta, wo, wi),
+            Bsdf::Glass { ggx, eta, .. } => glass_pdf(ggx, eta, wo, wi, fresnel_dielectric),
             _ => match upper(wo, wi) {
                 Some((wo, wi)) => self.pdf_reflection(wo, wi),
                 None => 0.0,
@@ -253,7 +253,7 @@ impl Bsdf {
         let u = u.clamp(Vec2::ZERO, Vec2::splat(1.0 - f32::EPSILON / 2.0));
         match *self {
             Bsdf::Black => None,
-            Bsdf::Glass { tint, ggx, eta } => glass_sample(tint, ggx, eta, wo, uc, u),
+            Bsdf::Glass { tint, ggx, eta } => glass_sample(tint, ggx, eta, wo, uc, u, fresnel_dielectric),
             _ => {
                 // Two-sided: sample in wo's hemisphere mirrored to +z, then mirror back.
                 let below = wo.z < 0.0;
@@ -265,6 +265,39 @@ impl Bsdf {
                 Some(s)
             }
         }
+    }
+
+    /// [`Bsdf::eval`] of a [`Bsdf::Glass`] whose microfacets reflect `fresnel(wo·m, η)` (a
+    /// negative cosine is seen from inside) rather than the dielectric Fresnel term: a glass
+    /// under a thin film ([`Reflectance`]). Other kinds are evaluated as they are. Plain glass
+    /// does not come this way, so its code stays specialised for the scalar term.
+    pub(crate) fn eval_glass_with<R: Reflectance>(&self, wo: Vec3, wi: Vec3, fresnel: impl Fn(f32, f32) -> R) -> Vec3 {
+        let Bsdf::Glass { tint, ggx, eta } = *self else { return self.eval(wo, wi) };
+        let f = glass_eval(tint, ggx, eta, wo, wi, fresnel);
+        if f.is_finite() { f.max(Vec3::ZERO) } else { Vec3::ZERO }
+    }
+
+    /// [`Bsdf::pdf`] of a glass with the Fresnel term `fresnel` ([`Bsdf::eval_glass_with`]).
+    pub(crate) fn pdf_glass_with<R: Reflectance>(&self, wo: Vec3, wi: Vec3, fresnel: impl Fn(f32, f32) -> R) -> f32 {
+        let Bsdf::Glass { ggx, eta, .. } = *self else { return self.pdf(wo, wi) };
+        let p = glass_pdf(ggx, eta, wo, wi, fresnel);
+        if p.is_finite() { p.max(0.0) } else { 0.0 }
+    }
+
+    /// [`Bsdf::sample`] of a glass with the Fresnel term `fresnel` ([`Bsdf::eval_glass_with`]).
+    pub(crate) fn sample_glass_with<R: Reflectance>(
+        &self,
+        wo: Vec3,
+        uc: f32,
+        u: Vec2,
+        fresnel: impl Fn(f32, f32) -> R + Copy,
+    ) -> Option<BsdfSample> {
+        let Bsdf::Glass { tint, ggx, eta } = *self else { return self.sample(wo, uc, u) };
+        if !(wo.z != 0.0 && wo.is_finite() && uc.is_finite() && u.is_finite()) {
+            return None;
+        }
+        let u = u.clamp(Vec2::ZERO, Vec2::splat(1.0 - f32::EPSILON / 2.0));
+        glass_sample(tint, ggx, eta, wo, uc, u, fresnel)
     }
 
     /// Approximate directional-hemispherical reflectance colour, for the "albedo" AOV: the
@@ -486,28 +519,80 @@ fn glass_half_vector(eta: f32, wo: Vec3, wi: Vec3) -> Option<(Vec3, f32, bool)> 
     Some((m, etap, reflect))
 }
 
-fn glass_eval(tint: Vec3, ggx: Ggx, eta: f32, wo: Vec3, wi: Vec3) -> Vec3 {
+/// What a glass interface's microfacet reflects, `R(wo·m)`: plain glass's scalar Fresnel term,
+/// or a colour (a thin film's, [`crate::render::material::lobes::Film`]). Transmission carries
+/// `1 − R` per channel, and sampling picks reflection with probability [`Reflectance::mean`].
+/// The scalar methods do plain glass's arithmetic in its original order, so that its images
+/// stay the same bit for bit.
+pub(crate) trait Reflectance: Copy {
+    /// The probability of choosing reflection.
+    fn mean(self) -> f32;
+    /// Reflection's `f`: `R · scale / denom`.
+    fn reflected(self, scale: f32, denom: f32) -> Vec3;
+    /// Transmission's `f`: `tint (1 − R) · scale · factor / denom`.
+    fn transmitted(self, tint: Vec3, scale: f32, factor: f32, denom: f32) -> Vec3;
+}
+
+impl Reflectance for f32 {
+    #[inline]
+    fn mean(self) -> f32 {
+        self
+    }
+    #[inline]
+    fn reflected(self, scale: f32, denom: f32) -> Vec3 {
+        Vec3::splat(scale * self / denom)
+    }
+    #[inline]
+    fn transmitted(self, tint: Vec3, scale: f32, factor: f32, denom: f32) -> Vec3 {
+        tint * (scale * (1.0 - self) * factor / denom)
+    }
+}
+
+impl Reflectance for Vec3 {
+    #[inline]
+    fn mean(self) -> f32 {
+        (self.x + self.y + self.z) / 3.0
+    }
+    #[inline]
+    fn reflected(self, scale: f32, denom: f32) -> Vec3 {
+        self * (scale / denom)
+    }
+    #[inline]
+    fn transmitted(self, tint: Vec3, scale: f32, factor: f32, denom: f32) -> Vec3 {
+        tint * (Vec3::ONE - self) * (scale * factor / denom)
+    }
+}
+
+/// Rough-glass `f` with microfacets reflecting `fresnel(wo·m, eta)` ([`Reflectance`]).
+fn glass_eval<R: Reflectance>(
+    tint: Vec3,
+    ggx: Ggx,
+    eta: f32,
+    wo: Vec3,
+    wi: Vec3,
+    fresnel: impl Fn(f32, f32) -> R,
+) -> Vec3 {
     if glass_smooth(ggx, eta) {
         return Vec3::ZERO;
     }
     let Some((m, etap, reflect)) = glass_half_vector(eta, wo, wi) else { return Vec3::ZERO };
-    let f = fresnel_dielectric(wo.dot(m), eta);
+    let f = fresnel(wo.dot(m), eta);
     let dg = ggx.d(m) * ggx.g2(wo, wi);
     if reflect {
-        Vec3::splat(dg * f / (4.0 * wo.z * wi.z).abs())
+        f.reflected(dg, (4.0 * wo.z * wi.z).abs())
     } else {
         let denom = wi.dot(m) + wo.dot(m) / etap;
-        let ft = dg * (1.0 - f) * (wi.dot(m) * wo.dot(m) / (wi.z * wo.z * denom * denom)).abs();
-        tint * (ft / (etap * etap))
+        f.transmitted(tint, dg, (wi.dot(m) * wo.dot(m) / (wi.z * wo.z * denom * denom)).abs(), etap * etap)
     }
 }
 
-fn glass_pdf(_tint: Vec3, ggx: Ggx, eta: f32, wo: Vec3, wi: Vec3) -> f32 {
+/// Pdf of [`glass_sample`] (non-delta part).
+fn glass_pdf<R: Reflectance>(ggx: Ggx, eta: f32, wo: Vec3, wi: Vec3, fresnel: impl Fn(f32, f32) -> R) -> f32 {
     if glass_smooth(ggx, eta) {
         return 0.0;
     }
     let Some((m, etap, reflect)) = glass_half_vector(eta, wo, wi) else { return 0.0 };
-    let f = fresnel_dielectric(wo.dot(m), eta);
+    let f = fresnel(wo.dot(m), eta).mean();
     let dv = ggx.d_visible(wo, m);
     if reflect {
         dv / (4.0 * wo.dot(m).abs()) * f
@@ -517,21 +602,30 @@ fn glass_pdf(_tint: Vec3, ggx: Ggx, eta: f32, wo: Vec3, wi: Vec3) -> f32 {
     }
 }
 
-fn glass_sample(tint: Vec3, ggx: Ggx, eta: f32, wo: Vec3, uc: f32, u: Vec2) -> Option<BsdfSample> {
+fn glass_sample<R: Reflectance>(
+    tint: Vec3,
+    ggx: Ggx,
+    eta: f32,
+    wo: Vec3,
+    uc: f32,
+    u: Vec2,
+    fresnel: impl Fn(f32, f32) -> R + Copy,
+) -> Option<BsdfSample> {
     if glass_smooth(ggx, eta) {
         // Fresnel picks reflection or transmission, so the weight f |cos| / pdf is 1 (times tint
-        // and the 1/η² radiance compression for transmission).
-        let r = fresnel_dielectric(wo.z, eta);
+        // and the 1/η² radiance compression for transmission; R over its mean for a colour).
+        let f = fresnel(wo.z, eta);
+        let r = f.mean();
         if uc < r {
             let wi = Vec3::new(-wo.x, -wo.y, wo.z);
-            return finish(wi, Vec3::splat(r / wi.z.abs()), r, true);
+            return finish(wi, f.reflected(1.0, wi.z.abs()), r, true);
         }
         let (wi, etap) = refract(wo, Vec3::Z, eta)?;
         let t = 1.0 - r;
-        return finish(wi, tint * (t / (wi.z.abs() * etap * etap)), t, true);
+        return finish(wi, f.transmitted(tint, 1.0, 1.0, wi.z.abs() * etap * etap), t, true);
     }
     let m = ggx.sample_visible(wo, u)?;
-    let r = fresnel_dielectric(wo.dot(m), eta);
+    let r = fresnel(wo.dot(m), eta).mean();
     let wi = if uc < r {
         let wi = reflect(wo, m);
         if wi.z * wo.z <= 0.0 {
@@ -547,7 +641,7 @@ fn glass_sample(tint: Vec3, ggx: Ggx, eta: f32, wo: Vec3, uc: f32, u: Vec2) -> O
     };
     // Re-deriving f and pdf from (wo, wi) keeps sample, eval and pdf consistent by construction;
     // the half vector recomputed from wi equals m up to rounding.
-    finish(wi, glass_eval(tint, ggx, eta, wo, wi), glass_pdf(tint, ggx, eta, wo, wi), false)
+    finish(wi, glass_eval(tint, ggx, eta, wo, wi, fresnel), glass_pdf(ggx, eta, wo, wi, fresnel), false)
 }
 
 #[cfg(test)]

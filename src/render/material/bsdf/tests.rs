@@ -158,26 +158,10 @@ fn chi2_detects_wrong_pdfs() {
 /// count 0 there). For glass the radiance compression is undone (transmitted weights × η²)
 /// so that the figure is the energy balance R + T.
 fn furnace(b: &Bsdf, wo: Vec3, n: usize, seed: u64) -> [(f64, f64); 2] {
-    let mut rng = Pcg32::new(seed, 3);
-    let mut sums = [[0.0f64; 2]; 2];
-    for _ in 0..n {
-        let uc = rng.f32();
-        let u = rng.vec2();
-        if let Some(s) = b.sample(wo, uc, u) {
-            let w = (s.f.max_element() * s.wi.z.abs() / s.pdf * b.compression(wo, s.wi)) as f64;
-            for (k, sum) in sums.iter_mut().enumerate() {
-                if k == 0 || !s.delta {
-                    sum[0] += w;
-                    sum[1] += w * w;
-                }
-            }
-        }
-    }
-    sums.map(|[sum, sum2]| {
-        let mean = sum / n as f64;
-        let var = (sum2 / n as f64 - mean * mean).max(0.0);
-        (mean, (var / n as f64).sqrt())
-    })
+    let weight = |s: &BsdfSample| {
+        glam::DVec3::splat((s.f.max_element() * s.wi.z.abs() / s.pdf * b.compression(wo, s.wi)) as f64)
+    };
+    furnace_weights(|uc, u| b.sample(wo, uc, u), weight, n, seed).map(|(mean, se)| (mean.x, se.x))
 }
 
 /// The same balance by deterministic quadrature of `eval` (not of anything `sample`
