@@ -477,6 +477,7 @@ impl<'s> Builder<'_, 's> {
         if id == "UsdUVTexture" || self.lib.function(func_id).param("decode").is_some() {
             self.load_texture(prim, func_id, &mut args);
         }
+        self.report_default_space(id, func_id, &args, prim.span);
         let node = self.nodes.len();
         self.nodes.push(NodeInstance {
             name: prim.path.rsplit('/').next().unwrap_or("shader").to_string(),
@@ -486,6 +487,35 @@ impl<'s> Builder<'_, 's> {
         });
         self.memo.insert(prim.path.clone(), Some(node));
         Some(node)
+    }
+
+    /// Reports a MaterialX geometry node left in its default space, object space, which strata
+    /// reads in world space: `position`/`normal`/`tangent`/`bitangent` without a `space`, and
+    /// the 3D noises without a `position` (their default is the object-space position). The
+    /// two agree only on prims without a transform, so the difference is said, never silent.
+    fn report_default_space(&mut self, id: &str, func: crate::front::hir::FuncId, args: &[Option<Source>], span: Span) {
+        const GEOMETRY: [&str; 4] = ["ND_position_", "ND_normal_", "ND_tangent_", "ND_bitangent_"];
+        const NOISES: [&str; 4] = ["ND_noise3d_", "ND_fractal3d_", "ND_cellnoise3d_", "ND_worleynoise3d_"];
+        let input = if GEOMETRY.iter().any(|p| id.starts_with(p)) {
+            "space"
+        } else if NOISES.iter().any(|p| id.starts_with(p)) {
+            "position"
+        } else {
+            return;
+        };
+        let Some((index, _)) = self.lib.function(func).param(input) else { return };
+        if args[index].is_some() {
+            return;
+        }
+        let node = id.strip_prefix("ND_").and_then(|n| n.split('_').next()).unwrap_or(id);
+        self.diags.push(
+            Diagnostic::warning(format!(
+                "`{node}` without `{input}` reads world space where MaterialX's default is object space"
+            ))
+            .at(span, "this node")
+            .note("object and world space agree for prims without a transform; set `space` to `world`, or connect a `position` node with it, to say so")
+            .kind("MaterialX space approximated"),
+        );
     }
 
     /// What drives the fourth channel of a 4-channel input connected to `source` (of type

@@ -655,3 +655,43 @@ fn a_document_sublayered_under_a_usd_layer_composes_its_materials() {
     assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.25, 0.75).kind), ClosureKind::Dielectric);
     assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.75, 0.75).kind), ClosureKind::GeneralizedSchlick);
 }
+
+/// MaterialX's geometry nodes and 3D noises default to object space, which strata reads in
+/// world space: left at the default, each says so (once per kind); `space = "world"`, or a
+/// noise fed by a world-space position, is silent.
+#[test]
+fn geometry_left_in_its_default_object_space_is_reported() {
+    let material = |nodes: &str, source: &str| {
+        format!(
+            "def Material \"M\" {{\n    token outputs:mtlx:surface.connect = </M/S.outputs:surface>\n    \
+             def Shader \"S\" {{\n        uniform token info:id = \"ND_surface_unlit\"\n        \
+             color3f inputs:emission_color.connect = {source}\n        token outputs:surface\n    }}\n{nodes}}}"
+        )
+    };
+    let position = |space: &str| {
+        format!(
+            "    def Shader \"P\" {{\n        uniform token info:id = \"ND_position_vector3\"\n{space}        \
+             vector3f outputs:out\n    }}\n    def Shader \"C\" {{\n        uniform token info:id = \"ND_convert_vector3_color3\"\n        \
+             vector3f inputs:in.connect = </M/P.outputs:out>\n        color3f outputs:out\n    }}\n"
+        )
+    };
+    let noise = |input: &str| {
+        format!(
+            "    def Shader \"F\" {{\n        uniform token info:id = \"ND_fractal3d_color3\"\n{input}        color3f outputs:out\n    }}\n"
+        )
+    };
+    let warned = |text: String| {
+        let (code, rendered) = compiled(&text);
+        assert!(code.is_some(), "{rendered}");
+        rendered.matches("default is object space").count()
+    };
+    assert_eq!(warned(material(&position(""), "</M/C.outputs:out>")), 1);
+    assert_eq!(warned(material(&position("        string inputs:space = \"world\"\n"), "</M/C.outputs:out>")), 0);
+    assert_eq!(warned(material(&noise(""), "</M/F.outputs:out>")), 1);
+    let fed = format!(
+        "{}{}",
+        position("        string inputs:space = \"world\"\n"),
+        noise("        vector3f inputs:position.connect = </M/P.outputs:out>\n")
+    );
+    assert_eq!(warned(material(&fed, "</M/F.outputs:out>")), 0);
+}
