@@ -531,6 +531,7 @@ impl ClosureBsdf {
     /// Whether a non-delta term transmits (light sampling must then cover both sides).
     pub fn transmits(&self) -> bool {
         self.terms().iter().any(|t| t.lobe.transmits())
+            || (self.layered && self.mode == LayeringMode::RandomWalk && walk::transmits(self))
     }
 
     /// Whether a term tells inside from outside, so the shading frame keeps the outward side.
@@ -568,3 +569,5 @@ pub(crate) fn pick(p: &[f32], uc: f32) -> Option<(usize, f32)> {
 }
 
 pub mod walk;
+#[cfg(test)]
+mod walk_tests;

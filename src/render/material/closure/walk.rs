@@ -2,43 +2,83 @@
 //! position-free layered BSDF of Guo et al. 2018 as pbrt-v4's `LayeredBxDF` computes it (no
 //! medium between the interfaces, so no thickness or position enters).
 //!
-//! The walk covers the stack OpenPBR and MaterialX build: one dielectric term on top (a
-//! `dielectric_bsdf` coat, weighted or not) over the terms under it, with terms beside the
-//! stack added as they are. The coat becomes a rough dielectric interface (reflection from
-//! outside keeps its tint; transmission and internal reflection are untinted), the base is the
-//! weighted sum of the terms under it, and a weighted coat `w` is `w · walk + (1 − w) · base`
-//! (what albedo scaling computes too). Other stacks (several tops, nested layers, a
-//! non-dielectric top, a transmitting base) fall back to albedo scaling. A coat that
-//! records a darkening factor (`with_darkening`, OpenPBR's `coat_darkening`: the shader's
-//! stand-in for the internal reflections albedo scaling omits) has it divided back out of
-//! the base's weights, since the walk follows those reflections itself.
+//! **The stack walked.** The innermost covering term must be a dielectric (`dielectric_bsdf`
+//! "R", a coat or OpenPBR's specular layer, weighted or not): it becomes the top interface, a
+//! rough dielectric (reflection from outside keeps its tint; transmission and internal
+//! reflection are untinted). The terms under it are the bottom interface, their weighted sum.
+//! A weighted coat `w` is `w · walk + (1 − w) · base` (what albedo scaling computes too), and
+//! terms beside the stack are added as they are.
 //!
-//! `eval` is an unbiased stochastic estimate (one walk, next-event connections at every base
-//! bounce, MIS between connecting through the coat and through the base as pbrt-v4 does),
-//! seeded by the directions so repeated calls agree. `sample` walks until light leaves and
-//! returns its exact throughput; the pdf it reports, like `pdf`, is a proxy (the albedo-scaling
-//! mixture's pdf with a tenth of cosine-weighted directions), which MIS weights may use freely.
+//! - **A transmitting base** (glass, `dielectric_bsdf` "RT"/"T", `translucent_bsdf`): light the
+//!   base transmits leaves below the stack, as transmission. A glass base sees the coat's medium
+//!   above it, so its index is taken relative to the coat's (`η_base / η_coat`, as pbrt-v4's
+//!   `CoatedConductor` divides the conductor's index by the coat's): a coat over glass of the
+//!   same index is one interface. A glass base makes the stack oriented: a viewer below
+//!   (`wo.z < 0`, inside the glass) enters through the base and leaves through either
+//!   interface; other stacks are two-sided (mirrored), as the lobes are. Transmitted `f`
+//!   carries the radiance compression of both interfaces (`1 / η_base²` in all), so
+//!   `ClosureBsdf::compression` (the base's) stays right.
+//! - **Nested stacks** (OpenPBR's fuzz over its coat, Standard Surface's sheen over the
+//!   coat): covering terms over the coat that are not dielectrics (sheen, fuzz, a Schlick or
+//!   metal lobe) are layered over the walked stack by albedo scaling, as OpenPBR defines
+//!   them: the walked stack is weighted `a(μo) a(μi) / N` with `a` the light the outer terms
+//!   let through (the coat term's albedo-scaling attenuation, [`super::ClosureBsdf`]'s module
+//!   docs) and `N` its maximum, so the sum never exceeds 1. The sheen lobe has no
+//!   transmission distribution to walk through (it is a volumetric fit), so walking it would
+//!   invent one; the stack under it is still walked exactly.
+//! - **Falling back.** Other stacks use albedo scaling: a dielectric over the coat (OpenPBR's
+//!   coat over its specular layer over the diffuse base: two walked dielectrics), two
+//!   separate stacks side by side, a non-dielectric innermost top, a term with its own normal.
+//!   The first such closure of a process is reported once ([`take_fallback`]).
+//!
+//! A coat that records a darkening factor (`with_darkening`, OpenPBR's `coat_darkening`: the
+//! shader's stand-in for the internal reflections albedo scaling omits) has it divided back out
+//! of the base's weights, since the walk follows those reflections itself.
+//!
+//! `eval` is an unbiased stochastic estimate (one walk, next-event connections at every
+//! vertex, MIS between connecting through the exit interface and through the other as pbrt-v4
+//! does; for transmission also the direct path through both interfaces, which pbrt-v4 without
+//! a medium leaves out), seeded by the directions so repeated calls agree. `sample` walks until
+//! light leaves and returns its exact throughput; the pdf it reports, like `pdf`, is a proxy
+//! (the albedo-scaling mixture's pdf with a tenth of cosine-weighted directions, on both sides
+//! for a transmitting stack), which MIS weights may use freely.
 
-use super::{ClosureBsdf, pick};
-use crate::render::material::bsdf::{Bsdf, BsdfSample, finish, flip_z, reflect, refract};
+use super::{Attenuation, ClosureBsdf, pick};
+use crate::abi::MAX_CLOSURE_TERMS;
+use crate::render::material::bsdf::{Bsdf, BsdfSample, finish, flip_z};
 use crate::render::material::lobes::{Fresnel, Lobe};
-use crate::render::material::microfacet::{Ggx, fresnel_dielectric};
+use crate::render::material::microfacet::Ggx;
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
+use std::sync::atomic::{AtomicU8, Ordering};
 
-/// Most bounces between the interfaces (pbrt-v4's default).
+/// Most bounces between the interfaces (pbrt-v4's default), each a visit to the base and one
+/// to the top.
 const MAX_DEPTH: u32 = 10;
 
-/// The walk's view of a stack: the top term, its interface, and the base terms' mask.
+/// The walk's view of a stack.
 struct Stack {
+    /// The term that is the top interface (the coat).
     top: usize,
     interface: Interface,
     tint: Vec3,
+    /// Mask of the base terms (those under the top).
     base: u8,
+    /// The base terms' lobes as seen from inside the coat (a glass's index relative to the
+    /// coat's); the other slots are unused.
+    lobes: [Lobe; MAX_CLOSURE_TERMS],
     /// `1 / darkening` of the top ([`super::Term::darkening`]): the walk follows the
     /// coat's internal reflections itself, so the base terms get back the weight the
     /// shader's darkening (standing in for them under albedo scaling) took away.
     undarken: Vec3,
+    /// A base term is glass: below the stack is inside it (see the module docs).
+    oriented: bool,
+    /// A base term transmits: light leaves below.
+    transmits: bool,
+    /// Every base term is a Dirac delta.
+    base_specular: bool,
+    /// Terms over the top, layered over the walked stack by albedo scaling.
+    outer: u8,
 }
 
 impl Stack {
@@ -47,6 +87,65 @@ impl Stack {
     fn base_weight(&self, t: &super::Term) -> Vec3 {
         (t.weight * self.undarken).min(Vec3::ONE)
     }
+
+    /// `a(μo) a(μi) / N` of the outer terms over the walked stack (1 without them).
+    #[inline]
+    fn outer_scale(&self, b: &ClosureBsdf, ao: &Attenuation, ai: &Attenuation) -> Vec3 {
+        if self.outer == 0 { Vec3::ONE } else { ao[self.top] * ai[self.top] * b.terms[self.top].inv_norm }
+    }
+
+    /// The radiance change of light a base lobe that does not refract (`translucent_bsdf`)
+    /// carries between the coat's medium and the one below, which is the outside's (index 1):
+    /// `η²` from the slab out, `1 / η²` in (as a glass's transmission carries its own).
+    #[inline]
+    fn out_of_the_coat(&self, lobe: &Lobe, wo: Vec3, wi: Vec3) -> f32 {
+        if lobe.oriented() || wo.z * wi.z >= 0.0 {
+            1.0
+        } else if wo.z > 0.0 {
+            self.interface.eta * self.interface.eta
+        } else {
+            1.0 / (self.interface.eta * self.interface.eta)
+        }
+    }
+
+    /// `(a(μo), a(μi))`, computed only when outer terms need them.
+    #[inline]
+    fn attenuations(&self, b: &ClosureBsdf, wo: Vec3, wi: Vec3) -> (Attenuation, Attenuation) {
+        if self.outer == 0 {
+            ([Vec3::ONE; MAX_CLOSURE_TERMS], [Vec3::ONE; MAX_CLOSURE_TERMS])
+        } else {
+            b.attenuations(wo, wi)
+        }
+    }
+}
+
+/// One of the two interfaces of the walked stack.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Side {
+    /// The coat: outside above (`z > 0`), the slab below.
+    Top,
+    /// The base: the slab above, below it what the base transmits into.
+    Bottom,
+}
+
+impl Side {
+    fn other(self) -> Side {
+        match self {
+            Side::Top => Side::Bottom,
+            Side::Bottom => Side::Top,
+        }
+    }
+}
+
+/// A scattering sampled at an interface: direction, `f`, pdf, whether a Dirac delta, and (for
+/// a delta) the radiance compression `wi` went through ([`Lobe::compression`]).
+#[derive(Clone, Copy)]
+struct Scatter {
+    wi: Vec3,
+    f: Vec3,
+    pdf: f32,
+    delta: bool,
+    compression: f32,
 }
 
 /// A rough dielectric interface, outside above (`z > 0`), index `eta` below.
@@ -54,6 +153,12 @@ impl Stack {
 struct Interface {
     ggx: Ggx,
     eta: f32,
+}
+
+impl Interface {
+    fn glass(&self) -> Bsdf {
+        Bsdf::Glass { tint: Vec3::ONE, ggx: self.ggx, eta: self.eta }
+    }
 }
 
 /// A small deterministic random stream (PCG32) for one estimate.
@@ -65,7 +170,11 @@ impl Rng {
         for x in [a.x, a.y, a.z, b.x, b.y, b.z] {
             h = (h ^ x.to_bits() as u64).wrapping_mul(0x100_0000_01b3).rotate_left(29);
         }
-        Rng(h)
+        // SplitMix64's finaliser: neighbouring directions (a quadrature grid, a pixel's
+        // neighbours) must not start correlated streams, or their estimates err alike.
+        h = (h ^ (h >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        h = (h ^ (h >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        Rng(h ^ (h >> 31))
     }
     fn f32(&mut self) -> f32 {
         let old = self.0;
@@ -79,63 +188,55 @@ impl Rng {
     }
 }
 
-impl Interface {
-    fn glass(&self) -> Bsdf {
-        Bsdf::Glass { tint: Vec3::ONE, ggx: self.ggx, eta: self.eta }
-    }
+/// Why a layered closure was not walked (bits of [`FALLBACK`]).
+const FALLBACK_TILTED: u8 = 1;
+const FALLBACK_TOP: u8 = 2;
+const FALLBACK_NESTED_DIELECTRIC: u8 = 4;
+const FALLBACK_SHAPE: u8 = 8;
 
-    /// f of the interface (both sides; transmission with its radiance compression, which
-    /// cancels between entering and leaving).
-    fn f(&self, wo: Vec3, wi: Vec3) -> f32 {
-        self.glass().eval(wo, wi).x
-    }
+/// The fallbacks seen in this process and not yet taken ([`take_fallback`]).
+static FALLBACK: AtomicU8 = AtomicU8::new(0);
 
-    /// Pdf of [`Interface::sample`] restricted to transmission (`transmit`) or reflection.
-    fn pdf(&self, wo: Vec3, wi: Vec3, transmit: bool) -> f32 {
-        if (wo.z * wi.z < 0.0) != transmit || self.ggx.is_smooth() {
-            return 0.0;
-        }
-        let etap = if !transmit {
-            1.0
-        } else if wo.z > 0.0 {
-            self.eta
-        } else {
-            1.0 / self.eta
-        };
-        let Some(mut m) = (wi * etap + wo).try_normalize() else { return 0.0 };
-        if m.z < 0.0 {
-            m = -m;
-        }
-        let f = fresnel_dielectric(wo.dot(m), self.eta);
-        let chosen = if transmit { 1.0 - f } else { f };
-        if chosen <= 0.0 { 0.0 } else { self.glass().pdf(wo, wi) / chosen }
+/// Records a fallback once per kind (one relaxed load on the hot path after the first).
+#[cold]
+fn fell_back(kind: u8) -> Option<Stack> {
+    if FALLBACK.load(Ordering::Relaxed) & kind == 0 {
+        FALLBACK.fetch_or(kind, Ordering::Relaxed);
     }
+    None
+}
 
-    /// Samples reflection or transmission only: `(wi, f, pdf, delta)`.
-    fn sample(&self, wo: Vec3, u: Vec2, transmit: bool) -> Option<(Vec3, f32, f32, bool)> {
-        let smooth = self.ggx.is_smooth();
-        let m = if smooth { Vec3::Z } else { self.ggx.sample_visible(wo, u)? };
-        let f = fresnel_dielectric(wo.dot(m), self.eta);
-        let wi = if transmit {
-            let (wi, _) = refract(wo, m, self.eta)?;
-            (wi.z * wo.z < 0.0).then_some(wi)?
-        } else {
-            let wi = reflect(wo, m);
-            (wi.z * wo.z > 0.0).then_some(wi)?
-        };
-        if smooth {
-            let etap = if wo.z > 0.0 { self.eta } else { 1.0 / self.eta };
-            let value = if transmit { (1.0 - f) / (etap * etap) } else { f };
-            return (value > 0.0).then_some((wi, value / wi.z.abs(), 1.0, true));
-        }
-        let pdf = self.pdf(wo, wi, transmit);
-        (pdf > 0.0).then_some((wi, self.f(wo, wi), pdf, false))
-    }
+/// The kinds of layered stacks the walk rendered by albedo scaling since the last call, named
+/// (empty if none): the renderer reports them once per render, so a `random-walk` image is
+/// never silently partly albedo-scaled.
+pub fn take_fallback() -> Vec<&'static str> {
+    let bits = FALLBACK.swap(0, Ordering::Relaxed);
+    [
+        (FALLBACK_TILTED, "a layered term with its own normal"),
+        (FALLBACK_TOP, "a layer whose innermost top is not a dielectric"),
+        (
+            FALLBACK_NESTED_DIELECTRIC,
+            "a dielectric over another dielectric layer (e.g. OpenPBR's coat over its specular)",
+        ),
+        (FALLBACK_SHAPE, "layers that are not one stack (separate stacks side by side)"),
+    ]
+    .into_iter()
+    .filter(|(bit, _)| bits & bit != 0)
+    .map(|(_, name)| name)
+    .collect()
+}
 
-    /// Samples both reflection and transmission, choosing by Fresnel: `(wi, f, pdf, delta)`.
-    fn sample_any(&self, wo: Vec3, uc: f32, u: Vec2) -> Option<(Vec3, f32, f32, bool)> {
-        let s = self.glass().sample(wo, uc, u)?;
-        Some((s.wi, s.f.x, s.pdf, s.delta))
+/// A lobe of the base as seen from inside a coat of index `eta`: a glass's index becomes
+/// relative to the coat's.
+fn inside(lobe: Lobe, eta: f32) -> Lobe {
+    let relative = |g: Bsdf| match g {
+        Bsdf::Glass { tint, ggx, eta: e } => Bsdf::Glass { tint, ggx, eta: e / eta },
+        other => other,
+    };
+    match lobe {
+        Lobe::Bsdf(g) => Lobe::Bsdf(relative(g)),
+        Lobe::Interface { glass, tint, reflect } => Lobe::Interface { glass: relative(glass), tint, reflect },
+        other => other,
     }
 }
 
@@ -143,43 +244,92 @@ impl Interface {
 fn stack(b: &ClosureBsdf) -> Option<Stack> {
     let terms = b.terms();
     let covered: u8 = terms.iter().fold(0, |m, t| m | t.above);
-    if covered.count_ones() != 1 || terms.iter().any(|t| t.tilt.is_some()) {
+    if covered == 0 {
         return None;
     }
-    let top = covered.trailing_zeros() as usize;
-    let Lobe::Specular { fresnel: Fresnel::Dielectric { eta }, tint, ggx } = terms[top].lobe else { return None };
-    let mut base = 0u8;
+    if terms.iter().any(|t| t.tilt.is_some()) {
+        return fell_back(FALLBACK_TILTED);
+    }
+    // The innermost covering term: the last one, as terms lie under earlier ones.
+    let top = 7 - covered.leading_zeros() as usize;
+    let Lobe::Specular { fresnel: Fresnel::Dielectric { eta }, tint, ggx } = terms[top].lobe else {
+        return fell_back(FALLBACK_TOP);
+    };
+    if eta <= 1.0 {
+        return fell_back(FALLBACK_TOP);
+    }
+    let outer = terms[top].above;
+    if covered != outer | (1 << top) {
+        return fell_back(FALLBACK_SHAPE);
+    }
     for (i, t) in terms.iter().enumerate() {
-        if t.above != 0 {
-            if t.above != covered || t.lobe.transmits() || t.lobe.oriented() {
-                return None;
+        if outer & (1 << i) != 0
+            && (t.lobe.transmits()
+                || t.lobe.oriented()
+                || matches!(
+                    t.lobe,
+                    Lobe::Specular { fresnel: Fresnel::Dielectric { .. } | Fresnel::ThinFilm { .. }, .. }
+                ))
+        {
+            return fell_back(FALLBACK_NESTED_DIELECTRIC);
+        }
+    }
+    let under = outer | (1 << top);
+    let mut s = Stack {
+        top,
+        interface: Interface { ggx, eta },
+        tint,
+        base: 0,
+        lobes: [Lobe::Bsdf(Bsdf::Black); MAX_CLOSURE_TERMS],
+        undarken: Vec3::ONE,
+        oriented: false,
+        transmits: false,
+        base_specular: true,
+        outer,
+    };
+    for (i, t) in terms.iter().enumerate() {
+        if t.above & (1 << top) != 0 {
+            if t.above != under {
+                return fell_back(FALLBACK_SHAPE);
             }
-            base |= 1 << i;
+            s.base |= 1 << i;
+            s.lobes[i] = inside(t.lobe, eta);
+            s.oriented |= t.lobe.oriented();
+            s.transmits |= t.lobe.oriented() || t.lobe.transmits();
+            s.base_specular &= t.lobe.is_delta();
         }
     }
     let darkening = terms[top].darkening;
-    let undarken = Vec3::select(darkening.cmpgt(Vec3::splat(1e-3)), darkening.recip(), Vec3::ONE);
-    (eta > 1.0).then_some(Stack { top, interface: Interface { ggx, eta }, tint, base, undarken })
+    s.undarken = Vec3::select(darkening.cmpgt(Vec3::splat(1e-3)), darkening.recip(), Vec3::ONE);
+    (s.base != 0).then_some(s)
 }
 
-/// The base: the weighted sum of the terms under the top, evaluated inside the slab.
-fn base_f(b: &ClosureBsdf, s: &Stack, wo: Vec3, wi: Vec3) -> Vec3 {
+/// Whether the walk transmits light through `b`'s base (light sampling must cover both sides).
+pub(crate) fn transmits(b: &ClosureBsdf) -> bool {
+    stack(b).is_some_and(|s| s.transmits)
+}
+
+/// The base: the weighted sum of the terms under the top, as seen from inside the slab
+/// (`inside`) or uncovered.
+fn base_f(b: &ClosureBsdf, s: &Stack, wo: Vec3, wi: Vec3, inside: bool) -> Vec3 {
     let mut f = Vec3::ZERO;
     for (i, t) in b.terms().iter().enumerate() {
         if s.base & (1 << i) != 0 {
-            f += s.base_weight(t) * t.lobe.eval(wo, wi);
+            let lobe = if inside { &s.lobes[i] } else { &t.lobe };
+            let scale = if inside { s.out_of_the_coat(lobe, wo, wi) } else { 1.0 };
+            f += s.base_weight(t) * lobe.eval(wo, wi) * scale;
         }
     }
     f
 }
 
 /// Sampling probabilities of the base terms (weight × albedo estimate).
-fn base_probabilities(b: &ClosureBsdf, s: &Stack) -> [f32; 8] {
-    let mut p = [0.0; 8];
+fn base_probabilities(b: &ClosureBsdf, s: &Stack) -> [f32; MAX_CLOSURE_TERMS] {
+    let mut p = [0.0; MAX_CLOSURE_TERMS];
     let mut total = 0.0;
     for (i, t) in b.terms().iter().enumerate() {
         if s.base & (1 << i) != 0 {
-            p[i] = (s.base_weight(t) * t.lobe.albedo()).max_element().max(1e-4);
+            p[i] = (s.base_weight(t) * s.lobes[i].albedo()).max_element().max(1e-4);
             total += p[i];
         }
     }
@@ -187,22 +337,65 @@ fn base_probabilities(b: &ClosureBsdf, s: &Stack) -> [f32; 8] {
     p
 }
 
-fn base_pdf(b: &ClosureBsdf, s: &Stack, wo: Vec3, wi: Vec3) -> f32 {
-    let p = base_probabilities(b, s);
-    b.terms().iter().enumerate().filter(|&(i, _)| p[i] > 0.0).map(|(i, t)| p[i] * t.lobe.pdf(wo, wi)).sum()
+fn base_pdf(s: &Stack, p: &[f32; MAX_CLOSURE_TERMS], wo: Vec3, wi: Vec3) -> f32 {
+    (0..MAX_CLOSURE_TERMS).filter(|&i| p[i] > 0.0).map(|i| p[i] * s.lobes[i].pdf(wo, wi)).sum()
 }
 
-/// Samples the base: `(wi, f, pdf, delta)` where a delta sample carries its own term only.
-fn base_sample(b: &ClosureBsdf, s: &Stack, wo: Vec3, rng: &mut Rng) -> Option<(Vec3, Vec3, f32, bool)> {
-    let p = base_probabilities(b, s);
-    let (k, uc) = pick(&p, rng.f32())?;
-    let t = &b.terms()[k];
-    let bs = t.lobe.sample(wo, uc, rng.vec2())?;
-    if bs.delta {
-        return Some((bs.wi, bs.f * s.base_weight(t), bs.pdf * p[k], true));
+impl Stack {
+    /// f of an interface (both directions on either side of it).
+    fn f(&self, b: &ClosureBsdf, side: Side, wo: Vec3, wi: Vec3) -> Vec3 {
+        match side {
+            Side::Top => {
+                let f = Vec3::splat(self.interface.glass().eval(wo, wi).x);
+                if wo.z > 0.0 && wi.z > 0.0 { f * self.tint } else { f }
+            }
+            Side::Bottom => base_f(b, self, wo, wi, true),
+        }
     }
-    let pdf = base_pdf(b, s, wo, bs.wi);
-    (pdf > 0.0).then_some((bs.wi, base_f(b, s, wo, bs.wi), pdf, false))
+
+    /// Pdf of [`Stack::sample`] at an interface.
+    fn pdf(&self, b: &ClosureBsdf, side: Side, wo: Vec3, wi: Vec3) -> f32 {
+        match side {
+            Side::Top => self.interface.glass().pdf(wo, wi),
+            Side::Bottom => base_pdf(self, &base_probabilities(b, self), wo, wi),
+        }
+    }
+
+    /// Whether an interface is all Dirac deltas (nothing to connect to by evaluation).
+    fn specular(&self, side: Side) -> bool {
+        match side {
+            Side::Top => self.interface.ggx.is_smooth(),
+            Side::Bottom => self.base_specular,
+        }
+    }
+
+    /// Samples an interface (reflection or transmission); a delta sample carries its own
+    /// term only, a non-delta one the whole interface's f and pdf.
+    fn sample(&self, b: &ClosureBsdf, side: Side, wo: Vec3, rng: &mut Rng) -> Option<Scatter> {
+        match side {
+            Side::Top => {
+                let glass = self.interface.glass();
+                let s = glass.sample(wo, rng.f32(), rng.vec2())?;
+                let f = if wo.z > 0.0 && s.wi.z > 0.0 { s.f * self.tint } else { s.f };
+                let compression = glass.compression(wo, s.wi);
+                Some(Scatter { wi: s.wi, f, pdf: s.pdf, delta: s.delta, compression })
+            }
+            Side::Bottom => {
+                let p = base_probabilities(b, self);
+                let (k, uc) = pick(&p, rng.f32())?;
+                let lobe = &self.lobes[k];
+                let s = lobe.sample(wo, uc, rng.vec2())?;
+                if s.delta {
+                    let f = s.f * self.base_weight(&b.terms()[k]) * self.out_of_the_coat(lobe, wo, s.wi);
+                    let compression = lobe.compression(wo, s.wi);
+                    return Some(Scatter { wi: s.wi, f, pdf: s.pdf * p[k], delta: true, compression });
+                }
+                let pdf = base_pdf(self, &p, wo, s.wi);
+                let f = base_f(b, self, wo, s.wi, true);
+                (pdf > 0.0).then_some(Scatter { wi: s.wi, f, pdf, delta: false, compression: 1.0 })
+            }
+        }
+    }
 }
 
 fn power_heuristic(a: f32, b: f32) -> f32 {
@@ -210,34 +403,76 @@ fn power_heuristic(a: f32, b: f32) -> f32 {
     if a2 + b2 > 0.0 { a2 / (a2 + b2) } else { 0.0 }
 }
 
-/// The terms beside the stack and the untouched share `(1 − w)` of the base.
-fn beside(b: &ClosureBsdf, s: &Stack, wo: Vec3, wi: Vec3) -> Vec3 {
-    let w = b.terms()[s.top].weight;
-    let mut f = (Vec3::ONE - w) * base_f(b, s, wo, wi);
-    for (i, t) in b.terms().iter().enumerate() {
-        if i != s.top && s.base & (1 << i) == 0 {
-            f += t.weight * t.lobe.eval(wo, wi);
+/// Coefficient of term `k` in [`beside`]: 0 for the top, the untouched share `(1 − w)` of a
+/// base term (under the outer terms only), and the albedo-scaling factor of the others.
+fn beside_factor(b: &ClosureBsdf, s: &Stack, k: usize, ao: &Attenuation, ai: &Attenuation) -> Vec3 {
+    if k == s.top {
+        Vec3::ZERO
+    } else if s.base & (1 << k) != 0 {
+        (Vec3::ONE - b.terms[s.top].weight) * s.base_weight(&b.terms[k]) * s.outer_scale(b, ao, ai)
+    } else {
+        b.factor(k, ao, ai)
+    }
+}
+
+/// Everything but the walk: the terms beside the stack (and the outer ones) and the
+/// untouched share `(1 − w)` of the base.
+fn beside(b: &ClosureBsdf, s: &Stack, wo: Vec3, wi: Vec3, ao: &Attenuation, ai: &Attenuation) -> Vec3 {
+    let mut f = Vec3::ZERO;
+    for (k, t) in b.terms().iter().enumerate() {
+        if k != s.top {
+            f += beside_factor(b, s, k, ao, ai) * t.lobe.eval(wo, wi);
         }
     }
     f
 }
 
-/// One-sample estimate of the layered stack's f(wo, wi) (pbrt-v4 `LayeredBxDF::f`, one
-/// sample, reflection: the base is opaque).
+/// One-sample estimate of the walked stack's f(wo, wi): pbrt-v4's `LayeredBxDF::f` with one
+/// sample, for reflection and transmission.
 fn layered_f(b: &ClosureBsdf, s: &Stack, wo: Vec3, wi: Vec3) -> Vec3 {
-    let (wo, wi) = if wo.z < 0.0 { (flip_z(wo), flip_z(wi)) } else { (wo, wi) };
-    if wi.z <= 0.0 || wo.z <= 0.0 {
+    let (wo, wi) = if !s.oriented && wo.z < 0.0 { (flip_z(wo), flip_z(wi)) } else { (wo, wi) };
+    let same = wo.z * wi.z > 0.0;
+    if wo.z == 0.0 || wi.z == 0.0 || (!same && !s.transmits) {
         return Vec3::ZERO;
     }
-    let top = s.interface;
-    let mut f = s.tint * top.f(wo, wi);
+    let enter = if wo.z > 0.0 { Side::Top } else { Side::Bottom };
+    let exit = if same { enter } else { enter.other() };
+    let non_exit = exit.other();
+    let mut f = if same { s.f(b, enter, wo, wi) } else { Vec3::ZERO };
     let mut rng = Rng::seeded(wo, wi, 0x51);
-    let Some((wos, fos, pos, _)) = top.sample(wo, rng.vec2(), true) else { return f };
-    let Some((wis, fis, pis, _)) = top.sample(wi, rng.vec2(), true) else { return f };
-    let mut beta = Vec3::splat(fos * wos.z.abs() / pos);
-    let mut w = wos; // travelling down, inside
-    let top_specular = top.ggx.is_smooth();
-    for depth in 0..MAX_DEPTH {
+    // The virtual light: into the slab from `wi` through the exit, and what the exit passes on
+    // towards `wi` along it, per unit pdf (the reverse direction's f: the compression
+    // the sample went through is given back).
+    let wis = s.sample(b, exit, wi, &mut rng).filter(|x| x.wi.z * wi.z < 0.0).map(|x| {
+        let through = if x.delta { x.f * x.compression } else { s.f(b, exit, x.wi, wi) };
+        (x, through / x.pdf)
+    });
+    // Straight through both interfaces along `wis`, evaluating the entrance (MIS with the
+    // same path along `wos` below). This strategy does not depend on `wos`.
+    if !same
+        && let Some((x, through)) = wis
+        && !s.specular(enter)
+    {
+        let fe = s.f(b, enter, wo, -x.wi);
+        if fe != Vec3::ZERO {
+            let weight = if x.delta { 1.0 } else { power_heuristic(x.pdf, s.pdf(b, enter, wo, -x.wi)) };
+            f += fe * through * (x.wi.z.abs() * weight);
+        }
+    }
+    // Into the slab through the entrance (a reflection there was counted above).
+    let Some(wos) = s.sample(b, enter, wo, &mut rng).filter(|x| x.wi.z * wo.z < 0.0) else { return f };
+    let mut beta = wos.f * (wos.wi.z.abs() / wos.pdf);
+    if !same && !s.specular(exit) {
+        // Straight through along `wos`, evaluating the exit.
+        let fe = s.f(b, exit, -wos.wi, wi);
+        if fe != Vec3::ZERO {
+            let weight = if wos.delta { 1.0 } else { power_heuristic(wos.pdf, s.pdf(b, exit, wi, -wos.wi)) };
+            f += beta * fe * weight;
+        }
+    }
+    let mut w = wos.wi;
+    let mut at = enter;
+    for depth in 0..2 * MAX_DEPTH {
         if depth > 3 && beta.max_element() < 0.25 {
             let q = (1.0 - beta.max_element()).max(0.0);
             if rng.f32() < q {
@@ -245,32 +480,42 @@ fn layered_f(b: &ClosureBsdf, s: &Stack, wo: Vec3, wi: Vec3) -> Vec3 {
             }
             beta /= 1.0 - q;
         }
-        // At the base: connect to wi through the coat along the presampled `wis`.
-        let up = -w;
-        let fb = base_f(b, s, up, -wis);
-        if fb != Vec3::ZERO {
-            let weight = if top_specular { 1.0 } else { power_heuristic(pis, base_pdf(b, s, up, -wis)) };
-            // `fis` was sampled from `wi`'s side; light leaving the coat gains back the η² its
-            // entry took (the transmission's radiance compression, reversed).
-            f += beta * fb * (wis.z.abs() * weight * fis / pis * top.eta * top.eta);
-        }
-        let Some((wb, fbs, pb, delta)) = base_sample(b, s, up, &mut rng) else { break };
-        if pb <= 0.0 || wb.z <= 0.0 {
-            break;
-        }
-        beta *= fbs * (wb.z.abs() / pb);
-        // Connect through the coat along the base's sample.
-        if !top_specular {
-            let fe = top.f(-wb, wi);
-            if fe > 0.0 {
-                let weight = if delta { 1.0 } else { power_heuristic(pb, top.pdf(wi, -wb, true)) };
-                f += beta * (fe * weight);
+        at = at.other();
+        if at == exit {
+            // Reflect off the exit back into the slab (light it transmits is counted by the
+            // connections at the other interface).
+            let Some(r) = s.sample(b, exit, -w, &mut rng) else { break };
+            if r.wi.z * w.z >= 0.0 {
+                break;
+            }
+            beta *= r.f * (r.wi.z.abs() / r.pdf);
+            w = r.wi;
+        } else {
+            // At the other interface: connect through the exit along the presampled `wis`.
+            if let Some((x, through)) = wis
+                && !s.specular(non_exit)
+            {
+                let fn_ = s.f(b, non_exit, -w, -x.wi);
+                if fn_ != Vec3::ZERO {
+                    let weight = if x.delta { 1.0 } else { power_heuristic(x.pdf, s.pdf(b, non_exit, -w, -x.wi)) };
+                    f += beta * fn_ * through * (x.wi.z.abs() * weight);
+                }
+            }
+            let Some(r) = s.sample(b, non_exit, -w, &mut rng) else { break };
+            if r.wi.z * w.z >= 0.0 {
+                break;
+            }
+            beta *= r.f * (r.wi.z.abs() / r.pdf);
+            w = r.wi;
+            // Connect through the exit along the sampled direction.
+            if !s.specular(exit) {
+                let fe = s.f(b, exit, -w, wi);
+                if fe != Vec3::ZERO {
+                    let weight = if r.delta { 1.0 } else { power_heuristic(r.pdf, s.pdf(b, exit, wi, -w)) };
+                    f += beta * fe * weight;
+                }
             }
         }
-        // Reflect off the coat's underside, back down.
-        let Some((wr, fr, pr, _)) = top.sample(-wb, rng.vec2(), false) else { break };
-        beta *= fr * wr.z.abs() / pr;
-        w = wr;
         if !beta.is_finite() {
             return Vec3::ZERO;
         }
@@ -280,67 +525,88 @@ fn layered_f(b: &ClosureBsdf, s: &Stack, wo: Vec3, wi: Vec3) -> Vec3 {
 
 pub(crate) fn eval(b: &ClosureBsdf, wo: Vec3, wi: Vec3) -> Vec3 {
     let Some(s) = stack(b) else { return b.eval_scaled(wo, wi) };
-    let w = b.terms()[s.top].weight;
-    w * layered_f(b, &s, wo, wi) + beside(b, &s, wo, wi)
+    let (ao, ai) = s.attenuations(b, wo, wi);
+    let w = b.terms()[s.top].weight * s.outer_scale(b, &ao, &ai);
+    w * layered_f(b, &s, wo, wi) + beside(b, &s, wo, wi, &ao, &ai)
 }
 
 /// The pdf proxy (see the module docs).
 pub(crate) fn pdf(b: &ClosureBsdf, wo: Vec3, wi: Vec3) -> f32 {
-    if stack(b).is_none() {
-        return b.pdf_mixture(wo, wi);
-    }
-    let cosine = if wo.z * wi.z > 0.0 { wi.z.abs() * FRAC_1_PI } else { 0.0 };
+    let Some(s) = stack(b) else { return b.pdf_mixture(wo, wi) };
+    proxy_pdf(b, &s, wo, wi)
+}
+
+fn proxy_pdf(b: &ClosureBsdf, s: &Stack, wo: Vec3, wi: Vec3) -> f32 {
+    let cosine = if s.transmits {
+        0.5 * wi.z.abs() * FRAC_1_PI
+    } else if wo.z * wi.z > 0.0 {
+        wi.z.abs() * FRAC_1_PI
+    } else {
+        0.0
+    };
     0.9 * b.pdf_mixture(wo, wi) + 0.1 * cosine
 }
 
 pub(crate) fn sample(b: &ClosureBsdf, wo: Vec3, uc: f32, u: Vec2) -> Option<BsdfSample> {
-    let Some(s) = stack(b) else { return albedo_scaling_sample(b, wo, uc, u) };
-    // Choose between the stack (by its weight) and what lies beside it (by its albedo).
-    let w = b.terms()[s.top].weight.max_element();
+    let Some(s) = stack(b) else { return b.sample_scaled(wo, uc, u) };
+    // Choose between the stack (by its weight, under the outer terms) and what lies beside it
+    // (by its albedo).
+    let ao = if s.outer == 0 { [Vec3::ONE; MAX_CLOSURE_TERMS] } else { b.attenuation(wo.z) };
+    let w = (b.terms()[s.top].weight * ao[s.top]).max_element();
     let mut beside_importance = 0.0;
     for (i, t) in b.terms().iter().enumerate() {
         if i != s.top && s.base & (1 << i) == 0 {
             beside_importance += (t.weight * t.lobe.albedo()).max_element();
         }
     }
-    let base_rest = (1.0 - w) * b.terms().iter().enumerate().filter(|(i, _)| s.base & (1 << i) != 0).count() as f32;
+    let base_rest = (1.0 - b.terms()[s.top].weight.max_element()) * s.base.count_ones() as f32;
     let p_stack =
         if beside_importance + base_rest <= 0.0 { 1.0 } else { (w / (w + beside_importance + base_rest)).max(0.1) };
-    let flip = wo.z < 0.0;
-    let wo_up = if flip { flip_z(wo) } else { wo };
     let mut rng = Rng::seeded(wo, Vec3::new(uc, u.x, u.y), 0xa7);
-    let walked = if uc < p_stack {
-        walk(b, &s, wo_up, &mut rng)
-            .map(|(wi, weight, delta)| (wi, weight * b.terms()[s.top].weight / p_stack, delta))
+    let (wi, weight, delta) = if uc < p_stack {
+        let flip = !s.oriented && wo.z < 0.0;
+        let (wi, beta, delta) = walk(b, &s, if flip { flip_z(wo) } else { wo }, &mut rng)?;
+        let wi = if flip { flip_z(wi) } else { wi };
+        let (ao, ai) = s.attenuations(b, wo, wi);
+        (wi, beta * b.terms()[s.top].weight * s.outer_scale(b, &ao, &ai) / p_stack, delta)
     } else {
-        // One of the terms beside (or the base's untouched share): sample the mixture, weigh by eval.
-        let bs = b.sample_scaled(wo_up, rng.f32(), rng.vec2())?;
-        let p = b.pdf_mixture(wo_up, bs.wi);
-        if bs.delta || p <= 0.0 {
-            return None;
-        }
-        let weight = beside(b, &s, wo_up, bs.wi) * bs.wi.z.abs() / p;
-        Some((bs.wi, weight / (1.0 - p_stack), false))
+        let (wi, weight, delta) = beside_sample(b, &s, wo, &mut rng)?;
+        (wi, weight / (1.0 - p_stack), delta)
     };
-    let (wi, weight, delta) = walked?;
-    let wi = if flip { flip_z(wi) } else { wi };
     if delta {
         return finish(wi, weight / wi.z.abs(), 1.0, true);
     }
-    let p = pdf(b, wo, wi);
+    let p = proxy_pdf(b, &s, wo, wi);
     finish(wi, weight * p / wi.z.abs(), p, false)
 }
 
-/// The random walk from `wo` (up): `(wi, f |cos| / pdf, delta)` once light leaves the top.
-fn walk(b: &ClosureBsdf, s: &Stack, wo: Vec3, rng: &mut Rng) -> Option<(Vec3, Vec3, bool)> {
-    let top = s.interface;
-    let (w0, f0, p0, mut delta) = top.sample_any(wo, rng.f32(), rng.vec2())?;
-    if w0.z > 0.0 {
-        return Some((w0, s.tint * (f0 * w0.z / p0), delta));
+/// Samples [`beside`] from the albedo-scaling mixture: `(wi, f |cos| / pdf, delta)`.
+fn beside_sample(b: &ClosureBsdf, s: &Stack, wo: Vec3, rng: &mut Rng) -> Option<(Vec3, Vec3, bool)> {
+    let ao = b.attenuation(wo.z);
+    let p = b.probabilities(&ao);
+    let (k, uc) = pick(&p[..b.len], rng.f32())?;
+    let bs = b.terms[k].sample(wo, uc, rng.vec2())?;
+    let (ao, ai) = s.attenuations(b, wo, bs.wi);
+    if bs.delta {
+        let weight = bs.f * beside_factor(b, s, k, &ao, &ai) * (bs.wi.z.abs() / (bs.pdf * p[k]));
+        return Some((bs.wi, weight, true));
     }
-    let mut beta = Vec3::splat(f0 * w0.z.abs() / p0);
-    let mut w = w0;
-    for depth in 0..MAX_DEPTH * 2 {
+    let pm = b.pdf_mixture(wo, bs.wi);
+    (pm > 0.0).then(|| (bs.wi, beside(b, s, wo, bs.wi, &ao, &ai) * (bs.wi.z.abs() / pm), false))
+}
+
+/// The random walk from `wo`: `(wi, f |cos| / pdf, delta)` once light leaves the stack
+/// (pbrt-v4's `LayeredBxDF::Sample_f`).
+fn walk(b: &ClosureBsdf, s: &Stack, wo: Vec3, rng: &mut Rng) -> Option<(Vec3, Vec3, bool)> {
+    let mut at = if wo.z > 0.0 { Side::Top } else { Side::Bottom };
+    let first = s.sample(b, at, wo, rng)?;
+    let mut beta = first.f * (first.wi.z.abs() / first.pdf);
+    let mut delta = first.delta;
+    if first.wi.z * wo.z > 0.0 {
+        return Some((first.wi, beta, delta));
+    }
+    let mut w = first.wi;
+    for depth in 0..2 * MAX_DEPTH {
         if depth > 3 && beta.max_element() < 0.25 {
             let q = (1.0 - beta.max_element()).max(0.0);
             if rng.f32() < q {
@@ -348,32 +614,17 @@ fn walk(b: &ClosureBsdf, s: &Stack, wo: Vec3, rng: &mut Rng) -> Option<(Vec3, Ve
             }
             beta /= 1.0 - q;
         }
-        if w.z < 0.0 {
-            // At the base, reflect up.
-            let (wb, fb, pb, d) = base_sample(b, s, -w, rng)?;
-            if wb.z <= 0.0 || pb <= 0.0 {
-                return None;
-            }
-            beta *= fb * (wb.z / pb);
-            delta &= d;
-            w = wb;
-        } else {
-            // At the coat from below: reflect down or leave.
-            let (wt, ft, pt, d) = top.sample_any(-w, rng.f32(), rng.vec2())?;
-            beta *= ft * wt.z.abs() / pt;
-            delta &= d;
-            if wt.z > 0.0 {
-                return beta.is_finite().then_some((wt, beta, delta));
-            }
-            w = wt;
+        at = at.other();
+        let r = s.sample(b, at, -w, rng)?;
+        beta *= r.f * (r.wi.z.abs() / r.pdf);
+        delta &= r.delta;
+        if r.wi.z * w.z > 0.0 {
+            // Transmitted on along its way: out of the stack.
+            return beta.is_finite().then_some((r.wi, beta, delta));
         }
+        w = r.wi;
     }
     None
-}
-
-/// Albedo scaling's own sampling, for stacks the walk does not handle.
-fn albedo_scaling_sample(b: &ClosureBsdf, wo: Vec3, uc: f32, u: Vec2) -> Option<BsdfSample> {
-    b.sample_scaled(wo, uc, u)
 }
 
 /// Directional albedo of `layer(top, base)` in either mode, by sampling (for the chart and
