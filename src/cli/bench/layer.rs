@@ -107,7 +107,7 @@ pub fn bench_layer(dir: &Path, quick: bool) -> Result<String, String> {
 }
 
 /// A closure value of `(kind, params, weight, above)` terms.
-fn closure(terms: &[(ClosureKind, &[f32], f32, u8)]) -> ClosureSum {
+fn closure(terms: &[(ClosureKind, &[f32], f32, u32)]) -> ClosureSum {
     let mut sum = ClosureSum::default();
     for (k, &(kind, params, weight, above)) in terms.iter().enumerate() {
         let mut t = ClosureTerm { kind: kind as u32, above, weight: [weight; 3], params: [0.0; TERM_PARAMS] };

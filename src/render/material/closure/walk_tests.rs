@@ -143,16 +143,16 @@ fn a_smooth_coat_over_smooth_glass_of_its_index_is_one_interface() {
 /// standard error.
 fn mean_eval(b: &ClosureBsdf, wo: Vec3, wi: Vec3, swap: bool, n: usize, seed: u64) -> (f64, f64) {
     let mut rng = Pcg32::new(seed, 13);
-    let (mut sum, mut sum2) = (0.0f64, 0.0f64);
-    for _ in 0..n {
-        let jitter = |v: Vec3, rng: &mut Pcg32| (v + (rng.dir() * 1e-3)).normalize();
-        let (a, c) = (jitter(wo, &mut rng), jitter(wi, &mut rng));
-        let f = if swap { b.eval(c, a) } else { b.eval(a, c) }.x as f64;
-        sum += f;
-        sum2 += f * f;
-    }
-    let mean = sum / n as f64;
-    (mean, ((sum2 / n as f64 - mean * mean).max(0.0) / n as f64).sqrt())
+    let jitter = |v: Vec3, rng: &mut Pcg32| (v + (rng.dir() * 1e-3)).normalize();
+    let values: Vec<f64> = (0..n)
+        .map(|_| {
+            let (a, c) = (jitter(wo, &mut rng), jitter(wi, &mut rng));
+            (if swap { b.eval(c, a) } else { b.eval(a, c) }).x as f64
+        })
+        .collect();
+    let mean = values.iter().sum::<f64>() / n as f64;
+    let variance = values.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n as f64;
+    (mean, (variance / n as f64).sqrt())
 }
 
 /// Generalized reciprocity of the walk over glass: `f(wo, wi) η_o²... ` in the form the
