@@ -421,6 +421,10 @@ fn render_frame(
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }
+    // Stacks the random walk does not cover render by albedo scaling: said once per kind.
+    for kind in strata::render::material::closure::walk::take_fallback() {
+        eprintln!("warning: --layering random-walk: {kind} is rendered by albedo scaling");
+    }
     let seconds = start.elapsed().as_secs_f64();
     let write_start = std::time::Instant::now();
     let written = match &sums {

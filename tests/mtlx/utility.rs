@@ -194,8 +194,9 @@ fn subsurface_is_a_reported_lambertian_transmitter_that_conserves_energy() {
         assert!((half - glam::Vec3::splat(0.5)).abs().max_element() < 0.01, "μ {mu}: half {half}");
         // Under a rough dielectric coat (pbrlib's layer): the coat reflects what it reflects
         // alone, the white transmitter passes the rest on, so the furnace stays at 1 within
-        // 1 %; a coloured one never exceeds 1. (The random walk does not walk a transmitting
-        // base: it falls back to albedo scaling, sample for sample, as closure.rs documents.)
+        // 1 %; a coloured one never exceeds 1. The random walk walks the transmitting base
+        // (light it transmits leaves below), and the coat alone reflects no more than the
+        // whole stack does.
         let coat_alone = {
             let d = by_hand("bsdf = dielectric_bsdf(color(1.0), 1.5, 0.3, \"R\");");
             albedo_split(&d, mu, n, LayeringMode::AlbedoScaling).0
@@ -207,11 +208,17 @@ fn subsurface_is_a_reported_lambertian_transmitter_that_conserves_energy() {
             .push(format!("μ {mu}: reflected {:.4} (coat alone {:.4}), transmitted {:.4}", up.x, coat_alone.x, down.x));
         assert!((total - glam::Vec3::ONE).abs().max_element() < 0.01, "μ {mu}: coated white {total}");
         assert!((up - coat_alone).abs().max_element() < 0.01, "μ {mu}: reflected {up} vs coat {coat_alone}");
-        assert_eq!(
-            albedo_split(&coated_white, mu, n, LayeringMode::RandomWalk),
-            (up, down),
-            "μ {mu}: the walk's fallback"
+        let (walk_up, walk_down) = albedo_split(&coated_white, mu, n, LayeringMode::RandomWalk);
+        figures.push(format!("  random walk: reflected {:.4}, transmitted {:.4}", walk_up.x, walk_down.x));
+        let walked = walk_up + walk_down;
+        // The coat is rough single-scattering GGX, which loses light towards grazing angles
+        // (as a rough dielectric alone does): 1 within 1 % at normal incidence, ≤ 1 elsewhere.
+        assert!(walked.max_element() <= 1.005, "μ {mu}: walked coated white {walked}");
+        assert!(
+            mu < 1.0 || (walked - glam::Vec3::ONE).abs().max_element() < 0.01,
+            "μ {mu}: walked coated white {walked}"
         );
+        assert!((walk_up - coat_alone).min_element() > -0.01, "μ {mu}: walk reflects {walk_up} < coat {coat_alone}");
         let (up, down) = albedo_split(&network("(0.3, 0.6, 0.9)", 1.0, true), mu, n, LayeringMode::AlbedoScaling);
         assert!((up + down).max_element() <= 1.0 + 0.005, "μ {mu}: coated colour {}", up + down);
     }

@@ -1,7 +1,8 @@
 //! `strata bench layer`: the two modes of `layer(top, base)` against each other, the mission's
 //! speed-vs-accuracy chart. For a dielectric coat (index 1.5) over a diffuse base of albedo 0.5
 //! per coat roughness and angle: the directional albedo each mode renders (by sampling, as the
-//! integrator does) and their gap, and the time per `sample` + `eval` pair of each mode.
+//! integrator does) and their gap, and the time per `sample` + `eval` pair of each mode. The
+//! report adds the stacks the walk also covers (a coat over glass, fuzz over a coat), not charted.
 
 use crate::cli::plot::Series;
 use glam::{Vec2, Vec3};
@@ -101,5 +102,67 @@ pub fn bench_layer(dir: &Path, quick: bool) -> Result<String, String> {
         &caption,
     )?;
     writeln!(out, "wrote {}", dir.join("layer_modes.svg").display()).unwrap();
+    stacks_beyond_the_chart(&mut out, samples);
     Ok(out)
+}
+
+/// A closure value of `(kind, params, weight, above)` terms.
+fn closure(terms: &[(ClosureKind, &[f32], f32, u32)]) -> ClosureSum {
+    let mut sum = ClosureSum::default();
+    for (k, &(kind, params, weight, above)) in terms.iter().enumerate() {
+        let mut t = ClosureTerm { kind: kind as u32, above, weight: [weight; 3], params: [0.0; TERM_PARAMS] };
+        t.params[..params.len()].copy_from_slice(params);
+        sum.terms[k] = t;
+    }
+    sum
+}
+
+/// Reflected and transmitted energy from `cos θo = mu` (channel 0, transmitted radiance's
+/// compression given back), by sampling as the integrator does.
+fn reflected_transmitted(b: &ClosureBsdf, mu: f32, n: usize) -> (f64, f64) {
+    let wo = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
+    let (mut r, mut t) = (0.0f64, 0.0f64);
+    for i in 0..n {
+        let x = (i as f32 + 0.5) / n as f32;
+        let u = Vec2::new((x * 7.31).fract(), (x * 13.17 + 0.3).fract());
+        if let Some(s) = b.sample(wo, (x * 3.7 + 0.11).fract(), u) {
+            let w = (s.f.x * s.wi.z.abs() / s.pdf * b.compression(wo, s.wi)) as f64;
+            if s.wi.z * wo.z > 0.0 { r += w } else { t += w }
+        }
+    }
+    (r / n as f64, t / n as f64)
+}
+
+/// The stacks the random walk also covers, albedo scaling against it (report lines, not
+/// charted): a coat (index 1.5) over white glass (index 1.5 and 1.33, roughness 0.2), reflected
+/// and transmitted; white fuzz (roughness 0.4) over a coat over a diffuse base of 0.5.
+fn stacks_beyond_the_chart(out: &mut String, samples: usize) {
+    for (glass_ior, r) in [(1.5f32, 0.0f32), (1.5, 0.3), (1.33, 0.3), (1.33, 0.8)] {
+        let sum = closure(&[
+            (ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, r, 0.0], 1.0, 0),
+            (ClosureKind::Dielectric, &[1.0, 1.0, 1.0, glass_ior, 0.2, 2.0], 1.0, 1),
+        ]);
+        let mut line = format!("coat r={r} over glass η={glass_ior} r=0.2, R / T:");
+        for mu in [1.0f32, 0.5, 0.2] {
+            let (ar, at) =
+                reflected_transmitted(&ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling), mu, samples);
+            let (wr, wt) = reflected_transmitted(&ClosureBsdf::from_sum(&sum, LayeringMode::RandomWalk), mu, samples);
+            write!(line, " cos θo {mu}: scaling {ar:.4} / {at:.4}, walk {wr:.4} / {wt:.4};").unwrap();
+        }
+        writeln!(out, "layer modes: {line}").unwrap();
+    }
+    for r in [0.0f32, 0.3, 0.8] {
+        let sum = closure(&[
+            (ClosureKind::Sheen, &[1.0, 1.0, 1.0, 0.4], 1.0, 0),
+            (ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, r, 0.0], 1.0, 1),
+            (ClosureKind::Diffuse, &[BASE_ALBEDO; 3], 1.0, 3),
+        ]);
+        let mut line = format!("fuzz over coat r={r} over diffuse {BASE_ALBEDO}, E:");
+        for mu in [1.0f32, 0.5, 0.2] {
+            let a = directional_albedo(&ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling), mu, samples, 1);
+            let w = directional_albedo(&ClosureBsdf::from_sum(&sum, LayeringMode::RandomWalk), mu, samples, 2);
+            write!(line, " cos θo {mu}: scaling {a:.4}, walk {w:.4};").unwrap();
+        }
+        writeln!(out, "layer modes: {line}").unwrap();
+    }
 }
