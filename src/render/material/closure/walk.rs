@@ -193,6 +193,7 @@ const FALLBACK_TILTED: u8 = 1;
 const FALLBACK_TOP: u8 = 2;
 const FALLBACK_NESTED_DIELECTRIC: u8 = 4;
 const FALLBACK_SHAPE: u8 = 8;
+const FALLBACK_FILMED_BASE: u8 = 16;
 
 /// The fallbacks seen in this process and not yet taken ([`take_fallback`]).
 static FALLBACK: AtomicU8 = AtomicU8::new(0);
@@ -219,6 +220,7 @@ pub fn take_fallback() -> Vec<&'static str> {
             "a dielectric over another dielectric layer (e.g. OpenPBR's coat over its specular)",
         ),
         (FALLBACK_SHAPE, "layers that are not one stack (separate stacks side by side)"),
+        (FALLBACK_FILMED_BASE, "a thin-filmed glass under a coat"),
     ]
     .into_iter()
     .filter(|(bit, _)| bits & bit != 0)
@@ -235,7 +237,9 @@ fn inside(lobe: Lobe, eta: f32) -> Lobe {
     };
     match lobe {
         Lobe::Bsdf(g) => Lobe::Bsdf(relative(g)),
-        Lobe::Interface { glass, tint, reflect } => Lobe::Interface { glass: relative(glass), tint, reflect },
+        Lobe::Interface { glass, tint, reflect, film } => {
+            Lobe::Interface { glass: relative(glass), tint, reflect, film }
+        }
         other => other,
     }
 }
@@ -291,6 +295,11 @@ fn stack(b: &ClosureBsdf) -> Option<Stack> {
         if t.above & (1 << top) != 0 {
             if t.above != under {
                 return fell_back(FALLBACK_SHAPE);
+            }
+            // A film's Airy sum assumes air outside it; under a coat it would need the coat's
+            // medium (and, past the film's critical angle, evanescent waves): not walked.
+            if matches!(t.lobe, Lobe::Interface { film: Some(_), .. }) {
+                return fell_back(FALLBACK_FILMED_BASE);
             }
             s.base |= 1 << i;
             s.lobes[i] = inside(t.lobe, eta);

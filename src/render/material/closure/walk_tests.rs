@@ -288,6 +288,13 @@ fn a_fallback_is_reported() {
     );
     let (wo, wi) = (dir(0.7, 0.1), dir(0.5, 2.0));
     assert_eq!(b.eval(wo, wi), scaled.eval(wo, wi));
+    // A coat over a thin-filmed glass (400 nm of index 1.33): the film's Airy sum assumes air
+    // outside it, so the stack is albedo-scaled, and said to be. (One test takes the
+    // process-wide report, so that parallel tests cannot take each other's.)
+    let filmed = lobe(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, 0.2, 2.0, 400.0, 1.33, 1.0]);
+    let b = layered(coat(0.2, 1.5), 1.0, filmed, WALK);
+    assert_eq!(b.eval(wo, wi), layered(coat(0.2, 1.5), 1.0, filmed, LayeringMode::AlbedoScaling).eval(wo, wi));
     let reported = take_fallback();
     assert!(reported.iter().any(|r| r.contains("dielectric over another")), "{reported:?}");
+    assert!(reported.iter().any(|r| r.contains("thin-filmed glass")), "{reported:?}");
 }
