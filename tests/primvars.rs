@@ -311,3 +311,49 @@ fn primvar_nodes_agree_across_backends_bit_for_bit() {
     }
     assert!(saw_fallback && saw_value);
 }
+
+/// The object-space position (`strata:Pobject`, what MaterialX's `position` and 3D noises read
+/// by default) at each corner of a moved, turned and scaled mesh is the point as authored in
+/// the layer, while the corner itself is in world space: the transform is undone exactly,
+/// whatever it is. The reference is the USDA text's own `points`, not strata's transforms.
+#[test]
+fn the_object_space_position_is_the_authored_point() {
+    let points = [[0.0f32, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 1.0, 0.5], [0.0, 1.0, 0.5]];
+    let text = format!(
+        "#usda 1.0\ndef Mesh \"Quad\" {{\n    uniform token subdivisionScheme = \"none\"\n    int[] faceVertexCounts = [4]\n    int[] faceVertexIndices = [0, 1, 2, 3]\n    \
+         point3f[] points = [{}]\n    double3 xformOp:translate = (5, -3, 2)\n    float3 xformOp:rotateXYZ = (30, 45, 10)\n    \
+         float3 xformOp:scale = (2, 0.5, 3)\n    uniform token[] xformOpOrder = [\"xformOp:translate\", \"xformOp:rotateXYZ\", \"xformOp:scale\"]\n}}\n",
+        points.iter().map(|p| format!("({}, {}, {})", p[0], p[1], p[2])).collect::<Vec<_>>().join(", ")
+    );
+    let mut sources = SourceMap::new();
+    let mut diags = Diagnostics::new();
+    let stage = Stage::from_text("quad.usda", &text, Path::new("."), &mut sources, &mut diags).expect("parses");
+    let xforms = world_transforms(&stage, &mut diags);
+    let names = vec![strata::render::geometry::primvars::OBJECT_POSITION.to_string()];
+    let geometry = build_with_primvars(&stage, &xforms, GeometryOptions::default(), &names, &mut diags);
+    assert!(diags.items().is_empty(), "{}", diags.render(&sources));
+    let infos = [PrimvarInfo { name: names[0].clone(), width: 3, offset: 0 }];
+    let slots = geometry.primvars.slots(&infos);
+    let mut corners = 0;
+    // Each authored point lands on one world position, on both triangles that share it.
+    let mut world_of: Vec<([f32; 3], glam::Vec3)> = Vec::new();
+    for t in geometry.triangles.iter() {
+        for k in 0..3 {
+            let mut bary = [0.0; 3];
+            bary[k] = 1.0;
+            let mut out = [f32::NAN; 4];
+            geometry.primvars.fill(t.primvars, bary, &slots, &mut out);
+            assert_eq!(out[0], 1.0, "present");
+            let object = [out[1], out[2], out[3]];
+            assert!(points.contains(&object), "corner {k}: {object:?} is not an authored point");
+            // The corner itself moved: world space is not object space here.
+            assert!((t.p[k] - glam::Vec3::from(object)).length() > 1.0, "{:?} vs {object:?}", t.p[k]);
+            match world_of.iter().find(|(o, _)| *o == object) {
+                Some((_, world)) => assert!((*world - t.p[k]).length() < 1e-5, "{object:?}: {world} and {}", t.p[k]),
+                None => world_of.push((object, t.p[k])),
+            }
+            corners += 1;
+        }
+    }
+    assert_eq!((corners, world_of.len()), (6, 4));
+}

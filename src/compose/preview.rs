@@ -490,19 +490,16 @@ impl<'s> Builder<'_, 's> {
     }
 
     /// Reports a MaterialX geometry node left in its default space, object space, which strata
-    /// reads in world space: `position`/`normal`/`tangent`/`bitangent` without a `space`, and
-    /// the 3D noises without a `position` (their default is the object-space position). The
-    /// two agree only on prims without a transform, so the difference is said, never silent.
+    /// reads in world space: `normal`/`tangent`/`bitangent` without a `space`. (`position` and
+    /// the 3D noises' default position read object space: `render::geometry::primvars::
+    /// OBJECT_POSITION`.) The two agree only on prims without a transform, so the difference is
+    /// said, never silent.
     fn report_default_space(&mut self, id: &str, func: crate::front::hir::FuncId, args: &[Option<Source>], span: Span) {
-        const GEOMETRY: [&str; 4] = ["ND_position_", "ND_normal_", "ND_tangent_", "ND_bitangent_"];
-        const NOISES: [&str; 4] = ["ND_noise3d_", "ND_fractal3d_", "ND_cellnoise3d_", "ND_worleynoise3d_"];
-        let input = if GEOMETRY.iter().any(|p| id.starts_with(p)) {
-            "space"
-        } else if NOISES.iter().any(|p| id.starts_with(p)) {
-            "position"
-        } else {
+        const GEOMETRY: [&str; 3] = ["ND_normal_", "ND_tangent_", "ND_bitangent_"];
+        if !GEOMETRY.iter().any(|p| id.starts_with(p)) {
             return;
-        };
+        }
+        let input = "space";
         let Some((index, _)) = self.lib.function(func).param(input) else { return };
         if args[index].is_some() {
             return;
@@ -513,7 +510,7 @@ impl<'s> Builder<'_, 's> {
                 "`{node}` without `{input}` reads world space where MaterialX's default is object space"
             ))
             .at(span, "this node")
-            .note("object and world space agree for prims without a transform; set `space` to `world`, or connect a `position` node with it, to say so")
+            .note("object and world space agree for prims without a transform; set `space` to `world` to say so")
             .kind("MaterialX space approximated"),
         );
     }
@@ -616,7 +613,16 @@ impl<'s> Builder<'_, 's> {
                         .kind("MaterialX filtertype approximated"),
                 );
             }
-            (_, "space") if token != "world" => {
+            // `position` reads object space (the mesh's own points): only `model` differs.
+            (_, "space") if id.starts_with("ND_position_") && token == "model" => {
+                self.diags.push(
+                    Diagnostic::warning("`position` `space` `model` is read as object space")
+                        .at(span, "this value")
+                        .note("model and object space agree for a prim that is its own model")
+                        .kind("MaterialX space approximated"),
+                );
+            }
+            (_, "space") if token != "world" && !(id.starts_with("ND_position_") && token == "object") => {
                 self.diags.push(
                     Diagnostic::warning(format!("geometry `space` `{token}` is read in world space"))
                         .at(span, "this value")

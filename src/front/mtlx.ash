@@ -252,10 +252,18 @@ shader mx_constant_color3(color value = color(0.0), output color out) { out = va
 shader mx_dot_float(float in_ = 0.0, output float out) { out = in_; }
 shader mx_dot_color3(color in_ = color(0.0), output color out) { out = in_; }
 
-// ---- geometry: world space (the `space` input is not read; compose reports it) ---------------
+// ---- geometry: world space, but `position` in object (and model) space, MaterialX's default:
+// the mesh's own points, blended at the hit (`strata:Pobject`; world `P` where geometry does not
+// make it, reported). normal/tangent/bitangent read world space; compose reports their `space`.
 
 shader mx_texcoord_color3(int index = 0, output color out) { out = color(u, v, 0.0); }
-shader mx_position_color3(string space = "object", output color out) { out = color(P); }
+shader mx_position_color3(string space = "object", output color out) {
+    if (space == "world") {
+        out = color(P);
+    } else {
+        out = primvar("strata:Pobject", color(P));
+    }
+}
 shader mx_normal_color3(string space = "object", output color out) { out = color(N); }
 shader mx_tangent_color3(string space = "object", int index = 0, output color out) {
     vector t = dPdu - N * dot(N, dPdu);
@@ -286,10 +294,10 @@ shader mx_noise2d_color3(color amplitude = color(1.0), float pivot = 0.0, color 
     point p = point(texcoord.r, texcoord.g, 0.0);
     out = color(snoise(p), snoise(p + point(19.1, 7.3, 0.0)), snoise(p + point(3.7, 41.9, 0.0))) * amplitude + color(pivot);
 }
-shader mx_noise3d_float(float amplitude = 1.0, float pivot = 0.0, color position = color(P), output float out) {
+shader mx_noise3d_float(float amplitude = 1.0, float pivot = 0.0, color position = primvar("strata:Pobject", color(P)), output float out) {
     out = snoise(point(position)) * amplitude + pivot;
 }
-shader mx_noise3d_color3(color amplitude = color(1.0), float pivot = 0.0, color position = color(P), output color out) {
+shader mx_noise3d_color3(color amplitude = color(1.0), float pivot = 0.0, color position = primvar("strata:Pobject", color(P)), output color out) {
     point p = point(position);
     out = color(snoise(p), snoise(p + point(19.1, 7.3, 5.2)), snoise(p + point(3.7, 41.9, 13.3))) * amplitude + color(pivot);
 }
@@ -307,18 +315,18 @@ float mx_fractal(point p, int octaves, float lacunarity, float diminish) {
     return sum;
 }
 shader mx_fractal3d_float(float amplitude = 1.0, int octaves = 3, float lacunarity = 2.0, float diminish = 0.5,
-                          color position = color(P), output float out) {
+                          color position = primvar("strata:Pobject", color(P)), output float out) {
     out = mx_fractal(point(position), octaves, lacunarity, diminish) * amplitude;
 }
 shader mx_cellnoise2d_float(color texcoord = color(u, v, 0.0), output float out) {
     out = cellnoise(point(texcoord.r, texcoord.g, 0.0));
 }
-shader mx_cellnoise3d_float(color position = color(P), output float out) { out = cellnoise(point(position)); }
+shader mx_cellnoise3d_float(color position = primvar("strata:Pobject", color(P)), output float out) { out = cellnoise(point(position)); }
 // worleynoise: distance to the nearest jittered feature point (F1, jitter fixed at 1).
 shader mx_worleynoise2d_float(color texcoord = color(u, v, 0.0), float jitter = 1.0, output float out) {
     out = cellular(point(texcoord.r, texcoord.g, 0.0));
 }
-shader mx_worleynoise3d_float(color position = color(P), float jitter = 1.0, output float out) { out = cellular(point(position)); }
+shader mx_worleynoise3d_float(color position = primvar("strata:Pobject", color(P)), float jitter = 1.0, output float out) { out = cellular(point(position)); }
 
 // Ramps and splits along u (left to right) and v (bottom to top).
 shader mx_ramplr_float(float valuel = 0.0, float valuer = 0.0, color texcoord = color(u, v, 0.0), output float out) {

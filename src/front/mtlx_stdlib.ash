@@ -274,7 +274,7 @@ shader mx_noise2d_color4(color amplitude = color(1.0), float amplitude_a = 1.0, 
     out = color(snoise(p), snoise(p + point(19.1, 7.3, 0.0)), snoise(p + point(3.7, 41.9, 0.0))) * amplitude + color(pivot);
     out_a = snoise(p + point(19.0, 73.0, 0.0)) * amplitude_a + pivot;
 }
-shader mx_noise3d_color4(color amplitude = color(1.0), float amplitude_a = 1.0, float pivot = 0.0, color position = color(P),
+shader mx_noise3d_color4(color amplitude = color(1.0), float amplitude_a = 1.0, float pivot = 0.0, color position = primvar("strata:Pobject", color(P)),
                          output color out, output float out_a) {
     point p = point(position);
     out = color(snoise(p), snoise(p + point(19.1, 7.3, 5.2)), snoise(p + point(3.7, 41.9, 13.3))) * amplitude + color(pivot);
@@ -304,11 +304,11 @@ color mx_fractal3d(color position, int octaves, float lacunarity, float diminish
                  mx_fractal(p + point(3.7, 41.9, 13.3), octaves, lacunarity, diminish));
 }
 shader mx_fractal3d_color3(color amplitude = color(1.0), int octaves = 3, float lacunarity = 2.0, float diminish = 0.5,
-                           color position = color(P), output color out) {
+                           color position = primvar("strata:Pobject", color(P)), output color out) {
     out = mx_fractal3d(position, octaves, lacunarity, diminish) * amplitude;
 }
 shader mx_fractal3d_color4(color amplitude = color(1.0), float amplitude_a = 1.0, int octaves = 3, float lacunarity = 2.0,
-                           float diminish = 0.5, color position = color(P), output color out, output float out_a) {
+                           float diminish = 0.5, color position = primvar("strata:Pobject", color(P)), output color out, output float out_a) {
     out = mx_fractal3d(position, octaves, lacunarity, diminish) * amplitude;
     out_a = mx_fractal(point(position) + point(19.0, 193.0, 17.0), octaves, lacunarity, diminish) * amplitude_a;
 }

@@ -583,6 +583,38 @@ fn instances_at(
     placeable.then_some(out)
 }
 
+/// Warns (once) where a material reads the object-space position
+/// ([`crate::render::geometry::primvars::OBJECT_POSITION`]) on a prim that is not a mesh:
+/// geometry makes it from a mesh's own points only, so an analytic shape or Points reads the
+/// fallback, world `P`.
+fn report_object_space_off_meshes(
+    stage: &Stage,
+    prims: &[geometry::GeomPrim],
+    prim_material: &[usize],
+    materials: &[&dyn MaterialCode],
+    diags: &mut Diagnostics,
+) {
+    use crate::render::geometry::primvars::OBJECT_POSITION;
+    let reads =
+        |m: usize| materials.get(m).is_some_and(|c| c.info().primvars.iter().any(|p| p.name == OBJECT_POSITION));
+    for (prim, &m) in prims.iter().zip(prim_material) {
+        let Some(id) = stage.find(&prim.path) else { continue };
+        let kind = stage.prim(id).type_name.as_deref().unwrap_or("prim");
+        if matches!(kind, "Mesh" | "GeomSubset") || !reads(m) {
+            continue;
+        }
+        diags.push(
+            Diagnostic::warning(format!(
+                "`{}`: its material reads the object-space position, which strata makes for meshes only; this {kind} reads world space",
+                prim.path
+            ))
+            .at(prim.span, "this prim")
+            .note("object and world space agree for prims without a transform")
+            .kind("object space on a shape"),
+        );
+    }
+}
+
 impl Parts {
     /// The geometry (diced and displaced where `materials` move it), the prims' materials,
     /// the lights and the camera of `stage`; `None` when any error was reported.
@@ -625,6 +657,7 @@ impl Parts {
             }
         }
         crate::render::support::report_unsupported(stage, &xforms, diags);
+        report_object_space_off_meshes(stage, &geometry.prims, &prim_material, materials, diags);
         let bounds = geometry.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
         let camera_path = chosen.map(|(_, prim)| prim.path.clone());
         let (lights, camera, default_lit) = lights_and_camera(stage, &xforms, chosen, bounds, options, diags);

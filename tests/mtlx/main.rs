@@ -656,11 +656,12 @@ fn a_document_sublayered_under_a_usd_layer_composes_its_materials() {
     assert_eq!(ClosureKind::from_u32(closure_at(&code, 0.75, 0.75).kind), ClosureKind::GeneralizedSchlick);
 }
 
-/// MaterialX's geometry nodes and 3D noises default to object space, which strata reads in
-/// world space: left at the default, each says so (once per kind); `space = "world"`, or a
-/// noise fed by a world-space position, is silent.
+/// MaterialX's geometry nodes and 3D noises default to object space. `position` and the
+/// noises' default position read it (the mesh's own points, `strata:Pobject`, world `P` where
+/// geometry does not make it); `normal` left at the default reads world space and says so
+/// (once per kind), and `space = "world"` is silent.
 #[test]
-fn geometry_left_in_its_default_object_space_is_reported() {
+fn geometry_in_its_default_object_space() {
     let material = |nodes: &str, source: &str| {
         format!(
             "def Material \"M\" {{\n    token outputs:mtlx:surface.connect = </M/S.outputs:surface>\n    \
@@ -668,30 +669,49 @@ fn geometry_left_in_its_default_object_space_is_reported() {
              color3f inputs:emission_color.connect = {source}\n        token outputs:surface\n    }}\n{nodes}}}"
         )
     };
-    let position = |space: &str| {
+    let geometry = |node: &str, space: &str| {
         format!(
-            "    def Shader \"P\" {{\n        uniform token info:id = \"ND_position_vector3\"\n{space}        \
+            "    def Shader \"P\" {{\n        uniform token info:id = \"ND_{node}_vector3\"\n{space}        \
              vector3f outputs:out\n    }}\n    def Shader \"C\" {{\n        uniform token info:id = \"ND_convert_vector3_color3\"\n        \
              vector3f inputs:in.connect = </M/P.outputs:out>\n        color3f outputs:out\n    }}\n"
         )
     };
-    let noise = |input: &str| {
-        format!(
-            "    def Shader \"F\" {{\n        uniform token info:id = \"ND_fractal3d_color3\"\n{input}        color3f outputs:out\n    }}\n"
-        )
-    };
-    let warned = |text: String| {
+    let noise = "    def Shader \"F\" {\n        uniform token info:id = \"ND_fractal3d_color3\"\n        color3f outputs:out\n    }\n";
+    let world = "        string inputs:space = \"world\"\n";
+    // (code, warnings, the value emitted where the object-space position is (1, 2, 3) and the
+    // world one (5, 6, 7)).
+    let emitted = |text: String| {
         let (code, rendered) = compiled(&text);
-        assert!(code.is_some(), "{rendered}");
-        rendered.matches("default is object space").count()
+        let code = code.unwrap_or_else(|| panic!("{rendered}"));
+        let info = code.info();
+        let object = info.primvars.iter().find(|p| p.name == "strata:Pobject");
+        let mut values = vec![0.0f32; info.primvar_floats];
+        if let Some(p) = object {
+            values[p.offset..p.offset + 4].copy_from_slice(&[1.0, 1.0, 2.0, 3.0]);
+        }
+        let g = Globals {
+            p: [5.0, 6.0, 7.0],
+            n: [0.0, 0.0, 1.0],
+            ng: [0.0, 0.0, 1.0],
+            primvars: strata::abi::PrimvarValues::new(&values),
+            ..Globals::default()
+        };
+        let mut out = [0.0f32; 3];
+        code.emission(&g, 0, &mut out).expect("emits");
+        (rendered.matches("default is object space").count(), out, object.is_some())
     };
-    assert_eq!(warned(material(&position(""), "</M/C.outputs:out>")), 1);
-    assert_eq!(warned(material(&position("        string inputs:space = \"world\"\n"), "</M/C.outputs:out>")), 0);
-    assert_eq!(warned(material(&noise(""), "</M/F.outputs:out>")), 1);
-    let fed = format!(
-        "{}{}",
-        position("        string inputs:space = \"world\"\n"),
-        noise("        vector3f inputs:position.connect = </M/P.outputs:out>\n")
+    assert_eq!(emitted(material(&geometry("position", ""), "</M/C.outputs:out>")), (0, [1.0, 2.0, 3.0], true));
+    assert_eq!(emitted(material(&geometry("position", world), "</M/C.outputs:out>")), (0, [5.0, 6.0, 7.0], false));
+    let (warned, _, _) = emitted(material(&geometry("normal", ""), "</M/C.outputs:out>"));
+    assert_eq!(warned, 1);
+    assert_eq!(emitted(material(&geometry("normal", world), "</M/C.outputs:out>")).0, 0);
+    // The noise reads the object-space point: the same value as fed (1, 2, 3) explicitly.
+    let (warned, by_default, reads) = emitted(material(noise, "</M/F.outputs:out>"));
+    assert_eq!((warned, reads), (0, true));
+    let fed = noise.replace(
+        "        color3f outputs:out",
+        "        vector3f inputs:position = (1, 2, 3)\n        color3f outputs:out",
     );
-    assert_eq!(warned(material(&fed, "</M/F.outputs:out>")), 0);
+    let (_, explicit, _) = emitted(material(&fed, "</M/F.outputs:out>"));
+    assert_eq!(by_default, explicit);
 }

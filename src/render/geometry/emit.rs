@@ -447,7 +447,12 @@ impl<'a> MeshPrimvars<'a> {
         for (i, name) in table.names.iter().enumerate() {
             // `st` keeps the default its texture coordinates have always had here.
             let default = if name == "st" { "faceVarying" } else { "constant" };
-            let Some(pv) = Primvar::any(prim, &format!("primvars:{name}"), default) else { continue };
+            let pv = if name == OBJECT_POSITION {
+                Primvar::get(prim, "points", 3, "vertex")
+            } else {
+                Primvar::any(prim, &format!("primvars:{name}"), default)
+            };
+            let Some(pv) = pv else { continue };
             if !check_primvar(prim, &pv, points, faces, fv, diags) {
                 continue;
             }

@@ -27,7 +27,9 @@ pub use builder::{
 
 use crate::compose::binding::{is_bound_subset, is_renderable};
 use crate::diag::{Diagnostic, Diagnostics, Span};
-use crate::render::geometry::primvars::{MAX_COMPONENTS, Primvar, PrimvarLayout, PrimvarRef, PrimvarTable};
+use crate::render::geometry::primvars::{
+    MAX_COMPONENTS, OBJECT_POSITION, Primvar, PrimvarLayout, PrimvarRef, PrimvarTable,
+};
 use crate::render::geometry::shapes::{Part, Shape};
 use crate::render::geometry::subdiv::{PolyMesh, catmull_clark, read_tags, refined_faces};
 use crate::render::geometry::xform::{

@@ -58,6 +58,14 @@ pub struct PrimvarTable {
     pub values: Vec<f32>,
 }
 
+/// The primvar geometry makes of a mesh's own `points`: the shading point in the prim's object
+/// space (MaterialX's default `space` for `position` and the 3D noises). The `strata:`
+/// namespace keeps it apart from authored primvars. A mesh's points are vertex-interpolated,
+/// so blending a triangle's corners gives the object-space point exactly; analytic shapes and
+/// Points do not make it (their material then reads its fallback, world `P`, and the build says
+/// so).
+pub const OBJECT_POSITION: &str = "strata:Pobject";
+
 /// Components stored per primvar at most: the shading language reads floats, triples and a
 /// 4-component primvar's fourth (`primvar_alpha`).
 pub const MAX_COMPONENTS: usize = 4;
