@@ -50,7 +50,11 @@ pub(crate) fn suite_target(doc: &str, target: &[&str]) -> (Option<Arc<dyn Materi
         path.canonicalize().unwrap()
     } else {
         let text = std::fs::read_to_string(&path).unwrap().replace("</materialx>", &format!("{extra}\n</materialx>"));
-        let dir = std::env::temp_dir().join(format!("strata_mtlx_suite_{}", std::process::id()));
+        // One directory per wrapped copy: tests run in parallel and wrap the same document
+        // differently (a shared path let one read another's half-written copy).
+        static COPIES: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let copy = COPIES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let dir = std::env::temp_dir().join(format!("strata_mtlx_suite_{}_{copy}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let file = dir.join(path.file_name().unwrap());
         std::fs::write(&file, text).unwrap();
