@@ -311,6 +311,14 @@ struct Builder<'a, 's> {
     reported: &'a mut HashSet<String>,
 }
 
+/// Whether MaterialX geometry node `id` reads `space` as the document means it: world space
+/// everywhere, and object space for `position` (a mesh's own points,
+/// `render::geometry::primvars::OBJECT_POSITION`; `model` is read as object). One rule for an
+/// authored `space` and for the default one.
+fn reads_space_as_authored(id: &str, space: &str) -> bool {
+    space == "world" || (id.starts_with("ND_position_") && space == "object")
+}
+
 impl<'s> Builder<'_, 's> {
     /// The source for output `output` of shader `prim`, and its type.
     fn output(&mut self, prim: &'s Prim, output: &Attribute, at: Span) -> Option<(Source, Type)> {
@@ -489,25 +497,23 @@ impl<'s> Builder<'_, 's> {
         Some(node)
     }
 
-    /// Reports a MaterialX geometry node left in its default space, object space, which strata
-    /// reads in world space: `normal`/`tangent`/`bitangent` without a `space`. (`position` and
-    /// the 3D noises' default position read object space: `render::geometry::primvars::
-    /// OBJECT_POSITION`.) The two agree only on prims without a transform, so the difference is
+    /// Reports a MaterialX geometry node left in its default space, object space, where strata
+    /// reads it in world space ([`reads_space_as_authored`]: today `normal`/`tangent`/
+    /// `bitangent`). The two agree only on prims without a transform, so the difference is
     /// said, never silent.
     fn report_default_space(&mut self, id: &str, func: crate::front::hir::FuncId, args: &[Option<Source>], span: Span) {
-        const GEOMETRY: [&str; 3] = ["ND_normal_", "ND_tangent_", "ND_bitangent_"];
-        if !GEOMETRY.iter().any(|p| id.starts_with(p)) {
+        const OBJECT_BY_DEFAULT: [&str; 4] = ["ND_position_", "ND_normal_", "ND_tangent_", "ND_bitangent_"];
+        if !OBJECT_BY_DEFAULT.iter().any(|p| id.starts_with(p)) || reads_space_as_authored(id, "object") {
             return;
         }
-        let input = "space";
-        let Some((index, _)) = self.lib.function(func).param(input) else { return };
+        let Some((index, _)) = self.lib.function(func).param("space") else { return };
         if args[index].is_some() {
             return;
         }
         let node = id.strip_prefix("ND_").and_then(|n| n.split('_').next()).unwrap_or(id);
         self.diags.push(
             Diagnostic::warning(format!(
-                "`{node}` without `{input}` reads world space where MaterialX's default is object space"
+                "`{node}` without `space` reads world space where MaterialX's default is object space"
             ))
             .at(span, "this node")
             .note("object and world space agree for prims without a transform; set `space` to `world` to say so")
@@ -613,7 +619,6 @@ impl<'s> Builder<'_, 's> {
                         .kind("MaterialX filtertype approximated"),
                 );
             }
-            // `position` reads object space (the mesh's own points): only `model` differs.
             (_, "space") if id.starts_with("ND_position_") && token == "model" => {
                 self.diags.push(
                     Diagnostic::warning("`position` `space` `model` is read as object space")
@@ -622,7 +627,7 @@ impl<'s> Builder<'_, 's> {
                         .kind("MaterialX space approximated"),
                 );
             }
-            (_, "space") if token != "world" && !(id.starts_with("ND_position_") && token == "object") => {
+            (_, "space") if !reads_space_as_authored(id, token) => {
                 self.diags.push(
                     Diagnostic::warning(format!("geometry `space` `{token}` is read in world space"))
                         .at(span, "this value")

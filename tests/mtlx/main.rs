@@ -684,7 +684,7 @@ fn geometry_in_its_default_object_space() {
         let (code, rendered) = compiled(&text);
         let code = code.unwrap_or_else(|| panic!("{rendered}"));
         let info = code.info();
-        let object = info.primvars.iter().find(|p| p.name == "strata:Pobject");
+        let object = info.primvars.iter().find(|p| p.name == strata::render::geometry::primvars::OBJECT_POSITION);
         let mut values = vec![0.0f32; info.primvar_floats];
         if let Some(p) = object {
             values[p.offset..p.offset + 4].copy_from_slice(&[1.0, 1.0, 2.0, 3.0]);
