@@ -27,6 +27,10 @@ use std::collections::{BTreeSet, HashMap, HashSet};
 use std::fmt::Write as _;
 use std::ops::Range;
 
+mod upgrade;
+
+use upgrade::{FILM_INPUTS, ThinFilmUpgrade};
+
 /// Something to report about a document, at a byte range of its XML text.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Problem {
@@ -91,7 +95,9 @@ pub fn translate(xml: &str) -> Result<Translation, Problem> {
             ),
         });
     }
-    let mut t = Translator { warnings: Vec::new(), top: HashMap::new(), outputs: HashMap::new(), defs: HashMap::new() };
+    let mut warnings = Vec::new();
+    let films = ThinFilmUpgrade::scan(root, &mut warnings);
+    let mut t = Translator { warnings, top: HashMap::new(), outputs: HashMap::new(), defs: HashMap::new(), films };
     for child in root.children().filter(|c| c.is_element()) {
         if let Some(name) = child.attribute("name") {
             t.top.insert(name.to_string(), child);
@@ -201,6 +207,8 @@ struct Translator<'a, 'i> {
     /// The document's own node definitions that a node graph implements, by node category:
     /// (`<nodedef>`, `<nodegraph nodedef=...>`).
     defs: HashMap<String, Vec<(Node<'a, 'i>, Node<'a, 'i>)>>,
+    /// 1.38's thin-film layers, rewritten as MaterialX's upgrade to 1.39 does.
+    films: ThinFilmUpgrade<'a, 'i>,
 }
 
 impl<'a, 'i> Translator<'a, 'i> {
@@ -509,7 +517,7 @@ impl<'a, 'i> Translator<'a, 'i> {
         for output in graph.children().filter(|c| c.is_element() && c.tag_name().name() == "output") {
             let Some(output_name) = output.attribute("name") else { continue };
             let ty = usd_type(output.attribute("type").unwrap_or("float")).unwrap_or("token");
-            match output.attribute("nodename") {
+            match output.attribute("nodename").map(|node| self.films.reads(graph, node)) {
                 Some(node) if child_named(graph, node).is_some() => {
                     let from = identifier(output.attribute("output").unwrap_or("out"));
                     let _ = writeln!(
@@ -568,6 +576,12 @@ impl<'a, 'i> Translator<'a, 'i> {
     fn connection_line(&mut self, input: Node<'a, 'i>, attr: &str, usd_ty: &str, scope: &str) -> Option<String> {
         Some(match connection_of(input)? {
             Connection::Node(target, output) => {
+                // A node's input reads a sibling of the node (a graph's interface input, a
+                // sibling of the graph).
+                let target = match input.parent_element().and_then(|owner| owner.parent_element()) {
+                    Some(scope) => self.films.reads(scope, target),
+                    None => target,
+                };
                 format!("{usd_ty} {attr}.connect = <{scope}/{}.outputs:{}>", identifier(target), identifier(output))
             }
             Connection::Graph(graph, output) => {
@@ -607,8 +621,16 @@ impl<'a, 'i> Translator<'a, 'i> {
         let pad = "    ".repeat(depth);
         let id = nodedef_id(node);
         let _ = writeln!(out, "{pad}def Shader \"{name}\"\n{pad}{{\n{pad}    uniform token info:id = \"{id}\"");
-        for input in inputs(node) {
-            let Some(input_name) = input.attribute("name") else { continue };
+        let film = self.films.film_of(node);
+        let film_input = |name: &str| film.and_then(|f| inputs(f).find(|i| i.attribute("name") == Some(name)));
+        // A film's input replaces the BSDF's own (MaterialX copies it over).
+        let own = inputs(node).filter(|i| {
+            !FILM_INPUTS.iter().any(|(from, to)| i.attribute("name") == Some(to) && film_input(from).is_some())
+        });
+        let taken = FILM_INPUTS.iter().filter_map(|(from, to)| Some((film_input(from)?, Some(*to))));
+        let all: Vec<(Node, Option<&str>)> = own.map(|i| (i, None)).chain(taken).collect();
+        for (input, renamed) in all {
+            let Some(input_name) = renamed.or(input.attribute("name")) else { continue };
             let attr = format!("inputs:{}", identifier(input_name));
             let ty = input.attribute("type").unwrap_or("float");
             let Some(usd_ty) = usd_type(ty) else {

@@ -296,3 +296,37 @@ fn thin_film_and_unlit_surfaces_reach_their_closures() {
     code.emission(&g, 0, &mut emitted).expect("emits");
     assert_eq!(emitted, [1.0, 0.5, 2.0]);
 }
+
+#[test]
+fn thin_film_layers_of_1_38_read_as_materialx_upgrades_them() {
+    // Each target of a 1.38 document against the same target of MaterialX's own reading of it
+    // (`tests/fixtures/mtlx/upgrade`): the film folded into the BSDFs below it, values and
+    // connections alike.
+    let graphs = (1..=8).map(|k| ("thin_film_bsdf_1_38", format!("thin_film_test{k}")));
+    let bound = ["bound", "unauthored", "over_diffuse"].map(|g| ("thin_film_bindings_1_38", g.to_string()));
+    let mut filmed = 0;
+    for (doc, graph) in graphs.chain(bound) {
+        let target = ["shade", graph.as_str(), "out"];
+        let (code, rendered) = suite_target(&format!("../upgrade/{doc}.mtlx"), &target);
+        let (want, _) = suite_target(&format!("../upgrade/{doc}.upgraded.mtlx"), &target);
+        let (got, want) = (sum_at(&code.unwrap_or_else(|| panic!("{rendered}"))), sum_at(&want.unwrap()));
+        assert_same_terms(&got, &want);
+        // A document's translation warnings come with each of its materials: the bindings
+        // document's film without thickness and film over a diffuse lobe; nothing else.
+        let expected = match doc {
+            "thin_film_bsdf_1_38" => vec![],
+            _ => vec!["authors no `thickness`", "covers no dielectric, conductor or generalized Schlick BSDF"],
+        };
+        assert_eq!(rendered.matches("warning").count(), expected.len(), "{graph}: {rendered}");
+        assert!(expected.iter().all(|w| rendered.contains(w)), "{graph}: {rendered}");
+        for term in got.terms.iter().filter(|t| t.kind != 0) {
+            let kind = ClosureKind::from_u32(term.kind);
+            filmed += strata::abi::thin_film_words(kind).is_some_and(|at| term.params[at] > 0.0) as usize;
+        }
+    }
+    // Not vacuous: the films are there (tests 1–8 film 10 BSDFs; `bound` its metal).
+    assert!(filmed >= 11, "{filmed} filmed terms");
+    let (code, rendered) = suite_target("../upgrade/thin_film_bindings_1_38.mtlx", &["material", "top_material"]);
+    let (want, _) = suite_target("../upgrade/thin_film_bindings_1_38.upgraded.mtlx", &["material", "top_material"]);
+    assert_same_terms(&sum_at(&code.unwrap_or_else(|| panic!("{rendered}"))), &sum_at(&want.unwrap()));
+}
