@@ -442,8 +442,8 @@ impl Blas {
             return self.intersect_flat::<KZ, DEFORMS, AVX2>(&pre, o, d, tmin, tmax, time);
         };
         let (ray, scaled_tmax, k) = space.ray(o, d, tmin, tmax)?;
-        let mut leaves =
-            ClosestInLeaves::<KZ, DEFORMS, AVX2> { blas: self, pre, o, d, tmin, tmax, k, time, best: None };
+        let ray_in_leaves = LeafRay::<KZ, DEFORMS, AVX2> { blas: self, pre, o, d, tmin, tmax, time };
+        let mut leaves = ClosestInLeaves { ray: ray_in_leaves, k, best: None };
         wide::closest_in::<AVX2>(&space.bvh, &ray, scaled_tmax, &mut leaves);
         leaves.best
     }
@@ -600,7 +600,7 @@ impl Blas {
             return self.leaf_any::<KZ, DEFORMS, AVX2>(&pre, o, d, 0, all, tmin, tmax, time);
         };
         let Some((ray, scaled_tmax, _)) = space.ray(o, d, tmin, tmax) else { return false };
-        let mut leaves = AnyInLeaves::<KZ, DEFORMS, AVX2> { blas: self, pre, o, d, tmin, tmax, time };
+        let mut leaves = LeafRay::<KZ, DEFORMS, AVX2> { blas: self, pre, o, d, tmin, tmax, time };
         wide::any_in::<AVX2>(&space.bvh, &ray, scaled_tmax, &mut leaves)
     }
 
@@ -686,19 +686,33 @@ impl Blas {
     }
 }
 
-/// A BLAS traversal's closest-hit leaf test: the ray `o + t d` (prepared as `pre`), `t` in
-/// `(tmin, tmax)` in the BLAS's units and `k` times that in its BVH's scaled space, and the
-/// closest hit found so far. A struct rather than a closure so that its test inlines into
-/// the traversal compiled for AVX2 (see [`wide::ClosestLeaf`]).
-struct ClosestInLeaves<'a, const KZ: usize, const DEFORMS: bool, const AVX2: bool> {
+/// A ray in a BLAS's leaf tests: `o + t d` (prepared as `pre`), `t` in `(tmin, tmax)` in the
+/// BLAS's units, at time `time`. As the occlusion traversal's leaf test it is a struct, not a
+/// closure, so that its test inlines into the traversal compiled for AVX2 (see
+/// [`wide::ClosestLeaf`]).
+struct LeafRay<'a, const KZ: usize, const DEFORMS: bool, const AVX2: bool> {
     blas: &'a Blas,
     pre: RayPre<KZ>,
     o: Vec3,
     d: Vec3,
     tmin: f32,
     tmax: f32,
-    k: f32,
     time: f32,
+}
+
+impl<const KZ: usize, const DEFORMS: bool, const AVX2: bool> wide::AnyLeaf for LeafRay<'_, KZ, DEFORMS, AVX2> {
+    #[inline(always)]
+    fn test(&mut self, first: u32, count: u32) -> bool {
+        let (o, d, time) = (self.o, self.d, self.time);
+        self.blas.leaf_any::<KZ, DEFORMS, AVX2>(&self.pre, o, d, first, count, self.tmin, self.tmax, time)
+    }
+}
+
+/// A BLAS traversal's closest-hit leaf test (as [`LeafRay`]): the ray, `k` (its parameter in
+/// the BVH's scaled space per unit of `t`) and the closest hit found so far.
+struct ClosestInLeaves<'a, const KZ: usize, const DEFORMS: bool, const AVX2: bool> {
+    ray: LeafRay<'a, KZ, DEFORMS, AVX2>,
+    k: f32,
     best: Option<(f32, u32, f32, f32)>,
 }
 
@@ -707,34 +721,15 @@ impl<const KZ: usize, const DEFORMS: bool, const AVX2: bool> wide::ClosestLeaf
 {
     #[inline(always)]
     fn test(&mut self, limit: f32, first: u32, count: u32) -> f32 {
-        let closest = unscale(limit, self.k, self.tmax);
-        let (o, d, time) = (self.o, self.d, self.time);
-        match self.blas.leaf_closest::<KZ, DEFORMS, AVX2>(&self.pre, o, d, first, count, self.tmin, closest, time) {
+        let r = &self.ray;
+        let closest = unscale(limit, self.k, r.tmax);
+        match r.blas.leaf_closest::<KZ, DEFORMS, AVX2>(&r.pre, r.o, r.d, first, count, r.tmin, closest, r.time) {
             Some(hit) => {
                 self.best = Some(hit);
                 hit.0 * self.k
             }
             None => f32::INFINITY,
         }
-    }
-}
-
-/// A BLAS traversal's occlusion leaf test (as [`ClosestInLeaves`]).
-struct AnyInLeaves<'a, const KZ: usize, const DEFORMS: bool, const AVX2: bool> {
-    blas: &'a Blas,
-    pre: RayPre<KZ>,
-    o: Vec3,
-    d: Vec3,
-    tmin: f32,
-    tmax: f32,
-    time: f32,
-}
-
-impl<const KZ: usize, const DEFORMS: bool, const AVX2: bool> wide::AnyLeaf for AnyInLeaves<'_, KZ, DEFORMS, AVX2> {
-    #[inline(always)]
-    fn test(&mut self, first: u32, count: u32) -> bool {
-        let (o, d, time) = (self.o, self.d, self.time);
-        self.blas.leaf_any::<KZ, DEFORMS, AVX2>(&self.pre, o, d, first, count, self.tmin, self.tmax, time)
     }
 }
 
