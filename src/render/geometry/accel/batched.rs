@@ -2,6 +2,7 @@
 //! to PLOC batches, built in parallel and stitched (moved out of `accel/mod.rs` as is).
 
 use super::BvhSpace;
+use super::leaves::{LANES as BLOCK_SLOTS, NO_PRIMITIVE};
 use glam::{Vec3, Vec3A};
 use obvhs::Boundable;
 use obvhs::aabb::Aabb;
@@ -177,19 +178,29 @@ pub(super) fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: u
     let Some(mut space) = BvhSpace::build(boxes) else { return (None, group_members) };
     // The groups in leaf order (obvhs' primitive ids); the id-to-group table is then unused.
     let leaf_order = std::mem::take(&mut space.primitive_indices);
-    let mut leaf_start = Vec::with_capacity(leaf_order.len() + 1);
+    // Each leaf's groups are adjacent in leaf order: the leaf becomes its members' range,
+    // `members_of[first]` for the leaf whose first primitive is `first`. A leaf of at most
+    // one block's triangles that would straddle two blocks starts at the next block instead
+    // (the slots between hold no triangle and lie in no leaf), so it is tested in one pass.
+    let mut leaves: Vec<(u32, u32)> = space.bvh.leaves().collect();
+    leaves.sort_unstable();
+    let mut members_of = vec![(0u32, 0u32); leaf_order.len()];
     let mut leaf_members = Vec::with_capacity(group_members.len());
-    leaf_start.push(0);
-    for &g in &leaf_order {
-        let g = g as usize;
-        leaf_members.extend_from_slice(&group_members[group_start[g] as usize..group_start[g + 1] as usize]);
-        leaf_start.push(leaf_members.len() as u32);
+    for (first, count) in leaves {
+        let groups = &leaf_order[first as usize..(first + count) as usize];
+        let size = |&g: &u32| (group_start[g as usize + 1] - group_start[g as usize]) as usize;
+        let members: usize = groups.iter().map(size).sum();
+        let at = leaf_members.len();
+        if members <= BLOCK_SLOTS && at / BLOCK_SLOTS != (at + members - 1) / BLOCK_SLOTS {
+            leaf_members.resize(at.next_multiple_of(BLOCK_SLOTS), NO_PRIMITIVE);
+        }
+        members_of[first as usize] = (leaf_members.len() as u32, members as u32);
+        for &g in groups {
+            let g = g as usize;
+            leaf_members.extend_from_slice(&group_members[group_start[g] as usize..group_start[g + 1] as usize]);
+        }
     }
-    // Each leaf's groups are adjacent in leaf order: the leaf becomes its members' range.
-    space.bvh.remap_leaves(|first, count| {
-        let (a, b) = (leaf_start[first as usize], leaf_start[(first + count) as usize]);
-        (a, b - a)
-    });
+    space.bvh.remap_leaves(|first, _| members_of[first as usize]);
     (Some(space), leaf_members)
 }
 

@@ -4,7 +4,8 @@
 //! `group_members` (the BVH's leaf order, so a leaf is a range of slots) grouped by 8 into
 //! [`Block`]s, each 9 rows of 8 lanes (x, y, z of each corner), as Embree's 8-wide leaves. A
 //! leaf's triangles are then adjacent, and one AVX2 pass (chosen at run time) runs the
-//! watertight test on all 8 lanes of a block; a leaf that straddles two blocks takes two.
+//! watertight test on all 8 lanes of a block. A leaf of at most 8 triangles is placed so that it
+//! lies in one block (the BVH build pads before it); a larger one takes several passes.
 //! The AVX2 test does the scalar test's f32 operations in the same order (no FMA), so each
 //! lane's hit and `(t, b1, b2)` are bit-identical to [`RayPre::intersect`] on that triangle.
 //! `slot_of` maps a triangle's own index (as in `Hit::index`) to its slot, for the hit's
@@ -118,7 +119,12 @@ fn edge_f64(a: f32, b: f32, c: f32, e: f32) -> f32 {
 }
 
 /// Triangles per [`Block`]: the lanes of an AVX2 register.
-const LANES: usize = 8;
+pub(super) const LANES: usize = 8;
+
+/// The primitive of a slot that holds none: the padding that makes a leaf start at the next
+/// block rather than straddle two (`batched::build_grouped`). It lies in no leaf, and holds
+/// the empty triangle.
+pub(super) const NO_PRIMITIVE: u32 = u32::MAX;
 
 /// Rows of a [`Block`]: corner 0's x, y, z, corner 1's, corner 2's.
 const ROWS: usize = 9;
@@ -204,7 +210,8 @@ impl LeafTriangles {
     /// The closest hit `(slot, t, b1, b2)` among the triangles in slots `first..first +
     /// count` with `t` in `(tmin, tmax)`; the lowest slot among equal distances, as a test
     /// slot by slot would find. By AVX2 when `AVX2`, which is true only on a path that found
-    /// the CPU has it (one call per leaf into AVX2 code, where the block test inlines).
+    /// the CPU has it, in code compiled for AVX2: the leaf loop and the block test then inline
+    /// into it.
     #[inline(always)]
     pub(super) fn closest<const KZ: usize, const AVX2: bool>(
         &self,
@@ -214,48 +221,10 @@ impl LeafTriangles {
         tmin: f32,
         tmax: f32,
     ) -> Option<(u32, f32, f32, f32)> {
-        #[cfg(target_arch = "x86_64")]
-        if AVX2 {
-            // SAFETY: `AVX2` is true only where the CPU has AVX2.
-            return unsafe { avx2::closest(self, pre, first, count, tmin, tmax) };
-        }
-        self.closest_by(pre, first, count, tmin, tmax, scalar_block_hits)
-    }
-
-    /// Whether any triangle in slots `first..first + count` is hit with `t` in `(tmin, tmax)`
-    /// (by AVX2 when `AVX2`, as [`LeafTriangles::closest`]).
-    #[inline(always)]
-    pub(super) fn any<const KZ: usize, const AVX2: bool>(
-        &self,
-        pre: &RayPre<KZ>,
-        first: u32,
-        count: u32,
-        tmin: f32,
-        tmax: f32,
-    ) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        if AVX2 {
-            // SAFETY: `AVX2` is true only where the CPU has AVX2.
-            return unsafe { avx2::any(self, pre, first, count, tmin, tmax) };
-        }
-        self.any_by(pre, first, count, tmin, tmax, scalar_block_hits)
-    }
-
-    /// [`LeafTriangles::closest`] with the block test `hits`.
-    #[inline(always)]
-    fn closest_by<const KZ: usize>(
-        &self,
-        pre: &RayPre<KZ>,
-        first: u32,
-        count: u32,
-        tmin: f32,
-        tmax: f32,
-        hits: impl Fn(&Block, &RayPre<KZ>, u32, f32, f32) -> LaneHits,
-    ) -> Option<(u32, f32, f32, f32)> {
         let mut best = None;
         let mut closest = tmax;
         for (k, lanes) in blocks_of(first, count) {
-            let found = hits(&self.blocks[k], pre, lanes, tmin, closest);
+            let found = self.block_hits::<KZ, AVX2>(k, pre, lanes, tmin, closest);
             let mut mask = found.mask;
             while mask != 0 {
                 let l = mask.trailing_zeros() as usize;
@@ -269,23 +238,43 @@ impl LeafTriangles {
         best
     }
 
-    /// [`LeafTriangles::any`] with the block test `hits`.
+    /// Whether any triangle in slots `first..first + count` is hit with `t` in `(tmin, tmax)`
+    /// (by AVX2 when `AVX2`, as [`LeafTriangles::closest`]).
     #[inline(always)]
-    fn any_by<const KZ: usize>(
+    pub(super) fn any<const KZ: usize, const AVX2: bool>(
         &self,
         pre: &RayPre<KZ>,
         first: u32,
         count: u32,
         tmin: f32,
         tmax: f32,
-        hits: impl Fn(&Block, &RayPre<KZ>, u32, f32, f32) -> LaneHits,
     ) -> bool {
+        // A loop, not `Iterator::any`: a closure would be compiled without AVX2 (see `avx2`).
         for (k, lanes) in blocks_of(first, count) {
-            if hits(&self.blocks[k], pre, lanes, tmin, tmax).mask != 0 {
+            if self.block_hits::<KZ, AVX2>(k, pre, lanes, tmin, tmax).mask != 0 {
                 return true;
             }
         }
         false
+    }
+
+    /// Block `k`'s lanes of `lanes` that the ray hits within `(tmin, tmax)`, by AVX2 when
+    /// `AVX2` (see [`LeafTriangles::closest`]).
+    #[inline(always)]
+    fn block_hits<const KZ: usize, const AVX2: bool>(
+        &self,
+        k: usize,
+        pre: &RayPre<KZ>,
+        lanes: u32,
+        tmin: f32,
+        tmax: f32,
+    ) -> LaneHits {
+        #[cfg(target_arch = "x86_64")]
+        if AVX2 {
+            // SAFETY: `AVX2` is true only where the CPU has AVX2.
+            return unsafe { avx2::block_hits(&self.blocks[k], pre, lanes, tmin, tmax) };
+        }
+        scalar_block_hits(&self.blocks[k], pre, lanes, tmin, tmax)
     }
 }
 
@@ -319,42 +308,22 @@ fn scalar_block_hits<const KZ: usize>(block: &Block, pre: &RayPre<KZ>, lanes: u3
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{Block, LANES, LaneHits, LeafTriangles, RayPre, edge_f64, gamma};
+    use super::{Block, LANES, LaneHits, RayPre, edge_f64, gamma};
     use std::arch::x86_64::*;
-
-    /// [`LeafTriangles::closest`] with the AVX2 block test.
-    #[target_feature(enable = "avx2")]
-    pub(super) fn closest<const KZ: usize>(
-        leaves: &LeafTriangles,
-        pre: &RayPre<KZ>,
-        first: u32,
-        count: u32,
-        tmin: f32,
-        tmax: f32,
-    ) -> Option<(u32, f32, f32, f32)> {
-        leaves.closest_by(pre, first, count, tmin, tmax, |b, pre, lanes, tmin, tmax| {
-            block_hits(b, pre, lanes, tmin, tmax)
-        })
-    }
-
-    /// [`LeafTriangles::any`] with the AVX2 block test.
-    #[target_feature(enable = "avx2")]
-    pub(super) fn any<const KZ: usize>(
-        leaves: &LeafTriangles,
-        pre: &RayPre<KZ>,
-        first: u32,
-        count: u32,
-        tmin: f32,
-        tmax: f32,
-    ) -> bool {
-        leaves.any_by(pre, first, count, tmin, tmax, |b, pre, lanes, tmin, tmax| block_hits(b, pre, lanes, tmin, tmax))
-    }
 
     /// [`super::scalar_block_hits`] on 8 lanes: [`RayPre::intersect`]'s operations in its
     /// order, its early returns as lane masks.
-    #[target_feature(enable = "avx2")]
-    #[inline]
-    pub(super) fn block_hits<const KZ: usize>(
+    ///
+    /// `#[inline(always)]` and not `#[target_feature]` (rustc rejects the two together), and
+    /// written without closures (a closure here would be compiled without AVX2 and keep the
+    /// intrinsics out of line): it inlines into its caller, and its intrinsics inline with it
+    /// where that caller is compiled for AVX2 (`Blas::intersect_avx2`, `occluded_avx2`), so a
+    /// leaf's blocks are tested with no call and their lanes stay in registers.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[inline(always)]
+    pub(super) unsafe fn block_hits<const KZ: usize>(
         block: &Block,
         pre: &RayPre<KZ>,
         lanes: u32,
@@ -362,95 +331,140 @@ mod avx2 {
         tmax: f32,
     ) -> LaneHits {
         let (kx, ky) = (RayPre::<KZ>::KX, RayPre::<KZ>::KY);
-        // SAFETY: each row is 8 f32, 32-byte aligned (`Block`'s alignment).
-        let row = |r: usize| unsafe { _mm256_load_ps(block.rows[r].as_ptr()) };
-        let splat = |x: f32| _mm256_set1_ps(x);
-        let (ox, oy, oz) = (splat(pre.o[kx]), splat(pre.o[ky]), splat(pre.o[KZ]));
-        let (sx, sy, sz) = (splat(pre.s.x), splat(pre.s.y), splat(pre.s.z));
-        // Translate to the ray origin, permute, shear.
-        let shear = |c: usize| {
-            let z = _mm256_sub_ps(row(3 * c + KZ), oz);
-            let x = _mm256_add_ps(_mm256_sub_ps(row(3 * c + kx), ox), _mm256_mul_ps(sx, z));
-            let y = _mm256_add_ps(_mm256_sub_ps(row(3 * c + ky), oy), _mm256_mul_ps(sy, z));
-            (x, y, z)
-        };
-        let (x0, y0, z0) = shear(0);
-        let (x1, y1, z1) = shear(1);
-        let (x2, y2, z2) = shear(2);
-        let edge = |a, b, c, e| _mm256_sub_ps(_mm256_mul_ps(a, b), _mm256_mul_ps(c, e));
-        let (mut e0, mut e1, mut e2) = (edge(x1, y2, y1, x2), edge(x2, y0, y2, x0), edge(x0, y1, y0, x1));
-        let zero = _mm256_setzero_ps();
-        let or = |a, b| _mm256_or_ps(a, b);
-        let eq = |a, b| _mm256_cmp_ps::<_CMP_EQ_OQ>(a, b);
-        let lt = |a, b| _mm256_cmp_ps::<_CMP_LT_OQ>(a, b);
-        let le = |a, b| _mm256_cmp_ps::<_CMP_LE_OQ>(a, b);
-        let gt = |a, b| _mm256_cmp_ps::<_CMP_GT_OQ>(a, b);
-        let ge = |a, b| _mm256_cmp_ps::<_CMP_GE_OQ>(a, b);
-        let on_edge = or(or(eq(e0, zero), eq(e1, zero)), eq(e2, zero));
-        let mut redo = _mm256_movemask_ps(on_edge) as u32 & lanes;
-        if redo != 0 {
-            // A triangle with two equal corners (a mesh's pole) has an exactly zero edge
-            // function on every ray, and its other two are exact negatives, so its
-            // determinant is zero in f32 as in f64: it needs no redo, only the rejection.
-            let same = |xa, ya, xb, yb| _mm256_and_ps(eq(xa, xb), eq(ya, yb));
-            let degenerate = or(or(same(x0, y0, x1, y1), same(x1, y1, x2, y2)), same(x0, y0, x2, y2));
-            redo &= !(_mm256_movemask_ps(degenerate) as u32);
-        }
-        if redo != 0 {
-            [e0, e1, e2] = edges_in_f64([x0, y0, x1, y1, x2, y2], [e0, e1, e2], redo);
-        }
-        // Rejected lanes, each test as the scalar test's early return.
-        let below = or(or(lt(e0, zero), lt(e1, zero)), lt(e2, zero));
-        let above = or(or(gt(e0, zero), gt(e1, zero)), gt(e2, zero));
-        let mut reject = _mm256_and_ps(below, above);
-        let det = _mm256_add_ps(_mm256_add_ps(e0, e1), e2);
-        reject = or(reject, eq(det, zero));
-        let (z0, z1, z2) = (_mm256_mul_ps(z0, sz), _mm256_mul_ps(z1, sz), _mm256_mul_ps(z2, sz));
-        let t_scaled =
-            _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(e0, z0), _mm256_mul_ps(e1, z1)), _mm256_mul_ps(e2, z2));
-        let tmax_det = _mm256_mul_ps(splat(tmax), det);
-        let behind_neg = or(ge(t_scaled, zero), lt(t_scaled, tmax_det));
-        reject = or(reject, _mm256_and_ps(lt(det, zero), behind_neg));
-        let behind_pos = or(le(t_scaled, zero), gt(t_scaled, tmax_det));
-        reject = or(reject, _mm256_and_ps(gt(det, zero), behind_pos));
-        let inv = _mm256_div_ps(splat(1.0), det);
-        let t = _mm256_mul_ps(t_scaled, inv);
-        // The conservative bound on t's rounding error (see `RayPre::intersect`).
-        let abs = |v| _mm256_and_ps(v, _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff)));
-        let max3 = |a, b, c| _mm256_max_ps(_mm256_max_ps(abs(a), abs(b)), abs(c));
-        let (max_z, max_x, max_y) = (max3(z0, z1, z2), max3(x0, x1, x2), max3(y0, y1, y2));
-        let mul = |a, b| _mm256_mul_ps(a, b);
-        let add = |a, b| _mm256_add_ps(a, b);
-        let delta_z = mul(splat(gamma(3)), max_z);
-        let delta_x = mul(splat(gamma(5)), add(max_x, max_z));
-        let delta_y = mul(splat(gamma(5)), add(max_y, max_z));
-        let delta_e = mul(
-            splat(2.0),
-            add(add(mul(mul(splat(gamma(2)), max_x), max_y), mul(delta_y, max_x)), mul(delta_x, max_y)),
-        );
-        let max_e = max3(e0, e1, e2);
-        let delta_t = mul(
-            mul(
-                splat(3.0),
-                add(add(mul(mul(splat(gamma(3)), max_e), max_z), mul(delta_e, max_z)), mul(delta_z, max_e)),
-            ),
-            abs(inv),
-        );
-        let out_of_range = or(or(le(t, delta_t), le(t, splat(tmin))), ge(t, splat(tmax)));
-        reject = or(reject, out_of_range);
-        let mut hits = LaneHits {
-            mask: !(_mm256_movemask_ps(reject) as u32) & lanes,
-            t: [0.0; LANES],
-            b1: [0.0; LANES],
-            b2: [0.0; LANES],
-        };
-        // SAFETY: each destination holds 8 f32.
+        // SAFETY: the caller's: the CPU has AVX2. Each row is 8 f32, 32-byte aligned
+        // (`Block`'s alignment); each store's destination holds 8 f32.
         unsafe {
-            _mm256_storeu_ps(hits.t.as_mut_ptr(), t);
-            _mm256_storeu_ps(hits.b1.as_mut_ptr(), mul(e1, inv));
-            _mm256_storeu_ps(hits.b2.as_mut_ptr(), mul(e2, inv));
+            macro_rules! splat {
+                ($x:expr) => {
+                    _mm256_set1_ps($x)
+                };
+            }
+            macro_rules! row {
+                ($r:expr) => {
+                    _mm256_load_ps(block.rows[$r].as_ptr())
+                };
+            }
+            let (ox, oy, oz) = (splat!(pre.o[kx]), splat!(pre.o[ky]), splat!(pre.o[KZ]));
+            let (sx, sy, sz) = (splat!(pre.s.x), splat!(pre.s.y), splat!(pre.s.z));
+            // Translate to the ray origin, permute, shear.
+            macro_rules! shear {
+                ($c:expr) => {{
+                    let z = _mm256_sub_ps(row!(3 * $c + KZ), oz);
+                    let x = _mm256_add_ps(_mm256_sub_ps(row!(3 * $c + kx), ox), _mm256_mul_ps(sx, z));
+                    let y = _mm256_add_ps(_mm256_sub_ps(row!(3 * $c + ky), oy), _mm256_mul_ps(sy, z));
+                    (x, y, z)
+                }};
+            }
+            let (x0, y0, z0) = shear!(0);
+            let (x1, y1, z1) = shear!(1);
+            let (x2, y2, z2) = shear!(2);
+            macro_rules! edge {
+                ($a:expr, $b:expr, $c:expr, $e:expr) => {
+                    _mm256_sub_ps(_mm256_mul_ps($a, $b), _mm256_mul_ps($c, $e))
+                };
+            }
+            let (mut e0, mut e1, mut e2) = (edge!(x1, y2, y1, x2), edge!(x2, y0, y2, x0), edge!(x0, y1, y0, x1));
+            let zero = _mm256_setzero_ps();
+            macro_rules! or {
+                ($a:expr, $b:expr) => {
+                    _mm256_or_ps($a, $b)
+                };
+            }
+            macro_rules! cmp {
+                ($op:ident, $a:expr, $b:expr) => {
+                    _mm256_cmp_ps::<$op>($a, $b)
+                };
+            }
+            let on_edge = or!(or!(cmp!(_CMP_EQ_OQ, e0, zero), cmp!(_CMP_EQ_OQ, e1, zero)), cmp!(_CMP_EQ_OQ, e2, zero));
+            let mut redo = _mm256_movemask_ps(on_edge) as u32 & lanes;
+            if redo != 0 {
+                // A triangle with two equal corners (a mesh's pole) has an exactly zero edge
+                // function on every ray, and its other two are exact negatives, so its
+                // determinant is zero in f32 as in f64: it needs no redo, only the rejection.
+                macro_rules! same {
+                    ($xa:expr, $ya:expr, $xb:expr, $yb:expr) => {
+                        _mm256_and_ps(cmp!(_CMP_EQ_OQ, $xa, $xb), cmp!(_CMP_EQ_OQ, $ya, $yb))
+                    };
+                }
+                let degenerate = or!(or!(same!(x0, y0, x1, y1), same!(x1, y1, x2, y2)), same!(x0, y0, x2, y2));
+                redo &= !(_mm256_movemask_ps(degenerate) as u32);
+            }
+            if redo != 0 {
+                [e0, e1, e2] = edges_in_f64([x0, y0, x1, y1, x2, y2], [e0, e1, e2], redo);
+            }
+            // Rejected lanes, each test as the scalar test's early return.
+            let below = or!(or!(cmp!(_CMP_LT_OQ, e0, zero), cmp!(_CMP_LT_OQ, e1, zero)), cmp!(_CMP_LT_OQ, e2, zero));
+            let above = or!(or!(cmp!(_CMP_GT_OQ, e0, zero), cmp!(_CMP_GT_OQ, e1, zero)), cmp!(_CMP_GT_OQ, e2, zero));
+            let mut reject = _mm256_and_ps(below, above);
+            let det = _mm256_add_ps(_mm256_add_ps(e0, e1), e2);
+            reject = or!(reject, cmp!(_CMP_EQ_OQ, det, zero));
+            let (z0, z1, z2) = (_mm256_mul_ps(z0, sz), _mm256_mul_ps(z1, sz), _mm256_mul_ps(z2, sz));
+            let t_scaled =
+                _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(e0, z0), _mm256_mul_ps(e1, z1)), _mm256_mul_ps(e2, z2));
+            let tmax_det = _mm256_mul_ps(splat!(tmax), det);
+            let behind_neg = or!(cmp!(_CMP_GE_OQ, t_scaled, zero), cmp!(_CMP_LT_OQ, t_scaled, tmax_det));
+            reject = or!(reject, _mm256_and_ps(cmp!(_CMP_LT_OQ, det, zero), behind_neg));
+            let behind_pos = or!(cmp!(_CMP_LE_OQ, t_scaled, zero), cmp!(_CMP_GT_OQ, t_scaled, tmax_det));
+            reject = or!(reject, _mm256_and_ps(cmp!(_CMP_GT_OQ, det, zero), behind_pos));
+            let inv = _mm256_div_ps(splat!(1.0), det);
+            let t = _mm256_mul_ps(t_scaled, inv);
+            // The conservative bound on t's rounding error (see `RayPre::intersect`).
+            let abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+            macro_rules! abs {
+                ($v:expr) => {
+                    _mm256_and_ps($v, abs_mask)
+                };
+            }
+            macro_rules! max3 {
+                ($a:expr, $b:expr, $c:expr) => {
+                    _mm256_max_ps(_mm256_max_ps(abs!($a), abs!($b)), abs!($c))
+                };
+            }
+            macro_rules! mul {
+                ($a:expr, $b:expr) => {
+                    _mm256_mul_ps($a, $b)
+                };
+            }
+            macro_rules! add {
+                ($a:expr, $b:expr) => {
+                    _mm256_add_ps($a, $b)
+                };
+            }
+            let (max_z, max_x, max_y) = (max3!(z0, z1, z2), max3!(x0, x1, x2), max3!(y0, y1, y2));
+            let delta_z = mul!(splat!(gamma(3)), max_z);
+            let delta_x = mul!(splat!(gamma(5)), add!(max_x, max_z));
+            let delta_y = mul!(splat!(gamma(5)), add!(max_y, max_z));
+            let delta_e = mul!(
+                splat!(2.0),
+                add!(add!(mul!(mul!(splat!(gamma(2)), max_x), max_y), mul!(delta_y, max_x)), mul!(delta_x, max_y))
+            );
+            let max_e = max3!(e0, e1, e2);
+            let delta_t = mul!(
+                mul!(
+                    splat!(3.0),
+                    add!(add!(mul!(mul!(splat!(gamma(3)), max_e), max_z), mul!(delta_e, max_z)), mul!(delta_z, max_e))
+                ),
+                abs!(inv)
+            );
+            let out_of_range = or!(
+                or!(cmp!(_CMP_LE_OQ, t, delta_t), cmp!(_CMP_LE_OQ, t, splat!(tmin))),
+                cmp!(_CMP_GE_OQ, t, splat!(tmax))
+            );
+            reject = or!(reject, out_of_range);
+            let mut hits = LaneHits {
+                mask: !(_mm256_movemask_ps(reject) as u32) & lanes,
+                t: [0.0; LANES],
+                b1: [0.0; LANES],
+                b2: [0.0; LANES],
+            };
+            // Most blocks a ray meets hold no hit: their distances are never read.
+            if hits.mask != 0 {
+                _mm256_storeu_ps(hits.t.as_mut_ptr(), t);
+                _mm256_storeu_ps(hits.b1.as_mut_ptr(), mul!(e1, inv));
+                _mm256_storeu_ps(hits.b2.as_mut_ptr(), mul!(e2, inv));
+            }
+            hits
         }
-        hits
     }
 
     /// The edge functions of the lanes in `redo` computed again in f64, as the scalar test
@@ -629,7 +643,8 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn avx2_hits<const KZ: usize>(b: &Block, pre: &RayPre<KZ>, lanes: u32, tmax: f32) -> LaneHits {
-        avx2::block_hits(b, pre, lanes, 0.0, tmax)
+        // SAFETY: compiled for AVX2, so called only where the CPU has it.
+        unsafe { avx2::block_hits(b, pre, lanes, 0.0, tmax) }
     }
 
     /// A leaf's closest hit over its blocks, on either path, for leaves of every length at

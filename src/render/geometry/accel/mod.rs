@@ -212,8 +212,10 @@ pub struct Blas {
     shapes: Vec<Shape>,
     /// The BVH's primitives are groups of primitives with bit-identical bounding boxes,
     /// stored here member by member in the BVH's leaf order (primitive indices as in
-    /// [`Hit::index`]): each BVH leaf is a range of this table, its groups' members. A flat
-    /// BLAS holds its finite primitives.
+    /// [`Hit::index`]): each BVH leaf is a range of this table, its groups' members, which
+    /// starts at a block boundary of `triangles` when it fits in one block and would
+    /// straddle two (the slots between hold `leaves::NO_PRIMITIVE`). A flat BLAS holds its
+    /// finite primitives.
     group_members: Vec<u32>,
     /// Object-space bounds `(min, max)` of the finite primitives; `None` when there are none.
     bounds: Option<(Vec3, Vec3)>,
@@ -440,18 +442,10 @@ impl Blas {
             return self.intersect_flat::<KZ, DEFORMS, AVX2>(&pre, o, d, tmin, tmax, time);
         };
         let (ray, scaled_tmax, k) = space.ray(o, d, tmin, tmax)?;
-        let mut best = None;
-        wide::closest_in::<AVX2>(&space.bvh, &ray, scaled_tmax, |limit, first, count| {
-            let closest = unscale(limit, k, tmax);
-            match self.leaf_closest::<KZ, DEFORMS, AVX2>(&pre, o, d, first, count, tmin, closest, time) {
-                Some(hit) => {
-                    best = Some(hit);
-                    hit.0 * k
-                }
-                None => f32::INFINITY,
-            }
-        });
-        best
+        let ray_in_leaves = LeafRay::<KZ, DEFORMS, AVX2> { blas: self, pre, o, d, tmin, tmax, time };
+        let mut leaves = ClosestInLeaves { ray: ray_in_leaves, k, best: None };
+        wide::closest_in::<AVX2>(&space.bvh, &ray, scaled_tmax, &mut leaves);
+        leaves.best
     }
 
     /// The closest hit `(t, index, b1, b2)` among the primitives in slots `first..first +
@@ -606,9 +600,8 @@ impl Blas {
             return self.leaf_any::<KZ, DEFORMS, AVX2>(&pre, o, d, 0, all, tmin, tmax, time);
         };
         let Some((ray, scaled_tmax, _)) = space.ray(o, d, tmin, tmax) else { return false };
-        wide::any_in::<AVX2>(&space.bvh, &ray, scaled_tmax, |first, count| {
-            self.leaf_any::<KZ, DEFORMS, AVX2>(&pre, o, d, first, count, tmin, tmax, time)
-        })
+        let mut leaves = LeafRay::<KZ, DEFORMS, AVX2> { blas: self, pre, o, d, tmin, tmax, time };
+        wide::any_in::<AVX2>(&space.bvh, &ray, scaled_tmax, &mut leaves)
     }
 
     /// Surface geometry in this BLAS's space where `o + t d` hit primitive `index`, with the
@@ -689,6 +682,53 @@ impl Blas {
                 };
                 (geom, None)
             }
+        }
+    }
+}
+
+/// A ray in a BLAS's leaf tests: `o + t d` (prepared as `pre`), `t` in `(tmin, tmax)` in the
+/// BLAS's units, at time `time`. As the occlusion traversal's leaf test it is a struct, not a
+/// closure, so that its test inlines into the traversal compiled for AVX2 (see
+/// [`wide::ClosestLeaf`]).
+struct LeafRay<'a, const KZ: usize, const DEFORMS: bool, const AVX2: bool> {
+    blas: &'a Blas,
+    pre: RayPre<KZ>,
+    o: Vec3,
+    d: Vec3,
+    tmin: f32,
+    tmax: f32,
+    time: f32,
+}
+
+impl<const KZ: usize, const DEFORMS: bool, const AVX2: bool> wide::AnyLeaf for LeafRay<'_, KZ, DEFORMS, AVX2> {
+    #[inline(always)]
+    fn test(&mut self, first: u32, count: u32) -> bool {
+        let (o, d, time) = (self.o, self.d, self.time);
+        self.blas.leaf_any::<KZ, DEFORMS, AVX2>(&self.pre, o, d, first, count, self.tmin, self.tmax, time)
+    }
+}
+
+/// A BLAS traversal's closest-hit leaf test (as [`LeafRay`]): the ray, `k` (its parameter in
+/// the BVH's scaled space per unit of `t`) and the closest hit found so far.
+struct ClosestInLeaves<'a, const KZ: usize, const DEFORMS: bool, const AVX2: bool> {
+    ray: LeafRay<'a, KZ, DEFORMS, AVX2>,
+    k: f32,
+    best: Option<(f32, u32, f32, f32)>,
+}
+
+impl<const KZ: usize, const DEFORMS: bool, const AVX2: bool> wide::ClosestLeaf
+    for ClosestInLeaves<'_, KZ, DEFORMS, AVX2>
+{
+    #[inline(always)]
+    fn test(&mut self, limit: f32, first: u32, count: u32) -> f32 {
+        let r = &self.ray;
+        let closest = unscale(limit, self.k, r.tmax);
+        match r.blas.leaf_closest::<KZ, DEFORMS, AVX2>(&r.pre, r.o, r.d, first, count, r.tmin, closest, r.time) {
+            Some(hit) => {
+                self.best = Some(hit);
+                hit.0 * self.k
+            }
+            None => f32::INFINITY,
         }
     }
 }

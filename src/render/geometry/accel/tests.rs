@@ -319,3 +319,38 @@ proptest::proptest! {
         agrees_with_brute_force(&random_mesh(0, &[0.0], &loose), rays)?;
     }
 }
+
+/// Every BVH leaf of at most one block's slots lies in one block of the leaf-order
+/// triangles (the padding before it makes the AVX2 test one pass per leaf), the padding slots
+/// lie in no leaf, and every triangle lies in exactly one leaf, coincident copies (one group
+/// of more members than a block holds) included.
+#[test]
+fn small_leaves_lie_in_one_block_and_padding_in_none() {
+    let mut tris = random_mesh(40, &[0.0, 0.1, -0.2, 0.05, 0.3, -0.1, 0.02], &[]);
+    tris.extend(std::iter::repeat_n(tris[7], 20));
+    let blas = Blas::new(tris.iter().map(|&p| tri(p)).collect::<Vec<_>>(), vec![]);
+    let space = blas.bvh.as_ref().expect("a BVH");
+    let mut leaves_of_slot = vec![0u32; blas.group_members.len()];
+    let mut large = 0;
+    for (first, count) in space.bvh.leaves() {
+        let (a, b) = (first as usize, (first + count) as usize);
+        leaves_of_slot[a..b].iter_mut().for_each(|n| *n += 1);
+        if b - a <= leaves::LANES {
+            assert_eq!(a / leaves::LANES, (b - 1) / leaves::LANES, "leaf {a}..{b} straddles two blocks");
+        } else {
+            large += 1;
+        }
+    }
+    assert!(large > 0, "the coincident copies make a leaf larger than a block");
+    let mut seen = vec![false; tris.len()];
+    for (slot, &member) in blas.group_members.iter().enumerate() {
+        if member == leaves::NO_PRIMITIVE {
+            assert_eq!(leaves_of_slot[slot], 0, "padding slot {slot} in a leaf");
+        } else {
+            assert_eq!(leaves_of_slot[slot], 1, "slot {slot}");
+            assert!(!std::mem::replace(&mut seen[member as usize], true), "triangle {member} twice");
+        }
+    }
+    assert!(seen.iter().all(|&s| s), "every triangle in a leaf");
+    assert!(blas.group_members.contains(&leaves::NO_PRIMITIVE), "some leaf needed padding");
+}

@@ -137,6 +137,11 @@ impl WideBvh {
         }
     }
 
+    /// Every leaf's `(first, count)`, in node order.
+    pub(super) fn leaves(&self) -> impl Iterator<Item = (u32, u32)> + '_ {
+        self.nodes.iter().flat_map(|n| (0..8).filter(|&i| n.count[i] != 0).map(|i| (n.child[i], n.count[i])))
+    }
+
     /// Bytes held by the nodes.
     pub(super) fn bytes(&self) -> usize {
         self.nodes.len() * std::mem::size_of::<Node>()
@@ -266,45 +271,67 @@ pub(super) fn any(bvh: &WideBvh, ray: &WideRay, tmax: f32, mut on_leaf: impl FnM
     any_with(bvh, ray, tmax, &mut on_leaf, scalar_hits)
 }
 
+/// A leaf test of the closest-hit traversal: `test(tmax, first, count)` tests the leaf's
+/// primitives against the ray shortened to `tmax` and returns the closest hit's distance, or
+/// anything not below `tmax` for none. A closure is one; a BLAS's leaf test is a struct whose
+/// `test` is `#[inline(always)]`, so that it inlines into a traversal compiled for AVX2 (a
+/// closure inlines only if the optimiser finds it cheap, and is compiled without AVX2: the
+/// block test it calls then stays out of line).
+pub(super) trait ClosestLeaf {
+    /// See [`ClosestLeaf`].
+    fn test(&mut self, tmax: f32, first: u32, count: u32) -> f32;
+}
+
+impl<F: FnMut(f32, u32, u32) -> f32> ClosestLeaf for F {
+    #[inline(always)]
+    fn test(&mut self, tmax: f32, first: u32, count: u32) -> f32 {
+        self(tmax, first, count)
+    }
+}
+
+/// A leaf test of the occlusion traversal: whether any of the leaf's primitives is hit (as
+/// [`ClosestLeaf`]).
+pub(super) trait AnyLeaf {
+    /// See [`AnyLeaf`].
+    fn test(&mut self, first: u32, count: u32) -> bool;
+}
+
+impl<F: FnMut(u32, u32) -> bool> AnyLeaf for F {
+    #[inline(always)]
+    fn test(&mut self, first: u32, count: u32) -> bool {
+        self(first, count)
+    }
+}
+
 /// [`closest`] on the AVX2 path or not, chosen by the caller: `AVX2` is true only where the
 /// CPU has AVX2, in a caller compiled for it, so that the node test and `on_leaf` inline.
 #[inline(always)]
-pub(super) fn closest_in<const AVX2: bool>(
-    bvh: &WideBvh,
-    ray: &WideRay,
-    tmax: f32,
-    mut on_leaf: impl FnMut(f32, u32, u32) -> f32,
-) {
+pub(super) fn closest_in<const AVX2: bool>(bvh: &WideBvh, ray: &WideRay, tmax: f32, on_leaf: &mut impl ClosestLeaf) {
     #[cfg(target_arch = "x86_64")]
     if AVX2 {
         // SAFETY: `AVX2` is true only where the CPU has AVX2.
         let hits = |node: &Node, ray: &WideRay, tmax: f32| unsafe { avx2::node_hits(node, ray, tmax) };
-        closest_with(bvh, ray, tmax, &mut on_leaf, hits);
+        closest_with(bvh, ray, tmax, on_leaf, hits);
         return;
     }
-    closest_with(bvh, ray, tmax, &mut on_leaf, scalar_hits);
+    closest_with(bvh, ray, tmax, on_leaf, scalar_hits);
 }
 
 /// [`any`] on the AVX2 path or not, chosen by the caller (see [`closest_in`]).
 #[inline(always)]
-pub(super) fn any_in<const AVX2: bool>(
-    bvh: &WideBvh,
-    ray: &WideRay,
-    tmax: f32,
-    mut on_leaf: impl FnMut(u32, u32) -> bool,
-) -> bool {
+pub(super) fn any_in<const AVX2: bool>(bvh: &WideBvh, ray: &WideRay, tmax: f32, on_leaf: &mut impl AnyLeaf) -> bool {
     #[cfg(target_arch = "x86_64")]
     if AVX2 {
         // SAFETY: `AVX2` is true only where the CPU has AVX2.
         let hits = |node: &Node, ray: &WideRay, tmax: f32| unsafe { avx2::node_hits(node, ray, tmax) };
-        return any_with(bvh, ray, tmax, &mut on_leaf, hits);
+        return any_with(bvh, ray, tmax, on_leaf, hits);
     }
-    any_with(bvh, ray, tmax, &mut on_leaf, scalar_hits)
+    any_with(bvh, ray, tmax, on_leaf, scalar_hits)
 }
 
 /// [`closest`] with the node test `hits`.
 #[inline(always)]
-fn closest_with<F: FnMut(f32, u32, u32) -> f32>(
+fn closest_with<F: ClosestLeaf>(
     bvh: &WideBvh,
     ray: &WideRay,
     mut tmax: f32,
@@ -354,7 +381,7 @@ fn closest_with<F: FnMut(f32, u32, u32) -> f32>(
                 descend = true;
             }
         } else {
-            let t = on_leaf(tmax, next.child, next.count);
+            let t = on_leaf.test(tmax, next.child, next.count);
             if t < tmax {
                 tmax = t;
             }
@@ -379,7 +406,7 @@ fn closest_with<F: FnMut(f32, u32, u32) -> f32>(
 
 /// [`any`] with the node test `hits`.
 #[inline(always)]
-fn any_with<F: FnMut(u32, u32) -> bool>(
+fn any_with<F: AnyLeaf>(
     bvh: &WideBvh,
     ray: &WideRay,
     tmax: f32,
@@ -407,7 +434,7 @@ fn any_with<F: FnMut(u32, u32) -> bool>(
             let i = mask.trailing_zeros() as usize;
             mask &= mask - 1;
             if n.count[i] != 0 {
-                if on_leaf(n.child[i], n.count[i]) {
+                if on_leaf.test(n.child[i], n.count[i]) {
                     return true;
                 }
             } else {
