@@ -2,7 +2,8 @@
 //! speed-vs-accuracy chart. For a dielectric coat (index 1.5) over a diffuse base of albedo 0.5
 //! per coat roughness and angle: the directional albedo each mode renders (by sampling, as the
 //! integrator does) and their gap, and the time per `sample` + `eval` pair of each mode. The
-//! report adds the stacks the walk also covers (a coat over glass, fuzz over a coat), not charted.
+//! report adds the stacks the walk also covers (a coat over glass, fuzz over a coat, OpenPBR's coat over
+//! its specular layer over the diffuse), not charted.
 
 use crate::cli::plot::Series;
 use glam::{Vec2, Vec3};
@@ -157,12 +158,27 @@ fn stacks_beyond_the_chart(out: &mut String, samples: usize) {
             (ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, r, 0.0], 1.0, 1),
             (ClosureKind::Diffuse, &[BASE_ALBEDO; 3], 1.0, 3),
         ]);
-        let mut line = format!("fuzz over coat r={r} over diffuse {BASE_ALBEDO}, E:");
-        for mu in [1.0f32, 0.5, 0.2] {
-            let a = directional_albedo(&ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling), mu, samples, 1);
-            let w = directional_albedo(&ClosureBsdf::from_sum(&sum, LayeringMode::RandomWalk), mu, samples, 2);
-            write!(line, " cos θo {mu}: scaling {a:.4}, walk {w:.4};").unwrap();
-        }
-        writeln!(out, "layer modes: {line}").unwrap();
+        albedo_line(out, &format!("fuzz over coat r={r} over diffuse {BASE_ALBEDO}"), &sum, samples);
     }
+    // OpenPBR's stack: a coat (η 1.6) over its specular layer (η 1.5) over the diffuse base.
+    for (coat_r, specular_r) in [(0.0f32, 0.3f32), (0.3, 0.6)] {
+        let sum = closure(&[
+            (ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.6, coat_r, 0.0], 1.0, 0),
+            (ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, specular_r, 0.0], 1.0, 1),
+            (ClosureKind::Diffuse, &[BASE_ALBEDO; 3], 1.0, 3),
+        ]);
+        let name = format!("coat r={coat_r} over specular r={specular_r} over diffuse {BASE_ALBEDO}");
+        albedo_line(out, &name, &sum, samples);
+    }
+}
+
+/// A report line: the directional albedo of `sum` in each mode at three angles.
+fn albedo_line(out: &mut String, name: &str, sum: &ClosureSum, samples: usize) {
+    let mut line = format!("{name}, E:");
+    for mu in [1.0f32, 0.5, 0.2] {
+        let a = directional_albedo(&ClosureBsdf::from_sum(sum, LayeringMode::AlbedoScaling), mu, samples, 1);
+        let w = directional_albedo(&ClosureBsdf::from_sum(sum, LayeringMode::RandomWalk), mu, samples, 2);
+        write!(line, " cos θo {mu}: scaling {a:.4}, walk {w:.4};").unwrap();
+    }
+    writeln!(out, "layer modes: {line}").unwrap();
 }

@@ -165,6 +165,9 @@ pub struct ClosureBsdf {
     /// Whether any term lies under another.
     pub(crate) layered: bool,
     pub(crate) mode: LayeringMode,
+    /// The stack the random walk follows, found once when the closure is decoded (`None` in
+    /// albedo-scaling mode, without layers, or where the walk falls back to albedo scaling).
+    pub(crate) walk: Option<walk::Stack>,
 }
 
 /// Equal when the used terms are: the unused ones are all empty, and comparing them would cost
@@ -251,19 +254,21 @@ impl ClosureBsdf {
             lobes[len] = (Lobe::from_term(t), weight, above);
             len += 1;
         }
-        self.set_lobes(&lobes[..len], mode);
+        self.set_lobes_finding(&lobes[..len], mode, false);
         if self.layered && mode == LayeringMode::RandomWalk {
             for (k, &p) in position.iter().enumerate() {
                 if p < len {
                     self.terms[p].darkening = darkening(&terms[k]);
                 }
             }
+            // The walk's stack reads the darkening.
+            self.walk = walk::stack(self);
         }
     }
 
     /// The closure with no terms (black).
     pub fn empty(mode: LayeringMode) -> ClosureBsdf {
-        ClosureBsdf { terms: [EMPTY_TERM; MAX_CLOSURE_TERMS], len: 0, layered: false, mode }
+        ClosureBsdf { terms: [EMPTY_TERM; MAX_CLOSURE_TERMS], len: 0, layered: false, mode, walk: None }
     }
 
     /// Builds the BSDF of `(lobe, weight, above)` terms (at most [`MAX_CLOSURE_TERMS`]).
@@ -276,9 +281,15 @@ impl ClosureBsdf {
     /// [`ClosureBsdf::from_lobes`] in place. Only the slots in use before or after are
     /// written: the unused ones stay empty.
     pub fn set_lobes(&mut self, lobes: &[(Lobe, Vec3, u8)], mode: LayeringMode) {
+        self.set_lobes_finding(lobes, mode, true);
+    }
+
+    /// [`ClosureBsdf::set_lobes`], finding the walk's stack or not (`set_terms` finds it once
+    /// the darkening is known).
+    fn set_lobes_finding(&mut self, lobes: &[(Lobe, Vec3, u8)], mode: LayeringMode, find_walk: bool) {
         let b = self;
         let old_len = b.len;
-        (b.len, b.layered, b.mode) = (0, false, mode);
+        (b.len, b.layered, b.mode, b.walk) = (0, false, mode, None);
         let mut covered = 0u8;
         for &(_, _, above) in lobes {
             covered |= above;
@@ -319,6 +330,9 @@ impl ClosureBsdf {
                 let norm = if t.lobe.is_diffuse() { average[i] } else { maximum[i] };
                 t.inv_norm = Vec3::select(norm.cmpgt(Vec3::splat(1e-6)), norm.recip(), Vec3::ZERO);
             }
+            if find_walk && mode == LayeringMode::RandomWalk {
+                b.walk = walk::stack(b);
+            }
         }
     }
 
@@ -333,6 +347,7 @@ impl ClosureBsdf {
             return;
         }
         let mut i = 0;
+        let mut tilted = false;
         for t in terms.iter() {
             if !is_live(t) {
                 continue;
@@ -351,9 +366,14 @@ impl ClosureBsdf {
                         n = (n + wo * (side * (MIN_TILTED_COS - cos))).normalize();
                     }
                     self.terms[i].tilt = Some(Quat::from_rotation_arc(n, Vec3::Z));
+                    tilted = true;
                 }
             }
             i += 1;
+        }
+        if tilted && self.walk.is_some() {
+            // A tilted term is not walked ([`walk::stack`] falls back).
+            self.walk = walk::stack(self);
         }
     }
 
@@ -530,8 +550,7 @@ impl ClosureBsdf {
 
     /// Whether a non-delta term transmits (light sampling must then cover both sides).
     pub fn transmits(&self) -> bool {
-        self.terms().iter().any(|t| t.lobe.transmits())
-            || (self.layered && self.mode == LayeringMode::RandomWalk && walk::transmits(self))
+        self.terms().iter().any(|t| t.lobe.transmits()) || walk::transmits(self)
     }
 
     /// Whether a term tells inside from outside, so the shading frame keeps the outward side.
