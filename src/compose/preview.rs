@@ -375,14 +375,15 @@ impl<'s> Builder<'_, 's> {
                 let function = mtlx::node_function(id).filter(|f| self.lib.shaders.contains_key(f.as_str()));
                 let Some(function) = function else {
                     if self.reported.insert(id.to_string()) {
-                        self.diags.push(
-                            Diagnostic::warning(format!(
-                                "MaterialX node `{id}` is not implemented by strata; the inputs it drives take their own value or default"
-                            ))
-                            .at(prim.attribute("info:id").map_or(prim.span, |a| a.span), "unsupported node")
-                            .also(at, "connected here")
-                            .note("README, MaterialX, lists the nodes strata implements"),
-                        );
+                        let mut d = Diagnostic::warning(format!(
+                            "MaterialX node `{id}` is not implemented by strata; the inputs it drives take their own value or default"
+                        ))
+                        .at(prim.attribute("info:id").map_or(prim.span, |a| a.span), "unsupported node")
+                        .also(at, "connected here");
+                        if let Some(why) = why_unsupported(id) {
+                            d = d.note(why);
+                        }
+                        self.diags.push(d.note("README, MaterialX, lists the nodes strata implements"));
                     }
                     return None;
                 };
@@ -616,6 +617,16 @@ impl<'s> Builder<'_, 's> {
             _ => {}
         }
     }
+}
+
+/// Why strata cannot implement MaterialX node `id`, where one reason covers a family of nodes.
+fn why_unsupported(id: &str) -> Option<&'static str> {
+    let (node, types) = mtlx::split_id(id)?;
+    if types.contains("matrix") || types.ends_with("M3") || types.ends_with("M4") || node.contains("matrix") {
+        return Some("matrices (matrix33, matrix44) are not a strata type: no value or connection can carry one");
+    }
+    (node == "heighttonormal")
+        .then_some("it needs the screen-space derivatives of its height input, which strata's shading does not compute")
 }
 
 /// Inputs of the UsdPreviewSurface specification that strata reads no value from: authored,

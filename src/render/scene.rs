@@ -4,10 +4,10 @@
 use crate::abi::MaterialCode;
 use crate::diag::{Diagnostic, Diagnostics};
 use crate::render::camera::Camera;
+use crate::render::geometry::accel::Hit;
 use crate::render::geometry::accel::{Accel, Blas};
 use crate::render::geometry::displace::{DicingOptions, DisplacementStats};
 use crate::render::geometry::motion::{self, MotionKeys, MotionStats, Shutter};
-use crate::render::geometry::accel::Hit;
 use crate::render::geometry::primvars::{ObjectSpace, PrimvarTable};
 use crate::render::geometry::xform::{PrimXform, world_transforms};
 use crate::render::geometry::{self, GeomPrim, InstanceDesc};

@@ -590,7 +590,8 @@ impl<'s> Builder<'s> {
         for (j, id) in members.into_iter().enumerate() {
             let index = self.prim_index(stage.prim(id));
             self.geometry.instance_prims.push(index);
-            self.geometry.prims[index as usize].object = self.geometry.prototypes[prototype as usize].prim_spaces.get(j).copied().unwrap_or_default();
+            self.geometry.prims[index as usize].object =
+                self.geometry.prototypes[prototype as usize].prim_spaces.get(j).copied().unwrap_or_default();
         }
         let to_world = self.xforms[root.0 as usize].world;
         self.place(root, prototype, start, to_world, None, diags);
@@ -896,7 +897,8 @@ impl Builder<'_> {
                     for (j, m) in members.into_iter().enumerate() {
                         let index = self.prim_index(stage.prim(m));
                         self.geometry.instance_prims.push(index);
-                        self.geometry.prims[index as usize].object = self.geometry.prototypes[p as usize].prim_spaces.get(j).copied().unwrap_or_default();
+                        self.geometry.prims[index as usize].object =
+                            self.geometry.prototypes[p as usize].prim_spaces.get(j).copied().unwrap_or_default();
                     }
                     self.prototype_of.insert(key, (p, start));
                     (p, start)
