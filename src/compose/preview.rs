@@ -311,12 +311,12 @@ struct Builder<'a, 's> {
     reported: &'a mut HashSet<String>,
 }
 
-/// Whether MaterialX geometry node `id` reads `space` as the document means it: world space
-/// everywhere, and object space for `position` (a mesh's own points,
-/// `render::geometry::primvars::OBJECT_POSITION`; `model` is read as object). One rule for an
-/// authored `space` and for the default one.
-fn reads_space_as_authored(id: &str, space: &str) -> bool {
-    space == "world" || (id.starts_with("ND_position_") && space == "object")
+/// Whether strata reads MaterialX space `space` (of a geometry node's `space`, a transform's
+/// `fromspace`/`tospace`) as the document means it: world space (and "", the working space),
+/// and object space, the prim's own (`render::geometry::primvars::OBJECT_TO_WORLD`). `model`
+/// is read as object space, any other name as world space.
+fn reads_space_as_authored(space: &str) -> bool {
+    matches!(space, "" | "world" | "object")
 }
 
 impl<'s> Builder<'_, 's> {
@@ -375,14 +375,15 @@ impl<'s> Builder<'_, 's> {
                 let function = mtlx::node_function(id).filter(|f| self.lib.shaders.contains_key(f.as_str()));
                 let Some(function) = function else {
                     if self.reported.insert(id.to_string()) {
-                        self.diags.push(
-                            Diagnostic::warning(format!(
-                                "MaterialX node `{id}` is not implemented by strata; the inputs it drives take their own value or default"
-                            ))
-                            .at(prim.attribute("info:id").map_or(prim.span, |a| a.span), "unsupported node")
-                            .also(at, "connected here")
-                            .note("README, MaterialX, lists the nodes strata implements"),
-                        );
+                        let mut d = Diagnostic::warning(format!(
+                            "MaterialX node `{id}` is not implemented by strata; the inputs it drives take their own value or default"
+                        ))
+                        .at(prim.attribute("info:id").map_or(prim.span, |a| a.span), "unsupported node")
+                        .also(at, "connected here");
+                        if let Some(why) = why_unsupported(id) {
+                            d = d.note(why);
+                        }
+                        self.diags.push(d.note("README, MaterialX, lists the nodes strata implements"));
                     }
                     return None;
                 };
@@ -485,7 +486,6 @@ impl<'s> Builder<'_, 's> {
         if id == "UsdUVTexture" || self.lib.function(func_id).param("decode").is_some() {
             self.load_texture(prim, func_id, &mut args);
         }
-        self.report_default_space(id, func_id, &args, prim.span);
         let node = self.nodes.len();
         self.nodes.push(NodeInstance {
             name: prim.path.rsplit('/').next().unwrap_or("shader").to_string(),
@@ -495,30 +495,6 @@ impl<'s> Builder<'_, 's> {
         });
         self.memo.insert(prim.path.clone(), Some(node));
         Some(node)
-    }
-
-    /// Reports a MaterialX geometry node left in its default space, object space, where strata
-    /// reads it in world space ([`reads_space_as_authored`]: today `normal`/`tangent`/
-    /// `bitangent`). The two agree only on prims without a transform, so the difference is
-    /// said, never silent.
-    fn report_default_space(&mut self, id: &str, func: crate::front::hir::FuncId, args: &[Option<Source>], span: Span) {
-        const OBJECT_BY_DEFAULT: [&str; 4] = ["ND_position_", "ND_normal_", "ND_tangent_", "ND_bitangent_"];
-        if !OBJECT_BY_DEFAULT.iter().any(|p| id.starts_with(p)) || reads_space_as_authored(id, "object") {
-            return;
-        }
-        let Some((index, _)) = self.lib.function(func).param("space") else { return };
-        if args[index].is_some() {
-            return;
-        }
-        let node = id.strip_prefix("ND_").and_then(|n| n.split('_').next()).unwrap_or(id);
-        self.diags.push(
-            Diagnostic::warning(format!(
-                "`{node}` without `space` reads world space where MaterialX's default is object space"
-            ))
-            .at(span, "this node")
-            .note("object and world space agree for prims without a transform; set `space` to `world` to say so")
-            .kind("MaterialX space approximated"),
-        );
     }
 
     /// What drives the fourth channel of a 4-channel input connected to `source` (of type
@@ -619,28 +595,19 @@ impl<'s> Builder<'_, 's> {
                         .kind("MaterialX filtertype approximated"),
                 );
             }
-            (_, "space") if id.starts_with("ND_position_") && token == "model" => {
+            (_, "space" | "fromspace" | "tospace") if token == "model" => {
                 self.diags.push(
-                    Diagnostic::warning("`position` `space` `model` is read as object space")
+                    Diagnostic::warning(format!("`{input}` `model` is read as object space"))
                         .at(span, "this value")
                         .note("model and object space agree for a prim that is its own model")
                         .kind("MaterialX space approximated"),
                 );
             }
-            (_, "space") if !reads_space_as_authored(id, token) => {
+            (_, "space" | "fromspace" | "tospace") if !reads_space_as_authored(token) => {
                 self.diags.push(
-                    Diagnostic::warning(format!("geometry `space` `{token}` is read in world space"))
+                    Diagnostic::warning(format!("`{input}` `{token}` is read as world space"))
                         .at(span, "this value")
-                        .note("object and world space agree for prims without a transform")
-                        .kind("MaterialX space approximated"),
-                );
-            }
-            // transformpoint/vector/normal: "" is the working space, which is world space.
-            (_, "fromspace" | "tospace") if !token.is_empty() && token != "world" => {
-                self.diags.push(
-                    Diagnostic::warning(format!("transform `{input}` `{token}` is read as world space"))
-                        .at(span, "this value")
-                        .note("strata shades in world space: a transform between spaces is the identity")
+                        .note("strata knows world, object and model (read as object) space")
                         .kind("MaterialX space approximated"),
                 );
             }
@@ -650,6 +617,16 @@ impl<'s> Builder<'_, 's> {
             _ => {}
         }
     }
+}
+
+/// Why strata cannot implement MaterialX node `id`, where one reason covers a family of nodes.
+fn why_unsupported(id: &str) -> Option<&'static str> {
+    let (node, types) = mtlx::split_id(id)?;
+    if types.contains("matrix") || types.ends_with("M3") || types.ends_with("M4") || node.contains("matrix") {
+        return Some("matrices (matrix33, matrix44) are not a strata type: no value or connection can carry one");
+    }
+    (node == "heighttonormal")
+        .then_some("it needs the screen-space derivatives of its height input, which strata's shading does not compute")
 }
 
 /// Inputs of the UsdPreviewSurface specification that strata reads no value from: authored,

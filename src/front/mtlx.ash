@@ -252,26 +252,69 @@ shader mx_constant_color3(color value = color(0.0), output color out) { out = va
 shader mx_dot_float(float in_ = 0.0, output float out) { out = in_; }
 shader mx_dot_color3(color in_ = color(0.0), output color out) { out = in_; }
 
-// ---- geometry: world space, but `position` in object (and model) space, MaterialX's default:
-// the mesh's own points, blended at the hit (`strata:Pobject`; world `P` where geometry does not
-// make it, reported). normal/tangent/bitangent read world space; compose reports their `space`.
+// ---- geometry: MaterialX's spaces. Object space (and model, read as object) is the prim's own.
+// `position` there is the mesh's own points blended at the hit (`strata:Pobject`), elsewhere the
+// world point carried back by the prim's world-to-object transform; normal, tangent, bitangent
+// and the space transforms (mtlx_stdlib.ash) carry world-space values by the transforms the
+// integrator gives the hit: `strata:objectToWorld0..3` and `strata:worldToObject0..3`, their
+// columns (axes, then translation; render::geometry::primvars::OBJECT_TO_WORLD). Where nothing
+// fills them they read the identity: object space is then world space.
+
+vector mx_object_to_world_vector(vector d) {
+    return primvar_vector("strata:objectToWorld0", vector(1, 0, 0)) * d.x
+        + primvar_vector("strata:objectToWorld1", vector(0, 1, 0)) * d.y
+        + primvar_vector("strata:objectToWorld2", vector(0, 0, 1)) * d.z;
+}
+vector mx_world_to_object_vector(vector d) {
+    return primvar_vector("strata:worldToObject0", vector(1, 0, 0)) * d.x
+        + primvar_vector("strata:worldToObject1", vector(0, 1, 0)) * d.y
+        + primvar_vector("strata:worldToObject2", vector(0, 0, 1)) * d.z;
+}
+vector mx_object_to_world_point(vector p) {
+    return mx_object_to_world_vector(p) + primvar_vector("strata:objectToWorld3", vector(0, 0, 0));
+}
+vector mx_world_to_object_point(vector p) {
+    return mx_world_to_object_vector(p) + primvar_vector("strata:worldToObject3", vector(0, 0, 0));
+}
+// A normal goes by the inverse transpose of the points' transform: a row of the result is a
+// column of the other direction's matrix dotted with it. Normalized (0 stays 0).
+vector mx_unit_or_zero(vector d) { return length(d) > 0.0 ? normalize(d) : d; }
+vector mx_world_to_object_normal(vector n) {
+    return mx_unit_or_zero(vector(dot(primvar_vector("strata:objectToWorld0", vector(1, 0, 0)), n),
+                                  dot(primvar_vector("strata:objectToWorld1", vector(0, 1, 0)), n),
+                                  dot(primvar_vector("strata:objectToWorld2", vector(0, 0, 1)), n)));
+}
+vector mx_object_to_world_normal(vector n) {
+    return mx_unit_or_zero(vector(dot(primvar_vector("strata:worldToObject0", vector(1, 0, 0)), n),
+                                  dot(primvar_vector("strata:worldToObject1", vector(0, 1, 0)), n),
+                                  dot(primvar_vector("strata:worldToObject2", vector(0, 0, 1)), n)));
+}
+// A world-space tangent direction in `space` (object or model: the prim's own), normalized.
+vector mx_tangent_in(string space, vector t) {
+    return space == "world" ? t : mx_unit_or_zero(mx_world_to_object_vector(t));
+}
 
 shader mx_texcoord_color3(int index = 0, output color out) { out = color(u, v, 0.0); }
 shader mx_position_color3(string space = "object", output color out) {
     if (space == "world") {
         out = color(P);
     } else {
-        out = primvar("strata:Pobject", color(P));
+        out = primvar("strata:Pobject", color(mx_world_to_object_point(vector(P))));
     }
 }
-shader mx_normal_color3(string space = "object", output color out) { out = color(N); }
+shader mx_normal_color3(string space = "object", output color out) {
+    out = space == "world" ? color(N) : color(mx_world_to_object_normal(vector(N)));
+}
 shader mx_tangent_color3(string space = "object", int index = 0, output color out) {
     vector t = dPdu - N * dot(N, dPdu);
-    out = length(t) > 1e-8 ? color(normalize(t)) : color(0.0);
+    out = length(t) > 1e-8 ? color(mx_tangent_in(space, normalize(t))) : color(0.0);
 }
+// The bitangent completes the frame in the space asked for: normal × tangent there (a
+// non-uniform scale does not keep world-space right angles).
 shader mx_bitangent_color3(string space = "object", int index = 0, output color out) {
     vector t = dPdu - N * dot(N, dPdu);
-    out = length(t) > 1e-8 ? color(cross(N, normalize(t))) : color(0.0);
+    vector n = space == "world" ? vector(N) : mx_world_to_object_normal(vector(N));
+    out = length(t) > 1e-8 ? color(cross(n, mx_tangent_in(space, normalize(t)))) : color(0.0);
 }
 shader mx_geompropvalue_float(string geomprop = "", float default_ = 0.0, output float out) {
     out = primvar_float(geomprop, default_);
@@ -294,10 +337,10 @@ shader mx_noise2d_color3(color amplitude = color(1.0), float pivot = 0.0, color 
     point p = point(texcoord.r, texcoord.g, 0.0);
     out = color(snoise(p), snoise(p + point(19.1, 7.3, 0.0)), snoise(p + point(3.7, 41.9, 0.0))) * amplitude + color(pivot);
 }
-shader mx_noise3d_float(float amplitude = 1.0, float pivot = 0.0, color position = primvar("strata:Pobject", color(P)), output float out) {
+shader mx_noise3d_float(float amplitude = 1.0, float pivot = 0.0, color position = primvar("strata:Pobject", color(mx_world_to_object_point(vector(P)))), output float out) {
     out = snoise(point(position)) * amplitude + pivot;
 }
-shader mx_noise3d_color3(color amplitude = color(1.0), float pivot = 0.0, color position = primvar("strata:Pobject", color(P)), output color out) {
+shader mx_noise3d_color3(color amplitude = color(1.0), float pivot = 0.0, color position = primvar("strata:Pobject", color(mx_world_to_object_point(vector(P)))), output color out) {
     point p = point(position);
     out = color(snoise(p), snoise(p + point(19.1, 7.3, 5.2)), snoise(p + point(3.7, 41.9, 13.3))) * amplitude + color(pivot);
 }
@@ -315,18 +358,18 @@ float mx_fractal(point p, int octaves, float lacunarity, float diminish) {
     return sum;
 }
 shader mx_fractal3d_float(float amplitude = 1.0, int octaves = 3, float lacunarity = 2.0, float diminish = 0.5,
-                          color position = primvar("strata:Pobject", color(P)), output float out) {
+                          color position = primvar("strata:Pobject", color(mx_world_to_object_point(vector(P)))), output float out) {
     out = mx_fractal(point(position), octaves, lacunarity, diminish) * amplitude;
 }
 shader mx_cellnoise2d_float(color texcoord = color(u, v, 0.0), output float out) {
     out = cellnoise(point(texcoord.r, texcoord.g, 0.0));
 }
-shader mx_cellnoise3d_float(color position = primvar("strata:Pobject", color(P)), output float out) { out = cellnoise(point(position)); }
+shader mx_cellnoise3d_float(color position = primvar("strata:Pobject", color(mx_world_to_object_point(vector(P)))), output float out) { out = cellnoise(point(position)); }
 // worleynoise: distance to the nearest jittered feature point (F1, jitter fixed at 1).
 shader mx_worleynoise2d_float(color texcoord = color(u, v, 0.0), float jitter = 1.0, output float out) {
     out = cellular(point(texcoord.r, texcoord.g, 0.0));
 }
-shader mx_worleynoise3d_float(color position = primvar("strata:Pobject", color(P)), float jitter = 1.0, output float out) { out = cellular(point(position)); }
+shader mx_worleynoise3d_float(color position = primvar("strata:Pobject", color(mx_world_to_object_point(vector(P)))), float jitter = 1.0, output float out) { out = cellular(point(position)); }
 
 // Ramps and splits along u (left to right) and v (bottom to top).
 shader mx_ramplr_float(float valuel = 0.0, float valuer = 0.0, color texcoord = color(u, v, 0.0), output float out) {

@@ -93,18 +93,32 @@ shader mx_mincomponent_vector2(color in_ = color(0.0), output float out) { out =
 shader mx_maxcomponent_vector2(color in_ = color(0.0), output float out) { out = max(in_.r, in_.g); }
 
 // ---- math: space transforms -------------------------------------------------------------------
-// strata shades in world space and every space reads as world (compose reports a `fromspace`
-// or `tospace` other than world or the working space ""), so a transform between the spaces it
-// knows is the identity.
+// Between world ("" is the working space, world) and object (model is read as object, and
+// compose reports it) by the hit's transforms (mtlx.ash, geometry); any other space reads as
+// world (reported). A normal goes by the inverse transpose and comes out normalized, as
+// MaterialX's generated code does.
+float mx_is_object_space(string space) { return space == "object" || space == "model" ? 1.0 : 0.0; }
 shader mx_transformpoint_color3(color in_ = color(0.0), string fromspace = "", string tospace = "", output color out) {
-    out = in_;
+    vector p = vector(in_);
+    if (mx_is_object_space(fromspace) != mx_is_object_space(tospace)) {
+        p = mx_is_object_space(fromspace) > 0.0 ? mx_object_to_world_point(p) : mx_world_to_object_point(p);
+    }
+    out = color(p);
 }
 shader mx_transformvector_color3(color in_ = color(0.0), string fromspace = "", string tospace = "", output color out) {
-    out = in_;
+    vector d = vector(in_);
+    if (mx_is_object_space(fromspace) != mx_is_object_space(tospace)) {
+        d = mx_is_object_space(fromspace) > 0.0 ? mx_object_to_world_vector(d) : mx_world_to_object_vector(d);
+    }
+    out = color(d);
 }
 shader mx_transformnormal_color3(color in_ = color(0.0, 0.0, 1.0), string fromspace = "", string tospace = "",
                                  output color out) {
-    out = in_;
+    vector n = vector(in_);
+    if (mx_is_object_space(fromspace) != mx_is_object_space(tospace)) {
+        n = mx_is_object_space(fromspace) > 0.0 ? mx_object_to_world_normal(n) : mx_world_to_object_normal(n);
+    }
+    out = color(n);
 }
 
 // ---- shapes: 1 inside, 0 outside (boundaries inside) --------------------------------------------
@@ -274,7 +288,7 @@ shader mx_noise2d_color4(color amplitude = color(1.0), float amplitude_a = 1.0, 
     out = color(snoise(p), snoise(p + point(19.1, 7.3, 0.0)), snoise(p + point(3.7, 41.9, 0.0))) * amplitude + color(pivot);
     out_a = snoise(p + point(19.0, 73.0, 0.0)) * amplitude_a + pivot;
 }
-shader mx_noise3d_color4(color amplitude = color(1.0), float amplitude_a = 1.0, float pivot = 0.0, color position = primvar("strata:Pobject", color(P)),
+shader mx_noise3d_color4(color amplitude = color(1.0), float amplitude_a = 1.0, float pivot = 0.0, color position = primvar("strata:Pobject", color(mx_world_to_object_point(vector(P)))),
                          output color out, output float out_a) {
     point p = point(position);
     out = color(snoise(p), snoise(p + point(19.1, 7.3, 5.2)), snoise(p + point(3.7, 41.9, 13.3))) * amplitude + color(pivot);
@@ -304,11 +318,11 @@ color mx_fractal3d(color position, int octaves, float lacunarity, float diminish
                  mx_fractal(p + point(3.7, 41.9, 13.3), octaves, lacunarity, diminish));
 }
 shader mx_fractal3d_color3(color amplitude = color(1.0), int octaves = 3, float lacunarity = 2.0, float diminish = 0.5,
-                           color position = primvar("strata:Pobject", color(P)), output color out) {
+                           color position = primvar("strata:Pobject", color(mx_world_to_object_point(vector(P)))), output color out) {
     out = mx_fractal3d(position, octaves, lacunarity, diminish) * amplitude;
 }
 shader mx_fractal3d_color4(color amplitude = color(1.0), float amplitude_a = 1.0, int octaves = 3, float lacunarity = 2.0,
-                           float diminish = 0.5, color position = primvar("strata:Pobject", color(P)), output color out, output float out_a) {
+                           float diminish = 0.5, color position = primvar("strata:Pobject", color(mx_world_to_object_point(vector(P)))), output color out, output float out_a) {
     out = mx_fractal3d(position, octaves, lacunarity, diminish) * amplitude;
     out_a = mx_fractal(point(position) + point(19.0, 193.0, 17.0), octaves, lacunarity, diminish) * amplitude_a;
 }

@@ -4,10 +4,11 @@
 use crate::abi::MaterialCode;
 use crate::diag::{Diagnostic, Diagnostics};
 use crate::render::camera::Camera;
+use crate::render::geometry::accel::Hit;
 use crate::render::geometry::accel::{Accel, Blas};
 use crate::render::geometry::displace::{DicingOptions, DisplacementStats};
 use crate::render::geometry::motion::{self, MotionKeys, MotionStats, Shutter};
-use crate::render::geometry::primvars::PrimvarTable;
+use crate::render::geometry::primvars::{ObjectSpace, PrimvarTable};
 use crate::render::geometry::xform::{PrimXform, world_transforms};
 use crate::render::geometry::{self, GeomPrim, InstanceDesc};
 use crate::render::light::emitter::Emitters;
@@ -250,6 +251,16 @@ impl Scene {
     #[inline]
     pub fn has_motion(&self) -> bool {
         self.camera_motion.is_some() || self.accel.has_motion()
+    }
+
+    /// The object space of renderable prim `prim` relative to the world where a ray at time
+    /// `time` made `hit` on it: its own transform, placed by its instance's when it is instanced.
+    pub fn object_space(&self, hit: &Hit, prim: u32, time: f32) -> ObjectSpace {
+        let own = self.prims.get(prim as usize).map_or(ObjectSpace::IDENTITY, |p| p.object);
+        match self.accel.instance_transforms(hit, time) {
+            Some((to_object, to_world)) => own.placed(&to_world, &to_object),
+            None => own,
+        }
     }
 
     /// Whether renderable prim `prim`'s surface was diced and displaced.
@@ -583,38 +594,6 @@ fn instances_at(
     placeable.then_some(out)
 }
 
-/// Warns (once) where a material reads the object-space position
-/// ([`crate::render::geometry::primvars::OBJECT_POSITION`]) on a prim that is not a mesh:
-/// geometry makes it from a mesh's own points only, so an analytic shape or Points reads the
-/// fallback, world `P`.
-fn report_object_space_off_meshes(
-    stage: &Stage,
-    prims: &[geometry::GeomPrim],
-    prim_material: &[usize],
-    materials: &[&dyn MaterialCode],
-    diags: &mut Diagnostics,
-) {
-    use crate::render::geometry::primvars::OBJECT_POSITION;
-    let reads =
-        |m: usize| materials.get(m).is_some_and(|c| c.info().primvars.iter().any(|p| p.name == OBJECT_POSITION));
-    for (prim, &m) in prims.iter().zip(prim_material) {
-        let Some(id) = stage.find(&prim.path) else { continue };
-        let kind = stage.prim(id).type_name.as_deref().unwrap_or("prim");
-        if matches!(kind, "Mesh" | "GeomSubset") || !reads(m) {
-            continue;
-        }
-        diags.push(
-            Diagnostic::warning(format!(
-                "`{}`: its material reads the object-space position, which strata makes for meshes only; this {kind} reads world space",
-                prim.path
-            ))
-            .at(prim.span, "this prim")
-            .note("object and world space agree for prims without a transform")
-            .kind("object space on a shape"),
-        );
-    }
-}
-
 impl Parts {
     /// The geometry (diced and displaced where `materials` move it), the prims' materials,
     /// the lights and the camera of `stage`; `None` when any error was reported.
@@ -657,7 +636,6 @@ impl Parts {
             }
         }
         crate::render::support::report_unsupported(stage, &xforms, diags);
-        report_object_space_off_meshes(stage, &geometry.prims, &prim_material, materials, diags);
         let bounds = geometry.bounds().unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
         let camera_path = chosen.map(|(_, prim)| prim.path.clone());
         let (lights, camera, default_lit) = lights_and_camera(stage, &xforms, chosen, bounds, options, diags);

@@ -8,6 +8,7 @@
 use crate::abi::{Globals, MaterialCode, PrimvarValues, layering};
 use crate::render::Scene;
 use crate::render::geometry::accel::Hit;
+use crate::render::geometry::primvars::{fill_object_space, reads_object_space};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -81,6 +82,9 @@ pub(crate) fn surface_globals<'a>(
     primvars.resize(info.primvar_floats, 0.0);
     if !slots.is_empty() {
         scene.primvars.fill(g.primvars, g.bary, &slots, primvars);
+        if reads_object_space(&slots) {
+            fill_object_space(&scene.object_space(hit, g.prim, 0.0), &slots, primvars);
+        }
     }
     let facing = |n: Vec3| if n.dot(d) > 0.0 { -n } else { n };
     Globals {

@@ -297,7 +297,12 @@ impl<'s> Builder<'s> {
     fn prim_index(&mut self, prim: &Prim) -> u32 {
         let prims = &mut self.geometry.prims;
         *self.prim_index.entry(prim.path.clone()).or_insert_with(|| {
-            prims.push(GeomPrim { path: prim.path.clone(), span: prim.span, subset_of: None });
+            prims.push(GeomPrim {
+                path: prim.path.clone(),
+                span: prim.span,
+                subset_of: None,
+                object: ObjectSpace::IDENTITY,
+            });
             prims.len() as u32 - 1
         })
     }
@@ -333,6 +338,8 @@ impl<'s> Builder<'s> {
         // Its world transform is in its triangles: a change of it or an ancestor's rebuilds them.
         self.bake(id, None);
         let index = self.prim_index(prim);
+        let object = ObjectSpace::new(world);
+        self.geometry.prims[index as usize].object = object;
         // GeomSubset material bindings: their faces are renderable prims of their own, so
         // each gets its composed material.
         let face_prims = if prim.type_name.as_deref() == Some("Mesh") {
@@ -344,6 +351,7 @@ impl<'s> Builder<'s> {
                 &mut |subset| {
                     let subset_index = self.prim_index(subset);
                     self.geometry.prims[subset_index as usize].subset_of = Some(index);
+                    self.geometry.prims[subset_index as usize].object = object;
                     subset_index
                 },
                 diags,
@@ -444,6 +452,7 @@ impl<'s> Builder<'s> {
         self.emit(prim, &mut buffers, DMat4::IDENTITY, 0, face_prims, diags);
         let mut proto = Prototype { triangles: buffers.0, shapes: buffers.1, ..Prototype::default() };
         proto.prims = members.len() as u32;
+        proto.prim_spaces = vec![ObjectSpace::IDENTITY; members.len()];
         proto.bounds = bounds_of(&proto.triangles, &proto.shapes);
         (proto, members)
     }
@@ -536,6 +545,7 @@ impl<'s> Builder<'s> {
             }
             let local = members.len() as u32;
             members.push(id);
+            proto.prim_spaces.push(ObjectSpace::new(m));
             let others = self.triangles_so_far();
             let mut out = Emitter::new(
                 &mut proto.triangles,
@@ -577,9 +587,11 @@ impl<'s> Builder<'s> {
         // This instance's own prims: each composes its own materials (slots are inherited
         // down the instance's own path), while the geometry is shared.
         let start = self.geometry.instance_prims.len() as u32;
-        for id in members {
+        for (j, id) in members.into_iter().enumerate() {
             let index = self.prim_index(stage.prim(id));
             self.geometry.instance_prims.push(index);
+            self.geometry.prims[index as usize].object =
+                self.geometry.prototypes[prototype as usize].prim_spaces.get(j).copied().unwrap_or_default();
         }
         let to_world = self.xforms[root.0 as usize].world;
         self.place(root, prototype, start, to_world, None, diags);
@@ -882,9 +894,11 @@ impl Builder<'_> {
                     self.geometry.prototypes.push(built);
                     let p = self.geometry.prototypes.len() as u32 - 1;
                     let start = self.geometry.instance_prims.len() as u32;
-                    for m in members {
+                    for (j, m) in members.into_iter().enumerate() {
                         let index = self.prim_index(stage.prim(m));
                         self.geometry.instance_prims.push(index);
+                        self.geometry.prims[index as usize].object =
+                            self.geometry.prototypes[p as usize].prim_spaces.get(j).copied().unwrap_or_default();
                     }
                     self.prototype_of.insert(key, (p, start));
                     (p, start)

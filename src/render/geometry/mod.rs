@@ -28,7 +28,7 @@ pub use builder::{
 use crate::compose::binding::{is_bound_subset, is_renderable};
 use crate::diag::{Diagnostic, Diagnostics, Span};
 use crate::render::geometry::primvars::{
-    MAX_COMPONENTS, OBJECT_POSITION, Primvar, PrimvarLayout, PrimvarRef, PrimvarTable,
+    MAX_COMPONENTS, OBJECT_POSITION, ObjectSpace, Primvar, PrimvarLayout, PrimvarRef, PrimvarTable,
 };
 use crate::render::geometry::shapes::{Part, Shape};
 use crate::render::geometry::subdiv::{PolyMesh, catmull_clark, read_tags, refined_faces};
@@ -154,6 +154,9 @@ pub struct GeomPrim {
     /// For the faces of a GeomSubset with its own material binding: the mesh they belong to
     /// (displacement welds a mesh's faces across subsets only where they share a material).
     pub subset_of: Option<u32>,
+    /// Its object space relative to the space its geometry is built in: the world for a prim
+    /// built there, its prototype's for an instanced prim (each instance then places it).
+    pub object: ObjectSpace,
 }
 
 /// Geometry that instances share: built once, in the space of its root prim.
@@ -170,6 +173,8 @@ pub struct Prototype {
     /// For a mesh that deforms while the shutter is open: its triangles' positions keyed
     /// over the shutter (`triangles` holds them at the frame).
     pub deformation: Option<motion::Deformation>,
+    /// Per prototype-local prim, its object space relative to the prototype's.
+    pub prim_spaces: Vec<ObjectSpace>,
 }
 
 /// The triangles of a whole stage.

@@ -12,6 +12,8 @@
 
 use std::borrow::Cow;
 
+use glam::{DAffine3, DMat4};
+
 use crate::scene::{Attribute, Prim, Value};
 
 /// Where a primitive's primvar values are in a [`PrimvarTable`].
@@ -66,6 +68,87 @@ pub struct PrimvarTable {
 /// so).
 pub const OBJECT_POSITION: &str = "strata:Pobject";
 
+/// The primvars that carry the hit prim's object-to-world transform to a material, one column
+/// each (x, y, z axes, then the translation): MaterialX's object space for `normal`,
+/// `tangent`, `bitangent` and `transformpoint`/`vector`/`normal`. Nothing stores them: the
+/// integrator fills them at a hit from the prim's [`ObjectSpace`] (placed by its instance's
+/// transform at the ray's time, see [`fill_object_space`]), for materials that name them only.
+/// Where nothing fills them (a bare evaluation, the emitters' power estimate) they read their
+/// fallback, which the library makes the identity: object space is then world space.
+pub const OBJECT_TO_WORLD: [&str; 4] =
+    ["strata:objectToWorld0", "strata:objectToWorld1", "strata:objectToWorld2", "strata:objectToWorld3"];
+
+/// The columns of the inverse of [`OBJECT_TO_WORLD`], filled likewise.
+pub const WORLD_TO_OBJECT: [&str; 4] =
+    ["strata:worldToObject0", "strata:worldToObject1", "strata:worldToObject2", "strata:worldToObject3"];
+
+/// [`PrimvarSlot::name`] of the first object-space column (then the other seven, in the order
+/// of [`OBJECT_TO_WORLD`] and [`WORLD_TO_OBJECT`]); `u32::MAX` stays "no prim has it".
+const OBJECT_SPACE_SLOT: u32 = u32::MAX - 8;
+
+/// A prim's object space: the transforms from it to the space its geometry is built in (the
+/// world for a prim built in world space, its prototype's for an instanced one) and back.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ObjectSpace {
+    /// Object space to the outer space.
+    pub to_outer: DAffine3,
+    /// The outer space to object space.
+    pub to_object: DAffine3,
+}
+
+impl Default for ObjectSpace {
+    fn default() -> Self {
+        ObjectSpace::IDENTITY
+    }
+}
+
+impl ObjectSpace {
+    /// Object space is the outer space.
+    pub const IDENTITY: ObjectSpace = ObjectSpace { to_outer: DAffine3::IDENTITY, to_object: DAffine3::IDENTITY };
+
+    /// The object space that `to_outer` (an affine matrix) maps from. A singular transform
+    /// (a zero scale, whose prim draws nothing) inverts to non-finite values.
+    pub fn new(to_outer: DMat4) -> ObjectSpace {
+        let to_outer = DAffine3::from_mat4(to_outer);
+        ObjectSpace { to_outer, to_object: to_outer.inverse() }
+    }
+
+    /// This object space seen from the space an instance places its prototype in:
+    /// `to_world`/`to_object` are the instance's transforms.
+    pub fn placed(&self, to_world: &DAffine3, to_object: &DAffine3) -> ObjectSpace {
+        ObjectSpace { to_outer: *to_world * self.to_outer, to_object: self.to_object * *to_object }
+    }
+}
+
+/// Whether any of `slots` is an object-space column ([`OBJECT_TO_WORLD`], [`WORLD_TO_OBJECT`]).
+#[inline]
+pub fn reads_object_space(slots: &[PrimvarSlot]) -> bool {
+    slots.iter().any(|s| (OBJECT_SPACE_SLOT..u32::MAX).contains(&s.name))
+}
+
+/// Writes the object-space columns among `slots` into `out` (as [`PrimvarTable::fill`] writes
+/// stored primvars: a presence flag of 1, then the components) from `space`, the hit prim's
+/// object space relative to the world. Allocation-free.
+#[inline]
+pub fn fill_object_space(space: &ObjectSpace, slots: &[PrimvarSlot], out: &mut [f32]) {
+    for slot in slots {
+        let Some(k) = slot.name.checked_sub(OBJECT_SPACE_SLOT).filter(|&k| k < 8) else { continue };
+        let o = slot.offset as usize;
+        let Some(out) = out.get_mut(o..o + 1 + slot.width as usize) else { continue };
+        let m = if k < 4 { &space.to_outer } else { &space.to_object };
+        let column = match k % 4 {
+            0 => m.matrix3.x_axis,
+            1 => m.matrix3.y_axis,
+            2 => m.matrix3.z_axis,
+            _ => m.translation,
+        };
+        out[0] = 1.0;
+        for (value, c) in out[1..].iter_mut().zip(column.to_array()) {
+            *value = c as f32;
+        }
+    }
+}
+
 /// Components stored per primvar at most: the shading language reads floats, triples and a
 /// 4-component primvar's fourth (`primvar_alpha`).
 pub const MAX_COMPONENTS: usize = 4;
@@ -74,7 +157,8 @@ pub const MAX_COMPONENTS: usize = 4;
 /// no prim has it), and where [`crate::abi::PrimvarInfo`] puts it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PrimvarSlot {
-    /// Index in [`PrimvarTable::names`], or `u32::MAX`.
+    /// Index in [`PrimvarTable::names`], or `u32::MAX`; one of the eight values below it for
+    /// an object-space column ([`fill_object_space`]).
     pub name: u32,
     /// Index of the presence flag in the shading point's values.
     pub offset: u32,
@@ -122,7 +206,10 @@ impl PrimvarTable {
         primvars
             .iter()
             .map(|p| PrimvarSlot {
-                name: self.names.iter().position(|n| *n == p.name).map_or(u32::MAX, |i| i as u32),
+                name: match OBJECT_TO_WORLD.iter().chain(&WORLD_TO_OBJECT).position(|n| *n == p.name) {
+                    Some(k) => OBJECT_SPACE_SLOT + k as u32,
+                    None => self.names.iter().position(|n| *n == p.name).map_or(u32::MAX, |i| i as u32),
+                },
                 offset: p.offset as u32,
                 width: p.width as u32,
             })
@@ -261,5 +348,31 @@ mod tests {
         assert_eq!(out, [0.0, 0.0, 1.0, 0.5, 0.25, 0.0, 0.0, 0.0]);
         table.fill(PrimvarRef::NONE, [1.0, 0.0, 0.0], &slots, &mut out);
         assert_eq!(out, [0.0; 8]);
+    }
+
+    #[test]
+    fn object_space_columns_come_from_the_hit_not_the_table() {
+        // A table that happens to store a primvar of the reserved name is not read for it.
+        let table = PrimvarTable {
+            names: vec![OBJECT_TO_WORLD[3].into()],
+            layouts: vec![PrimvarLayout { fields: vec![(0, 3)], stride: 3, corners: 1 }],
+            values: vec![7.0, 7.0, 7.0],
+        };
+        let info = |name: &str, offset| crate::abi::PrimvarInfo { name: name.into(), width: 3, offset };
+        let slots = table.slots(&[info(OBJECT_TO_WORLD[3], 0), info(WORLD_TO_OBJECT[0], 4), info("st", 8)]);
+        assert!(reads_object_space(&slots) && !reads_object_space(&slots[2..]));
+        let m = DMat4::from_scale_rotation_translation(
+            glam::DVec3::new(2.0, 1.0, 4.0),
+            glam::DQuat::IDENTITY,
+            glam::DVec3::new(1.0, 2.0, 3.0),
+        );
+        let mut out = [9.0; 12];
+        table.fill(PrimvarRef { layout: 0, offset: 0 }, [1.0, 0.0, 0.0], &slots, &mut out);
+        assert_eq!(out[..8], [0.0; 8], "not stored values");
+        fill_object_space(&ObjectSpace::new(m), &slots, &mut out);
+        // The translation column, then the inverse's x axis (1/2, 0, 0).
+        assert_eq!(out[..8], [1.0, 1.0, 2.0, 3.0, 1.0, 0.5, 0.0, 0.0]);
+        let placed = ObjectSpace::new(m).placed(&DAffine3::from_translation(glam::DVec3::X), &DAffine3::IDENTITY);
+        assert_eq!(placed.to_outer.translation, glam::DVec3::new(2.0, 2.0, 3.0));
     }
 }

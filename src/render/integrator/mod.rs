@@ -19,7 +19,7 @@ mod reference;
 use crate::abi::layering::{self, Relief};
 use crate::abi::{Closure, ClosureSum, ClosureTerm, Globals, MaterialCode, PrimvarValues, ShaderError};
 use crate::render::geometry::accel::{Accel, Hit, WORLD, offset_ray_origin};
-use crate::render::geometry::primvars::{PrimvarRef, PrimvarSlot};
+use crate::render::geometry::primvars::{PrimvarRef, PrimvarSlot, fill_object_space, reads_object_space};
 use crate::render::light::emitter::Emitter;
 use crate::render::light::{Light, LightSample, LightSelection};
 use crate::render::material::bsdf::Frame;
@@ -316,6 +316,10 @@ struct SurfacePoint {
     prim: u32,
     primvars: PrimvarRef,
     bary: [f32; 3],
+    /// The hit and the ray's time, for the prim's object space (read only by materials that
+    /// name it: [`reads_object_space`]).
+    hit: Hit,
+    time: f32,
 }
 
 /// Surface geometry where the ray `o + t d` hit.
@@ -333,6 +337,8 @@ fn surface_point(accel: &Accel, scene: &Scene, o: Vec3, d: Vec3, hit: &Hit, time
         prim: g.prim,
         primvars: g.primvars,
         bary: g.bary,
+        hit: *hit,
+        time,
     }
 }
 
@@ -353,6 +359,10 @@ impl Context<'_> {
         let used = self.materials[sp.material].info().primvar_floats.min(primvars.len());
         if !slots.is_empty() {
             self.scene.primvars.fill(sp.primvars, sp.bary, slots, &mut primvars[..used]);
+            if reads_object_space(slots) {
+                let space = self.scene.object_space(&sp.hit, sp.prim, sp.time);
+                fill_object_space(&space, slots, &mut primvars[..used]);
+            }
         }
         Globals {
             p: to_arr(sp.p),

@@ -1000,6 +1000,13 @@ impl Accel {
         self.instance_prims[(inst.prims + local) as usize]
     }
 
+    /// The transforms `(to_object, to_world)` of the instance a hit at ray time `time` is in
+    /// (as [`Accel::surface_at`] places it); `None` for a hit on the world's own geometry.
+    pub fn instance_transforms(&self, hit: &Hit, time: f32) -> Option<(DAffine3, DAffine3)> {
+        let inst = self.instances.get(hit.instance as usize)?;
+        Some(inst.transforms_at(&self.motions, time))
+    }
+
     /// Whether anything moves: an instance, or a prototype that deforms (rays then need a time).
     pub fn has_motion(&self) -> bool {
         self.moves
