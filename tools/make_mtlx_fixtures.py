@@ -25,7 +25,7 @@ scenes:
                       odd/verdicts.txt (whether MaterialX's XML reader accepts it).
   upgrade/*.upgraded.mtlx
                       each 1.38 document in upgrade/ (MaterialX's own thin_film_bsdf test
-                      document, and thin_film_bindings_1_38.mtlx, written here) as MaterialX
+                      document, and the hand-written thin_film_bindings_1_38.mtlx) as MaterialX
                       reads it: upgraded to 1.39, thin-film layers folded into the BSDFs below.
 
 The camera looks down -z at the quad [-1, 1]^2 in the z = 0 plane from z = 5 (20 mm aperture,
@@ -319,98 +319,7 @@ def verdicts():
         f.write("\n".join(lines) + "\n")
 
 
-THIN_FILM_BINDINGS = """<?xml version="1.0"?>
-<materialx version="1.38">
-  <!-- Written by tools/make_mtlx_fixtures.py: a film whose inputs are connections (a graph
-       interface input, a node), over a mix of a metal and a glass that only transmits; a film
-       that authors no thickness; a film over a BSDF that takes none; a top-level network. -->
-  <nodegraph name="bound">
-    <input name="film_nm" type="float" value="420" />
-    <constant name="film_ior" type="float">
-      <input name="value" type="float" value="1.8" />
-    </constant>
-    <conductor_bsdf name="metal" type="BSDF">
-      <input name="ior" type="color3" value="0.18, 0.42, 1.37" />
-      <input name="extinction" type="color3" value="3.42, 2.35, 1.77" />
-    </conductor_bsdf>
-    <dielectric_bsdf name="glass" type="BSDF">
-      <input name="scatter_mode" type="string" value="T" />
-    </dielectric_bsdf>
-    <mix name="mixed" type="BSDF">
-      <input name="fg" type="BSDF" nodename="metal" />
-      <input name="bg" type="BSDF" nodename="glass" />
-      <input name="mix" type="float" value="0.5" />
-    </mix>
-    <thin_film_bsdf name="film" type="BSDF">
-      <input name="thickness" type="float" interfacename="film_nm" />
-      <input name="ior" type="float" nodename="film_ior" />
-    </thin_film_bsdf>
-    <layer name="filmed" type="BSDF">
-      <input name="top" type="BSDF" nodename="film" />
-      <input name="base" type="BSDF" nodename="mixed" />
-    </layer>
-    <surface name="surface1" type="surfaceshader">
-      <input name="bsdf" type="BSDF" nodename="filmed" />
-    </surface>
-    <output name="out" type="surfaceshader" nodename="surface1" />
-  </nodegraph>
-  <nodegraph name="unauthored">
-    <generalized_schlick_bsdf name="schlick" type="BSDF">
-      <input name="color0" type="color3" value="0.04, 0.04, 0.04" />
-    </generalized_schlick_bsdf>
-    <thin_film_bsdf name="film" type="BSDF">
-      <input name="ior" type="float" value="1.4" />
-    </thin_film_bsdf>
-    <layer name="filmed" type="BSDF">
-      <input name="top" type="BSDF" nodename="film" />
-      <input name="base" type="BSDF" nodename="schlick" />
-    </layer>
-    <surface name="surface1" type="surfaceshader">
-      <input name="bsdf" type="BSDF" nodename="filmed" />
-    </surface>
-    <output name="out" type="surfaceshader" nodename="surface1" />
-  </nodegraph>
-  <nodegraph name="over_diffuse">
-    <oren_nayar_diffuse_bsdf name="diffuse" type="BSDF">
-      <input name="color" type="color3" value="0.5, 0.6, 0.7" />
-    </oren_nayar_diffuse_bsdf>
-    <thin_film_bsdf name="film" type="BSDF">
-      <input name="thickness" type="float" value="300" />
-    </thin_film_bsdf>
-    <layer name="filmed" type="BSDF">
-      <input name="top" type="BSDF" nodename="film" />
-      <input name="base" type="BSDF" nodename="diffuse" />
-    </layer>
-    <surface name="surface1" type="surfaceshader">
-      <input name="bsdf" type="BSDF" nodename="filmed" />
-    </surface>
-    <output name="out" type="surfaceshader" nodename="surface1" />
-  </nodegraph>
-  <dielectric_bsdf name="coat" type="BSDF">
-    <input name="ior" type="float" value="1.6" />
-    <input name="roughness" type="vector2" value="0.2, 0.2" />
-  </dielectric_bsdf>
-  <thin_film_bsdf name="top_film" type="BSDF">
-    <input name="thickness" type="float" value="250" />
-    <input name="ior" type="float" value="1.33" />
-  </thin_film_bsdf>
-  <layer name="top_layer" type="BSDF">
-    <input name="top" type="BSDF" nodename="top_film" />
-    <input name="base" type="BSDF" nodename="coat" />
-  </layer>
-  <surface name="top_surface" type="surfaceshader">
-    <input name="bsdf" type="BSDF" nodename="top_layer" />
-  </surface>
-  <surfacematerial name="top_material" type="material">
-    <input name="surfaceshader" type="surfaceshader" nodename="top_surface" />
-  </surfacematerial>
-</materialx>
-"""
-
-
 def upgrades():
-    with open(out("upgrade", "thin_film_bindings_1_38.mtlx"), "w") as f:
-        f.write(THIN_FILM_BINDINGS)
     for name in ["thin_film_bsdf_1_38", "thin_film_bindings_1_38"]:
         doc = mx.createDocument()
         mx.readFromXmlFile(doc, out("upgrade", f"{name}.mtlx"))
