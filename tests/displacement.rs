@@ -929,3 +929,34 @@ fn touching_prims_are_displaced_separately() {
         box_triangles.len()
     );
 }
+
+/// A displacement driven by a primvar reads the prim's values at each diced vertex, as the
+/// shading does at a hit (until stop 39 dicing gave every primvar its fallback: a flat quad).
+#[test]
+fn a_displacement_reads_the_prim_s_primvars_where_it_dices() {
+    const LIFTED: &str = r#"
+substance Lifted {
+    node lift = primvar_float(name: "lift", fallback: 0.0);
+    node bsdf = diffuse(albedo: color(0.5, 0.5, 0.5));
+    node d = displacement(height: lift.out, mode: "none");
+    surface = bsdf.bsdf;
+    displacement = d.out;
+}
+"#;
+    let dir = tempfile::tempdir().unwrap();
+    // lift = 0.3 + 0.1 x + 0.05 z at the corners: affine, so exact on any triangulation.
+    let quad = quad(&bindings(&["Lifted"]))
+        .replace("}\n", "    float[] primvars:lift = [0.25, 0.45, 0.35, 0.15] (interpolation = \"vertex\")\n}\n");
+    let prims = format!("{}{quad}", camera("Top", [0.0, 6.0, 0.0], [-90.0, 0.0, 0.0]));
+    let path = stage(dir.path(), LIFTED, &["Lifted"], &prims, "def DomeLight \"Sky\" {}\n");
+    let (scene, _) = built(&path, None, (64, 64), BackendKind::Jit, true);
+    assert!(scene.displacement.is_some(), "the quad is displaced");
+    for (u, v, height) in heights_on_grid(&scene) {
+        let (x, z) = (2.0 * u - 1.0, 2.0 * v - 1.0);
+        let expected = 0.3 + 0.1 * x + 0.05 * z;
+        assert!(
+            (height - expected).abs() < 1e-4,
+            "height {height:.5} at ({x:.3}, {z:.3}), the primvar gives {expected:.5}"
+        );
+    }
+}

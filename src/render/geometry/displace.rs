@@ -30,10 +30,10 @@
 //! distances); a warning says so and those prims are bumped.
 
 use crate::abi::layering::{self, Relief};
-use crate::abi::{Globals, MaterialCode};
+use crate::abi::{Globals, MaterialCode, PrimvarValues};
 use crate::diag::{Diagnostic, Diagnostics};
 use crate::render::camera::Camera;
-use crate::render::geometry::primvars::PrimvarRef;
+use crate::render::geometry::primvars::{ObjectSpace, PrimvarRef, PrimvarSlot, fill_object_space, reads_object_space};
 use crate::render::geometry::shapes::Shape;
 use crate::render::geometry::{Geometry, Triangle, Triangles};
 use glam::{DVec3, Vec2, Vec3};
@@ -149,6 +149,9 @@ struct Vertex {
     uv: Vec2,
     /// The source face that created it (its prim, tangents, quadric).
     source: u32,
+    /// Where it lies in that face (barycentric weights of its corners 1 and 2): where its
+    /// primvars are read.
+    b: Vec2,
 }
 
 /// A triangle corner: a welded vertex and where it lies in its source triangle
@@ -238,7 +241,7 @@ impl Base {
         let mut corner = |base: &mut Base, prim: u32, p: Vec3, n: DVec3, uv: Vec2, k: usize| -> Corner {
             let source = base.sources.len() as u32;
             let v = *index.entry(weld_key(group_of(prim), p)).or_insert_with(|| {
-                base.vertices.push(Vertex { p, n: n.as_vec3(), uv, source });
+                base.vertices.push(Vertex { p, n: n.as_vec3(), uv, source, b: SOURCE_CORNERS[k] });
                 normal_sums.push(DVec3::ZERO);
                 base.vertices.len() as u32 - 1
             });
@@ -320,7 +323,7 @@ impl Base {
 
     /// The shading globals at vertex `v` before displacement: its position, normal, texture
     /// coordinates and tangents (a quadric's from its exact surface, a mesh's from its face).
-    fn globals(&self, v: &Vertex) -> Globals<'static> {
+    fn globals<'p>(&self, v: &Vertex, primvars: PrimvarValues<'p>) -> Globals<'p> {
         let source = &self.sources[v.source as usize];
         let (dpdu, dpdv) = match source.shape {
             Some(s) => {
@@ -340,7 +343,7 @@ impl Base {
             st_footprint: [0.0; 4],
             u: v.uv.x,
             v: v.uv.y,
-            primvars: Default::default(),
+            primvars,
             params: Default::default(),
         }
     }
@@ -405,7 +408,7 @@ impl Dicer<'_> {
         let face_normal = src.n_at(bary);
         let averaged = (va.n + vb.n).try_normalize().unwrap_or(va.n);
         let n = if crease || face_normal == Vec3::ZERO { averaged } else { face_normal };
-        let mut vertex = Vertex { p: (va.p + vb.p) * 0.5, n, uv: src.uv_at(bary), source };
+        let mut vertex = Vertex { p: (va.p + vb.p) * 0.5, n, uv: src.uv_at(bary), source, b: bary };
         if let Some(s) = src.shape {
             // On a quadric, the midpoint goes back onto the exact surface.
             let shape = &self.base.shapes[s as usize];
@@ -515,6 +518,8 @@ impl Evaluated {
 struct Scratch {
     masks: Vec<f32>,
     heights: Vec<f32>,
+    /// The vertex's primvar values, as the material lays them out.
+    primvars: Vec<f32>,
 }
 
 /// The rule-6 height of the layers that move geometry at `g` (masks and heights at the
@@ -659,21 +664,45 @@ pub fn displace(
         )));
     }
     // One height per welded vertex, in parallel; then each vertex moves along its normal.
+    let primvar_slots: Vec<Vec<PrimvarSlot>> =
+        materials.iter().map(|m| geometry.primvars.slots(&m.info().primvars)).collect();
     let material_of =
         |v: &Vertex| prim_material.get(base.sources[v.source as usize].prim as usize).copied().unwrap_or(0);
     let (heights, evaluated): (Vec<f32>, Evaluated) = vertices
         .par_chunks(4096)
         .map(|chunk| {
             let mut found = Evaluated::default();
-            let mut scratch = Scratch { masks: Vec::new(), heights: Vec::new() };
+            let mut scratch = Scratch { masks: Vec::new(), heights: Vec::new(), primvars: Vec::new() };
             let heights: Vec<f32> = chunk
                 .iter()
                 .map(|v| {
                     let m = material_of(v);
-                    let prim = base.sources[v.source as usize].prim;
-                    materials
-                        .get(m)
-                        .map_or(0.0, |material| height(*material, m, &base.globals(v), prim, &mut scratch, &mut found))
+                    let source = &base.sources[v.source as usize];
+                    let Some(material) = materials.get(m) else { return 0.0 };
+                    // The primvars the material reads, as the integrator fills them at a hit
+                    // (dicing is in world space: a prim's own object space).
+                    let slots = &primvar_slots[m];
+                    let used = material.info().primvar_floats;
+                    let mut primvars = std::mem::take(&mut scratch.primvars);
+                    primvars.clear();
+                    primvars.resize(used, 0.0);
+                    if !slots.is_empty() {
+                        geometry.primvars.fill(
+                            source.primvars,
+                            [1.0 - v.b.x - v.b.y, v.b.x, v.b.y],
+                            slots,
+                            &mut primvars,
+                        );
+                        if reads_object_space(slots) {
+                            let space =
+                                geometry.prims.get(source.prim as usize).map_or(ObjectSpace::IDENTITY, |p| p.object);
+                            fill_object_space(&space, slots, &mut primvars);
+                        }
+                    }
+                    let g = base.globals(v, PrimvarValues::new(&primvars));
+                    let h = height(*material, m, &g, source.prim, &mut scratch, &mut found);
+                    scratch.primvars = primvars;
+                    h
                 })
                 .collect();
             (heights, found)
