@@ -191,7 +191,7 @@ pub(super) fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: u
         let size = |&g: &u32| (group_start[g as usize + 1] - group_start[g as usize]) as usize;
         let members: usize = groups.iter().map(size).sum();
         let at = leaf_members.len();
-        if members <= BLOCK_SLOTS && at / BLOCK_SLOTS != (at + members - 1) / BLOCK_SLOTS {
+        if (1..=BLOCK_SLOTS).contains(&members) && at / BLOCK_SLOTS != (at + members - 1) / BLOCK_SLOTS {
             leaf_members.resize(at.next_multiple_of(BLOCK_SLOTS), NO_PRIMITIVE);
         }
         members_of[first as usize] = (leaf_members.len() as u32, members as u32);
