@@ -406,6 +406,12 @@ mod avx2 {
             reject = or!(reject, _mm256_and_ps(cmp!(_CMP_LT_OQ, det, zero), behind_neg));
             let behind_pos = or!(cmp!(_CMP_LE_OQ, t_scaled, zero), cmp!(_CMP_GT_OQ, t_scaled, tmax_det));
             reject = or!(reject, _mm256_and_ps(cmp!(_CMP_GT_OQ, det, zero), behind_pos));
+            // Most blocks a ray meets have no lane left here (every lane missed an edge, or
+            // lies behind the origin or beyond the closest hit so far): the division and the
+            // error bound below could only reject more, so they are skipped.
+            if !(_mm256_movemask_ps(reject) as u32) & lanes == 0 {
+                return LaneHits { mask: 0, t: [0.0; LANES], b1: [0.0; LANES], b2: [0.0; LANES] };
+            }
             let inv = _mm256_div_ps(splat!(1.0), det);
             let t = _mm256_mul_ps(t_scaled, inv);
             // The conservative bound on t's rounding error (see `RayPre::intersect`).
