@@ -509,12 +509,22 @@ impl Blas {
         if DEFORMS && self.deformation.is_some() {
             return slots.any(|k| self.hit_slot::<KZ, DEFORMS>(pre, o, d, k, tmin, tmax, time).is_some());
         }
-        self.triangles.any::<KZ, AVX2>(pre, first, count, tmin, tmax)
-            || (!self.shapes.is_empty()
-                && slots.any(|k| {
-                    self.group_members[k] as usize >= self.triangles.len()
-                        && self.hit_slot::<KZ, DEFORMS>(pre, o, d, k, tmin, tmax, time).is_some()
-                }))
+        if self.triangles.any::<KZ, AVX2>(pre, first, count, tmin, tmax) {
+            return true;
+        }
+        if self.shapes.is_empty() {
+            return false;
+        }
+        // A loop, not `Iterator::any`: the closure was a call per leaf, compiled without
+        // AVX2 (as `LeafTriangles::any` says), around every shape's cull.
+        for k in slots {
+            if self.group_members[k] as usize >= self.triangles.len()
+                && self.hit_slot::<KZ, DEFORMS>(pre, o, d, k, tmin, tmax, time).is_some()
+            {
+                return true;
+            }
+        }
+        false
     }
 
     /// [`Blas::intersect`] without a BVH: every primitive tested.
