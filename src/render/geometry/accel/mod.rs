@@ -1039,9 +1039,29 @@ impl Accel {
         if !o.is_finite() || !d.is_finite() || d == Vec3::ZERO {
             return None;
         }
-        let mut best =
+        let best =
             self.world.intersect(o, d, tmin, tmax).map(|(t, index, b1, b2)| Hit { t, index, instance: WORLD, b1, b2 });
-        let Some(space) = &self.tlas else { return best };
+        match &self.tlas {
+            None => best,
+            Some(space) => self.intersect_instances(space, o, d, tmin, tmax, time, best),
+        }
+    }
+
+    /// The instances' part of [`Accel::intersect_at`]: the closest hit among the instances
+    /// and `best` (the world BLAS's). Out of line, so that a scene without instances does not
+    /// set up the instance traversal's stack frame for every ray.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn intersect_instances(
+        &self,
+        space: &BvhSpace,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+        mut best: Option<Hit>,
+    ) -> Option<Hit> {
         let tmax = best.map_or(tmax, |h| h.t);
         let Some((ray, scaled_tmax, k)) = space.ray(o, d, tmin, tmax) else { return best };
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
@@ -1082,7 +1102,16 @@ impl Accel {
         if self.world.occluded(o, d, tmin, tmax) {
             return true;
         }
-        let Some(space) = &self.tlas else { return false };
+        match &self.tlas {
+            None => false,
+            Some(space) => self.occluded_instances(space, o, d, tmin, tmax, time),
+        }
+    }
+
+    /// The instances' part of [`Accel::occluded_at`], out of line as
+    /// [`Accel::intersect_instances`] is.
+    #[inline(never)]
+    fn occluded_instances(&self, space: &BvhSpace, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
         let Some((ray, scaled_tmax, _)) = space.ray(o, d, tmin, tmax) else { return false };
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
         wide::any(&space.bvh, &ray, scaled_tmax, |first, count| {
