@@ -5,6 +5,7 @@
 //! MaterialX specification, and the UsdPreviewSurface translation of the same asset.
 
 #[path = "../common/mod.rs"]
+mod aniso;
 mod common;
 mod noise;
 mod pbrlib;
