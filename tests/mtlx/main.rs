@@ -4,8 +4,8 @@
 //! connections as MaterialX resolves them (`chess_mat.expected`), node values by hand from the
 //! MaterialX specification, and the UsdPreviewSurface translation of the same asset.
 
-#[path = "../common/mod.rs"]
 mod aniso;
+#[path = "../common/mod.rs"]
 mod common;
 mod noise;
 mod pbrlib;

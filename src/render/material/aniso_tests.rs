@@ -138,7 +138,7 @@ fn turning_by_90_degrees_swaps_the_widths() {
     // An anisotropic lobe is not rotation-invariant (else the test above proves nothing).
     let a = Ggx::anisotropic(0.1, 0.4);
     let m = Vec3::new(0.3, 0.0, 0.95).normalize();
-    assert!(a.d(m) > 2.0 * a.d(turn(m)), "{} vs {}", a.d(m), a.d(turn(m)));
+    assert!(a.d(turn(m)) > 2.0 * a.d(m), "{} vs {}", a.d(turn(m)), a.d(m));
 }
 
 /// ∫ D(m) cos θm dω = 1 for anisotropic widths too.
@@ -256,9 +256,10 @@ fn conductor_term(tangent: Vec3, aspect: f32, n: Vec3, wo: Vec3) -> (ClosureBsdf
     (b, frame)
 }
 
-/// The tangent words orient the lobe: a term stretched by `a` along world x evaluates as one
-/// stretched by `1/a` along world y (the 90° turn), as the distribution built directly in
-/// that frame, whatever tangent the shading frame had; aspect 1 leaves the frame alone.
+/// The tangent words orient the lobe: a term stretched by `a` along world x (projected into
+/// the tangent plane) evaluates as one stretched by `1/a` along the bitangent n × x (the 90°
+/// turn, of any length), and as the distribution built directly in that frame, whatever
+/// tangent the shading frame had; aspect 1 leaves the frame alone.
 #[test]
 fn a_term_is_stretched_along_its_own_tangent() {
     let n = Vec3::new(0.1, -0.2, 1.0).normalize();
@@ -274,7 +275,7 @@ fn a_term_is_stretched_along_its_own_tangent() {
             wi = -wi;
         }
         let (bx, fx) = conductor_term(Vec3::X, 2.0, n, wo);
-        let (by, fy) = conductor_term(Vec3::Y * 3.0, 0.5, n, wo);
+        let (by, fy) = conductor_term(n.cross(Vec3::X) * 3.0, 0.5, n, wo);
         let ex = bx.eval(fx.to_local(wo), fx.to_local(wi)).x;
         let ey = by.eval(fy.to_local(wo), fy.to_local(wi)).x;
         assert!(close(ex, ey, 1e-3), "tangent x aspect 2 {ex} vs tangent y aspect 1/2 {ey}");
@@ -290,9 +291,10 @@ fn a_term_is_stretched_along_its_own_tangent() {
 }
 
 /// White furnace: a white anisotropic glass (αx 0.02, αy 0.08, the radiance compression
-/// undone) conserves energy, R + T = 1 within 1 %; a perfect anisotropic conductor loses
-/// energy to single scattering but never creates it; both by quadrature of `eval` and by
-/// sampling.
+/// undone) conserves energy, R + T = 1 within 1 % up to 60° (at grazing incidence single
+/// scattering loses what the masking removes: there E lies between the isotropic glasses of
+/// widths αy and αx, as α(φ) does); a perfect anisotropic conductor loses energy to single
+/// scattering but never creates it; both by quadrature of `eval` and by sampling.
 #[test]
 fn anisotropic_white_furnace() {
     for (name, b, at_least) in [
@@ -319,7 +321,17 @@ fn anisotropic_white_furnace() {
             let [(e, se), _] = furnace_weights(|uc, u| b.sample(wo, uc, u), weight, 100_000, 7);
             eprintln!("furnace {name} wo.z {z}: quadrature {quadrature:.5}, sampled {:.5} ± {:.5}", e.x, se.x);
             assert!(quadrature <= 1.0 + 1e-3 && e.x <= 1.0 + 4.0 * se.x + 1e-3, "{name} {z}: E > 1");
-            assert!(quadrature >= at_least, "{name} {z}: E {quadrature} < {at_least}");
+            if z.abs() >= 0.5 {
+                assert!(quadrature >= at_least, "{name} {z}: E {quadrature} < {at_least}");
+            } else if let Bsdf::Glass { ggx, eta, .. } = b {
+                let iso = |alpha: f32| {
+                    let g = glass(Ggx::isotropic(alpha), eta);
+                    sphere_integral(|wi| g.eval(wo, wi).x * wi.z.abs() * g.compression(wo, wi), &centres(&g, wo, 0.02))
+                };
+                let (wide, narrow) = (iso(ggx.alpha_x().max(ggx.alpha_y())), iso(ggx.alpha_x().min(ggx.alpha_y())));
+                eprintln!("  isotropic glasses: α max {wide:.5}, α min {narrow:.5}");
+                assert!(wide - 1e-3 <= quadrature && quadrature <= narrow + 1e-3, "{name} {z}: {quadrature}");
+            }
             assert!(
                 (quadrature - e.x).abs() < 4.0 * se.x + 2e-3,
                 "{name} {z}: sampled {} vs quadrature {quadrature}",
@@ -356,27 +368,62 @@ fn anisotropic_lobes_are_reciprocal() {
 }
 
 /// Albedo scaling reads the layering tables at the mean width √(αx αy): the furnace gap that
-/// leaves for a white anisotropic coat over a white Lambert base, against the isotropic coat
-/// of the same mean width (whose tables are exact for it), printed for the note. Both ≤ 1.
+/// leaves for a white anisotropic coat over a white Lambert base against the random walk (the
+/// reference, which simulates the anisotropic interface), beside the same gap for the
+/// isotropic coat of the same mean width; printed for the note. All ≤ 1, and the walk takes
+/// the anisotropic stack (the shading frame turned to the coat's tangent) rather than falling
+/// back.
 #[test]
 fn anisotropic_coat_furnace_gap_under_albedo_scaling() {
     for (r, aspect) in [(0.3f32, 3.0f32), (0.5, 3.0), (0.5, 6.0)] {
         for z in [0.9f64, 0.5, 0.2] {
             let wo = dir(z, 0.4);
-            let albedo = |aspect: f32| {
-                let b = coated(Vec3::X, aspect, r, wo, LayeringMode::AlbedoScaling);
-                let f = |wi: Vec3| b.eval(wo, wi).x * wi.z.max(0.0);
-                sphere_integral(f, &[(Vec3::new(-wo.x, -wo.y, wo.z), r * r / aspect)])
+            let energy = |aspect: f32| {
+                let scaled = coated(Vec3::X, aspect, r, wo, LayeringMode::AlbedoScaling);
+                let f = |wi: Vec3| scaled.eval(wo, wi).x * wi.z.max(0.0);
+                let e_scaled = sphere_integral(f, &[(Vec3::new(-wo.x, -wo.y, wo.z), r * r / aspect)]);
+                let walk = coated(Vec3::X, aspect, r, wo, LayeringMode::RandomWalk);
+                assert!(walk.walk.is_some(), "the walk fell back for aspect {aspect}");
+                let weight = |s: &BsdfSample| DVec3::splat((s.f.x * s.wi.z.abs() / s.pdf) as f64);
+                let [(e_walk, se), _] = furnace_weights(|uc, u| walk.sample(wo, uc, u), weight, 40_000, 3);
+                (e_scaled, e_walk.x, se.x)
             };
-            let (iso, aniso) = (albedo(1.0), albedo(aspect));
+            let (iso, aniso) = (energy(1.0), energy(aspect));
             eprintln!(
-                "coat r {r} aspect {aspect} wo.z {z}: E isotropic {iso:.4}, anisotropic {aniso:.4}, gap {:+.4}",
-                aniso - iso
+                "coat r {r} aspect {aspect} wo.z {z}: isotropic scaling {:.4} walk {:.4}±{:.4} gap {:+.4}; \
+                 anisotropic scaling {:.4} walk {:.4}±{:.4} gap {:+.4}",
+                iso.0,
+                iso.1,
+                iso.2,
+                iso.0 - iso.1,
+                aniso.0,
+                aniso.1,
+                aniso.2,
+                aniso.0 - aniso.1
             );
-            assert!(aniso <= 1.0 + 1e-3 && iso <= 1.0 + 1e-3, "E > 1: {iso} {aniso}");
+            for (e, walk, se) in [iso, aniso] {
+                assert!(e <= 1.0 + 1e-3 && walk <= 1.0 + 4.0 * se, "E > 1: scaling {e}, walk {walk}");
+            }
         }
     }
-    // And the diffuse base alone is Lambert (the closure decodes the words it is given).
+    // The diffuse base renders under the coat (the closure decodes the words it is given).
     let b = coated(Vec3::X, 3.0, 0.3, Vec3::Z, LayeringMode::AlbedoScaling);
     assert!(b.eval(Vec3::Z, Vec3::new(0.6, 0.0, 0.8)).x > 0.5 * FRAC_1_PI);
+}
+
+/// A coat whose tangent is not the shading frame's first anisotropic tangent (here: a second
+/// anisotropic term with another tangent) has a frame of its own, and the walk falls back to
+/// albedo scaling for it (reported by `walk::take_fallback`).
+#[test]
+fn a_walked_stack_with_two_tangents_falls_back() {
+    let mut sum = ClosureSum::default();
+    sum.terms[0] = term(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, 0.3, 0.0], Vec3::X, 2.0);
+    sum.terms[1] = ClosureTerm {
+        above: 1,
+        ..term(ClosureKind::Conductor, &[1.3, 1.3, 1.3, 2.7, 2.7, 2.7, 0.4], Vec3::Y + Vec3::X, 3.0)
+    };
+    let mut b = ClosureBsdf::from_sum(&sum, LayeringMode::RandomWalk);
+    assert!(b.walk.is_some(), "the stack is walkable before its frames are set");
+    b.set_term_frames(&sum.terms, &mut Frame::from_normal(Vec3::Z), Vec3::Z);
+    assert!(b.walk.is_none(), "a term turned to its own tangent must not be walked");
 }
