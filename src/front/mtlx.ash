@@ -574,9 +574,9 @@ closure mx_anisotropic(closure lobe, color alpha, color tangent) {
 // MaterialX's `rotate3d` as its reference shaders compute it (Rodrigues' formula with the
 // cross product's factors swapped: v cos θ + (v × axis) sin θ + axis (axis · v)(1 − cos θ)),
 // `degrees_` about unit `axis`.
-vector mx_rotate3(vector v, float degrees_, vector axis) {
+vector mx_rotate3(vector in_, float degrees_, vector axis) {
     float a = radians(degrees_);
-    return v * cos(a) + cross(v, axis) * sin(a) + axis * dot(axis, v) * (1.0 - cos(a));
+    return in_ * cos(a) + cross(in_, axis) * sin(a) + axis * dot(axis, in_) * (1.0 - cos(a));
 }
 
 // MaterialX 1.39's `thinfilm_thickness` (nm) and `thinfilm_ior` inputs of the specular lobes:

@@ -151,6 +151,9 @@ fn anisotropic_d_is_normalised_over_projected_area() {
     }
 }
 
+/// A χ² case: name, sampler, pdf and lobe centres.
+type Chi2Case = (String, Box<dyn Fn(f32, Vec2) -> Option<BsdfSample>>, Box<dyn Fn(Vec3) -> f32>, Vec<(Vec3, f32)>);
+
 fn centres(b: &Bsdf, wo: Vec3, scale: f32) -> Vec<(Vec3, f32)> {
     let mirror = Vec3::new(-wo.x, -wo.y, wo.z);
     let mut c = vec![(mirror, scale)];
@@ -166,12 +169,7 @@ fn centres(b: &Bsdf, wo: Vec3, scale: f32) -> Vec<(Vec3, f32)> {
 /// generalized-Schlick lobe, and a coat turned to its own tangent over a diffuse base.
 #[test]
 fn anisotropic_sampling_matches_the_pdf() {
-    let mut cases: Vec<(
-        String,
-        Box<dyn Fn(f32, Vec2) -> Option<BsdfSample>>,
-        Box<dyn Fn(Vec3) -> f32>,
-        Vec<(Vec3, f32)>,
-    )> = vec![];
+    let mut cases: Vec<Chi2Case> = vec![];
     for (ax, ay) in [(0.05f32, 0.3f32), (0.4, 0.08), (0.9, 0.3)] {
         let g = Ggx::anisotropic(ax, ay);
         for (z, phi) in [(0.9, 0.3), (0.4, 1.2), (0.1, 2.0), (-0.6, 0.5)] {
@@ -226,7 +224,8 @@ fn anisotropic_sampling_matches_the_pdf() {
 }
 
 /// A closure of one anisotropic dielectric coat (roughness `r`, tangent `t` in world space,
-/// aspect `aspect`) over a white Lambert base, decoded in the frame of world +z for `wo`.
+/// aspect `aspect`) over a white Lambert base, decoded about world +z for `wo`; its directions
+/// are in the frame the closure turned to (x along `t` projected).
 fn coated(t: Vec3, aspect: f32, r: f32, wo: Vec3, mode: LayeringMode) -> ClosureBsdf {
     let mut sum = ClosureSum::default();
     sum.terms[0] = term(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, r, 0.0], t, aspect);
@@ -256,6 +255,12 @@ fn conductor_term(tangent: Vec3, aspect: f32, n: Vec3, wo: Vec3) -> (ClosureBsdf
     (b, frame)
 }
 
+/// Two random directions on the side of `n`.
+fn facing(rng: &mut Pcg32, n: Vec3) -> (Vec3, Vec3) {
+    let side = |v: Vec3| if v.dot(n) < 0.0 { -v } else { v };
+    (side(rng.dir()), side(rng.dir()))
+}
+
 /// The tangent words orient the lobe: a term stretched by `a` along world x (projected into
 /// the tangent plane) evaluates as one stretched by `1/a` along the bitangent n × x (the 90°
 /// turn, of any length), and as the distribution built directly in that frame, whatever
@@ -267,13 +272,7 @@ fn a_term_is_stretched_along_its_own_tangent() {
     let ggx = Ggx::isotropic(0.25).with_aspect(2.0);
     let direct = Bsdf::Metal { reflectivity: Vec3::ONE, eta: Vec3::splat(1.3), k: Vec3::splat(2.7), ggx };
     for _ in 0..200 {
-        let (mut wo, mut wi) = (rng.dir(), rng.dir());
-        if wo.dot(n) < 0.0 {
-            wo = -wo;
-        }
-        if wi.dot(n) < 0.0 {
-            wi = -wi;
-        }
+        let (wo, wi) = facing(&mut rng, n);
         let (bx, fx) = conductor_term(Vec3::X, 2.0, n, wo);
         let (by, fy) = conductor_term(n.cross(Vec3::X) * 3.0, 0.5, n, wo);
         let ex = bx.eval(fx.to_local(wo), fx.to_local(wi)).x;
@@ -379,10 +378,12 @@ fn anisotropic_coat_furnace_gap_under_albedo_scaling() {
         for z in [0.9f64, 0.5, 0.2] {
             let wo = dir(z, 0.4);
             let energy = |aspect: f32| {
-                let scaled = coated(Vec3::X, aspect, r, wo, LayeringMode::AlbedoScaling);
+                // A tangent the shading frame must turn to (its own is +x).
+                let tangent = Vec3::new(0.6, 0.8, 0.0);
+                let scaled = coated(tangent, aspect, r, wo, LayeringMode::AlbedoScaling);
                 let f = |wi: Vec3| scaled.eval(wo, wi).x * wi.z.max(0.0);
                 let e_scaled = sphere_integral(f, &[(Vec3::new(-wo.x, -wo.y, wo.z), r * r / aspect)]);
-                let walk = coated(Vec3::X, aspect, r, wo, LayeringMode::RandomWalk);
+                let walk = coated(tangent, aspect, r, wo, LayeringMode::RandomWalk);
                 assert!(walk.walk.is_some(), "the walk fell back for aspect {aspect}");
                 let weight = |s: &BsdfSample| DVec3::splat((s.f.x * s.wi.z.abs() / s.pdf) as f64);
                 let [(e_walk, se), _] = furnace_weights(|uc, u| walk.sample(wo, uc, u), weight, 40_000, 3);
@@ -426,4 +427,30 @@ fn a_walked_stack_with_two_tangents_falls_back() {
     assert!(b.walk.is_some(), "the stack is walkable before its frames are set");
     b.set_term_frames(&sum.terms, &mut Frame::from_normal(Vec3::Z), Vec3::Z);
     assert!(b.walk.is_none(), "a term turned to its own tangent must not be walked");
+}
+
+/// Two anisotropic terms with different tangents: the first turns the shading frame, the
+/// second turns in a frame of its own; the sum evaluates as each lobe in its own tangent frame.
+#[test]
+fn a_second_tangent_turns_its_term_alone() {
+    let n = Vec3::new(-0.2, 0.1, 1.0).normalize();
+    let (t0, t1) = (Vec3::X, Vec3::new(1.0, 1.0, 0.3));
+    let mut sum = ClosureSum::default();
+    let metal_words = [1.3, 1.3, 1.3, 2.7, 2.7, 2.7, 0.5];
+    sum.terms[0] = ClosureTerm { weight: [0.5; 3], ..term(ClosureKind::Conductor, &metal_words, t0, 2.0) };
+    sum.terms[1] = ClosureTerm { weight: [0.5; 3], ..term(ClosureKind::Conductor, &metal_words, t1, 3.0) };
+    let mut rng = Pcg32::new(21, 3);
+    let lobe = |aspect: f32| metal(Ggx::isotropic(0.25).with_aspect(aspect));
+    let plain = Frame::from_normal(n);
+    let (f0, f1) = (plain.with_tangent(t0).unwrap(), plain.with_tangent(t1).unwrap());
+    for _ in 0..200 {
+        let (wo, wi) = facing(&mut rng, n);
+        let mut b = ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling);
+        let mut frame = Frame::from_normal(n);
+        b.set_term_frames(&sum.terms, &mut frame, wo);
+        let got = b.eval(frame.to_local(wo), frame.to_local(wi)).x;
+        let want = 0.5 * lobe(2.0).eval(f0.to_local(wo), f0.to_local(wi)).x
+            + 0.5 * lobe(3.0).eval(f1.to_local(wo), f1.to_local(wi)).x;
+        assert!(close(got, want, 1e-3), "{got} vs {want}");
+    }
 }
