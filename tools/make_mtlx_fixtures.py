@@ -293,7 +293,7 @@ ODD = {
 <materialx version="1.39">
   <standard_surface name="SR" type="surfaceshader">
     <input name="sheen" type="float" value="0.5" />
-    <input name="coat_anisotropy" type="float" value="0.5" />
+    <input name="coat_affect_color" type="float" value="0.5" />
     <input name="metalness" type="float" value="0.3" />
   </standard_surface>
   <surfacematerial name="M" type="material">

@@ -232,11 +232,21 @@ pub struct Closure {
 /// compile-time error at the operator that overflows, never a silent drop.
 pub const MAX_CLOSURE_TERMS: usize = 8;
 /// Parameter words of one [`ClosureTerm`].
-pub const TERM_PARAMS: usize = 15;
+pub const TERM_PARAMS: usize = 19;
 /// Where a term's own shading normal starts in its parameters (three words, world space; zero:
 /// the layer's shading normal), set by `with_normal`. Every kind's parameters end before it
 /// but [`ClosureKind::GeneralizedSchlick`]'s, which has no normal of its own.
 pub const TERM_NORMAL: usize = 12;
+/// Where a term's tangent starts in its parameters (three words, world space; zero: the
+/// layer's shading frame picks one), set by `with_anisotropy`: the direction along which a
+/// GGX lobe's width is `αx` ([`TERM_ASPECT`]). Every kind's parameters end before it.
+pub const TERM_TANGENT: usize = 15;
+/// Where a term's GGX aspect is in its parameters, set by `with_anisotropy`: `√(αx / αy)`,
+/// the ratio of the widths along the tangent ([`TERM_TANGENT`]) and the bitangent to their
+/// geometric mean `α = √(αx αy)`, which the kind's roughness word keeps (`α = r²`). 0 (or 1):
+/// isotropic. Read by the GGX kinds (glossy, metal, glass, conductor, dielectric,
+/// generalized Schlick); the others ignore it.
+pub const TERM_ASPECT: usize = 18;
 /// Where a term's thin film is in its parameters, for the kinds that take one: three words,
 /// thickness in nanometres, the film's index and its weight (coverage; thickness or weight 0:
 /// none), set by `with_thin_film`. Dielectrics at 6 (a transmitting one's microfacets reflect
@@ -259,7 +269,7 @@ pub const THIN_FILM_KINDS: [ClosureKind; 4] =
 /// omits); the random walk simulates those reflections and divides the factor back out.
 pub const TERM_DARKENING: usize = 9;
 
-/// One weighted lobe of a [`ClosureSum`]. Field order is the C ABI (20 words).
+/// One weighted lobe of a [`ClosureSum`]. Field order is the C ABI (24 words).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ClosureTerm {

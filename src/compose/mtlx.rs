@@ -276,7 +276,6 @@ pub fn to_working_space(space: &str, c: [f32; 3]) -> Option<[f32; 3]> {
 /// Surface inputs that the layered surfaces do not read (or read approximately), with what
 /// strata does instead; reported when a scene drives them or sets them away from their default.
 const UNREAD_SURFACE_INPUTS: &[(&str, &str, &str)] = &[
-    ("open_pbr_surface", "specular_roughness_anisotropy", "specular reflection is isotropic"),
     ("open_pbr_surface", "transmission_depth", "transmission has no volume (a thin tinted interface)"),
     ("open_pbr_surface", "transmission_scatter", "transmission has no volume scattering"),
     ("open_pbr_surface", "transmission_dispersion_scale", "no dispersion"),
@@ -286,10 +285,7 @@ const UNREAD_SURFACE_INPUTS: &[(&str, &str, &str)] = &[
         "approximated by diffuse reflection of subsurface_color (no light travels under the surface)",
     ),
     ("open_pbr_surface", "subsurface_radius", "no subsurface scattering: the radius is not read"),
-    ("open_pbr_surface", "coat_roughness_anisotropy", "the coat is isotropic"),
     ("open_pbr_surface", "geometry_thin_walled", "surfaces are never thin-walled"),
-    ("open_pbr_surface", "geometry_tangent", "reflection is isotropic: tangents are not read"),
-    ("standard_surface", "specular_anisotropy", "specular reflection is isotropic"),
     ("standard_surface", "transmission_depth", "transmission has no volume (a thin tinted interface)"),
     ("standard_surface", "transmission_scatter", "transmission has no volume scattering"),
     ("standard_surface", "transmission_dispersion", "no dispersion"),
@@ -300,7 +296,6 @@ const UNREAD_SURFACE_INPUTS: &[(&str, &str, &str)] = &[
         "approximated by diffuse reflection of subsurface_color (no light travels under the surface)",
     ),
     ("standard_surface", "subsurface_radius", "no subsurface scattering: the radius is not read"),
-    ("standard_surface", "coat_anisotropy", "the coat is isotropic"),
     ("standard_surface", "coat_affect_color", "the coat does not saturate the base"),
     ("standard_surface", "thin_walled", "surfaces are never thin-walled"),
     ("mx_surface", "thin_walled", "surfaces are never thin-walled"),
@@ -345,26 +340,16 @@ pub fn report_surface_input(
 /// (`"*"`: every BSDF node). Each kind is reported once per run.
 const UNREAD_NODE_INPUTS: &[(&str, &str, &str)] = &[
     ("ND_generalized_schlick_bsdf", "normal", "generalized_schlick_bsdf uses the shading normal"),
-    ("*", "tangent", "lobes are isotropic: tangents are not read"),
     ("*", "retroreflective", "lobes are not retroreflective"),
-    ("*", "roughness", ANISOTROPIC_ALPHA),
     ("ND_generalized_schlick_bsdf", "scatter_mode", "generalized_schlick_bsdf reflects only"),
     ("ND_sheen_bsdf", "mode", "sheen is Conty and Kulla's Charlie sheen"),
-    // The roughness nodes make the α pair the lobes read as its geometric mean.
-    ("ND_roughness_anisotropy", "anisotropy", ANISOTROPIC_ALPHA),
-    ("ND_glossiness_anisotropy", "anisotropy", ANISOTROPIC_ALPHA),
 ];
 
-/// What strata does with an anisotropic GGX α (a pair that differs per direction).
-const ANISOTROPIC_ALPHA: &str = "lobes are isotropic: an anisotropic α is read as its geometric mean";
-
-/// pbrlib's nodes that make a BSDF's roughness, whose inputs [`report_node_input`] also reads.
-const ROUGHNESS_NODES: &[&str] = &["ND_roughness_anisotropy", "ND_glossiness_anisotropy"];
-
-/// Reports what a pbrlib BSDF (or roughness) node `id` does not honour of input `input` set to `setting`:
-/// each (input, what) kind once per run.
+/// Reports what a pbrlib BSDF node `id` does not honour of input `input` set to `setting`:
+/// each (input, what) kind once per run. (A vector2 `roughness` is GGX's α along the lobe's
+/// `tangent` and bitangent, read as such.)
 pub fn report_node_input(id: &str, input: &str, setting: Setting, at: Span, diags: &mut Diagnostics) {
-    if !PBRLIB.iter().any(|(nd, _)| *nd == id && nd.ends_with("_bsdf")) && !ROUGHNESS_NODES.contains(&id) {
+    if !PBRLIB.iter().any(|(nd, _)| *nd == id && nd.ends_with("_bsdf")) {
         return;
     }
     let Some((_, _, what)) =
@@ -373,9 +358,7 @@ pub fn report_node_input(id: &str, input: &str, setting: Setting, at: Span, diag
         return;
     };
     let away = match (input, setting) {
-        (_, Setting::Driven) => input != "roughness",
-        ("roughness", Setting::Value(Value::Triple([x, y, _]))) => (x - y).abs() > 1e-6 * x.abs().max(*y),
-        ("roughness", _) => false,
+        (_, Setting::Driven) => true,
         ("scatter_mode", Setting::Value(Value::Str(m))) => m != "R",
         ("mode", Setting::Value(Value::Str(m))) => m != "conty_kulla",
         (_, Setting::Value(Value::Triple(v))) => v.iter().any(|c| *c != 0.0),

@@ -136,6 +136,11 @@ intrinsics! {
     // terms under it were multiplied by `factor` for the coat's internal reflections (OpenPBR's
     // coat_darkening), so the random-walk layering, which simulates them, divides it back out.
     WithDarkening = "with_darkening": Fixed(&[CL, C], CL),
+    // with_anisotropy(c, tangent, aspect): every term of `c` stretched along its own
+    // world-space `tangent` (zero: the shading frame's) with GGX widths α·aspect along it and
+    // α / aspect across (α the term's mean width; aspect 1: isotropic). Lobes that are not
+    // GGX ignore it.
+    WithAnisotropy = "with_anisotropy": Fixed(&[CL, V, F], CL),
 }
 
 impl Intrinsic {
@@ -163,7 +168,11 @@ impl Intrinsic {
         self.closure_kind().is_some()
             || matches!(
                 self,
-                Intrinsic::Layer | Intrinsic::WithNormal | Intrinsic::WithThinFilm | Intrinsic::WithDarkening
+                Intrinsic::Layer
+                    | Intrinsic::WithNormal
+                    | Intrinsic::WithThinFilm
+                    | Intrinsic::WithDarkening
+                    | Intrinsic::WithAnisotropy
             )
     }
 

@@ -548,15 +548,35 @@ shader mx_roughness_dual_color3(color roughness = color(0.0), output color out) 
 // A BSDF node is its lobe times `weight`; `layer`/`mix`/`add`/`multiply` are the closure
 // algebra (MaterialX's `mix(fg, bg, m)` is `bg·(1 − m) + fg·m`). MaterialX's microfacet
 // `roughness` is the GGX α along tangent and bitangent (a vector2, as `roughness_anisotropy`
-// makes it from a perceptual roughness); strata's lobes are isotropic and take the perceptual
-// roughness r = √α, here of the geometric mean α = √(αx αy) (compose reports anisotropy).
+// makes it from a perceptual roughness): a lobe takes the perceptual roughness r = √α of the
+// geometric mean α = √(αx αy) and is stretched by √(αx / αy) along its `tangent`
+// (`mx_anisotropic`; unset, the zero vector: dPdu, MaterialX's default `Tworld`).
 // A per-lobe `normal` (world space; unset, the zero vector: the shading normal) shades the lobe
-// about it (`with_normal`), but generalized_schlick_bsdf's (compose reports it); `tangent` is
-// reported (lobes are isotropic).
+// about it (`with_normal`), but generalized_schlick_bsdf's (compose reports it); the renderer
+// projects the tangent into the plane of the lobe's normal.
 // An EDF is its emitted radiance as a colour: `uniform_edf` is its colour, and the EDF
 // operators are the colour nodes (`ND_add_edf` is `mx_add_color3`).
 float mx_isotropic_roughness(color alpha) {
     return sqrt(sqrt(clamp(alpha.r, 0.0, 1.0) * clamp(alpha.g, 0.0, 1.0)));
+}
+// A lobe (whose roughness is mx_isotropic_roughness(alpha)) stretched by √(αx / αy) along
+// `tangent` (world space; the zero vector: dPdu). Equal widths leave the words zero: the
+// isotropic closure, bit for bit; a zero width leaves the lobe isotropic (its mean α is 0: a
+// mirror).
+closure mx_anisotropic(closure lobe, color alpha, color tangent) {
+    float ax = clamp(alpha.r, 0.0, 1.0);
+    float ay = clamp(alpha.g, 0.0, 1.0);
+    float aspect = ax > 0.0 && ay > 0.0 ? sqrt(ax / ay) : 1.0;
+    float stretched = aspect != 1.0 ? 1.0 : 0.0;
+    vector t = length(vector(tangent)) > 1e-8 ? vector(tangent) : dPdu;
+    return with_anisotropy(lobe, t * stretched, aspect * stretched);
+}
+// MaterialX's `rotate3d` as its reference shaders compute it (Rodrigues' formula with the
+// cross product's factors swapped: v cos θ + (v × axis) sin θ + axis (axis · v)(1 − cos θ)),
+// `degrees_` about unit `axis`.
+vector mx_rotate3(vector in_, float degrees_, vector axis) {
+    float a = radians(degrees_);
+    return in_ * cos(a) + cross(in_, axis) * sin(a) + axis * dot(axis, in_) * (1.0 - cos(a));
 }
 
 // MaterialX 1.39's `thinfilm_thickness` (nm) and `thinfilm_ior` inputs of the specular lobes:
@@ -581,14 +601,16 @@ shader mx_dielectric_bsdf(float weight = 1.0, color tint = color(1.0), float ior
                           float thinfilm_ior = 1.5, color normal_ = color(0.0), color tangent = color(0.0),
                           string distribution = "ggx", string scatter_mode = "R", output closure out) {
     closure lobe = dielectric_bsdf(clamp(tint, 0.0, 1.0), clamp(ior, 1.0, 4.0), mx_isotropic_roughness(roughness), scatter_mode);
-    out = with_normal(mx_thinfilm(lobe, thinfilm_thickness, thinfilm_ior), vector(normal_)) * clamp(weight, 0.0, 1.0);
+    out = with_normal(mx_anisotropic(mx_thinfilm(lobe, thinfilm_thickness, thinfilm_ior), roughness, tangent), vector(normal_))
+          * clamp(weight, 0.0, 1.0);
 }
 shader mx_conductor_bsdf(float weight = 1.0, color ior = color(0.183, 0.421, 1.373), color extinction = color(3.424, 2.346, 1.770),
                          color roughness = color(0.05, 0.05, 0.0), int retroreflective = 0, float thinfilm_thickness = 0.0,
                          float thinfilm_ior = 1.5, color normal_ = color(0.0), color tangent = color(0.0),
                          string distribution = "ggx", output closure out) {
     closure lobe = conductor_bsdf(ior, extinction, mx_isotropic_roughness(roughness));
-    out = with_normal(mx_thinfilm(lobe, thinfilm_thickness, thinfilm_ior), vector(normal_)) * clamp(weight, 0.0, 1.0);
+    out = with_normal(mx_anisotropic(mx_thinfilm(lobe, thinfilm_thickness, thinfilm_ior), roughness, tangent), vector(normal_))
+          * clamp(weight, 0.0, 1.0);
 }
 shader mx_generalized_schlick_bsdf(float weight = 1.0, color color0 = color(1.0), color color82 = color(1.0),
                                    color color90 = color(1.0), float exponent = 5.0, color roughness = color(0.05, 0.05, 0.0),
@@ -597,7 +619,7 @@ shader mx_generalized_schlick_bsdf(float weight = 1.0, color color0 = color(1.0)
                                    string scatter_mode = "R", output closure out) {
     closure lobe = generalized_schlick_bsdf(clamp(color0, 0.0, 1.0), clamp(color82, 0.0, 1.0), clamp(color90, 0.0, 1.0),
                                             exponent, mx_isotropic_roughness(roughness));
-    out = mx_thinfilm(lobe, thinfilm_thickness, thinfilm_ior) * clamp(weight, 0.0, 1.0);
+    out = mx_anisotropic(mx_thinfilm(lobe, thinfilm_thickness, thinfilm_ior), roughness, tangent) * clamp(weight, 0.0, 1.0);
 }
 shader mx_sheen_bsdf(float weight = 1.0, color color_ = color(1.0), float roughness = 0.3, color normal_ = color(0.0),
                      string mode = "conty_kulla", output closure out) {
@@ -733,17 +755,28 @@ color mx_coat_darkening(color base_albedo, float base_roughness, float coat_ior,
     return mix(color(1.0), delta, clamp(amount, 0.0, 1.0));
 }
 
+// OpenPBR's anisotropic widths (specification, "Specular": α_t = r² √(2 / (1 + (1 − a)²)),
+// α_b = (1 − a) α_t along tangent and bitangent), the anisotropy a clamped to [0, 0.998] (at 1
+// the bitangent width vanishes; 0.998 stretches the lobe 22-fold).
+color mx_open_pbr_alpha(float roughness, float anisotropy) {
+    float rest = 1.0 - clamp(anisotropy, 0.0, 0.998);
+    float alpha_t = roughness * roughness * sqrt(2.0 / (1.0 + rest * rest));
+    return color(alpha_t, rest * alpha_t, 0.0);
+}
+
 // A clear coat of `weight` over `base`, which it tints by `coat_color` and darkens by
 // `darkening` (OpenPBR's coat darkening; color(1.0): none), shaded about `coat_normal` (world
 // space; unset, the zero vector: the surface's unperturbed normal N, as both specifications
 // default it to Nworld, so a bumped base keeps a smooth coat). The coat records the darkening
 // (`with_darkening`): the random-walk layering simulates the internal reflections it stands
-// for and divides it back out, so the base is not darkened twice.
+// for and divides it back out, so the base is not darkened twice. The coat's GGX widths are
+// `alpha` (its `roughness` their mean's, mx_anisotropic) along `tangent`.
 closure mx_coated(closure base, float weight, color coat_color, float roughness, float ior, color coat_normal,
-                  color darkening) {
+                  color darkening, color alpha, color tangent) {
     float c = clamp(weight, 0.0, 1.0);
     vector n = length(vector(coat_normal)) > 1e-8 ? normalize(vector(coat_normal)) : vector(N);
-    closure coat = with_normal(dielectric_bsdf(color(1.0), clamp(ior, 1.0, 4.0), clamp(roughness, 0.0, 1.0), "R"), n);
+    closure isotropic_coat = dielectric_bsdf(color(1.0), clamp(ior, 1.0, 4.0), clamp(roughness, 0.0, 1.0), "R");
+    closure coat = with_normal(mx_anisotropic(isotropic_coat, alpha, tangent), n);
     return layer(with_darkening(coat, darkening) * c, base * darkening * mix(color(1.0), clamp(coat_color, 0.0, 1.0), c));
 }
 
@@ -755,11 +788,18 @@ shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0
                         float fuzz_roughness = 0.5, float coat_weight = 0.0, color coat_color = color(1.0),
                         float coat_roughness = 0.0, float coat_ior = 1.6, float coat_darkening = 1.0,
                         color coat_normal = color(0.0), float thin_film_weight = 0.0, float thin_film_thickness = 0.5,
-                        float thin_film_ior = 1.4, output closure bsdf) {
+                        float thin_film_ior = 1.4, float specular_roughness_anisotropy = 0.0,
+                        float coat_roughness_anisotropy = 0.0, color geometry_tangent = color(0.0),
+                        color geometry_coat_tangent = color(0.0), output closure bsdf) {
     float c = clamp(coat_weight, 0.0, 1.0);
-    float rc = clamp(coat_roughness, 0.0, 1.0);
+    float rc_in = clamp(coat_roughness, 0.0, 1.0);
     float r0 = clamp(specular_roughness, 0.0, 1.0);
-    float r = mix(r0, min(1.0, pow(r0 * r0 * r0 * r0 + 2.0 * rc * rc * rc * rc, 0.25)), c);
+    float r_in = mix(r0, min(1.0, pow(r0 * r0 * r0 * r0 + 2.0 * rc_in * rc_in * rc_in * rc_in, 0.25)), c);
+    // The specular and coat widths along their tangents (isotropic: r itself, bit for bit).
+    color alpha = mx_open_pbr_alpha(r_in, specular_roughness_anisotropy);
+    float r = specular_roughness_anisotropy > 0.0 ? mx_isotropic_roughness(alpha) : r_in;
+    color coat_alpha = mx_open_pbr_alpha(rc_in, coat_roughness_anisotropy);
+    float rc = coat_roughness_anisotropy > 0.0 ? mx_isotropic_roughness(coat_alpha) : rc_in;
     color base = clamp(base_color * base_weight, 0.0, 1.0);
     color diffuse_colour = mix(base, clamp(subsurface_color, 0.0, 1.0), clamp(subsurface_weight, 0.0, 1.0));
     closure diffuse = oren_nayar_diffuse_bsdf(diffuse_colour, clamp(base_diffuse_roughness, 0.0, 1.0), 1.0);
@@ -781,7 +821,8 @@ shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0
     color e_base = mix(e_dielectric, base * clamp(specular_weight, 0.0, 1.0), m);
     float base_roughness = mix(mix(1.0, r0, fs), r0, m);
     color darkening = mx_coat_darkening(e_base, base_roughness, coat_ior, c * clamp(coat_darkening, 0.0, 1.0));
-    closure coated = mx_coated(mix(dielectric, metal, m), c, coat_color, rc, coat_ior, coat_normal, darkening);
+    closure base_slab = mx_anisotropic(mix(dielectric, metal, m), alpha, geometry_tangent);
+    closure coated = mx_coated(base_slab, c, coat_color, rc, coat_ior, coat_normal, darkening, coat_alpha, geometry_coat_tangent);
     bsdf = layer(sheen_bsdf(clamp(fuzz_color, 0.0, 1.0), clamp(fuzz_roughness, 0.0, 1.0)) * clamp(fuzz_weight, 0.0, 1.0), coated);
 }
 
@@ -793,10 +834,21 @@ shader mx_standard_surface_bsdf(float base = 0.8, color base_color = color(1.0),
                                 float sheen_roughness = 0.3, float coat = 0.0, color coat_color = color(1.0),
                                 float coat_roughness = 0.1, float coat_IOR = 1.5, float coat_affect_roughness = 0.0,
                                 color coat_normal = color(0.0), float thin_film_thickness = 0.0, float thin_film_IOR = 1.5,
-                                output closure bsdf) {
+                                float specular_anisotropy = 0.0, float specular_rotation = 0.0, float coat_anisotropy = 0.0,
+                                float coat_rotation = 0.0, color tangent = color(0.0), output closure bsdf) {
     float c = clamp(coat, 0.0, 1.0);
-    float rc = clamp(coat_roughness, 0.0, 1.0);
-    float r = mix(clamp(specular_roughness, 0.0, 1.0), 1.0, clamp(coat_affect_roughness, 0.0, 1.0) * c * rc);
+    float rc_in = clamp(coat_roughness, 0.0, 1.0);
+    float r_in = mix(clamp(specular_roughness, 0.0, 1.0), 1.0, clamp(coat_affect_roughness, 0.0, 1.0) * c * rc_in);
+    // `roughness_anisotropy`'s widths (isotropic: r itself, bit for bit), along the tangent
+    // (unset: dPdu) turned by `*_rotation` turns about the normal (the coat's about its own).
+    color alpha = mx_anisotropic_alpha(r_in, specular_anisotropy);
+    float r = specular_anisotropy > 0.0 ? mx_isotropic_roughness(alpha) : r_in;
+    color coat_alpha = mx_anisotropic_alpha(rc_in, coat_anisotropy);
+    float rc = coat_anisotropy > 0.0 ? mx_isotropic_roughness(coat_alpha) : rc_in;
+    vector t = length(vector(tangent)) > 1e-8 ? vector(tangent) : dPdu;
+    vector coat_n = length(vector(coat_normal)) > 1e-8 ? normalize(vector(coat_normal)) : vector(N);
+    color main_tangent = color(mx_rotate3(t, specular_rotation * 360.0, vector(N)));
+    color coat_tangent = color(mx_rotate3(t, coat_rotation * 360.0, coat_n));
     color albedo = clamp(base_color * base, 0.0, 1.0);
     color diffuse_colour = mix(albedo, clamp(subsurface_color, 0.0, 1.0), clamp(subsurface, 0.0, 1.0));
     closure diffuse = oren_nayar_diffuse_bsdf(diffuse_colour, clamp(diffuse_roughness, 0.0, 1.0), 0.0);
@@ -806,7 +858,8 @@ shader mx_standard_surface_bsdf(float base = 0.8, color base_color = color(1.0),
                                             thin_film_thickness > 0.0 ? 1.0 : 0.0, thin_film_thickness, thin_film_IOR);
     closure metal = mx_film(mx_f82_metal(albedo, specular_color, r), thin_film_thickness > 0.0 ? 1.0 : 0.0, thin_film_thickness,
                             thin_film_IOR);
-    bsdf = mx_coated(mix(dielectric, metal, clamp(metalness, 0.0, 1.0)), c, coat_color, rc, coat_IOR, coat_normal, color(1.0));
+    closure base_slab = mx_anisotropic(mix(dielectric, metal, clamp(metalness, 0.0, 1.0)), alpha, main_tangent);
+    bsdf = mx_coated(base_slab, c, coat_color, rc, coat_IOR, coat_normal, color(1.0), coat_alpha, coat_tangent);
 }
 
 // MaterialX's `surface_unlit`: emission · emission_color as emitted radiance and no BSDF
@@ -892,7 +945,10 @@ substance open_pbr_surface {
                                  fuzz_roughness: fuzz_roughness, coat_weight: coat_weight, coat_color: coat_color,
                                  coat_roughness: coat_roughness, coat_ior: coat_ior, coat_darkening: coat_darkening,
                                  coat_normal: geometry_coat_normal, thin_film_weight: thin_film_weight,
-                                 thin_film_thickness: thin_film_thickness, thin_film_ior: thin_film_ior);
+                                 thin_film_thickness: thin_film_thickness, thin_film_ior: thin_film_ior,
+                                 specular_roughness_anisotropy: specular_roughness_anisotropy,
+                                 coat_roughness_anisotropy: coat_roughness_anisotropy, geometry_tangent: geometry_tangent,
+                                 geometry_coat_tangent: geometry_coat_tangent);
     node presence = mask(opacity: geometry_opacity);
     node normals = mx_surface_normal(n: geometry_normal);
     node glow = mx_emission(amount: emission_luminance, tint: emission_color);
@@ -954,7 +1010,9 @@ substance standard_surface {
                                          sheen_color: sheen_color, sheen_roughness: sheen_roughness, coat: coat,
                                          coat_color: coat_color, coat_roughness: coat_roughness, coat_IOR: coat_IOR,
                                          coat_affect_roughness: coat_affect_roughness, coat_normal: coat_normal,
-                                         thin_film_thickness: thin_film_thickness, thin_film_IOR: thin_film_IOR);
+                                         thin_film_thickness: thin_film_thickness, thin_film_IOR: thin_film_IOR,
+                                         specular_anisotropy: specular_anisotropy, specular_rotation: specular_rotation,
+                                         coat_anisotropy: coat_anisotropy, coat_rotation: coat_rotation, tangent: tangent);
     node presence = mx_opacity(opacity: opacity);
     node normals = mx_surface_normal(n: normal_);
     node glow = mx_emission(amount: emission, tint: emission_color);

@@ -42,12 +42,13 @@ typedef struct StrataGlobals {
 
 /* One weighted lobe of a closure (abi::ClosureTerm): kind 0 none, 1 diffuse, 2 glossy,
    3 metal, 4 glass, 5 conductor, 6 dielectric, 7 generalized Schlick, 8 Oren-Nayar, 9 Burley,
-   10 sheen; bit j of `above` set when term j lies above this one (layer). */
+   10 sheen, 11 translucent; bit j of `above` set when term j lies above this one (layer);
+   params[15..18] a world-space tangent and params[18] the GGX aspect sqrt(ax / ay) (0: none). */
 typedef struct StrataClosureTerm {
     uint32_t kind;
     uint32_t above;
     float weight[3];
-    float params[11];
+    float params[19];
 } StrataClosureTerm;
 
 /* A closure value (abi::ClosureSum). Zero it before calling a surface entry: the entry writes
@@ -59,6 +60,24 @@ typedef struct StrataClosure {
 /* Every function returns a status: 0 ok, 1 loop budget exceeded, 2 index out of bounds. */
 enum { STRATA_OK = 0, STRATA_LOOP_BUDGET = 1, STRATA_OUT_OF_BOUNDS = 2 };
 ";
+
+// The header's term is the ABI's (a stale size would let compiled code write past the caller's
+// closure).
+const _: () = {
+    let (header, want) = (C_HEADER_PRELUDE.as_bytes(), b"float params[19];");
+    assert!(crate::abi::TERM_PARAMS == 19 && crate::abi::TERM_TANGENT == 15 && crate::abi::TERM_ASPECT == 18);
+    let mut i = 0;
+    let mut found = false;
+    while i + want.len() <= header.len() {
+        let mut k = 0;
+        while k < want.len() && header[i + k] == want[k] {
+            k += 1;
+        }
+        found |= k == want.len();
+        i += 1;
+    }
+    assert!(found, "the C header's StrataClosureTerm does not match abi::TERM_PARAMS");
+};
 
 /// Compiles every substance that `file` declares (inputs at their defaults) to a native object
 /// with one C function per product, and the C header declaring them (`strata compile`).

@@ -4,6 +4,7 @@
 //! connections as MaterialX resolves them (`chess_mat.expected`), node values by hand from the
 //! MaterialX specification, and the UsdPreviewSurface translation of the same asset.
 
+mod aniso;
 #[path = "../common/mod.rs"]
 mod common;
 mod noise;
@@ -553,7 +554,7 @@ fn what_the_surfaces_approximate_is_reported_once_per_kind() {
     let text = "def Material \"M\" (prepend references = @odd/unsupported_lobes.mtlx@</MaterialX/Materials/M>) {}";
     let (code, rendered) = compiled(text);
     assert!(code.is_some(), "{rendered}");
-    assert!(rendered.contains("`coat_anisotropy` is not supported"), "{rendered}");
+    assert!(rendered.contains("`coat_affect_color` is not supported"), "{rendered}");
     // Sheen and partial metalness are layered and mixed as the specification says: no warning.
     assert!(!rendered.contains("sheen") && !rendered.contains("metalness"), "{rendered}");
     // An ND_ node strata lacks: one warning naming it, the input keeps its default.

@@ -175,6 +175,13 @@ impl FnLower<'_> {
         Lv::Scalars(self.closure_set_params(c, abi::TERM_DARKENING, &removed, Kinds::Only(ClosureKind::Dielectric)).0)
     }
 
+    /// `with_anisotropy(c, tangent, aspect)`: `[tangent xyz, aspect]` in the tangent and aspect
+    /// words ([`abi::TERM_TANGENT`], [`abi::TERM_ASPECT`], adjacent) of every term of `c`.
+    pub(super) fn closure_with_anisotropy(&mut self, c: &[ssa::Value], words: &[ssa::Value; 4]) -> Lv {
+        const _: () = assert!(abi::TERM_ASPECT == abi::TERM_TANGENT + 3);
+        Lv::Scalars(self.closure_set_params(c, abi::TERM_TANGENT, words, Kinds::AllBut(ClosureKind::None)).0)
+    }
+
     /// `c` with `values` in parameter words `at..` of every term of the `kinds`: a term of a
     /// kind known when compiling is set or not, one of a kind known only when running by a
     /// select. Also whether a term of a known kind was left out.

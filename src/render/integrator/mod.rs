@@ -595,8 +595,9 @@ impl Context<'_> {
             n
         };
         (lobe.weight, lobe.frame, lobe.layer) = (weight, Frame::from_normal(n), layer);
-        // Terms with a normal of their own (`with_normal`) turn into its frame.
-        lobe.bsdf.set_term_normals(terms, &lobe.frame, lobe.frame.to_local(-d));
+        // Terms with a normal of their own (`with_normal`) turn into its frame; anisotropic
+        // ones (`with_anisotropy`) turn the frame about the normal to their tangent.
+        lobe.bsdf.set_term_frames(terms, &mut lobe.frame, -d);
         Ok(())
     }
 

@@ -28,8 +28,17 @@
 //! sampled in a frame about that normal ([`ClosureBsdf::set_term_normals`]), rotated from the
 //! shading frame. The attenuation of the terms under it keeps using the shading frame's
 //! cosines, and a walk over a stack with a tilted term falls back to albedo scaling.
+//!
+//! **Per-term tangents.** An anisotropic GGX term (`with_anisotropy`, [`TERM_ASPECT`]) is
+//! stretched along its own world-space tangent ([`TERM_TANGENT`]): the shading frame turns
+//! about its normal so that its first tangent is the first anisotropic term's
+//! ([`ClosureBsdf::set_term_frames`]), and a term whose tangent differs from it (another
+//! tangent, or one tilted by the term's own normal, projected) turns about its normal in its
+//! own frame. The layering tables read the mean width `√(αx αy)`.
 
-use crate::abi::{ClosureKind, ClosureSum, ClosureTerm, MAX_CLOSURE_TERMS, TERM_DARKENING, TERM_NORMAL};
+use crate::abi::{
+    ClosureKind, ClosureSum, ClosureTerm, MAX_CLOSURE_TERMS, TERM_ASPECT, TERM_DARKENING, TERM_NORMAL, TERM_TANGENT,
+};
 use crate::render::material::bsdf::{Bsdf, BsdfSample, finish};
 use crate::render::material::frame::Frame;
 use crate::render::material::lobes::Lobe;
@@ -73,7 +82,8 @@ pub(crate) struct Term {
     /// Estimated albedo × weight (max channel): the term's share of samples before layering.
     importance: f32,
     /// The rotation from the shading frame to the frame of the term's own normal, if it has
-    /// one that differs ([`ClosureBsdf::set_term_normals`]).
+    /// one that differs, or a tangent that differs from the shading frame's
+    /// ([`ClosureBsdf::set_term_frames`]).
     tilt: Option<Quat>,
     /// The factor the shader multiplied the terms under this one by for its internal
     /// reflections ([`TERM_DARKENING`]; 1: none). Only the random walk reads it.
@@ -125,6 +135,31 @@ fn term_normal(t: &ClosureTerm) -> Option<Vec3> {
     }
     let n = Vec3::from_slice(&t.params[TERM_NORMAL..TERM_NORMAL + 3]);
     (n != Vec3::ZERO && n.is_finite()).then_some(n)
+}
+
+/// The GGX aspect `√(αx / αy)` a closure term carries ([`TERM_ASPECT`]), if it is not
+/// isotropic (0, 1 and non-finite words are isotropic).
+#[inline]
+fn term_aspect(t: &ClosureTerm) -> Option<f32> {
+    let a = t.params[TERM_ASPECT];
+    (a.is_finite() && a > 0.0 && a != 1.0).then_some(a)
+}
+
+/// The world-space tangent a closure term carries ([`TERM_TANGENT`]), if any (zero: none).
+#[inline]
+fn term_tangent(t: &ClosureTerm) -> Option<Vec3> {
+    let v = Vec3::from_slice(&t.params[TERM_TANGENT..TERM_TANGENT + 3]);
+    (v != Vec3::ZERO && v.is_finite()).then_some(v)
+}
+
+/// A term's lobe, stretched by its aspect when it has one.
+#[inline]
+fn decode(t: &ClosureTerm) -> Lobe {
+    let lobe = Lobe::from_term(t);
+    match term_aspect(t) {
+        Some(aspect) => lobe.with_aspect(aspect),
+        None => lobe,
+    }
 }
 
 /// A term's colour weight as the renderer uses it: each channel clamped to [0, 1], NaN as 0.
@@ -230,7 +265,7 @@ impl ClosureBsdf {
         }
         if live.count_ones() <= 1 {
             match terms.get(live.trailing_zeros() as usize) {
-                Some(t) => self.set_lobes(&[(Lobe::from_term(t), clamped(t), 0)], mode),
+                Some(t) => self.set_lobes(&[(decode(t), clamped(t), 0)], mode),
                 None => self.set_lobes(&[], mode),
             }
             return;
@@ -251,7 +286,7 @@ impl ClosureBsdf {
                 }
             }
             position[k] = len;
-            lobes[len] = (Lobe::from_term(t), weight, above);
+            lobes[len] = (decode(t), weight, above);
             len += 1;
         }
         self.set_lobes_finding(&lobes[..len], mode, false);
@@ -336,25 +371,35 @@ impl ClosureBsdf {
         }
     }
 
-    /// Gives the terms of `sum` (as [`ClosureBsdf::set_sum`] decoded them) that carry their own
-    /// world-space normal a frame about it: `frame` is the shading frame and `wo` the outgoing
-    /// direction in it. A normal on the far side of the frame is flipped (as the shading
-    /// normal is), one tilted away from `wo` bent towards it ([`MIN_TILTED_COS`]); a normal
-    /// within 1e-6 of the shading normal is none, so such a closure is today's bit for bit.
-    pub fn set_term_normals(&mut self, terms: &[ClosureTerm], frame: &Frame, wo: Vec3) {
-        // Most closures have none: one pass over the words before any decoding.
-        if !terms.iter().any(|t| term_normal(t).is_some()) {
+    /// Gives the terms of `sum` (as [`ClosureBsdf::set_sum`] decoded them) their own frames:
+    /// `frame` is the shading frame and `wo` the outgoing direction (world space).
+    ///
+    /// With an anisotropic term, `frame` first turns about its normal so that its first
+    /// tangent is the first anisotropic term's ([`TERM_TANGENT`]; none: the frame keeps its
+    /// own). A term with its own world-space normal gets a frame about it: a normal on the far
+    /// side of the frame is flipped (as the shading normal is), one tilted away from `wo` bent
+    /// towards it ([`MIN_TILTED_COS`]); a normal within 1e-6 of the shading normal is none, so
+    /// such a closure is today's bit for bit. An anisotropic term whose tangent, projected into
+    /// its frame, is not the frame's x axis turns about its normal to it.
+    pub fn set_term_frames(&mut self, terms: &[ClosureTerm], frame: &mut Frame, wo: Vec3) {
+        let anisotropic = self.terms().iter().any(|t| t.lobe.is_anisotropic());
+        // Most closures have neither: one pass over the words before any decoding.
+        if !anisotropic && !terms.iter().any(|t| term_normal(t).is_some()) {
             return;
         }
-        let mut i = 0;
-        let mut tilted = false;
-        for t in terms.iter() {
-            if !is_live(t) {
-                continue;
+        let len = self.len;
+        let live = || terms.iter().filter(|t| is_live(t)).take(len).zip(0..);
+        if anisotropic {
+            let first = live().find(|&(_, i)| self.terms[i].lobe.is_anisotropic());
+            if let Some(turned) = first.and_then(|(t, _)| term_tangent(t)).and_then(|t| frame.with_tangent(t)) {
+                *frame = turned;
             }
-            if let Some(n) = term_normal(t)
-                && i < self.len
-            {
+        }
+        let wo = frame.to_local(wo);
+        let mut tilted = false;
+        for (t, i) in live() {
+            let mut tilt = None;
+            if let Some(n) = term_normal(t) {
                 let mut n = frame.to_local(n.normalize());
                 if n.z < 0.0 {
                     n = -n;
@@ -365,14 +410,25 @@ impl ClosureBsdf {
                     if cos < MIN_TILTED_COS {
                         n = (n + wo * (side * (MIN_TILTED_COS - cos))).normalize();
                     }
-                    self.terms[i].tilt = Some(Quat::from_rotation_arc(n, Vec3::Z));
-                    tilted = true;
+                    tilt = Some(Quat::from_rotation_arc(n, Vec3::Z));
                 }
             }
-            i += 1;
+            if self.terms[i].lobe.is_anisotropic() {
+                // The term's tangent in its frame (none: the shading frame's), projected.
+                let tangent = term_tangent(t).map_or(Vec3::X, |v| frame.to_local(v));
+                let tangent = tilt.map_or(tangent, |q| q * tangent);
+                let turn = tangent.y.atan2(tangent.x);
+                if tangent.truncate().length_squared() > 1e-12 && turn.abs() > 1e-6 {
+                    tilt = Some(Quat::from_rotation_z(-turn) * tilt.unwrap_or(Quat::IDENTITY));
+                }
+            }
+            if tilt.is_some() {
+                self.terms[i].tilt = tilt;
+                tilted = true;
+            }
         }
         if tilted && self.walk.is_some() {
-            // A tilted term is not walked ([`walk::stack`] falls back).
+            // A term with a frame of its own is not walked ([`walk::stack`] falls back).
             self.walk = walk::stack(self);
         }
     }

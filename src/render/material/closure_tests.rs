@@ -422,7 +422,7 @@ fn tilted_coat_over_diffuse(rough: f32, n: Vec3, wo: Vec3) -> ClosureBsdf {
     sum.terms[0].params[TERM_NORMAL..TERM_NORMAL + 3].copy_from_slice(&n.to_array());
     sum.terms[1] = ClosureTerm { above: 1, ..term(ClosureKind::Diffuse, &[0.8, 0.8, 0.8]) };
     let mut b = ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling);
-    b.set_term_normals(&sum.terms, &Frame::from_normal(Vec3::Z), wo);
+    b.set_term_frames(&sum.terms, &mut Frame::from_normal(Vec3::Z), wo);
     b
 }
 

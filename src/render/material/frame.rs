@@ -29,6 +29,18 @@ impl Frame {
         }
     }
 
+    /// The frame about the same normal whose first tangent is `t` projected into the tangent
+    /// plane (`None` when `t` is not finite or nearly along the normal).
+    pub fn with_tangent(&self, t: Vec3) -> Option<Frame> {
+        let projected = t - self.n * self.n.dot(t);
+        if projected.length_squared() <= 1e-8 * t.length_squared() {
+            return None;
+        }
+        // Non-finite: `None` here.
+        let t = projected.try_normalize()?;
+        Some(Frame { t, b: self.n.cross(t), n: self.n })
+    }
+
     /// World direction -> local coordinates.
     #[inline]
     pub fn to_local(&self, v: Vec3) -> Vec3 {

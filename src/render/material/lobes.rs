@@ -437,6 +437,43 @@ impl Lobe {
         }
     }
 
+    /// The lobe with its GGX distribution (if it has one) stretched by `aspect` (`√(αx / αy)`,
+    /// [`Ggx::with_aspect`]) along its frame's x axis, the mean width kept; other lobes are
+    /// unchanged.
+    pub fn with_aspect(self, aspect: f32) -> Lobe {
+        let bsdf = |b: Bsdf| match b {
+            Bsdf::Glossy { albedo, specular, ggx, eta } => {
+                Bsdf::Glossy { albedo, specular, ggx: ggx.with_aspect(aspect), eta }
+            }
+            Bsdf::Metal { reflectivity, eta, k, ggx } => {
+                Bsdf::Metal { reflectivity, eta, k, ggx: ggx.with_aspect(aspect) }
+            }
+            Bsdf::Glass { tint, ggx, eta } => Bsdf::Glass { tint, ggx: ggx.with_aspect(aspect), eta },
+            other => other,
+        };
+        match self {
+            Lobe::Bsdf(b) => Lobe::Bsdf(bsdf(b)),
+            Lobe::Interface { glass, tint, reflect, film } => {
+                Lobe::Interface { glass: bsdf(glass), tint, reflect, film }
+            }
+            Lobe::Specular { fresnel, tint, ggx } => Lobe::Specular { fresnel, tint, ggx: ggx.with_aspect(aspect) },
+            other => other,
+        }
+    }
+
+    /// Whether the lobe's GGX distribution is anisotropic (its frame's x axis matters).
+    pub fn is_anisotropic(&self) -> bool {
+        let bsdf = |b: &Bsdf| match b {
+            Bsdf::Glossy { ggx, .. } | Bsdf::Metal { ggx, .. } | Bsdf::Glass { ggx, .. } => ggx.is_anisotropic(),
+            _ => false,
+        };
+        match self {
+            Lobe::Bsdf(b) | Lobe::Interface { glass: b, .. } => bsdf(b),
+            Lobe::Specular { ggx, .. } => ggx.is_anisotropic(),
+            _ => false,
+        }
+    }
+
     /// The lobe as a layer on top of others: its transmission is what reaches them, so a
     /// transmitting dielectric keeps only its reflection.
     pub fn covering(self) -> Lobe {

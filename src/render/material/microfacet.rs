@@ -1,7 +1,8 @@
 //! GGX (Trowbridge–Reitz) microfacet distribution and Fresnel terms shared by the BSDFs.
 //!
-//! All directions are in the local shading frame (+z = normal). The distribution is isotropic;
-//! microfacet normals always lie in the upper hemisphere, whichever side the directions are on.
+//! All directions are in the lobe's local frame (+z = normal, +x = tangent). The distribution
+//! may be anisotropic (α along the tangent and the bitangent); microfacet normals always lie in
+//! the upper hemisphere, whichever side the directions are on.
 
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
@@ -11,20 +12,67 @@ use std::f32::consts::{FRAC_1_PI, PI};
 /// and binning can resolve, and the integrator is better served by a delta lobe.
 pub const DELTA_ALPHA: f32 = 1e-3;
 
-/// Isotropic GGX distribution with the height-correlated Smith masking–shadowing term.
+/// Largest ratio `√(αx / αy)` (or its inverse) a lobe takes: past it the narrow direction's
+/// width falls under [`DELTA_ALPHA`] for any roughness that is not nearly 1.
+pub const MAX_ASPECT: f32 = 30.0;
+
+/// GGX distribution with the height-correlated Smith masking–shadowing term, anisotropic with
+/// `αx = α·aspect` along the local x axis (the tangent) and `αy = α / aspect` along y.
+///
+/// `aspect == 1` is the isotropic distribution, bit for bit: every formula below multiplies
+/// or divides by `aspect²` where the isotropic one has nothing, which is exact for 1.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ggx {
-    /// Width `α`; the closures' perceptual roughness `r` maps to `α = r²`.
+    /// Geometric mean width `α = √(αx αy)`; the closures' perceptual roughness `r` maps to
+    /// `α = r²`. Albedo tables, which are isotropic, read this width.
     pub alpha: f32,
+    /// `√(αx / αy)`, in [1 / [`MAX_ASPECT`], [`MAX_ASPECT`]]; 1: isotropic.
+    pub aspect: f32,
 }
 
 impl Ggx {
-    /// From perceptual roughness (already clamped to [0, 1]).
-    pub fn from_roughness(roughness: f32) -> Ggx {
-        Ggx { alpha: roughness * roughness }
+    /// Isotropic, of width `alpha`.
+    pub fn isotropic(alpha: f32) -> Ggx {
+        Ggx { alpha, aspect: 1.0 }
     }
 
-    /// Whether the lobe should be handled as a delta lobe.
+    /// Widths `alpha_x` along the tangent and `alpha_y` along the bitangent (both > 0).
+    pub fn anisotropic(alpha_x: f32, alpha_y: f32) -> Ggx {
+        Ggx { alpha: (alpha_x * alpha_y).sqrt(), aspect: 1.0 }.with_aspect((alpha_x / alpha_y).sqrt())
+    }
+
+    /// From perceptual roughness (already clamped to [0, 1]).
+    pub fn from_roughness(roughness: f32) -> Ggx {
+        Ggx::isotropic(roughness * roughness)
+    }
+
+    /// The same mean width stretched by `aspect` (`√(αx / αy)`; clamped to
+    /// [1 / [`MAX_ASPECT`], [`MAX_ASPECT`]], a non-finite or non-positive one is 1).
+    pub fn with_aspect(self, aspect: f32) -> Ggx {
+        let aspect = if aspect.is_finite() && aspect > 0.0 { aspect.clamp(1.0 / MAX_ASPECT, MAX_ASPECT) } else { 1.0 };
+        Ggx { aspect, ..self }
+    }
+
+    /// Width along the tangent (local x).
+    #[inline]
+    pub fn alpha_x(&self) -> f32 {
+        self.alpha * self.aspect
+    }
+
+    /// Width along the bitangent (local y).
+    #[inline]
+    pub fn alpha_y(&self) -> f32 {
+        self.alpha / self.aspect
+    }
+
+    /// Whether the distribution is anisotropic.
+    #[inline]
+    pub fn is_anisotropic(&self) -> bool {
+        self.aspect != 1.0
+    }
+
+    /// Whether the lobe should be handled as a delta lobe (its mean width is under
+    /// [`DELTA_ALPHA`]).
     #[inline]
     pub fn is_smooth(&self) -> bool {
         self.alpha < DELTA_ALPHA
@@ -37,8 +85,10 @@ impl Ggx {
             return 0.0;
         }
         let a2 = self.alpha * self.alpha;
-        // 1 / (π α² (x²/α² + y²/α² + z²)²) multiplied through by α⁴ to stay finite for small α.
-        let t = m.x * m.x + m.y * m.y + a2 * m.z * m.z;
+        let s2 = self.aspect * self.aspect;
+        // 1 / (π αx αy (x²/αx² + y²/αy² + z²)²) multiplied through by (αx αy)² = α⁴ to stay
+        // finite for small α (αy/αx = 1/aspect², αx/αy = aspect²).
+        let t = m.x * m.x / s2 + m.y * m.y * s2 + a2 * m.z * m.z;
         if t <= 0.0 {
             return 0.0;
         }
@@ -52,7 +102,9 @@ impl Ggx {
         if z2 <= 0.0 {
             return f32::INFINITY;
         }
-        let a2tan2 = self.alpha * self.alpha * (w.x * w.x + w.y * w.y) / z2;
+        // α² tan² θ with α²(φ) = cos²φ αx² + sin²φ αy² (α² aspect² and α² / aspect²).
+        let s2 = self.aspect * self.aspect;
+        let a2tan2 = self.alpha * self.alpha * (w.x * w.x * s2 + w.y * w.y / s2) / z2;
         // (sqrt(1 + x) - 1) / 2 rewritten as x / (2 (sqrt(1 + x) + 1)) to avoid cancellation for tiny α.
         a2tan2 / (2.0 * ((1.0 + a2tan2).sqrt() + 1.0))
     }
@@ -91,14 +143,15 @@ impl Ggx {
     #[inline]
     pub fn sample_visible(&self, wo: Vec3, u: Vec2) -> Option<Vec3> {
         let wo_up = if wo.z < 0.0 { -wo } else { wo };
+        let (ax, ay) = (self.alpha_x(), self.alpha_y());
         // Warp to the hemisphere configuration (α = 1).
-        let wh = Vec3::new(self.alpha * wo_up.x, self.alpha * wo_up.y, wo_up.z).try_normalize()?;
+        let wh = Vec3::new(ax * wo_up.x, ay * wo_up.y, wo_up.z).try_normalize()?;
         let phi = 2.0 * PI * u.x;
         let z = (1.0 - u.y) * (1.0 + wh.z) - wh.z;
         let sin_theta = (1.0 - z * z).clamp(0.0, 1.0).sqrt();
         let c = Vec3::new(sin_theta * phi.cos(), sin_theta * phi.sin(), z);
         let h = c + wh;
-        let m = Vec3::new(self.alpha * h.x, self.alpha * h.y, h.z).try_normalize()?;
+        let m = Vec3::new(ax * h.x, ay * h.y, h.z).try_normalize()?;
         (m.z > 0.0).then_some(m)
     }
 }
@@ -261,7 +314,7 @@ mod tests {
     fn ggx_d_is_normalised_over_projected_area() {
         // ∫ D(m) cos θm dω = 1 for every α, including the narrow ones the chi-square tests use.
         for alpha in [0.0025f32, 0.05, 0.3, 1.0] {
-            let g = Ggx { alpha };
+            let g = Ggx::isotropic(alpha);
             // Integrate in slope-space-friendly θ: substitute tan θ = α s, s ∈ [0, ∞) via s = t/(1-t).
             let n = 4000;
             let mut sum = 0.0f64;
@@ -310,7 +363,7 @@ mod tests {
 
     #[test]
     fn visible_normal_samples_are_upper_hemisphere_and_facing() {
-        let g = Ggx { alpha: 0.5 };
+        let g = Ggx::isotropic(0.5);
         let wo = Vec3::new(0.6, 0.0, -0.8);
         for i in 0..64 {
             for j in 0..64 {

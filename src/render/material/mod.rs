@@ -5,6 +5,8 @@
 //! ([`frame`]), and the χ² statistics the BSDF, layering and thin-film tests share ([`chi2`]).
 
 pub mod albedo;
+#[cfg(test)]
+mod aniso_tests;
 pub mod bsdf;
 #[cfg(test)]
 pub(crate) mod chi2;

@@ -313,7 +313,7 @@ fn fell_back(kind: u8) -> Option<Stack> {
 pub fn take_fallback() -> Vec<&'static str> {
     let bits = FALLBACK.swap(0, Ordering::Relaxed);
     [
-        (FALLBACK_TILTED, "a layered term with its own normal"),
+        (FALLBACK_TILTED, "a layered term with its own normal, or an anisotropic one whose tangent is not the first's"),
         (FALLBACK_TOP, "a layer whose innermost top is not a dielectric"),
         (FALLBACK_NESTED_DIELECTRIC, "three or more nested dielectric layers, or a transmitting one over another"),
         (FALLBACK_SHAPE, "layers that are not one stack (separate stacks side by side)"),
