@@ -136,6 +136,10 @@ intrinsics! {
     // terms under it were multiplied by `factor` for the coat's internal reflections (OpenPBR's
     // coat_darkening), so the random-walk layering, which simulates them, divides it back out.
     WithDarkening = "with_darkening": Fixed(&[CL, C], CL),
+    // with_thin_walled(c, thin): where `thin` is not 0, every transmitting dielectric_bsdf term
+    // of `c` ("T", "RT") is a thin-walled sheet: no interior, the sheet's inter-reflected
+    // reflectance, transmission straight through (OpenPBR geometry_thin_walled).
+    WithThinWalled = "with_thin_walled": Fixed(&[CL, F], CL),
 }
 
 impl Intrinsic {
@@ -163,7 +167,11 @@ impl Intrinsic {
         self.closure_kind().is_some()
             || matches!(
                 self,
-                Intrinsic::Layer | Intrinsic::WithNormal | Intrinsic::WithThinFilm | Intrinsic::WithDarkening
+                Intrinsic::Layer
+                    | Intrinsic::WithNormal
+                    | Intrinsic::WithThinFilm
+                    | Intrinsic::WithDarkening
+                    | Intrinsic::WithThinWalled
             )
     }
 

@@ -494,6 +494,7 @@ fn intrinsic_value(i: Intrinsic, a: &[Value]) -> Result<Value, Stop> {
         | Layer
         | WithNormal
         | WithThinFilm
-        | WithDarkening => return Err(Stop::NotConstant),
+        | WithDarkening
+        | WithThinWalled => return Err(Stop::NotConstant),
     })
 }

@@ -156,6 +156,7 @@ impl FnLower<'_> {
                 self.closure_with_thin_film(&a[0], &film)
             }
             WithDarkening => self.closure_with_darkening(&a[0], &a[1]),
+            WithThinWalled => self.closure_with_thin_walled(&a[0], a[1][0]),
             DielectricBsdf => {
                 // The scatter mode string becomes the lobe's last parameter: 0 R, 1 T, 2 RT.
                 let Some(mode) = self.constant_string(&args[3], frame, "the scatter mode") else {
