@@ -10,6 +10,7 @@ mod noise;
 mod pbrlib;
 mod space;
 mod suite;
+mod thin;
 mod utility;
 
 use pbrlib::*;
