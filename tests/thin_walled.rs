@@ -63,8 +63,12 @@ fn scene(thin: bool) -> String {
         .map(|(a, b)| PANE_U * (a * PANE_HALF) + Vec3::Y * (b * PANE_HALF))
         .collect::<Vec<_>>();
     let h = EMITTER_HALF;
-    let emitter =
-        [Vec3::new(-h, -h, EMITTER_Z), Vec3::new(0.0, -h, EMITTER_Z), Vec3::new(0.0, h, EMITTER_Z), Vec3::new(-h, h, EMITTER_Z)];
+    let emitter = [
+        Vec3::new(-h, -h, EMITTER_Z),
+        Vec3::new(0.0, -h, EMITTER_Z),
+        Vec3::new(0.0, h, EMITTER_Z),
+        Vec3::new(-h, h, EMITTER_Z),
+    ];
     format!(
         "#usda 1.0\n(\n    upAxis = \"Z\"\n)\ndef DistantLight \"Off\" {{\n    float inputs:intensity = 0\n}}\n\
          def Camera \"Cam\" {{\n    float focalLength = 18\n    float horizontalAperture = 36\n    \

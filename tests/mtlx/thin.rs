@@ -71,7 +71,8 @@ fn close(a: &[f32], b: &[f32]) -> bool {
 
 #[test]
 fn a_thin_walled_surface_node_makes_its_transmission_thin_and_keeps_its_coat() {
-    let text = "def Material \"M\" (prepend references = @../thin/thin_walled_surface.mtlx@</MaterialX/Materials/M>) {}";
+    let text =
+        "def Material \"M\" (prepend references = @../thin/thin_walled_surface.mtlx@</MaterialX/Materials/M>) {}";
     let (got, rendered) = lobes(text.to_string());
     assert!(!rendered.contains("warning"), "{rendered}");
     let scatter: Vec<f32> = got.iter().map(|t| t.params[SCATTER]).collect();

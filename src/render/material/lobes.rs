@@ -12,10 +12,10 @@ use crate::render::material::bsdf::{
     Bsdf, BsdfSample, colour, cosine_hemisphere, finish, flip_z, ior, microfacet_reflection_pdf, reflect, roughness,
     sanitize, upper,
 };
-use crate::render::material::thin::ThinSheet;
 use crate::render::material::microfacet::{
     Ggx, fresnel_conductor3, fresnel_dielectric, hemispherical_average, hemispherical_average3, sheen_eval,
 };
+use crate::render::material::thin::ThinSheet;
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
 

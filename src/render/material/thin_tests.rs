@@ -113,7 +113,10 @@ fn a_smooth_sheet_matches_mitsuba_thindielectric() {
         let v: Vec<f32> = line.split_whitespace().map(|x| x.parse().unwrap()).collect();
         let (eta, cos, want_r, want_t) = (v[0], v[1], v[2], v[3]);
         let [(_, r), (_, t)] = delta_samples(&sheet(eta, 0.0), dir(cos as f64, 0.0));
-        assert!((r.x - want_r).abs() < 2e-5 && (t.x - want_t).abs() < 2e-5, "η {eta} cos {cos}: {r} {t} vs {want_r} {want_t}");
+        assert!(
+            (r.x - want_r).abs() < 2e-5 && (t.x - want_t).abs() < 2e-5,
+            "η {eta} cos {cos}: {r} {t} vs {want_r} {want_t}"
+        );
         rows += 1;
     }
     assert_eq!(rows, 35);
@@ -214,7 +217,10 @@ fn a_rough_sheet_is_reciprocal_and_consistent() {
         for _ in 0..3000 {
             let (wo, wi) = (rng.dir(), rng.dir());
             let (f, g) = (l.eval(wo, wi), l.eval(wi, wo));
-            assert!((f - g).abs().max_element() <= 1e-3 * f.max(g).max_element() + 1e-6, "r={rough} {wo} {wi}: {f} vs {g}");
+            assert!(
+                (f - g).abs().max_element() <= 1e-3 * f.max(g).max_element() + 1e-6,
+                "r={rough} {wo} {wi}: {f} vs {g}"
+            );
             transmitted += (wo.z * wi.z < 0.0 && f.max_element() > 0.0) as usize;
             if let Some(s) = l.sample(wo, rng.f32(), rng.vec2()) {
                 let (e, p) = (l.eval(wo, s.wi), l.pdf(wo, s.wi));
@@ -266,5 +272,23 @@ fn a_coat_over_a_sheet_conserves_energy_and_the_walk_falls_back() {
         if z == 1.0 {
             assert!(e.x > 0.99 - 4.0 * se.x, "wo.z={z}: E = {}, not within 1 % of 1", e.x);
         }
+    }
+}
+
+/// At normal incidence the two lobes peak where GGX does with the published widths: the
+/// reflection with the interface's α = r², the transmission straight through with
+/// α_t = ((0.65 η − 0.35) r)² (Burley 2015's fit), each weighted by the sheet's R' or T':
+/// f(n, ±n) = R' or T' · D(n) / 4, D(n) = 1 / (π α²).
+#[test]
+fn the_lobes_peak_with_the_published_roughness() {
+    for (eta, rough) in [(1.5f32, 0.4f32), (1.33, 0.6), (1.8, 0.3)] {
+        let l = sheet(eta, rough);
+        let (want_r, want_t) = ladder(fresnel(1.0, eta as f64));
+        let peak = |alpha: f64| 1.0 / (std::f64::consts::PI * alpha * alpha) / 4.0;
+        let alpha_t = ((0.65 * eta as f64 - 0.35) * rough as f64).powi(2);
+        let (f_r, f_t) = (l.eval(Vec3::Z, Vec3::Z).x as f64, l.eval(Vec3::Z, -Vec3::Z).x as f64);
+        let (r, t) = (want_r * peak((rough * rough) as f64), want_t * peak(alpha_t));
+        assert!((f_r / r - 1.0).abs() < 2e-3, "η {eta} r {rough}: reflection peak {f_r} vs {r}");
+        assert!((f_t / t - 1.0).abs() < 2e-3, "η {eta} r {rough}: transmission peak {f_t} vs {t}");
     }
 }
