@@ -263,7 +263,7 @@ pub const TERM_DARKENING: usize = 9;
 /// What `with_thin_walled` adds to a transmitting [`ClosureKind::Dielectric`] term's scatter
 /// word (parameter 5: "T" 1 becomes 3, "RT" 2 becomes 4): the interface is then a thin-walled
 /// sheet with no interior (the sheet's reflectance, transmission straight through, no medium
-/// entered; `render::material::thin`). A reflecting-only term (a coat) is left as it is.
+/// entered; `render::material::lobes::thin`). A reflecting-only term (a coat) is left as it is.
 pub const THIN_WALLED_SCATTER: f32 = 2.0;
 /// The scatter word of a [`ClosureKind::Dielectric`] term.
 pub const DIELECTRIC_SCATTER: usize = 5;

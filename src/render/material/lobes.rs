@@ -15,9 +15,9 @@ use crate::render::material::bsdf::{
 use crate::render::material::microfacet::{
     Ggx, fresnel_conductor3, fresnel_dielectric, hemispherical_average, hemispherical_average3, sheen_eval,
 };
-use crate::render::material::thin::ThinSheet;
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
+use thin::ThinSheet;
 
 /// The Fresnel curve of a [`Lobe::Specular`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -748,3 +748,5 @@ impl Lobe {
         )
     }
 }
+
+pub mod thin;

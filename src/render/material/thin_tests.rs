@@ -1,4 +1,4 @@
-//! Tests of the thin-walled sheet ([`crate::render::material::thin`]) against answers strata
+//! Tests of the thin-walled sheet ([`crate::render::material::lobes::thin`]) against answers strata
 //! does not compute: Fresnel's equations and the inter-reflection series summed term by term
 //! in f64, Mitsuba 3's `thindielectric` (a committed fixture), white furnaces, χ² of sampling
 //! against the pdf, reciprocity, and as the base of a coat.

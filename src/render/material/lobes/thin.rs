@@ -22,9 +22,9 @@
 //! Conventions are [`crate::render::material::bsdf`]'s: local frame, `eval` without the
 //! cosine. The sheet is symmetric: a viewer below (`wo.z < 0`) sees it mirrored.
 
+use super::Film;
 use crate::render::material::albedo;
 use crate::render::material::bsdf::{BsdfSample, finish, flip_z, microfacet_reflection_pdf, reflect};
-use crate::render::material::lobes::Film;
 use crate::render::material::microfacet::{DELTA_ALPHA, Ggx, fresnel_dielectric, hemispherical_average3};
 use glam::{Vec2, Vec3};
 
