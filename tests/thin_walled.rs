@@ -5,24 +5,16 @@
 //! pixel's angle: Fresnel's equations and the sheet's inter-reflection ladder, computed here.
 
 mod common;
+#[path = "common/sheet_optics.rs"]
+mod sheet_optics;
 
 use common::{render_scene, scene_file_with, settings};
 use glam::Vec3;
 use strata::backend::BackendKind;
 
-/// Unpolarised Fresnel reflectance of index `eta` from air (s and p amplitudes).
-fn fresnel(cos: f64, eta: f64) -> f64 {
-    let sin_t = (1.0 - cos * cos).sqrt() / eta;
-    let cos_t = (1.0 - sin_t * sin_t).sqrt();
-    let rs = (cos - eta * cos_t) / (cos + eta * cos_t);
-    let rp = (eta * cos - cos_t) / (eta * cos + cos_t);
-    0.5 * (rs * rs + rp * rp)
-}
-
-/// The sheet's transmittance: Σ_k (1 − R)² R^(2k).
+/// The sheet's transmittance at `cos` θ.
 fn sheet_transmittance(cos: f64, eta: f64) -> f64 {
-    let r = fresnel(cos, eta);
-    (0..200).map(|k| (1.0 - r) * (1.0 - r) * r.powi(2 * k)).sum()
+    sheet_optics::ladder(sheet_optics::fresnel(cos, eta)).1
 }
 
 /// USD mesh attributes of the quad with corners `p`.

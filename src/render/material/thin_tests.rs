@@ -11,6 +11,10 @@ use crate::render::material::lobes::{Fresnel, Lobe};
 use crate::render::material::microfacet::Ggx;
 use glam::{DVec3, Vec3};
 
+#[path = "../../../tests/common/sheet_optics.rs"]
+mod sheet_optics;
+use sheet_optics::{fresnel, ladder};
+
 /// A `dielectric_bsdf` term (tint `tint`, index `eta`, `rough`) with scatter word `scatter`
 /// (1 "T", 2 "RT"; 3 and 4 thin-walled).
 fn dielectric(tint: f32, eta: f32, rough: f32, scatter: f32) -> ClosureTerm {
@@ -23,28 +27,6 @@ fn dielectric(tint: f32, eta: f32, rough: f32, scatter: f32) -> ClosureTerm {
 /// A clear thin sheet ("RT").
 fn sheet(eta: f32, rough: f32) -> Lobe {
     Lobe::from_term(&dielectric(1.0, eta, rough, 4.0))
-}
-
-/// Unpolarised Fresnel reflectance of a dielectric of index `eta` from air, in f64 from the s
-/// and p amplitudes (Born and Wolf), independent of `microfacet::fresnel_dielectric`.
-fn fresnel(cos: f64, eta: f64) -> f64 {
-    let sin_t = (1.0 - cos * cos).sqrt() / eta;
-    let cos_t = (1.0 - sin_t * sin_t).sqrt();
-    let rs = (cos - eta * cos_t) / (cos + eta * cos_t);
-    let rp = (eta * cos - cos_t) / (eta * cos + cos_t);
-    0.5 * (rs * rs + rp * rp)
-}
-
-/// The sheet's reflectance and transmittance by summing its ladder of inter-reflections
-/// term by term: R, then T·R^(2k+1)·T back out, and T·R^(2k)·T through.
-fn ladder(r: f64) -> (f64, f64) {
-    let t = 1.0 - r;
-    let (mut reflected, mut transmitted) = (r, 0.0);
-    for k in 0..200 {
-        reflected += t * r.powi(2 * k + 1) * t;
-        transmitted += t * r.powi(2 * k) * t;
-    }
-    (reflected, transmitted)
 }
 
 /// A smooth sheet's delta samples: reflection at `uc = 0`, transmission at `uc → 1`, as
