@@ -178,7 +178,8 @@ pub enum ClosureKind {
     Conductor = 5,
     /// GGX dielectric interface: `[tint rgb, ior, roughness, scatter, film thickness (nm),
     /// film ior, film weight, darkening rgb]`, scatter 0 reflects only (a coat), 1 transmits
-    /// only, 2 does both; a film thickness or weight of 0 is no thin film
+    /// only, 2 does both, 3 and 4 are 1 and 2 on a thin-walled sheet
+    /// ([`THIN_WALLED_SCATTER`]); a film thickness or weight of 0 is no thin film
     /// ([`thin_film_words`]); darkening ([`TERM_DARKENING`]) is what a coat's darkening
     /// removed from the terms under it.
     Dielectric = 6,
@@ -268,6 +269,14 @@ pub const THIN_FILM_KINDS: [ClosureKind; 4] =
 /// scaling ignores it (the factor stands in for the coat's internal reflections, which it
 /// omits); the random walk simulates those reflections and divides the factor back out.
 pub const TERM_DARKENING: usize = 9;
+
+/// What `with_thin_walled` adds to a transmitting [`ClosureKind::Dielectric`] term's scatter
+/// word (parameter 5: "T" 1 becomes 3, "RT" 2 becomes 4): the interface is then a thin-walled
+/// sheet with no interior (the sheet's reflectance, transmission straight through, no medium
+/// entered; `render::material::lobes::thin`). A reflecting-only term (a coat) is left as it is.
+pub const THIN_WALLED_SCATTER: f32 = 2.0;
+/// The scatter word of a [`ClosureKind::Dielectric`] term.
+pub const DIELECTRIC_SCATTER: usize = 5;
 
 /// One weighted lobe of a [`ClosureSum`]. Field order is the C ABI (24 words).
 #[repr(C)]

@@ -282,10 +282,10 @@ const UNREAD_SURFACE_INPUTS: &[(&str, &str, &str)] = &[
     (
         "open_pbr_surface",
         "subsurface_weight",
-        "approximated by diffuse reflection of subsurface_color (no light travels under the surface)",
+        "approximated by diffuse reflection of subsurface_color (no light travels under the surface; \
+         thin-walled, it is the specification's diffuse reflection and transmission)",
     ),
     ("open_pbr_surface", "subsurface_radius", "no subsurface scattering: the radius is not read"),
-    ("open_pbr_surface", "geometry_thin_walled", "surfaces are never thin-walled"),
     ("standard_surface", "transmission_depth", "transmission has no volume (a thin tinted interface)"),
     ("standard_surface", "transmission_scatter", "transmission has no volume scattering"),
     ("standard_surface", "transmission_dispersion", "no dispersion"),
@@ -293,12 +293,11 @@ const UNREAD_SURFACE_INPUTS: &[(&str, &str, &str)] = &[
     (
         "standard_surface",
         "subsurface",
-        "approximated by diffuse reflection of subsurface_color (no light travels under the surface)",
+        "approximated by diffuse reflection of subsurface_color (no light travels under the surface; \
+         thin-walled, it is the specification's diffuse reflection and transmission)",
     ),
     ("standard_surface", "subsurface_radius", "no subsurface scattering: the radius is not read"),
     ("standard_surface", "coat_affect_color", "the coat does not saturate the base"),
-    ("standard_surface", "thin_walled", "surfaces are never thin-walled"),
-    ("mx_surface", "thin_walled", "surfaces are never thin-walled"),
     ("mx_surface_unlit", "transmission", "an unlit surface hides what lies behind it (its opacity is read)"),
 ];
 

@@ -141,6 +141,10 @@ intrinsics! {
     // α / aspect across (α the term's mean width; aspect 1: isotropic). Lobes that are not
     // GGX ignore it.
     WithAnisotropy = "with_anisotropy": Fixed(&[CL, V, F], CL),
+    // with_thin_walled(c, thin): where `thin` is not 0, every transmitting dielectric_bsdf term
+    // of `c` ("T", "RT") is a thin-walled sheet: no interior, the sheet's inter-reflected
+    // reflectance, transmission straight through (OpenPBR geometry_thin_walled).
+    WithThinWalled = "with_thin_walled": Fixed(&[CL, F], CL),
 }
 
 impl Intrinsic {
@@ -173,6 +177,7 @@ impl Intrinsic {
                     | Intrinsic::WithThinFilm
                     | Intrinsic::WithDarkening
                     | Intrinsic::WithAnisotropy
+                    | Intrinsic::WithThinWalled
             )
     }
 

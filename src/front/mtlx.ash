@@ -652,13 +652,16 @@ shader mx_uniform_edf(color color_ = color(1.0), output color out) { out = color
 
 // MaterialX's `surface`: a BSDF, an EDF (emitted radiance) and opacity. The BSDF reaches the
 // shell node's closure port `bsdf` (a substance input cannot carry a closure), wired by
-// compose; unconnected it is black.
-shader mx_surface_shell(closure bsdf, output closure out) { out = bsdf; }
+// compose; unconnected it is black. `thin_walled` makes its transmitting dielectrics
+// thin-walled sheets (its translucent and subsurface lobes already transmit diffusely).
+shader mx_surface_shell(closure bsdf, int thin_walled = 0, output closure out) {
+    out = with_thin_walled(bsdf, thin_walled != 0 ? 1.0 : 0.0);
+}
 substance mx_surface {
     input color edf = color(0.0, 0.0, 0.0);
     input float opacity = 1.0;
     input int thin_walled = 0;
-    node shell = mx_surface_shell();
+    node shell = mx_surface_shell(thin_walled: thin_walled);
     node presence = mask(opacity: opacity);
     node glow = mx_emission(amount: 1.0, tint: edf);
     surface = shell.out;
@@ -686,6 +689,11 @@ substance mx_surface {
 //   as its tint, no volume (depth, scatter and dispersion are reported);
 // - subsurface: diffuse reflection of subsurface_color (no light travels under the surface;
 //   reported);
+// - thin-walled (OpenPBR geometry_thin_walled, Standard Surface thin_walled): the transmission
+//   is a thin sheet (`with_thin_walled`: the sheet's reflectance, transmission straight
+//   through, no medium entered); the subsurface becomes diffuse reflection and transmission of
+//   subsurface_color, in OpenPBR split (1 − g) / 2 and (1 + g) / 2 by the scatter anisotropy g,
+//   in Standard Surface all transmission (its translucent_bsdf);
 // - coat: a GGX dielectric reflection (coat_ior, coat_roughness) over the base tinted by
 //   mix(1, coat_color, coat_weight); in OpenPBR the coat roughens the specular lobes below
 //   (r' = mix(r, min(1, (r⁴ + 2 r_c⁴)^¼), coat_weight)), in Standard Surface by
@@ -708,11 +716,11 @@ closure mx_film(closure lobe, float weight, float thickness, float ior) {
 // transmission under the film (`mx_film`).
 closure mx_dielectric_base(closure opaque, float specular_weight, color specular_color, float roughness, float ior,
                            float transmission, color transmission_color, float film_weight, float film_thickness,
-                           float film_ior) {
+                           float film_ior, float thin_walled) {
     closure bare = dielectric_bsdf(clamp(specular_color, 0.0, 1.0), clamp(ior, 1.0, 4.0), roughness, "R");
     closure specular = mx_film(bare, film_weight, film_thickness, film_ior) * clamp(specular_weight, 0.0, 1.0);
-    closure glass = mx_film(dielectric_bsdf(clamp(transmission_color, 0.0, 1.0), clamp(ior, 1.0001, 4.0), roughness, "RT"),
-                            film_weight, film_thickness, film_ior);
+    closure refracting = dielectric_bsdf(clamp(transmission_color, 0.0, 1.0), clamp(ior, 1.0001, 4.0), roughness, "RT");
+    closure glass = mx_film(with_thin_walled(refracting, thin_walled), film_weight, film_thickness, film_ior);
     return mix(layer(specular, opaque), glass, clamp(transmission, 0.0, 1.0));
 }
 
@@ -790,7 +798,8 @@ shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0
                         color coat_normal = color(0.0), float thin_film_weight = 0.0, float thin_film_thickness = 0.5,
                         float thin_film_ior = 1.4, float specular_roughness_anisotropy = 0.0,
                         float coat_roughness_anisotropy = 0.0, color geometry_tangent = color(0.0),
-                        color geometry_coat_tangent = color(0.0), output closure bsdf) {
+                        color geometry_coat_tangent = color(0.0), float subsurface_scatter_anisotropy = 0.0,
+                        int thin_walled = 0, output closure bsdf) {
     float c = clamp(coat_weight, 0.0, 1.0);
     float rc_in = clamp(coat_roughness, 0.0, 1.0);
     float r0 = clamp(specular_roughness, 0.0, 1.0);
@@ -801,14 +810,21 @@ shader mx_open_pbr_bsdf(float base_weight = 1.0, color base_color = color(0.8, 0
     color coat_alpha = mx_open_pbr_alpha(rc_in, coat_roughness_anisotropy);
     float rc = coat_roughness_anisotropy > 0.0 ? mx_isotropic_roughness(coat_alpha) : rc_in;
     color base = clamp(base_color * base_weight, 0.0, 1.0);
-    color diffuse_colour = mix(base, clamp(subsurface_color, 0.0, 1.0), clamp(subsurface_weight, 0.0, 1.0));
-    closure diffuse = oren_nayar_diffuse_bsdf(diffuse_colour, clamp(base_diffuse_roughness, 0.0, 1.0), 1.0);
+    // Thin-walled, the subsurface reflects (1 − g) / 2 and transmits (1 + g) / 2 of
+    // subsurface_color diffusely (OpenPBR, "Thin-walled": a thin translucent sheet).
+    float thin = thin_walled != 0 ? 1.0 : 0.0;
+    float s = clamp(subsurface_weight, 0.0, 1.0);
+    float g = clamp(subsurface_scatter_anisotropy, -1.0, 1.0);
+    color subsurface = clamp(subsurface_color, 0.0, 1.0);
+    color diffuse_colour = mix(base, subsurface * mix(1.0, 0.5 * (1.0 - g), thin), s);
+    closure diffuse = oren_nayar_diffuse_bsdf(diffuse_colour, clamp(base_diffuse_roughness, 0.0, 1.0), 1.0)
+                      + translucent_bsdf(subsurface) * (s * thin * 0.5 * (1.0 + g));
     // The modulated IOR serves reflection and transmission alike; a weight of 0 (η' = 1,
     // no reflection) drops the specular lobe, so the limiting cases stay single lobes.
     float ior = mx_modulated_ior(specular_ior, specular_weight);
     closure dielectric = mx_dielectric_base(diffuse, specular_weight > 0.0 ? 1.0 : 0.0, specular_color, r, ior,
                                             transmission_weight, transmission_color, thin_film_weight,
-                                            thin_film_thickness * 1000.0, thin_film_ior);
+                                            thin_film_thickness * 1000.0, thin_film_ior, thin);
     closure metal = mx_film(mx_f82_metal(base, specular_color, r), thin_film_weight, thin_film_thickness * 1000.0, thin_film_ior)
                     * clamp(specular_weight, 0.0, 1.0);
     // The base's albedo at normal incidence and roughness estimate, for the coat's darkening:
@@ -835,7 +851,8 @@ shader mx_standard_surface_bsdf(float base = 0.8, color base_color = color(1.0),
                                 float coat_roughness = 0.1, float coat_IOR = 1.5, float coat_affect_roughness = 0.0,
                                 color coat_normal = color(0.0), float thin_film_thickness = 0.0, float thin_film_IOR = 1.5,
                                 float specular_anisotropy = 0.0, float specular_rotation = 0.0, float coat_anisotropy = 0.0,
-                                float coat_rotation = 0.0, color tangent = color(0.0), output closure bsdf) {
+                                float coat_rotation = 0.0, color tangent = color(0.0), int thin_walled = 0,
+                                output closure bsdf) {
     float c = clamp(coat, 0.0, 1.0);
     float rc_in = clamp(coat_roughness, 0.0, 1.0);
     float r_in = mix(clamp(specular_roughness, 0.0, 1.0), 1.0, clamp(coat_affect_roughness, 0.0, 1.0) * c * rc_in);
@@ -850,12 +867,18 @@ shader mx_standard_surface_bsdf(float base = 0.8, color base_color = color(1.0),
     color main_tangent = color(mx_rotate3(t, specular_rotation * 360.0, vector(N)));
     color coat_tangent = color(mx_rotate3(t, coat_rotation * 360.0, coat_n));
     color albedo = clamp(base_color * base, 0.0, 1.0);
-    color diffuse_colour = mix(albedo, clamp(subsurface_color, 0.0, 1.0), clamp(subsurface, 0.0, 1.0));
-    closure diffuse = oren_nayar_diffuse_bsdf(diffuse_colour, clamp(diffuse_roughness, 0.0, 1.0), 0.0);
+    // Thin-walled, the subsurface is diffuse transmission of subsurface_color (the
+    // specification's translucent_bsdf); otherwise diffuse reflection of it (reported).
+    float thin = thin_walled != 0 ? 1.0 : 0.0;
+    float s = clamp(subsurface, 0.0, 1.0);
+    color subsurface_colour = clamp(subsurface_color, 0.0, 1.0);
+    color diffuse_colour = mix(albedo, subsurface_colour, s * (1.0 - thin)) * (1.0 - s * thin);
+    closure diffuse = oren_nayar_diffuse_bsdf(diffuse_colour, clamp(diffuse_roughness, 0.0, 1.0), 0.0)
+                      + translucent_bsdf(subsurface_colour) * (s * thin);
     closure opaque = layer(sheen_bsdf(clamp(sheen_color, 0.0, 1.0), clamp(sheen_roughness, 0.0, 1.0)) * clamp(sheen, 0.0, 1.0),
                            diffuse);
     closure dielectric = mx_dielectric_base(opaque, specular, specular_color, r, specular_IOR, transmission, transmission_color,
-                                            thin_film_thickness > 0.0 ? 1.0 : 0.0, thin_film_thickness, thin_film_IOR);
+                                            thin_film_thickness > 0.0 ? 1.0 : 0.0, thin_film_thickness, thin_film_IOR, thin);
     closure metal = mx_film(mx_f82_metal(albedo, specular_color, r), thin_film_thickness > 0.0 ? 1.0 : 0.0, thin_film_thickness,
                             thin_film_IOR);
     closure base_slab = mx_anisotropic(mix(dielectric, metal, clamp(metalness, 0.0, 1.0)), alpha, main_tangent);
@@ -948,7 +971,9 @@ substance open_pbr_surface {
                                  thin_film_thickness: thin_film_thickness, thin_film_ior: thin_film_ior,
                                  specular_roughness_anisotropy: specular_roughness_anisotropy,
                                  coat_roughness_anisotropy: coat_roughness_anisotropy, geometry_tangent: geometry_tangent,
-                                 geometry_coat_tangent: geometry_coat_tangent);
+                                 geometry_coat_tangent: geometry_coat_tangent,
+                                 subsurface_scatter_anisotropy: subsurface_scatter_anisotropy,
+                                 thin_walled: geometry_thin_walled);
     node presence = mask(opacity: geometry_opacity);
     node normals = mx_surface_normal(n: geometry_normal);
     node glow = mx_emission(amount: emission_luminance, tint: emission_color);
@@ -1012,7 +1037,8 @@ substance standard_surface {
                                          coat_affect_roughness: coat_affect_roughness, coat_normal: coat_normal,
                                          thin_film_thickness: thin_film_thickness, thin_film_IOR: thin_film_IOR,
                                          specular_anisotropy: specular_anisotropy, specular_rotation: specular_rotation,
-                                         coat_anisotropy: coat_anisotropy, coat_rotation: coat_rotation, tangent: tangent);
+                                         coat_anisotropy: coat_anisotropy, coat_rotation: coat_rotation, tangent: tangent,
+                                         thin_walled: thin_walled);
     node presence = mx_opacity(opacity: opacity);
     node normals = mx_surface_normal(n: normal_);
     node glow = mx_emission(amount: emission, tint: emission_color);

@@ -495,6 +495,7 @@ fn intrinsic_value(i: Intrinsic, a: &[Value]) -> Result<Value, Stop> {
         | WithNormal
         | WithThinFilm
         | WithDarkening
-        | WithAnisotropy => return Err(Stop::NotConstant),
+        | WithAnisotropy
+        | WithThinWalled => return Err(Stop::NotConstant),
     })
 }

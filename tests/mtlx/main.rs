@@ -11,6 +11,7 @@ mod noise;
 mod pbrlib;
 mod space;
 mod suite;
+mod thin;
 mod utility;
 
 use pbrlib::*;

@@ -182,6 +182,41 @@ impl FnLower<'_> {
         Lv::Scalars(self.closure_set_params(c, abi::TERM_TANGENT, words, Kinds::AllBut(ClosureKind::None)).0)
     }
 
+    /// `with_thin_walled(c, flag)`: where `flag` is not 0, every transmitting dielectric term
+    /// of `c` (scatter "T" or "RT") becomes a thin-walled sheet, its scatter word raised by
+    /// [`abi::THIN_WALLED_SCATTER`]. Reflecting-only dielectrics (coats), sheets already and
+    /// other kinds are left as they are; a term whose kind is known only when running, by a
+    /// select.
+    pub(super) fn closure_with_thin_walled(&mut self, c: &[ssa::Value], flag: ssa::Value) -> Lv {
+        let mut out = c.to_vec();
+        let zero = self.b.fconst(0.0);
+        let on = self.b.cmp(CmpOp::Ne, flag, zero);
+        // Scatter 1 ("T") and 2 ("RT") transmit: the words in (0.5, 2.5).
+        let (low, high) = (self.b.fconst(0.5), self.b.fconst(2.5));
+        let raise = self.b.fconst(abi::THIN_WALLED_SCATTER);
+        for t in 0..self.live_terms(c) {
+            let kind = c[t * TERM_WORDS + KIND];
+            let known = self.b.known(kind).map(ClosureKind::from_u32);
+            if known.is_some_and(|k| k != ClosureKind::Dielectric) {
+                continue;
+            }
+            let word = t * TERM_WORDS + PARAMS + abi::DIELECTRIC_SCATTER;
+            let scatter = c[word];
+            let above_low = self.b.cmp(CmpOp::Gt, scatter, low);
+            let below_high = self.b.cmp(CmpOp::Lt, scatter, high);
+            let mut thin = self.b.binary(BinOp::And, above_low, below_high);
+            thin = self.b.binary(BinOp::And, thin, on);
+            if known.is_none() {
+                let dielectric = self.b.iconst(ClosureKind::Dielectric as i32);
+                let is_dielectric = self.b.cmp(CmpOp::Eq, kind, dielectric);
+                thin = self.b.binary(BinOp::And, thin, is_dielectric);
+            }
+            let raised = self.b.binary(BinOp::FAdd, scatter, raise);
+            out[word] = self.b.select(thin, raised, scatter);
+        }
+        Lv::Scalars(out)
+    }
+
     /// `c` with `values` in parameter words `at..` of every term of the `kinds`: a term of a
     /// kind known when compiling is set or not, one of a kind known only when running by a
     /// select. Also whether a term of a known kind was left out.

@@ -160,6 +160,7 @@ impl FnLower<'_> {
                 let words = [a[1][0], a[1][1], a[1][2], a[2][0]];
                 self.closure_with_anisotropy(&a[0], &words)
             }
+            WithThinWalled => self.closure_with_thin_walled(&a[0], a[1][0]),
             DielectricBsdf => {
                 // The scatter mode string becomes the lobe's last parameter: 0 R, 1 T, 2 RT.
                 let Some(mode) = self.constant_string(&args[3], frame, "the scatter mode") else {

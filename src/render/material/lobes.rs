@@ -17,6 +17,7 @@ use crate::render::material::microfacet::{
 };
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
+use thin::ThinSheet;
 
 /// The Fresnel curve of a [`Lobe::Specular`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -346,6 +347,9 @@ pub enum Lobe {
         /// Transmittance.
         albedo: Vec3,
     },
+    /// A thin-walled dielectric sheet (`dielectric_bsdf` "T"/"RT" made thin by
+    /// `with_thin_walled`): no interior, transmission straight through ([`ThinSheet`]).
+    Thin(ThinSheet),
     /// The Charlie sheen (Estevez and Kulla 2017) with Neubelt and Pettineo's visibility,
     /// divided by its albedo where that exceeds 1 (smooth sheen at grazing angles).
     Sheen {
@@ -387,7 +391,7 @@ impl Lobe {
             ClosureKind::Dielectric => {
                 let (tint, eta, ggx) = (colour(&p[0..3]), ior(p[3]), roughness(p[4]));
                 let film = film_of(t);
-                match sanitize(p[5], 0.0, 2.0, 2.0).round() as u32 {
+                match sanitize(p[5], 0.0, 4.0, 2.0).round() as u32 {
                     0 => {
                         let fresnel = match film {
                             Some(film) => Fresnel::ThinFilm { eta, film },
@@ -395,6 +399,8 @@ impl Lobe {
                         };
                         Lobe::Specular { fresnel, tint, ggx }
                     }
+                    // Thin-walled ([`crate::abi::THIN_WALLED_SCATTER`]): 3 "T", 4 "RT".
+                    mode @ 3.. => Lobe::Thin(ThinSheet::new(tint, eta, ggx, mode == 4, film)),
                     mode => {
                         let mut closure = crate::abi::Closure { kind: ClosureKind::Glass as u32, params: [0.0; 8] };
                         closure.params[..3].copy_from_slice(&p[0..3]);
@@ -489,6 +495,7 @@ impl Lobe {
                 tint: if reflect { tint } else { Vec3::ZERO },
                 ggx,
             },
+            Lobe::Thin(sheet) => Lobe::Thin(sheet.covering()),
             other => other,
         }
     }
@@ -497,6 +504,7 @@ impl Lobe {
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         let f = match *self {
             Lobe::Bsdf(b) => return b.eval(wo, wi),
+            Lobe::Thin(sheet) => return sheet.eval(wo, wi),
             Lobe::Interface { glass, tint, reflect, film } => {
                 let f = match film {
                     Some(film) => glass.eval_glass_with(wo, wi, film.glass()),
@@ -527,6 +535,7 @@ impl Lobe {
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         let p = match *self {
             Lobe::Bsdf(b) => return b.pdf(wo, wi),
+            Lobe::Thin(sheet) => return sheet.pdf(wo, wi),
             Lobe::Interface { glass, reflect, film, .. } => {
                 if wo.z * wi.z > 0.0 && !reflect {
                     0.0
@@ -560,6 +569,7 @@ impl Lobe {
     pub fn sample(&self, wo: Vec3, uc: f32, u: Vec2) -> Option<BsdfSample> {
         match *self {
             Lobe::Bsdf(b) => b.sample(wo, uc, u),
+            Lobe::Thin(sheet) => sheet.sample(wo, uc, u),
             Lobe::Interface { glass, tint, reflect, film } => {
                 let mut s = match film {
                     Some(film) => glass.sample_glass_with(wo, uc, u, film.glass())?,
@@ -641,7 +651,7 @@ impl Lobe {
                 let excess = albedo::sheen(wo.z, roughness).max(albedo::sheen(wi.z, roughness)).max(1.0);
                 color * (sheen_eval(roughness, wo, wi) / excess)
             }
-            Lobe::Bsdf(_) | Lobe::Interface { .. } | Lobe::Translucent { .. } => Vec3::ZERO,
+            Lobe::Bsdf(_) | Lobe::Interface { .. } | Lobe::Translucent { .. } | Lobe::Thin(_) => Vec3::ZERO,
         }
     }
 
@@ -686,6 +696,7 @@ impl Lobe {
             Lobe::Bsdf(Bsdf::Diffuse { albedo }) => albedo,
             Lobe::OrenNayar { albedo, roughness: 0.0, compensated: false } => albedo,
             Lobe::Sheen { color, roughness } => color * albedo::sheen(mu, roughness).min(1.0),
+            Lobe::Thin(sheet) => sheet.directional_albedo(mu),
             _ => self.albedo(),
         }
     }
@@ -694,6 +705,7 @@ impl Lobe {
     pub fn albedo(&self) -> Vec3 {
         match *self {
             Lobe::Bsdf(b) => b.albedo(),
+            Lobe::Thin(sheet) => sheet.albedo(),
             Lobe::Interface { glass, tint, reflect, film } => {
                 let Bsdf::Glass { eta, tint: transmitted, .. } = glass else { return Vec3::ZERO };
                 let fav = match film {
@@ -730,6 +742,7 @@ impl Lobe {
         match *self {
             Lobe::Bsdf(b) | Lobe::Interface { glass: b, .. } => b.transmits(),
             Lobe::Translucent { .. } => true,
+            Lobe::Thin(sheet) => sheet.transmits(),
             _ => false,
         }
     }
@@ -737,7 +750,7 @@ impl Lobe {
     /// Whether [`Lobe::sample`] reads its component number `uc` (coat or base, reflection or
     /// transmission): a lobe that does not can be sampled without drawing one.
     pub fn reads_choice(&self) -> bool {
-        matches!(self, Lobe::Bsdf(Bsdf::Glossy { .. } | Bsdf::Glass { .. }) | Lobe::Interface { .. })
+        matches!(self, Lobe::Bsdf(Bsdf::Glossy { .. } | Bsdf::Glass { .. }) | Lobe::Interface { .. } | Lobe::Thin(_))
     }
 
     /// Whether the lobe tells inside from outside (its frame keeps the outward side).
@@ -758,6 +771,7 @@ impl Lobe {
         match *self {
             Lobe::Bsdf(b) | Lobe::Interface { glass: b, .. } => b.is_delta(),
             Lobe::Specular { ggx, .. } => ggx.is_smooth(),
+            Lobe::Thin(sheet) => sheet.is_delta(),
             _ => false,
         }
     }
@@ -771,3 +785,5 @@ impl Lobe {
         )
     }
 }
+
+pub mod thin;

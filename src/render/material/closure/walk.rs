@@ -42,8 +42,8 @@
 //!   stacks walk up to [`NESTED_MAX_DEPTH`] bounces.
 //! - **Falling back.** Other stacks use albedo scaling: three or more nested dielectrics (or a
 //!   transmitting one over another), a thin-filmed specular layer under a coat, a transmitting
-//!   base under two dielectrics, two separate stacks side by side, a non-dielectric innermost
-//!   top, a term with its own normal. The first such closure of a process is reported once
+//!   base under two dielectrics, a thin-walled sheet under a coat, two separate stacks side by
+//!   side, a non-dielectric innermost top, a term with its own normal. The first such closure of a process is reported once
 //!   ([`take_fallback`]).
 //!
 //! **Found once.** The stack depends on the closure only, so [`stack`] runs when the closure
@@ -294,6 +294,7 @@ const FALLBACK_SHAPE: u8 = 8;
 const FALLBACK_FILMED_BASE: u8 = 16;
 const FALLBACK_FILMED_INNER: u8 = 32;
 const FALLBACK_INNER_BASE: u8 = 64;
+const FALLBACK_THIN_BASE: u8 = 128;
 
 /// The fallbacks seen in this process and not yet taken ([`take_fallback`]).
 static FALLBACK: AtomicU8 = AtomicU8::new(0);
@@ -320,6 +321,7 @@ pub fn take_fallback() -> Vec<&'static str> {
         (FALLBACK_FILMED_BASE, "a thin-filmed glass under a coat"),
         (FALLBACK_FILMED_INNER, "a thin-filmed dielectric under a coat (e.g. OpenPBR's filmed specular)"),
         (FALLBACK_INNER_BASE, "a transmitting base under two dielectric layers"),
+        (FALLBACK_THIN_BASE, "a thin-walled sheet under a coat"),
     ]
     .into_iter()
     .filter(|(bit, _)| bits & bit != 0)
@@ -422,6 +424,11 @@ pub(crate) fn stack(b: &ClosureBsdf) -> Option<Stack> {
             continue;
         }
         s.base |= 1 << i;
+        // A sheet under a coat sits in the coat's medium, where its inter-reflections would
+        // need the index relative to the coat's on both faces: not walked.
+        if matches!(t.lobe, Lobe::Thin(_)) {
+            return fell_back(FALLBACK_THIN_BASE);
+        }
         if let Some(n) = &mut s.inner
             && t.above & inner_bit != 0
         {
