@@ -463,6 +463,11 @@ impl Lobe {
                 Lobe::Interface { glass: bsdf(glass), tint, reflect, film }
             }
             Lobe::Specular { fresnel, tint, ggx } => Lobe::Specular { fresnel, tint, ggx: ggx.with_aspect(aspect) },
+            // Both faces' lobes stretch alike: the transmission mirrors the reflection's
+            // microfacets through the tangent plane, which keeps the frame's x axis.
+            Lobe::Thin(sheet) => {
+                Lobe::Thin(ThinSheet { ggx: sheet.ggx.with_aspect(aspect), ggx_t: sheet.ggx_t.with_aspect(aspect), ..sheet })
+            }
             other => other,
         }
     }
@@ -475,7 +480,7 @@ impl Lobe {
         };
         match self {
             Lobe::Bsdf(b) | Lobe::Interface { glass: b, .. } => bsdf(b),
-            Lobe::Specular { ggx, .. } => ggx.is_anisotropic(),
+            Lobe::Specular { ggx, .. } | Lobe::Thin(ThinSheet { ggx, .. }) => ggx.is_anisotropic(),
             _ => false,
         }
     }

@@ -73,7 +73,7 @@ impl ThinSheet {
         }
         let scale = (0.65 * eta - 0.35).clamp(0.0, 1.0);
         let scaled = Ggx::from_roughness(ggx.alpha.sqrt() * scale);
-        if scaled.is_smooth() { Ggx { alpha: DELTA_ALPHA } } else { scaled }
+        if scaled.is_smooth() { Ggx::isotropic(DELTA_ALPHA) } else { scaled.with_aspect(ggx.aspect) }
     }
 
     /// One interface's reflectance at `cos` (from outside: both faces see air).
