@@ -465,9 +465,11 @@ impl Lobe {
             Lobe::Specular { fresnel, tint, ggx } => Lobe::Specular { fresnel, tint, ggx: ggx.with_aspect(aspect) },
             // Both faces' lobes stretch alike: the transmission mirrors the reflection's
             // microfacets through the tangent plane, which keeps the frame's x axis.
-            Lobe::Thin(sheet) => {
-                Lobe::Thin(ThinSheet { ggx: sheet.ggx.with_aspect(aspect), ggx_t: sheet.ggx_t.with_aspect(aspect), ..sheet })
-            }
+            Lobe::Thin(sheet) => Lobe::Thin(ThinSheet {
+                ggx: sheet.ggx.with_aspect(aspect),
+                ggx_t: sheet.ggx_t.with_aspect(aspect),
+                ..sheet
+            }),
             other => other,
         }
     }

@@ -274,3 +274,38 @@ fn the_lobes_peak_with_the_published_roughness() {
         assert!((f_t / t - 1.0).abs() < 2e-3, "η {eta} r {rough}: transmission peak {f_t} vs {t}");
     }
 }
+
+/// An anisotropic term stretches both of the sheet's lobes alike (its reflection and the
+/// transmission mirrored through the tangent plane): the sheet of aspect a at (x, y) is the one
+/// of 1/a at (−y, x), on both sides, and it is not rotation-invariant (an isotropic sheet
+/// would pass the swap trivially); it stays ≤ 1 in the furnace.
+#[test]
+fn an_anisotropic_sheet_stretches_both_lobes() {
+    let turn = |v: Vec3| Vec3::new(-v.y, v.x, v.z);
+    let (a, b) = (sheet(1.5, 0.5).with_aspect(2.0), sheet(1.5, 0.5).with_aspect(0.5));
+    assert!(a.is_anisotropic() && b.is_anisotropic());
+    let mut rng = Pcg32::new(41, 6);
+    let (mut reflected, mut transmitted) = (0, 0);
+    for _ in 0..3000 {
+        let (wo, wi) = (rng.dir(), rng.dir());
+        let (fa, fb) = (a.eval(wo, wi), b.eval(turn(wo), turn(wi)));
+        assert!((fa - fb).abs().max_element() <= 1e-3 * fa.max(fb).max_element() + 1e-6, "{wo} {wi}: {fa} vs {fb}");
+        let side = if wo.z * wi.z > 0.0 { &mut reflected } else { &mut transmitted };
+        *side += (fa.max_element() > 0.0) as usize;
+    }
+    assert!(reflected > 500 && transmitted > 500, "{reflected} reflected, {transmitted} transmitted");
+    // Along the tangent the lobes are wider: off-peak by the same angle in x and in y, both the
+    // reflection and the straight-through transmission are brighter along x.
+    let wo = Vec3::Z;
+    for z in [1.0f32, -1.0] {
+        let (along, across) = (Vec3::new(0.4, 0.0, z).normalize(), Vec3::new(0.0, 0.4, z).normalize());
+        let (fx, fy) = (a.eval(wo, along).x, a.eval(wo, across).x);
+        assert!(fx > 1.5 * fy, "side {z}: along {fx} vs across {fy}");
+    }
+    for (j, z) in COS.into_iter().enumerate() {
+        let wo = Vec3::new((1.0 - z * z).sqrt(), 0.0, z);
+        for (e, se) in furnace(&a, wo, 20_000, 70 + j as u64) {
+            assert!(e.max_element() <= 1.0 + 4.0 * se.max_element() + 1e-3, "cos {z}: {e} ± {se}");
+        }
+    }
+}
