@@ -26,8 +26,8 @@ use std::fmt;
 use std::ops::Range;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use sum::add_coverage;
 pub use sum::{ExactSum, PixelSums, WindowSums};
+use sum::{add_coverage, add_each};
 
 /// What to render.
 #[derive(Clone, Debug)]
@@ -750,14 +750,15 @@ fn render_impl(
                         row.stats.pass_through_limit += u64::from(r.pass_limit);
                         // Fixed-size arrays, not chained iterators: the adds unroll (a chain of
                         // three iterators cost about 100 instructions a sample).
+                        // One range test per group (`add_each`), not per value.
                         let (sums, (c, a)) = (&mut px.builtin, (r.radiance, r.albedo));
-                        for (sum, v) in sums[..7].iter_mut().zip([c.x, c.y, c.z, r.alpha, a.x, a.y, a.z]) {
-                            sum.add(v);
+                        if let Some(colour) = sums.first_chunk_mut::<7>() {
+                            add_each(colour, [c.x, c.y, c.z, r.alpha, a.x, a.y, a.z]);
                         }
                         if r.alpha > 0.0 {
                             let (n, p) = (r.normal, r.position);
-                            for (sum, v) in sums[7..].iter_mut().zip([n.x, n.y, n.z, p.x, p.y, p.z]) {
-                                sum.add(v);
+                            if let Some(geometry) = sums.last_chunk_mut::<6>() {
+                                add_each(geometry, [n.x, n.y, n.z, p.x, p.y, p.z]);
                             }
                             px.hits += 1;
                             if let Some(prim) = r.prim {

@@ -23,9 +23,30 @@ const LIMIT: f64 = 36_028_797_018_963_968.0;
 /// Below 2⁶² units (values below 2²²), a sample converts through `i64`.
 const FAST: f64 = 4_611_686_018_427_387_904.0;
 
+/// [`FAST`] in sample values: `|v| < 2²²` exactly when `|v · 2⁴⁰| < 2⁶²` (the product is exact).
+const FAST_VALUE: f32 = 4_194_304.0;
+
 /// An exact sum of finite `f32` samples (see the module documentation).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct ExactSum(i128);
+
+/// Adds each of `values` to the sum in the same place, exactly as [`ExactSum::add`] does one at
+/// a time, with one range test for the lot: the film adds a sample's channels together, and
+/// they are almost always all in the fast range.
+#[inline]
+pub fn add_each<const N: usize>(sums: &mut [ExactSum; N], values: [f32; N]) {
+    // `&`, not `&&`: one branch for all the values, not one each (NaN fails the test).
+    if values.iter().fold(true, |fast, v| fast & (v.abs() < FAST_VALUE)) {
+        for (sum, v) in sums.iter_mut().zip(values) {
+            // Exact in f32 as in f64: a power-of-two scale of a value below 2²² neither
+            // overflows nor rounds (a subnormal value scales to a normal one).
+            // SAFETY: |v · 2⁴⁰| < 2⁶², finite and in i64's range after truncation.
+            sum.0 += i128::from(unsafe { (v * SCALE as f32).to_int_unchecked::<i64>() });
+        }
+    } else {
+        sums.iter_mut().zip(values).for_each(|(sum, v)| sum.add(v));
+    }
+}
 
 impl ExactSum {
     /// Adds `v` rounded toward zero to a multiple of 2⁻⁴⁰ (and clamped to ±2⁵⁵). NaN adds 0;
@@ -285,6 +306,21 @@ mod tests {
         one.add(0.25);
         assert_eq!(one.mean(2), 0.5);
         assert_eq!(ExactSum::from_bits(one.to_bits()), one);
+    }
+
+    #[test]
+    fn adding_a_group_at_once_is_adding_each_value() {
+        // The fast range's edges, huge and non-finite values, among the ordinary ones.
+        let edges = [4_194_303.5, 4_194_304.0, -4_194_304.0, 1e30, -f32::MAX, f32::INFINITY, f32::NAN, -0.0];
+        let v: Vec<f32> = values().into_iter().chain(edges).collect();
+        for group in v.chunks_exact(7).chain(edges.windows(7)) {
+            let group: [f32; 7] = group.try_into().unwrap();
+            let mut each = [ExactSum::of(1.5); 7];
+            each.iter_mut().zip(group).for_each(|(s, x)| s.add(x));
+            let mut at_once = [ExactSum::of(1.5); 7];
+            add_each(&mut at_once, group);
+            assert_eq!(at_once, each, "{group:?}");
+        }
     }
 
     #[test]

@@ -18,8 +18,8 @@ mod reference;
 
 use crate::abi::layering::{self, Relief};
 use crate::abi::{Closure, ClosureSum, ClosureTerm, Globals, MaterialCode, PrimvarValues, ShaderError};
-use crate::render::geometry::accel::{Accel, Hit, WORLD, offset_ray_origin};
-use crate::render::geometry::primvars::{PrimvarRef, PrimvarSlot, fill_object_space, reads_object_space};
+use crate::render::geometry::accel::{Accel, Hit, SurfaceGeom, WORLD, offset_ray_origin};
+use crate::render::geometry::primvars::{PrimvarSlot, fill_object_space, reads_object_space};
 use crate::render::light::emitter::Emitter;
 use crate::render::light::{Light, LightSample, LightSelection};
 use crate::render::material::bsdf::Frame;
@@ -301,45 +301,28 @@ pub fn is_opaque(material: &dyn MaterialCode) -> bool {
 
 /// Surface geometry at a hit.
 struct SurfacePoint {
-    p: Vec3,
-    /// Conservative absolute error bound of `p` (per component).
-    p_error: Vec3,
-    /// Geometric normal, outward by winding.
-    ng: Vec3,
-    /// Interpolated shading normal, outward.
-    ns: Vec3,
-    dpdu: Vec3,
-    dpdv: Vec3,
-    uv: Vec2,
+    /// The hit's geometry, held as [`Accel::surface_at`] returns it (the fields read through
+    /// `Deref`): copying it field by field cost moves on every hit.
+    geom: SurfaceGeom,
     material: usize,
-    /// Index of the prim in [`Scene::prims`].
-    prim: u32,
-    primvars: PrimvarRef,
-    bary: [f32; 3],
     /// The hit and the ray's time, for the prim's object space (read only by materials that
     /// name it: [`reads_object_space`]).
     hit: Hit,
     time: f32,
 }
 
+impl std::ops::Deref for SurfacePoint {
+    type Target = SurfaceGeom;
+
+    fn deref(&self) -> &SurfaceGeom {
+        &self.geom
+    }
+}
+
 /// Surface geometry where the ray `o + t d` hit.
 fn surface_point(accel: &Accel, scene: &Scene, o: Vec3, d: Vec3, hit: &Hit, time: f32) -> SurfacePoint {
-    let g = accel.surface_at(o, d, hit, time);
-    SurfacePoint {
-        p: g.p,
-        p_error: g.p_error,
-        ng: g.ng,
-        ns: g.ns,
-        dpdu: g.dpdu,
-        dpdv: g.dpdv,
-        uv: g.uv,
-        material: scene.prim_material[g.prim as usize],
-        prim: g.prim,
-        primvars: g.primvars,
-        bary: g.bary,
-        hit: *hit,
-        time,
-    }
+    let geom = accel.surface_at(o, d, hit, time);
+    SurfacePoint { material: scene.prim_material[geom.prim as usize], geom, hit: *hit, time }
 }
 
 /// The material index of a hit's prim, without the surface geometry [`surface_point`] builds.

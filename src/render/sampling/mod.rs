@@ -195,6 +195,10 @@ impl Distribution1D {
     }
 
     fn find(&self, u: f32) -> usize {
+        // One piece (a scene with one light): the search below can only give 0.
+        if self.func.len() == 1 {
+            return 0;
+        }
         // Largest i with cdf[i] <= u, skipping zero-width pieces.
         let i = self.cdf.partition_point(|&c| c <= u).saturating_sub(1);
         let mut i = i.min(self.len() - 1);
