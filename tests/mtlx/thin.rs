@@ -42,6 +42,14 @@ fn thin_walled_transmission_is_a_thin_sheet_without_a_warning() {
         // Not thin-walled: the refracting interface, as before.
         let (got, _) = lobes(make(glass));
         assert!(described(&got, 6).iter().all(|(_, _, p)| p[SCATTER] <= 2.0), "{surface}: {got:?}");
+        // The thin-walled translucency adds a term, but the fuzz (sheen), whose weight is a
+        // known 0 here, takes no place of the eight: six, as before thin walls, leaving room
+        // for vertical layers over the surface.
+        let code = compiled(&make(glass)).0.expect("compiles");
+        let mut sum = ClosureSum::default();
+        code.surface_sum(&Globals::default(), 0, &mut sum).expect("evaluates");
+        let kinds: Vec<u32> = sum.terms.iter().map(|t| t.kind).filter(|&k| k != None as u32).collect();
+        assert!(kinds.len() <= 6 && !kinds.contains(&(Sheen as u32)), "{surface}: {kinds:?}");
     }
 }
 

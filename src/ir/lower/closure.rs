@@ -101,13 +101,22 @@ impl FnLower<'_> {
         (0..MAX_CLOSURE_TERMS).rev().find(|&t| self.b.known(c[t * TERM_WORDS + KIND]) != Some(0)).map_or(0, |t| t + 1)
     }
 
-    /// `closure * w`, `w` one float or a colour.
+    /// `closure * w`, `w` one float or a colour. A term whose weight is then known to be zero
+    /// becomes empty (kind `None`), so a trailing one takes no place in the closure: a
+    /// zero-weight lobe a surface keeps for an input it was not given (OpenPBR's thin-walled
+    /// translucency, a mix at 0) costs neither a term of the eight nor decoding per hit.
     pub(super) fn closure_scale(&mut self, c: &[ssa::Value], w: &[ssa::Value]) -> Lv {
         let mut out = c.to_vec();
         for t in 0..self.live_terms(c) {
+            let mut zero = true;
             for k in 0..3 {
                 let at = t * TERM_WORDS + WEIGHT + k;
                 out[at] = self.b.binary(BinOp::FMul, c[at], w[if w.len() == 1 { 0 } else { k }]);
+                // ±0 (the renderer clamps weights to [0, 1], so a negative zero is zero too).
+                zero &= self.b.known(out[at]).is_some_and(|bits| bits & 0x7fff_ffff == 0);
+            }
+            if zero {
+                out[t * TERM_WORDS + KIND] = self.b.iconst(ClosureKind::None as i32);
             }
         }
         Lv::Scalars(out)
@@ -384,6 +393,27 @@ mod tests {
              bsdf = c + dielectric_bsdf(color(1.0), 1.5, 0.0, \"RT\");",
         );
         assert_eq!(got, vec![(Diffuse, 0, [1.0; 3]), (Dielectric, 0, [1.0; 3])]);
+    }
+
+    /// A term whose weight is a known zero is empty, and a trailing one takes no place: a
+    /// surface's unused lobe (OpenPBR's thin-walled translucency when not thin-walled) leaves
+    /// room for vertical layers over it.
+    #[test]
+    fn a_known_zero_weight_term_is_empty_and_takes_no_place() {
+        use ClosureKind::*;
+        let got = terms("bsdf = diffuse_bsdf(color(1.0)) + translucent_bsdf(color(1.0)) * 0.0;");
+        assert_eq!(got, vec![(Diffuse, 0, [1.0; 3])]);
+        let got = terms("bsdf = translucent_bsdf(color(1.0)) * color(0.0, -0.0, 0.0) + diffuse_bsdf(color(1.0));");
+        assert_eq!(got, vec![(Diffuse, 0, [1.0; 3])]);
+        // Six terms and a zero one under two: eight, not nine.
+        let eight = "closure d = diffuse_bsdf(color(1.0));
+             closure base = d + d + d + d + d + d + translucent_bsdf(color(1.0)) * 0.0;
+             bsdf = layer(d + d, base);";
+        assert!(compile(eight).is_ok(), "{:?}", compile(eight).err());
+        assert!(compile(&eight.replace("* 0.0", "* 0.5")).is_err(), "nine terms must not compile");
+        // A weight not known when compiling (zero here, at u = 0) keeps its term.
+        let got = terms("bsdf = diffuse_bsdf(color(1.0)) + translucent_bsdf(color(1.0)) * u;");
+        assert_eq!(got.iter().map(|t| t.0).collect::<Vec<_>>(), vec![Diffuse, Translucent]);
     }
 
     #[test]
