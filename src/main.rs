@@ -125,6 +125,10 @@ enum Command {
         /// Maximum path depth (bounces).
         #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=1024))]
         max_depth: u32,
+        /// Bounces before Russian roulette may end a path (paths shorter than this are never
+        /// ended early; a larger value trades time for less noise in deep inter-reflection).
+        #[arg(long, default_value_t = strata::render::film::DEFAULT_RR_DEPTH, value_parser = clap::value_parser!(u32).range(1..=1024))]
+        rr_depth: u32,
         /// Shader backend.
         #[arg(long, value_enum, default_value_t = BackendKind::Jit)]
         backend: BackendKind,
@@ -526,6 +530,7 @@ fn main() -> ExitCode {
             seed,
             threads,
             max_depth,
+            rr_depth,
             backend,
             weighted,
             stochastic,
@@ -552,6 +557,7 @@ fn main() -> ExitCode {
                 seed,
                 threads: threads.map(|t| t as usize),
                 max_depth,
+                rr_depth,
                 mode: match (weighted, stochastic) {
                     (true, _) => LayerMode::Weighted,
                     (_, true) => LayerMode::Stochastic,

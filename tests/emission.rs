@@ -3,7 +3,8 @@
 //! - an emissive quad lights a floor as a RectLight of the same size, place and radiance does
 //!   (UsdLux's light, sampled by its own analytic code), region by region within noise;
 //! - a closed box whose walls emit `Le` and reflect diffusely with albedo `a`: the radiance
-//!   everywhere inside is `Le / (1 − a)` (the furnace's closed form);
+//!   everywhere inside is `Le / (1 − a)` (the furnace's closed form), and `Le (1 + a + … + a^n)`
+//!   for paths of at most n bounces, whichever bounce Russian roulette starts at;
 //! - a glowing layer under a non-emitting layer of mask 0.5 emits half its radiance (rule 5);
 //! - a camera sees the authored `emissiveColor` itself, from the front only;
 //! - a small bright emitter sampled as a light has far less variance than found by BSDF
@@ -176,13 +177,9 @@ fn an_emissive_quad_lights_a_floor_as_a_rect_light_of_the_same_size_and_radiance
     assert!(mean.abs() < 4.5 * se, "floor radiance differs by {mean} ± {se} (level {level})");
 }
 
-#[test]
-fn inside_a_closed_emissive_box_radiance_is_le_over_one_minus_albedo() {
-    // Walls of a 2-unit box facing inwards, each emitting Le and reflecting with albedo a
-    // (Lambert, per channel): L = Le + a L everywhere, so L = Le / (1 − a).
-    let le = Vec3::new(1.0, 2.0, 0.5);
-    let albedo = Vec3::new(0.5, 0.25, 0.75);
-    let want = le / (Vec3::ONE - albedo);
+/// A closed 2-unit box whose walls face inwards, each emitting `le` and reflecting
+/// diffusely with albedo `albedo` (per channel), seen from its centre.
+fn emissive_box(name: &str, le: Vec3, albedo: Vec3, size: usize) -> (Scene, Vec<Arc<dyn MaterialCode>>) {
     let mut walls = String::new();
     for (k, n) in [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z].into_iter().enumerate() {
         walls += &format!(
@@ -206,16 +203,66 @@ fn inside_a_closed_emissive_box_radiance_is_le_over_one_minus_albedo() {
     );
     let ash = "substance glow {\n    input color albedo = color(0.5);\n    input color radiance = color(1.0);\n    \
                node d = diffuse(albedo: albedo);\n    surface = d.bsdf;\n    emission = radiance;\n}\n";
+    let built = build(name, &[("scene.usda", scene), ("glow.ash", ash.to_string())], size);
+    assert_eq!(built.0.emitters.list.len(), 6);
+    built
+}
+
+/// Per channel, the mean and standard error of an image's pixels.
+fn channel_mean_se(image: &Image) -> [(f64, f64); 3] {
+    let pixels = rgb(image);
+    [0, 1, 2].map(|c| mean_se(&pixels.iter().map(|p| p[c] as f64).collect::<Vec<_>>()))
+}
+
+#[test]
+fn inside_a_closed_emissive_box_radiance_is_le_over_one_minus_albedo() {
+    // L = Le + a L everywhere, so L = Le / (1 − a).
+    let le = Vec3::new(1.0, 2.0, 0.5);
+    let albedo = Vec3::new(0.5, 0.25, 0.75);
+    let want = le / (Vec3::ONE - albedo);
     let size = 32;
-    let (scene, materials) = build("box", &[("scene.usda", scene), ("glow.ash", ash.to_string())], size);
-    assert_eq!(scene.emitters.list.len(), 6);
+    let (scene, materials) = emissive_box("box", le, albedo, size);
     let image = render_scene(&scene, &materials, &settings(size, size, 64, 3, 96));
-    let pixels = rgb(&image);
-    for c in 0..3 {
-        let values: Vec<f64> = pixels.iter().map(|p| p[c] as f64).collect();
-        let (mean, se) = mean_se(&values);
+    for (c, (mean, se)) in channel_mean_se(&image).into_iter().enumerate() {
         let want = want[c] as f64;
         assert!((mean - want).abs() < 4.5 * se + 1e-3 * want, "channel {c}: {mean} ± {se}, want {want}");
+    }
+}
+
+/// Russian roulette ends paths only from `rr_depth` bounces on, and without bias: inside the
+/// emissive box, a path of at most `max_depth` bounces sees `Le (1 + a + … + a^max_depth)`
+/// (every vertex emits `Le`, every bounce keeps `a`), whichever bounce roulette starts at.
+/// Starting past `max_depth` plays no roulette at all (the image of a never-ending rule, bit
+/// for bit); starting at the first bounce ends paths early and boosts the rest, so it is
+/// noisier — a renderer that ignored `rr_depth` would give three equal images.
+#[test]
+fn russian_roulette_starts_at_rr_depth_and_keeps_the_truncated_series() {
+    let le = Vec3::new(1.0, 2.0, 0.5);
+    let albedo = Vec3::new(0.5, 0.25, 0.75);
+    let max_depth = 4;
+    let want = (0..=max_depth).fold(Vec3::ZERO, |sum, i| sum + le * albedo.powf(i as f32));
+    let size = 24;
+    let (scene, materials) = emissive_box("roulette", le, albedo, size);
+    let render = |rr_depth| {
+        let s = strata::render::RenderSettings { rr_depth, ..settings(size, size, 32, 5, max_depth) };
+        render_scene(&scene, &materials, &s)
+    };
+    let (first, past, never) = (render(1), render(max_depth + 1), render(1024));
+    for image in [&first, &past] {
+        for (c, (mean, se)) in channel_mean_se(image).into_iter().enumerate() {
+            let want = want[c] as f64;
+            assert!((mean - want).abs() < 4.5 * se + 1e-3 * want, "channel {c}: {mean} ± {se}, want {want}");
+        }
+    }
+    for c in ["R", "G", "B"] {
+        assert_eq!(past.f32_channel(c), never.f32_channel(c), "{c}: roulette played before rr_depth");
+    }
+    let (se_first, se_past) = (channel_mean_se(&first), channel_mean_se(&past));
+    for c in 0..3 {
+        assert!(
+            se_first[c].1 > 1.2 * se_past[c].1,
+            "channel {c}: roulette from bounce 1 adds no noise: {se_first:?} vs {se_past:?}"
+        );
     }
 }
 

@@ -545,6 +545,7 @@ fn exr_options(
             ("strata/seed".into(), settings.seed.to_string()),
             ("strata/sampler".into(), settings.sampler.name().into()),
             ("strata/maxDepth".into(), settings.max_depth.to_string()),
+            ("strata/rrDepth".into(), settings.rr_depth.to_string()),
             ("strata/backend".into(), args.backend.to_string()),
             ("strata/layerMode".into(), mode.into()),
             ("strata/optimize".into(), args.optimize.to_string()),

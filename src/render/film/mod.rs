@@ -29,6 +29,12 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 pub use sum::{ExactSum, PixelSums, WindowSums};
 use sum::{add_coverage, add_each};
 
+/// Bounces a path makes before Russian roulette may end it: Mitsuba 3's default. Ending
+/// paths from the third bounce (strata's earlier rule) saved no measurable time under a dome,
+/// where most paths escape on their own within a few bounces, and cost 1.3–1.8x the variance
+/// per sample (docs/PERFORMANCE.md, "Russian roulette from the fifth bounce").
+pub const DEFAULT_RR_DEPTH: u32 = 5;
+
 /// What to render.
 #[derive(Clone, Debug)]
 pub struct RenderSettings {
@@ -44,6 +50,8 @@ pub struct RenderSettings {
     pub threads: Option<usize>,
     /// Maximum number of bounces.
     pub max_depth: u32,
+    /// Bounces before Russian roulette may end a path ([`DEFAULT_RR_DEPTH`]).
+    pub rr_depth: u32,
     /// Layer evaluation mode.
     pub mode: LayerMode,
     /// How each decision's numbers are spread over a pixel's samples.
@@ -61,6 +69,7 @@ impl Default for RenderSettings {
             seed: 0,
             threads: None,
             max_depth: 8,
+            rr_depth: DEFAULT_RR_DEPTH,
             mode: LayerMode::Auto,
             sampler: SamplerKind::default(),
             layering: LayeringMode::default(),
@@ -694,7 +703,7 @@ fn render_impl(
         channel_map: &channel_map,
         params: PathParams {
             max_depth: settings.max_depth,
-            rr_depth: 3,
+            rr_depth: settings.rr_depth,
             mode: settings.mode,
             layering: settings.layering,
         },
