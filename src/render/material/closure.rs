@@ -272,7 +272,7 @@ impl ClosureBsdf {
             match terms.get(live.trailing_zeros() as usize) {
                 Some(t) => {
                     let (lobe, own_frame) = decode(t);
-                    self.set_lobes_finding(&[(lobe, clamped(t), 0)], mode, true);
+                    self.set_single(lobe, clamped(t), mode);
                     self.own_frames = own_frame;
                 }
                 None => self.set_lobes_finding(&[], mode, true),
@@ -339,6 +339,26 @@ impl ClosureBsdf {
         self.set_lobes_finding(lobes, mode, true);
         // Lobes carry no term words: `set_term_frames` looks at whatever it is given.
         self.own_frames = true;
+    }
+
+    /// [`ClosureBsdf::set_lobes`] of one lobe under nothing, written straight into the first
+    /// slot: the general path's copies of the lobe list and scans for layers cost a Lambert
+    /// shading point more than its own sampling.
+    #[inline]
+    fn set_single(&mut self, lobe: Lobe, weight: Vec3, mode: LayeringMode) {
+        let old_len = self.len;
+        // A single unit-weight lobe samples itself; its albedo is not needed.
+        let importance = if weight == Vec3::ONE {
+            1.0
+        } else {
+            (weight * lobe.albedo()).max_element().max(1e-4 * weight.max_element())
+        };
+        self.terms[0] =
+            Term { lobe, weight, above: 0, inv_norm: Vec3::ONE, importance, tilt: None, darkening: Vec3::ONE };
+        (self.len, self.layered, self.mode, self.walk) = (1, false, mode, None);
+        for t in self.terms.iter_mut().take(old_len).skip(1) {
+            *t = EMPTY_TERM;
+        }
     }
 
     /// [`ClosureBsdf::set_lobes`], finding the walk's stack or not (`set_terms` finds it once
