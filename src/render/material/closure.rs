@@ -275,7 +275,10 @@ impl ClosureBsdf {
                     self.set_single(lobe, clamped(t), mode);
                     self.own_frames = own_frame;
                 }
-                None => self.set_lobes_finding(&[], mode, true),
+                None => {
+                    self.set_lobes_finding(&[], mode, true);
+                    self.own_frames = false;
+                }
             }
             return;
         }
