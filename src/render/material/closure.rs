@@ -359,8 +359,8 @@ impl ClosureBsdf {
         self.terms[0] =
             Term { lobe, weight, above: 0, inv_norm: Vec3::ONE, importance, tilt: None, darkening: Vec3::ONE };
         (self.len, self.layered, self.mode, self.walk) = (1, false, mode, None);
-        for t in self.terms.iter_mut().take(old_len).skip(1) {
-            *t = EMPTY_TERM;
+        if old_len > 1 {
+            self.terms[1..old_len].fill(EMPTY_TERM);
         }
     }
 
