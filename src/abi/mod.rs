@@ -298,10 +298,12 @@ impl ClosureTerm {
     /// parameter.
     #[inline]
     pub fn is_non_finite(&self) -> bool {
-        // The largest magnitude's bits: at or above the exponent's all-ones, infinite or NaN.
-        let magnitude = |m: u32, x: &f32| m.max(x.to_bits() & 0x7fff_ffff);
-        self.kind != ClosureKind::None as u32
-            && self.weight.iter().fold(0, magnitude).max(self.params.iter().fold(0, magnitude)) >= 0x7f80_0000
+        // A magnitude's bits at or above the exponent's all-ones: infinite or NaN. Compared as
+        // i32 (the magnitude is never negative) and or-ed without branches, the test runs four
+        // words at a time in SSE2, which has no unsigned 32-bit max.
+        let non_finite = |x: &f32| (x.to_bits() & 0x7fff_ffff) as i32 >= 0x7f80_0000;
+        let any = |words: &[f32]| words.iter().fold(false, |m, x| m | non_finite(x));
+        self.kind != ClosureKind::None as u32 && (any(&self.weight) | any(&self.params))
     }
 
     /// A single closure with unit weight.

@@ -32,18 +32,26 @@ impl Lobes {
     }
 
     /// A slot for one more lobe (its old contents left to overwrite), counted as current.
+    #[inline]
     pub(super) fn push_slot(&mut self) -> &mut Lobe {
         if self.len == self.slots.len() {
-            // Grows once per slot per thread: Scratch::new reserves every material's layers.
-            self.slots.push(Lobe {
-                weight: 0.0,
-                bsdf: ClosureBsdf::empty(LayeringMode::default()),
-                frame: Frame::from_normal(Vec3::Z),
-                layer: 0,
-            });
+            self.grow();
         }
         self.len += 1;
         &mut self.slots[self.len - 1]
+    }
+
+    /// One more slot: once per slot per thread (Scratch::new reserves every material's
+    /// layers), so kept out of the shading point's code.
+    #[cold]
+    #[inline(never)]
+    fn grow(&mut self) {
+        self.slots.push(Lobe {
+            weight: 0.0,
+            bsdf: ClosureBsdf::empty(LayeringMode::default()),
+            frame: Frame::from_normal(Vec3::Z),
+            layer: 0,
+        });
     }
 }
 

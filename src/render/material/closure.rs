@@ -152,13 +152,14 @@ fn term_tangent(t: &ClosureTerm) -> Option<Vec3> {
     (v != Vec3::ZERO && v.is_finite()).then_some(v)
 }
 
-/// A term's lobe, stretched by its aspect when it has one.
+/// A term's lobe, stretched by its aspect when it has one, and whether the term may want a
+/// frame of its own (it carries an aspect or a normal: [`ClosureBsdf::set_term_frames`]).
 #[inline]
-fn decode(t: &ClosureTerm) -> Lobe {
+fn decode(t: &ClosureTerm) -> (Lobe, bool) {
     let lobe = Lobe::from_term(t);
     match term_aspect(t) {
-        Some(aspect) => lobe.with_aspect(aspect),
-        None => lobe,
+        Some(aspect) => (lobe.with_aspect(aspect), true),
+        None => (lobe, term_normal(t).is_some()),
     }
 }
 
@@ -203,6 +204,10 @@ pub struct ClosureBsdf {
     /// The stack the random walk follows, found once when the closure is decoded (`None` in
     /// albedo-scaling mode, without layers, or where the walk falls back to albedo scaling).
     pub(crate) walk: Option<walk::Stack>,
+    /// Whether a term may want a frame of its own (an aspect or a normal), found while
+    /// decoding: without one [`ClosureBsdf::set_term_frames`] has nothing to do, and most
+    /// shading points skip it without scanning the terms again.
+    own_frames: bool,
 }
 
 /// Equal when the used terms are: the unused ones are all empty, and comparing them would cost
@@ -265,14 +270,22 @@ impl ClosureBsdf {
         }
         if live.count_ones() <= 1 {
             match terms.get(live.trailing_zeros() as usize) {
-                Some(t) => self.set_lobes(&[(decode(t), clamped(t), 0)], mode),
-                None => self.set_lobes(&[], mode),
+                Some(t) => {
+                    let (lobe, own_frame) = decode(t);
+                    self.set_single(lobe, clamped(t), mode);
+                    self.own_frames = own_frame;
+                }
+                None => {
+                    self.set_lobes_finding(&[], mode, true);
+                    self.own_frames = false;
+                }
             }
             return;
         }
         let mut lobes = [(Lobe::Bsdf(Bsdf::Black), Vec3::ZERO, 0u8); MAX_CLOSURE_TERMS];
         let mut position = [usize::MAX; MAX_CLOSURE_TERMS];
         let mut len = 0;
+        let mut own_frames = false;
         for (k, t) in terms.iter().enumerate().take(MAX_CLOSURE_TERMS) {
             if live & (1 << k) == 0 {
                 continue;
@@ -286,10 +299,13 @@ impl ClosureBsdf {
                 }
             }
             position[k] = len;
-            lobes[len] = (decode(t), weight, above);
+            let (lobe, own_frame) = decode(t);
+            own_frames |= own_frame;
+            lobes[len] = (lobe, weight, above);
             len += 1;
         }
         self.set_lobes_finding(&lobes[..len], mode, false);
+        self.own_frames = own_frames;
         if self.layered && mode == LayeringMode::RandomWalk {
             for (k, &p) in position.iter().enumerate() {
                 if p < len {
@@ -303,7 +319,14 @@ impl ClosureBsdf {
 
     /// The closure with no terms (black).
     pub fn empty(mode: LayeringMode) -> ClosureBsdf {
-        ClosureBsdf { terms: [EMPTY_TERM; MAX_CLOSURE_TERMS], len: 0, layered: false, mode, walk: None }
+        ClosureBsdf {
+            terms: [EMPTY_TERM; MAX_CLOSURE_TERMS],
+            len: 0,
+            layered: false,
+            mode,
+            walk: None,
+            own_frames: false,
+        }
     }
 
     /// Builds the BSDF of `(lobe, weight, above)` terms (at most [`MAX_CLOSURE_TERMS`]).
@@ -317,6 +340,28 @@ impl ClosureBsdf {
     /// written: the unused ones stay empty.
     pub fn set_lobes(&mut self, lobes: &[(Lobe, Vec3, u8)], mode: LayeringMode) {
         self.set_lobes_finding(lobes, mode, true);
+        // Lobes carry no term words: `set_term_frames` looks at whatever it is given.
+        self.own_frames = true;
+    }
+
+    /// [`ClosureBsdf::set_lobes`] of one lobe under nothing, written straight into the first
+    /// slot: the general path's copies of the lobe list and scans for layers cost a Lambert
+    /// shading point more than its own sampling.
+    #[inline]
+    fn set_single(&mut self, lobe: Lobe, weight: Vec3, mode: LayeringMode) {
+        let old_len = self.len;
+        // A single unit-weight lobe samples itself; its albedo is not needed.
+        let importance = if weight == Vec3::ONE {
+            1.0
+        } else {
+            (weight * lobe.albedo()).max_element().max(1e-4 * weight.max_element())
+        };
+        self.terms[0] =
+            Term { lobe, weight, above: 0, inv_norm: Vec3::ONE, importance, tilt: None, darkening: Vec3::ONE };
+        (self.len, self.layered, self.mode, self.walk) = (1, false, mode, None);
+        if old_len > 1 {
+            self.terms[1..old_len].fill(EMPTY_TERM);
+        }
     }
 
     /// [`ClosureBsdf::set_lobes`], finding the walk's stack or not (`set_terms` finds it once
@@ -382,6 +427,9 @@ impl ClosureBsdf {
     /// such a closure is today's bit for bit. An anisotropic term whose tangent, projected into
     /// its frame, is not the frame's x axis turns about its normal to it.
     pub fn set_term_frames(&mut self, terms: &[ClosureTerm], frame: &mut Frame, wo: Vec3) {
+        if !self.own_frames {
+            return;
+        }
         let anisotropic = self.terms().iter().any(|t| t.lobe.is_anisotropic());
         // Most closures have neither: one pass over the words before any decoding.
         if !anisotropic && !terms.iter().any(|t| term_normal(t).is_some()) {

@@ -469,6 +469,76 @@ fn a_term_with_its_own_normal_is_shaded_about_it() {
     assert!(at_tilted > 5.0 * at_plain, "highlight at the tilted mirror {at_tilted} vs the plain mirror {at_plain}");
 }
 
+/// A closure of one live term is decoded by its own short path (`set_single`): it must leave the
+/// slot exactly as the general path leaves it, every term slot compared (stale ones from a
+/// three-term layered closure decoded into it before must be emptied), for unit and partial
+/// weights, dead terms around the live one, and both layering modes.
+#[test]
+fn a_single_live_term_decodes_as_the_general_path_does() {
+    let stack = {
+        let mut sum = ClosureSum::default();
+        sum.terms[0] = term(ClosureKind::Dielectric, &[1.0, 1.0, 1.0, 1.5, 0.2, 0.0]);
+        sum.terms[1] = ClosureTerm { above: 1, ..term(ClosureKind::Metal, &[0.9, 0.6, 0.5, 1.0, 0.8, 0.6, 0.3]) };
+        sum.terms[2] = ClosureTerm { above: 3, ..term(ClosureKind::Diffuse, &[0.8, 0.8, 0.8]) };
+        sum
+    };
+    let live = [
+        term(ClosureKind::Diffuse, &[0.7, 0.5, 0.3]),
+        ClosureTerm {
+            weight: [0.5, 0.25, 1.0],
+            ..term(ClosureKind::Glossy, &[0.6, 0.4, 0.2, 0.8, 0.8, 0.8, 0.3, 1.5])
+        },
+        ClosureTerm { weight: [0.3, 0.3, 0.3], ..term(ClosureKind::Dielectric, &[0.9, 0.9, 0.9, 1.5, 0.3, 4.0]) },
+        term(ClosureKind::Sheen, &[0.5, 0.5, 0.5, 0.4]),
+    ];
+    for mode in [LayeringMode::AlbedoScaling, LayeringMode::RandomWalk] {
+        for (k, t) in live.iter().enumerate() {
+            let mut sum = ClosureSum::default();
+            // A dead term before it (zero weight) and one after (kind None).
+            sum.terms[0] = ClosureTerm { weight: [0.0; 3], ..term(ClosureKind::Diffuse, &[1.0, 1.0, 1.0]) };
+            sum.terms[1] = ClosureTerm { above: 1, ..*t };
+            let mut fast = ClosureBsdf::from_sum(&stack, mode);
+            fast.set_sum(&sum, mode);
+            let mut general = ClosureBsdf::from_sum(&stack, mode);
+            let weight = Vec3::from_array(t.weight);
+            general.set_lobes(&[(Lobe::from_term(t), weight, 0)], mode);
+            assert_eq!(fast.terms, general.terms, "term {k}, {mode:?}");
+            assert_eq!((fast.len, fast.layered, fast.mode), (general.len, general.layered, general.mode));
+            assert!(fast.walk.is_none() && general.walk.is_none());
+        }
+    }
+}
+
+/// Whether `set_term_frames` has work is found while decoding: a single term with its own
+/// normal (and no aspect) still turns into that normal's frame, and a single anisotropic term
+/// still turns the shading frame to its tangent.
+#[test]
+fn term_frames_follow_what_the_decoded_terms_carry() {
+    use crate::abi::{TERM_ASPECT, TERM_TANGENT};
+    use crate::render::material::frame::Frame;
+    let wo = dir(0.8, 0.4);
+    // Lambert about a normal tilted 60° towards +x: a direction just above the shading plane
+    // on the -x side lies below the term's plane.
+    let n = Vec3::new(60f32.to_radians().sin(), 0.0, 60f32.to_radians().cos());
+    let mut sum = ClosureSum::default();
+    sum.terms[0] = term(ClosureKind::Diffuse, &[0.8, 0.8, 0.8]);
+    sum.terms[0].params[TERM_NORMAL..TERM_NORMAL + 3].copy_from_slice(&n.to_array());
+    let mut b = ClosureBsdf::from_sum(&sum, LayeringMode::AlbedoScaling);
+    b.set_term_frames(&sum.terms, &mut Frame::from_normal(Vec3::Z), wo);
+    let (below_term, above_term) = (Vec3::new(-0.98, 0.0, 0.2).normalize(), Vec3::new(0.5, 0.0, 0.866).normalize());
+    assert_eq!(b.eval(wo, below_term), Vec3::ZERO, "the term's own normal was not used");
+    assert!((b.eval(wo, above_term) - Vec3::splat(0.8 * std::f32::consts::FRAC_1_PI)).abs().max_element() < 1e-6);
+    // An anisotropic metal along a tangent 90° from the frame's turns the frame.
+    let mut aniso = ClosureSum::default();
+    aniso.terms[0] = term(ClosureKind::Metal, &[0.9, 0.6, 0.5, 1.0, 0.8, 0.6, 0.3]);
+    aniso.terms[0].params[TERM_TANGENT..TERM_TANGENT + 3].copy_from_slice(&[0.0, 1.0, 0.0]);
+    aniso.terms[0].params[TERM_ASPECT] = 2.0;
+    let mut slot = ClosureBsdf::from_sum(&aniso, LayeringMode::AlbedoScaling);
+    let mut frame = Frame::from_normal(Vec3::Z);
+    slot.set_term_frames(&aniso.terms, &mut frame, wo);
+    assert!((frame.to_local(Vec3::Y) - Vec3::X).length() < 1e-5, "the frame did not turn to the tangent");
+}
+
 // ---------------------------------------------------------------- thin film
 
 /// Reflectance at normal incidence of a film (index `n2`, `d` nm) on a substrate (`n3`) in air
