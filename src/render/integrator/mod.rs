@@ -782,12 +782,10 @@ impl Context<'_> {
     /// Emission of area lights crossed by the segment `o + t d`, `t < tmax`, MIS-weighted
     /// against the vertex that chose `d` (which transparent picks may have left behind `o`).
     /// `camera_ray`: the ray left the camera (perhaps through transparent surfaces), so lights
-    /// hidden from the camera contribute nothing.
+    /// hidden from the camera contribute nothing. Called only where some light is hittable
+    /// ([`Context::hittable_lights`]).
     fn area_emission(&self, o: Vec3, d: Vec3, tmax: f32, from: &Scatter, camera_ray: bool) -> Vec3 {
         let mut sum = Vec3::ZERO;
-        if !self.hittable_lights {
-            return sum;
-        }
         for (i, light) in self.scene.lights.iter().enumerate().filter(|(_, l)| l.visible_to_camera || !camera_ray) {
             if let Some((le, _)) = light.hit(o, d, tmax) {
                 sum += le * from.mis(light, d, self.light_selection.pmf(i));
@@ -851,7 +849,12 @@ impl Context<'_> {
             let t_hit = hit.map_or(f32::INFINITY, |h| h.t);
             // Still the camera's ray until the first bounce (passing through is not one).
             let camera_ray = bounces == 0;
-            out.radiance += throughput * self.area_emission(o, d, t_hit, &from, camera_ray);
+            // Skipped, not added as a zero, where no light can be hit: the throughput is finite
+            // here (a non-finite one ends the path), so the product would be a zero, and the
+            // radiance, a sum of such terms from +0, is never −0 for a +0 to change.
+            if self.hittable_lights {
+                out.radiance += throughput * self.area_emission(o, d, t_hit, &from, camera_ray);
+            }
             let Some(hit) = hit else {
                 out.radiance += throughput * self.escape_emission(d, &from, camera_ray);
                 break;
