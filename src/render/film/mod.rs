@@ -688,6 +688,7 @@ fn render_impl(
     let moving = scene.has_motion();
     let primvar_slots = crate::render::integrator::primvar_slots(scene, materials);
     let layer_modes: Vec<LayerMode> = materials.iter().map(|m| settings.mode.resolve(*m)).collect();
+    let certain_picks = crate::render::integrator::certain_picks(materials, &layer_modes);
     let ctx = Context {
         layer_modes: &layer_modes,
         scene,
@@ -707,6 +708,7 @@ fn render_impl(
             (scene.bounds.1 - scene.bounds.0).length() / 2.0,
         ),
         primvar_slots: &primvar_slots,
+        certain_picks: &certain_picks,
         pixel_spread: camera.pixel_angle(w),
     };
     let done = AtomicUsize::new(0);
