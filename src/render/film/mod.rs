@@ -727,10 +727,12 @@ fn render_impl(
             let pixel = (y * w + x) as u64;
             px.reset(channel_floats);
             let pixel_key = PathSampler::pixel_key(settings.seed, pixel);
+            // The pixel's corner and the image's size in floats, converted once per pixel.
+            let (corner, size) = (Vec2::new(x as f32, y as f32), Vec2::new(w as f32, h as f32));
             for sample in samples.clone() {
                 let mut sampler = PathSampler::of_pixel(settings.sampler, pixel_key, sample);
                 let jitter = sampler.get2(Slot::Pixel);
-                let film = Vec2::new((x as f32 + jitter.x) / w as f32, (y as f32 + jitter.y) / h as f32);
+                let film = (corner + jitter) / size;
                 // Numbers are counter based: skipping the lens draw of a pinhole camera
                 // changes no other decision's numbers.
                 let lens = if camera.has_lens() { sampler.get2(Slot::Lens) } else { Vec2::ZERO };
