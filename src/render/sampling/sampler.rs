@@ -231,14 +231,11 @@ fn unit_reversed(bits: u32) -> f32 {
 /// in the top 24 bits of a reversal (3 KiB).
 const REVERSED_BYTES_IN_PLACE: [[u32; 256]; 3] = {
     let mut table = [[0u32; 256]; 3];
-    let mut b = 0;
-    while b < 3 {
-        let mut byte = 0;
-        while byte < 256 {
-            table[b][byte] = ((byte as u32) << (8 * b)).reverse_bits() >> 8;
-            byte += 1;
-        }
-        b += 1;
+    let mut entry = 0;
+    while entry < 3 * 256 {
+        let (b, byte) = (entry / 256, entry % 256);
+        table[b][byte] = ((byte as u32) << (8 * b)).reverse_bits() >> 8;
+        entry += 1;
     }
     table
 };
