@@ -190,3 +190,33 @@ fn normal_map_applies_in_the_tangent_frame() {
     let k = 1.0 / 1.25f32.sqrt();
     assert_close(mean_normal(&scene), [0.5 * k, k, 0.0]);
 }
+
+/// A sample whose radiance overflows f32 is counted and left out of the pixel, never summed:
+/// two domes of 3e38 each add up to more than an f32 holds wherever a path escapes. (The film
+/// tests a sample's values once against its exact sums' fast range; whatever fails it must
+/// still meet the finite check.)
+#[test]
+fn overflowing_samples_are_counted_and_left_out() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy("scenes/compare/matte.ash", dir.path().join("matte.ash")).unwrap();
+    let usda = std::fs::read_to_string("scenes/compare/matte_ball.usda").unwrap();
+    let dome = "    def DomeLight \"Sky\"\n    {\n        float inputs:intensity = 1\n    }\n";
+    assert!(usda.contains(dome), "the matte ball's dome moved");
+    let hot = dome.replace("= 1", "= 3e38");
+    let path = dir.path().join("overflow.usda");
+    std::fs::write(&path, usda.replace(dome, &format!("{hot}{}", hot.replace("\"Sky\"", "\"Sky2\"")))).unwrap();
+    let (session, scene) = common::stage_scene(SceneSource::from_path(Some(path.as_path())), BackendKind::Jit, true);
+    let refs = session.compiled().expect("compiled").refs();
+    let settings = RenderSettings { width: 16, height: 12, spp: 2, seed: 7, threads: Some(2), ..Default::default() };
+    let (image, stats) = render(&scene, &refs, &settings, None).expect("renders");
+    // Most paths escape to the domes (every one from the floor or the ball does, in the end).
+    assert!(
+        stats.nonfinite_samples > stats.samples / 2,
+        "{} of {} samples discarded",
+        stats.nonfinite_samples,
+        stats.samples
+    );
+    for name in ["R", "G", "B", "A"] {
+        assert!(image.f32_channel(name).unwrap().iter().all(|v| v.is_finite()), "{name} is not finite");
+    }
+}

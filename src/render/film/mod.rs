@@ -15,7 +15,8 @@ pub mod sum;
 use crate::abi::ChannelKind;
 use crate::abi::{MaterialCode, ShaderError};
 use crate::render::integrator::{
-    ChannelMap, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams, PickStratum, Scratch,
+    ChannelMap, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams, PickStratum,
+    SampleResult, Scratch,
 };
 use crate::render::material::closure::LayeringMode;
 use crate::render::sampling::sampler::{PathSampler, SamplerKind, Slot};
@@ -27,7 +28,7 @@ use std::ops::Range;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 pub use sum::{ExactSum, PixelSums, WindowSums};
-use sum::{add_coverage, add_each};
+use sum::{add_coverage, add_each, add_fast, all_fast};
 
 /// Bounces a path makes before Russian roulette may end it: Mitsuba 3's default. Ending
 /// paths from the third bounce (strata's earlier rule) saved no measurable time under a dome,
@@ -696,6 +697,7 @@ fn render_impl(
     let moving = scene.has_motion();
     let primvar_slots = crate::render::integrator::primvar_slots(scene, materials);
     let layer_modes: Vec<LayerMode> = materials.iter().map(|m| settings.mode.resolve(*m)).collect();
+    let certain_picks = crate::render::integrator::certain_picks(materials, &layer_modes);
     let ctx = Context {
         layer_modes: &layer_modes,
         scene,
@@ -715,6 +717,7 @@ fn render_impl(
             (scene.bounds.1 - scene.bounds.0).length() / 2.0,
         ),
         primvar_slots: &primvar_slots,
+        certain_picks: &certain_picks,
         pixel_spread: camera.pixel_angle(w),
     };
     let done = AtomicUsize::new(0);
@@ -733,10 +736,12 @@ fn render_impl(
             let pixel = (y * w + x) as u64;
             px.reset(channel_floats);
             let pixel_key = PathSampler::pixel_key(settings.seed, pixel);
+            // The pixel's corner and the image's size in floats, converted once per pixel.
+            let (corner, size) = (Vec2::new(x as f32, y as f32), Vec2::new(w as f32, h as f32));
             for sample in samples.clone() {
                 let mut sampler = PathSampler::of_pixel(settings.sampler, pixel_key, sample);
                 let jitter = sampler.get2(Slot::Pixel);
-                let film = Vec2::new((x as f32 + jitter.x) / w as f32, (y as f32 + jitter.y) / h as f32);
+                let film = (corner + jitter) / size;
                 // Numbers are counter based: skipping the lens draw of a pinhole camera
                 // changes no other decision's numbers.
                 let lens = if camera.has_lens() { sampler.get2(Slot::Lens) } else { Vec2::ZERO };
@@ -754,20 +759,38 @@ fn render_impl(
                 let first_pick = PickStratum { index: sample, count: settings.spp };
                 row.stats.samples += 1;
                 px.samples += 1;
-                match ctx.trace(ray.o, ray.d, ray.tmin, ray.tmax, first_pick, &mut sampler, scratch) {
-                    Ok(r) if r.radiance.is_finite() && r.albedo.is_finite() && r.normal.is_finite() => {
+                let traced = ctx.trace(ray.o, ray.d, ray.tmin, ray.tmax, first_pick, &mut sampler, scratch);
+                // The 13 values the exact sums take: colour (radiance, alpha, albedo) over all
+                // samples, geometry (normal, position) over the hits.
+                let colour_of = |r: &SampleResult| {
+                    let (c, a) = (r.radiance, r.albedo);
+                    [c.x, c.y, c.z, r.alpha, a.x, a.y, a.z]
+                };
+                let geometry_of = |r: &SampleResult| {
+                    let (n, p) = (r.normal, r.position);
+                    [n.x, n.y, n.z, p.x, p.y, p.z]
+                };
+                // Almost every sample's values are all in the exact sums' fast range, which
+                // holds finite values only: one test of the 13 then stands for the finite check
+                // and both groups' range tests (`add_fast`); any other sample takes the tests
+                // one by one.
+                let fast = traced.as_ref().is_ok_and(|r| all_fast(&colour_of(r)) & all_fast(&geometry_of(r)));
+                match traced {
+                    Ok(r) if fast || (r.radiance.is_finite() && r.albedo.is_finite() && r.normal.is_finite()) => {
                         row.stats.pass_through_limit += u64::from(r.pass_limit);
                         // Fixed-size arrays, not chained iterators: the adds unroll (a chain of
                         // three iterators cost about 100 instructions a sample).
-                        // One range test per group (`add_each`), not per value.
-                        let (sums, (c, a)) = (&mut px.builtin, (r.radiance, r.albedo));
+                        let sums = &mut px.builtin;
                         if let Some(colour) = sums.first_chunk_mut::<7>() {
-                            add_each(colour, [c.x, c.y, c.z, r.alpha, a.x, a.y, a.z]);
+                            if fast { add_fast(colour, colour_of(&r)) } else { add_each(colour, colour_of(&r)) }
                         }
                         if r.alpha > 0.0 {
-                            let (n, p) = (r.normal, r.position);
                             if let Some(geometry) = sums.last_chunk_mut::<6>() {
-                                add_each(geometry, [n.x, n.y, n.z, p.x, p.y, p.z]);
+                                if fast {
+                                    add_fast(geometry, geometry_of(&r))
+                                } else {
+                                    add_each(geometry, geometry_of(&r))
+                                }
                             }
                             px.hits += 1;
                             if let Some(prim) = r.prim {

@@ -20,29 +20,61 @@ const SCALE: f64 = 1_099_511_627_776.0;
 /// Per-sample values are clamped to ±2⁵⁵ so that 2³² samples cannot overflow 127 bits.
 const LIMIT: f64 = 36_028_797_018_963_968.0;
 
-/// Below 2⁶² units (values below 2²²), a sample converts through `i64`.
-const FAST: f64 = 4_611_686_018_427_387_904.0;
-
-/// [`FAST`] in sample values: `|v| < 2²²` exactly when `|v · 2⁴⁰| < 2⁶²` (the product is exact).
+/// The fast range's bound: `|v| < 2²²` exactly when `|v · 2⁴⁰| < 2⁶²` (the product is exact), so
+/// the sample converts through `i64`.
 const FAST_VALUE: f32 = 4_194_304.0;
 
 /// An exact sum of finite `f32` samples (see the module documentation).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct ExactSum(i128);
 
+/// [`FAST_VALUE`]'s bits: a value's magnitude bits (`to_bits() & 0x7fff_ffff`) are below them
+/// exactly when it is in the fast range, and NaN's and the infinities' are not.
+const FAST_BITS: u32 = FAST_VALUE.to_bits();
+
+/// Whether every one of `values` is in the fast range (`|v| < 2²²`, so finite too). One
+/// integer maximum over the magnitudes' bits: no branch per value, and no float compare that
+/// NaN would need its own care for.
+#[inline]
+pub fn all_fast<const N: usize>(values: &[f32; N]) -> bool {
+    values.iter().fold(0, |max: u32, v| max.max(v.to_bits() & 0x7fff_ffff)) < FAST_BITS
+}
+
+/// `v` in units of 2⁻⁴⁰, rounded toward zero, for `v` in the fast range: exact in f32 as in
+/// f64 (a power-of-two scale of a value below 2²² neither overflows nor rounds; a subnormal
+/// value scales to a normal one), and one truncating conversion. [`ExactSum::add`] and the
+/// film's groups ([`add_fast`]) both convert through it.
+///
+/// # Safety
+/// `|v| < 2²²` (then `|v · 2⁴⁰| < 2⁶²`: finite and in i64's range after truncation).
+#[inline]
+unsafe fn fast_units(v: f32) -> i128 {
+    // SAFETY: the caller's range makes the truncation defined (see above).
+    i128::from(unsafe { (v * SCALE as f32).to_int_unchecked::<i64>() })
+}
+
+/// Adds each of `values`, all in the fast range ([`all_fast`]), to the sum in the same place,
+/// exactly as [`ExactSum::add`] does one at a time: the film tests a sample's channels once and
+/// adds its groups with no test of their own.
+///
+/// # Panics
+/// In debug builds, when a value is out of the fast range (release builds do not check it).
+#[inline]
+pub fn add_fast<const N: usize>(sums: &mut [ExactSum; N], values: [f32; N]) {
+    debug_assert!(all_fast(&values), "{values:?}");
+    for (sum, v) in sums.iter_mut().zip(values) {
+        // SAFETY: in the fast range (the caller's test, asserted above in debug builds).
+        sum.0 += unsafe { fast_units(v) };
+    }
+}
+
 /// Adds each of `values` to the sum in the same place, exactly as [`ExactSum::add`] does one at
 /// a time, with one range test for the lot: the film adds a sample's channels together, and
 /// they are almost always all in the fast range.
 #[inline]
 pub fn add_each<const N: usize>(sums: &mut [ExactSum; N], values: [f32; N]) {
-    // `&`, not `&&`: one branch for all the values, not one each (NaN fails the test).
-    if values.iter().fold(true, |fast, v| fast & (v.abs() < FAST_VALUE)) {
-        for (sum, v) in sums.iter_mut().zip(values) {
-            // Exact in f32 as in f64: a power-of-two scale of a value below 2²² neither
-            // overflows nor rounds (a subnormal value scales to a normal one).
-            // SAFETY: |v · 2⁴⁰| < 2⁶², finite and in i64's range after truncation.
-            sum.0 += i128::from(unsafe { (v * SCALE as f32).to_int_unchecked::<i64>() });
-        }
+    if all_fast(&values) {
+        add_fast(sums, values);
     } else {
         sums.iter_mut().zip(values).for_each(|(sum, v)| sum.add(v));
     }
@@ -53,16 +85,13 @@ impl ExactSum {
     /// the film discards non-finite samples before they get here.
     #[inline]
     pub fn add(&mut self, v: f32) {
-        // Exact: an f32 times a power of two is an f64 with the same significand, and the
-        // float-to-integer conversions truncate (NaN converts to 0). Both paths give the
-        // same integer; the first is one instruction.
-        let units = f64::from(v) * SCALE;
-        self.0 += if units.abs() < FAST {
-            // SAFETY: |units| < 2⁶², so it is finite and its truncation fits in i64 (NaN fails
-            // the test). The checked `as i64` would test both again for every sample.
-            i128::from(unsafe { units.to_int_unchecked::<i64>() })
+        self.0 += if v.abs() < FAST_VALUE {
+            // SAFETY: the test is the fast range (NaN fails it).
+            unsafe { fast_units(v) }
         } else {
-            (units.clamp(-LIMIT * SCALE, LIMIT * SCALE)) as i128
+            // Exact: an f32 times a power of two is an f64 with the same significand, and the
+            // float-to-integer conversion truncates (NaN converts to 0), as `fast_units` does.
+            (f64::from(v) * SCALE).clamp(-LIMIT * SCALE, LIMIT * SCALE) as i128
         };
     }
 
@@ -320,6 +349,27 @@ mod tests {
             let mut at_once = [ExactSum::of(1.5); 7];
             add_each(&mut at_once, group);
             assert_eq!(at_once, each, "{group:?}");
+        }
+    }
+
+    /// `add` against the definition, computed in f64 and i128 alone: the value times 2⁴⁰,
+    /// truncated, clamped to ±2⁵⁵ · 2⁴⁰, NaN as 0; and `all_fast` against the float test.
+    #[test]
+    fn add_is_the_truncated_fixed_point_value() {
+        let below = f32::from_bits(FAST_VALUE.to_bits() - 1);
+        let edges = [FAST_VALUE, -FAST_VALUE, below, -below, 1e30, -f32::MAX, f32::INFINITY, -f32::INFINITY];
+        let subnormal = f32::from_bits(1);
+        let more = [f32::NAN, -f32::NAN, 0.0, -0.0, subnormal, -subnormal, f32::MIN_POSITIVE, 0.1, -2.5e-13];
+        for v in values().into_iter().chain(edges).chain(more) {
+            let expected = if v.is_nan() {
+                0
+            } else {
+                (f64::from(v) * SCALE).trunc().clamp(-LIMIT * SCALE, LIMIT * SCALE) as i128
+            };
+            let mut sum = ExactSum::from_bits(7);
+            sum.add(v);
+            assert_eq!(sum.to_bits(), 7 + expected, "{v:e}");
+            assert_eq!(all_fast(&[0.5, v, -1.0]), v.abs() < FAST_VALUE, "{v:e}");
         }
     }
 

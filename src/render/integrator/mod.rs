@@ -279,6 +279,10 @@ pub struct Context<'a> {
     pub hittable_lights: bool,
     /// How next-event estimation chooses a light (by power; see [`LightSelection`]).
     pub light_selection: LightSelection,
+    /// Per material, whether the layer pick at its surfaces cannot go two ways ([`certain_picks`]):
+    /// such a hit draws no pick number, and the path loop reads this instead of the material's
+    /// layers at every hit.
+    pub certain_picks: &'a [bool],
     /// Per material, its primvar reads resolved against [`Scene::primvars`]
     /// (see [`primvar_slots`]).
     pub primvar_slots: &'a [Vec<PrimvarSlot>],
@@ -291,6 +295,17 @@ pub struct Context<'a> {
 /// Each material's primvar reads resolved against the scene's stored primvars.
 pub fn primvar_slots(scene: &Scene, materials: &[&dyn MaterialCode]) -> Vec<Vec<PrimvarSlot>> {
     materials.iter().map(|m| scene.primvars.slots(&m.info().primvars)).collect()
+}
+
+/// Per material, whether its pick cannot go two ways: a stochastic pick
+/// ([`layering::pick_is_certain`]) under `layer_modes` ([`Context::layer_modes`]); a weighted
+/// evaluation always reads its number.
+pub fn certain_picks(materials: &[&dyn MaterialCode], layer_modes: &[LayerMode]) -> Vec<bool> {
+    materials
+        .iter()
+        .zip(layer_modes)
+        .map(|(m, &mode)| mode != LayerMode::Weighted && layering::pick_is_certain(&m.info().layers))
+        .collect()
 }
 
 /// Whether a material never lets light through: a layer with a surface and a mask of 1 at
@@ -782,12 +797,10 @@ impl Context<'_> {
     /// Emission of area lights crossed by the segment `o + t d`, `t < tmax`, MIS-weighted
     /// against the vertex that chose `d` (which transparent picks may have left behind `o`).
     /// `camera_ray`: the ray left the camera (perhaps through transparent surfaces), so lights
-    /// hidden from the camera contribute nothing.
+    /// hidden from the camera contribute nothing. Called only where some light is hittable
+    /// ([`Context::hittable_lights`]).
     fn area_emission(&self, o: Vec3, d: Vec3, tmax: f32, from: &Scatter, camera_ray: bool) -> Vec3 {
         let mut sum = Vec3::ZERO;
-        if !self.hittable_lights {
-            return sum;
-        }
         for (i, light) in self.scene.lights.iter().enumerate().filter(|(_, l)| l.visible_to_camera || !camera_ray) {
             if let Some((le, _)) = light.hit(o, d, tmax) {
                 sum += le * from.mis(light, d, self.light_selection.pmf(i));
@@ -834,10 +847,11 @@ impl Context<'_> {
         // Transparent picks passed since the current vertex (each takes its own dimension).
         let mut vertex_passes = 0u32;
         let mut first = true;
-        let mut travelled = 0.0f32;
         // The ray cone's length from the camera to the current ray's origin, along the path
         // (pass-throughs and bounces alike): at a hit its width is `pixel_spread` times this
-        // plus the hit distance.
+        // plus the hit distance. Until the first visible hit (no bounce yet) it is the
+        // distance the camera ray has travelled through transparent picks, which the depth
+        // AOV adds the hit distance to.
         let mut cone_length = 0.0f32;
         // Rough bounces widen the cone (textures read there need no detail): the spread they
         // added, and the width it has grown to at the current ray's origin.
@@ -851,7 +865,12 @@ impl Context<'_> {
             let t_hit = hit.map_or(f32::INFINITY, |h| h.t);
             // Still the camera's ray until the first bounce (passing through is not one).
             let camera_ray = bounces == 0;
-            out.radiance += throughput * self.area_emission(o, d, t_hit, &from, camera_ray);
+            // Skipped, not added as a zero, where no light can be hit: the throughput is finite
+            // here (a non-finite one ends the path), so the product would be a zero, and the
+            // radiance, a sum of such terms from +0, is never −0 for a +0 to change.
+            if self.hittable_lights {
+                out.radiance += throughput * self.area_emission(o, d, t_hit, &from, camera_ray);
+            }
             let Some(hit) = hit else {
                 out.radiance += throughput * self.escape_emission(d, &from, camera_ray);
                 break;
@@ -860,10 +879,8 @@ impl Context<'_> {
             // The pick at the vertex's first surface has a dimension of its own; each
             // pass through a transparent pick takes another, so later decisions keep theirs.
             // A stochastic pick that cannot go two ways draws no number.
-            let certain = self.layer_modes[sp.material] != LayerMode::Weighted
-                && layering::pick_is_certain(&self.materials[sp.material].info().layers);
             let u_layer = match (bounces, vertex_passes) {
-                _ if certain => 0.0,
+                _ if self.certain_picks[sp.material] => 0.0,
                 (0, 0) => first_pick.number(sampler),
                 (_, 0) => sampler.get1(Slot::LayerPick),
                 _ => sampler.pass_pick(vertex_passes),
@@ -889,7 +906,6 @@ impl Context<'_> {
                 let side = if sp.ng.dot(d) > 0.0 { sp.ng } else { -sp.ng };
                 let next = offset_ray_origin(sp.p, sp.p_error, side);
                 let advanced = (next - o).dot(d);
-                travelled += advanced;
                 cone_length += advanced;
                 bounce_width += bounce_spread * advanced;
                 tmax = (tmax - advanced).max(0.0);
@@ -902,7 +918,7 @@ impl Context<'_> {
                 out.alpha = 1.0;
                 out.albedo = albedo;
                 out.normal = normal;
-                out.depth = travelled + hit.t;
+                out.depth = cone_length + hit.t;
                 out.position = sp.p;
                 out.prim = Some(sp.prim);
             }
