@@ -125,8 +125,15 @@ fn default_render_exr_has_the_compositing_channels_and_header() {
     for (key, value) in [("strata/N/space", "world"), ("strata/P/space", "world"), ("strata/spp", "2")] {
         assert_eq!(text(&image, key), value);
     }
-    for key in ["strata/seed", "strata/maxDepth", "strata/rrDepth", "strata/backend", "strata/layerMode", "strata/scene", "strata/camera"]
-    {
+    for key in [
+        "strata/seed",
+        "strata/maxDepth",
+        "strata/rrDepth",
+        "strata/backend",
+        "strata/layerMode",
+        "strata/scene",
+        "strata/camera",
+    ] {
         text(&image, key);
     }
     assert_eq!(text(&image, "strata/camera"), "/World/Camera");
