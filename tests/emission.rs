@@ -233,8 +233,9 @@ fn inside_a_closed_emissive_box_radiance_is_le_over_one_minus_albedo() {
 /// emissive box, a path of at most `max_depth` bounces sees `Le (1 + a + … + a^max_depth)`
 /// (every vertex emits `Le`, every bounce keeps `a`), whichever bounce roulette starts at.
 /// Starting past `max_depth` plays no roulette at all (the image of a never-ending rule, bit
-/// for bit); starting at the first bounce ends paths early and boosts the rest, so it is
-/// noisier — a renderer that ignored `rr_depth` would give three equal images.
+/// for bit), starting at `max_depth` plays on the last segment only (a different image);
+/// starting at the first bounce ends paths early and boosts the rest, so it is noisier — a
+/// renderer that ignored `rr_depth` would give equal images.
 #[test]
 fn russian_roulette_starts_at_rr_depth_and_keeps_the_truncated_series() {
     let le = Vec3::new(1.0, 2.0, 0.5);
@@ -257,6 +258,9 @@ fn russian_roulette_starts_at_rr_depth_and_keeps_the_truncated_series() {
     for c in ["R", "G", "B"] {
         assert_eq!(past.f32_channel(c), never.f32_channel(c), "{c}: roulette played before rr_depth");
     }
+    // From bounce `max_depth` on, roulette plays once, on the path's last segment.
+    let last = render(max_depth);
+    assert_ne!(last.f32_channel("R"), never.f32_channel("R"), "roulette did not play at bounce rr_depth");
     let (se_first, se_past) = (channel_mean_se(&first), channel_mean_se(&past));
     for c in 0..3 {
         assert!(

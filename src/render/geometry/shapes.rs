@@ -122,6 +122,10 @@ struct SingleSphere {
 /// thousand radii) the f64 surface is computed.
 const SINGLE_SURFACE_TOLERANCE: f32 = 1.0 / 4096.0;
 
+/// Object-space radii (2⁻⁴⁰ … 2⁴⁰) whose squares stay normal f32 numbers far from overflow,
+/// so [`SingleSphere::surface`]'s `|q|` is as exact as its bound assumes.
+const SINGLE_RADIUS_RANGE: (f32, f32) = (1.0 / (1u64 << 40) as f32, (1u64 << 40) as f32);
+
 impl SingleSphere {
     /// The f32 copy of a sphere part under `to_world` (inverse `to_object`); `None` for other
     /// parts or anything not finite in f32.
@@ -142,7 +146,10 @@ impl SingleSphere {
             cz: cz as f32,
         };
         let finite = w.is_finite() && o.is_finite() && single.normal_to_world.is_finite();
-        (finite && single.r.is_finite() && single.r > 0.0 && single.cz.is_finite()).then_some(single)
+        // |q|² in `surface` overflows f32 for radii near 1e19 and loses bits in subnormals
+        // near 1e-19, past what the bound accounts for: such spheres keep the f64 surface.
+        let in_range = (SINGLE_RADIUS_RANGE.0..=SINGLE_RADIUS_RANGE.1).contains(&single.r);
+        (finite && in_range && single.cz.is_finite()).then_some(single)
     }
 
     /// The hit surface of the world ray `o + t d` in f32, or `None` where the error bound on
@@ -898,6 +905,27 @@ mod tests {
             entered += 1;
         }
         assert!(left > 5000 && entered > 5000, "{left} {entered}");
+    }
+
+    /// Spheres whose radius squared leaves f32's normal range (a 1e20 sky sphere seen from
+    /// its centre, a 1e-20 grain) keep the f64 surface: the f32 one put the sky's hit point
+    /// at its centre (|q| overflowed) and the grain's off the sphere by 12x its bound.
+    #[test]
+    fn spheres_too_large_or_small_for_f32_squares_keep_the_f64_surface() {
+        for radius in [1e20, 1e-20, 2e12, 1e-13] {
+            let part = Part::Sphere { r: radius, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY };
+            let shape = Shape::new(part, DMat4::IDENTITY, 0).unwrap();
+            assert!(shape.single.is_none(), "radius {radius} takes the f32 surface");
+            let (o, d) = (Vec3::ZERO, Vec3::new(0.6, 0.0, 0.8));
+            let t = shape.intersect(o, d, 0.0, f32::INFINITY).expect("hit from the centre");
+            let h = shape.surface(o, d, t);
+            let off = (h.p.as_dvec3().length() - radius).abs() / radius;
+            assert!(off < 1e-6 && h.n.dot(d) > 0.999, "radius {radius}: point {} normal {}", h.p, h.n);
+        }
+        for radius in [1e9, 1e-9] {
+            let part = Part::Sphere { r: radius, cz: 0.0, zmin: f64::NEG_INFINITY, zmax: f64::INFINITY };
+            assert!(Shape::new(part, DMat4::IDENTITY, 0).unwrap().single.is_some(), "radius {radius}");
+        }
     }
 
     #[test]

@@ -866,8 +866,10 @@ impl Context<'_> {
             // Still the camera's ray until the first bounce (passing through is not one).
             let camera_ray = bounces == 0;
             // Skipped, not added as a zero, where no light can be hit: the throughput is finite
-            // here (a non-finite one ends the path), so the product would be a zero, and the
-            // radiance, a sum of such terms from +0, is never −0 for a +0 to change.
+            // here (a non-finite one ends the path; roulette's boost could overflow it only for
+            // a survival probability below ~1e-38, where the next bounce ends the path as
+            // non-finite), so the product would be a zero, and the radiance, a sum of such
+            // terms from +0, is never −0 for a +0 to change.
             if self.hittable_lights {
                 out.radiance += throughput * self.area_emission(o, d, t_hit, &from, camera_ray);
             }
