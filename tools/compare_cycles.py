@@ -229,10 +229,13 @@ def throughput(args):
     rate = lambda cpus, cpu1: n * (args.spp - 1) / (np.mean(cpus) - cpu1) / 1e6
     _, cpus, cpu1 = cm.strata_pair(exe, sc, args.out, 'matte_1t', res, args.spp, args.max_depth, seeds, '--threads 1')
     rates = {'strata': rate(cpus, cpu1)}
-    mi = cm.load_mitsuba(args.variant, 1)
-    scene = cm.mitsuba_scene(mi, sc, res, args.spp, args.max_depth, [])
-    _, cpus, cpu1 = cm.mitsuba_pair(mi, scene, args.spp, seeds)
-    rates[f'Mitsuba {mi.__version__} {mi.variant()}'] = rate(cpus, cpu1)
+    # Each variant in turn: llvm_ad_rgb runs a path per SIMD lane (16 on AVX-512), scalar_rgb
+    # one path at a time as strata does, so the pair separates vector width from the rest.
+    for variant in args.variant.split(','):
+        mi = cm.load_mitsuba(variant, 1)
+        scene = cm.mitsuba_scene(mi, sc, res, args.spp, args.max_depth, [])
+        _, cpus, cpu1 = cm.mitsuba_pair(mi, scene, args.spp, seeds)
+        rates[f'Mitsuba {mi.__version__} {mi.variant()}'] = rate(cpus, cpu1)
     try:
         import importlib.util
         have_bpy = importlib.util.find_spec('bpy') is not None
@@ -257,7 +260,8 @@ def main():
     m.add_argument('--agree', type=float, default=0.001,
                    help='relative tolerance of the whole-image means, on top of 3 standard errors')
     t = sub.add_parser('throughput', help='one thread: samples per CPU second, strata / Mitsuba / Cycles')
-    t.add_argument('--variant', default='llvm_ad_rgb')
+    t.add_argument('--variant', default='llvm_ad_rgb,scalar_rgb',
+                   help="Mitsuba variants, comma-separated, each measured in turn")
     for p, res in ((m, '320x240'), (t, '640x480')):
         p.add_argument('--res', default=res)
         p.add_argument('--spp', type=int, default=64)
