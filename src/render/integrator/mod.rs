@@ -21,7 +21,7 @@ use crate::abi::{Closure, ClosureSum, ClosureTerm, Globals, MaterialCode, Primva
 use crate::render::geometry::accel::{Accel, Hit, SurfaceGeom, WORLD, offset_ray_origin};
 use crate::render::geometry::primvars::{PrimvarSlot, fill_object_space, reads_object_space};
 use crate::render::light::emitter::Emitter;
-use crate::render::light::{Light, LightSample, LightSelection};
+use crate::render::light::{Light, LightKind, LightSample, LightSelection};
 use crate::render::material::bsdf::Frame;
 use crate::render::material::closure::{ClosureBsdf, LayeringMode};
 use crate::render::sampling::power_heuristic;
@@ -279,6 +279,9 @@ pub struct Context<'a> {
     pub hittable_lights: bool,
     /// How next-event estimation chooses a light (by power; see [`LightSelection`]).
     pub light_selection: LightSelection,
+    /// The scene's only light at infinity when that is a constant dome ([`ConstantDome::of`]):
+    /// an escaping ray then skips the walk over the lights.
+    pub constant_dome: Option<ConstantDome<'a>>,
     /// Per material, whether the layer pick at its surfaces cannot go two ways ([`certain_picks`]):
     /// such a hit draws no pick number, and the path loop reads this instead of the material's
     /// layers at every hit.
@@ -312,6 +315,41 @@ pub fn certain_picks(materials: &[&dyn MaterialCode], layer_modes: &[LayerMode])
 /// compile time hides everything below it.
 pub fn is_opaque(material: &dyn MaterialCode) -> bool {
     layering::is_opaque(&material.info().layers)
+}
+
+/// A constant dome that is the scene's only light at infinity: what an escaping ray reads,
+/// found once per render (the general walk over the lights, the dome's `escape` and its
+/// selection probability cost about 100 instructions a ray that leaves the scene).
+#[derive(Clone, Copy)]
+pub struct ConstantDome<'a> {
+    light: &'a Light,
+    radiance: Vec3,
+    /// The dome's probability in the light selection.
+    select: f32,
+}
+
+impl<'a> ConstantDome<'a> {
+    /// The constant dome among `lights`, if it is their only light at infinity.
+    pub fn of(lights: &'a [Light], selection: &LightSelection) -> Option<ConstantDome<'a>> {
+        let mut infinite = lights.iter().enumerate().filter(|(_, l)| l.is_infinite());
+        let (i, light) = infinite.next()?;
+        match light.kind {
+            LightKind::Dome { radiance, map: None, .. } if infinite.next().is_none() => {
+                Some(ConstantDome { light, radiance, select: selection.pmf(i) })
+            }
+            _ => None,
+        }
+    }
+
+    /// [`Context::escape_emission`] of this dome alone (the same sum, bit for bit).
+    #[inline]
+    fn escape(&self, d: Vec3, from: &Scatter, camera_ray: bool) -> Vec3 {
+        let mut sum = Vec3::ZERO;
+        if (self.light.visible_to_camera || !camera_ray) && self.radiance != Vec3::ZERO {
+            sum += self.radiance * from.mis(self.light, d, self.select);
+        }
+        sum
+    }
 }
 
 /// Surface geometry at a hit.
@@ -812,6 +850,9 @@ impl Context<'_> {
     /// Emission of infinite lights reached in direction `d`, MIS-weighted against `from`
     /// (`camera_ray` as in [`Context::area_emission`]).
     fn escape_emission(&self, d: Vec3, from: &Scatter, camera_ray: bool) -> Vec3 {
+        if let Some(dome) = &self.constant_dome {
+            return dome.escape(d, from, camera_ray);
+        }
         let mut sum = Vec3::ZERO;
         let lights = self.scene.lights.iter().enumerate();
         for (i, light) in lights.filter(|(_, l)| l.is_infinite() && (l.visible_to_camera || !camera_ray)) {
