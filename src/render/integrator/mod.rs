@@ -341,7 +341,8 @@ impl<'a> ConstantDome<'a> {
         }
     }
 
-    /// [`Context::escape_emission`] of this dome alone (the same sum, bit for bit).
+    /// [`escape_walk`] over lights whose only one at infinity is this dome: the same sum, bit
+    /// for bit.
     #[inline]
     fn escape(&self, d: Vec3, from: &Scatter, camera_ray: bool) -> Vec3 {
         let mut sum = Vec3::ZERO;
@@ -350,6 +351,21 @@ impl<'a> ConstantDome<'a> {
         }
         sum
     }
+}
+
+/// Emission of the infinite lights among `lights` (chosen by `selection`) reached in
+/// direction `d`, MIS-weighted against `from`: [`Context::escape_emission`] without a
+/// [`ConstantDome`].
+fn escape_walk(lights: &[Light], selection: &LightSelection, d: Vec3, from: &Scatter, camera_ray: bool) -> Vec3 {
+    let mut sum = Vec3::ZERO;
+    let infinite = lights.iter().enumerate().filter(|(_, l)| l.is_infinite() && (l.visible_to_camera || !camera_ray));
+    for (i, light) in infinite {
+        let le = light.escape(d);
+        if le != Vec3::ZERO {
+            sum += le * from.mis(light, d, selection.pmf(i));
+        }
+    }
+    sum
 }
 
 /// Surface geometry at a hit.
@@ -850,18 +866,10 @@ impl Context<'_> {
     /// Emission of infinite lights reached in direction `d`, MIS-weighted against `from`
     /// (`camera_ray` as in [`Context::area_emission`]).
     fn escape_emission(&self, d: Vec3, from: &Scatter, camera_ray: bool) -> Vec3 {
-        if let Some(dome) = &self.constant_dome {
-            return dome.escape(d, from, camera_ray);
+        match &self.constant_dome {
+            Some(dome) => dome.escape(d, from, camera_ray),
+            None => escape_walk(&self.scene.lights, &self.light_selection, d, from, camera_ray),
         }
-        let mut sum = Vec3::ZERO;
-        let lights = self.scene.lights.iter().enumerate();
-        for (i, light) in lights.filter(|(_, l)| l.is_infinite() && (l.visible_to_camera || !camera_ray)) {
-            let le = light.escape(d);
-            if le != Vec3::ZERO {
-                sum += le * from.mis(light, d, self.light_selection.pmf(i));
-            }
-        }
-        sum
     }
 
     /// Traces one camera ray. Channels of the first visible hit are left in `s.channels`.
