@@ -698,6 +698,7 @@ fn render_impl(
     let primvar_slots = crate::render::integrator::primvar_slots(scene, materials);
     let layer_modes: Vec<LayerMode> = materials.iter().map(|m| settings.mode.resolve(*m)).collect();
     let certain_picks = crate::render::integrator::certain_picks(materials, &layer_modes);
+    let hittable_lights: Vec<usize> = (0..scene.lights.len()).filter(|&i| scene.lights[i].is_hittable()).collect();
     let light_selection = crate::render::light::LightSelection::with_emitters(
         &scene.lights,
         &scene.emitters.list.iter().map(|e| e.power).collect::<Vec<_>>(),
@@ -715,7 +716,7 @@ fn render_impl(
             layering: settings.layering,
         },
         all_opaque: materials.iter().all(|m| crate::render::integrator::is_opaque(*m)),
-        hittable_lights: scene.lights.iter().any(|l| l.is_hittable()),
+        hittable_lights: &hittable_lights,
         constant_dome: ConstantDome::of(&scene.lights, &light_selection),
         light_selection,
         primvar_slots: &primvar_slots,
