@@ -15,8 +15,8 @@ pub mod sum;
 use crate::abi::ChannelKind;
 use crate::abi::{MaterialCode, ShaderError};
 use crate::render::integrator::{
-    ChannelMap, ConstantDome, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams, PickStratum,
-    SampleResult, Scratch,
+    ChannelMap, ConstantDome, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams,
+    PickStratum, SampleResult, Scratch,
 };
 use crate::render::material::closure::LayeringMode;
 use crate::render::sampling::sampler::{PathSampler, SamplerKind, Slot};

@@ -12,6 +12,7 @@
 //! `w_T` at the surfaces they cross), which matches the stochastic pass-through on average.
 
 mod cone;
+mod infinite;
 mod lobes;
 #[cfg(test)]
 mod reference;
@@ -21,7 +22,7 @@ use crate::abi::{Closure, ClosureSum, ClosureTerm, Globals, MaterialCode, Primva
 use crate::render::geometry::accel::{Accel, Hit, SurfaceGeom, WORLD, offset_ray_origin};
 use crate::render::geometry::primvars::{PrimvarSlot, fill_object_space, reads_object_space};
 use crate::render::light::emitter::Emitter;
-use crate::render::light::{Light, LightKind, LightSample, LightSelection};
+use crate::render::light::{Light, LightSample, LightSelection};
 use crate::render::material::bsdf::Frame;
 use crate::render::material::closure::{ClosureBsdf, LayeringMode};
 use crate::render::sampling::power_heuristic;
@@ -29,6 +30,8 @@ use crate::render::sampling::sampler::{PathSampler, Slot};
 use crate::render::scene::Scene;
 use cone::{MAX_BOUNCE_SPREAD, bounce_widening, st_footprint};
 use glam::{Vec2, Vec3};
+pub use infinite::ConstantDome;
+use infinite::escape_walk;
 pub(crate) use lobes::{Lobe, Lobes, sample_lobes};
 
 /// How layers are evaluated at a path vertex. Both evaluations are unbiased: they render
@@ -317,57 +320,6 @@ pub fn certain_picks(materials: &[&dyn MaterialCode], layer_modes: &[LayerMode])
 /// compile time hides everything below it.
 pub fn is_opaque(material: &dyn MaterialCode) -> bool {
     layering::is_opaque(&material.info().layers)
-}
-
-/// A constant dome that is the scene's only light at infinity: what an escaping ray reads,
-/// found once per render (the general walk over the lights, the dome's `escape` and its
-/// selection probability cost about 100 instructions a ray that leaves the scene).
-#[derive(Clone, Copy)]
-pub struct ConstantDome<'a> {
-    light: &'a Light,
-    radiance: Vec3,
-    /// The dome's probability in the light selection.
-    select: f32,
-}
-
-impl<'a> ConstantDome<'a> {
-    /// The constant dome among `lights`, if it is their only light at infinity.
-    pub fn of(lights: &'a [Light], selection: &LightSelection) -> Option<ConstantDome<'a>> {
-        let mut infinite = lights.iter().enumerate().filter(|(_, l)| l.is_infinite());
-        let (i, light) = infinite.next()?;
-        match light.kind {
-            LightKind::Dome { radiance, map: None, .. } if infinite.next().is_none() => {
-                Some(ConstantDome { light, radiance, select: selection.pmf(i) })
-            }
-            _ => None,
-        }
-    }
-
-    /// [`escape_walk`] over lights whose only one at infinity is this dome: the same sum, bit
-    /// for bit.
-    #[inline]
-    fn escape(&self, d: Vec3, from: &Scatter, camera_ray: bool) -> Vec3 {
-        let mut sum = Vec3::ZERO;
-        if (self.light.visible_to_camera || !camera_ray) && self.radiance != Vec3::ZERO {
-            sum += self.radiance * from.mis(self.light, d, self.select);
-        }
-        sum
-    }
-}
-
-/// Emission of the infinite lights among `lights` (chosen by `selection`) reached in
-/// direction `d`, MIS-weighted against `from`: [`Context::escape_emission`] without a
-/// [`ConstantDome`].
-fn escape_walk(lights: &[Light], selection: &LightSelection, d: Vec3, from: &Scatter, camera_ray: bool) -> Vec3 {
-    let mut sum = Vec3::ZERO;
-    let infinite = lights.iter().enumerate().filter(|(_, l)| l.is_infinite() && (l.visible_to_camera || !camera_ray));
-    for (i, light) in infinite {
-        let le = light.escape(d);
-        if le != Vec3::ZERO {
-            sum += le * from.mis(light, d, selection.pmf(i));
-        }
-    }
-    sum
 }
 
 /// Surface geometry at a hit.
