@@ -57,9 +57,6 @@ impl Lobes {
 
 impl std::ops::Deref for Lobes {
     type Target = [Lobe];
-    /// Inlined: the path loop reads the lobes at every vertex, and an out-of-line call there
-    /// spills the loop's float state.
-    #[inline]
     fn deref(&self) -> &[Lobe] {
         &self.slots[..self.len]
     }
