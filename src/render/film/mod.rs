@@ -15,8 +15,8 @@ pub mod sum;
 use crate::abi::ChannelKind;
 use crate::abi::{MaterialCode, ShaderError};
 use crate::render::integrator::{
-    ChannelMap, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams, PickStratum,
-    SampleResult, Scratch,
+    ChannelMap, ConstantDome, Context, EvalCounts, FaultSite, Invalid, LayerMode, MappedChannel, PathParams,
+    PickStratum, SampleResult, Scratch,
 };
 use crate::render::material::closure::LayeringMode;
 use crate::render::sampling::sampler::{PathSampler, SamplerKind, Slot};
@@ -698,6 +698,12 @@ fn render_impl(
     let primvar_slots = crate::render::integrator::primvar_slots(scene, materials);
     let layer_modes: Vec<LayerMode> = materials.iter().map(|m| settings.mode.resolve(*m)).collect();
     let certain_picks = crate::render::integrator::certain_picks(materials, &layer_modes);
+    let hittable_lights: Vec<usize> = (0..scene.lights.len()).filter(|&i| scene.lights[i].is_hittable()).collect();
+    let light_selection = crate::render::light::LightSelection::with_emitters(
+        &scene.lights,
+        &scene.emitters.list.iter().map(|e| e.power).collect::<Vec<_>>(),
+        (scene.bounds.1 - scene.bounds.0).length() / 2.0,
+    );
     let ctx = Context {
         layer_modes: &layer_modes,
         scene,
@@ -710,12 +716,9 @@ fn render_impl(
             layering: settings.layering,
         },
         all_opaque: materials.iter().all(|m| crate::render::integrator::is_opaque(*m)),
-        hittable_lights: scene.lights.iter().any(|l| l.is_hittable()),
-        light_selection: crate::render::light::LightSelection::with_emitters(
-            &scene.lights,
-            &scene.emitters.list.iter().map(|e| e.power).collect::<Vec<_>>(),
-            (scene.bounds.1 - scene.bounds.0).length() / 2.0,
-        ),
+        hittable_lights: &hittable_lights,
+        constant_dome: ConstantDome::of(&scene.lights, &light_selection),
+        light_selection,
         primvar_slots: &primvar_slots,
         certain_picks: &certain_picks,
         pixel_spread: camera.pixel_angle(w),

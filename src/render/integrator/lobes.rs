@@ -80,6 +80,9 @@ pub(crate) struct LobeSample {
 /// for the lobe's own component choice; `u` samples the direction. A delta sample or a single
 /// lobe is weighted by its own `f · |cos| / pdf` (lobe choice and lobe weight cancel); otherwise
 /// the whole mixture is evaluated, so its pdf is `Σ w_k pdf_k` (one-sample MIS over lobes).
+/// Inlined into the path loop, its one caller on the render path: called out of line, the
+/// loop's float state is spilled around the call.
+#[inline]
 pub(crate) fn sample_lobes(lobes: &[Lobe], wo: Vec3, uc: f32, u: glam::Vec2) -> Option<LobeSample> {
     let mut start = 0.0;
     let mut k = lobes.len().checked_sub(1)?;

@@ -12,6 +12,7 @@
 //! `w_T` at the surfaces they cross), which matches the stochastic pass-through on average.
 
 mod cone;
+mod infinite;
 mod lobes;
 #[cfg(test)]
 mod reference;
@@ -29,6 +30,8 @@ use crate::render::sampling::sampler::{PathSampler, Slot};
 use crate::render::scene::Scene;
 use cone::{MAX_BOUNCE_SPREAD, bounce_widening, st_footprint};
 use glam::{Vec2, Vec3};
+pub use infinite::ConstantDome;
+use infinite::escape_walk;
 pub(crate) use lobes::{Lobe, Lobes, sample_lobes};
 
 /// How layers are evaluated at a path vertex. Both evaluations are unbiased: they render
@@ -274,11 +277,16 @@ pub struct Context<'a> {
     /// Whether every material has a layer whose mask is 1 at compile time: then no surface
     /// lets light through and shadow rays can stop at their first hit, in any order.
     pub all_opaque: bool,
-    /// Whether any light can be hit by a ray ([`Light::is_hittable`]): a scene lit only by
-    /// a dome, distant or point lights skips the search for crossed area lights at every ray.
-    pub hittable_lights: bool,
+    /// The indices of the lights a ray can hit ([`Light::is_hittable`]), the only ones the
+    /// search for crossed area lights walks: a scene lit only by a dome, distant or point
+    /// lights skips the search at every ray, and one with a dome besides its area lights does
+    /// not call the dome's `hit`.
+    pub hittable_lights: &'a [usize],
     /// How next-event estimation chooses a light (by power; see [`LightSelection`]).
     pub light_selection: LightSelection,
+    /// The scene's only light at infinity when that is a constant dome ([`ConstantDome::of`]):
+    /// an escaping ray then skips the walk over the lights.
+    pub constant_dome: Option<ConstantDome<'a>>,
     /// Per material, whether the layer pick at its surfaces cannot go two ways ([`certain_picks`]):
     /// such a hit draws no pick number, and the path loop reads this instead of the material's
     /// layers at every hit.
@@ -797,11 +805,15 @@ impl Context<'_> {
     /// Emission of area lights crossed by the segment `o + t d`, `t < tmax`, MIS-weighted
     /// against the vertex that chose `d` (which transparent picks may have left behind `o`).
     /// `camera_ray`: the ray left the camera (perhaps through transparent surfaces), so lights
-    /// hidden from the camera contribute nothing. Called only where some light is hittable
-    /// ([`Context::hittable_lights`]).
+    /// hidden from the camera contribute nothing. Walks only [`Context::hittable_lights`]: the
+    /// others' `hit` is always `None`.
     fn area_emission(&self, o: Vec3, d: Vec3, tmax: f32, from: &Scatter, camera_ray: bool) -> Vec3 {
         let mut sum = Vec3::ZERO;
-        for (i, light) in self.scene.lights.iter().enumerate().filter(|(_, l)| l.visible_to_camera || !camera_ray) {
+        for &i in self.hittable_lights {
+            let light = &self.scene.lights[i];
+            if camera_ray && !light.visible_to_camera {
+                continue;
+            }
             if let Some((le, _)) = light.hit(o, d, tmax) {
                 sum += le * from.mis(light, d, self.light_selection.pmf(i));
             }
@@ -812,15 +824,10 @@ impl Context<'_> {
     /// Emission of infinite lights reached in direction `d`, MIS-weighted against `from`
     /// (`camera_ray` as in [`Context::area_emission`]).
     fn escape_emission(&self, d: Vec3, from: &Scatter, camera_ray: bool) -> Vec3 {
-        let mut sum = Vec3::ZERO;
-        let lights = self.scene.lights.iter().enumerate();
-        for (i, light) in lights.filter(|(_, l)| l.is_infinite() && (l.visible_to_camera || !camera_ray)) {
-            let le = light.escape(d);
-            if le != Vec3::ZERO {
-                sum += le * from.mis(light, d, self.light_selection.pmf(i));
-            }
+        match &self.constant_dome {
+            Some(dome) => dome.escape(d, from, camera_ray),
+            None => escape_walk(&self.scene.lights, &self.light_selection, d, from, camera_ray),
         }
-        sum
     }
 
     /// Traces one camera ray. Channels of the first visible hit are left in `s.channels`.
@@ -870,7 +877,7 @@ impl Context<'_> {
             // a survival probability below ~1e-38, where the next bounce ends the path as
             // non-finite), so the product would be a zero, and the radiance, a sum of such
             // terms from +0, is never −0 for a +0 to change.
-            if self.hittable_lights {
+            if !self.hittable_lights.is_empty() {
                 out.radiance += throughput * self.area_emission(o, d, t_hit, &from, camera_ray);
             }
             let Some(hit) = hit else {

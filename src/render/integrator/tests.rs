@@ -153,3 +153,64 @@ fn lobe_choice_weights_are_respected() {
         "mirror + diffuse: E[weight] = {mean} ± {se}, want Σ w_k (f cos/pdf)_k = {want}"
     );
 }
+
+/// An escaping ray reads a constant dome that is the only light at infinity directly
+/// ([`ConstantDome`]); everywhere else the lights are walked. Whichever is taken, the sum must
+/// be the walk's, bit for bit: visibility to camera rays, the dome's share of the light
+/// selection and the MIS weight included, and any other light at infinity must rule the
+/// shortcut out.
+#[test]
+fn constant_dome_escape_is_the_walk_bit_for_bit() {
+    use crate::render::light::LightKind;
+    use crate::render::sampling::uniform_sphere;
+    let light = |kind, visible_to_camera| Light { path: "/L".into(), kind, visible_to_camera };
+    let dome = |visible| {
+        let (to_local, to_world) = (glam::Mat3::IDENTITY, glam::Mat3::IDENTITY);
+        light(LightKind::Dome { radiance: Vec3::new(0.8, 0.5, 0.3), map: None, to_local, to_world }, visible)
+    };
+    let rect = light(
+        LightKind::Rect {
+            centre: Vec3::new(0.0, 0.0, 3.0),
+            ex: Vec3::X,
+            ey: Vec3::Y,
+            n: -Vec3::Z,
+            radiance: Vec3::splat(4.0),
+        },
+        true,
+    );
+    let sun = |cos_max| light(LightKind::Distant { dir: Vec3::Z, cos_max, radiance: Vec3::splat(2.0) }, true);
+    // (lights, whether the shortcut applies)
+    let scenes = [
+        (vec![dome(true)], true),
+        (vec![rect.clone(), dome(false)], true),
+        (vec![dome(true), sun(0.9)], false),
+        (vec![rect.clone(), dome(true), sun(1.0)], false),
+        (vec![rect], false),
+    ];
+    let p = Vec3::new(0.1, -0.2, 0.3);
+    let froms = [
+        Scatter { p, n: Vec3::ZERO, pdf: None },
+        Scatter { p, n: Vec3::new(0.0, 0.6, 0.8), pdf: Some(0.3) },
+        Scatter { p, n: Vec3::ZERO, pdf: Some(1.7) },
+    ];
+    for (lights, shortcut) in &scenes {
+        let selection = LightSelection::new(lights, 5.0);
+        let dome = ConstantDome::of(lights, &selection);
+        assert_eq!(dome.is_some(), *shortcut, "{} lights", lights.len());
+        for (k, from) in froms.iter().enumerate() {
+            for i in 0..256 {
+                let d = uniform_sphere(glam::Vec2::new((i % 16) as f32 / 16.0 + 0.03, (i / 16) as f32 / 16.0 + 0.03));
+                for camera_ray in [true, false] {
+                    let walk = escape_walk(lights, &selection, d, from, camera_ray);
+                    let read = dome.map_or(walk, |dome| dome.escape(d, from, camera_ray));
+                    assert_eq!(
+                        read.to_array().map(f32::to_bits),
+                        walk.to_array().map(f32::to_bits),
+                        "{} lights, from {k}, d {d}, camera ray {camera_ray}",
+                        lights.len()
+                    );
+                }
+            }
+        }
+    }
+}
