@@ -61,24 +61,22 @@ impl SphericalRect {
             return None;
         }
         let (x1, y1) = (x0 + 2.0 * half_w, y0 + 2.0 * half_h);
+        // The interior angles g0..g3 of the spherical quadrilateral are those between the
+        // planes through p and each edge. With those planes' unit normals n0..n3 (the paper's),
+        // (cos g, sin g) = (−nᵢ·nⱼ, |nᵢ × nⱼ|) reduces to corner coordinates over a positive
+        // common factor, and a complex product adds two angles: two atan2 give g0 + g1 and
+        // g2 + g3, well conditioned near 0 and π, where acos is not. Each pair sums to more
+        // than the solid angle, so a negative atan2 is the sum less 2π.
         let z0sq = z0 * z0;
-        // Unit normals of the planes through p and each edge, inward.
-        let n0 = DVec3::new(0.0, z0, -y0) / (z0sq + y0 * y0).sqrt();
-        let n1 = DVec3::new(-z0, 0.0, x1) / (z0sq + x1 * x1).sqrt();
-        let n2 = DVec3::new(0.0, -z0, y1) / (z0sq + y1 * y1).sqrt();
-        let n3 = DVec3::new(z0, 0.0, -x0) / (z0sq + x0 * x0).sqrt();
-        // The sums of pairs of the quadrilateral's interior angles, each angle (in [0, π]) as
-        // a unit complex number (cos, sin) of the edge planes' normals: a product adds two
-        // angles, so two atan2 give what four acos would (and without acos's ill-conditioning
-        // near 0 and π). Each pair sums to more than the solid angle, so a negative atan2 is
-        // the sum less 2π.
-        let angle = |a: DVec3, b: DVec3| (-a.dot(b), a.cross(b).length());
+        let corner_dist = |x: f64, y: f64| (x * x + y * y + z0sq).sqrt();
+        let (r00, r10, r11, r01) = (corner_dist(x0, y0), corner_dist(x1, y0), corner_dist(x1, y1), corner_dist(x0, y1));
         let pair_sum = |(c0, s0): (f64, f64), (c1, s1): (f64, f64)| {
             let sum = (s0 * c1 + c0 * s1).atan2(c0 * c1 - s0 * s1);
             if sum < 0.0 { sum + TAU } else { sum }
         };
-        let g01 = pair_sum(angle(n0, n1), angle(n1, n2));
-        let g23 = pair_sum(angle(n2, n3), angle(n3, n0));
+        let h = -z0;
+        let g01 = pair_sum((y0 * x1, h * r10), (-x1 * y1, h * r11));
+        let g23 = pair_sum((x0 * y1, h * r01), (-x0 * y0, h * r00));
         let k = TAU - g23;
         let solid_angle = g01 - k;
         (MIN_SOLID_ANGLE..=MAX_SOLID_ANGLE).contains(&solid_angle).then_some(SphericalRect {
@@ -90,8 +88,8 @@ impl SphericalRect {
             y0,
             y1,
             z0,
-            b0: n0.z,
-            b1: n2.z,
+            b0: -y0 / (z0sq + y0 * y0).sqrt(),
+            b1: y1 / (z0sq + y1 * y1).sqrt(),
             k,
             solid_angle,
         })
