@@ -22,8 +22,8 @@ use crate::render::sampling::{
     Distribution1D, Distribution2D, concentric_disk, cosine_hemisphere, uniform_cone, uniform_sphere,
 };
 use crate::scene::{Prim, Stage, Value};
-use spherical_rect::SphericalRect;
 use glam::{DMat3, DVec3, Mat3, Vec2, Vec3};
+use spherical_rect::SphericalRect;
 use std::f32::consts::PI;
 use std::sync::Arc;
 
