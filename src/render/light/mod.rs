@@ -11,6 +11,7 @@
 //! [`Light::sample_li`] and [`Light::pdf_li`], which multiple importance sampling needs.
 
 pub mod emitter;
+mod spherical_rect;
 mod usd;
 
 pub use usd::{MAX_COLOR_TEMPERATURE, MIN_COLOR_TEMPERATURE, blackbody_rgb, lights_from_stage};
@@ -22,6 +23,7 @@ use crate::render::sampling::{
 };
 use crate::scene::{Prim, Stage, Value};
 use glam::{DMat3, DVec3, Mat3, Vec2, Vec3};
+use spherical_rect::SphericalRect;
 use std::f32::consts::PI;
 use std::sync::Arc;
 
@@ -115,7 +117,8 @@ pub enum LightKind {
         /// Dome frame → world.
         to_world: Mat3,
     },
-    /// A parallelogram `centre ± ex ± ey` emitting along `n`.
+    /// A parallelogram `centre ± ex ± ey` emitting along `n`; sampled by solid angle where it
+    /// is a rectangle ([`spherical_rect`]), by area where it is sheared or degenerate.
     Rect {
         /// Centre.
         centre: Vec3,
@@ -259,9 +262,21 @@ impl Light {
                 }
             },
             LightKind::Rect { centre, ex, ey, n, radiance } => {
-                let q = *centre + *ex * (2.0 * u.x - 1.0) + *ey * (2.0 * u.y - 1.0);
-                let area = 4.0 * ex.cross(*ey).length();
-                area_sample(p, q, *n, area, *radiance)?
+                // One-sided: nothing reaches a point behind (or on) the light's plane.
+                if (p - *centre).dot(*n) <= 0.0 {
+                    return None;
+                }
+                match SphericalRect::new(p, *centre, *ex, *ey) {
+                    Some(rect) => {
+                        let (wi, dist) = rect.sample(u);
+                        let pdf = (1.0 / rect.solid_angle()) as f32;
+                        LightSample { wi, li: *radiance, pdf, dist, delta: false }
+                    }
+                    None => {
+                        let q = *centre + *ex * (2.0 * u.x - 1.0) + *ey * (2.0 * u.y - 1.0);
+                        area_sample(p, q, *n, 4.0 * ex.cross(*ey).length(), *radiance)?
+                    }
+                }
             }
             LightKind::Disk { centre, ex, ey, n, radiance } => {
                 let d = concentric_disk(u);
@@ -328,7 +343,11 @@ impl Light {
                 if sin_theta <= 0.0 { 0.0 } else { map.distribution.pdf(uv) / (2.0 * PI * PI * sin_theta) }
             }
             LightKind::Rect { centre, ex, ey, n, .. } => match rect_hit(p, wi, *centre, *ex, *ey, *n) {
-                Some(t) => area_pdf(p, wi, t, *n, 4.0 * ex.cross(*ey).length()),
+                // The density sample_li used: by solid angle unless that is degenerate.
+                Some(t) => match SphericalRect::new(p, *centre, *ex, *ey) {
+                    Some(rect) => (1.0 / rect.solid_angle()) as f32,
+                    None => area_pdf(p, wi, t, *n, 4.0 * ex.cross(*ey).length()),
+                },
                 None => 0.0,
             },
             LightKind::Disk { centre, ex, ey, n, .. } => match disk_hit(p, wi, *centre, *ex, *ey, *n) {
