@@ -277,7 +277,10 @@ pub(super) fn build_grouped(
     // pass merges one pair, so n coincident copies cost O(n²) to build. Groups are numbered
     // in the order of their first primitives.
     let mut group_of_primitive = first_with_same_box(bounds.clone(), count);
-    let mut boxes: Vec<Padded> = Vec::new();
+    // Allocated once at its size: a growing table copies itself and, where the allocator
+    // keeps freed blocks (see `main`'s mmap threshold), leaves its smaller copies resident.
+    let groups = group_of_primitive.iter().zip(0u32..).filter(|&(&first, index)| first == index).count();
+    let mut boxes: Vec<Padded> = Vec::with_capacity(groups);
     for ((lo, hi), index) in bounds.zip(0u32..) {
         let first = group_of_primitive[index as usize];
         group_of_primitive[index as usize] = if first == u32::MAX {
