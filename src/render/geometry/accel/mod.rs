@@ -45,6 +45,8 @@ pub use batched::PLOC_BATCH;
 use batched::{Padded, build_batched, build_grouped};
 use leaves::{LeafTriangles, RayPre, dominant_axis};
 use wide::{WideBvh, WideRay};
+#[cfg(test)]
+pub(in crate::render::geometry) use wide::tests::generator;
 
 // Defined below the BVH (geometry produces instances; shapes bound their own hit points), so
 // the render modules import in one direction: accel → geometry → shapes.
