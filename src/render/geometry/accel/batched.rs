@@ -349,3 +349,34 @@ impl Boundable for Padded {
         self.0
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::HashMap;
+
+    /// The partitioned grouping against a plain map from each padded box to the first
+    /// primitive with it: boxes drawn with repeats from 20 000 (several partitions), and
+    /// non-finite boxes, which are in no group.
+    #[test]
+    fn groups_as_a_map_of_first_primitives_does() {
+        let mut next = crate::render::geometry::accel::generator(11);
+        let distinct: Vec<(Vec3, Vec3)> = (0..20_000)
+            .map(|_| {
+                let lo = Vec3::new(next(), next(), next()) * 100.0;
+                (lo, lo + Vec3::new(next().abs(), next().abs(), 0.0))
+            })
+            .collect();
+        let mut bounds: Vec<(Vec3, Vec3)> =
+            (0..60_000).map(|_| distinct[((next() + 1.0) * 0.5 * 19_999.0) as usize]).collect();
+        bounds[7] = (Vec3::splat(f32::NAN), Vec3::ONE);
+        bounds[9] = (Vec3::ZERO, Vec3::splat(f32::INFINITY));
+        let first = first_with_same_box(bounds.iter().copied(), bounds.len());
+        let mut seen: HashMap<[u32; 6], u32> = HashMap::new();
+        for (i, &(lo, hi)) in bounds.iter().enumerate() {
+            let want = padded_box(lo, hi).map_or(u32::MAX, |key| *seen.entry(key).or_insert(i as u32));
+            assert_eq!(first[i], want, "primitive {i}");
+        }
+        assert!((10_000..20_000).contains(&seen.len()), "{} distinct boxes drawn", seen.len());
+    }
+}
