@@ -805,15 +805,10 @@ mod tests {
         assert!(clear > 100 && culled == clear, "the cull must take every clear miss ({culled} of {clear})");
     }
 
-    /// A small xorshift generator of uniform numbers in [0, 1].
+    /// Uniform numbers in [0, 1], from the BVH tests' generator.
     fn uniform(seed: u32) -> impl FnMut() -> f64 {
-        let mut seed = seed;
-        move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 17;
-            seed ^= seed << 5;
-            seed as f64 / u32::MAX as f64
-        }
+        let mut next = crate::render::geometry::accel::generator(seed);
+        move || (f64::from(next()) + 1.0) * 0.5
     }
 
     /// Random spheres of radius 1e-3 … 1e4 (as the part's radius or as a uniform scale,

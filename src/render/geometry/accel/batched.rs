@@ -9,7 +9,6 @@ use obvhs::aabb::Aabb;
 use obvhs::bvh2::Bvh2;
 use obvhs::bvh2::node::Bvh2Node;
 use obvhs::ploc::{PlocBuilder, PlocSearchDistance, SortPrecision};
-use std::hash::BuildHasher;
 
 /// The most primitives one PLOC build is given. PLOC merges only mutually nearest
 /// neighbours, and where the merge cost grows steadily along the sorted order (the thin
@@ -22,42 +21,84 @@ pub const PLOC_BATCH: usize = 128;
 /// How many PLOC batches are built in parallel before they are stitched into the tree.
 const PARALLEL_BATCHES: usize = 256;
 
+/// Subtrees with more primitives than this are split on two threads (rayon): below it the
+/// split is cheaper than handing it over.
+const PARALLEL_SPLIT: usize = 4096;
+
+/// A primitive's box centre beside its index: the median splits partition these, contiguous,
+/// instead of indices whose centres are read from the boxes (a cache miss per comparison;
+/// the splits were a fifth of a 10⁶-triangle build).
+#[derive(Clone, Copy)]
+struct Centred {
+    centre: [f32; 3],
+    index: u32,
+}
+
+/// The median splits above the PLOC batches: a split of two subtrees, or a batch (a range of
+/// the split primitives).
+enum Split {
+    Node(Box<[Split; 2]>),
+    Batch(std::ops::Range<usize>),
+}
+
+/// Splits `members` (the primitives `offset..` of the split order) at the median centre
+/// along the centres' widest axis until at most [`PLOC_BATCH`] remain, large subtrees in
+/// parallel. Each subtree's work depends only on its own members, so the order and the tree
+/// are those of a sequential split.
+fn split(members: &mut [Centred], offset: usize) -> Split {
+    if members.len() <= PLOC_BATCH {
+        return Split::Batch(offset..offset + members.len());
+    }
+    let mut centres = Aabb::empty();
+    for m in members.iter() {
+        centres.extend(Vec3A::from_array(m.centre));
+    }
+    let axis = (centres.max - centres.min).max_position();
+    let half = members.len() / 2;
+    members.select_nth_unstable_by(half, |a, b| a.centre[axis].total_cmp(&b.centre[axis]));
+    let big = members.len() > PARALLEL_SPLIT;
+    let (left, right) = members.split_at_mut(half);
+    let (left, right) = if big {
+        rayon::join(|| split(left, offset), || split(right, offset + half))
+    } else {
+        (split(left, offset), split(right, offset + half))
+    };
+    Split::Node(Box::new([left, right]))
+}
+
 /// A BVH2 over `boxes`: median splits of the centroids along their widest axis down to
 /// [`PLOC_BATCH`] primitives, PLOC below. Also returns the largest PLOC batch. The splits are
-/// made first; the batches, independent of each other, are then built in parallel (rayon)
-/// and stitched under their split nodes.
+/// made first (large subtrees in parallel); the batches, independent of each other, are then
+/// built in parallel (rayon) and stitched under their split nodes, whose boxes are last made
+/// the unions of their children's.
 pub(super) fn build_batched(boxes: &[Padded]) -> (Bvh2, usize) {
     use rayon::prelude::*;
+    let mut centred: Vec<Centred> =
+        boxes.iter().enumerate().map(|(i, b)| Centred { centre: b.0.center().to_array(), index: i as u32 }).collect();
+    let tree = split(&mut centred, 0);
+    let order: Vec<u32> = centred.iter().map(|c| c.index).collect();
+    drop(centred);
     let mut nodes = vec![Bvh2Node::default()];
-    let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
     // (node slot, range of `order`, depth of the slot) of each batch, in split order.
     let mut batches: Vec<(usize, std::ops::Range<usize>, usize)> = Vec::new();
-    let mut todo = vec![(0usize, 0..order.len(), 0usize)];
-    while let Some((slot, range, depth)) = todo.pop() {
-        let members = &mut order[range.clone()];
-        if members.len() <= PLOC_BATCH {
-            batches.push((slot, range, depth));
-            continue;
-        }
-        let mut bounds = Aabb::empty();
-        let mut centres = Aabb::empty();
-        for &i in members.iter() {
-            let b = boxes[i as usize].0;
-            bounds = bounds.union(&b);
-            centres.extend(b.center());
-        }
-        let axis = (centres.max - centres.min).max_position();
-        let half = members.len() / 2;
-        members.select_nth_unstable_by(half, |&a, &b| {
-            let (a, b) = (boxes[a as usize].0.center_axis(axis), boxes[b as usize].0.center_axis(axis));
-            a.total_cmp(&b)
-        });
+    // The split nodes' slots: their boxes are filled in once the batches are stitched.
+    let mut split_slots: Vec<usize> = Vec::new();
+    let mut todo = vec![(0usize, &tree, 0usize)];
+    while let Some((slot, node, depth)) = todo.pop() {
+        let children = match node {
+            Split::Batch(range) => {
+                batches.push((slot, range.clone(), depth));
+                continue;
+            }
+            Split::Node(children) => children,
+        };
         let left = nodes.len();
         nodes.push(Bvh2Node::default());
         nodes.push(Bvh2Node::default());
-        nodes[slot] = Bvh2Node::new(bounds, 0, left as u32);
-        todo.push((left, range.start..range.start + half, depth + 1));
-        todo.push((left + 1, range.start + half..range.end, depth + 1));
+        nodes[slot] = Bvh2Node::new(Aabb::empty(), 0, left as u32);
+        split_slots.push(slot);
+        todo.push((left, &children[0], depth + 1));
+        todo.push((left + 1, &children[1], depth + 1));
     }
     // One primitive per PLOC leaf: the tree has exactly 2n − 1 nodes, allocated once.
     nodes.reserve_exact((2 * boxes.len()).saturating_sub(1 + nodes.len()));
@@ -101,6 +142,13 @@ pub(super) fn build_batched(boxes: &[Padded]) -> (Bvh2, usize) {
         }
         nodes.extend(moved);
     }
+    // A split node's children have larger slots than it: children before parents.
+    split_slots.sort_unstable();
+    for &slot in split_slots.iter().rev() {
+        let first = nodes[slot].first_index as usize;
+        let bounds = nodes[first].aabb().union(nodes[first + 1].aabb());
+        nodes[slot].set_aabb(bounds);
+    }
     (Bvh2 { nodes, primitive_indices, max_depth, ..Default::default() }, largest)
 }
 
@@ -120,40 +168,131 @@ fn padded_box(lo: Vec3, hi: Vec3) -> Option<[u32; 6]> {
     Some([lo.x, lo.y, lo.z, hi.x, hi.y, hi.z].map(f32::to_bits))
 }
 
+/// A primitive's padded box bits, its index and, first, the low half of its hash, then the
+/// index of the first primitive with the same box: what a partition of the grouping holds.
+#[derive(Clone, Copy)]
+struct Keyed {
+    key: [u32; 6],
+    index: u32,
+    aux: u32,
+}
+
+/// A hash of a box's bits (a folded 128-bit multiply, as wyhash's): the grouping's
+/// partitions take the top bits, their tables the low half.
+fn box_hash(key: &[u32; 6]) -> u64 {
+    let word = |i: usize| u64::from(key[2 * i]) | u64::from(key[2 * i + 1]) << 32;
+    let fold = |a: u64, b: u64| {
+        let p = u128::from(a) * u128::from(b);
+        p as u64 ^ (p >> 64) as u64
+    };
+    fold(fold(word(0) ^ 0xa076_1d64_78bd_642f, word(1) ^ 0xe703_7ed1_a0b4_28db) ^ word(2), 0x8ebc_6af0_9c88_c6e3)
+}
+
+/// The hash a partition's table uses: the low half of [`box_hash`] (the top bits chose the
+/// partition), spread over 64 bits.
+fn table_hash(aux: u32) -> u64 {
+    u64::from(aux) | u64::from(aux) << 32
+}
+
+/// Primitives per grouping partition, about: a partition's table (5 bytes a slot) and its
+/// keyed boxes stay in the cache.
+const GROUPING_PARTITION: usize = 4096;
+
+/// For each of `bounds`' primitives, the first primitive with a bit-identical padded box
+/// (itself when it is the first; `u32::MAX` when its box is not finite). The boxes are
+/// partitioned by hash and each partition grouped on its own (in parallel), with a table
+/// that stays in the cache: one table over 10⁶ boxes missed the cache at every look-up,
+/// a fifth of a 10⁶-triangle build.
+fn first_with_same_box(bounds: impl Iterator<Item = (Vec3, Vec3)> + Clone, count: usize) -> Vec<u32> {
+    use rayon::prelude::*;
+    let bits = (count / GROUPING_PARTITION).max(1).ilog2().min(12);
+    let partition_of = |hash: u64| if bits == 0 { 0 } else { (hash >> (64 - bits)) as usize };
+    let keys = || bounds.clone().map(|(lo, hi)| padded_box(lo, hi)).enumerate();
+    // A counting sort into partitions, each in primitive order; the keys are computed twice
+    // rather than held (24 bytes a primitive at the build's peak).
+    let mut start = vec![0usize; (1 << bits) + 1];
+    for (_, key) in keys() {
+        if let Some(key) = key {
+            start[partition_of(box_hash(&key)) + 1] += 1;
+        }
+    }
+    for p in 0..1 << bits {
+        start[p + 1] += start[p];
+    }
+    let mut keyed = vec![Keyed { key: [0; 6], index: 0, aux: 0 }; start[1 << bits]];
+    let mut next = start.clone();
+    for (index, key) in keys() {
+        if let Some(key) = key {
+            let hash = box_hash(&key);
+            let slot = &mut next[partition_of(hash)];
+            keyed[*slot] = Keyed { key, index: index as u32, aux: hash as u32 };
+            *slot += 1;
+        }
+    }
+    drop(next);
+    let mut partitions = Vec::with_capacity(1 << bits);
+    let mut rest = keyed.as_mut_slice();
+    for p in 0..1 << bits {
+        let (part, tail) = rest.split_at_mut(start[p + 1] - start[p]);
+        partitions.push(part);
+        rest = tail;
+    }
+    partitions.into_par_iter().for_each(|part| {
+        // Positions in the partition, looked up by their boxes; the first of each box stays.
+        let mut table: hashbrown::HashTable<u32> = hashbrown::HashTable::with_capacity(part.len());
+        let firsts: Vec<u32> = part
+            .iter()
+            .enumerate()
+            .map(|(pos, k)| {
+                let hash = table_hash(k.aux);
+                match table.find(hash, |&q| part[q as usize].key == k.key) {
+                    Some(&q) => part[q as usize].index,
+                    None => {
+                        table.insert_unique(hash, pos as u32, |&q| table_hash(part[q as usize].aux));
+                        k.index
+                    }
+                }
+            })
+            .collect();
+        for (k, first) in part.iter_mut().zip(firsts) {
+            k.aux = first;
+        }
+    });
+    let mut first = vec![u32::MAX; count];
+    for k in &keyed {
+        first[k.index as usize] = k.aux;
+    }
+    first
+}
+
 /// A BVH over `bounds` (`(min, max)` per primitive), grouping bit-identical boxes; returns
 /// the BVH (`None` when no box is finite), its leaves ranges of the returned primitive
 /// indices (the groups' members in leaf order).
-pub(super) fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: usize) -> (Option<BvhSpace>, Vec<u32>) {
+pub(super) fn build_grouped(
+    bounds: impl Iterator<Item = (Vec3, Vec3)> + Clone,
+    count: usize,
+) -> (Option<BvhSpace>, Vec<u32>) {
     // Primitives with bit-identical boxes (copies of one mesh at one place) become one BVH
     // primitive: PLOC merges only mutually-nearest pairs, and among n equal boxes every
-    // pass merges one pair, so n coincident copies cost O(n²) to build.
-    // FNV, not std's SipHash: keys are our own boxes, and hashing was a sixth of the build
-    // of a 10⁶-triangle mesh. The table holds group numbers only, looked up by their boxes
-    // (5 B a slot with its control byte, where a map holding the 24-byte keys took 29): it
-    // was the largest allocation of a 10⁶-triangle mesh's build (61 MB, now 10).
-    let hasher = fnv::FnvBuildHasher::default();
-    let key_of = |b: &Padded| [b.0.min.x, b.0.min.y, b.0.min.z, b.0.max.x, b.0.max.y, b.0.max.z].map(f32::to_bits);
-    let mut group_of_box: hashbrown::HashTable<u32> = hashbrown::HashTable::with_capacity(count);
-    let mut boxes: Vec<Padded> = Vec::new();
-    let mut group_of_primitive: Vec<u32> = Vec::with_capacity(count);
-    for (lo, hi) in bounds {
-        let group = match padded_box(lo, hi) {
-            Some(key) => {
-                let hash = hasher.hash_one(key);
-                match group_of_box.find(hash, |&g| key_of(&boxes[g as usize]) == key) {
-                    Some(&g) => g,
-                    None => {
-                        let [lx, ly, lz, hx, hy, hz] = key.map(f32::from_bits);
-                        boxes.push(Padded(Aabb::new(Vec3A::new(lx, ly, lz), Vec3A::new(hx, hy, hz))));
-                        let g = boxes.len() as u32 - 1;
-                        group_of_box.insert_unique(hash, g, |&g| hasher.hash_one(key_of(&boxes[g as usize])));
-                        g
-                    }
-                }
-            }
-            None => u32::MAX,
+    // pass merges one pair, so n coincident copies cost O(n²) to build. Groups are numbered
+    // in the order of their first primitives.
+    let mut group_of_primitive = first_with_same_box(bounds.clone(), count);
+    // Allocated once at its size: a growing table copies itself and, where the allocator
+    // keeps freed blocks (see `main`'s mmap threshold), leaves its smaller copies resident.
+    let groups = group_of_primitive.iter().zip(0u32..).filter(|&(&first, index)| first == index).count();
+    let mut boxes: Vec<Padded> = Vec::with_capacity(groups);
+    for ((lo, hi), index) in bounds.zip(0u32..) {
+        let first = group_of_primitive[index as usize];
+        group_of_primitive[index as usize] = if first == u32::MAX {
+            u32::MAX
+        } else if first == index {
+            let [lx, ly, lz, hx, hy, hz] = padded_box(lo, hi).map_or([0.0; 6], |key| key.map(f32::from_bits));
+            boxes.push(Padded(Aabb::new(Vec3A::new(lx, ly, lz), Vec3A::new(hx, hy, hz))));
+            boxes.len() as u32 - 1
+        } else {
+            // The first primitive with this box came before: its group is numbered.
+            group_of_primitive[first as usize]
         };
-        group_of_primitive.push(group);
     }
     // Counting sort of primitive indices by group: the groups' lists, back to back.
     let mut group_start = vec![0u32; boxes.len() + 1];
@@ -163,9 +302,6 @@ pub(super) fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: u
     for g in 0..boxes.len() {
         group_start[g + 1] += group_start[g];
     }
-    // The box table and the per-primitive groups are freed before the BVH is built: on a
-    // mesh of distinct boxes the table is the largest allocation here (build peak memory).
-    drop(group_of_box);
     let mut next = group_start.clone();
     let mut group_members = vec![0u32; group_start[boxes.len()] as usize];
     for (index, &g) in group_of_primitive.iter().enumerate() {
@@ -174,6 +310,7 @@ pub(super) fn build_grouped(bounds: impl Iterator<Item = (Vec3, Vec3)>, count: u
             next[g as usize] += 1;
         }
     }
+    // The per-primitive groups are freed before the BVH is built (build peak memory).
     drop((next, group_of_primitive));
     let Some(mut space) = BvhSpace::build(boxes) else { return (None, group_members) };
     // The groups in leaf order (obvhs' primitive ids); the id-to-group table is then unused.
@@ -210,5 +347,36 @@ pub(super) struct Padded(pub(super) Aabb);
 impl Boundable for Padded {
     fn aabb(&self) -> Aabb {
         self.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::HashMap;
+
+    /// The partitioned grouping against a plain map from each padded box to the first
+    /// primitive with it: boxes drawn with repeats from 20 000 (several partitions), and
+    /// non-finite boxes, which are in no group.
+    #[test]
+    fn groups_as_a_map_of_first_primitives_does() {
+        let mut next = crate::render::geometry::accel::generator(11);
+        let distinct: Vec<(Vec3, Vec3)> = (0..20_000)
+            .map(|_| {
+                let lo = Vec3::new(next(), next(), next()) * 100.0;
+                (lo, lo + Vec3::new(next().abs(), next().abs(), 0.0))
+            })
+            .collect();
+        let mut bounds: Vec<(Vec3, Vec3)> =
+            (0..60_000).map(|_| distinct[((next() + 1.0) * 0.5 * 19_999.0) as usize]).collect();
+        bounds[7] = (Vec3::splat(f32::NAN), Vec3::ONE);
+        bounds[9] = (Vec3::ZERO, Vec3::splat(f32::INFINITY));
+        let first = first_with_same_box(bounds.iter().copied(), bounds.len());
+        let mut seen: HashMap<[u32; 6], u32> = HashMap::new();
+        for (i, &(lo, hi)) in bounds.iter().enumerate() {
+            let want = padded_box(lo, hi).map_or(u32::MAX, |key| *seen.entry(key).or_insert(i as u32));
+            assert_eq!(first[i], want, "primitive {i}");
+        }
+        assert!((10_000..20_000).contains(&seen.len()), "{} distinct boxes drawn", seen.len());
     }
 }

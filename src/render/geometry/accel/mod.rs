@@ -44,6 +44,8 @@ use attrs::AttrTable;
 pub use batched::PLOC_BATCH;
 use batched::{Padded, build_batched, build_grouped};
 use leaves::{LeafTriangles, RayPre, dominant_axis};
+#[cfg(test)]
+pub(in crate::render::geometry) use wide::tests::generator;
 use wide::{WideBvh, WideRay};
 
 // Defined below the BVH (geometry produces instances; shapes bound their own hit points), so

@@ -510,8 +510,8 @@ pub(super) mod tests {
     use obvhs::aabb::Aabb;
     use obvhs::cwbvh::builder::build_cwbvh;
 
-    /// A small deterministic generator in [-1, 1) (the leaf tests' too).
-    pub(in crate::render::geometry::accel) fn generator(mut seed: u32) -> impl FnMut() -> f32 {
+    /// A small deterministic generator (xorshift) in [-1, 1] (the leaf and shape tests' too).
+    pub(in crate::render::geometry) fn generator(mut seed: u32) -> impl FnMut() -> f32 {
         move || {
             seed ^= seed << 13;
             seed ^= seed >> 17;
