@@ -118,7 +118,7 @@ pub enum LightKind {
         to_world: Mat3,
     },
     /// A parallelogram `centre ± ex ± ey` emitting along `n`; sampled by solid angle where it
-    /// is a rectangle ([`spherical_rect`]), by area where it is sheared or degenerate.
+    /// is a rectangle (`spherical_rect`), by area where it is sheared or degenerate.
     Rect {
         /// Centre.
         centre: Vec3,
@@ -538,19 +538,23 @@ fn area_pdf(_p: Vec3, wi: Vec3, t: f32, n: Vec3, area: f32) -> f32 {
 /// Ray/parallelogram distance, front (emitting) side only.
 fn rect_hit(p: Vec3, wi: Vec3, c: Vec3, ex: Vec3, ey: Vec3, n: Vec3) -> Option<f32> {
     let (t, q) = plane_hit(p, wi, c, n)?;
-    let d = q - c;
-    let a = d.dot(ex) / ex.length_squared();
-    let b = d.dot(ey) / ey.length_squared();
+    let (a, b) = edge_coordinates(q - c, ex, ey, n);
     (a.abs() <= 1.0 && b.abs() <= 1.0).then_some(t)
 }
 
 /// Ray/ellipse distance, front side only.
 fn disk_hit(p: Vec3, wi: Vec3, c: Vec3, ex: Vec3, ey: Vec3, n: Vec3) -> Option<f32> {
     let (t, q) = plane_hit(p, wi, c, n)?;
-    let d = q - c;
-    let a = d.dot(ex) / ex.length_squared();
-    let b = d.dot(ey) / ey.length_squared();
+    let (a, b) = edge_coordinates(q - c, ex, ey, n);
     (a * a + b * b <= 1.0).then_some(t)
+}
+
+/// The coordinates `(a, b)` of `d = a ex + b ey`, a vector in the plane of `ex`, `ey` (normal
+/// `n`). Projections `d·ex / |ex|²` would be right only for perpendicular edges: a transform
+/// that scales after rotating shears a light, and its corners then read as outside.
+fn edge_coordinates(d: Vec3, ex: Vec3, ey: Vec3, n: Vec3) -> (f32, f32) {
+    let area = ex.cross(ey).dot(n);
+    (d.cross(ey).dot(n) / area, ex.cross(d).dot(n) / area)
 }
 
 fn plane_hit(p: Vec3, wi: Vec3, c: Vec3, n: Vec3) -> Option<(f32, Vec3)> {

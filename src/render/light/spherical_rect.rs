@@ -11,8 +11,8 @@
 use glam::{DVec3, Vec2, Vec3};
 use std::f64::consts::TAU;
 
-/// Below this solid angle (sr) the set-up's cancellation costs precision and the light is so
-/// far, or so edge-on, that area sampling's `d²` and `cos θ_l` hardly vary: area sampling.
+/// Below this solid angle (sr) the set-up's cancellation costs precision and the light
+/// subtends so little that how it is sampled hardly matters: area sampling.
 const MIN_SOLID_ANGLE: f64 = 1e-4;
 /// Above this (2π less 0.08 sr) the point almost touches the light and the spherical
 /// rectangle degenerates to a hemisphere: area sampling (pbrt-v4's bound, 6.22, is similar).
@@ -22,7 +22,7 @@ const MAX_EDGE_COSINE: f64 = 1e-5;
 
 /// The rectangle `centre ± ex ± ey` as seen from a point, ready for uniform solid-angle
 /// sampling: the point's frame (`x` along `ex`, `y` along `ey`, `z` away from the light) and
-/// the rectangle's extent in it, the paper's `x0 x1 y0 y1 z0 b0 b1 k S`.
+/// the rectangle's extent in it, the paper's `x0 x1 y0 y1 z0 k S` (`b0 b1` are made when sampling).
 #[derive(Clone, Copy, Debug)]
 pub(super) struct SphericalRect {
     x: DVec3,
@@ -33,8 +33,6 @@ pub(super) struct SphericalRect {
     y0: f64,
     y1: f64,
     z0: f64,
-    b0: f64,
-    b1: f64,
     k: f64,
     solid_angle: f64,
 }
@@ -88,8 +86,6 @@ impl SphericalRect {
             y0,
             y1,
             z0,
-            b0: -y0 / (z0sq + y0 * y0).sqrt(),
-            b1: y1 / (z0sq + y1 * y1).sqrt(),
             k,
             solid_angle,
         })
@@ -104,7 +100,10 @@ impl SphericalRect {
     /// maps to, uniformly over the solid angle. Not finite in the rare case that rounding
     /// breaks the inversion (the caller drops the sample).
     pub(super) fn sample(&self, u: Vec2) -> (Vec3, f32) {
-        let SphericalRect { x0, x1, y0, y1, z0, b0, b1, k, .. } = *self;
+        let SphericalRect { x0, x1, y0, y1, z0, k, .. } = *self;
+        // Here, not in the set-up: pdf_li needs only the solid angle.
+        let b0 = -y0 / (z0 * z0 + y0 * y0).sqrt();
+        let b1 = y1 / (z0 * z0 + y1 * y1).sqrt();
         // The x coordinate: the area swept from the x0 edge is u.x of the solid angle.
         let au = u.x as f64 * self.solid_angle + k;
         let (sin_au, cos_au) = au.sin_cos();
@@ -117,7 +116,14 @@ impl SphericalRect {
         let h1 = y1 / (d2 + y1 * y1).sqrt();
         let hv = h0 + u.y as f64 * (h1 - h0);
         let hv2 = hv * hv;
-        let yv = if hv2 < 1.0 - 1e-12 { hv * d2.sqrt() / (1.0 - hv2).sqrt() } else { y1 };
+        // |hv| ≈ 1: the line runs along the light's plane; the sine's sign says which edge.
+        let yv = if hv2 < 1.0 - 1e-12 {
+            hv * d2.sqrt() / (1.0 - hv2).sqrt()
+        } else if hv > 0.0 {
+            y1
+        } else {
+            y0
+        };
         let to = self.x * xu + self.y * yv.clamp(y0, y1) + self.z * z0;
         let dist = to.length();
         ((to / dist).as_vec3(), dist as f32)
@@ -223,6 +229,56 @@ mod tests {
             }
             let pv = chi2_p_value(stat, CELLS * CELLS - 1);
             assert!(pv > alpha, "case {case} from {p}: chi2 = {stat:.1}, p = {pv:e}");
+        }
+    }
+
+    /// A receiver a hair above the light's plane and just past an edge: a line of samples runs
+    /// along the plane (|sine of elevation| ≈ 1), and `u.y = 0` must reach the far edge, not
+    /// the near one (the density stays 1/Ω, so a wrong end would be a silent bias).
+    #[test]
+    fn a_sample_along_the_plane_reaches_the_far_edge() {
+        let (c, ex, ey) = (Vec3::ZERO, Vec3::X, Vec3::Y);
+        let p = Vec3::new(0.0, 1.0 + 1e-7, 1e-7);
+        let sr = SphericalRect::new(p, c, ex, ey).expect("Ω ≈ π/2 is sampled by solid angle");
+        let (wi, dist) = sr.sample(Vec2::new(0.5, 0.0));
+        let q = p + wi * dist;
+        assert!((q.y + 1.0).abs() < 1e-3, "u.y = 0 lands at y = {} (the far edge is -1)", q.y);
+    }
+
+    /// Where the spherical rectangle is refused (a sheared light; a point almost touching a
+    /// large light) the light samples its area, and pdf_li returns that same density.
+    #[test]
+    fn refused_rectangles_are_sampled_by_area_with_the_same_density() {
+        use crate::render::light::{Light, LightKind};
+        let cases = [
+            // Sheared (edges 8.5° off square), from 1 above: E[1/pdf] against the closed form.
+            (Vec3::new(0.0, 0.0, 1.0), Vec3::X * 2.0, Vec3::new(0.3, 2.0, 0.0), true),
+            // 0.01 above a 4 x 4 light: Ω within 0.08 sr of 2π. 1/pdf is too heavy-tailed
+            // here for its mean to be tested at this sample count.
+            (Vec3::new(0.3, 0.2, 0.01), Vec3::X * 2.0, Vec3::Y * 2.0, false),
+        ];
+        for (p, ex, ey, check_mean) in cases {
+            let (centre, n) = (Vec3::ZERO, Vec3::Z);
+            assert!(SphericalRect::new(p, centre, ex, ey).is_none(), "{p}: the area branch");
+            let light = Light {
+                path: "/R".into(),
+                kind: LightKind::Rect { centre, ex, ey, n, radiance: Vec3::ONE },
+                visible_to_camera: true,
+            };
+            let mut rng = Rng::new(5, 0, 0);
+            let samples = 200_000;
+            let mut inv_pdf_sum = 0.0f64;
+            for _ in 0..samples {
+                let s = light.sample_li(p, Vec3::ZERO, rng.uniform2()).expect("the light faces p");
+                let pdf = light.pdf_li(p, Vec3::ZERO, s.wi);
+                assert!((pdf - s.pdf).abs() <= 1e-3 * s.pdf, "{p}: pdf_li {pdf} vs the sample's {}", s.pdf);
+                inv_pdf_sum += 1.0 / s.pdf as f64;
+            }
+            if check_mean {
+                let expected = rect_solid_angle(p, centre, ex, ey);
+                let mean = inv_pdf_sum / samples as f64;
+                assert!((mean - expected).abs() < 0.01 * expected, "{p}: E[1/pdf] {mean} vs Ω {expected}");
+            }
         }
     }
 }

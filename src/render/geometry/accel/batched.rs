@@ -21,7 +21,7 @@ pub const PLOC_BATCH: usize = 128;
 /// How many PLOC batches are built in parallel before they are stitched into the tree.
 const PARALLEL_BATCHES: usize = 256;
 
-/// Subtrees with more primitives than this are split on two threads (rayon): below it the
+/// Subtrees with more primitives than this are split in parallel (`rayon::join`): below it the
 /// split is cheaper than handing it over.
 const PARALLEL_SPLIT: usize = 4096;
 
@@ -205,6 +205,8 @@ const GROUPING_PARTITION: usize = 4096;
 /// a fifth of a 10⁶-triangle build.
 fn first_with_same_box(bounds: impl Iterator<Item = (Vec3, Vec3)> + Clone, count: usize) -> Vec<u32> {
     use rayon::prelude::*;
+    // `count` indexes the result, and every walk of `bounds` must yield the same boxes.
+    debug_assert_eq!(bounds.clone().count(), count, "the bounds and the primitive count disagree");
     let bits = (count / GROUPING_PARTITION).max(1).ilog2().min(12);
     let partition_of = |hash: u64| if bits == 0 { 0 } else { (hash >> (64 - bits)) as usize };
     let keys = || bounds.clone().map(|(lo, hi)| padded_box(lo, hi)).enumerate();
@@ -286,7 +288,9 @@ pub(super) fn build_grouped(
         group_of_primitive[index as usize] = if first == u32::MAX {
             u32::MAX
         } else if first == index {
-            let [lx, ly, lz, hx, hy, hz] = padded_box(lo, hi).map_or([0.0; 6], |key| key.map(f32::from_bits));
+            let key = padded_box(lo, hi);
+            debug_assert!(key.is_some(), "a group's first primitive has a finite box (the walks disagree)");
+            let [lx, ly, lz, hx, hy, hz] = key.map_or([0.0; 6], |key| key.map(f32::from_bits));
             boxes.push(Padded(Aabb::new(Vec3A::new(lx, ly, lz), Vec3A::new(hx, hy, hz))));
             boxes.len() as u32 - 1
         } else {
