@@ -383,4 +383,28 @@ mod tests {
         }
         assert!((10_000..20_000).contains(&seen.len()), "{} distinct boxes drawn", seen.len());
     }
+
+    /// The build is the same tree whatever the thread count: the splits and the grouping
+    /// run in parallel, but each subtree and partition depends only on its own members.
+    #[test]
+    fn one_thread_and_four_build_the_same_tree() {
+        let mut next = crate::render::geometry::accel::generator(3);
+        let bounds: Vec<(Vec3, Vec3)> = (0..4 * PARALLEL_SPLIT.max(PLOC_BATCH))
+            .map(|_| {
+                let lo = Vec3::new(next(), next(), next()) * 50.0;
+                (lo, lo + Vec3::new(next().abs(), next().abs(), next().abs()))
+            })
+            .collect();
+        let build = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
+            pool.install(|| {
+                let first = first_with_same_box(bounds.iter().copied(), bounds.len());
+                let boxes: Vec<Padded> =
+                    bounds.iter().map(|&(lo, hi)| Padded(Aabb::new(Vec3A::from(lo), Vec3A::from(hi)))).collect();
+                let (bvh, largest) = build_batched(&boxes);
+                (first, format!("{:?} {:?}", bvh.nodes, bvh.primitive_indices), largest)
+            })
+        };
+        assert!(build(1) == build(4), "the tree depends on the thread count");
+    }
 }
