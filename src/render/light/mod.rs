@@ -462,6 +462,9 @@ impl Light {
 #[derive(Clone, Debug)]
 pub struct LightSelection {
     distribution: Option<Distribution1D>,
+    /// Each entry's probability ([`Distribution1D::discrete_pdf`]), made once: next-event
+    /// estimation reads it at every shading point and MIS at every ray that meets a light.
+    pmf: Box<[f32]>,
 }
 
 /// Share of the bounded lights' probability spread uniformly (see [`LightSelection`]).
@@ -484,7 +487,7 @@ impl LightSelection {
             .chain(emitters.iter().map(|&p| (false, p)))
             .collect();
         if entries.is_empty() {
-            return LightSelection { distribution: None };
+            return LightSelection { distribution: None, pmf: Box::new([]) };
         }
         let infinite = entries.iter().filter(|(inf, _)| *inf).count();
         let bounded = entries.len() - infinite;
@@ -507,7 +510,9 @@ impl LightSelection {
                 share / groups as f32
             })
             .collect();
-        LightSelection { distribution: Some(Distribution1D::new(&weights)) }
+        let distribution = Distribution1D::new(&weights);
+        let pmf = (0..weights.len()).map(|i| distribution.discrete_pdf(i)).collect();
+        LightSelection { distribution: Some(distribution), pmf }
     }
 
     /// Chooses a light with uniform `u`: its index and probability.
@@ -519,13 +524,14 @@ impl LightSelection {
     /// [`LightSelection::sample`], also returning `u` rescaled to [0, 1) within the chosen
     /// light's share (see [`Distribution1D::sample_discrete_remapped`]).
     pub fn sample_remapped(&self, u: f32) -> Option<(usize, f32, f32)> {
-        let (i, pmf, rest) = self.distribution.as_ref()?.sample_discrete_remapped(u);
+        let (i, rest) = self.distribution.as_ref()?.sample_piece_remapped(u);
+        let pmf = self.pmf(i);
         (pmf > 0.0).then_some((i, pmf, rest))
     }
 
     /// The probability of choosing light `i`.
     pub fn pmf(&self, i: usize) -> f32 {
-        self.distribution.as_ref().map_or(0.0, |d| d.discrete_pdf(i))
+        self.pmf.get(i).copied().unwrap_or(0.0)
     }
 }
 
