@@ -168,16 +168,7 @@ fn constant_dome_escape_is_the_walk_bit_for_bit() {
         let (to_local, to_world) = (glam::Mat3::IDENTITY, glam::Mat3::IDENTITY);
         light(LightKind::Dome { radiance: Vec3::new(0.8, 0.5, 0.3), map: None, to_local, to_world }, visible)
     };
-    let rect = light(
-        LightKind::Rect {
-            centre: Vec3::new(0.0, 0.0, 3.0),
-            ex: Vec3::X,
-            ey: Vec3::Y,
-            n: -Vec3::Z,
-            radiance: Vec3::splat(4.0),
-        },
-        true,
-    );
+    let rect = light(LightKind::rect(Vec3::new(0.0, 0.0, 3.0), Vec3::X, Vec3::Y, -Vec3::Z, Vec3::splat(4.0)), true);
     let sun = |cos_max| light(LightKind::Distant { dir: Vec3::Z, cos_max, radiance: Vec3::splat(2.0) }, true);
     // (lights, whether the shortcut applies)
     let scenes = [

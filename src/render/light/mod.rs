@@ -23,6 +23,7 @@ use crate::render::sampling::{
 };
 use crate::scene::{Prim, Stage, Value};
 use glam::{DMat3, DVec3, Mat3, Vec2, Vec3};
+pub use spherical_rect::RectFrame;
 use spherical_rect::SphericalRect;
 use std::f32::consts::PI;
 use std::sync::Arc;
@@ -130,6 +131,9 @@ pub enum LightKind {
         n: Vec3,
         /// Radiance.
         radiance: Vec3,
+        /// What of the geometry does not depend on the point it is seen from (made by
+        /// [`LightKind::rect`] from the fields above).
+        frame: RectFrame,
     },
     /// An ellipse `centre + a ex + b ey`, `a² + b² ≤ 1`, emitting along `n`.
     Disk {
@@ -182,6 +186,14 @@ pub enum LightKind {
         /// Radiance of the disk, or the irradiance of a delta light.
         radiance: Vec3,
     },
+}
+
+impl LightKind {
+    /// A [`LightKind::Rect`] `centre ± ex ± ey` emitting along the unit `n`, with its
+    /// point-independent geometry made once here.
+    pub fn rect(centre: Vec3, ex: Vec3, ey: Vec3, n: Vec3, radiance: Vec3) -> LightKind {
+        LightKind::Rect { centre, ex, ey, n, radiance, frame: RectFrame::new(centre, ex, ey, n) }
+    }
 }
 
 /// A light and the prim it came from.
@@ -261,12 +273,12 @@ impl Light {
                     LightSample { wi, li: *radiance * map.lookup(local), pdf, dist: f32::INFINITY, delta: false }
                 }
             },
-            LightKind::Rect { centre, ex, ey, n, radiance } => {
+            LightKind::Rect { centre, ex, ey, n, radiance, frame } => {
                 // One-sided: nothing reaches a point behind (or on) the light's plane.
                 if (p - *centre).dot(*n) <= 0.0 {
                     return None;
                 }
-                match SphericalRect::new(p, *centre, *ex, *ey) {
+                match SphericalRect::new(p, frame) {
                     Some(rect) => {
                         let (wi, dist) = rect.sample(u);
                         let pdf = (1.0 / rect.solid_angle()) as f32;
@@ -274,7 +286,7 @@ impl Light {
                     }
                     None => {
                         let q = *centre + *ex * (2.0 * u.x - 1.0) + *ey * (2.0 * u.y - 1.0);
-                        area_sample(p, q, *n, 4.0 * ex.cross(*ey).length(), *radiance)?
+                        area_sample(p, q, *n, frame.area(), *radiance)?
                     }
                 }
             }
@@ -342,11 +354,11 @@ impl Light {
                 let sin_theta = Vec2::new(local.x, local.z).length();
                 if sin_theta <= 0.0 { 0.0 } else { map.distribution.pdf(uv) / (2.0 * PI * PI * sin_theta) }
             }
-            LightKind::Rect { centre, ex, ey, n, .. } => match rect_hit(p, wi, *centre, *ex, *ey, *n) {
+            LightKind::Rect { centre, n, frame, .. } => match rect_hit(p, wi, *centre, *n, frame) {
                 // The density sample_li used: by solid angle unless that is degenerate.
-                Some(t) => match SphericalRect::new(p, *centre, *ex, *ey) {
+                Some(t) => match SphericalRect::new(p, frame) {
                     Some(rect) => (1.0 / rect.solid_angle()) as f32,
-                    None => area_pdf(p, wi, t, *n, 4.0 * ex.cross(*ey).length()),
+                    None => area_pdf(p, wi, t, *n, frame.area()),
                 },
                 None => 0.0,
             },
@@ -384,7 +396,7 @@ impl Light {
     /// its emitting side.
     pub fn hit(&self, p: Vec3, wi: Vec3, tmax: f32) -> Option<(Vec3, f32)> {
         let (radiance, t) = match &self.kind {
-            LightKind::Rect { centre, ex, ey, n, radiance } => (*radiance, rect_hit(p, wi, *centre, *ex, *ey, *n)?),
+            LightKind::Rect { centre, n, radiance, frame, .. } => (*radiance, rect_hit(p, wi, *centre, *n, frame)?),
             LightKind::Disk { centre, ex, ey, n, radiance } => (*radiance, disk_hit(p, wi, *centre, *ex, *ey, *n)?),
             LightKind::Sphere { centre, radius, radiance } => (*radiance, sphere_hit(p, wi, *centre, *radius)?),
             LightKind::Cylinder { centre, axis, half_length, radius, radiance } => {
@@ -450,6 +462,9 @@ impl Light {
 #[derive(Clone, Debug)]
 pub struct LightSelection {
     distribution: Option<Distribution1D>,
+    /// Each entry's probability ([`Distribution1D::discrete_pdf`]), made once: next-event
+    /// estimation reads it at every shading point and MIS at every ray that meets a light.
+    pmf: Box<[f32]>,
 }
 
 /// Share of the bounded lights' probability spread uniformly (see [`LightSelection`]).
@@ -472,7 +487,7 @@ impl LightSelection {
             .chain(emitters.iter().map(|&p| (false, p)))
             .collect();
         if entries.is_empty() {
-            return LightSelection { distribution: None };
+            return LightSelection { distribution: None, pmf: Box::new([]) };
         }
         let infinite = entries.iter().filter(|(inf, _)| *inf).count();
         let bounded = entries.len() - infinite;
@@ -495,7 +510,9 @@ impl LightSelection {
                 share / groups as f32
             })
             .collect();
-        LightSelection { distribution: Some(Distribution1D::new(&weights)) }
+        let distribution = Distribution1D::new(&weights);
+        let pmf = (0..weights.len()).map(|i| distribution.discrete_pdf(i)).collect();
+        LightSelection { distribution: Some(distribution), pmf }
     }
 
     /// Chooses a light with uniform `u`: its index and probability.
@@ -507,13 +524,14 @@ impl LightSelection {
     /// [`LightSelection::sample`], also returning `u` rescaled to [0, 1) within the chosen
     /// light's share (see [`Distribution1D::sample_discrete_remapped`]).
     pub fn sample_remapped(&self, u: f32) -> Option<(usize, f32, f32)> {
-        let (i, pmf, rest) = self.distribution.as_ref()?.sample_discrete_remapped(u);
+        let (i, rest) = self.distribution.as_ref()?.sample_piece_remapped(u);
+        let pmf = self.pmf(i);
         (pmf > 0.0).then_some((i, pmf, rest))
     }
 
     /// The probability of choosing light `i`.
     pub fn pmf(&self, i: usize) -> f32 {
-        self.distribution.as_ref().map_or(0.0, |d| d.discrete_pdf(i))
+        self.pmf.get(i).copied().unwrap_or(0.0)
     }
 }
 
@@ -536,9 +554,9 @@ fn area_pdf(_p: Vec3, wi: Vec3, t: f32, n: Vec3, area: f32) -> f32 {
 }
 
 /// Ray/parallelogram distance, front (emitting) side only.
-fn rect_hit(p: Vec3, wi: Vec3, c: Vec3, ex: Vec3, ey: Vec3, n: Vec3) -> Option<f32> {
+fn rect_hit(p: Vec3, wi: Vec3, c: Vec3, n: Vec3, frame: &RectFrame) -> Option<f32> {
     let (t, q) = plane_hit(p, wi, c, n)?;
-    let (a, b) = edge_coordinates(q - c, ex, ey, n);
+    let (a, b) = frame.edge_coordinates(q - c);
     (a.abs() <= 1.0 && b.abs() <= 1.0).then_some(t)
 }
 

@@ -92,7 +92,7 @@ fn light_kind(prim: &Prim, ty: &str, xf: PrimXform, diags: &mut Diagnostics) -> 
             if normalize {
                 emission /= (4.0 * ex.cross(ey).length()).max(1e-12);
             }
-            LightKind::Rect { centre: point(DVec3::ZERO), ex, ey, n: normal_z(), radiance: emission }
+            LightKind::rect(point(DVec3::ZERO), ex, ey, normal_z(), emission)
         }
         "DiskLight" => {
             let r = positive("inputs:radius", 0.5, diags)?;

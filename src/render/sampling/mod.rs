@@ -164,10 +164,17 @@ impl Distribution1D {
     /// `u` fell within the piece, rescaled to [0, 1): `(index, probability, remainder)`. The
     /// remainder is uniform and independent of the choice, so one number can make both.
     pub fn sample_discrete_remapped(&self, u: f32) -> (usize, f32, f32) {
+        let (i, rest) = self.sample_piece_remapped(u);
+        (i, self.discrete_pdf(i), rest)
+    }
+
+    /// [`Distribution1D::sample_discrete_remapped`] without the probability: `(index,
+    /// remainder)`, for a caller that keeps the probabilities in a table of its own.
+    pub fn sample_piece_remapped(&self, u: f32) -> (usize, f32) {
         let i = self.find(u);
         let width = self.cdf[i + 1] - self.cdf[i];
         let rest = if width > 0.0 { ((u - self.cdf[i]) / width).clamp(0.0, 1.0 - f32::EPSILON / 2.0) } else { 0.0 };
-        (i, self.discrete_pdf(i), rest)
+        (i, rest)
     }
 
     /// Samples a piece: `(index, probability)`.
