@@ -182,11 +182,13 @@ fn pow2(k: i32) -> f32 {
     f32::from_bits(((k.clamp(-126, 127) + 127) as u32) << 23)
 }
 
-/// A scaled ray parameter back in the caller's units (`k` from [`BvhSpace::ray`]), never
-/// beyond `tmax` (a finite `tmax` can overflow when scaled).
+/// A scaled ray parameter back in the caller's units, never beyond `tmax` (a finite `tmax`
+/// can overflow when scaled). `k_inv` is `1 / k` (`k` from [`BvhSpace::ray`]): `k` is a
+/// normal power of two, so its reciprocal is exact (a subnormal at worst) and the product
+/// rounds exactly as `t / k` would, without a division per leaf.
 #[inline]
-fn unscale(t: f32, k: f32, tmax: f32) -> f32 {
-    (t / k).min(tmax)
+fn unscale(t: f32, k_inv: f32, tmax: f32) -> f32 {
+    (t * k_inv).min(tmax)
 }
 
 impl BvhSpace {
@@ -445,7 +447,7 @@ impl Blas {
         };
         let (ray, scaled_tmax, k) = space.ray(o, d, tmin, tmax)?;
         let ray_in_leaves = LeafRay::<KZ, DEFORMS, AVX2> { blas: self, pre, o, d, tmin, tmax, time };
-        let mut leaves = ClosestInLeaves { ray: ray_in_leaves, k, best: None };
+        let mut leaves = ClosestInLeaves { ray: ray_in_leaves, k, k_inv: 1.0 / k, best: None };
         wide::closest_in::<AVX2>(&space.bvh, &ray, scaled_tmax, &mut leaves);
         leaves.best
     }
@@ -721,10 +723,11 @@ impl<const KZ: usize, const DEFORMS: bool, const AVX2: bool> wide::AnyLeaf for L
 }
 
 /// A BLAS traversal's closest-hit leaf test (as [`LeafRay`]): the ray, `k` (its parameter in
-/// the BVH's scaled space per unit of `t`) and the closest hit found so far.
+/// the BVH's scaled space per unit of `t`), `1 / k`, and the closest hit found so far.
 struct ClosestInLeaves<'a, const KZ: usize, const DEFORMS: bool, const AVX2: bool> {
     ray: LeafRay<'a, KZ, DEFORMS, AVX2>,
     k: f32,
+    k_inv: f32,
     best: Option<(f32, u32, f32, f32)>,
 }
 
@@ -734,7 +737,7 @@ impl<const KZ: usize, const DEFORMS: bool, const AVX2: bool> wide::ClosestLeaf
     #[inline(always)]
     fn test(&mut self, limit: f32, first: u32, count: u32) -> f32 {
         let r = &self.ray;
-        let closest = unscale(limit, self.k, r.tmax);
+        let closest = unscale(limit, self.k_inv, r.tmax);
         match r.blas.leaf_closest::<KZ, DEFORMS, AVX2>(&r.pre, r.o, r.d, first, count, r.tmin, closest, r.time) {
             Some(hit) => {
                 self.best = Some(hit);
@@ -1066,6 +1069,7 @@ impl Accel {
     ) -> Option<Hit> {
         let tmax = best.map_or(tmax, |h| h.t);
         let Some((ray, scaled_tmax, k)) = space.ray(o, d, tmin, tmax) else { return best };
+        let k_inv = 1.0 / k;
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
         wide::closest(&space.bvh, &ray, scaled_tmax, |limit, first, count| {
             let mut limit = limit;
@@ -1080,7 +1084,7 @@ impl Accel {
                     continue;
                 }
                 let prototype = &self.prototypes[inst.prototype as usize];
-                if let Some((t, index, b1, b2)) = prototype.intersect_at(oo, ob, tmin, unscale(limit, k, tmax), time) {
+                if let Some((t, index, b1, b2)) = prototype.intersect_at(oo, ob, tmin, unscale(limit, k_inv, tmax), time) {
                     best = Some(Hit { t, index, instance: i, b1, b2 });
                     limit = t * k;
                     found = true;

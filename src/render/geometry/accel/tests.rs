@@ -354,3 +354,23 @@ fn small_leaves_lie_in_one_block_and_padding_in_none() {
     assert!(seen.iter().all(|&s| s), "every triangle in a leaf");
     assert!(blas.group_members.contains(&leaves::NO_PRIMITIVE), "some leaf needed padding");
 }
+
+/// A leaf's closest distance is unscaled by `1 / k` instead of divided by `k`: bit for bit
+/// the division's result, for every normal power of two `k` a BVH space can give and
+/// distances of every magnitude (so a render through a scaled BVH is the same either way).
+#[test]
+fn unscaling_by_the_reciprocal_rounds_as_the_division() {
+    let mut bits = 0x1234_5678u32;
+    for m in -126..=127 {
+        let k = f32::from_bits(((m + 127) as u32) << 23);
+        assert!(k.is_normal());
+        for _ in 0..500 {
+            bits ^= bits << 13;
+            bits ^= bits >> 17;
+            bits ^= bits << 5;
+            // Any finite non-negative distance, subnormals included.
+            let t = f32::from_bits(bits % 0x7f80_0000);
+            assert_eq!(unscale(t, 1.0 / k, f32::INFINITY).to_bits(), (t / k).to_bits(), "t {t:e}, k 2^{m}");
+        }
+    }
+}
