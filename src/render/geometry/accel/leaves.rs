@@ -12,7 +12,7 @@
 //! surface and the light sampler.
 
 use super::gamma;
-use glam::{Vec3, Vec3A};
+use glam::Vec3;
 
 /// The axis of `d`'s largest component (the first of equals, from the last): the watertight
 /// test shears along it.
@@ -49,8 +49,7 @@ impl<const KZ: usize> RayPre<KZ> {
 
     #[inline(always)]
     pub(super) fn new(o: Vec3, d: Vec3) -> RayPre<KZ> {
-        // One 4-lane division for the three (each lane as the scalar division rounds it).
-        let s = Vec3::from(Vec3A::new(-d[Self::KX], -d[Self::KY], 1.0) / Vec3A::splat(d[KZ]));
+        let s = Vec3::new(-d[Self::KX] / d[KZ], -d[Self::KY] / d[KZ], 1.0 / d[KZ]);
         RayPre { o, s }
     }
 

@@ -16,7 +16,7 @@
 //! multiply, then min/max with the x86 rule "a NaN operand yields the second"), so they accept
 //! the same boxes with the same entry distances, and a render is bit-identical on either path.
 
-use glam::{Vec3, Vec3A};
+use glam::Vec3;
 use obvhs::cwbvh::CwBvh;
 use std::mem::MaybeUninit;
 
@@ -165,8 +165,7 @@ impl WideRay {
     /// (0·∞ = NaN), where that axis is ignored (the box is kept).
     #[inline]
     pub(super) fn new(o: Vec3, d: Vec3, tmin: f32) -> WideRay {
-        // One 4-lane division for the three (each lane IEEE-rounded as a scalar division).
-        let inv = (Vec3A::ONE / Vec3A::from(d)).to_array();
+        let inv = [1.0 / d.x, 1.0 / d.y, 1.0 / d.z];
         let near = [0, 1, 2].map(|a| if inv[a] < 0.0 { a + 3 } else { a });
         let far = near.map(|n| (n + 3) % 6);
         WideRay { o: o.to_array(), inv, near, far, tmin }
