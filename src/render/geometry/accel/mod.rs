@@ -396,6 +396,20 @@ impl Blas {
             // SAFETY: the CPU has AVX2 (checked just above).
             return unsafe { self.intersect_avx2::<DEFORMS>(o, d, tmin, tmax, time) };
         }
+        self.intersect_scalar::<DEFORMS>(o, d, tmin, tmax, time)
+    }
+
+    /// [`Blas::intersect_axis`] without AVX2, out of line: inlined, its traversal stack (3 KiB)
+    /// and spills were in every caller's frame, set up on the AVX2 path too.
+    #[inline(never)]
+    fn intersect_scalar<const DEFORMS: bool>(
+        &self,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+        time: f32,
+    ) -> Option<(f32, u32, f32, f32)> {
         self.intersect_axis::<DEFORMS, false>(o, d, tmin, tmax, time)
     }
 
@@ -571,6 +585,12 @@ impl Blas {
             // SAFETY: the CPU has AVX2 (checked just above).
             return unsafe { self.occluded_avx2::<DEFORMS>(o, d, tmin, tmax, time) };
         }
+        self.occluded_scalar::<DEFORMS>(o, d, tmin, tmax, time)
+    }
+
+    /// [`Blas::occluded_axis`] without AVX2, out of line (as [`Blas::intersect_scalar`]).
+    #[inline(never)]
+    fn occluded_scalar<const DEFORMS: bool>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
         self.occluded_axis::<DEFORMS, false>(o, d, tmin, tmax, time)
     }
 
@@ -746,6 +766,15 @@ impl<const KZ: usize, const DEFORMS: bool, const AVX2: bool> wide::ClosestLeaf
             None => f32::INFINITY,
         }
     }
+}
+
+/// Whether a ray from `o` along `d` can be traced: all six finite, `d` not zero. `0·x` is
+/// ±0 for a finite `x` and NaN for ±∞ and NaN, so one sum says whether all six are finite:
+/// a few arithmetic instructions per ray instead of a compare and branch per component.
+#[inline(always)]
+fn traceable(o: Vec3, d: Vec3) -> bool {
+    let z = o * 0.0 + d * 0.0;
+    z.x + z.y + z.z == 0.0 && d != Vec3::ZERO
 }
 
 /// The unit normal of `p` by winding, computed in f64 (exact products of the f32 inputs)
@@ -1041,7 +1070,7 @@ impl Accel {
     /// [`Accel::intersect`] at ray time `time` (`[0, 1)` across the shutter; see
     /// [`crate::render::geometry::motion`]).
     pub fn intersect_at(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> Option<Hit> {
-        if !o.is_finite() || !d.is_finite() || d == Vec3::ZERO {
+        if !traceable(o, d) {
             return None;
         }
         let best =
@@ -1080,7 +1109,7 @@ impl Accel {
                 let oo = to_object.transform_point3(od).as_vec3();
                 let ob = to_object.transform_vector3(dd).as_vec3();
                 // A nearly singular instance can overflow f32 in object space: no hit there.
-                if !oo.is_finite() || !ob.is_finite() || ob == Vec3::ZERO {
+                if !traceable(oo, ob) {
                     continue;
                 }
                 let prototype = &self.prototypes[inst.prototype as usize];
@@ -1102,7 +1131,7 @@ impl Accel {
 
     /// [`Accel::occluded`] at ray time `time`.
     pub fn occluded_at(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
-        if !o.is_finite() || !d.is_finite() || d == Vec3::ZERO {
+        if !traceable(o, d) {
             return false;
         }
         if self.world.occluded(o, d, tmin, tmax) {
@@ -1126,8 +1155,7 @@ impl Accel {
                 let (to_object, _) = inst.transforms_at(&self.motions, time);
                 let oo = to_object.transform_point3(od).as_vec3();
                 let ob = to_object.transform_vector3(dd).as_vec3();
-                let finite = oo.is_finite() && ob.is_finite() && ob != Vec3::ZERO;
-                finite && self.prototypes[inst.prototype as usize].occluded_at(oo, ob, tmin, tmax, time)
+                traceable(oo, ob) && self.prototypes[inst.prototype as usize].occluded_at(oo, ob, tmin, tmax, time)
             })
         })
     }

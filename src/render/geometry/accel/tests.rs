@@ -374,3 +374,23 @@ fn unscaling_by_the_reciprocal_rounds_as_the_division() {
         }
     }
 }
+
+/// `traceable` refuses a ray with any non-finite component or a zero direction, and takes
+/// every other (negative zeros, the largest finite values, subnormals).
+#[test]
+fn only_finite_rays_with_a_direction_are_traceable() {
+    let finite = [0.0, -0.0, 1.0, -3.5, f32::MAX, f32::MIN, f32::MIN_POSITIVE / 4.0];
+    for (i, &x) in finite.iter().enumerate() {
+        let o = Vec3::new(x, finite[(i + 1) % finite.len()], -x);
+        assert!(traceable(o, Vec3::new(0.0, x, 1.0)), "{o}");
+    }
+    for bad in [f32::INFINITY, f32::NEG_INFINITY, f32::NAN] {
+        for axis in 0..6 {
+            let mut v = [1.0f32, -2.0, 0.0, 0.5, 0.0, -1.0];
+            v[axis] = bad;
+            let (o, d) = (Vec3::new(v[0], v[1], v[2]), Vec3::new(v[3], v[4], v[5]));
+            assert!(!traceable(o, d), "{o} {d}");
+        }
+    }
+    assert!(!traceable(Vec3::ONE, Vec3::ZERO) && !traceable(Vec3::ONE, -Vec3::ZERO));
+}
