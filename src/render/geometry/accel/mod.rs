@@ -25,7 +25,6 @@ use crate::render::geometry::motion::{Deformation, MotionKeys};
 use crate::render::geometry::primvars::PrimvarRef;
 use crate::render::geometry::shapes::Shape;
 use crate::render::geometry::triangles::Triangles;
-use crate::render::material::frame::Frame;
 use glam::{DAffine3, DMat3, Vec2, Vec3};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
@@ -37,12 +36,15 @@ use std::time::Duration;
 pub(in crate::render::geometry) mod attrs;
 mod batched;
 mod convert;
+mod frames;
 mod leaves;
 mod wide;
 
 use attrs::AttrTable;
 pub use batched::PLOC_BATCH;
 use batched::{Padded, build_batched, build_grouped};
+pub(crate) use frames::tangents;
+use frames::{edge_tangents, frame_or, shading_normal, winding_normal};
 use leaves::{LeafTriangles, RayPre, dominant_axis};
 #[cfg(test)]
 pub(in crate::render::geometry) use wide::tests::generator;
@@ -775,72 +777,6 @@ impl<const KZ: usize, const DEFORMS: bool, const AVX2: bool> wide::ClosestLeaf
 fn traceable(o: Vec3, d: Vec3) -> bool {
     let z = o * 0.0 + d * 0.0;
     z.x + z.y + z.z == 0.0 && d != Vec3::ZERO
-}
-
-/// The unit normal of `p` by winding, computed in f64 (exact products of the f32 inputs)
-/// so that it does not underflow for tiny triangles as an f32 cross product does (edges below
-/// ~1e-10 units); zero when the vertices are collinear.
-#[inline]
-fn winding_normal(p: [Vec3; 3]) -> Vec3 {
-    let [a, b, c] = p.map(|v| v.as_dvec3());
-    (b - a).cross(c - a).normalize_or_zero().as_vec3()
-}
-
-/// `(dpdu, dpdv)`, or a frame around `n` when they do not span a plane (at a pole ∂P/∂u
-/// vanishes).
-fn frame_or(dpdu: Vec3, dpdv: Vec3, n: Vec3) -> (Vec3, Vec3) {
-    if dpdu.cross(dpdv).length_squared() > 0.0 && dpdu.is_finite() && dpdv.is_finite() {
-        (dpdu, dpdv)
-    } else {
-        let f = Frame::from_normal(n);
-        (f.t, f.b)
-    }
-}
-
-/// The interpolated shading normal, normalised and kept on the geometric normal's side
-/// (shading normals are authored on either side); `ng` when it vanishes.
-fn shading_normal(n: Vec3, ng: Vec3) -> Vec3 {
-    let ns = n.normalize_or_zero();
-    if ns == Vec3::ZERO || !ns.is_finite() {
-        ng
-    } else if ns.dot(ng) < 0.0 {
-        -ns
-    } else {
-        ns
-    }
-}
-
-/// dP/du and dP/dv from the triangle's texture coordinates, or a frame around `n` when
-/// they are degenerate.
-pub(crate) fn tangents(p: [Vec3; 3], uv: [Vec2; 3], n: Vec3) -> (Vec3, Vec3) {
-    let d1 = uv[1] - uv[0];
-    let d2 = uv[2] - uv[0];
-    let det = d1.x * d2.y - d1.y * d2.x;
-    let e1 = p[1] - p[0];
-    let e2 = p[2] - p[0];
-    if det.abs() > 1e-12 {
-        let inv = 1.0 / det;
-        let dpdu = (e1 * d2.y - e2 * d1.y) * inv;
-        let dpdv = (e2 * d1.x - e1 * d2.x) * inv;
-        if dpdu.is_finite() && dpdv.is_finite() && dpdu.cross(dpdv).length_squared() > 0.0 {
-            return (dpdu, dpdv);
-        }
-    }
-    let f = Frame::from_normal(n);
-    (f.t, f.b)
-}
-
-/// [`tangents`] for the parametric coordinates `(0,0), (1,0), (0,1)`: the edges from corner 0,
-/// or a frame around `n` when they do not span a plane.
-#[inline]
-fn edge_tangents(p: [Vec3; 3], n: Vec3) -> (Vec3, Vec3) {
-    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
-    if e1.is_finite() && e2.is_finite() && e1.cross(e2).length_squared() > 0.0 {
-        (e1, e2)
-    } else {
-        let f = Frame::from_normal(n);
-        (f.t, f.b)
-    }
 }
 
 /// An instance as the traversal uses it.
