@@ -398,21 +398,7 @@ impl Blas {
             // SAFETY: the CPU has AVX2 (checked just above).
             return unsafe { self.intersect_avx2::<DEFORMS>(o, d, tmin, tmax, time) };
         }
-        self.intersect_scalar::<DEFORMS>(o, d, tmin, tmax, time)
-    }
-
-    /// [`Blas::intersect_axis`] without AVX2, out of line: inlined, its traversal stack (3 KiB)
-    /// and spills were in every caller's frame, set up on the AVX2 path too.
-    #[inline(never)]
-    fn intersect_scalar<const DEFORMS: bool>(
-        &self,
-        o: Vec3,
-        d: Vec3,
-        tmin: f32,
-        tmax: f32,
-        time: f32,
-    ) -> Option<(f32, u32, f32, f32)> {
-        self.intersect_axis::<DEFORMS, false>(o, d, tmin, tmax, time)
+        out_of_line(|| self.intersect_axis::<DEFORMS, false>(o, d, tmin, tmax, time))
     }
 
     /// [`Blas::intersect_axis`] compiled for AVX2.
@@ -587,13 +573,7 @@ impl Blas {
             // SAFETY: the CPU has AVX2 (checked just above).
             return unsafe { self.occluded_avx2::<DEFORMS>(o, d, tmin, tmax, time) };
         }
-        self.occluded_scalar::<DEFORMS>(o, d, tmin, tmax, time)
-    }
-
-    /// [`Blas::occluded_axis`] without AVX2, out of line (as [`Blas::intersect_scalar`]).
-    #[inline(never)]
-    fn occluded_scalar<const DEFORMS: bool>(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
-        self.occluded_axis::<DEFORMS, false>(o, d, tmin, tmax, time)
+        out_of_line(|| self.occluded_axis::<DEFORMS, false>(o, d, tmin, tmax, time))
     }
 
     /// [`Blas::occluded_axis`] compiled for AVX2.
@@ -768,6 +748,14 @@ impl<const KZ: usize, const DEFORMS: bool, const AVX2: bool> wide::ClosestLeaf
             None => f32::INFINITY,
         }
     }
+}
+
+/// `query()`, in a function of its own: a BLAS's query without AVX2, which inlined into
+/// `Accel::intersect_at`/`occluded_at` put its 3 KiB traversal stack and spills in their frame,
+/// set up on every ray, AVX2 or not.
+#[inline(never)]
+fn out_of_line<R>(query: impl FnOnce() -> R) -> R {
+    query()
 }
 
 /// Whether a ray from `o` along `d` can be traced: all six finite, `d` not zero. `0·x` is
