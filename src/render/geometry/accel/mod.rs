@@ -1037,7 +1037,9 @@ impl Accel {
                     continue;
                 }
                 let prototype = &self.prototypes[inst.prototype as usize];
-                if let Some((t, index, b1, b2)) = prototype.intersect_at(oo, ob, tmin, unscale(limit, k_inv, tmax), time) {
+                if let Some((t, index, b1, b2)) =
+                    prototype.intersect_at(oo, ob, tmin, unscale(limit, k_inv, tmax), time)
+                {
                     best = Some(Hit { t, index, instance: i, b1, b2 });
                     limit = t * k;
                     found = true;
