@@ -25,7 +25,6 @@ use crate::render::geometry::motion::{Deformation, MotionKeys};
 use crate::render::geometry::primvars::PrimvarRef;
 use crate::render::geometry::shapes::Shape;
 use crate::render::geometry::triangles::Triangles;
-use crate::render::material::frame::Frame;
 use glam::{DAffine3, DMat3, Vec2, Vec3};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
@@ -37,12 +36,15 @@ use std::time::Duration;
 pub(in crate::render::geometry) mod attrs;
 mod batched;
 mod convert;
+mod frames;
 mod leaves;
 mod wide;
 
 use attrs::AttrTable;
 pub use batched::PLOC_BATCH;
 use batched::{Padded, build_batched, build_grouped};
+pub(crate) use frames::tangents;
+use frames::{edge_tangents, frame_or, shading_normal, winding_normal};
 use leaves::{LeafTriangles, RayPre, dominant_axis};
 #[cfg(test)]
 pub(in crate::render::geometry) use wide::tests::generator;
@@ -182,11 +184,13 @@ fn pow2(k: i32) -> f32 {
     f32::from_bits(((k.clamp(-126, 127) + 127) as u32) << 23)
 }
 
-/// A scaled ray parameter back in the caller's units (`k` from [`BvhSpace::ray`]), never
-/// beyond `tmax` (a finite `tmax` can overflow when scaled).
+/// A scaled ray parameter back in the caller's units, never beyond `tmax` (a finite `tmax`
+/// can overflow when scaled). `k_inv` is `1 / k` (`k` from [`BvhSpace::ray`]): `k` is a
+/// normal power of two, so its reciprocal is exact (a subnormal at worst) and the product
+/// rounds exactly as `t / k` would, without a division per leaf.
 #[inline]
-fn unscale(t: f32, k: f32, tmax: f32) -> f32 {
-    (t / k).min(tmax)
+fn unscale(t: f32, k_inv: f32, tmax: f32) -> f32 {
+    (t * k_inv).min(tmax)
 }
 
 impl BvhSpace {
@@ -394,7 +398,7 @@ impl Blas {
             // SAFETY: the CPU has AVX2 (checked just above).
             return unsafe { self.intersect_avx2::<DEFORMS>(o, d, tmin, tmax, time) };
         }
-        self.intersect_axis::<DEFORMS, false>(o, d, tmin, tmax, time)
+        out_of_line(move || self.intersect_axis::<DEFORMS, false>(o, d, tmin, tmax, time))
     }
 
     /// [`Blas::intersect_axis`] compiled for AVX2.
@@ -445,7 +449,7 @@ impl Blas {
         };
         let (ray, scaled_tmax, k) = space.ray(o, d, tmin, tmax)?;
         let ray_in_leaves = LeafRay::<KZ, DEFORMS, AVX2> { blas: self, pre, o, d, tmin, tmax, time };
-        let mut leaves = ClosestInLeaves { ray: ray_in_leaves, k, best: None };
+        let mut leaves = ClosestInLeaves { ray: ray_in_leaves, k, k_inv: 1.0 / k, best: None };
         wide::closest_in::<AVX2>(&space.bvh, &ray, scaled_tmax, &mut leaves);
         leaves.best
     }
@@ -569,7 +573,7 @@ impl Blas {
             // SAFETY: the CPU has AVX2 (checked just above).
             return unsafe { self.occluded_avx2::<DEFORMS>(o, d, tmin, tmax, time) };
         }
-        self.occluded_axis::<DEFORMS, false>(o, d, tmin, tmax, time)
+        out_of_line(move || self.occluded_axis::<DEFORMS, false>(o, d, tmin, tmax, time))
     }
 
     /// [`Blas::occluded_axis`] compiled for AVX2.
@@ -721,10 +725,11 @@ impl<const KZ: usize, const DEFORMS: bool, const AVX2: bool> wide::AnyLeaf for L
 }
 
 /// A BLAS traversal's closest-hit leaf test (as [`LeafRay`]): the ray, `k` (its parameter in
-/// the BVH's scaled space per unit of `t`) and the closest hit found so far.
+/// the BVH's scaled space per unit of `t`), `1 / k`, and the closest hit found so far.
 struct ClosestInLeaves<'a, const KZ: usize, const DEFORMS: bool, const AVX2: bool> {
     ray: LeafRay<'a, KZ, DEFORMS, AVX2>,
     k: f32,
+    k_inv: f32,
     best: Option<(f32, u32, f32, f32)>,
 }
 
@@ -734,7 +739,7 @@ impl<const KZ: usize, const DEFORMS: bool, const AVX2: bool> wide::ClosestLeaf
     #[inline(always)]
     fn test(&mut self, limit: f32, first: u32, count: u32) -> f32 {
         let r = &self.ray;
-        let closest = unscale(limit, self.k, r.tmax);
+        let closest = unscale(limit, self.k_inv, r.tmax);
         match r.blas.leaf_closest::<KZ, DEFORMS, AVX2>(&r.pre, r.o, r.d, first, count, r.tmin, closest, r.time) {
             Some(hit) => {
                 self.best = Some(hit);
@@ -745,70 +750,22 @@ impl<const KZ: usize, const DEFORMS: bool, const AVX2: bool> wide::ClosestLeaf
     }
 }
 
-/// The unit normal of `p` by winding, computed in f64 (exact products of the f32 inputs)
-/// so that it does not underflow for tiny triangles as an f32 cross product does (edges below
-/// ~1e-10 units); zero when the vertices are collinear.
-#[inline]
-fn winding_normal(p: [Vec3; 3]) -> Vec3 {
-    let [a, b, c] = p.map(|v| v.as_dvec3());
-    (b - a).cross(c - a).normalize_or_zero().as_vec3()
+/// `query()`, in a function of its own: a BLAS's query without AVX2, which inlined into
+/// `Accel::intersect_at`/`occluded_at` put its 3 KiB traversal stack and spills in their frame,
+/// set up on every ray, AVX2 or not. Give it a `move` closure: one capturing by reference made
+/// the AVX2 path store the arguments for it (13 instructions a ray, callgrind).
+#[inline(never)]
+fn out_of_line<R>(query: impl FnOnce() -> R) -> R {
+    query()
 }
 
-/// `(dpdu, dpdv)`, or a frame around `n` when they do not span a plane (at a pole ∂P/∂u
-/// vanishes).
-fn frame_or(dpdu: Vec3, dpdv: Vec3, n: Vec3) -> (Vec3, Vec3) {
-    if dpdu.cross(dpdv).length_squared() > 0.0 && dpdu.is_finite() && dpdv.is_finite() {
-        (dpdu, dpdv)
-    } else {
-        let f = Frame::from_normal(n);
-        (f.t, f.b)
-    }
-}
-
-/// The interpolated shading normal, normalised and kept on the geometric normal's side
-/// (shading normals are authored on either side); `ng` when it vanishes.
-fn shading_normal(n: Vec3, ng: Vec3) -> Vec3 {
-    let ns = n.normalize_or_zero();
-    if ns == Vec3::ZERO || !ns.is_finite() {
-        ng
-    } else if ns.dot(ng) < 0.0 {
-        -ns
-    } else {
-        ns
-    }
-}
-
-/// dP/du and dP/dv from the triangle's texture coordinates, or a frame around `n` when
-/// they are degenerate.
-pub(crate) fn tangents(p: [Vec3; 3], uv: [Vec2; 3], n: Vec3) -> (Vec3, Vec3) {
-    let d1 = uv[1] - uv[0];
-    let d2 = uv[2] - uv[0];
-    let det = d1.x * d2.y - d1.y * d2.x;
-    let e1 = p[1] - p[0];
-    let e2 = p[2] - p[0];
-    if det.abs() > 1e-12 {
-        let inv = 1.0 / det;
-        let dpdu = (e1 * d2.y - e2 * d1.y) * inv;
-        let dpdv = (e2 * d1.x - e1 * d2.x) * inv;
-        if dpdu.is_finite() && dpdv.is_finite() && dpdu.cross(dpdv).length_squared() > 0.0 {
-            return (dpdu, dpdv);
-        }
-    }
-    let f = Frame::from_normal(n);
-    (f.t, f.b)
-}
-
-/// [`tangents`] for the parametric coordinates `(0,0), (1,0), (0,1)`: the edges from corner 0,
-/// or a frame around `n` when they do not span a plane.
-#[inline]
-fn edge_tangents(p: [Vec3; 3], n: Vec3) -> (Vec3, Vec3) {
-    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
-    if e1.is_finite() && e2.is_finite() && e1.cross(e2).length_squared() > 0.0 {
-        (e1, e2)
-    } else {
-        let f = Frame::from_normal(n);
-        (f.t, f.b)
-    }
+/// Whether a ray from `o` along `d` can be traced: all six finite, `d` not zero. `0·x` is
+/// ±0 for a finite `x` and NaN for ±∞ and NaN, so one sum says whether all six are finite:
+/// a few arithmetic instructions per ray instead of a compare and branch per component.
+#[inline(always)]
+fn traceable(o: Vec3, d: Vec3) -> bool {
+    let z = o * 0.0 + d * 0.0;
+    z.x + z.y + z.z == 0.0 && d != Vec3::ZERO
 }
 
 /// An instance as the traversal uses it.
@@ -1038,7 +995,7 @@ impl Accel {
     /// [`Accel::intersect`] at ray time `time` (`[0, 1)` across the shutter; see
     /// [`crate::render::geometry::motion`]).
     pub fn intersect_at(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> Option<Hit> {
-        if !o.is_finite() || !d.is_finite() || d == Vec3::ZERO {
+        if !traceable(o, d) {
             return None;
         }
         let best =
@@ -1066,6 +1023,7 @@ impl Accel {
     ) -> Option<Hit> {
         let tmax = best.map_or(tmax, |h| h.t);
         let Some((ray, scaled_tmax, k)) = space.ray(o, d, tmin, tmax) else { return best };
+        let k_inv = 1.0 / k;
         let (od, dd) = (o.as_dvec3(), d.as_dvec3());
         wide::closest(&space.bvh, &ray, scaled_tmax, |limit, first, count| {
             let mut limit = limit;
@@ -1076,11 +1034,13 @@ impl Accel {
                 let oo = to_object.transform_point3(od).as_vec3();
                 let ob = to_object.transform_vector3(dd).as_vec3();
                 // A nearly singular instance can overflow f32 in object space: no hit there.
-                if !oo.is_finite() || !ob.is_finite() || ob == Vec3::ZERO {
+                if !traceable(oo, ob) {
                     continue;
                 }
                 let prototype = &self.prototypes[inst.prototype as usize];
-                if let Some((t, index, b1, b2)) = prototype.intersect_at(oo, ob, tmin, unscale(limit, k, tmax), time) {
+                if let Some((t, index, b1, b2)) =
+                    prototype.intersect_at(oo, ob, tmin, unscale(limit, k_inv, tmax), time)
+                {
                     best = Some(Hit { t, index, instance: i, b1, b2 });
                     limit = t * k;
                     found = true;
@@ -1098,7 +1058,7 @@ impl Accel {
 
     /// [`Accel::occluded`] at ray time `time`.
     pub fn occluded_at(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32, time: f32) -> bool {
-        if !o.is_finite() || !d.is_finite() || d == Vec3::ZERO {
+        if !traceable(o, d) {
             return false;
         }
         if self.world.occluded(o, d, tmin, tmax) {
@@ -1122,8 +1082,7 @@ impl Accel {
                 let (to_object, _) = inst.transforms_at(&self.motions, time);
                 let oo = to_object.transform_point3(od).as_vec3();
                 let ob = to_object.transform_vector3(dd).as_vec3();
-                let finite = oo.is_finite() && ob.is_finite() && ob != Vec3::ZERO;
-                finite && self.prototypes[inst.prototype as usize].occluded_at(oo, ob, tmin, tmax, time)
+                traceable(oo, ob) && self.prototypes[inst.prototype as usize].occluded_at(oo, ob, tmin, tmax, time)
             })
         })
     }

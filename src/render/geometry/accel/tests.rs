@@ -354,3 +354,43 @@ fn small_leaves_lie_in_one_block_and_padding_in_none() {
     assert!(seen.iter().all(|&s| s), "every triangle in a leaf");
     assert!(blas.group_members.contains(&leaves::NO_PRIMITIVE), "some leaf needed padding");
 }
+
+/// A leaf's closest distance is unscaled by `1 / k` instead of divided by `k`: bit for bit
+/// the division's result, for every normal power of two `k` a BVH space can give and
+/// distances of every magnitude (so a render through a scaled BVH is the same either way).
+#[test]
+fn unscaling_by_the_reciprocal_rounds_as_the_division() {
+    let mut bits = 0x1234_5678u32;
+    for m in -126..=127 {
+        let k = f32::from_bits(((m + 127) as u32) << 23);
+        assert!(k.is_normal());
+        for _ in 0..500 {
+            bits ^= bits << 13;
+            bits ^= bits >> 17;
+            bits ^= bits << 5;
+            // Any finite non-negative distance, subnormals included.
+            let t = f32::from_bits(bits % 0x7f80_0000);
+            assert_eq!(unscale(t, 1.0 / k, f32::INFINITY).to_bits(), (t / k).to_bits(), "t {t:e}, k 2^{m}");
+        }
+    }
+}
+
+/// `traceable` refuses a ray with any non-finite component or a zero direction, and takes
+/// every other (negative zeros, the largest finite values, subnormals).
+#[test]
+fn only_finite_rays_with_a_direction_are_traceable() {
+    let finite = [0.0, -0.0, 1.0, -3.5, f32::MAX, f32::MIN, f32::MIN_POSITIVE / 4.0];
+    for (i, &x) in finite.iter().enumerate() {
+        let o = Vec3::new(x, finite[(i + 1) % finite.len()], -x);
+        assert!(traceable(o, Vec3::new(0.0, x, 1.0)), "{o}");
+    }
+    for bad in [f32::INFINITY, f32::NEG_INFINITY, f32::NAN] {
+        for axis in 0..6 {
+            let mut v = [1.0f32, -2.0, 0.0, 0.5, 0.0, -1.0];
+            v[axis] = bad;
+            let (o, d) = (Vec3::new(v[0], v[1], v[2]), Vec3::new(v[3], v[4], v[5]));
+            assert!(!traceable(o, d), "{o} {d}");
+        }
+    }
+    assert!(!traceable(Vec3::ONE, Vec3::ZERO) && !traceable(Vec3::ONE, -Vec3::ZERO));
+}

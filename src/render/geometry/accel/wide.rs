@@ -353,8 +353,23 @@ fn closest_with<F: ClosestLeaf>(
             let (mut mask, near) = hits(node, ray, tmax);
             if mask != 0 {
                 let entry = |i: usize| Entry { t: near[i], child: node.child[i], count: node.count[i] };
-                if mask & (mask - 1) == 0 {
+                let rest = mask & (mask - 1);
+                if rest == 0 {
                     next = entry(mask.trailing_zeros() as usize);
+                } else if rest & (rest - 1) == 0 {
+                    // Two children (the commonest case after one): the nearer is next, the
+                    // other stacked, in registers; on equal distances the higher slot is next,
+                    // as the insertion sort below orders them.
+                    let (a, b) = (entry(mask.trailing_zeros() as usize), entry(rest.trailing_zeros() as usize));
+                    let (near, far) = if a.t < b.t { (a, b) } else { (b, a) };
+                    for e in [near, far] {
+                        if e.count == 0 {
+                            prefetch(bvh, e.child);
+                        }
+                    }
+                    slots[len] = MaybeUninit::new(far);
+                    len += 1;
+                    next = near;
                 } else {
                     // Insertion sort onto the stack, farthest deepest; the nearest is then
                     // taken off the top.
