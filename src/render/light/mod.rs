@@ -131,8 +131,9 @@ pub enum LightKind {
         n: Vec3,
         /// Radiance.
         radiance: Vec3,
-        /// What of the geometry does not depend on the point it is seen from (made by
-        /// [`LightKind::rect`] from the fields above).
+        /// What of the geometry does not depend on the point it is seen from, made by
+        /// [`LightKind::rect`] from the fields above: a rect light is built by that function
+        /// and never changed in place (a changed field would leave this frame stale).
         frame: RectFrame,
     },
     /// An ellipse `centre + a ex + b ey`, `a² + b² ≤ 1`, emitting along `n`.
@@ -427,7 +428,7 @@ impl Light {
     pub fn power(&self, scene_radius: f32) -> f32 {
         let disk = PI * scene_radius * scene_radius;
         match &self.kind {
-            LightKind::Rect { ex, ey, radiance, .. } => luminance(*radiance) * 4.0 * ex.cross(*ey).length() * PI,
+            LightKind::Rect { radiance, frame, .. } => luminance(*radiance) * frame.area() * PI,
             LightKind::Disk { ex, ey, radiance, .. } => luminance(*radiance) * PI * ex.cross(*ey).length() * PI,
             LightKind::Sphere { radius, radiance, .. } => luminance(*radiance) * 4.0 * PI * radius * radius * PI,
             LightKind::Cylinder { half_length, radius, radiance, .. } => {
@@ -522,7 +523,7 @@ impl LightSelection {
     }
 
     /// [`LightSelection::sample`], also returning `u` rescaled to [0, 1) within the chosen
-    /// light's share (see [`Distribution1D::sample_discrete_remapped`]).
+    /// light's share (see [`Distribution1D::sample_piece_remapped`]).
     pub fn sample_remapped(&self, u: f32) -> Option<(usize, f32, f32)> {
         let (i, rest) = self.distribution.as_ref()?.sample_piece_remapped(u);
         let pmf = self.pmf(i);

@@ -13,8 +13,9 @@
 use glam::{DVec3, Vec2, Vec3};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
-/// Below this solid angle (sr) the set-up's cancellation costs precision and the light
-/// subtends so little that how it is sampled hardly matters: area sampling.
+/// Below this solid angle (sr) the light subtends so little that how it is sampled hardly
+/// matters, and the sampling's `b0`, `b1` (differences of nearly equal sines) lose precision:
+/// area sampling.
 const MIN_SOLID_ANGLE: f64 = 1e-4;
 /// Above this (2π less 0.08 sr) the point almost touches the light and the spherical
 /// rectangle degenerates to a hemisphere: area sampling (pbrt-v4's bound, 6.22, is similar).
@@ -122,7 +123,8 @@ const ATAN_COEFFICIENTS: [f64; 9] = [
     0.002_866_225_7,
 ];
 
-/// The argument of `re + i im` in `[0, 2π)`: `atan2` without libm. The polynomial's relative
+/// The argument of `re + i im` in `[0, 2π]` (exactly 2π where `im` is a hair below zero, which
+/// the callers' 2π − 0.08 bound rejects): `atan2` without libm. The polynomial's relative
 /// error (1.8e-8 on `[0, π/4]`) carries over: an angle above π/4 is π/2, π or 2π less one at
 /// most π/4, whose absolute error (1.4e-8) is smaller relative to the result. So the solid
 /// angle, and its f32 density, is within 2e-8 relative of the exact one, a third of f32's
@@ -159,10 +161,12 @@ impl SphericalRect {
         // planes through p and each edge. With those planes' unit normals n0..n3 (the paper's),
         // (cos g, sin g) = (−nᵢ·nⱼ, |nᵢ × nⱼ|) reduces to corner coordinates over a positive
         // common factor, and a complex product adds angles: the product of all four has the
-        // argument g0 + g1 + g2 + g3 = 2π + Ω, so one arctangent gives Ω, with no cancellation
-        // against 2π (small rectangles keep their relative precision). Angles do not depend
-        // on scale: lengths are divided by the farthest corner's distance first, so that the
-        // products of eight of them neither overflow nor underflow.
+        // argument g0 + g1 + g2 + g3 = 2π + Ω, so one arctangent gives Ω where the paper's
+        // set-up takes four (or two, pairing them): the gain is cost; the precision is that of
+        // two arctangents' sum, since [`argument`]'s error is relative to the angle it reduces
+        // to, small near multiples of π/2, where each pair's sum lies for a small rectangle.
+        // Angles do not depend on scale: lengths are divided by the farthest corner's distance
+        // first, so that the products of eight of them neither overflow nor underflow.
         let z0sq = z0 * z0;
         let corner_dist = |x: f64, y: f64| (x * x + y * y + z0sq).sqrt();
         let (r00, r10, r11, r01) = (corner_dist(x0, y0), corner_dist(x1, y0), corner_dist(x1, y1), corner_dist(x0, y1));
@@ -283,8 +287,8 @@ mod tests {
     fn solid_angle_matches_the_closed_form() {
         let (c, ex, ey) = (Vec3::new(0.0, 2.0, 0.0), Vec3::X, Vec3::Z);
         // Besides the sampled cases: a speck near the smallest solid angle sampled (2e-4 sr,
-        // head-on and oblique), where a set-up that cancels against 2π with an approximate
-        // arctangent would be off by 1e-4 relative, and a point almost touching (2π − 0.28).
+        // head-on and oblique) and a point almost touching (2π − 0.28), the two ends of the
+        // range sampled by solid angle.
         let extremes = [(Vec3::new(0.0, -139.0, 0.0), c, ex, ey), (Vec3::new(60.0, -90.0, 40.0), c, ex, ey)];
         let touching = [(Vec3::new(0.1, 1.95, 0.2), c, ex, ey)];
         for (p, c, ex, ey) in cases().into_iter().chain(extremes).chain(touching) {

@@ -160,16 +160,11 @@ impl Distribution1D {
         (x, pdf, i)
     }
 
-    /// Samples a piece as [`Distribution1D::sample_discrete`] does, and also returns where
-    /// `u` fell within the piece, rescaled to [0, 1): `(index, probability, remainder)`. The
-    /// remainder is uniform and independent of the choice, so one number can make both.
-    pub fn sample_discrete_remapped(&self, u: f32) -> (usize, f32, f32) {
-        let (i, rest) = self.sample_piece_remapped(u);
-        (i, self.discrete_pdf(i), rest)
-    }
-
-    /// [`Distribution1D::sample_discrete_remapped`] without the probability: `(index,
-    /// remainder)`, for a caller that keeps the probabilities in a table of its own.
+    /// Picks a piece as [`Distribution1D::sample_discrete`] does and also returns where `u`
+    /// fell within it, rescaled to [0, 1): `(index, remainder)`. The remainder is uniform and
+    /// independent of the choice, so one number can make both. No probability: the caller
+    /// (the light selection) keeps them in a table of its own, or takes
+    /// [`Distribution1D::discrete_pdf`].
     pub fn sample_piece_remapped(&self, u: f32) -> (usize, f32) {
         let i = self.find(u);
         let width = self.cdf[i + 1] - self.cdf[i];
@@ -266,8 +261,8 @@ mod tests {
         let mut rests: Vec<Vec<f32>> = vec![Vec::new(); 4];
         for k in 0..n {
             let u = (k as f32 + 0.5) / n as f32;
-            let (i, pmf, rest) = d.sample_discrete_remapped(u);
-            assert_eq!((i, pmf), d.sample_discrete(u));
+            let (i, rest) = d.sample_piece_remapped(u);
+            assert_eq!((i, d.discrete_pdf(i)), d.sample_discrete(u));
             assert!((0.0..1.0).contains(&rest), "{rest}");
             let back = d.cdf[i] + rest * (d.cdf[i + 1] - d.cdf[i]);
             assert!((back - u).abs() < 1e-5, "{u} -> piece {i}, {rest} -> {back}");
