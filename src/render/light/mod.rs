@@ -148,6 +148,9 @@ pub enum LightKind {
         n: Vec3,
         /// Radiance.
         radiance: Vec3,
+        /// A point's coordinates along `ex`, `ey`, made by [`LightKind::disk`] from the
+        /// fields above (a disk light is built by that function and never changed in place).
+        plane: PlaneCoordinates,
     },
     /// A sphere emitting outwards.
     Sphere {
@@ -194,6 +197,40 @@ impl LightKind {
     /// point-independent geometry made once here.
     pub fn rect(centre: Vec3, ex: Vec3, ey: Vec3, n: Vec3, radiance: Vec3) -> LightKind {
         LightKind::Rect { centre, ex, ey, n, radiance, frame: RectFrame::new(centre, ex, ey, n) }
+    }
+
+    /// A [`LightKind::Disk`] `centre + a ex + b ey` (`a² + b² ≤ 1`) emitting along the unit `n`.
+    pub fn disk(centre: Vec3, ex: Vec3, ey: Vec3, n: Vec3, radiance: Vec3) -> LightKind {
+        let plane = PlaneCoordinates::new(ex.as_dvec3(), ey.as_dvec3(), n.as_dvec3());
+        LightKind::Disk { centre, ex, ey, n, radiance, plane }
+    }
+}
+
+/// The coordinates `(a, b)` of a vector `d = a ex + b ey` in a planar light's plane (normal
+/// `n`), read as `(d·dual_x, d·dual_y)` with the dual vectors `(ey × n, n × ex) / ((ex × ey)·n)`
+/// made once when the light is built (in f64, then rounded). Right for sheared edges too:
+/// projections `d·ex / |ex|²` are right only for perpendicular ones, and a transform that
+/// scales after rotating shears a light, whose corners would then read as outside.
+#[derive(Clone, Copy, Debug)]
+pub struct PlaneCoordinates {
+    dual_x: Vec3,
+    dual_y: Vec3,
+}
+
+impl PlaneCoordinates {
+    /// The dual vectors of the edges `ex`, `ey` in the plane with normal `n`.
+    fn new(ex: DVec3, ey: DVec3, n: DVec3) -> PlaneCoordinates {
+        let signed_area = ex.cross(ey).dot(n);
+        PlaneCoordinates {
+            dual_x: (ey.cross(n) / signed_area).as_vec3(),
+            dual_y: (n.cross(ex) / signed_area).as_vec3(),
+        }
+    }
+
+    /// `(a, b)` with `d = a ex + b ey`, for `d` in the plane.
+    #[inline]
+    fn of(&self, d: Vec3) -> (f32, f32) {
+        (d.dot(self.dual_x), d.dot(self.dual_y))
     }
 }
 
@@ -291,7 +328,7 @@ impl Light {
                     }
                 }
             }
-            LightKind::Disk { centre, ex, ey, n, radiance } => {
+            LightKind::Disk { centre, ex, ey, n, radiance, .. } => {
                 let d = concentric_disk(u);
                 let q = *centre + *ex * d.x + *ey * d.y;
                 let area = PI * ex.cross(*ey).length();
@@ -363,7 +400,7 @@ impl Light {
                 },
                 None => 0.0,
             },
-            LightKind::Disk { centre, ex, ey, n, .. } => match disk_hit(p, wi, *centre, *ex, *ey, *n) {
+            LightKind::Disk { centre, ex, ey, n, plane, .. } => match disk_hit(p, wi, *centre, *n, plane) {
                 Some(t) => area_pdf(p, wi, t, *n, PI * ex.cross(*ey).length()),
                 None => 0.0,
             },
@@ -398,7 +435,7 @@ impl Light {
     pub fn hit(&self, p: Vec3, wi: Vec3, tmax: f32) -> Option<(Vec3, f32)> {
         let (radiance, t) = match &self.kind {
             LightKind::Rect { centre, n, radiance, frame, .. } => (*radiance, rect_hit(p, wi, *centre, *n, frame)?),
-            LightKind::Disk { centre, ex, ey, n, radiance } => (*radiance, disk_hit(p, wi, *centre, *ex, *ey, *n)?),
+            LightKind::Disk { centre, n, radiance, plane, .. } => (*radiance, disk_hit(p, wi, *centre, *n, plane)?),
             LightKind::Sphere { centre, radius, radiance } => (*radiance, sphere_hit(p, wi, *centre, *radius)?),
             LightKind::Cylinder { centre, axis, half_length, radius, radiance } => {
                 (*radiance, cylinder_hit(p, wi, *centre, *axis, *half_length, *radius)?.0)
@@ -516,14 +553,9 @@ impl LightSelection {
         LightSelection { distribution: Some(distribution), pmf }
     }
 
-    /// Chooses a light with uniform `u`: its index and probability.
-    pub fn sample(&self, u: f32) -> Option<(usize, f32)> {
-        let (i, pmf) = self.distribution.as_ref()?.sample_discrete(u);
-        (pmf > 0.0).then_some((i, pmf))
-    }
-
-    /// [`LightSelection::sample`], also returning `u` rescaled to [0, 1) within the chosen
-    /// light's share (see [`Distribution1D::sample_piece_remapped`]).
+    /// Chooses a light with uniform `u`: its index, its probability and `u` rescaled to
+    /// [0, 1) within the chosen light's share (see [`Distribution1D::sample_piece_remapped`]),
+    /// for the point on the light.
     pub fn sample_remapped(&self, u: f32) -> Option<(usize, f32, f32)> {
         let (i, rest) = self.distribution.as_ref()?.sample_piece_remapped(u);
         let pmf = self.pmf(i);
@@ -562,18 +594,10 @@ fn rect_hit(p: Vec3, wi: Vec3, c: Vec3, n: Vec3, frame: &RectFrame) -> Option<f3
 }
 
 /// Ray/ellipse distance, front side only.
-fn disk_hit(p: Vec3, wi: Vec3, c: Vec3, ex: Vec3, ey: Vec3, n: Vec3) -> Option<f32> {
+fn disk_hit(p: Vec3, wi: Vec3, c: Vec3, n: Vec3, plane: &PlaneCoordinates) -> Option<f32> {
     let (t, q) = plane_hit(p, wi, c, n)?;
-    let (a, b) = edge_coordinates(q - c, ex, ey, n);
+    let (a, b) = plane.of(q - c);
     (a * a + b * b <= 1.0).then_some(t)
-}
-
-/// The coordinates `(a, b)` of `d = a ex + b ey`, a vector in the plane of `ex`, `ey` (normal
-/// `n`). Projections `d·ex / |ex|²` would be right only for perpendicular edges: a transform
-/// that scales after rotating shears a light, and its corners then read as outside.
-fn edge_coordinates(d: Vec3, ex: Vec3, ey: Vec3, n: Vec3) -> (f32, f32) {
-    let area = ex.cross(ey).dot(n);
-    (d.cross(ey).dot(n) / area, ex.cross(d).dot(n) / area)
 }
 
 fn plane_hit(p: Vec3, wi: Vec3, c: Vec3, n: Vec3) -> Option<(f32, Vec3)> {
@@ -795,6 +819,33 @@ def CylinderLight "C" { float inputs:length = 3  float inputs:radius = 0.4
     /// The integrator looks for crossed lights only when one `is_hittable`: a ray must be
     /// able to hit exactly those (a light with area seen from outside it covers some of the
     /// 4096 directions).
+    /// A planar light is hit where a point's coordinates along its edges are inside the shape
+    /// and missed just outside, sheared edges too (a transform that scales after rotating):
+    /// coordinates along the edges decide, not projections onto them.
+    #[test]
+    fn planar_lights_are_hit_inside_their_edges_and_missed_outside() {
+        let (centre, ex, ey) = (Vec3::new(0.0, 0.0, 3.0), Vec3::X, Vec3::new(0.3, 0.4, 0.0));
+        let n = -ex.cross(ey).normalize();
+        let p = Vec3::new(0.2, -0.1, 0.0);
+        type Inside = fn(f32, f32) -> bool;
+        let in_rect: Inside = |a, b| a.abs() < 1.0 && b.abs() < 1.0;
+        let in_disk: Inside = |a, b| a * a + b * b < 1.0;
+        let cases = [
+            (LightKind::rect(centre, ex, ey, n, Vec3::ONE), in_rect),
+            (LightKind::disk(centre, ex, ey, n, Vec3::ONE), in_disk),
+        ];
+        for (kind, inside) in cases {
+            let light = Light { path: "/L".into(), kind, visible_to_camera: true };
+            for (a, b) in
+                [(0.97, 0.97), (-0.97, 0.5), (1.03, 0.0), (0.0, -1.03), (1.03, 1.03), (0.69, 0.69), (0.73, -0.73)]
+            {
+                let wi = (centre + ex * a + ey * b - p).normalize();
+                let hit = light.hit(p, wi, f32::INFINITY).is_some();
+                assert_eq!(hit, inside(a, b), "{:?} at ({a}, {b})", light.kind);
+            }
+        }
+    }
+
     #[test]
     fn exactly_the_hittable_lights_are_hit_by_rays() {
         let all = lights(
@@ -966,13 +1017,13 @@ def DomeLight "Sky" { float inputs:intensity = 1000 }"#,
         assert!((p[0] - bright).abs() < 1e-5 && (p[1] - dim).abs() < 1e-5, "{p:?}");
         let mut counts = [0usize; 3];
         for i in 0..10_000 {
-            let (k, pmf) = sel.sample((i as f32 + 0.5) / 10_000.0).unwrap();
+            let (k, pmf, _) = sel.sample_remapped((i as f32 + 0.5) / 10_000.0).unwrap();
             assert_eq!(pmf, p[k]);
             counts[k] += 1;
         }
         for k in 0..3 {
             assert!((counts[k] as f32 / 10_000.0 - p[k]).abs() < 1e-3, "{counts:?} vs {p:?}");
         }
-        assert!(LightSelection::new(&[], 1.0).sample(0.5).is_none());
+        assert!(LightSelection::new(&[], 1.0).sample_remapped(0.5).is_none());
     }
 }

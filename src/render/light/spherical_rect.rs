@@ -10,6 +10,7 @@
 //! f64 and takes the solid angle as the argument of one complex product, with one polynomial
 //! arctangent ([`argument`]) instead of two calls to libm's `atan2`.
 
+use super::PlaneCoordinates;
 use glam::{DVec3, Vec2, Vec3};
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
@@ -41,11 +42,8 @@ pub struct RectFrame {
     /// Whether the edges are square enough ([`MAX_EDGE_COSINE`]) and not degenerate: a
     /// sheared or empty rect light is sampled by area from every point.
     rectangle: bool,
-    /// `d·dual_x`, `d·dual_y` are the coordinates `(a, b)` of `d = a ex + b ey` in the
-    /// light's plane: `(ey × n, n × ex) / ((ex × ey)·n)`, right for sheared edges too
-    /// (projections `d·ex / |ex|²` would read a sheared light's corners as outside).
-    dual_x: Vec3,
-    dual_y: Vec3,
+    /// A point's edge coordinates, for the hit test.
+    plane: PlaneCoordinates,
     /// `4 |ex × ey|`, as the area sampling and its pdf use it.
     area: f32,
 }
@@ -59,7 +57,6 @@ impl RectFrame {
         let rectangle = half_w > 0.0 && half_h > 0.0 && ex.dot(ey).abs() <= MAX_EDGE_COSINE * half_w * half_h;
         let x = ex / half_w;
         let y = (ey - x * x.dot(ey)).normalize();
-        let signed_area = ex.cross(ey).dot(n64);
         RectFrame {
             corner: centre.as_dvec3() - ex - ey,
             x,
@@ -68,15 +65,14 @@ impl RectFrame {
             width: 2.0 * half_w,
             height: 2.0 * half_h,
             rectangle,
-            dual_x: (ey.cross(n64) / signed_area).as_vec3(),
-            dual_y: (n64.cross(ex) / signed_area).as_vec3(),
+            plane: PlaneCoordinates::new(ex, ey, n64),
             area,
         }
     }
 
     /// The coordinates `(a, b)` of `d = a ex + b ey`, a vector in the light's plane.
     pub(super) fn edge_coordinates(&self, d: Vec3) -> (f32, f32) {
-        (d.dot(self.dual_x), d.dot(self.dual_y))
+        self.plane.of(d)
     }
 
     /// `4 |ex × ey|`: the area of the parallelogram.

@@ -101,7 +101,7 @@ fn light_kind(prim: &Prim, ty: &str, xf: PrimXform, diags: &mut Diagnostics) -> 
             if normalize {
                 emission /= (PI * ex.cross(ey).length()).max(1e-12);
             }
-            LightKind::Disk { centre: point(DVec3::ZERO), ex, ey, n: normal_z(), radiance: emission }
+            LightKind::disk(point(DVec3::ZERO), ex, ey, normal_z(), emission)
         }
         "SphereLight" => {
             let r = positive("inputs:radius", 0.5, diags)?;
